@@ -1,0 +1,23 @@
+//! The bench's one CAN wire contract.
+//!
+//! `bench.dbc` (beside this crate's `Cargo.toml`) describes every frame on the bus. This crate
+//! is the one codec for those frames: the emulators encode with it, `nav` decodes with it, and
+//! a test parses the DBC and checks that every [`SignalSpec`] here agrees with it, bit for bit.
+//! Frame layouts are written nowhere else.
+//!
+//! The crate does no I/O. [`RawFrame`] is a plain classic CAN frame; the optional `socketcan`
+//! feature converts it to and from `socketcan::CanFrame`.
+
+pub mod busload;
+mod codec;
+mod messages;
+#[cfg(feature = "socketcan")]
+mod sock;
+
+pub use codec::{DecodeError, EncodeError, MessageSpec, RawFrame, SignalSpec};
+pub use messages::*;
+#[cfg(feature = "socketcan")]
+pub use sock::{FrameConvError, from_can_frame, to_can_frame};
+
+/// The DBC file text, embedded so tools can print or ship it.
+pub const DBC: &str = include_str!("../bench.dbc");
