@@ -1,0 +1,111 @@
+//! `vcan-setup`: give a command a real Linux vcan interface, natively or in a QEMU guest.
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::time::Duration;
+use vcan_setup::{Backend, CanSupport, VmOptions};
+
+#[derive(Parser)]
+#[command(version, about, long_about = "Gives a run a real Linux vcan interface: natively where the kernel has CAN, \
+otherwise inside a QEMU guest running the stock Debian kernel, with the host folders the run needs \
+mounted at the same paths. Exits with the command's own exit status.")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Report whether this kernel has CAN and whether the QEMU guest can be used.
+    Check,
+    /// Install what the guest needs (Debian packages; needs root).
+    Install,
+    /// Create a vcan interface on this kernel and bring it up (needs CAP_NET_ADMIN).
+    Up {
+        /// Interface name.
+        #[arg(default_value = "vcan0")]
+        name: String,
+    },
+    /// Run a command where vcan is available (natively, or in the guest), and exit with its status.
+    Run {
+        /// Host folder to mount in the guest at the same path (repeatable); default: the current folder.
+        #[arg(long = "share")]
+        shares: Vec<PathBuf>,
+        /// Always use the QEMU guest, even where the host kernel has CAN.
+        #[arg(long)]
+        vm: bool,
+        /// Guest memory in MiB.
+        #[arg(long, default_value_t = 2048)]
+        memory_mb: u32,
+        /// Give up after this many seconds.
+        #[arg(long, default_value_t = 2400)]
+        timeout_s: u64,
+        /// Install missing guest prerequisites first (needs root).
+        #[arg(long)]
+        install: bool,
+        /// The command and its arguments.
+        #[arg(trailing_var_arg = true, required = true)]
+        command: Vec<String>,
+    },
+}
+
+fn main() -> Result<()> {
+    tracing_subscriber::fmt().with_writer(std::io::stderr).with_env_filter(
+        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+    ).init();
+    match Cli::parse().cmd {
+        Cmd::Check => {
+            match vcan_setup::can_support() {
+                CanSupport::Available => println!("kernel CAN: available (vcan runs natively)"),
+                CanSupport::Missing(e) => println!("kernel CAN: missing ({e}); runs go through the QEMU guest"),
+            }
+            match vcan_setup::prereqs() {
+                Ok(p) => println!(
+                    "QEMU guest: ready (qemu {}, kernel {}, busybox {})",
+                    p.qemu.display(),
+                    p.kernel_version,
+                    p.busybox.display()
+                ),
+                Err(e) => println!("QEMU guest: not ready: {e}"),
+            }
+        }
+        Cmd::Install => {
+            let p = vcan_setup::install_prereqs()?;
+            println!("QEMU guest: ready (kernel {})", p.kernel_version);
+        }
+        Cmd::Up { name } => {
+            vcan_setup::ensure_vcan(&name).with_context(|| format!("setting up {name}"))?;
+            println!("{name}: up");
+        }
+        Cmd::Run { shares, vm, memory_mb, timeout_s, install, command } => {
+            let native = !vm && matches!(vcan_setup::can_support(), CanSupport::Available);
+            if !native && install {
+                vcan_setup::install_prereqs()?;
+            }
+            let shares = if shares.is_empty() { vec![std::env::current_dir()?] } else { shares };
+            let opts = VmOptions {
+                shares,
+                memory_mb,
+                timeout: Duration::from_secs(timeout_s),
+                ..VmOptions::default()
+            };
+            let out = if native {
+                vcan_setup::run(&command, &opts)?
+            } else {
+                vcan_setup::run_in_vm(&command, &opts)?
+            };
+            if out.backend == Backend::Vm {
+                eprintln!(
+                    "vcan-setup: guest boot {:.1} s, total {:.1} s, exit status {}",
+                    out.boot_secs, out.total_secs, out.status
+                );
+            }
+            if out.status != 0 {
+                std::process::exit(out.status.clamp(1, 255));
+            }
+        }
+    }
+    Ok(())
+}
+

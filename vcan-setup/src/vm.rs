@@ -1,0 +1,451 @@
+//! Real vcan inside a QEMU guest (software emulation) running the host's stock Debian kernel.
+
+use crate::cpio::Archive;
+use crate::{Backend, Error, GUEST_ENV, Result, RunOutcome, io_ctx};
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+/// Kernel modules the guest loads, dependencies resolved from `modules.dep`.
+const MODULES: &[&str] = &["can", "can-raw", "can-dev", "vcan", "9p", "9pnet_virtio", "virtio_pci"];
+
+/// Debian packages the guest needs.
+pub const APT_PACKAGES: &[&str] = &["qemu-system-x86", "linux-image-amd64", "busybox-static"];
+
+/// Environment variables passed from the host into the guest when set.
+const PASS_ENV: &[&str] = &["RUST_LOG", "RUST_BACKTRACE", "NO_COLOR", "TERM"];
+
+/// Marker line the guest prints when the command starts.
+const READY: &str = "vcan-setup-guest: ready";
+
+/// How to run the guest.
+#[derive(Debug, Clone)]
+pub struct VmOptions {
+    /// Host folders mounted in the guest at the same paths (read-write).
+    pub shares: Vec<PathBuf>,
+    /// Working directory of the command (must be inside a share); default the first share.
+    pub cwd: Option<PathBuf>,
+    /// Extra environment for the command.
+    pub env: Vec<(String, String)>,
+    /// Guest memory, MiB.
+    pub memory_mb: u32,
+    /// Guest CPUs.
+    pub cpus: u32,
+    /// Kill the guest after this long.
+    pub timeout: Duration,
+    /// Echo the output live to stderr.
+    pub echo: bool,
+    /// More executables whose shared libraries the guest needs (the command's own are found).
+    pub libs_for: Vec<PathBuf>,
+}
+
+impl Default for VmOptions {
+    fn default() -> Self {
+        Self {
+            shares: Vec::new(),
+            cwd: None,
+            env: Vec::new(),
+            memory_mb: 2048,
+            cpus: 2,
+            timeout: Duration::from_secs(40 * 60),
+            echo: true,
+            libs_for: Vec::new(),
+        }
+    }
+}
+
+/// What the guest needs from the host, as found.
+#[derive(Debug, Clone)]
+pub struct VmPrereqs {
+    /// `qemu-system-x86_64`.
+    pub qemu: PathBuf,
+    /// Kernel image.
+    pub kernel: PathBuf,
+    /// Kernel version (`/lib/modules/<version>`).
+    pub kernel_version: String,
+    /// Busybox binary.
+    pub busybox: PathBuf,
+}
+
+fn which(name: &str) -> Option<PathBuf> {
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path)
+        .chain(["/usr/sbin", "/sbin", "/usr/bin", "/bin"].iter().map(PathBuf::from))
+        .map(|d| d.join(name))
+        .find(|p| p.is_file())
+}
+
+fn hint() -> String {
+    format!(
+        "run `vcan-setup install` as root (apt-get install {})",
+        APT_PACKAGES.join(" ")
+    )
+}
+
+/// Find the guest's prerequisites on the host.
+pub fn prereqs() -> Result<VmPrereqs> {
+    let qemu = which("qemu-system-x86_64")
+        .ok_or_else(|| Error::MissingPrereq { what: "qemu-system-x86_64".into(), hint: hint() })?;
+    let busybox = ["/bin/busybox", "/usr/bin/busybox"]
+        .iter()
+        .map(PathBuf::from)
+        .find(|p| p.is_file())
+        .ok_or_else(|| Error::MissingPrereq { what: "busybox".into(), hint: hint() })?;
+    let mut kernels: Vec<(Vec<u64>, String)> = std::fs::read_dir("/boot")
+        .map_err(io_ctx("listing /boot"))?
+        .filter_map(|e| e.ok())
+        .filter_map(|e| e.file_name().to_str().and_then(|n| n.strip_prefix("vmlinuz-")).map(String::from))
+        .filter(|v| Path::new("/lib/modules").join(v).join("modules.dep").is_file())
+        .map(|v| {
+            let key = v.split(|c: char| !c.is_ascii_digit()).filter_map(|p| p.parse().ok()).collect();
+            (key, v)
+        })
+        .collect();
+    kernels.sort();
+    let (_, kernel_version) = kernels.pop().ok_or_else(|| Error::MissingPrereq {
+        what: "a Debian kernel with its modules (/boot/vmlinuz-* and /lib/modules/*/modules.dep)".into(),
+        hint: hint(),
+    })?;
+    let kernel = PathBuf::from(format!("/boot/vmlinuz-{kernel_version}"));
+    if let Err(e) = std::fs::File::open(&kernel) {
+        return Err(Error::MissingPrereq {
+            what: format!("read access to {}", kernel.display()),
+            hint: format!("{e}; run as root or make the kernel image readable"),
+        });
+    }
+    Ok(VmPrereqs { qemu, kernel, kernel_version, busybox })
+}
+
+/// Install the guest's prerequisites with apt-get (needs root).
+pub fn install_prereqs() -> Result<VmPrereqs> {
+    if prereqs().is_ok() {
+        return prereqs();
+    }
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        return Err(Error::MissingPrereq {
+            what: "root to install packages".into(),
+            hint: format!("run `sudo apt-get install {}`", APT_PACKAGES.join(" ")),
+        });
+    }
+    eprintln!("vcan-setup: installing {} (about 1-2 minutes)", APT_PACKAGES.join(" "));
+    let apt = |args: &[&str]| -> Result<()> {
+        let st = Command::new("apt-get")
+            .args(args)
+            .env("DEBIAN_FRONTEND", "noninteractive")
+            .stdout(Stdio::null())
+            .status()
+            .map_err(io_ctx("running apt-get"))?;
+        if st.success() {
+            Ok(())
+        } else {
+            Err(Error::MissingPrereq {
+                what: APT_PACKAGES.join(" "),
+                hint: format!("apt-get {} failed ({st})", args.join(" ")),
+            })
+        }
+    };
+    apt(&["update", "-qq"])?;
+    let mut args = vec!["install", "-y", "-qq", "--no-install-recommends"];
+    args.extend_from_slice(APT_PACKAGES);
+    apt(&args)?;
+    prereqs()
+}
+
+/// Module files in load order (dependencies first), from `modules.dep`.
+fn module_files(kver: &str) -> Result<Vec<PathBuf>> {
+    let base = Path::new("/lib/modules").join(kver);
+    let dep = std::fs::read_to_string(base.join("modules.dep"))
+        .map_err(io_ctx(format!("reading {}/modules.dep", base.display())))?;
+    let norm = |p: &str| {
+        Path::new(p)
+            .file_name()
+            .and_then(|n| n.to_str())
+            .map(|n| n.split(".ko").next().unwrap_or(n).replace('-', "_"))
+            .unwrap_or_default()
+    };
+    let mut table: BTreeMap<String, (String, Vec<String>)> = BTreeMap::new();
+    for line in dep.lines() {
+        if let Some((m, deps)) = line.split_once(':') {
+            table.insert(norm(m), (m.to_string(), deps.split_whitespace().map(String::from).collect()));
+        }
+    }
+    let builtin = std::fs::read_to_string(base.join("modules.builtin")).unwrap_or_default();
+    let builtin: BTreeSet<String> = builtin.lines().map(norm).collect();
+    let mut order: Vec<String> = Vec::new();
+    fn visit(
+        path: &str,
+        table: &BTreeMap<String, (String, Vec<String>)>,
+        order: &mut Vec<String>,
+        norm: &dyn Fn(&str) -> String,
+    ) {
+        if order.iter().any(|p| p == path) {
+            return;
+        }
+        if let Some((_, deps)) = table.get(&norm(path)) {
+            // modules.dep lists deps so that the last one loads first
+            for d in deps.iter().rev() {
+                visit(d, table, order, norm);
+            }
+        }
+        order.push(path.to_string());
+    }
+    for m in MODULES {
+        let key = m.replace('-', "_");
+        match table.get(&key) {
+            Some((path, _)) => visit(&path.clone(), &table, &mut order, &norm),
+            None if builtin.contains(&key) => {}
+            None => {
+                return Err(Error::MissingPrereq {
+                    what: format!("kernel module {m} for kernel {kver}"),
+                    hint: "install the stock Debian kernel (linux-image-amd64)".into(),
+                });
+            }
+        }
+    }
+    Ok(order.into_iter().map(|p| base.join(p)).collect())
+}
+
+/// Shared libraries (and the dynamic loader) of `exe`, by `ldd`; empty for static binaries.
+fn shared_libs(exe: &Path) -> Vec<PathBuf> {
+    let Ok(out) = Command::new("ldd").arg(exe).output() else { return Vec::new() };
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| {
+            let l = l.trim();
+            let path = match l.split_once("=>") {
+                Some((_, rhs)) => rhs.trim().split_whitespace().next()?,
+                None => l.split_whitespace().next()?,
+            };
+            path.starts_with('/').then(|| PathBuf::from(path))
+        })
+        .collect()
+}
+
+fn sh_quote(s: &str) -> String {
+    format!("'{}'", s.replace('\'', "'\\''"))
+}
+
+fn build_initramfs(pre: &VmPrereqs, mods: &[PathBuf], execs: &[PathBuf], shares: &[PathBuf]) -> Result<Vec<u8>> {
+    let mut a = Archive::default();
+    for d in ["proc", "sys", "dev", "tmp", "root", "run/vcan-setup", "etc", "sbin", "usr/bin", "usr/sbin"] {
+        a.dir(d);
+    }
+    let read = |p: &Path| std::fs::read(p).map_err(io_ctx(format!("reading {}", p.display())));
+    a.file("bin/busybox", 0o755, &read(&pre.busybox)?);
+    // glibc and friends, so ordinary dynamically linked binaries run unchanged
+    let mut libs: BTreeSet<PathBuf> = BTreeSet::new();
+    for e in execs.iter().chain(std::iter::once(&pre.busybox)) {
+        libs.extend(shared_libs(e));
+    }
+    for l in &libs {
+        let data = read(l)?; // follows symlinks
+        a.file(&l.to_string_lossy(), 0o755, &data);
+    }
+    let mut names = Vec::new();
+    for m in mods {
+        let name = m.file_name().and_then(|n| n.to_str()).unwrap_or("mod.ko").to_string();
+        a.file(&format!("lib/modules/{name}"), 0o644, &read(m)?);
+        names.push(name);
+    }
+    let mut mounts = String::new();
+    for (i, s) in shares.iter().enumerate() {
+        let p = sh_quote(&s.to_string_lossy());
+        mounts.push_str(&format!(
+            "mkdir -p {p} && mount -t 9p -o trans=virtio,version=9p2000.L,msize=512000,cache=none share{i} {p} || echo 'vcan-setup-guest: cannot mount share {i}'\n"
+        ));
+    }
+    let init = format!(
+        r#"#!/bin/busybox sh
+/bin/busybox --install -s /bin
+export PATH=/bin:/sbin:/usr/bin:/usr/sbin
+mount -t proc proc /proc; mount -t sysfs sys /sys; mount -t devtmpfs dev /dev
+mkdir -p /dev/pts /dev/shm; mount -t devpts devpts /dev/pts; mount -t tmpfs tmp /tmp; mount -t tmpfs shm /dev/shm
+for m in {mods}; do insmod /lib/modules/$m || echo "vcan-setup-guest: insmod $m failed"; done
+ip link set lo up
+mount -t 9p -o trans=virtio,version=9p2000.L,msize=512000 ctl /run/vcan-setup
+{mounts}echo "{READY} $(cut -d' ' -f1 /proc/uptime) s"
+sh /run/vcan-setup/cmd.sh
+echo $? > /run/vcan-setup/rc
+sync
+poweroff -f
+"#,
+        mods = names.join(" ")
+    );
+    a.file("init", 0o755, init.as_bytes());
+    Ok(a.finish())
+}
+
+/// Boot the guest, run `cmd` in it as root and return its status and output.
+pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
+    let start = Instant::now();
+    let pre = prereqs()?;
+    let (prog, _) = cmd.split_first().ok_or_else(|| Error::Io {
+        context: "run".into(),
+        source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "empty command"),
+    })?;
+    let mods = module_files(&pre.kernel_version)?;
+    let mut shares: Vec<PathBuf> = Vec::new();
+    for s in &opts.shares {
+        let c = s.canonicalize().map_err(io_ctx(format!("share {}", s.display())))?;
+        if !shares.contains(&c) {
+            shares.push(c);
+        }
+    }
+    // parents before children so nested shares mount on top
+    shares.sort_by_key(|p| p.components().count());
+    let mut execs = opts.libs_for.clone();
+    let prog_path = PathBuf::from(prog);
+    execs.push(if prog_path.is_file() { prog_path } else { which(prog).unwrap_or(prog_path) });
+
+    let ctl = tempfile::Builder::new()
+        .prefix("vcan-setup-")
+        .tempdir()
+        .map_err(io_ctx("creating the guest's control folder"))?;
+    let initrd = ctl.path().join("initrd.cpio");
+    std::fs::write(&initrd, build_initramfs(&pre, &mods, &execs, &shares)?)
+        .map_err(io_ctx("writing the initramfs"))?;
+    let cwd = opts
+        .cwd
+        .clone()
+        .or_else(|| std::env::current_dir().ok().filter(|d| shares.iter().any(|s| d.starts_with(s))))
+        .or_else(|| shares.first().cloned())
+        .unwrap_or_else(|| "/".into());
+    let mut script = format!("cd {} || exit 126\nexport HOME=/root TMPDIR=/tmp {GUEST_ENV}=1\n", sh_quote(&cwd.to_string_lossy()));
+    for k in PASS_ENV {
+        if let Ok(v) = std::env::var(k) {
+            script.push_str(&format!("export {k}={}\n", sh_quote(&v)));
+        }
+    }
+    for (k, v) in &opts.env {
+        script.push_str(&format!("export {k}={}\n", sh_quote(v)));
+    }
+    script.push_str("exec");
+    for a in cmd {
+        script.push(' ');
+        script.push_str(&sh_quote(a));
+    }
+    script.push_str(" 2>&1\n");
+    std::fs::write(ctl.path().join("cmd.sh"), script).map_err(io_ctx("writing the guest command"))?;
+
+    let mut q = Command::new(&pre.qemu);
+    q.args(["-accel", "tcg,thread=multi", "-cpu", "max", "-nodefaults", "-display", "none"])
+        .args(["-serial", "stdio", "-no-reboot"])
+        .args(["-smp", &opts.cpus.to_string(), "-m", &opts.memory_mb.to_string()])
+        .arg("-kernel")
+        .arg(&pre.kernel)
+        .arg("-initrd")
+        .arg(&initrd)
+        .args(["-append", "console=ttyS0 quiet loglevel=3 panic=-1"])
+        .arg("-virtfs")
+        .arg(format!("local,path={},mount_tag=ctl,security_model=none", ctl.path().display()));
+    for (i, s) in shares.iter().enumerate() {
+        q.arg("-virtfs").arg(format!("local,path={},mount_tag=share{i},security_model=none", s.display()));
+    }
+    let mut child = q
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(io_ctx(format!("starting {}", pre.qemu.display())))?;
+    let (tx, rx) = mpsc::channel::<String>();
+    let out = child.stdout.take();
+    let err = child.stderr.take();
+    let tx2 = tx.clone();
+    let t1 = std::thread::spawn(move || {
+        if let Some(o) = out {
+            for line in BufReader::new(o).split(b'\n').map_while(|l| l.ok()) {
+                let _ = tx.send(String::from_utf8_lossy(&line).trim_end_matches('\r').to_string());
+            }
+        }
+    });
+    let t2 = std::thread::spawn(move || {
+        if let Some(e) = err {
+            for line in BufReader::new(e).lines().map_while(|l| l.ok()) {
+                let _ = tx2.send(format!("qemu: {line}"));
+            }
+        }
+    });
+    let mut output = String::new();
+    let mut preboot: Vec<String> = Vec::new();
+    let mut boot_secs = None;
+    let deadline = start + opts.timeout;
+    loop {
+        match rx.recv_timeout(Duration::from_millis(200)) {
+            Ok(line) => {
+                if boot_secs.is_none() && line.contains(READY) {
+                    boot_secs = Some(start.elapsed().as_secs_f64());
+                    if opts.echo {
+                        eprintln!("vcan-setup: guest up after {:.1} s (kernel {}), running {prog}", start.elapsed().as_secs_f64(), pre.kernel_version);
+                    }
+                    continue;
+                }
+                if boot_secs.is_none() {
+                    // firmware and kernel chatter before the command starts: kept for errors only
+                    preboot.push(line);
+                    continue;
+                }
+                if line.contains("] reboot: Power down") {
+                    continue;
+                }
+                if opts.echo {
+                    let _ = writeln!(std::io::stderr(), "{line}");
+                }
+                output.push_str(&line);
+                output.push('\n');
+            }
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+            Err(mpsc::RecvTimeoutError::Timeout) => {
+                if Instant::now() > deadline {
+                    let _ = child.kill();
+                    let _ = child.wait();
+                    return Err(Error::Timeout(opts.timeout.as_secs()));
+                }
+            }
+        }
+    }
+    let _ = t1.join();
+    let _ = t2.join();
+    let _ = child.wait();
+    let rc = std::fs::read_to_string(ctl.path().join("rc")).ok().and_then(|s| s.trim().parse::<i32>().ok());
+    let Some(status) = rc else {
+        if boot_secs.is_none() {
+            output = preboot.join("\n");
+        }
+        let tail: Vec<&str> = output.lines().rev().take(30).collect();
+        return Err(Error::NoStatus(tail.into_iter().rev().collect::<Vec<_>>().join("\n")));
+    };
+    Ok(RunOutcome {
+        status,
+        output,
+        backend: Backend::Vm,
+        boot_secs: boot_secs.unwrap_or(0.0),
+        total_secs: start.elapsed().as_secs_f64(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quoting_survives_single_quotes() {
+        assert_eq!(sh_quote("a'b"), r#"'a'\''b'"#);
+    }
+
+    #[test]
+    fn modules_resolve_in_dependency_order_when_a_kernel_is_installed() {
+        let Ok(pre) = prereqs() else {
+            eprintln!("skipped: no Debian kernel installed (vcan-setup install)");
+            return;
+        };
+        let files = module_files(&pre.kernel_version).expect("modules resolve");
+        let pos = |n: &str| files.iter().position(|p| p.file_name().and_then(|f| f.to_str()) == Some(n));
+        let (can, raw, vcan, dev) = (pos("can.ko"), pos("can-raw.ko"), pos("vcan.ko"), pos("can-dev.ko"));
+        assert!(can.is_some() && raw.is_some() && vcan.is_some() && dev.is_some(), "{files:?}");
+        assert!(can < raw && dev < vcan);
+    }
+}
