@@ -1,1 +1,8 @@
-//! placeholder
+//! Navigation library of the RLG strapdown INS: earth model, IMU front end, configuration,
+//! recording. The `nav` binary is the production program; it opens the devices named in its
+//! config file and knows nothing of emulators.
+
+pub mod config;
+pub mod earth;
+pub mod imu;
+pub mod record;

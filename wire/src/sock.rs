@@ -37,7 +37,7 @@ pub fn from_can_frame(f: &CanFrame) -> Result<RawFrame, FrameConvError> {
             Id::Standard(id) => u32::from(id.as_raw()),
             Id::Extended(id) => id.as_raw(),
         })),
-        CanFrame::Error(e) => Err(FrameConvError::Error(socketcan::Frame::error_bits(e))),
+        CanFrame::Error(e) => Err(FrameConvError::Error(e.error_bits())),
     }
 }
 

@@ -1,0 +1,157 @@
+//! Transport: puts emulator frames on a CAN interface (vcan on the bench), paced by the
+//! simulated clock.
+
+use crate::clock::SimClock;
+use crate::imu::ImuEmulator;
+use serde::{Deserialize, Serialize};
+use socketcan::{CanSocket, Socket};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+use thiserror::Error;
+use wire::RawFrame;
+
+/// Deliberate faults the IMU adapter injects on the bus (for testing the receiver).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct BusFaults {
+    /// Sample indices (0-based) whose frames are not sent.
+    pub drop_samples: Vec<u64>,
+    /// Sample indices whose IMU_GYRO frame is sent twice.
+    pub duplicate_samples: Vec<u64>,
+    /// Simulated times (s) at which a frame with an id outside the contract is sent.
+    pub unknown_id_at_s: Vec<f64>,
+    /// Simulated times (s) at which an IMU_GYRO frame with a wrong length is sent.
+    pub bad_length_at_s: Vec<f64>,
+}
+
+/// What the adapter sent.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+pub struct TxStats {
+    /// Samples produced by the model.
+    pub samples: u64,
+    /// IMU_GYRO frames written.
+    pub gyro_frames: u64,
+    /// IMU_ACCEL frames written.
+    pub accel_frames: u64,
+    /// IMU_HK frames written.
+    pub hk_frames: u64,
+    /// Frames written in all (including injected ones).
+    pub frames: u64,
+    /// Samples deliberately dropped.
+    pub dropped_samples: u64,
+    /// Deliberately injected bad frames (unknown id, wrong length, duplicates).
+    pub injected_frames: u64,
+    /// Writes retried after ENOBUFS (transmit queue full).
+    pub enobufs_retries: u64,
+    /// Largest lag behind the simulated clock, ms of wall time.
+    pub max_lag_ms: u64,
+}
+
+/// Transport failures.
+#[derive(Debug, Error)]
+pub enum CanTxError {
+    /// The interface could not be opened.
+    #[error("CAN interface {iface}: cannot open: {source}")]
+    Open {
+        /// Interface.
+        iface: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A write failed.
+    #[error("CAN interface {iface}: write of frame 0x{id:03X} failed: {source}")]
+    Write {
+        /// Interface.
+        iface: String,
+        /// Frame id.
+        id: u16,
+        /// Cause.
+        source: std::io::Error,
+    },
+}
+
+fn write(sock: &CanSocket, iface: &str, f: &RawFrame, stats: &mut TxStats) -> Result<(), CanTxError> {
+    let frame = wire::to_can_frame(f).map_err(|e| CanTxError::Write {
+        iface: iface.into(),
+        id: f.id,
+        source: std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()),
+    })?;
+    let deadline = Instant::now() + Duration::from_secs(2);
+    loop {
+        match sock.write_frame(&frame) {
+            Ok(()) => {
+                stats.frames += 1;
+                return Ok(());
+            }
+            Err(e) if e.raw_os_error() == Some(libc::ENOBUFS) && Instant::now() < deadline => {
+                stats.enobufs_retries += 1;
+                std::thread::sleep(Duration::from_micros(200));
+            }
+            Err(source) => return Err(CanTxError::Write { iface: iface.into(), id: f.id, source }),
+        }
+    }
+}
+
+/// Live progress shared with the caller: simulated milliseconds sent so far.
+#[derive(Debug, Default)]
+pub struct Progress {
+    /// Simulated time reached, ms.
+    pub sim_ms: AtomicU64,
+}
+
+/// Run the IMU on `iface` for `duration_s` of simulated time, paced by `clock`. Stops early when
+/// `stop` is set.
+pub fn run_imu(
+    iface: &str,
+    mut imu: ImuEmulator,
+    clock: SimClock,
+    duration_s: f64,
+    faults: &BusFaults,
+    stop: &AtomicBool,
+    progress: &Arc<Progress>,
+) -> Result<TxStats, CanTxError> {
+    let sock = CanSocket::open(iface).map_err(|source| CanTxError::Open { iface: iface.into(), source })?;
+    let mut st = TxStats::default();
+    let mut unknown = faults.unknown_id_at_s.clone();
+    let mut badlen = faults.bad_length_at_s.clone();
+    while imu.next_time() <= duration_s + 1e-9 && !stop.load(Ordering::Relaxed) {
+        let t = imu.next_time();
+        clock.sleep_until(t);
+        let lag = Instant::now().saturating_duration_since(clock.wall_at(t));
+        st.max_lag_ms = st.max_lag_ms.max(lag.as_millis() as u64);
+        let s = imu.next_sample();
+        st.samples += 1;
+        if faults.drop_samples.contains(&s.k) {
+            st.dropped_samples += 1;
+            continue;
+        }
+        for f in &s.frames {
+            write(&sock, iface, f, &mut st)?;
+            match f.id {
+                0x080 => st.gyro_frames += 1,
+                0x081 => st.accel_frames += 1,
+                _ => st.hk_frames += 1,
+            }
+        }
+        if faults.duplicate_samples.contains(&s.k) {
+            write(&sock, iface, &s.frames[0], &mut st)?;
+            st.injected_frames += 1;
+        }
+        for (times, frame) in [
+            (&mut unknown, RawFrame { id: 0x7E5, len: 8, data: *b"UNKNOWN!" }),
+            (&mut badlen, RawFrame { id: 0x080, len: 5, data: [1, 2, 3, 4, 5, 0, 0, 0] }),
+        ] {
+            if let Some(pos) = times.iter().position(|at| *at <= t) {
+                times.swap_remove(pos);
+                write(&sock, iface, &frame, &mut st)?;
+                st.injected_frames += 1;
+            }
+        }
+        if s.k % 200 == 0 {
+            progress.sim_ms.store((t * 1000.0) as u64, Ordering::Relaxed);
+        }
+    }
+    progress.sim_ms.store((imu.next_time() * 1000.0) as u64, Ordering::Relaxed);
+    Ok(st)
+}

@@ -1,0 +1,157 @@
+//! The `nav` config file (TOML). On a vehicle it names `can0` and `/dev/ttyS1`; on the bench it
+//! names a vcan interface and a pty. Nothing else differs.
+
+use crate::imu::ImuCalibration;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// Whole configuration.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NavConfig {
+    /// CAN bus.
+    pub can: CanConfig,
+    /// IMU calibration bound to the unit.
+    #[serde(default)]
+    pub imu: ImuCalibration,
+    /// Liveness watchdog.
+    #[serde(default)]
+    pub watchdog: WatchdogConfig,
+    /// Recording and reports.
+    #[serde(default)]
+    pub record: RecordConfig,
+}
+
+/// CAN bus settings.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CanConfig {
+    /// Interface name (`can0`, `vcan0`).
+    pub interface: String,
+    /// Socket receive buffer, bytes. Large enough to ride out scheduling hiccups at 4,000 frames/s.
+    #[serde(default = "default_rcvbuf")]
+    pub rcvbuf_bytes: usize,
+}
+
+fn default_rcvbuf() -> usize {
+    8 << 20
+}
+
+/// Watchdog settings (wall time: liveness only, never navigation time).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WatchdogConfig {
+    /// Report an IMU timeout after this long without IMU frames.
+    pub imu_timeout_ms: u64,
+}
+
+impl Default for WatchdogConfig {
+    fn default() -> Self {
+        Self { imu_timeout_ms: 500 }
+    }
+}
+
+/// Recording settings. Relative paths are relative to the config file's folder.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecordConfig {
+    /// MCAP file of raw frames, decoded samples and events.
+    pub mcap: Option<PathBuf>,
+    /// JSON summary written at exit.
+    pub summary: Option<PathBuf>,
+}
+
+/// Config file problems.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    /// Unreadable.
+    #[error("cannot read config file {path}: {source}")]
+    Read {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Not valid.
+    #[error("config file {path}: {source}")]
+    Parse {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: toml::de::Error,
+    },
+    /// A value makes no sense.
+    #[error("config file {path}: {what}")]
+    Invalid {
+        /// File.
+        path: PathBuf,
+        /// What is wrong.
+        what: String,
+    },
+}
+
+impl NavConfig {
+    /// Load and check a config file; relative record paths are resolved against its folder.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.into(), source })?;
+        let mut cfg: NavConfig =
+            toml::from_str(&text).map_err(|source| ConfigError::Parse { path: path.into(), source })?;
+        let invalid = |what: String| ConfigError::Invalid { path: path.into(), what };
+        if cfg.can.interface.is_empty() {
+            return Err(invalid("can.interface is empty".into()));
+        }
+        let c = &cfg.imu;
+        if c.gyro_pulse_arcsec.iter().chain(&c.accel_pulse_mps).any(|w| !(w.is_finite() && *w > 0.0)) {
+            return Err(invalid("imu pulse weights must be positive".into()));
+        }
+        if !(c.rate_hz > 0.0 && c.gyro_range_dps > 0.0 && c.accel_range_mps2 > 0.0) {
+            return Err(invalid("imu.rate_hz, gyro_range_dps and accel_range_mps2 must be positive".into()));
+        }
+        let base = path.parent().unwrap_or(Path::new("."));
+        for p in [&mut cfg.record.mcap, &mut cfg.record.summary].into_iter().flatten() {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+        }
+        Ok(cfg)
+    }
+
+    /// Serialize (the bench writes configs with this).
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).unwrap_or_default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn minimal_config_loads_with_defaults_and_resolves_paths() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("nav.toml");
+        std::fs::write(&p, "[can]\ninterface = \"can0\"\n[record]\nmcap = \"x.mcap\"\n").unwrap();
+        let c = NavConfig::load(&p).unwrap();
+        assert_eq!(c.can.interface, "can0");
+        assert_eq!(c.imu, ImuCalibration::default());
+        assert_eq!(c.record.mcap.as_deref(), Some(dir.path().join("x.mcap").as_path()));
+        // and it round-trips through the writer
+        std::fs::write(&p, c.to_toml()).unwrap();
+        assert_eq!(NavConfig::load(&p).unwrap().can.interface, "can0");
+    }
+
+    #[test]
+    fn bad_configs_name_the_file_and_the_problem() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("nav.toml");
+        std::fs::write(&p, "[can]\ninterfac = \"can0\"\n").unwrap();
+        let e = NavConfig::load(&p).unwrap_err().to_string();
+        assert!(e.contains("nav.toml") && e.contains("interfac"), "{e}");
+        std::fs::write(&p, "[can]\ninterface = \"can0\"\n[imu]\ngyro_pulse_arcsec = [1.0, 0.0, 1.0]\naccel_pulse_mps=[1e-4,1e-4,1e-4]\ngyro_range_dps=1\naccel_range_mps2=1\nrate_hz=2000\n").unwrap();
+        let e = NavConfig::load(&p).unwrap_err().to_string();
+        assert!(e.contains("pulse weights"), "{e}");
+        let e = NavConfig::load(&dir.path().join("missing.toml")).unwrap_err().to_string();
+        assert!(e.contains("missing.toml"), "{e}");
+    }
+}

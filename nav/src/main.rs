@@ -1,0 +1,360 @@
+//! `nav`: the production navigation program. It opens the CAN interface named in its config
+//! file, decodes the IMU stream, checks it, records it, and on SIGINT/SIGTERM finishes its
+//! recording, prints a summary and exits 0.
+
+use anyhow::{Context, Result, bail};
+use clap::Parser;
+use nav::config::NavConfig;
+use nav::earth;
+use nav::imu::{Housekeeping, ImuEvent, ImuFrontEnd, ImuSample, ImuStats};
+use nav::record::{JsonChannel, Record, Recorder, wall_ns};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::os::fd::AsRawFd;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use tokio::signal::unix::{SignalKind, signal};
+use tracing::{info, warn};
+use wire::{DecodeError, Message, RawFrame};
+
+#[derive(Parser)]
+#[command(version, about = "Navigation computer of the RLG strapdown INS", long_about = "Navigation computer of the \
+RLG strapdown INS. Opens the devices named in its config file (a CAN interface such as can0 or vcan0), decodes and \
+checks the IMU stream, records raw and decoded data to MCAP, and on SIGINT/SIGTERM finishes the recording, prints \
+a summary and exits 0.")]
+struct Cli {
+    /// Config file (TOML).
+    #[arg(short, long)]
+    config: PathBuf,
+    /// Print the summary as JSON on stdout instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// What `nav` reports at exit (also written to `record.summary`).
+#[derive(Debug, Serialize)]
+struct Summary {
+    interface: String,
+    frames_total: u64,
+    frames_by_message: BTreeMap<&'static str, u64>,
+    unknown_id_frames: u64,
+    unknown_ids: Vec<String>,
+    bad_length_frames: u64,
+    invalid_value_frames: u64,
+    non_data_frames: u64,
+    read_errors: u64,
+    imu: ImuStats,
+    max_safe_gap_samples: u32,
+    first_sample: Option<u64>,
+    last_sample: Option<u64>,
+    imu_seconds: f64,
+    wall_seconds: f64,
+    imu_timeouts: u64,
+    mean_rate_dph: [f64; 3],
+    mean_specific_force_mps2: [f64; 3],
+    rate_norm_dph: f64,
+    specific_force_norm_mps2: f64,
+    housekeeping: Housekeeping,
+    mcap: Option<PathBuf>,
+    mcap_messages: u64,
+}
+
+#[derive(Default)]
+struct Sums {
+    dtheta: [f64; 3],
+    dv: [f64; 3],
+    samples: u64,
+    first: Option<u64>,
+    last: Option<u64>,
+}
+
+impl Sums {
+    fn add(&mut self, s: &ImuSample) {
+        if s.ambiguous {
+            return;
+        }
+        for i in 0..3 {
+            self.dtheta[i] += s.dtheta[i];
+            self.dv[i] += s.dv[i];
+        }
+        self.samples += u64::from(s.span);
+        self.first.get_or_insert(s.sample - u64::from(s.span));
+        self.last = Some(s.sample);
+    }
+}
+
+fn set_rcvbuf(fd: i32, bytes: usize) -> std::io::Result<()> {
+    let v = bytes as libc::c_int;
+    let len = std::mem::size_of::<libc::c_int>() as libc::socklen_t;
+    let p = &v as *const libc::c_int as *const libc::c_void;
+    // SAFETY: fd is an open socket, p points to a c_int of the given length.
+    let r = unsafe { libc::setsockopt(fd, libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, p, len) };
+    if r == 0 {
+        return Ok(());
+    }
+    // SAFETY: as above; without CAP_NET_ADMIN fall back to the capped SO_RCVBUF.
+    let r = unsafe { libc::setsockopt(fd, libc::SOL_SOCKET, libc::SO_RCVBUF, p, len) };
+    if r == 0 { Ok(()) } else { Err(std::io::Error::last_os_error()) }
+}
+
+fn open_error_hint(iface: &str, e: &std::io::Error) -> String {
+    match e.raw_os_error() {
+        Some(libc::ENODEV) => format!("no such CAN interface {iface} (is it created and up? on the bench: `vcan-setup up {iface}`)"),
+        Some(libc::EAFNOSUPPORT) => "this kernel has no CAN support (modprobe can_raw, or run through vcan-setup)".into(),
+        Some(libc::EPERM) | Some(libc::EACCES) => format!("no permission to open {iface}"),
+        _ => e.to_string(),
+    }
+}
+
+fn main() -> Result<()> {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
+        .init();
+    let cli = Cli::parse();
+    let cfg = NavConfig::load(&cli.config)?;
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
+    let summary = rt.block_on(run(&cfg))?;
+    if cli.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        print_summary(&summary);
+    }
+    Ok(())
+}
+
+async fn run(cfg: &NavConfig) -> Result<Summary> {
+    let iface = cfg.can.interface.as_str();
+    let sock = socketcan::tokio::CanSocket::open(iface)
+        .map_err(|e| anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e)))?;
+    if let Err(e) = set_rcvbuf(sock.as_raw_fd(), cfg.can.rcvbuf_bytes) {
+        warn!(interface = iface, "cannot enlarge the receive buffer to {} bytes: {e}", cfg.can.rcvbuf_bytes);
+    }
+    let recorder = match &cfg.record.mcap {
+        Some(p) => Some(Recorder::start(p)?),
+        None => None,
+    };
+    let mut sigint = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;
+    let mut sigterm = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
+    let mut fe = ImuFrontEnd::new(cfg.imu);
+    let mut sums = Sums::default();
+    let mut by_msg: BTreeMap<&'static str, u64> = BTreeMap::new();
+    let mut unknown: BTreeMap<u32, u64> = BTreeMap::new();
+    let (mut bad_len, mut invalid, mut non_data, mut read_errors, mut total) = (0u64, 0u64, 0u64, 0u64, 0u64);
+    let mut timeouts = 0u64;
+    let (mut out, mut ev) = (Vec::new(), Vec::new());
+    let start = Instant::now();
+    let mut last_imu = Instant::now();
+    let mut in_timeout = false;
+    let timeout = Duration::from_millis(cfg.watchdog.imu_timeout_ms);
+    let mut tick = tokio::time::interval(Duration::from_millis(100));
+    let sample_ns = 1e9 / cfg.imu.rate_hz;
+    info!(interface = iface, "receiving");
+    println!("nav: receiving on {iface}");
+    let event = |rec: &Option<Recorder>, sample: u64, json: String| {
+        if let Some(r) = rec {
+            r.send(Record::Json { channel: JsonChannel::Event, t_ns: wall_ns(), publish_ns: (sample as f64 * sample_ns) as u64, json });
+        }
+    };
+    loop {
+        tokio::select! {
+            r = sock.read_frame() => {
+                let f = match r {
+                    Ok(f) => f,
+                    Err(e) => {
+                        read_errors += 1;
+                        match e.raw_os_error() {
+                            Some(libc::ENODEV) | Some(libc::ENXIO) => bail!("CAN interface {iface} disappeared: {e}"),
+                            _ => {
+                                warn!(interface = iface, "read error: {e}");
+                                tokio::time::sleep(Duration::from_millis(10)).await;
+                                continue;
+                            }
+                        }
+                    }
+                };
+                total += 1;
+                let raw = match wire::from_can_frame(&f) {
+                    Ok(r) => r,
+                    Err(e) => {
+                        non_data += 1;
+                        if non_data <= 5 {
+                            warn!(interface = iface, "ignored: {e}");
+                        }
+                        event(&recorder, fe.stats().samples, format!("{{\"kind\":\"non_data_frame\",\"detail\":{}}}", serde_json::to_string(&e.to_string())?));
+                        continue;
+                    }
+                };
+                if let Some(r) = &recorder {
+                    r.send(Record::Frame { t_ns: wall_ns(), frame: raw });
+                }
+                match Message::decode(&raw) {
+                    Ok(m) => {
+                        *by_msg.entry(m.spec().name).or_insert(0) += 1;
+                        match m {
+                            Message::ImuGyro(g) => {
+                                last_imu = Instant::now();
+                                fe.on_gyro(&g, &mut out, &mut ev);
+                            }
+                            Message::ImuAccel(a) => fe.on_accel(&a, &mut out, &mut ev),
+                            Message::ImuHk(h) => fe.on_hk(&h),
+                            _ => {}
+                        }
+                    }
+                    Err(e) => report_bad_frame(&e, &raw, iface, &mut unknown, &mut bad_len, &mut invalid, &recorder, fe.stats().samples),
+                }
+                drain(&mut out, &mut ev, &mut sums, &recorder, sample_ns);
+                if in_timeout && last_imu.elapsed() < timeout {
+                    info!(interface = iface, "IMU data back");
+                    in_timeout = false;
+                }
+            }
+            _ = tick.tick() => {
+                if !in_timeout && last_imu.elapsed() > timeout && fe.stats().gyro_frames > 0 {
+                    timeouts += 1;
+                    in_timeout = true;
+                    warn!(interface = iface, "no IMU frame for {} ms (last sample {:?})", timeout.as_millis(), sums.last);
+                    event(&recorder, sums.last.unwrap_or(0), format!("{{\"kind\":\"imu_timeout\",\"after_ms\":{}}}", timeout.as_millis()));
+                }
+            }
+            _ = sigint.recv() => { info!("SIGINT: finishing"); break; }
+            _ = sigterm.recv() => { info!("SIGTERM: finishing"); break; }
+        }
+    }
+    fe.flush(&mut out, &mut ev);
+    drain(&mut out, &mut ev, &mut sums, &recorder, sample_ns);
+    let n = sums.samples.max(1) as f64;
+    let dt = 1.0 / cfg.imu.rate_hz;
+    let mean_rate_dph = sums.dtheta.map(|x| x / (n * dt) * earth::DEG_PER_HOUR_PER_RAD_S);
+    let mean_f = sums.dv.map(|x| x / (n * dt));
+    let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let mut summary = Summary {
+        interface: iface.to_string(),
+        frames_total: total,
+        frames_by_message: by_msg,
+        unknown_id_frames: unknown.values().sum(),
+        unknown_ids: unknown.keys().map(|id| format!("0x{id:03X}")).collect(),
+        bad_length_frames: bad_len,
+        invalid_value_frames: invalid,
+        non_data_frames: non_data,
+        read_errors,
+        imu: fe.stats(),
+        max_safe_gap_samples: fe.max_span(),
+        first_sample: sums.first,
+        last_sample: sums.last,
+        imu_seconds: sums.samples as f64 * dt,
+        wall_seconds: start.elapsed().as_secs_f64(),
+        imu_timeouts: timeouts,
+        mean_rate_dph,
+        mean_specific_force_mps2: mean_f,
+        rate_norm_dph: norm(mean_rate_dph),
+        specific_force_norm_mps2: norm(mean_f),
+        housekeeping: fe.housekeeping(),
+        mcap: cfg.record.mcap.clone(),
+        mcap_messages: 0,
+    };
+    if let Some(r) = recorder {
+        r.send(Record::Json {
+            channel: JsonChannel::Summary,
+            t_ns: wall_ns(),
+            publish_ns: (sums.last.unwrap_or(0) as f64 * sample_ns) as u64,
+            json: serde_json::to_string(&summary)?,
+        });
+        summary.mcap_messages = r.finish()?;
+    }
+    if let Some(p) = &cfg.record.summary {
+        std::fs::write(p, serde_json::to_string_pretty(&summary)?).with_context(|| format!("writing summary {}", p.display()))?;
+    }
+    Ok(summary)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn report_bad_frame(
+    e: &DecodeError,
+    raw: &RawFrame,
+    iface: &str,
+    unknown: &mut BTreeMap<u32, u64>,
+    bad_len: &mut u64,
+    invalid: &mut u64,
+    recorder: &Option<Recorder>,
+    sample: u64,
+) {
+    let first = match e {
+        DecodeError::UnknownId { id } => {
+            let c = unknown.entry(*id).or_insert(0);
+            *c += 1;
+            *c == 1
+        }
+        DecodeError::WrongLength { .. } => {
+            *bad_len += 1;
+            *bad_len <= 5
+        }
+        _ => {
+            *invalid += 1;
+            *invalid <= 5
+        }
+    };
+    if first {
+        warn!(interface = iface, "bad frame near IMU sample {sample}: {e} (data {:02X?})", raw.payload());
+    }
+    if let Some(r) = recorder {
+        let json = serde_json::json!({"kind": "bad_frame", "sample": sample, "id": raw.id, "len": raw.len, "error": e.to_string()});
+        r.send(Record::Json { channel: JsonChannel::Event, t_ns: wall_ns(), publish_ns: 0, json: json.to_string() });
+    }
+}
+
+fn drain(out: &mut Vec<ImuSample>, ev: &mut Vec<ImuEvent>, sums: &mut Sums, rec: &Option<Recorder>, sample_ns: f64) {
+    for e in ev.drain(..) {
+        match e {
+            ImuEvent::Gap { .. } | ImuEvent::AccelMissing { .. } => tracing::debug!("IMU: {e:?}"),
+            _ => warn!("IMU: {e:?}"),
+        }
+        if let (Some(r), Ok(json)) = (rec, serde_json::to_string(&e)) {
+            r.send(Record::Json { channel: JsonChannel::Event, t_ns: wall_ns(), publish_ns: 0, json });
+        }
+    }
+    for s in out.drain(..) {
+        sums.add(&s);
+        if let (Some(r), Ok(json)) = (rec, serde_json::to_string(&s)) {
+            r.send(Record::Json {
+                channel: JsonChannel::ImuSample,
+                t_ns: wall_ns(),
+                publish_ns: (s.sample as f64 * sample_ns) as u64,
+                json,
+            });
+        }
+    }
+}
+
+fn print_summary(s: &Summary) {
+    println!("nav summary ({})", s.interface);
+    println!("  frames received   {} ({:?})", s.frames_total, s.frames_by_message);
+    println!(
+        "  IMU samples       {} over {:.3} s of IMU time ({:.1} s wall)",
+        s.imu.samples, s.imu_seconds, s.wall_seconds
+    );
+    println!(
+        "  gaps              {} ({} samples lost, {} too long to difference), duplicates {}, backwards {}",
+        s.imu.gaps, s.imu.missing_samples, s.imu.ambiguous_gaps, s.imu.duplicates, s.imu.backwards
+    );
+    println!(
+        "  bad frames        unknown id {} {:?}, wrong length {}, invalid {}, non-data {}, read errors {}",
+        s.unknown_id_frames, s.unknown_ids, s.bad_length_frames, s.invalid_value_frames, s.non_data_frames, s.read_errors
+    );
+    println!(
+        "  accel frames      missing {}, unpaired {}; BIT-fail samples {}, saturated {}, PPS edges {}",
+        s.imu.accel_missing, s.imu.accel_unpaired, s.imu.bit_fail_samples, s.imu.saturated_samples, s.imu.pps_edges
+    );
+    println!(
+        "  mean rate         [{:.3}, {:.3}, {:.3}] deg/h, |w| = {:.3} deg/h",
+        s.mean_rate_dph[0], s.mean_rate_dph[1], s.mean_rate_dph[2], s.rate_norm_dph
+    );
+    println!(
+        "  mean spec. force  [{:.5}, {:.5}, {:.5}] m/s^2, |f| = {:.5} m/s^2",
+        s.mean_specific_force_mps2[0], s.mean_specific_force_mps2[1], s.mean_specific_force_mps2[2], s.specific_force_norm_mps2
+    );
+    println!("  IMU timeouts      {}", s.imu_timeouts);
+    if let Some(p) = &s.mcap {
+        println!("  recording         {} ({} messages)", p.display(), s.mcap_messages);
+    }
+}

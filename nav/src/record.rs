@@ -1,0 +1,172 @@
+//! MCAP recording on its own thread, so the receive path never waits for the disk.
+//!
+//! Channels:
+//! - `/can/raw` (encoding `rlg-hil.can-frame.v1`): every received frame as
+//!   `[id: u16 LE][len: u8][data: 8 bytes]`; log time = receive wall time.
+//! - `/imu/sample` (JSON): every decoded IMU sample; publish time = sample time on the IMU clock.
+//! - `/nav/event` (JSON): irregularities (gaps, duplicates, bad frames, timeouts).
+//! - `/nav/summary` (JSON): the run summary, once at the end.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::thread::JoinHandle;
+use thiserror::Error;
+use wire::RawFrame;
+
+/// Message encoding of `/can/raw`.
+pub const RAW_FRAME_ENCODING: &str = "rlg-hil.can-frame.v1";
+
+/// One thing to record.
+#[derive(Debug)]
+pub enum Record {
+    /// A received frame.
+    Frame {
+        /// Receive wall time, ns since the epoch.
+        t_ns: u64,
+        /// The frame.
+        frame: RawFrame,
+    },
+    /// A JSON message on a JSON channel.
+    Json {
+        /// Which channel.
+        channel: JsonChannel,
+        /// Log time, ns.
+        t_ns: u64,
+        /// Publish time (IMU clock), ns.
+        publish_ns: u64,
+        /// JSON text.
+        json: String,
+    },
+}
+
+/// The JSON channels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum JsonChannel {
+    /// `/imu/sample`.
+    ImuSample,
+    /// `/nav/event`.
+    Event,
+    /// `/nav/summary`.
+    Summary,
+}
+
+impl JsonChannel {
+    fn topic(self) -> &'static str {
+        match self {
+            JsonChannel::ImuSample => "/imu/sample",
+            JsonChannel::Event => "/nav/event",
+            JsonChannel::Summary => "/nav/summary",
+        }
+    }
+}
+
+/// Recording failures.
+#[derive(Debug, Error)]
+pub enum RecordError {
+    /// File could not be created.
+    #[error("cannot create MCAP file {path}: {source}")]
+    Create {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The MCAP writer failed.
+    #[error("MCAP file {path}: {source}")]
+    Mcap {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: mcap::McapError,
+    },
+    /// The writer thread died.
+    #[error("MCAP writer thread for {0} panicked")]
+    Thread(PathBuf),
+}
+
+/// Handle to the recorder thread.
+pub struct Recorder {
+    tx: Option<mpsc::Sender<Record>>,
+    handle: Option<JoinHandle<Result<u64, RecordError>>>,
+    path: PathBuf,
+}
+
+impl Recorder {
+    /// Create the file and start the writer thread.
+    pub fn start(path: &Path) -> Result<Self, RecordError> {
+        let file = File::create(path).map_err(|source| RecordError::Create { path: path.into(), source })?;
+        let p = path.to_path_buf();
+        let mcap_err = move |source| RecordError::Mcap { path: p.clone(), source };
+        let mut w = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .chunk_size(Some(256 * 1024))
+            .profile("")
+            .create(BufWriter::new(file))
+            .map_err(mcap_err.clone())?;
+        let meta = BTreeMap::new();
+        let raw = w.add_channel(0, "/can/raw", RAW_FRAME_ENCODING, &meta).map_err(mcap_err.clone())?;
+        let mut json = BTreeMap::new();
+        for c in [JsonChannel::ImuSample, JsonChannel::Event, JsonChannel::Summary] {
+            let schema = w.add_schema(c.topic(), "jsonschema", br#"{"type":"object"}"#).map_err(mcap_err.clone())?;
+            json.insert(c, w.add_channel(schema, c.topic(), "json", &meta).map_err(mcap_err.clone())?);
+        }
+        let (tx, rx) = mpsc::channel::<Record>();
+        let handle = std::thread::Builder::new()
+            .name("mcap-writer".into())
+            .spawn(move || -> Result<u64, RecordError> {
+                let mut seq: BTreeMap<u16, u32> = BTreeMap::new();
+                let mut n = 0u64;
+                let mut buf = [0u8; 11];
+                for r in rx {
+                    let (ch, log, publish, data): (u16, u64, u64, &[u8]) = match &r {
+                        Record::Frame { t_ns, frame } => {
+                            buf[..2].copy_from_slice(&frame.id.to_le_bytes());
+                            buf[2] = frame.len;
+                            buf[3..].copy_from_slice(&frame.data);
+                            (raw, *t_ns, *t_ns, &buf)
+                        }
+                        Record::Json { channel, t_ns, publish_ns, json: text } => {
+                            (json[channel], *t_ns, *publish_ns, text.as_bytes())
+                        }
+                    };
+                    let s = seq.entry(ch).or_insert(0);
+                    *s += 1;
+                    let h = mcap::records::MessageHeader { channel_id: ch, sequence: *s, log_time: log, publish_time: publish };
+                    w.write_to_known_channel(&h, data).map_err(mcap_err.clone())?;
+                    n += 1;
+                }
+                w.finish().map_err(mcap_err)?;
+                Ok(n)
+            })
+            .map_err(|source| RecordError::Create { path: path.into(), source })?;
+        Ok(Self { tx: Some(tx), handle: Some(handle), path: path.into() })
+    }
+
+    /// Queue a record (never blocks the caller).
+    pub fn send(&self, r: Record) {
+        if let Some(tx) = &self.tx {
+            let _ = tx.send(r);
+        }
+    }
+
+    /// Close the file (writes the MCAP summary and footer); returns the message count.
+    pub fn finish(mut self) -> Result<u64, RecordError> {
+        self.tx.take();
+        match self.handle.take().map(|h| h.join()) {
+            Some(Ok(r)) => r,
+            Some(Err(_)) => Err(RecordError::Thread(self.path.clone())),
+            None => Ok(0),
+        }
+    }
+}
+
+/// Wall time now, ns since the epoch.
+pub fn wall_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0)
+}
