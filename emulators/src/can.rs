@@ -71,7 +71,12 @@ pub enum CanTxError {
     },
 }
 
-fn write(sock: &CanSocket, iface: &str, f: &RawFrame, stats: &mut TxStats) -> Result<(), CanTxError> {
+fn write(
+    sock: &CanSocket,
+    iface: &str,
+    f: &RawFrame,
+    stats: &mut TxStats,
+) -> Result<(), CanTxError> {
     let frame = wire::to_can_frame(f).map_err(|e| CanTxError::Write {
         iface: iface.into(),
         id: f.id,
@@ -88,7 +93,13 @@ fn write(sock: &CanSocket, iface: &str, f: &RawFrame, stats: &mut TxStats) -> Re
                 stats.enobufs_retries += 1;
                 std::thread::sleep(Duration::from_micros(200));
             }
-            Err(source) => return Err(CanTxError::Write { iface: iface.into(), id: f.id, source }),
+            Err(source) => {
+                return Err(CanTxError::Write {
+                    iface: iface.into(),
+                    id: f.id,
+                    source,
+                });
+            }
         }
     }
 }
@@ -111,7 +122,10 @@ pub fn run_imu(
     stop: &AtomicBool,
     progress: &Arc<Progress>,
 ) -> Result<TxStats, CanTxError> {
-    let sock = CanSocket::open(iface).map_err(|source| CanTxError::Open { iface: iface.into(), source })?;
+    let sock = CanSocket::open(iface).map_err(|source| CanTxError::Open {
+        iface: iface.into(),
+        source,
+    })?;
     let mut st = TxStats::default();
     let mut unknown = faults.unknown_id_at_s.clone();
     let mut badlen = faults.bad_length_at_s.clone();
@@ -139,8 +153,22 @@ pub fn run_imu(
             st.injected_frames += 1;
         }
         for (times, frame) in [
-            (&mut unknown, RawFrame { id: 0x7E5, len: 8, data: *b"UNKNOWN!" }),
-            (&mut badlen, RawFrame { id: 0x080, len: 5, data: [1, 2, 3, 4, 5, 0, 0, 0] }),
+            (
+                &mut unknown,
+                RawFrame {
+                    id: 0x7E5,
+                    len: 8,
+                    data: *b"UNKNOWN!",
+                },
+            ),
+            (
+                &mut badlen,
+                RawFrame {
+                    id: 0x080,
+                    len: 5,
+                    data: [1, 2, 3, 4, 5, 0, 0, 0],
+                },
+            ),
         ] {
             if let Some(pos) = times.iter().position(|at| *at <= t) {
                 times.swap_remove(pos);
@@ -148,10 +176,14 @@ pub fn run_imu(
                 st.injected_frames += 1;
             }
         }
-        if s.k % 200 == 0 {
-            progress.sim_ms.store((t * 1000.0) as u64, Ordering::Relaxed);
+        if s.k.is_multiple_of(200) {
+            progress
+                .sim_ms
+                .store((t * 1000.0) as u64, Ordering::Relaxed);
         }
     }
-    progress.sim_ms.store((imu.next_time() * 1000.0) as u64, Ordering::Relaxed);
+    progress
+        .sim_ms
+        .store((imu.next_time() * 1000.0) as u64, Ordering::Relaxed);
     Ok(st)
 }

@@ -12,7 +12,10 @@ pub struct SimClock {
 impl SimClock {
     /// Start a clock now. `speed` 1.0 is real time; 10.0 runs ten times faster.
     pub fn start(speed: f64) -> Self {
-        Self { origin: Instant::now(), speed: speed.max(1e-6) }
+        Self {
+            origin: Instant::now(),
+            speed: speed.max(1e-6),
+        }
     }
 
     /// Speed factor.

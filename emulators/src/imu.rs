@@ -118,7 +118,11 @@ impl ImuEmulator {
     pub fn new(motion: Box<dyn Motion>, p: ImuParams) -> Self {
         let mut rng = StdRng::seed_from_u64(p.seed);
         let mut sign = |b: f64| {
-            if p.random_bias_sign && rand::Rng::random_bool(&mut rng, 0.5) { -b } else { b }
+            if p.random_bias_sign && rand::Rng::random_bool(&mut rng, 0.5) {
+                -b
+            } else {
+                b
+            }
         };
         let deg_h = std::f64::consts::PI / 180.0 / 3600.0;
         let gyro_bias = p.gyro_bias_dph.map(|b| sign(b) * deg_h);
@@ -169,18 +173,33 @@ impl ImuEmulator {
         let n = Normal::new(0.0, 1.0).expect("unit normal");
         let arcsec = std::f64::consts::PI / 180.0 / 3600.0;
         for i in 0..3 {
-            let dth = inc.dtheta[i] + self.gyro_bias[i] * self.dt + self.arw_sigma * n.sample(&mut self.rng);
+            let dth = inc.dtheta[i]
+                + self.gyro_bias[i] * self.dt
+                + self.arw_sigma * n.sample(&mut self.rng);
             self.gyro[i].add(dth / (self.p.gyro_pulse_arcsec[i] * arcsec));
-            let dv = inc.dv[i] + self.accel_bias[i] * self.dt + self.vrw_sigma * n.sample(&mut self.rng);
+            let dv =
+                inc.dv[i] + self.accel_bias[i] * self.dt + self.vrw_sigma * n.sample(&mut self.rng);
             self.accel[i].add(dv / self.p.accel_pulse_mps[i]);
         }
         let sample_counter = (u64::from(self.counter0) + self.k + 1) as u16;
         // PPS: an edge at whole seconds + phase inside (t0, t1]?
         let edge = (t1 - self.p.pps_phase_s).floor() + self.p.pps_phase_s;
-        let pps_offset = (edge > t0 && edge <= t1).then(|| (((t1 - edge) / self.dt) * 256.0).floor().clamp(0.0, 255.0) as u8);
-        let g = ImuGyro { counts: [self.gyro[0].wire(), self.gyro[1].wire(), self.gyro[2].wire()], sample_counter };
+        let pps_offset = (edge > t0 && edge <= t1)
+            .then(|| (((t1 - edge) / self.dt) * 256.0).floor().clamp(0.0, 255.0) as u8);
+        let g = ImuGyro {
+            counts: [
+                self.gyro[0].wire(),
+                self.gyro[1].wire(),
+                self.gyro[2].wire(),
+            ],
+            sample_counter,
+        };
         let a = ImuAccel {
-            counts: [self.accel[0].wire(), self.accel[1].wire(), self.accel[2].wire()],
+            counts: [
+                self.accel[0].wire(),
+                self.accel[1].wire(),
+                self.accel[2].wire(),
+            ],
             sample_counter_low: (sample_counter & 0xF) as u8,
             pps_offset,
             bit_fail: false,
@@ -190,7 +209,10 @@ impl ImuEmulator {
         for m in [Message::ImuGyro(g), Message::ImuAccel(a)] {
             frames.push(m.encode().expect("IMU frames always encode"));
         }
-        if self.k % (self.p.rate_hz / 10.0).round().max(1.0) as u64 == 0 {
+        if self
+            .k
+            .is_multiple_of((self.p.rate_hz / 10.0).round().max(1.0) as u64)
+        {
             let hk = ImuHk {
                 sample_counter,
                 temp_gyro_c: self.p.temp_c,
@@ -224,8 +246,21 @@ mod tests {
 
     #[test]
     fn noiseless_static_imu_integrates_to_truth_within_one_pulse() {
-        let s = Static { lat_deg: 28.2, lon_deg: 0.0, height_m: 0.0, heading_deg: 30.0, pitch_deg: 1.0, roll_deg: -2.0 };
-        let p = ImuParams { gyro_bias_dph: [0.0; 3], gyro_arw_dpsh: 0.0, accel_bias_mps2: [0.0; 3], accel_vrw_mpss: 0.0, ..Default::default() };
+        let s = Static {
+            lat_deg: 28.2,
+            lon_deg: 0.0,
+            height_m: 0.0,
+            heading_deg: 30.0,
+            pitch_deg: 1.0,
+            roll_deg: -2.0,
+        };
+        let p = ImuParams {
+            gyro_bias_dph: [0.0; 3],
+            gyro_arw_dpsh: 0.0,
+            accel_bias_mps2: [0.0; 3],
+            accel_vrw_mpss: 0.0,
+            ..Default::default()
+        };
         let mut imu = ImuEmulator::new(Box::new(s), p);
         let start = imu.gyro.map(|c| c.total);
         let n = 20_000;
@@ -243,7 +278,14 @@ mod tests {
 
     #[test]
     fn frames_carry_wrapping_counters_pps_and_housekeeping() {
-        let s = Static { lat_deg: 45.0, lon_deg: 0.0, height_m: 0.0, heading_deg: 0.0, pitch_deg: 0.0, roll_deg: 0.0 };
+        let s = Static {
+            lat_deg: 45.0,
+            lon_deg: 0.0,
+            height_m: 0.0,
+            heading_deg: 0.0,
+            pitch_deg: 0.0,
+            roll_deg: 0.0,
+        };
         let mut imu = ImuEmulator::new(Box::new(s), ImuParams::default());
         let (mut pps, mut hk, mut last_sc) = (0, 0, None::<u16>);
         for _ in 0..4000 {
@@ -268,7 +310,14 @@ mod tests {
 
     #[test]
     fn the_same_seed_gives_the_same_frames() {
-        let s = Static { lat_deg: 10.0, lon_deg: 0.0, height_m: 0.0, heading_deg: 0.0, pitch_deg: 0.0, roll_deg: 0.0 };
+        let s = Static {
+            lat_deg: 10.0,
+            lon_deg: 0.0,
+            height_m: 0.0,
+            heading_deg: 0.0,
+            pitch_deg: 0.0,
+            roll_deg: 0.0,
+        };
         let mut a = ImuEmulator::new(Box::new(s), ImuParams::default());
         let mut b = ImuEmulator::new(Box::new(s), ImuParams::default());
         for _ in 0..100 {

@@ -57,13 +57,21 @@ pub struct Static {
 impl Static {
     /// Body angular rate w.r.t. inertial space, rad/s.
     pub fn omega_ib_b(&self) -> Vector3<f64> {
-        let cbn = c_b_n(self.heading_deg.to_radians(), self.pitch_deg.to_radians(), self.roll_deg.to_radians());
+        let cbn = c_b_n(
+            self.heading_deg.to_radians(),
+            self.pitch_deg.to_radians(),
+            self.roll_deg.to_radians(),
+        );
         cbn.inverse() * Vector3::from(earth::earth_rate_enu(self.lat_deg.to_radians()))
     }
 
     /// Specific force in the body frame, m/s^2.
     pub fn f_b(&self) -> Vector3<f64> {
-        let cbn = c_b_n(self.heading_deg.to_radians(), self.pitch_deg.to_radians(), self.roll_deg.to_radians());
+        let cbn = c_b_n(
+            self.heading_deg.to_radians(),
+            self.pitch_deg.to_radians(),
+            self.roll_deg.to_radians(),
+        );
         let g = earth::gravity(self.lat_deg.to_radians(), self.height_m);
         cbn.inverse() * Vector3::new(0.0, 0.0, g)
     }
@@ -73,7 +81,10 @@ impl Motion for Static {
     fn increments(&self, t0: f64, t1: f64) -> Increments {
         // constant rate about a fixed axis: the integral is exact
         let dt = t1 - t0;
-        Increments { dtheta: self.omega_ib_b() * dt, dv: self.f_b() * dt }
+        Increments {
+            dtheta: self.omega_ib_b() * dt,
+            dv: self.f_b() * dt,
+        }
     }
 
     fn latitude(&self, _t: f64) -> f64 {
@@ -87,7 +98,14 @@ mod tests {
 
     #[test]
     fn level_north_facing_static_sees_earth_rate_and_gravity() {
-        let s = Static { lat_deg: 28.2, lon_deg: 0.0, height_m: 0.0, heading_deg: 0.0, pitch_deg: 0.0, roll_deg: 0.0 };
+        let s = Static {
+            lat_deg: 28.2,
+            lon_deg: 0.0,
+            height_m: 0.0,
+            heading_deg: 0.0,
+            pitch_deg: 0.0,
+            roll_deg: 0.0,
+        };
         let w = s.omega_ib_b();
         let lat = 28.2f64.to_radians();
         assert!(w.x.abs() < 1e-15);
@@ -98,7 +116,14 @@ mod tests {
 
     #[test]
     fn heading_east_puts_north_rate_on_minus_x() {
-        let s = Static { lat_deg: 0.0, lon_deg: 0.0, height_m: 0.0, heading_deg: 90.0, pitch_deg: 0.0, roll_deg: 0.0 };
+        let s = Static {
+            lat_deg: 0.0,
+            lon_deg: 0.0,
+            height_m: 0.0,
+            heading_deg: 90.0,
+            pitch_deg: 0.0,
+            roll_deg: 0.0,
+        };
         let w = s.omega_ib_b();
         // facing east, north is to the left (-x)
         assert!((w.x + earth::OMEGA_IE).abs() < 1e-12, "{w}");
@@ -107,7 +132,14 @@ mod tests {
 
     #[test]
     fn nose_up_pitch_tilts_gravity_onto_forward_axis() {
-        let s = Static { lat_deg: 0.0, lon_deg: 0.0, height_m: 0.0, heading_deg: 0.0, pitch_deg: 10.0, roll_deg: 0.0 };
+        let s = Static {
+            lat_deg: 0.0,
+            lon_deg: 0.0,
+            height_m: 0.0,
+            heading_deg: 0.0,
+            pitch_deg: 10.0,
+            roll_deg: 0.0,
+        };
         let f = s.f_b();
         let g = earth::gravity(0.0, 0.0);
         assert!((f.y - g * 10f64.to_radians().sin()).abs() < 1e-9, "{f}");

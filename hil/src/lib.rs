@@ -1,1 +1,5 @@
-//! placeholder
+//! The HIL bench: scenarios, runs on vcan, checks and reports.
+
+pub mod report;
+pub mod run;
+pub mod scenario;

@@ -48,7 +48,9 @@ pub struct WatchdogConfig {
 
 impl Default for WatchdogConfig {
     fn default() -> Self {
-        Self { imu_timeout_ms: 500 }
+        Self {
+            imu_timeout_ms: 500,
+        }
     }
 }
 
@@ -94,22 +96,39 @@ pub enum ConfigError {
 impl NavConfig {
     /// Load and check a config file; relative record paths are resolved against its folder.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.into(), source })?;
-        let mut cfg: NavConfig =
-            toml::from_str(&text).map_err(|source| ConfigError::Parse { path: path.into(), source })?;
-        let invalid = |what: String| ConfigError::Invalid { path: path.into(), what };
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.into(),
+            source,
+        })?;
+        let mut cfg: NavConfig = toml::from_str(&text).map_err(|source| ConfigError::Parse {
+            path: path.into(),
+            source,
+        })?;
+        let invalid = |what: String| ConfigError::Invalid {
+            path: path.into(),
+            what,
+        };
         if cfg.can.interface.is_empty() {
             return Err(invalid("can.interface is empty".into()));
         }
         let c = &cfg.imu;
-        if c.gyro_pulse_arcsec.iter().chain(&c.accel_pulse_mps).any(|w| !(w.is_finite() && *w > 0.0)) {
+        if c.gyro_pulse_arcsec
+            .iter()
+            .chain(&c.accel_pulse_mps)
+            .any(|w| !(w.is_finite() && *w > 0.0))
+        {
             return Err(invalid("imu pulse weights must be positive".into()));
         }
         if !(c.rate_hz > 0.0 && c.gyro_range_dps > 0.0 && c.accel_range_mps2 > 0.0) {
-            return Err(invalid("imu.rate_hz, gyro_range_dps and accel_range_mps2 must be positive".into()));
+            return Err(invalid(
+                "imu.rate_hz, gyro_range_dps and accel_range_mps2 must be positive".into(),
+            ));
         }
         let base = path.parent().unwrap_or(Path::new("."));
-        for p in [&mut cfg.record.mcap, &mut cfg.record.summary].into_iter().flatten() {
+        for p in [&mut cfg.record.mcap, &mut cfg.record.summary]
+            .into_iter()
+            .flatten()
+        {
             if p.is_relative() {
                 *p = base.join(&*p);
             }
@@ -131,11 +150,18 @@ mod tests {
     fn minimal_config_loads_with_defaults_and_resolves_paths() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("nav.toml");
-        std::fs::write(&p, "[can]\ninterface = \"can0\"\n[record]\nmcap = \"x.mcap\"\n").unwrap();
+        std::fs::write(
+            &p,
+            "[can]\ninterface = \"can0\"\n[record]\nmcap = \"x.mcap\"\n",
+        )
+        .unwrap();
         let c = NavConfig::load(&p).unwrap();
         assert_eq!(c.can.interface, "can0");
         assert_eq!(c.imu, ImuCalibration::default());
-        assert_eq!(c.record.mcap.as_deref(), Some(dir.path().join("x.mcap").as_path()));
+        assert_eq!(
+            c.record.mcap.as_deref(),
+            Some(dir.path().join("x.mcap").as_path())
+        );
         // and it round-trips through the writer
         std::fs::write(&p, c.to_toml()).unwrap();
         assert_eq!(NavConfig::load(&p).unwrap().can.interface, "can0");
@@ -151,7 +177,9 @@ mod tests {
         std::fs::write(&p, "[can]\ninterface = \"can0\"\n[imu]\ngyro_pulse_arcsec = [1.0, 0.0, 1.0]\naccel_pulse_mps=[1e-4,1e-4,1e-4]\ngyro_range_dps=1\naccel_range_mps2=1\nrate_hz=2000\n").unwrap();
         let e = NavConfig::load(&p).unwrap_err().to_string();
         assert!(e.contains("pulse weights"), "{e}");
-        let e = NavConfig::load(&dir.path().join("missing.toml")).unwrap_err().to_string();
+        let e = NavConfig::load(&dir.path().join("missing.toml"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("missing.toml"), "{e}");
     }
 }

@@ -41,8 +41,18 @@ impl ImuCalibration {
     /// both gyros and accelerometers at full range.
     pub fn max_safe_span(&self) -> u32 {
         let dt = 1.0 / self.rate_hz;
-        let g = self.gyro_range_dps * 3600.0 * dt / self.gyro_pulse_arcsec.iter().cloned().fold(f64::INFINITY, f64::min);
-        let a = self.accel_range_mps2 * dt / self.accel_pulse_mps.iter().cloned().fold(f64::INFINITY, f64::min);
+        let g = self.gyro_range_dps * 3600.0 * dt
+            / self
+                .gyro_pulse_arcsec
+                .iter()
+                .cloned()
+                .fold(f64::INFINITY, f64::min);
+        let a = self.accel_range_mps2 * dt
+            / self
+                .accel_pulse_mps
+                .iter()
+                .cloned()
+                .fold(f64::INFINITY, f64::min);
         let per_sample = g.max(a).max(1.0);
         ((32767.0 / per_sample).floor() as u32).max(1)
     }
@@ -255,9 +265,19 @@ impl ImuFrontEnd {
         }
         if d > 32768 {
             self.stats.backwards += 1;
-            ev.push(ImuEvent::Backwards { last: self.ext, counter: g.sample_counter });
+            ev.push(ImuEvent::Backwards {
+                last: self.ext,
+                counter: g.sample_counter,
+            });
             if let Some(p) = self.pending.take() {
-                self.emit(ImuSample { accel_missing: true, ..p }, out, ev);
+                self.emit(
+                    ImuSample {
+                        accel_missing: true,
+                        ..p
+                    },
+                    out,
+                    ev,
+                );
             }
             self.last_counter = Some(g.sample_counter);
             self.last_gyro = g.counts;
@@ -265,7 +285,14 @@ impl ImuFrontEnd {
             return;
         }
         if let Some(p) = self.pending.take() {
-            self.emit(ImuSample { accel_missing: true, ..p }, out, ev);
+            self.emit(
+                ImuSample {
+                    accel_missing: true,
+                    ..p
+                },
+                out,
+                ev,
+            );
         }
         let span = u32::from(d);
         self.ext += u64::from(d);
@@ -276,9 +303,15 @@ impl ImuFrontEnd {
             if span > self.max_span {
                 ambiguous = true;
                 self.stats.ambiguous_gaps += 1;
-                ev.push(ImuEvent::AmbiguousGap { sample: self.ext, missing: span - 1 });
+                ev.push(ImuEvent::AmbiguousGap {
+                    sample: self.ext,
+                    missing: span - 1,
+                });
             } else {
-                ev.push(ImuEvent::Gap { sample: self.ext, missing: span - 1 });
+                ev.push(ImuEvent::Gap {
+                    sample: self.ext,
+                    missing: span - 1,
+                });
             }
         }
         let dc = diff(g.counts, self.last_gyro);
@@ -306,13 +339,19 @@ impl ImuFrontEnd {
                 self.last_accel = Some(a.counts);
             } else {
                 self.stats.accel_unpaired += 1;
-                ev.push(ImuEvent::UnpairedAccel { sample: self.ext, low: a.sample_counter_low });
+                ev.push(ImuEvent::UnpairedAccel {
+                    sample: self.ext,
+                    low: a.sample_counter_low,
+                });
             }
             return;
         };
         if u64::from(a.sample_counter_low) != p.sample & 0xF {
             self.stats.accel_unpaired += 1;
-            ev.push(ImuEvent::UnpairedAccel { sample: p.sample, low: a.sample_counter_low });
+            ev.push(ImuEvent::UnpairedAccel {
+                sample: p.sample,
+                low: a.sample_counter_low,
+            });
             self.pending = Some(p);
             return;
         }
@@ -344,13 +383,24 @@ impl ImuFrontEnd {
     /// Feed an IMU_HK frame.
     pub fn on_hk(&mut self, h: &ImuHk) {
         self.stats.hk_frames += 1;
-        self.hk = Housekeeping { temp_gyro_c: h.temp_gyro_c, temp_accel_c: h.temp_accel_c, bit_fail: h.bit.any() };
+        self.hk = Housekeeping {
+            temp_gyro_c: h.temp_gyro_c,
+            temp_accel_c: h.temp_accel_c,
+            bit_fail: h.bit.any(),
+        };
     }
 
     /// End of stream: emit a sample still waiting for its accelerometer frame.
     pub fn flush(&mut self, out: &mut Vec<ImuSample>, ev: &mut Vec<ImuEvent>) {
         if let Some(p) = self.pending.take() {
-            self.emit(ImuSample { accel_missing: true, ..p }, out, ev);
+            self.emit(
+                ImuSample {
+                    accel_missing: true,
+                    ..p
+                },
+                out,
+                ev,
+            );
         }
     }
 }
@@ -360,14 +410,28 @@ mod tests {
     use super::*;
 
     fn gyro(sc: u16, c: [u16; 3]) -> ImuGyro {
-        ImuGyro { counts: c, sample_counter: sc }
+        ImuGyro {
+            counts: c,
+            sample_counter: sc,
+        }
     }
     fn accel(sc: u16, c: [u16; 3]) -> ImuAccel {
-        ImuAccel { counts: c, sample_counter_low: (sc & 0xF) as u8, pps_offset: None, bit_fail: false, saturated: false }
+        ImuAccel {
+            counts: c,
+            sample_counter_low: (sc & 0xF) as u8,
+            pps_offset: None,
+            bit_fail: false,
+            saturated: false,
+        }
     }
 
     /// Feed a stream where each gyro counter advances by `rate` pulses per sample.
-    fn run(fe: &mut ImuFrontEnd, samples: impl Iterator<Item = u32>, rate: i64, drop: impl Fn(u32) -> bool) -> (Vec<ImuSample>, Vec<ImuEvent>) {
+    fn run(
+        fe: &mut ImuFrontEnd,
+        samples: impl Iterator<Item = u32>,
+        rate: i64,
+        drop: impl Fn(u32) -> bool,
+    ) -> (Vec<ImuSample>, Vec<ImuEvent>) {
         let (mut out, mut ev) = (Vec::new(), Vec::new());
         for k in samples {
             let c = ((i64::from(k) * rate).rem_euclid(65536)) as u16;
@@ -391,7 +455,10 @@ mod tests {
         let total: f64 = out.iter().map(|s| s.dtheta[0]).sum();
         let pulse = std::f64::consts::PI / 180.0 / 3600.0;
         assert!((total - 999.0 * 700.0 * pulse).abs() < 1e-9);
-        assert!(out.iter().all(|s| s.span == 1 && (s.dtheta[1] + 700.0 * pulse).abs() < 1e-12));
+        assert!(
+            out.iter()
+                .all(|s| s.span == 1 && (s.dtheta[1] + 700.0 * pulse).abs() < 1e-12)
+        );
         assert_eq!(out.last().map(|s| s.sample), Some(65999));
     }
 
@@ -401,10 +468,19 @@ mod tests {
         let (out, ev) = run(&mut fe, 0..100, 500, |k| (40..43).contains(&k));
         assert_eq!(fe.stats().gaps, 1);
         assert_eq!(fe.stats().missing_samples, 3);
-        assert_eq!(ev, vec![ImuEvent::Gap { sample: 43, missing: 3 }]);
+        assert_eq!(
+            ev,
+            vec![ImuEvent::Gap {
+                sample: 43,
+                missing: 3
+            }]
+        );
         let total: f64 = out.iter().map(|s| s.dtheta[0]).sum();
         let pulse = std::f64::consts::PI / 180.0 / 3600.0;
-        assert!((total - 99.0 * 500.0 * pulse).abs() < 1e-9, "angle kept across the gap");
+        assert!(
+            (total - 99.0 * 500.0 * pulse).abs() < 1e-9,
+            "angle kept across the gap"
+        );
         let after = out.iter().find(|s| s.sample == 43).expect("sample 43");
         assert_eq!(after.span, 4);
         assert!(!after.ambiguous);
@@ -434,7 +510,16 @@ mod tests {
         assert_eq!(fe.stats().duplicates, 1);
         fe.on_gyro(&gyro(5, [9; 3]), &mut out, &mut ev);
         assert_eq!(fe.stats().backwards, 1);
-        assert!(matches!(ev[..], [ImuEvent::Duplicate { sample: 11 }, ImuEvent::Backwards { last: 11, counter: 5 }]));
+        assert!(matches!(
+            ev[..],
+            [
+                ImuEvent::Duplicate { sample: 11 },
+                ImuEvent::Backwards {
+                    last: 11,
+                    counter: 5
+                }
+            ]
+        ));
         assert_eq!(out.len(), 1);
     }
 
@@ -452,7 +537,10 @@ mod tests {
         assert_eq!(fe.stats().accel_missing, 1);
         assert_eq!(out.len(), 3);
         assert!(out[1].accel_missing && out[1].dv == [0.0; 3]);
-        assert!((out[2].dv[0] - 200.0 * 1e-4).abs() < 1e-12, "dv of the lost frame arrives with the next");
+        assert!(
+            (out[2].dv[0] - 200.0 * 1e-4).abs() < 1e-12,
+            "dv of the lost frame arrives with the next"
+        );
         // an accel frame with the wrong low counter bits is refused
         fe.on_gyro(&gyro(4, [4; 3]), &mut out, &mut ev);
         fe.on_accel(&accel(9, [400; 3]), &mut out, &mut ev);
@@ -466,9 +554,20 @@ mod tests {
         fe.on_gyro(&gyro(0, [0; 3]), &mut out, &mut ev);
         fe.on_accel(&accel(0, [0; 3]), &mut out, &mut ev);
         fe.on_gyro(&gyro(1, [0; 3]), &mut out, &mut ev);
-        let a = ImuAccel { bit_fail: true, saturated: true, pps_offset: Some(128), ..accel(1, [0; 3]) };
+        let a = ImuAccel {
+            bit_fail: true,
+            saturated: true,
+            pps_offset: Some(128),
+            ..accel(1, [0; 3])
+        };
         fe.on_accel(&a, &mut out, &mut ev);
-        assert_eq!(ev, vec![ImuEvent::BitFail { sample: 1 }, ImuEvent::Saturated { sample: 1 }]);
+        assert_eq!(
+            ev,
+            vec![
+                ImuEvent::BitFail { sample: 1 },
+                ImuEvent::Saturated { sample: 1 }
+            ]
+        );
         assert_eq!(out[0].pps_offset, Some(0.5));
         assert_eq!(fe.stats().pps_edges, 1);
     }

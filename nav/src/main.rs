@@ -18,10 +18,14 @@ use tracing::{info, warn};
 use wire::{DecodeError, Message, RawFrame};
 
 #[derive(Parser)]
-#[command(version, about = "Navigation computer of the RLG strapdown INS", long_about = "Navigation computer of the \
+#[command(
+    version,
+    about = "Navigation computer of the RLG strapdown INS",
+    long_about = "Navigation computer of the \
 RLG strapdown INS. Opens the devices named in its config file (a CAN interface such as can0 or vcan0), decodes and \
 checks the IMU stream, records raw and decoded data to MCAP, and on SIGINT/SIGTERM finishes the recording, prints \
-a summary and exits 0.")]
+a summary and exits 0."
+)]
 struct Cli {
     /// Config file (TOML).
     #[arg(short, long)]
@@ -94,13 +98,21 @@ fn set_rcvbuf(fd: i32, bytes: usize) -> std::io::Result<()> {
     }
     // SAFETY: as above; without CAP_NET_ADMIN fall back to the capped SO_RCVBUF.
     let r = unsafe { libc::setsockopt(fd, libc::SOL_SOCKET, libc::SO_RCVBUF, p, len) };
-    if r == 0 { Ok(()) } else { Err(std::io::Error::last_os_error()) }
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
 }
 
 fn open_error_hint(iface: &str, e: &std::io::Error) -> String {
     match e.raw_os_error() {
-        Some(libc::ENODEV) => format!("no such CAN interface {iface} (is it created and up? on the bench: `vcan-setup up {iface}`)"),
-        Some(libc::EAFNOSUPPORT) => "this kernel has no CAN support (modprobe can_raw, or run through vcan-setup)".into(),
+        Some(libc::ENODEV) => format!(
+            "no such CAN interface {iface} (is it created and up? on the bench: `vcan-setup up {iface}`)"
+        ),
+        Some(libc::EAFNOSUPPORT) => {
+            "this kernel has no CAN support (modprobe can_raw, or run through vcan-setup)".into()
+        }
         Some(libc::EPERM) | Some(libc::EACCES) => format!("no permission to open {iface}"),
         _ => e.to_string(),
     }
@@ -108,12 +120,21 @@ fn open_error_hint(iface: &str, e: &std::io::Error) -> String {
 
 fn main() -> Result<()> {
     tracing_subscriber::fmt()
+        .with_ansi(
+            std::io::IsTerminal::is_terminal(&std::io::stderr())
+                && std::env::var_os("NO_COLOR").is_none(),
+        )
         .with_writer(std::io::stderr)
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()))
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
         .init();
     let cli = Cli::parse();
     let cfg = NavConfig::load(&cli.config)?;
-    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the runtime")?;
     let summary = rt.block_on(run(&cfg))?;
     if cli.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
@@ -128,7 +149,10 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let sock = socketcan::tokio::CanSocket::open(iface)
         .map_err(|e| anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e)))?;
     if let Err(e) = set_rcvbuf(sock.as_raw_fd(), cfg.can.rcvbuf_bytes) {
-        warn!(interface = iface, "cannot enlarge the receive buffer to {} bytes: {e}", cfg.can.rcvbuf_bytes);
+        warn!(
+            interface = iface,
+            "cannot enlarge the receive buffer to {} bytes: {e}", cfg.can.rcvbuf_bytes
+        );
     }
     let recorder = match &cfg.record.mcap {
         Some(p) => Some(Recorder::start(p)?),
@@ -140,7 +164,8 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let mut sums = Sums::default();
     let mut by_msg: BTreeMap<&'static str, u64> = BTreeMap::new();
     let mut unknown: BTreeMap<u32, u64> = BTreeMap::new();
-    let (mut bad_len, mut invalid, mut non_data, mut read_errors, mut total) = (0u64, 0u64, 0u64, 0u64, 0u64);
+    let (mut bad_len, mut invalid, mut non_data, mut read_errors, mut total) =
+        (0u64, 0u64, 0u64, 0u64, 0u64);
     let mut timeouts = 0u64;
     let (mut out, mut ev) = (Vec::new(), Vec::new());
     let start = Instant::now();
@@ -153,7 +178,12 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     println!("nav: receiving on {iface}");
     let event = |rec: &Option<Recorder>, sample: u64, json: String| {
         if let Some(r) = rec {
-            r.send(Record::Json { channel: JsonChannel::Event, t_ns: wall_ns(), publish_ns: (sample as f64 * sample_ns) as u64, json });
+            r.send(Record::Json {
+                channel: JsonChannel::Event,
+                t_ns: wall_ns(),
+                publish_ns: (sample as f64 * sample_ns) as u64,
+                json,
+            });
         }
     };
     loop {
@@ -225,7 +255,9 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     drain(&mut out, &mut ev, &mut sums, &recorder, sample_ns);
     let n = sums.samples.max(1) as f64;
     let dt = 1.0 / cfg.imu.rate_hz;
-    let mean_rate_dph = sums.dtheta.map(|x| x / (n * dt) * earth::DEG_PER_HOUR_PER_RAD_S);
+    let mean_rate_dph = sums
+        .dtheta
+        .map(|x| x / (n * dt) * earth::DEG_PER_HOUR_PER_RAD_S);
     let mean_f = sums.dv.map(|x| x / (n * dt));
     let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     let mut summary = Summary {
@@ -263,7 +295,8 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         summary.mcap_messages = r.finish()?;
     }
     if let Some(p) = &cfg.record.summary {
-        std::fs::write(p, serde_json::to_string_pretty(&summary)?).with_context(|| format!("writing summary {}", p.display()))?;
+        std::fs::write(p, serde_json::to_string_pretty(&summary)?)
+            .with_context(|| format!("writing summary {}", p.display()))?;
     }
     Ok(summary)
 }
@@ -295,22 +328,42 @@ fn report_bad_frame(
         }
     };
     if first {
-        warn!(interface = iface, "bad frame near IMU sample {sample}: {e} (data {:02X?})", raw.payload());
+        warn!(
+            interface = iface,
+            "bad frame near IMU sample {sample}: {e} (data {:02X?})",
+            raw.payload()
+        );
     }
     if let Some(r) = recorder {
         let json = serde_json::json!({"kind": "bad_frame", "sample": sample, "id": raw.id, "len": raw.len, "error": e.to_string()});
-        r.send(Record::Json { channel: JsonChannel::Event, t_ns: wall_ns(), publish_ns: 0, json: json.to_string() });
+        r.send(Record::Json {
+            channel: JsonChannel::Event,
+            t_ns: wall_ns(),
+            publish_ns: 0,
+            json: json.to_string(),
+        });
     }
 }
 
-fn drain(out: &mut Vec<ImuSample>, ev: &mut Vec<ImuEvent>, sums: &mut Sums, rec: &Option<Recorder>, sample_ns: f64) {
+fn drain(
+    out: &mut Vec<ImuSample>,
+    ev: &mut Vec<ImuEvent>,
+    sums: &mut Sums,
+    rec: &Option<Recorder>,
+    sample_ns: f64,
+) {
     for e in ev.drain(..) {
         match e {
             ImuEvent::Gap { .. } | ImuEvent::AccelMissing { .. } => tracing::debug!("IMU: {e:?}"),
             _ => warn!("IMU: {e:?}"),
         }
         if let (Some(r), Ok(json)) = (rec, serde_json::to_string(&e)) {
-            r.send(Record::Json { channel: JsonChannel::Event, t_ns: wall_ns(), publish_ns: 0, json });
+            r.send(Record::Json {
+                channel: JsonChannel::Event,
+                t_ns: wall_ns(),
+                publish_ns: 0,
+                json,
+            });
         }
     }
     for s in out.drain(..) {
@@ -328,7 +381,10 @@ fn drain(out: &mut Vec<ImuSample>, ev: &mut Vec<ImuEvent>, sums: &mut Sums, rec:
 
 fn print_summary(s: &Summary) {
     println!("nav summary ({})", s.interface);
-    println!("  frames received   {} ({:?})", s.frames_total, s.frames_by_message);
+    println!(
+        "  frames received   {} ({:?})",
+        s.frames_total, s.frames_by_message
+    );
     println!(
         "  IMU samples       {} over {:.3} s of IMU time ({:.1} s wall)",
         s.imu.samples, s.imu_seconds, s.wall_seconds
@@ -339,11 +395,20 @@ fn print_summary(s: &Summary) {
     );
     println!(
         "  bad frames        unknown id {} {:?}, wrong length {}, invalid {}, non-data {}, read errors {}",
-        s.unknown_id_frames, s.unknown_ids, s.bad_length_frames, s.invalid_value_frames, s.non_data_frames, s.read_errors
+        s.unknown_id_frames,
+        s.unknown_ids,
+        s.bad_length_frames,
+        s.invalid_value_frames,
+        s.non_data_frames,
+        s.read_errors
     );
     println!(
         "  accel frames      missing {}, unpaired {}; BIT-fail samples {}, saturated {}, PPS edges {}",
-        s.imu.accel_missing, s.imu.accel_unpaired, s.imu.bit_fail_samples, s.imu.saturated_samples, s.imu.pps_edges
+        s.imu.accel_missing,
+        s.imu.accel_unpaired,
+        s.imu.bit_fail_samples,
+        s.imu.saturated_samples,
+        s.imu.pps_edges
     );
     println!(
         "  mean rate         [{:.3}, {:.3}, {:.3}] deg/h, |w| = {:.3} deg/h",
@@ -351,10 +416,17 @@ fn print_summary(s: &Summary) {
     );
     println!(
         "  mean spec. force  [{:.5}, {:.5}, {:.5}] m/s^2, |f| = {:.5} m/s^2",
-        s.mean_specific_force_mps2[0], s.mean_specific_force_mps2[1], s.mean_specific_force_mps2[2], s.specific_force_norm_mps2
+        s.mean_specific_force_mps2[0],
+        s.mean_specific_force_mps2[1],
+        s.mean_specific_force_mps2[2],
+        s.specific_force_norm_mps2
     );
     println!("  IMU timeouts      {}", s.imu_timeouts);
     if let Some(p) = &s.mcap {
-        println!("  recording         {} ({} messages)", p.display(), s.mcap_messages);
+        println!(
+            "  recording         {} ({} messages)",
+            p.display(),
+            s.mcap_messages
+        );
     }
 }

@@ -97,9 +97,15 @@ pub struct Recorder {
 impl Recorder {
     /// Create the file and start the writer thread.
     pub fn start(path: &Path) -> Result<Self, RecordError> {
-        let file = File::create(path).map_err(|source| RecordError::Create { path: path.into(), source })?;
+        let file = File::create(path).map_err(|source| RecordError::Create {
+            path: path.into(),
+            source,
+        })?;
         let p = path.to_path_buf();
-        let mcap_err = move |source| RecordError::Mcap { path: p.clone(), source };
+        let mcap_err = move |source| RecordError::Mcap {
+            path: p.clone(),
+            source,
+        };
         let mut w = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
             .chunk_size(Some(256 * 1024))
@@ -107,11 +113,23 @@ impl Recorder {
             .create(BufWriter::new(file))
             .map_err(mcap_err.clone())?;
         let meta = BTreeMap::new();
-        let raw = w.add_channel(0, "/can/raw", RAW_FRAME_ENCODING, &meta).map_err(mcap_err.clone())?;
+        let raw = w
+            .add_channel(0, "/can/raw", RAW_FRAME_ENCODING, &meta)
+            .map_err(mcap_err.clone())?;
         let mut json = BTreeMap::new();
-        for c in [JsonChannel::ImuSample, JsonChannel::Event, JsonChannel::Summary] {
-            let schema = w.add_schema(c.topic(), "jsonschema", br#"{"type":"object"}"#).map_err(mcap_err.clone())?;
-            json.insert(c, w.add_channel(schema, c.topic(), "json", &meta).map_err(mcap_err.clone())?);
+        for c in [
+            JsonChannel::ImuSample,
+            JsonChannel::Event,
+            JsonChannel::Summary,
+        ] {
+            let schema = w
+                .add_schema(c.topic(), "jsonschema", br#"{"type":"object"}"#)
+                .map_err(mcap_err.clone())?;
+            json.insert(
+                c,
+                w.add_channel(schema, c.topic(), "json", &meta)
+                    .map_err(mcap_err.clone())?,
+            );
         }
         let (tx, rx) = mpsc::channel::<Record>();
         let handle = std::thread::Builder::new()
@@ -128,21 +146,37 @@ impl Recorder {
                             buf[3..].copy_from_slice(&frame.data);
                             (raw, *t_ns, *t_ns, &buf)
                         }
-                        Record::Json { channel, t_ns, publish_ns, json: text } => {
-                            (json[channel], *t_ns, *publish_ns, text.as_bytes())
-                        }
+                        Record::Json {
+                            channel,
+                            t_ns,
+                            publish_ns,
+                            json: text,
+                        } => (json[channel], *t_ns, *publish_ns, text.as_bytes()),
                     };
                     let s = seq.entry(ch).or_insert(0);
                     *s += 1;
-                    let h = mcap::records::MessageHeader { channel_id: ch, sequence: *s, log_time: log, publish_time: publish };
-                    w.write_to_known_channel(&h, data).map_err(mcap_err.clone())?;
+                    let h = mcap::records::MessageHeader {
+                        channel_id: ch,
+                        sequence: *s,
+                        log_time: log,
+                        publish_time: publish,
+                    };
+                    w.write_to_known_channel(&h, data)
+                        .map_err(mcap_err.clone())?;
                     n += 1;
                 }
                 w.finish().map_err(mcap_err)?;
                 Ok(n)
             })
-            .map_err(|source| RecordError::Create { path: path.into(), source })?;
-        Ok(Self { tx: Some(tx), handle: Some(handle), path: path.into() })
+            .map_err(|source| RecordError::Create {
+                path: path.into(),
+                source,
+            })?;
+        Ok(Self {
+            tx: Some(tx),
+            handle: Some(handle),
+            path: path.into(),
+        })
     }
 
     /// Queue a record (never blocks the caller).

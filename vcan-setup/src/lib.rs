@@ -50,7 +50,9 @@ pub enum Error {
         detail: String,
     },
     /// A name exists but is not a CAN interface.
-    #[error("interface {name} exists but is not a CAN interface (link type {link_type}); choose another name")]
+    #[error(
+        "interface {name} exists but is not a CAN interface (link type {link_type}); choose another name"
+    )]
     NotCan {
         /// Interface name.
         name: String,
@@ -87,7 +89,9 @@ pub enum Error {
     #[error("the QEMU guest did not finish within {0} s; it was killed")]
     Timeout(u64),
     /// The guest ended without reporting the command's exit status.
-    #[error("the QEMU guest ended without reporting an exit status (kernel panic or crash?); last output:\n{0}")]
+    #[error(
+        "the QEMU guest ended without reporting an exit status (kernel panic or crash?); last output:\n{0}"
+    )]
     NoStatus(String),
 }
 
@@ -152,10 +156,8 @@ pub fn default_shares(exe: &std::path::Path, extra: &[PathBuf]) -> Vec<PathBuf> 
         }
         dir = d.parent();
     }
-    if shares.is_empty() {
-        if let Some(p) = exe.parent() {
-            shares.push(p.to_path_buf());
-        }
+    if let (true, Some(p)) = (shares.is_empty(), exe.parent()) {
+        shares.push(p.to_path_buf());
     }
     shares.extend(extra.iter().cloned());
     shares

@@ -7,9 +7,13 @@ use std::time::Duration;
 use vcan_setup::{Backend, CanSupport, VmOptions};
 
 #[derive(Parser)]
-#[command(version, about, long_about = "Gives a run a real Linux vcan interface: natively where the kernel has CAN, \
+#[command(
+    version,
+    about,
+    long_about = "Gives a run a real Linux vcan interface: natively where the kernel has CAN, \
 otherwise inside a QEMU guest running the stock Debian kernel, with the host folders the run needs \
-mounted at the same paths. Exits with the command's own exit status.")]
+mounted at the same paths. Exits with the command's own exit status."
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -51,14 +55,23 @@ enum Cmd {
 }
 
 fn main() -> Result<()> {
-    tracing_subscriber::fmt().with_writer(std::io::stderr).with_env_filter(
-        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
-    ).init();
+    tracing_subscriber::fmt()
+        .with_ansi(
+            std::io::IsTerminal::is_terminal(&std::io::stderr())
+                && std::env::var_os("NO_COLOR").is_none(),
+        )
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .init();
     match Cli::parse().cmd {
         Cmd::Check => {
             match vcan_setup::can_support() {
                 CanSupport::Available => println!("kernel CAN: available (vcan runs natively)"),
-                CanSupport::Missing(e) => println!("kernel CAN: missing ({e}); runs go through the QEMU guest"),
+                CanSupport::Missing(e) => {
+                    println!("kernel CAN: missing ({e}); runs go through the QEMU guest")
+                }
             }
             match vcan_setup::prereqs() {
                 Ok(p) => println!(
@@ -78,12 +91,23 @@ fn main() -> Result<()> {
             vcan_setup::ensure_vcan(&name).with_context(|| format!("setting up {name}"))?;
             println!("{name}: up");
         }
-        Cmd::Run { shares, vm, memory_mb, timeout_s, install, command } => {
+        Cmd::Run {
+            shares,
+            vm,
+            memory_mb,
+            timeout_s,
+            install,
+            command,
+        } => {
             let native = !vm && matches!(vcan_setup::can_support(), CanSupport::Available);
             if !native && install {
                 vcan_setup::install_prereqs()?;
             }
-            let shares = if shares.is_empty() { vec![std::env::current_dir()?] } else { shares };
+            let shares = if shares.is_empty() {
+                vec![std::env::current_dir()?]
+            } else {
+                shares
+            };
             let opts = VmOptions {
                 shares,
                 memory_mb,
@@ -108,4 +132,3 @@ fn main() -> Result<()> {
     }
     Ok(())
 }
-

@@ -63,10 +63,14 @@ pub fn ensure_vcan(name: &str) -> Result<()> {
         let link_type = std::fs::read_to_string(sys.join("type")).unwrap_or_default();
         // ARPHRD_CAN = 280
         if link_type.trim() != "280" {
-            return Err(Error::NotCan { name: name.into(), link_type: link_type.trim().into() });
+            return Err(Error::NotCan {
+                name: name.into(),
+                link_type: link_type.trim().into(),
+            });
         }
         let flags = std::fs::read_to_string(sys.join("flags")).unwrap_or_default();
-        let up = u32::from_str_radix(flags.trim().trim_start_matches("0x"), 16).unwrap_or(0) & 1 == 1;
+        let up =
+            u32::from_str_radix(flags.trim().trim_start_matches("0x"), 16).unwrap_or(0) & 1 == 1;
         if up {
             return Ok(());
         }
@@ -79,10 +83,17 @@ pub fn ensure_vcan(name: &str) -> Result<()> {
         if low.contains("not supported") || low.contains("unknown") {
             modprobe(&["vcan"]);
             if CanInterface::create_vcan(name, None).is_err() {
-                return Err(Error::NoVcanModule { name: name.into(), detail });
+                return Err(Error::NoVcanModule {
+                    name: name.into(),
+                    detail,
+                });
             }
         } else {
-            return Err(Error::Netlink { name: name.into(), action: "create", detail });
+            return Err(Error::Netlink {
+                name: name.into(),
+                action: "create",
+                detail,
+            });
         }
     }
     let iface = CanInterface::open(name).map_err(|e| Error::Netlink {
@@ -95,7 +106,11 @@ pub fn ensure_vcan(name: &str) -> Result<()> {
         if detail.to_lowercase().contains("permi") {
             Error::Permission { name: name.into() }
         } else {
-            Error::Netlink { name: name.into(), action: "bring up", detail }
+            Error::Netlink {
+                name: name.into(),
+                action: "bring up",
+                detail,
+            }
         }
     })
 }
@@ -126,7 +141,9 @@ pub(crate) fn run_native(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome>
             output.push('\n');
         }
     }
-    let st = child.wait().map_err(io_ctx(format!("waiting for {prog}")))?;
+    let st = child
+        .wait()
+        .map_err(io_ctx(format!("waiting for {prog}")))?;
     use std::os::unix::process::ExitStatusExt;
     let status = st.code().unwrap_or_else(|| 128 + st.signal().unwrap_or(0));
     Ok(RunOutcome {

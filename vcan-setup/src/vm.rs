@@ -10,7 +10,15 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 /// Kernel modules the guest loads, dependencies resolved from `modules.dep`.
-const MODULES: &[&str] = &["can", "can-raw", "can-dev", "vcan", "9p", "9pnet_virtio", "virtio_pci"];
+const MODULES: &[&str] = &[
+    "can",
+    "can-raw",
+    "can-dev",
+    "vcan",
+    "9p",
+    "9pnet_virtio",
+    "virtio_pci",
+];
 
 /// Debian packages the guest needs.
 pub const APT_PACKAGES: &[&str] = &["qemu-system-x86", "linux-image-amd64", "busybox-static"];
@@ -73,7 +81,11 @@ pub struct VmPrereqs {
 fn which(name: &str) -> Option<PathBuf> {
     let path = std::env::var_os("PATH")?;
     std::env::split_paths(&path)
-        .chain(["/usr/sbin", "/sbin", "/usr/bin", "/bin"].iter().map(PathBuf::from))
+        .chain(
+            ["/usr/sbin", "/sbin", "/usr/bin", "/bin"]
+                .iter()
+                .map(PathBuf::from),
+        )
         .map(|d| d.join(name))
         .find(|p| p.is_file())
 }
@@ -87,26 +99,45 @@ fn hint() -> String {
 
 /// Find the guest's prerequisites on the host.
 pub fn prereqs() -> Result<VmPrereqs> {
-    let qemu = which("qemu-system-x86_64")
-        .ok_or_else(|| Error::MissingPrereq { what: "qemu-system-x86_64".into(), hint: hint() })?;
+    let qemu = which("qemu-system-x86_64").ok_or_else(|| Error::MissingPrereq {
+        what: "qemu-system-x86_64".into(),
+        hint: hint(),
+    })?;
     let busybox = ["/bin/busybox", "/usr/bin/busybox"]
         .iter()
         .map(PathBuf::from)
         .find(|p| p.is_file())
-        .ok_or_else(|| Error::MissingPrereq { what: "busybox".into(), hint: hint() })?;
+        .ok_or_else(|| Error::MissingPrereq {
+            what: "busybox".into(),
+            hint: hint(),
+        })?;
     let mut kernels: Vec<(Vec<u64>, String)> = std::fs::read_dir("/boot")
         .map_err(io_ctx("listing /boot"))?
         .filter_map(|e| e.ok())
-        .filter_map(|e| e.file_name().to_str().and_then(|n| n.strip_prefix("vmlinuz-")).map(String::from))
-        .filter(|v| Path::new("/lib/modules").join(v).join("modules.dep").is_file())
+        .filter_map(|e| {
+            e.file_name()
+                .to_str()
+                .and_then(|n| n.strip_prefix("vmlinuz-"))
+                .map(String::from)
+        })
+        .filter(|v| {
+            Path::new("/lib/modules")
+                .join(v)
+                .join("modules.dep")
+                .is_file()
+        })
         .map(|v| {
-            let key = v.split(|c: char| !c.is_ascii_digit()).filter_map(|p| p.parse().ok()).collect();
+            let key = v
+                .split(|c: char| !c.is_ascii_digit())
+                .filter_map(|p| p.parse().ok())
+                .collect();
             (key, v)
         })
         .collect();
     kernels.sort();
     let (_, kernel_version) = kernels.pop().ok_or_else(|| Error::MissingPrereq {
-        what: "a Debian kernel with its modules (/boot/vmlinuz-* and /lib/modules/*/modules.dep)".into(),
+        what: "a Debian kernel with its modules (/boot/vmlinuz-* and /lib/modules/*/modules.dep)"
+            .into(),
         hint: hint(),
     })?;
     let kernel = PathBuf::from(format!("/boot/vmlinuz-{kernel_version}"));
@@ -116,7 +147,12 @@ pub fn prereqs() -> Result<VmPrereqs> {
             hint: format!("{e}; run as root or make the kernel image readable"),
         });
     }
-    Ok(VmPrereqs { qemu, kernel, kernel_version, busybox })
+    Ok(VmPrereqs {
+        qemu,
+        kernel,
+        kernel_version,
+        busybox,
+    })
 }
 
 /// Install the guest's prerequisites with apt-get (needs root).
@@ -131,7 +167,10 @@ pub fn install_prereqs() -> Result<VmPrereqs> {
             hint: format!("run `sudo apt-get install {}`", APT_PACKAGES.join(" ")),
         });
     }
-    eprintln!("vcan-setup: installing {} (about 1-2 minutes)", APT_PACKAGES.join(" "));
+    eprintln!(
+        "vcan-setup: installing {} (about 1-2 minutes)",
+        APT_PACKAGES.join(" ")
+    );
     let apt = |args: &[&str]| -> Result<()> {
         let st = Command::new("apt-get")
             .args(args)
@@ -170,7 +209,13 @@ fn module_files(kver: &str) -> Result<Vec<PathBuf>> {
     let mut table: BTreeMap<String, (String, Vec<String>)> = BTreeMap::new();
     for line in dep.lines() {
         if let Some((m, deps)) = line.split_once(':') {
-            table.insert(norm(m), (m.to_string(), deps.split_whitespace().map(String::from).collect()));
+            table.insert(
+                norm(m),
+                (
+                    m.to_string(),
+                    deps.split_whitespace().map(String::from).collect(),
+                ),
+            );
         }
     }
     let builtin = std::fs::read_to_string(base.join("modules.builtin")).unwrap_or_default();
@@ -211,13 +256,15 @@ fn module_files(kver: &str) -> Result<Vec<PathBuf>> {
 
 /// Shared libraries (and the dynamic loader) of `exe`, by `ldd`; empty for static binaries.
 fn shared_libs(exe: &Path) -> Vec<PathBuf> {
-    let Ok(out) = Command::new("ldd").arg(exe).output() else { return Vec::new() };
+    let Ok(out) = Command::new("ldd").arg(exe).output() else {
+        return Vec::new();
+    };
     String::from_utf8_lossy(&out.stdout)
         .lines()
         .filter_map(|l| {
             let l = l.trim();
             let path = match l.split_once("=>") {
-                Some((_, rhs)) => rhs.trim().split_whitespace().next()?,
+                Some((_, rhs)) => rhs.split_whitespace().next()?,
                 None => l.split_whitespace().next()?,
             };
             path.starts_with('/').then(|| PathBuf::from(path))
@@ -225,13 +272,62 @@ fn shared_libs(exe: &Path) -> Vec<PathBuf> {
         .collect()
 }
 
+/// Executables beside `prog` and one folder up (cargo's `target/<profile>/deps/..` layout): the
+/// programs a test binary starts need their libraries in the guest too.
+fn sibling_executables(prog: &Path) -> Vec<PathBuf> {
+    use std::os::unix::fs::PermissionsExt;
+    let Some(dir) = prog.parent() else {
+        return Vec::new();
+    };
+    let is_elf = |p: &Path| {
+        let mut magic = [0u8; 4];
+        std::fs::File::open(p)
+            .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic))
+            .is_ok()
+            && magic == *b"\x7fELF"
+    };
+    let mut out = Vec::new();
+    for d in [Some(dir), dir.parent()].into_iter().flatten() {
+        let Ok(rd) = std::fs::read_dir(d) else {
+            continue;
+        };
+        for e in rd.filter_map(|e| e.ok()) {
+            let p = e.path();
+            let exec = e
+                .metadata()
+                .map(|m| m.is_file() && m.permissions().mode() & 0o111 != 0)
+                .unwrap_or(false);
+            if exec && p.extension().is_none() && is_elf(&p) {
+                out.push(p);
+            }
+        }
+    }
+    out
+}
+
 fn sh_quote(s: &str) -> String {
     format!("'{}'", s.replace('\'', "'\\''"))
 }
 
-fn build_initramfs(pre: &VmPrereqs, mods: &[PathBuf], execs: &[PathBuf], shares: &[PathBuf]) -> Result<Vec<u8>> {
+fn build_initramfs(
+    pre: &VmPrereqs,
+    mods: &[PathBuf],
+    execs: &[PathBuf],
+    shares: &[PathBuf],
+) -> Result<Vec<u8>> {
     let mut a = Archive::default();
-    for d in ["proc", "sys", "dev", "tmp", "root", "run/vcan-setup", "etc", "sbin", "usr/bin", "usr/sbin"] {
+    for d in [
+        "proc",
+        "sys",
+        "dev",
+        "tmp",
+        "root",
+        "run/vcan-setup",
+        "etc",
+        "sbin",
+        "usr/bin",
+        "usr/sbin",
+    ] {
         a.dir(d);
     }
     let read = |p: &Path| std::fs::read(p).map_err(io_ctx(format!("reading {}", p.display())));
@@ -247,7 +343,11 @@ fn build_initramfs(pre: &VmPrereqs, mods: &[PathBuf], execs: &[PathBuf], shares:
     }
     let mut names = Vec::new();
     for m in mods {
-        let name = m.file_name().and_then(|n| n.to_str()).unwrap_or("mod.ko").to_string();
+        let name = m
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or("mod.ko")
+            .to_string();
         a.file(&format!("lib/modules/{name}"), 0o644, &read(m)?);
         names.push(name);
     }
@@ -290,7 +390,9 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     let mods = module_files(&pre.kernel_version)?;
     let mut shares: Vec<PathBuf> = Vec::new();
     for s in &opts.shares {
-        let c = s.canonicalize().map_err(io_ctx(format!("share {}", s.display())))?;
+        let c = s
+            .canonicalize()
+            .map_err(io_ctx(format!("share {}", s.display())))?;
         if !shares.contains(&c) {
             shares.push(c);
         }
@@ -299,7 +401,13 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     shares.sort_by_key(|p| p.components().count());
     let mut execs = opts.libs_for.clone();
     let prog_path = PathBuf::from(prog);
-    execs.push(if prog_path.is_file() { prog_path } else { which(prog).unwrap_or(prog_path) });
+    let prog_path = if prog_path.is_file() {
+        prog_path
+    } else {
+        which(prog).unwrap_or(prog_path)
+    };
+    execs.extend(sibling_executables(&prog_path));
+    execs.push(prog_path);
 
     let ctl = tempfile::Builder::new()
         .prefix("vcan-setup-")
@@ -311,10 +419,17 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     let cwd = opts
         .cwd
         .clone()
-        .or_else(|| std::env::current_dir().ok().filter(|d| shares.iter().any(|s| d.starts_with(s))))
+        .or_else(|| {
+            std::env::current_dir()
+                .ok()
+                .filter(|d| shares.iter().any(|s| d.starts_with(s)))
+        })
         .or_else(|| shares.first().cloned())
         .unwrap_or_else(|| "/".into());
-    let mut script = format!("cd {} || exit 126\nexport HOME=/root TMPDIR=/tmp {GUEST_ENV}=1\n", sh_quote(&cwd.to_string_lossy()));
+    let mut script = format!(
+        "cd {} || exit 126\nexport HOME=/root TMPDIR=/tmp {GUEST_ENV}=1\n",
+        sh_quote(&cwd.to_string_lossy())
+    );
     for k in PASS_ENV {
         if let Ok(v) = std::env::var(k) {
             script.push_str(&format!("export {k}={}\n", sh_quote(&v)));
@@ -329,21 +444,41 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
         script.push_str(&sh_quote(a));
     }
     script.push_str(" 2>&1\n");
-    std::fs::write(ctl.path().join("cmd.sh"), script).map_err(io_ctx("writing the guest command"))?;
+    std::fs::write(ctl.path().join("cmd.sh"), script)
+        .map_err(io_ctx("writing the guest command"))?;
 
     let mut q = Command::new(&pre.qemu);
-    q.args(["-accel", "tcg,thread=multi", "-cpu", "max", "-nodefaults", "-display", "none"])
-        .args(["-serial", "stdio", "-no-reboot"])
-        .args(["-smp", &opts.cpus.to_string(), "-m", &opts.memory_mb.to_string()])
-        .arg("-kernel")
-        .arg(&pre.kernel)
-        .arg("-initrd")
-        .arg(&initrd)
-        .args(["-append", "console=ttyS0 quiet loglevel=3 panic=-1"])
-        .arg("-virtfs")
-        .arg(format!("local,path={},mount_tag=ctl,security_model=none", ctl.path().display()));
+    q.args([
+        "-accel",
+        "tcg,thread=multi",
+        "-cpu",
+        "max",
+        "-nodefaults",
+        "-display",
+        "none",
+    ])
+    .args(["-serial", "stdio", "-no-reboot"])
+    .args([
+        "-smp",
+        &opts.cpus.to_string(),
+        "-m",
+        &opts.memory_mb.to_string(),
+    ])
+    .arg("-kernel")
+    .arg(&pre.kernel)
+    .arg("-initrd")
+    .arg(&initrd)
+    .args(["-append", "console=ttyS0 quiet loglevel=3 panic=-1"])
+    .arg("-virtfs")
+    .arg(format!(
+        "local,path={},mount_tag=ctl,security_model=none",
+        ctl.path().display()
+    ));
     for (i, s) in shares.iter().enumerate() {
-        q.arg("-virtfs").arg(format!("local,path={},mount_tag=share{i},security_model=none", s.display()));
+        q.arg("-virtfs").arg(format!(
+            "local,path={},mount_tag=share{i},security_model=none",
+            s.display()
+        ));
     }
     let mut child = q
         .stdin(Stdio::null())
@@ -358,7 +493,11 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     let t1 = std::thread::spawn(move || {
         if let Some(o) = out {
             for line in BufReader::new(o).split(b'\n').map_while(|l| l.ok()) {
-                let _ = tx.send(String::from_utf8_lossy(&line).trim_end_matches('\r').to_string());
+                let _ = tx.send(
+                    String::from_utf8_lossy(&line)
+                        .trim_end_matches('\r')
+                        .to_string(),
+                );
             }
         }
     });
@@ -379,7 +518,11 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
                 if boot_secs.is_none() && line.contains(READY) {
                     boot_secs = Some(start.elapsed().as_secs_f64());
                     if opts.echo {
-                        eprintln!("vcan-setup: guest up after {:.1} s (kernel {}), running {prog}", start.elapsed().as_secs_f64(), pre.kernel_version);
+                        eprintln!(
+                            "vcan-setup: guest up after {:.1} s (kernel {}), running {prog}",
+                            start.elapsed().as_secs_f64(),
+                            pre.kernel_version
+                        );
                     }
                     continue;
                 }
@@ -410,13 +553,17 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     let _ = t1.join();
     let _ = t2.join();
     let _ = child.wait();
-    let rc = std::fs::read_to_string(ctl.path().join("rc")).ok().and_then(|s| s.trim().parse::<i32>().ok());
+    let rc = std::fs::read_to_string(ctl.path().join("rc"))
+        .ok()
+        .and_then(|s| s.trim().parse::<i32>().ok());
     let Some(status) = rc else {
         if boot_secs.is_none() {
             output = preboot.join("\n");
         }
         let tail: Vec<&str> = output.lines().rev().take(30).collect();
-        return Err(Error::NoStatus(tail.into_iter().rev().collect::<Vec<_>>().join("\n")));
+        return Err(Error::NoStatus(
+            tail.into_iter().rev().collect::<Vec<_>>().join("\n"),
+        ));
     };
     Ok(RunOutcome {
         status,
@@ -443,9 +590,21 @@ mod tests {
             return;
         };
         let files = module_files(&pre.kernel_version).expect("modules resolve");
-        let pos = |n: &str| files.iter().position(|p| p.file_name().and_then(|f| f.to_str()) == Some(n));
-        let (can, raw, vcan, dev) = (pos("can.ko"), pos("can-raw.ko"), pos("vcan.ko"), pos("can-dev.ko"));
-        assert!(can.is_some() && raw.is_some() && vcan.is_some() && dev.is_some(), "{files:?}");
+        let pos = |n: &str| {
+            files
+                .iter()
+                .position(|p| p.file_name().and_then(|f| f.to_str()) == Some(n))
+        };
+        let (can, raw, vcan, dev) = (
+            pos("can.ko"),
+            pos("can-raw.ko"),
+            pos("vcan.ko"),
+            pos("can-dev.ko"),
+        );
+        assert!(
+            can.is_some() && raw.is_some() && vcan.is_some() && dev.is_some(),
+            "{files:?}"
+        );
         assert!(can < raw && dev < vcan);
     }
 }

@@ -22,28 +22,54 @@ pub struct SignalSpec {
 impl SignalSpec {
     /// Unsigned signal with factor 1.
     pub const fn uint(name: &'static str, start: u8, len: u8) -> Self {
-        Self { name, start, len, signed: false, factor: 1.0, offset: 0.0 }
+        Self {
+            name,
+            start,
+            len,
+            signed: false,
+            factor: 1.0,
+            offset: 0.0,
+        }
     }
 
     /// Scaled signal.
     pub const fn scaled(name: &'static str, start: u8, len: u8, signed: bool, factor: f64) -> Self {
-        Self { name, start, len, signed, factor, offset: 0.0 }
+        Self {
+            name,
+            start,
+            len,
+            signed,
+            factor,
+            offset: 0.0,
+        }
     }
 
     /// Smallest raw value.
     pub fn raw_min(&self) -> i64 {
-        if self.signed { -(1i64 << (self.len - 1)) } else { 0 }
+        if self.signed {
+            -(1i64 << (self.len - 1))
+        } else {
+            0
+        }
     }
 
     /// Largest raw value.
     pub fn raw_max(&self) -> i64 {
-        if self.signed { (1i64 << (self.len - 1)) - 1 } else { (1i64 << self.len) - 1 }
+        if self.signed {
+            (1i64 << (self.len - 1)) - 1
+        } else {
+            (1i64 << self.len) - 1
+        }
     }
 
     /// Read the raw value (sign-extended for signed signals).
     pub fn get(&self, data: &[u8; 8]) -> i64 {
         let word = u64::from_le_bytes(*data);
-        let mask = if self.len == 64 { u64::MAX } else { (1u64 << self.len) - 1 };
+        let mask = if self.len == 64 {
+            u64::MAX
+        } else {
+            (1u64 << self.len) - 1
+        };
         let v = (word >> self.start) & mask;
         if self.signed && v >> (self.len - 1) & 1 == 1 {
             (v | !mask) as i64
@@ -64,7 +90,11 @@ impl SignalSpec {
 
     /// Write a raw value, wrapping it to the signal's width (for free-running counters).
     pub fn put_wrapping(&self, data: &mut [u8; 8], raw: i64) {
-        let mask = if self.len == 64 { u64::MAX } else { (1u64 << self.len) - 1 };
+        let mask = if self.len == 64 {
+            u64::MAX
+        } else {
+            (1u64 << self.len) - 1
+        };
         let mut word = u64::from_le_bytes(*data);
         word &= !(mask << self.start);
         word |= ((raw as u64) & mask) << self.start;

@@ -209,8 +209,15 @@ pub mod nav_time {
         id: 0x200,
         dlc: 8,
         signals: &[
-            &SAMPLE_COUNT, &SEQ, &MODE, &HEALTH[0], &HEALTH[1], &HEALTH[2], &HEALTH[3],
-            &HEALTH[4], &HEALTH[5],
+            &SAMPLE_COUNT,
+            &SEQ,
+            &MODE,
+            &HEALTH[0],
+            &HEALTH[1],
+            &HEALTH[2],
+            &HEALTH[3],
+            &HEALTH[4],
+            &HEALTH[5],
         ],
         frames_per_second: 50.0,
     };
@@ -435,7 +442,17 @@ impl BitFlags {
     fn to_array(self) -> [bool; 9] {
         let [gx, gy, gz] = self.gyro;
         let [ax, ay, az] = self.accel;
-        [gx, gy, gz, ax, ay, az, self.dither, self.power, self.over_temp]
+        [
+            gx,
+            gy,
+            gz,
+            ax,
+            ay,
+            az,
+            self.dither,
+            self.power,
+            self.over_temp,
+        ]
     }
     fn from_array(b: [bool; 9]) -> Self {
         Self {
@@ -512,7 +529,15 @@ pub struct TtFaults {
 
 impl TtFaults {
     fn to_array(self) -> [bool; 7] {
-        [self.stall, self.lock, self.encoder, self.heartbeat, self.estop, self.drive, self.limit]
+        [
+            self.stall,
+            self.lock,
+            self.encoder,
+            self.heartbeat,
+            self.estop,
+            self.drive,
+            self.limit,
+        ]
     }
     fn from_array(b: [bool; 7]) -> Self {
         Self {
@@ -569,7 +594,14 @@ pub struct NavHealth {
 
 impl NavHealth {
     fn to_array(self) -> [bool; 6] {
-        [self.imu_timeout, self.imu_gaps, self.imu_bit, self.gps_stale, self.turntable, self.filter]
+        [
+            self.imu_timeout,
+            self.imu_gaps,
+            self.imu_bit,
+            self.gps_stale,
+            self.turntable,
+            self.filter,
+        ]
     }
     fn from_array(b: [bool; 6]) -> Self {
         Self {
@@ -668,7 +700,11 @@ pub enum Message {
 }
 
 fn frame(spec: &MessageSpec, data: [u8; 8]) -> RawFrame {
-    RawFrame { id: spec.id, len: spec.dlc, data }
+    RawFrame {
+        id: spec.id,
+        len: spec.dlc,
+        data,
+    }
 }
 
 fn enum_value<T>(
@@ -678,7 +714,11 @@ fn enum_value<T>(
     f: impl Fn(i64) -> Option<T>,
 ) -> Result<T, DecodeError> {
     let raw = sig.get(data);
-    f(raw).ok_or(DecodeError::InvalidValue { message: spec.name, signal: sig.name, raw })
+    f(raw).ok_or(DecodeError::InvalidValue {
+        message: spec.name,
+        signal: sig.name,
+        raw,
+    })
 }
 
 fn flags<const N: usize>(specs: &[SignalSpec; N], data: &[u8; 8]) -> [bool; N] {
@@ -800,7 +840,9 @@ impl Message {
 
     /// Decode a frame: unknown ids, wrong lengths and undefined enum values are errors.
     pub fn decode(f: &RawFrame) -> Result<Message, DecodeError> {
-        let spec = spec_for_id(f.id).ok_or(DecodeError::UnknownId { id: u32::from(f.id) })?;
+        let spec = spec_for_id(f.id).ok_or(DecodeError::UnknownId {
+            id: u32::from(f.id),
+        })?;
         let d = check(spec, f)?;
         let u8_of = |s: &SignalSpec| s.get(&d) as u8;
         let u16_of = |s: &SignalSpec| s.get(&d) as u16;
@@ -886,9 +928,10 @@ impl Message {
                     enu_mps: [EAST.phys(&d), NORTH.phys(&d), UP.phys(&d)],
                 })
             }
-            0x203 => {
-                Message::NavPos(NavPos { lat_deg: nav_pos::LAT.phys(&d), lon_deg: nav_pos::LON.phys(&d) })
-            }
+            0x203 => Message::NavPos(NavPos {
+                lat_deg: nav_pos::LAT.phys(&d),
+                lon_deg: nav_pos::LON.phys(&d),
+            }),
             0x204 => {
                 use nav_hgt::*;
                 Message::NavHgt(NavHgt {
@@ -898,7 +941,11 @@ impl Message {
                     heading_sigma_deg: HEADING_SIGMA.phys(&d),
                 })
             }
-            other => return Err(DecodeError::UnknownId { id: u32::from(other) }),
+            other => {
+                return Err(DecodeError::UnknownId {
+                    id: u32::from(other),
+                });
+            }
         })
     }
 }

@@ -29,7 +29,11 @@ pub fn from_can_frame(f: &CanFrame) -> Result<RawFrame, FrameConvError> {
                 let mut data = [0u8; 8];
                 let p = d.data();
                 data[..p.len()].copy_from_slice(p);
-                Ok(RawFrame { id: id.as_raw(), len: p.len() as u8, data })
+                Ok(RawFrame {
+                    id: id.as_raw(),
+                    len: p.len() as u8,
+                    data,
+                })
             }
             Id::Extended(id) => Err(FrameConvError::Extended(id.as_raw())),
         },

@@ -1,0 +1,235 @@
+//! `hil`: the bench command line.
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+use hil::report;
+use hil::run::{RunOptions, run_here, sibling_binary};
+use hil::scenario::Scenario;
+use std::path::{Path, PathBuf};
+use vcan_setup::{CanSupport, GUEST_ENV, VmOptions};
+
+#[derive(Parser)]
+#[command(
+    version,
+    about = "Hardware-in-the-loop bench for the RLG strapdown INS",
+    long_about = "Hardware-in-the-loop bench \
+for the RLG strapdown INS. Emulators drive a real Linux vcan interface; the production nav binary reads it as it \
+would read can0 on a vehicle. Where this kernel has no CAN, runs go through a QEMU guest automatically."
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Run a scenario on vcan: emulators + nav, then checks, a result card and a report.
+    Run(RunArgs),
+    /// The main job: the built-in static run at the paper's start point, with result card and report.
+    Demo {
+        /// Speed factor.
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
+        /// Output folder (default runs/<name>-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Print the bus-load table of the wire contract.
+    Busload {
+        /// Bit rate, bit/s.
+        #[arg(long, default_value_t = 1_000_000.0)]
+        bitrate: f64,
+    },
+    /// Print the DBC file of the wire contract.
+    Dbc,
+}
+
+#[derive(clap::Args, Clone)]
+struct RunArgs {
+    /// Scenario file (TOML); default: the built-in static scenario.
+    #[arg(long)]
+    scenario: Option<PathBuf>,
+    /// Override the simulated duration, s.
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Override the speed factor (1 = real time).
+    #[arg(long)]
+    speed: Option<f64>,
+    /// CAN interface (created when missing).
+    #[arg(long, default_value = "vcan0")]
+    iface: String,
+    /// Output folder (default runs/<name>-<unix time>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// The nav binary (default: next to hil).
+    #[arg(long)]
+    nav: Option<PathBuf>,
+    /// Print the report as JSON on stdout instead of the result card.
+    #[arg(long)]
+    json: bool,
+    /// Always use the QEMU guest, even where this kernel has CAN.
+    #[arg(long)]
+    vm: bool,
+}
+
+fn main() {
+    tracing_subscriber::fmt()
+        .with_ansi(
+            std::io::IsTerminal::is_terminal(&std::io::stderr())
+                && std::env::var_os("NO_COLOR").is_none(),
+        )
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .init();
+    match real_main() {
+        Ok(code) => std::process::exit(code),
+        Err(e) => {
+            eprintln!("hil: error: {e:#}");
+            std::process::exit(2);
+        }
+    }
+}
+
+fn real_main() -> Result<i32> {
+    match Cli::parse().cmd {
+        Cmd::Run(a) => run(a),
+        Cmd::Demo { speed, out } => run(RunArgs {
+            scenario: None,
+            duration: None,
+            speed: Some(speed),
+            iface: "vcan0".into(),
+            out,
+            nav: None,
+            json: false,
+            vm: false,
+        }),
+        Cmd::Busload { bitrate } => {
+            print!("{}", wire::busload::report(bitrate));
+            Ok(0)
+        }
+        Cmd::Dbc => {
+            print!("{}", wire::DBC);
+            Ok(0)
+        }
+    }
+}
+
+fn absolute(p: &Path) -> Result<PathBuf> {
+    Ok(if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        std::env::current_dir()?.join(p)
+    })
+}
+
+fn run(a: RunArgs) -> Result<i32> {
+    let mut s = match &a.scenario {
+        Some(p) => Scenario::load(p)?,
+        None => Scenario::builtin_static(),
+    };
+    if let Some(d) = a.duration {
+        s.duration_s = d;
+    }
+    if let Some(x) = a.speed {
+        s.speed = x;
+    }
+    s.check()?;
+    let out = absolute(&match &a.out {
+        Some(o) => o.clone(),
+        None => {
+            let secs = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_secs())
+                .unwrap_or(0);
+            PathBuf::from("runs").join(format!("{}-{secs}", s.name))
+        }
+    })?;
+    let in_guest = std::env::var_os(GUEST_ENV).is_some();
+    let native = !a.vm || in_guest;
+    if native && matches!(vcan_setup::can_support(), CanSupport::Available) {
+        let opts = RunOptions {
+            iface: a.iface.clone(),
+            out: out.clone(),
+            nav_bin: match &a.nav {
+                Some(n) => n.clone(),
+                None => sibling_binary("nav")?,
+            },
+            progress: true,
+        };
+        let backend = if in_guest { "vm" } else { "native" };
+        let r = run_here(&s, &opts, backend)?;
+        if a.json {
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        } else {
+            print!("{}", report::card(&r));
+            println!(" report: {}", out.join("report.md").display());
+        }
+        return Ok(if r.pass { 0 } else { 1 });
+    }
+    if in_guest {
+        bail!(
+            "inside the QEMU guest and still no CAN support: the guest kernel lacks the can/vcan modules"
+        );
+    }
+    // No CAN here: run this same command inside the QEMU guest.
+    eprintln!("hil: this kernel has no CAN support; running on real vcan inside a QEMU guest");
+    vcan_setup::install_prereqs()?;
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let exe = std::env::current_exe()?;
+    let mut extra = vec![out.clone()];
+    let mut args: Vec<String> = vec![exe.to_string_lossy().into_owned(), "run".into()];
+    if let Some(p) = &a.scenario {
+        let p = absolute(p)?;
+        extra.push(p.parent().map(Path::to_path_buf).unwrap_or_default());
+        args.extend(["--scenario".into(), p.to_string_lossy().into_owned()]);
+    }
+    args.extend([
+        "--duration".into(),
+        s.duration_s.to_string(),
+        "--speed".into(),
+        s.speed.to_string(),
+    ]);
+    args.extend([
+        "--iface".into(),
+        a.iface.clone(),
+        "--out".into(),
+        out.to_string_lossy().into_owned(),
+    ]);
+    let nav = match &a.nav {
+        Some(n) => absolute(n)?,
+        None => sibling_binary("nav")?,
+    };
+    args.extend(["--nav".into(), nav.to_string_lossy().into_owned()]);
+    if a.json {
+        args.push("--json".into());
+    }
+    let shares = vcan_setup::default_shares(&exe, &extra);
+    let shares = dedupe_nested(shares);
+    let opts = VmOptions {
+        shares,
+        libs_for: vec![nav],
+        ..VmOptions::default()
+    };
+    let o = vcan_setup::run_in_vm(&args, &opts)?;
+    if a.json {
+        // the guest's console carries the JSON; hand it on as it came
+        print!("{}", o.output);
+    }
+    eprintln!(
+        "hil: guest boot {:.1} s, run {:.1} s",
+        o.boot_secs,
+        o.total_secs - o.boot_secs
+    );
+    Ok(o.status)
+}
+
+/// Drop shares that lie inside another share.
+fn dedupe_nested(mut shares: Vec<PathBuf>) -> Vec<PathBuf> {
+    shares.retain(|p| !p.as_os_str().is_empty());
+    let all = shares.clone();
+    shares.retain(|p| !all.iter().any(|q| q != p && p.starts_with(q)));
+    shares.dedup();
+    shares
+}

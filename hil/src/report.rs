@@ -1,0 +1,236 @@
+//! Checks of a run against truth and the bus accounting, and the result card.
+
+use crate::scenario::Scenario;
+use emulators::can::TxStats;
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+/// One check of a run.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Check {
+    /// Short name.
+    pub name: String,
+    /// Passed?
+    pub pass: bool,
+    /// Measured value and limit, in words.
+    pub detail: String,
+}
+
+/// The full report of a run.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RunReport {
+    /// Scenario as run.
+    pub scenario: Scenario,
+    /// `native` or `vm`.
+    pub backend: String,
+    /// CAN interface.
+    pub interface: String,
+    /// Wall seconds of the emulation.
+    pub wall_seconds: f64,
+    /// Frames per second of wall time through the interface.
+    pub frames_per_wall_second: f64,
+    /// What the emulator sent.
+    pub tx: TxStats,
+    /// IMU biases the emulator applied (deg/h).
+    pub applied_gyro_bias_dph: [f64; 3],
+    /// Accelerometer biases applied (m/s^2).
+    pub applied_accel_bias_mps2: [f64; 3],
+    /// nav's exit status.
+    pub nav_exit: Option<i32>,
+    /// nav's summary (as nav wrote it).
+    pub nav: Value,
+    /// IMU frames lost on the bus (sent but not received).
+    pub bus_lost_frames: i64,
+    /// Checks.
+    pub checks: Vec<Check>,
+    /// All checks passed.
+    pub pass: bool,
+}
+
+fn num(v: &Value, path: &[&str]) -> f64 {
+    let mut v = v;
+    for p in path {
+        v = &v[*p];
+    }
+    v.as_f64().unwrap_or(f64::NAN)
+}
+
+fn vec3(v: &Value, key: &str) -> Vector3<f64> {
+    let a = &v[key];
+    Vector3::new(
+        a[0].as_f64().unwrap_or(f64::NAN),
+        a[1].as_f64().unwrap_or(f64::NAN),
+        a[2].as_f64().unwrap_or(f64::NAN),
+    )
+}
+
+/// Compute the checks of a finished run.
+pub fn checks(
+    s: &Scenario,
+    tx: &TxStats,
+    gyro_bias_dph: [f64; 3],
+    accel_bias: [f64; 3],
+    nav: &Value,
+    nav_exit: Option<i32>,
+) -> (Vec<Check>, i64) {
+    let mut out = Vec::new();
+    out.push(Check {
+        name: "nav exited cleanly".into(),
+        pass: nav_exit == Some(0),
+        detail: format!("exit status {nav_exit:?}"),
+    });
+    let rx_gyro = num(nav, &["imu", "gyro_frames"]) as i64;
+    let dup = s.faults.duplicate_samples.len() as i64;
+    let lost = tx.gyro_frames as i64 + dup - rx_gyro;
+    let missing = num(nav, &["imu", "missing_samples"]) as i64;
+    let sent = tx.gyro_frames.max(1) as f64;
+    out.push(Check {
+        name: "every lost IMU frame accounted".into(),
+        pass: missing == lost + tx.dropped_samples as i64 && lost >= 0,
+        detail: format!(
+            "sent {} IMU_GYRO, received {rx_gyro}; nav counted {missing} missing samples = {lost} lost on the bus + {} dropped on purpose",
+            tx.gyro_frames, tx.dropped_samples
+        ),
+    });
+    out.push(Check {
+        name: "bus loss within tolerance".into(),
+        pass: (lost.max(0) as f64) / sent <= s.max_bus_loss,
+        detail: format!(
+            "{lost} of {} frames ({:.4} %), limit {:.4} %",
+            tx.gyro_frames,
+            100.0 * lost as f64 / sent,
+            100.0 * s.max_bus_loss
+        ),
+    });
+    for (name, key, want) in [
+        (
+            "unknown-id frames reported",
+            "unknown_id_frames",
+            s.faults.unknown_id_at_s.len(),
+        ),
+        (
+            "wrong-length frames reported",
+            "bad_length_frames",
+            s.faults.bad_length_at_s.len(),
+        ),
+    ] {
+        let got = num(nav, &[key]) as usize;
+        out.push(Check {
+            name: name.into(),
+            pass: got == want,
+            detail: format!("nav counted {got}, {want} injected"),
+        });
+    }
+    let got = num(nav, &["imu", "duplicates"]) as usize;
+    out.push(Check {
+        name: "duplicate frames reported".into(),
+        pass: got == s.faults.duplicate_samples.len(),
+        detail: format!(
+            "nav counted {got}, {} injected",
+            s.faults.duplicate_samples.len()
+        ),
+    });
+    // Mean rate and specific force against truth plus the applied biases. Limits: 5 sigma of the
+    // white noise averaged over the run, plus two pulses of quantization over the run.
+    let t = num(nav, &["imu_seconds"]);
+    let w_truth =
+        s.site.omega_ib_b() * nav::earth::DEG_PER_HOUR_PER_RAD_S + Vector3::from(gyro_bias_dph);
+    let w = vec3(nav, "mean_rate_dph");
+    let arw_dph = s.imu.gyro_arw_dpsh * 60.0; // deg/h per sqrt(Hz)
+    // one pulse (arcsec) over the run, in deg/h: arcsec / 3600 deg, per t/3600 h
+    let pulse_dph = s.imu.gyro_pulse_arcsec.iter().cloned().fold(0.0, f64::max);
+    let lim_w = 5.0 * arw_dph / t.sqrt() + 2.0 * pulse_dph / t;
+    let err_w = (w - w_truth).abs().max();
+    out.push(Check {
+        name: "mean gyro rate matches truth + bias".into(),
+        pass: err_w <= lim_w,
+        detail: format!(
+            "measured [{:.4}, {:.4}, {:.4}] deg/h, truth [{:.4}, {:.4}, {:.4}]; worst axis off by {err_w:.4} deg/h, limit {lim_w:.4}",
+            w.x, w.y, w.z, w_truth.x, w_truth.y, w_truth.z
+        ),
+    });
+    let f_truth = s.site.f_b() + Vector3::from(accel_bias);
+    let f = vec3(nav, "mean_specific_force_mps2");
+    let pulse_a = s.imu.accel_pulse_mps.iter().cloned().fold(0.0, f64::max);
+    let lim_f = 5.0 * s.imu.accel_vrw_mpss / t.sqrt() + 2.0 * pulse_a / t;
+    let err_f = (f - f_truth).abs().max();
+    out.push(Check {
+        name: "mean specific force matches truth + bias".into(),
+        pass: err_f <= lim_f,
+        detail: format!(
+            "measured [{:.6}, {:.6}, {:.6}] m/s^2, truth [{:.6}, {:.6}, {:.6}]; worst axis off by {err_f:.2e}, limit {lim_f:.2e}",
+            f.x, f.y, f.z, f_truth.x, f_truth.y, f_truth.z
+        ),
+    });
+    (out, lost)
+}
+
+/// The result card printed at the end of a run.
+pub fn card(r: &RunReport) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let line = "=".repeat(78);
+    let _ = writeln!(s, "{line}");
+    let _ = writeln!(
+        s,
+        " RUN {}  on {} ({})  {:.0} s simulated at x{}  in {:.1} s wall",
+        r.scenario.name,
+        r.interface,
+        r.backend,
+        r.scenario.duration_s,
+        r.scenario.speed,
+        r.wall_seconds
+    );
+    let _ = writeln!(
+        s,
+        " IMU frames sent {} ({:.0} frames/s wall), lost on the bus {}, dropped on purpose {}",
+        r.tx.frames, r.frames_per_wall_second, r.bus_lost_frames, r.tx.dropped_samples
+    );
+    let _ = writeln!(s, "{line}");
+    for c in &r.checks {
+        let _ = writeln!(
+            s,
+            " [{}] {:<42} {}",
+            if c.pass { "PASS" } else { "FAIL" },
+            c.name,
+            c.detail
+        );
+    }
+    let _ = writeln!(s, "{line}");
+    let _ = writeln!(s, " RESULT: {}", if r.pass { "PASS" } else { "FAIL" });
+    s
+}
+
+/// Markdown version of the report.
+pub fn markdown(r: &RunReport) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(s, "# Run report: {}\n", r.scenario.name);
+    let _ = writeln!(
+        s,
+        "- interface: `{}` ({})\n- simulated: {} s at x{}\n- wall: {:.1} s, {:.0} frames/s\n- result: **{}**\n",
+        r.interface,
+        r.backend,
+        r.scenario.duration_s,
+        r.scenario.speed,
+        r.wall_seconds,
+        r.frames_per_wall_second,
+        if r.pass { "PASS" } else { "FAIL" }
+    );
+    let _ = writeln!(s, "| check | result | detail |\n|---|---|---|");
+    for c in &r.checks {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} |",
+            c.name,
+            if c.pass { "PASS" } else { "FAIL" },
+            c.detail
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nFiles: `report.json` (everything), `nav-summary.json`, `nav.mcap` (raw frames, decoded samples, events), `nav.toml`, `scenario.toml`."
+    );
+    s
+}

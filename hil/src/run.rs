@@ -1,0 +1,221 @@
+//! One bench run: bring up vcan, start `nav` as its own process (unmodified: only its config
+//! file differs from a vehicle's), run the emulators for the scenario's simulated duration,
+//! stop `nav` with SIGTERM, check and report.
+
+use crate::report::{self, RunReport};
+use crate::scenario::Scenario;
+use anyhow::{Context, Result, bail};
+use emulators::can::{Progress, run_imu};
+use emulators::clock::SimClock;
+use emulators::imu::ImuEmulator;
+use nav::config::{CanConfig, NavConfig, RecordConfig, WatchdogConfig};
+use nav::imu::ImuCalibration;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use tracing::info;
+
+/// Options of a run.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// CAN interface to use (created when missing).
+    pub iface: String,
+    /// Output folder.
+    pub out: PathBuf,
+    /// The `nav` binary.
+    pub nav_bin: PathBuf,
+    /// Print progress.
+    pub progress: bool,
+}
+
+/// The `nav` binary next to the running executable (cargo puts all workspace binaries together).
+pub fn sibling_binary(name: &str) -> Result<PathBuf> {
+    let exe = std::env::current_exe().context("locating the running executable")?;
+    let dir = exe.parent().context("executable has no folder")?;
+    for d in [dir, dir.parent().unwrap_or(dir)] {
+        let p = d.join(name);
+        if p.is_file() {
+            return Ok(p);
+        }
+    }
+    bail!(
+        "cannot find the {name} binary next to {} (build it with `cargo build --workspace`)",
+        exe.display()
+    )
+}
+
+fn nav_config(s: &Scenario, iface: &str) -> NavConfig {
+    NavConfig {
+        can: CanConfig {
+            interface: iface.into(),
+            rcvbuf_bytes: 8 << 20,
+        },
+        imu: ImuCalibration {
+            gyro_pulse_arcsec: s.imu.gyro_pulse_arcsec,
+            accel_pulse_mps: s.imu.accel_pulse_mps,
+            rate_hz: s.imu.rate_hz,
+            ..ImuCalibration::default()
+        },
+        watchdog: WatchdogConfig {
+            imu_timeout_ms: (500.0 / s.speed.max(1.0)).max(100.0) as u64,
+        },
+        record: RecordConfig {
+            mcap: Some("nav.mcap".into()),
+            summary: Some("nav-summary.json".into()),
+        },
+    }
+}
+
+struct NavProcess {
+    child: Child,
+    lines: std::sync::mpsc::Receiver<String>,
+}
+
+fn start_nav(bin: &Path, config: &Path) -> Result<NavProcess> {
+    let mut child = Command::new(bin)
+        .arg("--config")
+        .arg(config)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .with_context(|| format!("starting {}", bin.display()))?;
+    let out = child.stdout.take().context("nav stdout")?;
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for l in BufReader::new(out).lines().map_while(|l| l.ok()) {
+            let _ = tx.send(l);
+        }
+    });
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        match rx.recv_timeout(Duration::from_millis(100)) {
+            Ok(l) if l.starts_with("nav: receiving") => break,
+            Ok(l) => eprintln!("{l}"),
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                if let Some(st) = child.try_wait()? {
+                    bail!("nav exited before it was ready ({st}); see its messages above");
+                }
+                if Instant::now() > deadline {
+                    let _ = child.kill();
+                    bail!("nav did not report ready within 20 s");
+                }
+            }
+            Err(_) => {
+                let st = child.wait()?;
+                bail!("nav exited before it was ready ({st}); see its messages above");
+            }
+        }
+    }
+    Ok(NavProcess { child, lines: rx })
+}
+
+fn stop_nav(mut nav: NavProcess) -> Result<(Option<i32>, Vec<String>)> {
+    // SAFETY: kill(2) on our own child's pid.
+    unsafe { libc::kill(nav.child.id() as libc::pid_t, libc::SIGTERM) };
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let status = loop {
+        if let Some(st) = nav.child.try_wait()? {
+            break st.code();
+        }
+        if Instant::now() > deadline {
+            let _ = nav.child.kill();
+            let _ = nav.child.wait();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    Ok((status, nav.lines.try_iter().collect()))
+}
+
+/// Run a scenario here (the kernel must have CAN). Returns the report; files go to `opts.out`.
+pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunReport> {
+    std::fs::create_dir_all(&opts.out)
+        .with_context(|| format!("creating {}", opts.out.display()))?;
+    vcan_setup::ensure_vcan(&opts.iface)?;
+    std::fs::write(opts.out.join("scenario.toml"), toml::to_string_pretty(s)?)?;
+    let cfg_path = opts.out.join("nav.toml");
+    std::fs::write(&cfg_path, nav_config(s, &opts.iface).to_toml())?;
+    info!(interface = %opts.iface, "starting nav");
+    let nav = start_nav(&opts.nav_bin, &cfg_path)?;
+
+    let imu = ImuEmulator::new(Box::new(s.site), s.imu.clone());
+    let (gb, ab) = (imu.gyro_bias_dph(), imu.accel_bias_mps2());
+    let stop = Arc::new(AtomicBool::new(false));
+    let progress = Arc::new(Progress::default());
+    let clock = SimClock::start(s.speed);
+    let t0 = Instant::now();
+    let tx = {
+        let (iface, faults, stop, progress, dur) = (
+            opts.iface.clone(),
+            s.faults.clone(),
+            stop.clone(),
+            progress.clone(),
+            s.duration_s,
+        );
+        std::thread::spawn(move || run_imu(&iface, imu, clock, dur, &faults, &stop, &progress))
+    };
+    let mut next_report = Instant::now() + Duration::from_secs(5);
+    while !tx.is_finished() {
+        std::thread::sleep(Duration::from_millis(50));
+        if opts.progress && Instant::now() >= next_report {
+            let t = progress.sim_ms.load(Ordering::Relaxed) as f64 / 1000.0;
+            eprintln!(
+                "hil: {t:.1} / {:.1} s simulated (x{})",
+                s.duration_s, s.speed
+            );
+            next_report += Duration::from_secs(5);
+        }
+    }
+    let wall = t0.elapsed().as_secs_f64();
+    let tx = tx
+        .join()
+        .map_err(|_| anyhow::anyhow!("IMU emulator thread panicked"))?;
+    // let nav drain its socket before it is told to stop
+    std::thread::sleep(Duration::from_millis(500));
+    let (tx, nav_out) = match tx {
+        Ok(st) => (st, stop_nav(nav)?),
+        Err(e) => {
+            let _ = stop_nav(nav);
+            return Err(e.into());
+        }
+    };
+    let (nav_exit, nav_lines) = nav_out;
+    for l in &nav_lines {
+        eprintln!("{l}");
+    }
+    let summary_path = opts.out.join("nav-summary.json");
+    let nav_json: serde_json::Value = match std::fs::read_to_string(&summary_path) {
+        Ok(t) => serde_json::from_str(&t)
+            .with_context(|| format!("parsing {}", summary_path.display()))?,
+        Err(e) => bail!(
+            "nav wrote no summary ({}: {e}); exit status {nav_exit:?}",
+            summary_path.display()
+        ),
+    };
+    let (checks, lost) = report::checks(s, &tx, gb, ab, &nav_json, nav_exit);
+    let pass = checks.iter().all(|c| c.pass);
+    let r = RunReport {
+        scenario: s.clone(),
+        backend: backend.into(),
+        interface: opts.iface.clone(),
+        wall_seconds: wall,
+        frames_per_wall_second: tx.frames as f64 / wall.max(1e-9),
+        tx,
+        applied_gyro_bias_dph: gb,
+        applied_accel_bias_mps2: ab,
+        nav_exit,
+        nav: nav_json,
+        bus_lost_frames: lost,
+        checks,
+        pass,
+    };
+    std::fs::write(
+        opts.out.join("report.json"),
+        serde_json::to_string_pretty(&r)?,
+    )?;
+    std::fs::write(opts.out.join("report.md"), report::markdown(&r))?;
+    Ok(r)
+}

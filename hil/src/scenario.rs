@@ -1,0 +1,100 @@
+//! Scenario files (TOML): what the emulated vehicle does and how its sensors err.
+
+use anyhow::{Context, Result, bail};
+use emulators::can::BusFaults;
+use emulators::imu::ImuParams;
+use emulators::truth::Static;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A bench scenario.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Name (used for run folders).
+    pub name: String,
+    /// Simulated duration, s.
+    pub duration_s: f64,
+    /// Speed factor (1.0 real time).
+    #[serde(default = "one")]
+    pub speed: f64,
+    /// Largest fraction of IMU frames the bus may lose before the run fails.
+    #[serde(default)]
+    pub max_bus_loss: f64,
+    /// Where the vehicle is parked.
+    pub site: Static,
+    /// IMU parameters.
+    #[serde(default)]
+    pub imu: ImuParams,
+    /// Faults injected on the bus.
+    #[serde(default)]
+    pub faults: BusFaults,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl Scenario {
+    /// Load and check a scenario file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read scenario {}", path.display()))?;
+        let s: Scenario =
+            toml::from_str(&text).with_context(|| format!("scenario {}", path.display()))?;
+        s.check()
+            .with_context(|| format!("scenario {}", path.display()))?;
+        Ok(s)
+    }
+
+    /// Sanity checks.
+    pub fn check(&self) -> Result<()> {
+        if !(self.duration_s > 0.0 && self.duration_s.is_finite()) {
+            bail!("duration_s must be positive");
+        }
+        if !(self.speed > 0.0 && self.speed <= 1000.0) {
+            bail!("speed must be in (0, 1000]");
+        }
+        if !(-90.0..=90.0).contains(&self.site.lat_deg) {
+            bail!("site.lat_deg {} is not a latitude", self.site.lat_deg);
+        }
+        if !(0.0..1.0).contains(&self.max_bus_loss) {
+            bail!("max_bus_loss must be in [0, 1)");
+        }
+        if self.imu.rate_hz != wire::IMU_RATE_HZ {
+            bail!(
+                "imu.rate_hz must be {} (the wire contract's rate)",
+                wire::IMU_RATE_HZ
+            );
+        }
+        Ok(())
+    }
+
+    /// The built-in static scenario (paper 003's start point).
+    pub fn builtin_static() -> Self {
+        toml::from_str(include_str!("../../scenarios/static-campus.toml"))
+            .expect("built-in scenario parses")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn builtin_scenario_is_valid() {
+        let s = Scenario::builtin_static();
+        s.check().unwrap();
+        assert_eq!(s.site.lat_deg, 28.218157);
+    }
+
+    #[test]
+    fn bad_scenarios_say_what_is_wrong() {
+        let mut s = Scenario::builtin_static();
+        s.site.lat_deg = 99.0;
+        assert!(s.check().unwrap_err().to_string().contains("latitude"));
+        let e = toml::from_str::<Scenario>("name='x'\nduration_s=1\n[site]\nlat_deg=1\nbogus=2\n")
+            .unwrap_err();
+        assert!(e.to_string().contains("bogus"), "{e}");
+    }
+}

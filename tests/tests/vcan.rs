@@ -1,0 +1,158 @@
+//! End-to-end tests on real Linux vcan. They need a kernel with CAN, so they are ignored by a
+//! plain `cargo test`; `./run-tests` runs them natively where the kernel has vcan, otherwise
+//! inside the QEMU guest (one boot for all of them).
+
+use e2e::{bin, mcap_topic_counts};
+use serde_json::Value;
+use std::process::Command;
+
+fn hil_run(args: &[&str], out: &std::path::Path) -> (Value, i32) {
+    let o = Command::new(bin("hil"))
+        .arg("run")
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .arg("--json")
+        .output()
+        .expect("hil runs");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    eprintln!("{stderr}");
+    let report: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!(
+            "hil printed no JSON report ({e}); stdout: {}",
+            String::from_utf8_lossy(&o.stdout)
+        )
+    });
+    (report, o.status.code().unwrap_or(-1))
+}
+
+fn checks(r: &Value) -> Vec<(String, bool, String)> {
+    r["checks"]
+        .as_array()
+        .expect("checks")
+        .iter()
+        .map(|c| {
+            (
+                c["name"].as_str().unwrap_or("").to_string(),
+                c["pass"].as_bool().unwrap_or(false),
+                c["detail"].as_str().unwrap_or("").to_string(),
+            )
+        })
+        .collect()
+}
+
+/// 60 s of static data at 2 kHz, speed factor 10. Tolerated loss: none is expected (nav's socket
+/// has an 8 MiB receive buffer); the run fails above 0.1 % (the scenario's max_bus_loss), and
+/// every lost frame must show up in nav's gap count, sample for sample.
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn static_60s_at_x10_every_frame_arrives_and_the_recording_reads_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let (r, code) = hil_run(
+        &["--duration", "60", "--speed", "10", "--iface", "vcan-e2e0"],
+        dir.path(),
+    );
+    for (name, pass, detail) in checks(&r) {
+        eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
+        assert!(pass, "check failed: {name}: {detail}");
+    }
+    assert_eq!(code, 0);
+    assert_eq!(r["nav_exit"], 0, "nav exited cleanly on SIGTERM");
+    let nav = &r["nav"];
+    let tx = &r["tx"];
+    assert_eq!(tx["samples"], 120_000, "60 s at 2 kHz");
+    let lost = r["bus_lost_frames"].as_i64().unwrap();
+    assert_eq!(
+        nav["imu"]["missing_samples"].as_i64().unwrap(),
+        lost,
+        "every lost frame is a counted gap"
+    );
+    assert!(lost as f64 <= 0.001 * 120_000.0, "lost {lost} frames");
+    assert_eq!(
+        nav["imu"]["samples"].as_i64().unwrap() + lost,
+        119_999,
+        "all samples but the baseline one"
+    );
+    eprintln!(
+        "throughput: {:.0} frames/s wall, max lag {} ms, lost {lost}",
+        r["frames_per_wall_second"].as_f64().unwrap(),
+        tx["max_lag_ms"]
+    );
+    // the MCAP file is complete and reads back
+    let counts = mcap_topic_counts(&dir.path().join("nav.mcap")).expect("MCAP reads back");
+    assert_eq!(
+        counts.get("/can/raw").copied(),
+        nav["frames_total"].as_u64(),
+        "{counts:?}"
+    );
+    assert_eq!(
+        counts.get("/imu/sample").copied(),
+        nav["imu"]["samples"].as_u64(),
+        "{counts:?}"
+    );
+    assert_eq!(counts.get("/nav/summary").copied(), Some(1));
+}
+
+/// Bad input on the bus: dropped samples, a duplicated frame, unknown ids and a short frame are
+/// each detected and counted exactly, and the angle survives the gaps.
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn injected_bus_faults_are_counted_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let scen = dir.path().join("faults.toml");
+    std::fs::write(
+        &scen,
+        r#"name = "faults"
+duration_s = 8.0
+speed = 10.0
+[site]
+lat_deg = 45.0
+heading_deg = 30.0
+[faults]
+drop_samples = [1000, 1001, 1002, 5000]
+duplicate_samples = [2000]
+unknown_id_at_s = [1.0, 2.5]
+bad_length_at_s = [3.0]
+"#,
+    )
+    .unwrap();
+    let out = dir.path().join("run");
+    let (r, code) = hil_run(
+        &["--scenario", scen.to_str().unwrap(), "--iface", "vcan-e2e1"],
+        &out,
+    );
+    for (name, pass, detail) in checks(&r) {
+        assert!(pass, "check failed: {name}: {detail}");
+    }
+    assert_eq!(code, 0);
+    let nav = &r["nav"];
+    let lost = r["bus_lost_frames"].as_i64().unwrap();
+    assert_eq!(nav["imu"]["missing_samples"].as_i64().unwrap(), 4 + lost);
+    assert!(nav["imu"]["gaps"].as_i64().unwrap() >= 2);
+    assert_eq!(nav["imu"]["duplicates"], 1);
+    assert_eq!(nav["unknown_id_frames"], 2);
+    assert_eq!(nav["unknown_ids"][0], "0x7E5");
+    assert_eq!(nav["bad_length_frames"], 1);
+    assert_eq!(nav["imu"]["ambiguous_gaps"], 0);
+}
+
+/// A missing interface: nav names it and exits non-zero, no panic.
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn nav_names_a_missing_interface_and_exits_nonzero() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("nav.toml");
+    std::fs::write(&cfg, "[can]\ninterface = \"nosuchcan7\"\n").unwrap();
+    let o = Command::new(bin("nav"))
+        .arg("--config")
+        .arg(&cfg)
+        .output()
+        .expect("nav runs");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("nosuchcan7") && err.contains("no such CAN interface"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+}
