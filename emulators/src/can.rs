@@ -52,7 +52,7 @@ pub struct TxStats {
 #[derive(Debug, Error)]
 pub enum CanTxError {
     /// The interface could not be opened.
-    #[error("CAN interface {iface}: cannot open: {source}")]
+    #[error("CAN interface {iface}: cannot open")]
     Open {
         /// Interface.
         iface: String,
@@ -60,7 +60,7 @@ pub enum CanTxError {
         source: std::io::Error,
     },
     /// A write failed.
-    #[error("CAN interface {iface}: write of frame 0x{id:03X} failed: {source}")]
+    #[error("CAN interface {iface}: write of frame 0x{id:03X} failed")]
     Write {
         /// Interface.
         iface: String,

@@ -68,7 +68,7 @@ pub struct RecordConfig {
 #[derive(Debug, Error)]
 pub enum ConfigError {
     /// Unreadable.
-    #[error("cannot read config file {path}: {source}")]
+    #[error("cannot read config file {path}")]
     Read {
         /// File.
         path: PathBuf,
@@ -76,7 +76,7 @@ pub enum ConfigError {
         source: std::io::Error,
     },
     /// Not valid.
-    #[error("config file {path}: {source}")]
+    #[error("config file {path}")]
     Parse {
         /// File.
         path: PathBuf,
@@ -167,15 +167,20 @@ mod tests {
         assert_eq!(NavConfig::load(&p).unwrap().can.interface, "can0");
     }
 
+    /// The message with its causes, as the binaries print it.
+    fn full(e: ConfigError) -> String {
+        format!("{:#}", anyhow::Error::from(e))
+    }
+
     #[test]
     fn bad_configs_name_the_file_and_the_problem() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("nav.toml");
         std::fs::write(&p, "[can]\ninterfac = \"can0\"\n").unwrap();
-        let e = NavConfig::load(&p).unwrap_err().to_string();
+        let e = full(NavConfig::load(&p).unwrap_err());
         assert!(e.contains("nav.toml") && e.contains("interfac"), "{e}");
         std::fs::write(&p, "[can]\ninterface = \"can0\"\n[imu]\ngyro_pulse_arcsec = [1.0, 0.0, 1.0]\naccel_pulse_mps=[1e-4,1e-4,1e-4]\ngyro_range_dps=1\naccel_range_mps2=1\nrate_hz=2000\n").unwrap();
-        let e = NavConfig::load(&p).unwrap_err().to_string();
+        let e = full(NavConfig::load(&p).unwrap_err());
         assert!(e.contains("pulse weights"), "{e}");
         let e = NavConfig::load(&dir.path().join("missing.toml"))
             .unwrap_err()

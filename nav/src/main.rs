@@ -105,7 +105,21 @@ fn set_rcvbuf(fd: i32, bytes: usize) -> std::io::Result<()> {
     }
 }
 
+/// Whether this kernel can open CAN sockets at all.
+fn kernel_has_can() -> bool {
+    // SAFETY: plain socket(2); the descriptor is closed at once.
+    let fd = unsafe { libc::socket(libc::AF_CAN, libc::SOCK_RAW, libc::CAN_RAW) };
+    if fd >= 0 {
+        // SAFETY: fd is ours.
+        unsafe { libc::close(fd) };
+    }
+    fd >= 0
+}
+
 fn open_error_hint(iface: &str, e: &std::io::Error) -> String {
+    if !kernel_has_can() {
+        return "this kernel has no CAN support (modprobe can_raw; on the bench, runs go through vcan-setup)".into();
+    }
     match e.raw_os_error() {
         Some(libc::ENODEV) => format!(
             "no such CAN interface {iface} (is it created and up? on the bench: `vcan-setup up {iface}`)"
@@ -118,7 +132,17 @@ fn open_error_hint(iface: &str, e: &std::io::Error) -> String {
     }
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
+    match real_main() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("nav: error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn real_main() -> Result<()> {
     tracing_subscriber::fmt()
         .with_ansi(
             std::io::IsTerminal::is_terminal(&std::io::stderr())

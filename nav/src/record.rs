@@ -67,7 +67,7 @@ impl JsonChannel {
 #[derive(Debug, Error)]
 pub enum RecordError {
     /// File could not be created.
-    #[error("cannot create MCAP file {path}: {source}")]
+    #[error("cannot create MCAP file {path}")]
     Create {
         /// File.
         path: PathBuf,
@@ -75,7 +75,7 @@ pub enum RecordError {
         source: std::io::Error,
     },
     /// The MCAP writer failed.
-    #[error("MCAP file {path}: {source}")]
+    #[error("MCAP file {path}")]
     Mcap {
         /// File.
         path: PathBuf,

@@ -78,7 +78,7 @@ pub enum Error {
         hint: String,
     },
     /// An I/O step failed.
-    #[error("{context}: {source}")]
+    #[error("{context}")]
     Io {
         /// What was being done.
         context: String,
