@@ -73,23 +73,9 @@ struct RunArgs {
 }
 
 fn main() {
-    tracing_subscriber::fmt()
-        .with_ansi(
-            std::io::IsTerminal::is_terminal(&std::io::stderr())
-                && std::env::var_os("NO_COLOR").is_none(),
-        )
-        .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
-        )
-        .init();
-    match real_main() {
-        Ok(code) => std::process::exit(code),
-        Err(e) => {
-            eprintln!("hil: error: {e:#}");
-            std::process::exit(2);
-        }
-    }
+    nav::cli::init_tracing();
+    // exit 0: pass, 1: a check failed or the run could not go on
+    std::process::exit(nav::cli::exit_code("hil", real_main(), |code| code));
 }
 
 fn real_main() -> Result<i32> {

@@ -132,27 +132,12 @@ fn open_error_hint(iface: &str, e: &std::io::Error) -> String {
     }
 }
 
-fn main() -> std::process::ExitCode {
-    match real_main() {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("nav: error: {e:#}");
-            std::process::ExitCode::FAILURE
-        }
-    }
+fn main() {
+    nav::cli::init_tracing();
+    std::process::exit(nav::cli::exit_code("nav", real_main(), |()| 0));
 }
 
 fn real_main() -> Result<()> {
-    tracing_subscriber::fmt()
-        .with_ansi(
-            std::io::IsTerminal::is_terminal(&std::io::stderr())
-                && std::env::var_os("NO_COLOR").is_none(),
-        )
-        .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
-        )
-        .init();
     let cli = Cli::parse();
     let cfg = NavConfig::load(&cli.config)?;
     let rt = tokio::runtime::Builder::new_current_thread()

@@ -1,0 +1,26 @@
+//! Start-up shared by the bench's binaries: logging to stderr, errors printed once with their causes.
+
+/// Log to stderr with `tracing`, level from `RUST_LOG` (default `info`), colour only on a terminal.
+pub fn init_tracing() {
+    tracing_subscriber::fmt()
+        .with_ansi(
+            std::io::IsTerminal::is_terminal(&std::io::stderr())
+                && std::env::var_os("NO_COLOR").is_none(),
+        )
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .init();
+}
+
+/// Print `program: error: <message and causes>` and give the exit code, or `ok` on success.
+pub fn exit_code<T>(program: &str, r: anyhow::Result<T>, ok: impl FnOnce(T) -> i32) -> i32 {
+    match r {
+        Ok(v) => ok(v),
+        Err(e) => {
+            eprintln!("{program}: error: {e:#}");
+            1
+        }
+    }
+}
