@@ -377,12 +377,12 @@ fn drain(
     }
     for s in out.drain(..) {
         sums.add(&s);
-        if let (Some(r), Ok(json)) = (rec, serde_json::to_string(&s)) {
-            r.send(Record::Json {
-                channel: JsonChannel::ImuSample,
+        if let Some(r) = rec {
+            let publish_ns = (s.sample as f64 * sample_ns) as u64;
+            r.send(Record::Sample {
                 t_ns: wall_ns(),
-                publish_ns: (s.sample as f64 * sample_ns) as u64,
-                json,
+                publish_ns,
+                sample: s,
             });
         }
     }

@@ -29,6 +29,15 @@ pub enum Record {
         /// The frame.
         frame: RawFrame,
     },
+    /// A decoded IMU sample, serialized to JSON on the writer thread (off the receive path).
+    Sample {
+        /// Log time, ns.
+        t_ns: u64,
+        /// Publish time (IMU clock), ns.
+        publish_ns: u64,
+        /// The sample.
+        sample: crate::imu::ImuSample,
+    },
     /// A JSON message on a JSON channel.
     Json {
         /// Which channel.
@@ -138,6 +147,7 @@ impl Recorder {
                 let mut seq: BTreeMap<u16, u32> = BTreeMap::new();
                 let mut n = 0u64;
                 let mut buf = [0u8; 11];
+                let mut text: String;
                 for r in rx {
                     let (ch, log, publish, data): (u16, u64, u64, &[u8]) = match &r {
                         Record::Frame { t_ns, frame } => {
@@ -146,12 +156,25 @@ impl Recorder {
                             buf[3..].copy_from_slice(&frame.data);
                             (raw, *t_ns, *t_ns, &buf)
                         }
+                        Record::Sample {
+                            t_ns,
+                            publish_ns,
+                            sample,
+                        } => {
+                            text = serde_json::to_string(sample).unwrap_or_default();
+                            (
+                                json[&JsonChannel::ImuSample],
+                                *t_ns,
+                                *publish_ns,
+                                text.as_bytes(),
+                            )
+                        }
                         Record::Json {
                             channel,
                             t_ns,
                             publish_ns,
-                            json: text,
-                        } => (json[channel], *t_ns, *publish_ns, text.as_bytes()),
+                            json: j,
+                        } => (json[channel], *t_ns, *publish_ns, j.as_bytes()),
                     };
                     let s = seq.entry(ch).or_insert(0);
                     *s += 1;
