@@ -7,3 +7,6 @@ pub mod config;
 pub mod earth;
 pub mod imu;
 pub mod record;
+pub mod coning;
+pub mod fir;
+pub mod attitude;
