@@ -71,26 +71,20 @@ pub enum CanTxError {
     },
 }
 
-fn write(
-    sock: &CanSocket,
-    iface: &str,
-    f: &RawFrame,
-    stats: &mut TxStats,
-) -> Result<(), CanTxError> {
+/// Write one frame, retrying while the transmit queue is full; returns the retries.
+fn write(sock: &CanSocket, iface: &str, f: &RawFrame) -> Result<u64, CanTxError> {
     let frame = wire::to_can_frame(f).map_err(|e| CanTxError::Write {
         iface: iface.into(),
         id: f.id,
         source: std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()),
     })?;
     let deadline = Instant::now() + Duration::from_secs(2);
+    let mut retries = 0;
     loop {
         match sock.write_frame(&frame) {
-            Ok(()) => {
-                stats.frames += 1;
-                return Ok(());
-            }
+            Ok(()) => return Ok(retries),
             Err(e) if e.raw_os_error() == Some(libc::ENOBUFS) && Instant::now() < deadline => {
-                stats.enobufs_retries += 1;
+                retries += 1;
                 std::thread::sleep(Duration::from_micros(200));
             }
             Err(source) => {
@@ -111,11 +105,93 @@ pub struct Progress {
     pub sim_ms: AtomicU64,
 }
 
+/// The IMU's frames as they go on the bus, with the configured faults injected. Pure (no I/O):
+/// the vcan adapter writes what this yields, and in-process replays use the very same stream.
+pub struct BusStream {
+    imu: ImuEmulator,
+    faults: BusFaults,
+    unknown: Vec<f64>,
+    badlen: Vec<f64>,
+    /// Counts of what was yielded (`frames` counts frames handed out).
+    pub stats: TxStats,
+}
+
+impl BusStream {
+    /// The stream of `imu` with `faults`.
+    pub fn new(imu: ImuEmulator, faults: &BusFaults) -> Self {
+        Self {
+            imu,
+            unknown: faults.unknown_id_at_s.clone(),
+            badlen: faults.bad_length_at_s.clone(),
+            faults: faults.clone(),
+            stats: TxStats::default(),
+        }
+    }
+
+    /// The emulator.
+    pub fn imu(&self) -> &ImuEmulator {
+        &self.imu
+    }
+
+    /// Simulated time at the end of the next sample, s.
+    pub fn next_time(&self) -> f64 {
+        self.imu.next_time()
+    }
+
+    /// Append the next sample's frames (as sent, faults included) to `out`.
+    pub fn next_frames(&mut self, out: &mut Vec<RawFrame>) {
+        let t = self.imu.next_time();
+        let s = self.imu.next_sample();
+        let st = &mut self.stats;
+        st.samples += 1;
+        if self.faults.drop_samples.contains(&s.k) {
+            st.dropped_samples += 1;
+            return;
+        }
+        for f in &s.frames {
+            out.push(*f);
+            match f.id {
+                0x080 => st.gyro_frames += 1,
+                0x081 => st.accel_frames += 1,
+                _ => st.hk_frames += 1,
+            }
+        }
+        if self.faults.duplicate_samples.contains(&s.k) {
+            out.push(s.frames[0]);
+            st.injected_frames += 1;
+        }
+        for (times, frame) in [
+            (
+                &mut self.unknown,
+                RawFrame {
+                    id: 0x7E5,
+                    len: 8,
+                    data: *b"UNKNOWN!",
+                },
+            ),
+            (
+                &mut self.badlen,
+                RawFrame {
+                    id: 0x080,
+                    len: 5,
+                    data: [1, 2, 3, 4, 5, 0, 0, 0],
+                },
+            ),
+        ] {
+            if let Some(pos) = times.iter().position(|at| *at <= t) {
+                times.swap_remove(pos);
+                out.push(frame);
+                st.injected_frames += 1;
+            }
+        }
+    }
+}
+
 /// Run the IMU on `iface` for `duration_s` of simulated time, paced by `clock`. Stops early when
 /// `stop` is set.
 pub fn run_imu(
     iface: &str,
-    mut imu: ImuEmulator,
+    imu: ImuEmulator,
     clock: SimClock,
     duration_s: f64,
     faults: &BusFaults,
@@ -126,57 +202,21 @@ pub fn run_imu(
         iface: iface.into(),
         source,
     })?;
-    let mut st = TxStats::default();
-    let mut unknown = faults.unknown_id_at_s.clone();
-    let mut badlen = faults.bad_length_at_s.clone();
-    while imu.next_time() <= duration_s + 1e-9 && !stop.load(Ordering::Relaxed) {
-        let t = imu.next_time();
+    let mut bus = BusStream::new(imu, faults);
+    let mut frames = Vec::with_capacity(8);
+    let (mut written, mut max_lag_ms, mut retries) = (0u64, 0u64, 0u64);
+    while bus.next_time() <= duration_s + 1e-9 && !stop.load(Ordering::Relaxed) {
+        let t = bus.next_time();
         clock.sleep_until(t);
         let lag = Instant::now().saturating_duration_since(clock.wall_at(t));
-        st.max_lag_ms = st.max_lag_ms.max(lag.as_millis() as u64);
-        let s = imu.next_sample();
-        st.samples += 1;
-        if faults.drop_samples.contains(&s.k) {
-            st.dropped_samples += 1;
-            continue;
+        max_lag_ms = max_lag_ms.max(lag.as_millis() as u64);
+        frames.clear();
+        bus.next_frames(&mut frames);
+        for f in &frames {
+            retries += write(&sock, iface, f)?;
+            written += 1;
         }
-        for f in &s.frames {
-            write(&sock, iface, f, &mut st)?;
-            match f.id {
-                0x080 => st.gyro_frames += 1,
-                0x081 => st.accel_frames += 1,
-                _ => st.hk_frames += 1,
-            }
-        }
-        if faults.duplicate_samples.contains(&s.k) {
-            write(&sock, iface, &s.frames[0], &mut st)?;
-            st.injected_frames += 1;
-        }
-        for (times, frame) in [
-            (
-                &mut unknown,
-                RawFrame {
-                    id: 0x7E5,
-                    len: 8,
-                    data: *b"UNKNOWN!",
-                },
-            ),
-            (
-                &mut badlen,
-                RawFrame {
-                    id: 0x080,
-                    len: 5,
-                    data: [1, 2, 3, 4, 5, 0, 0, 0],
-                },
-            ),
-        ] {
-            if let Some(pos) = times.iter().position(|at| *at <= t) {
-                times.swap_remove(pos);
-                write(&sock, iface, &frame, &mut st)?;
-                st.injected_frames += 1;
-            }
-        }
-        if s.k.is_multiple_of(200) {
+        if bus.stats.samples.is_multiple_of(200) {
             progress
                 .sim_ms
                 .store((t * 1000.0) as u64, Ordering::Relaxed);
@@ -184,6 +224,11 @@ pub fn run_imu(
     }
     progress
         .sim_ms
-        .store((imu.next_time() * 1000.0) as u64, Ordering::Relaxed);
-    Ok(st)
+        .store((bus.next_time() * 1000.0) as u64, Ordering::Relaxed);
+    Ok(TxStats {
+        frames: written,
+        enobufs_retries: retries,
+        max_lag_ms,
+        ..bus.stats
+    })
 }

@@ -1,22 +1,40 @@
 //! RLG / quartz-accelerometer IMU: sensor errors, pulse quantization, and the frames it sends.
 //!
-//! Defaults follow paper 003's sensor table: gyro bias stability 0.1 deg/h and white noise
-//! 0.1 deg/h (taken as the 1 s averaged rate noise, i.e. an angle random walk of
-//! 0.1/60 deg/sqrt(h)); accelerometer white noise 0.001 m/s^2 (1 s averaged, i.e. a velocity
-//! random walk of 0.001 m/s/sqrt(s)). The accelerometer bias default is 5e-5 g per axis, a
-//! good quartz unit after calibration; the paper's 5e-3 g is its bias *stability* spec over the
-//! range and can be set in the scenario.
+//! Layers: the truth motion gives exact increments; the error model below turns them into what
+//! the sensors would count; the counters quantize with carried remainder; the frames encode the
+//! 16-bit wrapping counters.
+//!
+//! Gyro, per axis: scale-factor error and asymmetry (different for positive and negative
+//! input), mounting misalignment (small angles onto the other two axes), constant bias (a random
+//! sign per axis from the seed), bias instability (first-order Gauss-Markov), angle random walk,
+//! mechanical dither (a sinusoidal angle at a distinct frequency per gyro in 300-430 Hz with a
+//! random phase: the readout sees the dither, the navigation filter must remove it), range
+//! limit (saturation is flagged on the wire).
+//!
+//! Accelerometer, per axis: scale factor, misalignment, cross-coupling (error proportional to
+//! the product of the input and the next axis' acceleration), bias, velocity random walk, range.
+//!
+//! Defaults follow paper 003's sensor table: gyro bias 0.1 deg/h (its bias stability), random
+//! drift 0.05 deg/h (the Gauss-Markov sigma), white noise 0.1 deg/h (taken as the 1 s averaged
+//! rate noise, i.e. an angle random walk of 0.1/60 deg/sqrt(h)); accelerometer bias 5e-3 g,
+//! white noise 0.001 m/s^2 (1 s averaged: a velocity random walk of 0.001 m/s/sqrt(s)).
 //!
 //! Quantization carries its remainder from sample to sample, so rounding never becomes drift:
 //! the pulse count after N samples differs from the true accumulated angle by less than one
 //! pulse, whatever N.
 
 use crate::truth::Motion;
+use nalgebra::{Matrix3, Vector3};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
 use wire::{BitFlags, ImuAccel, ImuGyro, ImuHk, Message, RawFrame};
+
+const ARCSEC: f64 = PI / 180.0 / 3600.0;
+const DEG_H: f64 = PI / 180.0 / 3600.0;
+const G0: f64 = 9.80665;
 
 /// IMU parameters (every one settable in a scenario file).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -30,12 +48,37 @@ pub struct ImuParams {
     pub accel_pulse_mps: [f64; 3],
     /// Gyro constant bias, deg/h, per axis (drawn at +-this with random sign when `random_bias_sign`).
     pub gyro_bias_dph: [f64; 3],
+    /// Gyro bias instability (random drift): Gauss-Markov sigma, deg/h.
+    pub gyro_bias_instability_dph: f64,
+    /// Correlation time of the bias instability, s.
+    pub gyro_bias_tau_s: f64,
     /// Gyro angle random walk, deg/sqrt(h).
     pub gyro_arw_dpsh: f64,
+    /// Gyro scale-factor error, ppm, per axis.
+    pub gyro_scale_factor_ppm: [f64; 3],
+    /// Gyro scale-factor asymmetry (positive minus negative input), ppm, per axis.
+    pub gyro_sf_asymmetry_ppm: [f64; 3],
+    /// Gyro mounting misalignment, arcsec: row i, column j (i != j) is the sensitivity of gyro i
+    /// to rate about axis j. The diagonal is ignored.
+    pub gyro_misalignment_arcsec: [[f64; 3]; 3],
+    /// Dither frequencies, Hz, per gyro (distinct, 300-430 Hz for the type-90 RLG).
+    pub dither_hz: [f64; 3],
+    /// Dither amplitude (peak angle), arcsec, per gyro. 0 turns dither off.
+    pub dither_arcsec: [f64; 3],
+    /// Gyro range, deg/s (true input, without dither).
+    pub gyro_range_dps: f64,
     /// Accelerometer constant bias, m/s^2, per axis.
     pub accel_bias_mps2: [f64; 3],
     /// Accelerometer velocity random walk, m/s/sqrt(s).
     pub accel_vrw_mpss: f64,
+    /// Accelerometer scale-factor error, ppm, per axis.
+    pub accel_scale_factor_ppm: [f64; 3],
+    /// Accelerometer misalignment, arcsec (as for the gyros).
+    pub accel_misalignment_arcsec: [[f64; 3]; 3],
+    /// Accelerometer cross-coupling, 1/g: axis i errs by `k_i a_i a_(i+1) / g`.
+    pub accel_cross_coupling_per_g: [f64; 3],
+    /// Accelerometer range, g.
+    pub accel_range_g: f64,
     /// Draw the sign of each bias at random from the seed.
     pub random_bias_sign: bool,
     /// Random seed: the same seed gives the same run.
@@ -44,6 +87,8 @@ pub struct ImuParams {
     pub pps_phase_s: f64,
     /// Gyro block temperature, degC.
     pub temp_c: f64,
+    /// Simulated time from which the built-in test reports a failure (none by default).
+    pub bit_fail_from_s: Option<f64>,
 }
 
 impl Default for ImuParams {
@@ -53,15 +98,115 @@ impl Default for ImuParams {
             gyro_pulse_arcsec: [1.0; 3],
             accel_pulse_mps: [1e-4; 3],
             gyro_bias_dph: [0.1; 3],
+            gyro_bias_instability_dph: 0.05,
+            gyro_bias_tau_s: 600.0,
             gyro_arw_dpsh: 0.1 / 60.0,
-            accel_bias_mps2: [5e-5 * 9.80665; 3],
+            gyro_scale_factor_ppm: [5.0, -3.0, 4.0],
+            gyro_sf_asymmetry_ppm: [1.0; 3],
+            gyro_misalignment_arcsec: [[0.0, 5.0, -4.0], [3.0, 0.0, 6.0], [-5.0, 2.0, 0.0]],
+            dither_hz: [331.0, 373.0, 412.0],
+            dither_arcsec: [400.0; 3],
+            gyro_range_dps: 400.0,
+            accel_bias_mps2: [5e-3 * G0; 3],
             accel_vrw_mpss: 0.001,
+            accel_scale_factor_ppm: [50.0, -40.0, 30.0],
+            accel_misalignment_arcsec: [[0.0, 10.0, -8.0], [6.0, 0.0, 12.0], [-10.0, 4.0, 0.0]],
+            accel_cross_coupling_per_g: [1.5e-5; 3],
+            accel_range_g: 10.0,
             random_bias_sign: true,
             seed: 1,
             pps_phase_s: 0.000_123,
             temp_c: 42.0,
+            bit_fail_from_s: None,
         }
     }
+}
+
+impl ImuParams {
+    /// An ideal IMU: no errors, no dither; pulses and their quantization only.
+    pub fn ideal() -> Self {
+        Self {
+            gyro_bias_dph: [0.0; 3],
+            gyro_bias_instability_dph: 0.0,
+            gyro_arw_dpsh: 0.0,
+            gyro_scale_factor_ppm: [0.0; 3],
+            gyro_sf_asymmetry_ppm: [0.0; 3],
+            gyro_misalignment_arcsec: [[0.0; 3]; 3],
+            dither_arcsec: [0.0; 3],
+            accel_bias_mps2: [0.0; 3],
+            accel_vrw_mpss: 0.0,
+            accel_scale_factor_ppm: [0.0; 3],
+            accel_misalignment_arcsec: [[0.0; 3]; 3],
+            accel_cross_coupling_per_g: [0.0; 3],
+            ..Self::default()
+        }
+    }
+
+    /// Check ranges; the message names the parameter.
+    pub fn check(&self) -> Result<(), String> {
+        for (i, f) in self.dither_hz.iter().enumerate() {
+            if self.dither_arcsec[i] != 0.0 && !(*f > 0.0 && *f < self.rate_hz / 2.0) {
+                return Err(format!(
+                    "imu.dither_hz[{i}] = {f} must lie in (0, {}) Hz",
+                    self.rate_hz / 2.0
+                ));
+            }
+        }
+        let positive = |x: f64| x.is_finite() && x > 0.0;
+        if !positive(self.gyro_bias_tau_s) {
+            return Err("imu.gyro_bias_tau_s must be positive".into());
+        }
+        if self.gyro_pulse_arcsec.iter().any(|w| !positive(*w))
+            || self.accel_pulse_mps.iter().any(|w| !positive(*w))
+        {
+            return Err("imu pulse weights must be positive".into());
+        }
+        if !(positive(self.gyro_range_dps) && positive(self.accel_range_g)) {
+            return Err("imu ranges must be positive".into());
+        }
+        Ok(())
+    }
+}
+
+/// The deterministic part of the sensor error model (what a calibration would find).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ErrorModel {
+    /// Gyro: `w_out = M_g (w + asym) + bias` with `M_g = I + SF + misalignment`.
+    pub gyro_matrix: Matrix3<f64>,
+    /// Gyro scale-factor asymmetry, per axis (fraction, half applied with the sign of the input).
+    pub gyro_asymmetry: Vector3<f64>,
+    /// Gyro constant bias, rad/s.
+    pub gyro_bias: Vector3<f64>,
+    /// Accelerometer matrix.
+    pub accel_matrix: Matrix3<f64>,
+    /// Accelerometer cross-coupling, per (m/s^2).
+    pub accel_cross: Vector3<f64>,
+    /// Accelerometer bias, m/s^2.
+    pub accel_bias: Vector3<f64>,
+}
+
+impl ErrorModel {
+    /// Gyro output rate for a true rate (without noise, drift and dither).
+    pub fn gyro(&self, w: &Vector3<f64>) -> Vector3<f64> {
+        let asym = Vector3::from_fn(|i, _| 0.5 * self.gyro_asymmetry[i] * w[i].abs());
+        self.gyro_matrix * w + asym + self.gyro_bias
+    }
+
+    /// Accelerometer output for a true specific force (without noise).
+    pub fn accel(&self, f: &Vector3<f64>) -> Vector3<f64> {
+        let cross = Vector3::from_fn(|i, _| self.accel_cross[i] * f[i] * f[(i + 1) % 3]);
+        self.accel_matrix * f + cross + self.accel_bias
+    }
+}
+
+fn sensor_matrix(sf_ppm: &[f64; 3], mis_arcsec: &[[f64; 3]; 3]) -> Matrix3<f64> {
+    Matrix3::from_fn(|i, j| {
+        if i == j {
+            1.0 + sf_ppm[i] * 1e-6
+        } else {
+            mis_arcsec[i][j] * ARCSEC
+        }
+    })
 }
 
 /// A pulse counter that quantizes with carried remainder and wraps at 16 bits.
@@ -97,8 +242,12 @@ pub struct ImuEmulator {
     counter0: u16,
     gyro: [PulseCounter; 3],
     accel: [PulseCounter; 3],
-    gyro_bias: [f64; 3],
-    accel_bias: [f64; 3],
+    model: ErrorModel,
+    drift: [f64; 3],
+    drift_sum: [f64; 3],
+    drift_phi: f64,
+    drift_drive: f64,
+    dither_phase: [f64; 3],
     rng: StdRng,
     arw_sigma: f64,
     vrw_sigma: f64,
@@ -124,9 +273,8 @@ impl ImuEmulator {
                 b
             }
         };
-        let deg_h = std::f64::consts::PI / 180.0 / 3600.0;
-        let gyro_bias = p.gyro_bias_dph.map(|b| sign(b) * deg_h);
-        let accel_bias = p.accel_bias_mps2.map(&mut sign);
+        let gyro_bias = Vector3::from(p.gyro_bias_dph.map(|b| sign(b) * DEG_H));
+        let accel_bias = Vector3::from(p.accel_bias_mps2.map(&mut sign));
         let dt = 1.0 / p.rate_hz;
         // random counter origins so every run exercises the 16-bit wrap
         let counter0 = rand::Rng::random::<u16>(&mut rng);
@@ -135,30 +283,68 @@ impl ImuEmulator {
         for c in gyro.iter_mut().chain(accel.iter_mut()) {
             c.total = i64::from(rand::Rng::random::<u16>(&mut rng));
         }
+        let dither_phase = std::array::from_fn(|_| rand::Rng::random::<f64>(&mut rng) * 2.0 * PI);
+        let n = Normal::new(0.0, 1.0).expect("unit normal");
+        let sigma = p.gyro_bias_instability_dph * DEG_H;
+        let drift = std::array::from_fn(|_| sigma * n.sample(&mut rng));
+        let drift_phi = (-dt / p.gyro_bias_tau_s).exp();
+        let model = ErrorModel {
+            gyro_matrix: sensor_matrix(&p.gyro_scale_factor_ppm, &p.gyro_misalignment_arcsec),
+            gyro_asymmetry: Vector3::from(p.gyro_sf_asymmetry_ppm.map(|x| x * 1e-6)),
+            gyro_bias,
+            accel_matrix: sensor_matrix(&p.accel_scale_factor_ppm, &p.accel_misalignment_arcsec),
+            accel_cross: Vector3::from(p.accel_cross_coupling_per_g.map(|k| k / G0)),
+            accel_bias,
+        };
         Self {
             motion,
             arw_sigma: p.gyro_arw_dpsh.to_radians() / 60.0 * dt.sqrt(),
             vrw_sigma: p.accel_vrw_mpss * dt.sqrt(),
+            drift_drive: sigma * (1.0 - drift_phi * drift_phi).sqrt(),
+            drift_phi,
+            drift,
+            drift_sum: [0.0; 3],
+            dither_phase,
             p,
             dt,
             k: 0,
             counter0,
             gyro,
             accel,
-            gyro_bias,
-            accel_bias,
+            model,
             rng,
         }
     }
 
-    /// The gyro biases actually applied, deg/h.
+    /// The gyro constant biases actually applied, deg/h.
     pub fn gyro_bias_dph(&self) -> [f64; 3] {
-        self.gyro_bias.map(|b| b.to_degrees() * 3600.0)
+        std::array::from_fn(|i| self.model.gyro_bias[i] / DEG_H)
     }
 
     /// The accelerometer biases actually applied, m/s^2.
     pub fn accel_bias_mps2(&self) -> [f64; 3] {
-        self.accel_bias
+        self.model.accel_bias.into()
+    }
+
+    /// Mean bias instability (random drift) applied over the samples so far, deg/h.
+    pub fn mean_drift_dph(&self) -> [f64; 3] {
+        let n = self.k.max(1) as f64;
+        self.drift_sum.map(|x| x / n / DEG_H)
+    }
+
+    /// The deterministic error model in use.
+    pub fn error_model(&self) -> &ErrorModel {
+        &self.model
+    }
+
+    /// The parameters in use.
+    pub fn params(&self) -> &ImuParams {
+        &self.p
+    }
+
+    /// The truth motion.
+    pub fn motion(&self) -> &dyn Motion {
+        self.motion.as_ref()
     }
 
     /// Simulated time at the end of the next sample, s.
@@ -166,27 +352,52 @@ impl ImuEmulator {
         (self.k + 1) as f64 * self.dt
     }
 
+    fn dither(&self, i: usize, t: f64) -> f64 {
+        self.p.dither_arcsec[i]
+            * ARCSEC
+            * (2.0 * PI * self.p.dither_hz[i] * t + self.dither_phase[i]).sin()
+    }
+
     /// Produce the next sample's frames.
     pub fn next_sample(&mut self) -> SampleFrames {
         let (t0, t1) = (self.k as f64 * self.dt, (self.k + 1) as f64 * self.dt);
         let inc = self.motion.increments(t0, t1);
         let n = Normal::new(0.0, 1.0).expect("unit normal");
-        let arcsec = std::f64::consts::PI / 180.0 / 3600.0;
+        let mut saturated = false;
+        // range limits act on the true input
+        let glim = self.p.gyro_range_dps.to_radians() * self.dt;
+        let alim = self.p.accel_range_g * G0 * self.dt;
+        let dth = inc.dtheta.map(|x| {
+            saturated |= x.abs() > glim;
+            x.clamp(-glim, glim)
+        });
+        let dvt = inc.dv.map(|x| {
+            saturated |= x.abs() > alim;
+            x.clamp(-alim, alim)
+        });
+        // the error models are linear in the rate, so applying them to the increment is exact
+        let g = self.model.gyro(&(dth / self.dt)) * self.dt;
+        let a = self.model.accel(&(dvt / self.dt)) * self.dt;
         for i in 0..3 {
-            let dth = inc.dtheta[i]
-                + self.gyro_bias[i] * self.dt
-                + self.arw_sigma * n.sample(&mut self.rng);
-            self.gyro[i].add(dth / (self.p.gyro_pulse_arcsec[i] * arcsec));
-            let dv =
-                inc.dv[i] + self.accel_bias[i] * self.dt + self.vrw_sigma * n.sample(&mut self.rng);
+            let d = g[i]
+                + self.drift[i] * self.dt
+                + self.arw_sigma * n.sample(&mut self.rng)
+                + self.dither(i, t1)
+                - self.dither(i, t0);
+            self.gyro[i].add(d / (self.p.gyro_pulse_arcsec[i] * ARCSEC));
+            self.drift_sum[i] += self.drift[i];
+            self.drift[i] =
+                self.drift_phi * self.drift[i] + self.drift_drive * n.sample(&mut self.rng);
+            let dv = a[i] + self.vrw_sigma * n.sample(&mut self.rng);
             self.accel[i].add(dv / self.p.accel_pulse_mps[i]);
         }
+        let bit_fail = self.p.bit_fail_from_s.is_some_and(|t| t1 >= t);
         let sample_counter = (u64::from(self.counter0) + self.k + 1) as u16;
         // PPS: an edge at whole seconds + phase inside (t0, t1]?
         let edge = (t1 - self.p.pps_phase_s).floor() + self.p.pps_phase_s;
         let pps_offset = (edge > t0 && edge <= t1)
             .then(|| (((t1 - edge) / self.dt) * 256.0).floor().clamp(0.0, 255.0) as u8);
-        let g = ImuGyro {
+        let gf = ImuGyro {
             counts: [
                 self.gyro[0].wire(),
                 self.gyro[1].wire(),
@@ -194,7 +405,7 @@ impl ImuEmulator {
             ],
             sample_counter,
         };
-        let a = ImuAccel {
+        let af = ImuAccel {
             counts: [
                 self.accel[0].wire(),
                 self.accel[1].wire(),
@@ -202,11 +413,11 @@ impl ImuEmulator {
             ],
             sample_counter_low: (sample_counter & 0xF) as u8,
             pps_offset,
-            bit_fail: false,
-            saturated: false,
+            bit_fail,
+            saturated,
         };
         let mut frames = Vec::with_capacity(3);
-        for m in [Message::ImuGyro(g), Message::ImuAccel(a)] {
+        for m in [Message::ImuGyro(gf), Message::ImuAccel(af)] {
             frames.push(m.encode().expect("IMU frames always encode"));
         }
         if self
@@ -217,7 +428,10 @@ impl ImuEmulator {
                 sample_counter,
                 temp_gyro_c: self.p.temp_c,
                 temp_accel_c: self.p.temp_c - 1.5,
-                bit: BitFlags::default(),
+                bit: BitFlags {
+                    gyro: [bit_fail; 3],
+                    ..BitFlags::default()
+                },
             };
             if let Ok(f) = Message::ImuHk(hk).encode() {
                 frames.push(f);
@@ -254,13 +468,7 @@ mod tests {
             pitch_deg: 1.0,
             roll_deg: -2.0,
         };
-        let p = ImuParams {
-            gyro_bias_dph: [0.0; 3],
-            gyro_arw_dpsh: 0.0,
-            accel_bias_mps2: [0.0; 3],
-            accel_vrw_mpss: 0.0,
-            ..Default::default()
-        };
+        let p = ImuParams::ideal();
         let mut imu = ImuEmulator::new(Box::new(s), p);
         let start = imu.gyro.map(|c| c.total);
         let n = 20_000;
@@ -268,7 +476,7 @@ mod tests {
             imu.next_sample();
         }
         let t = n as f64 / 2000.0;
-        let w = s.omega_ib_b();
+        let w = s.rate();
         let arcsec = std::f64::consts::PI / 180.0 / 3600.0;
         for i in 0..3 {
             let pulses = (imu.gyro[i].total - start[i]) as f64;
@@ -323,5 +531,154 @@ mod tests {
         for _ in 0..100 {
             assert_eq!(a.next_sample().frames, b.next_sample().frames);
         }
+    }
+
+    fn gyro_pulses(imu: &mut ImuEmulator, n: usize) -> Vec<[i64; 3]> {
+        (0..n)
+            .map(|_| {
+                let before = imu.gyro.map(|c| c.total);
+                imu.next_sample();
+                std::array::from_fn(|i| imu.gyro[i].total - before[i])
+            })
+            .collect()
+    }
+
+    fn level(lat_deg: f64) -> Static {
+        Static {
+            lat_deg,
+            lon_deg: 0.0,
+            height_m: 0.0,
+            heading_deg: 0.0,
+            pitch_deg: 0.0,
+            roll_deg: 0.0,
+        }
+    }
+
+    #[test]
+    fn dither_shows_at_its_own_frequency_and_carries_no_net_angle() {
+        let p = ImuParams {
+            dither_arcsec: [400.0, 300.0, 200.0],
+            ..ImuParams::ideal()
+        };
+        let mut imu = ImuEmulator::new(Box::new(level(0.0)), p.clone());
+        let pulses = gyro_pulses(&mut imu, 20_000);
+        for i in 0..3 {
+            // amplitude of the increments ~ A * 2 sin(pi f dt)
+            let peak = pulses.iter().map(|x| x[i].abs()).max().unwrap() as f64;
+            let expect = p.dither_arcsec[i] * 2.0 * (PI * p.dither_hz[i] / 2000.0).sin();
+            assert!((peak - expect).abs() <= 2.0, "axis {i}: {peak} vs {expect}");
+            // the dither is an oscillating angle: the sum stays within its amplitude
+            let sum: i64 = pulses.iter().map(|x| x[i]).sum();
+            assert!(sum.abs() as f64 <= 2.0 * p.dither_arcsec[i] + 1.0, "{sum}");
+            // correlation with its own frequency is strong, with another gyro's weak
+            let corr = |f: f64| {
+                let (mut c, mut s) = (0.0, 0.0);
+                for (k, x) in pulses.iter().enumerate() {
+                    let ph = 2.0 * PI * f * k as f64 / 2000.0;
+                    c += x[i] as f64 * ph.cos();
+                    s += x[i] as f64 * ph.sin();
+                }
+                (c * c + s * s).sqrt() / pulses.len() as f64
+            };
+            let own = corr(p.dither_hz[i]);
+            let other = corr(p.dither_hz[(i + 1) % 3]);
+            assert!(own > 50.0 * other, "axis {i}: {own} vs {other}");
+        }
+    }
+
+    #[test]
+    fn scale_factor_and_misalignment_act_on_the_true_rate() {
+        let p = ImuParams {
+            gyro_scale_factor_ppm: [1000.0, 0.0, 0.0],
+            gyro_misalignment_arcsec: [[0.0; 3], [0.0, 0.0, 0.0], [3600.0, 0.0, 0.0]],
+            ..ImuParams::ideal()
+        };
+        // spin about x at 100 deg/s on a lab table
+        let m = crate::truth::Composed {
+            base: Box::new(crate::truth::Coning {
+                half_angle_deg: 0.0,
+                frequency_hz: 1.0,
+            }),
+            relative: vec![Box::new(RotX(100f64.to_radians()))],
+            linear: None,
+        };
+        let mut imu = ImuEmulator::new(Box::new(m), p);
+        let pulses = gyro_pulses(&mut imu, 2000);
+        let sum = |i: usize| pulses.iter().map(|x| x[i]).sum::<i64>() as f64;
+        // 1 s at 100 deg/s = 360000 arcsec; +1000 ppm; 1 deg misalignment puts sin(1 deg) on z
+        assert!((sum(0) - 360_000.0 * 1.001).abs() <= 1.0, "{}", sum(0));
+        assert!(
+            (sum(2) - 360_000.0 * 3600.0 * ARCSEC).abs() <= 1.0,
+            "{}",
+            sum(2)
+        );
+        assert!(sum(1).abs() <= 1.0);
+    }
+
+    struct RotX(f64);
+    impl crate::truth::RelativeRotation for RotX {
+        fn rotation(&self, t: f64) -> nalgebra::UnitQuaternion<f64> {
+            nalgebra::UnitQuaternion::from_axis_angle(&Vector3::x_axis(), self.0 * t)
+        }
+        fn rate(&self, _t: f64) -> Vector3<f64> {
+            Vector3::new(self.0, 0.0, 0.0)
+        }
+    }
+
+    #[test]
+    fn over_range_input_is_clamped_and_flagged() {
+        let m = crate::truth::Composed {
+            base: Box::new(level(0.0)),
+            relative: vec![Box::new(RotX(500f64.to_radians()))],
+            linear: None,
+        };
+        let mut imu = ImuEmulator::new(Box::new(m), ImuParams::ideal());
+        let f = imu.next_sample();
+        let sat = f
+            .frames
+            .iter()
+            .any(|fr| matches!(Message::decode(fr), Ok(Message::ImuAccel(a)) if a.saturated));
+        assert!(sat, "saturation flagged");
+    }
+
+    #[test]
+    fn bias_instability_wanders_with_the_configured_sigma() {
+        let p = ImuParams {
+            gyro_bias_instability_dph: 0.05,
+            gyro_bias_tau_s: 1.0,
+            ..ImuParams::ideal()
+        };
+        let mut imu = ImuEmulator::new(Box::new(level(0.0)), p);
+        let mut sq = 0.0;
+        let n = 200_000;
+        for _ in 0..n {
+            imu.next_sample();
+            sq += imu.drift[0].powi(2) + imu.drift[1].powi(2) + imu.drift[2].powi(2);
+        }
+        let rms = (sq / (3 * n) as f64).sqrt() / DEG_H;
+        // 100 correlation times x 3 axes: about 4 % sampling error
+        assert!((rms - 0.05).abs() < 0.015, "{rms}");
+    }
+
+    #[test]
+    fn bit_failure_is_reported_from_the_configured_time() {
+        let p = ImuParams {
+            bit_fail_from_s: Some(0.01),
+            ..ImuParams::ideal()
+        };
+        let mut imu = ImuEmulator::new(Box::new(level(0.0)), p);
+        let mut first = None;
+        for _ in 0..100 {
+            let f = imu.next_sample();
+            for fr in &f.frames {
+                if let Ok(Message::ImuAccel(a)) = Message::decode(fr)
+                    && a.bit_fail
+                    && first.is_none()
+                {
+                    first = Some(f.k);
+                }
+            }
+        }
+        assert_eq!(first, Some(19), "t1 = 20 / 2000 s = 0.01 s");
     }
 }

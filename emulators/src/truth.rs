@@ -2,10 +2,22 @@
 //!
 //! Frames: navigation frame ENU (east, north, up); body frame x right, y forward, z up.
 //! Heading is clockwise from north, pitch nose up, roll right wing down positive.
+//!
+//! Every motion gives its attitude `q(t)` (body relative to the motion's reference frame), the
+//! body rate w.r.t. inertial space and the specific force, both in body axes. Sensor increments
+//! over a sample interval are integrals of those, not rate times dt: analytic where the motion
+//! allows (static, classical coning), otherwise 6-point Gauss-Legendre quadrature, which on a
+//! 0.5 ms interval is exact to rounding for the smooth motions here (vibration up to a few
+//! hundred hertz).
+//!
+//! Motions compose: [`Composed`] puts a relative rotation (the indexing mechanism's angle,
+//! angular vibration) and linear vibration on top of any base motion, so the gyros see every
+//! move of the mechanism.
 
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use nav::earth;
 use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
 
 /// Exact sensor-frame increments over one interval.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -16,12 +28,44 @@ pub struct Increments {
     pub dv: Vector3<f64>,
 }
 
+/// Gauss-Legendre nodes and weights on [-1, 1], 6 points.
+#[allow(clippy::excessive_precision)]
+const GL6: [(f64, f64); 6] = [
+    (-0.932_469_514_203_152_1, 0.171_324_492_379_170_3),
+    (-0.661_209_386_466_264_5, 0.360_761_573_048_138_6),
+    (-0.238_619_186_083_196_9, 0.467_913_934_572_691_0),
+    (0.238_619_186_083_196_9, 0.467_913_934_572_691_0),
+    (0.661_209_386_466_264_5, 0.360_761_573_048_138_6),
+    (0.932_469_514_203_152_1, 0.171_324_492_379_170_3),
+];
+
 /// A motion the IMU undergoes.
 pub trait Motion: Send {
-    /// Exact increments over `(t0, t1]`, integrated (not rate times dt).
-    fn increments(&self, t0: f64, t1: f64) -> Increments;
+    /// Body rate w.r.t. inertial space at `t`, rad/s, body axes.
+    fn omega_ib_b(&self, t: f64) -> Vector3<f64>;
+    /// Specific force at `t`, m/s^2, body axes.
+    fn f_b(&self, t: f64) -> Vector3<f64>;
+    /// Attitude at `t`: body relative to the motion's reference frame.
+    fn attitude(&self, t: f64) -> UnitQuaternion<f64>;
+    /// Attitude at `t` relative to inertial space (the frame the gyros integrate in). Equal to
+    /// [`Motion::attitude`] for motions whose reference frame is inertial.
+    fn inertial_attitude(&self, t: f64) -> UnitQuaternion<f64> {
+        self.attitude(t)
+    }
     /// Geodetic latitude (rad) at `t`.
     fn latitude(&self, t: f64) -> f64;
+    /// Exact increments over `(t0, t1]` (default: Gauss-Legendre quadrature of rate and force).
+    fn increments(&self, t0: f64, t1: f64) -> Increments {
+        let (c, h) = ((t0 + t1) / 2.0, (t1 - t0) / 2.0);
+        let mut dtheta = Vector3::zeros();
+        let mut dv = Vector3::zeros();
+        for (x, w) in GL6 {
+            let t = c + h * x;
+            dtheta += self.omega_ib_b(t) * (w * h);
+            dv += self.f_b(t) * (w * h);
+        }
+        Increments { dtheta, dv }
+    }
 }
 
 /// Body-to-ENU rotation for heading, pitch, roll (rad).
@@ -55,40 +99,291 @@ pub struct Static {
 }
 
 impl Static {
-    /// Body angular rate w.r.t. inertial space, rad/s.
-    pub fn omega_ib_b(&self) -> Vector3<f64> {
-        let cbn = c_b_n(
+    fn cbn(&self) -> Rotation3<f64> {
+        c_b_n(
             self.heading_deg.to_radians(),
             self.pitch_deg.to_radians(),
             self.roll_deg.to_radians(),
-        );
-        cbn.inverse() * Vector3::from(earth::earth_rate_enu(self.lat_deg.to_radians()))
+        )
     }
 
-    /// Specific force in the body frame, m/s^2.
-    pub fn f_b(&self) -> Vector3<f64> {
-        let cbn = c_b_n(
-            self.heading_deg.to_radians(),
-            self.pitch_deg.to_radians(),
-            self.roll_deg.to_radians(),
-        );
+    /// Body angular rate w.r.t. inertial space, rad/s (constant).
+    pub fn rate(&self) -> Vector3<f64> {
+        self.cbn().inverse() * Vector3::from(earth::earth_rate_enu(self.lat_deg.to_radians()))
+    }
+
+    /// Specific force in the body frame, m/s^2 (constant).
+    pub fn force(&self) -> Vector3<f64> {
         let g = earth::gravity(self.lat_deg.to_radians(), self.height_m);
-        cbn.inverse() * Vector3::new(0.0, 0.0, g)
+        self.cbn().inverse() * Vector3::new(0.0, 0.0, g)
     }
 }
 
 impl Motion for Static {
+    fn omega_ib_b(&self, _t: f64) -> Vector3<f64> {
+        self.rate()
+    }
+    fn f_b(&self, _t: f64) -> Vector3<f64> {
+        self.force()
+    }
+    fn attitude(&self, _t: f64) -> UnitQuaternion<f64> {
+        // body relative to ENU; the ENU frame itself turns with the earth (seen in the rate)
+        UnitQuaternion::from_rotation_matrix(&self.cbn())
+    }
+    fn latitude(&self, _t: f64) -> f64 {
+        self.lat_deg.to_radians()
+    }
+    fn inertial_attitude(&self, t: f64) -> UnitQuaternion<f64> {
+        // the body turns with the earth at a constant body rate
+        self.attitude(0.0) * UnitQuaternion::from_scaled_axis(self.rate() * t)
+    }
     fn increments(&self, t0: f64, t1: f64) -> Increments {
         // constant rate about a fixed axis: the integral is exact
         let dt = t1 - t0;
         Increments {
-            dtheta: self.omega_ib_b() * dt,
-            dv: self.f_b() * dt,
+            dtheta: self.rate() * dt,
+            dv: self.force() * dt,
+        }
+    }
+}
+
+/// Classical coning in inertial space (paper 000, eq. 5): the rotation vector from the
+/// reference frame is `[0, a cos(W t), a sin(W t)]`; the cone axis is body x.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Coning {
+    /// Half-cone angle, deg.
+    pub half_angle_deg: f64,
+    /// Coning frequency, Hz.
+    pub frequency_hz: f64,
+}
+
+impl Coning {
+    fn a_w(&self) -> (f64, f64) {
+        (
+            self.half_angle_deg.to_radians(),
+            2.0 * PI * self.frequency_hz,
+        )
+    }
+}
+
+impl Motion for Coning {
+    fn omega_ib_b(&self, t: f64) -> Vector3<f64> {
+        let (a, w) = self.a_w();
+        Vector3::new(
+            -2.0 * w * (a / 2.0).sin().powi(2),
+            -w * a.sin() * (w * t).sin(),
+            w * a.sin() * (w * t).cos(),
+        )
+    }
+    fn f_b(&self, _t: f64) -> Vector3<f64> {
+        Vector3::zeros()
+    }
+    fn attitude(&self, t: f64) -> UnitQuaternion<f64> {
+        let (a, w) = self.a_w();
+        UnitQuaternion::from_scaled_axis(Vector3::new(0.0, a * (w * t).cos(), a * (w * t).sin()))
+    }
+    fn latitude(&self, _t: f64) -> f64 {
+        0.0
+    }
+    fn increments(&self, t0: f64, t1: f64) -> Increments {
+        let (a, w) = self.a_w();
+        Increments {
+            dtheta: Vector3::new(
+                -2.0 * w * (a / 2.0).sin().powi(2) * (t1 - t0),
+                a.sin() * ((w * t1).cos() - (w * t0).cos()),
+                a.sin() * ((w * t1).sin() - (w * t0).sin()),
+            ),
+            dv: Vector3::zeros(),
+        }
+    }
+}
+
+/// A rotation of the body relative to its base (an indexing mechanism, angular vibration).
+pub trait RelativeRotation: Send {
+    /// Rotation of the body relative to the base at `t`.
+    fn rotation(&self, t: f64) -> UnitQuaternion<f64>;
+    /// Rate of the body relative to the base at `t`, rad/s, body axes.
+    fn rate(&self, t: f64) -> Vector3<f64>;
+}
+
+/// Angle of one mechanism axis as a function of time.
+pub trait AxisAngle: Send + Sync {
+    /// Angle, rad.
+    fn angle(&self, t: f64) -> f64;
+    /// Rate, rad/s.
+    fn rate(&self, t: f64) -> f64;
+}
+
+/// Constant-rate rotation of an axis (a lab table in rate mode).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ConstantRate {
+    /// Angle at t = 0, rad.
+    pub angle0: f64,
+    /// Rate, rad/s.
+    pub rate: f64,
+}
+
+impl AxisAngle for ConstantRate {
+    fn angle(&self, t: f64) -> f64 {
+        self.angle0 + self.rate * t
+    }
+    fn rate(&self, _t: f64) -> f64 {
+        self.rate
+    }
+}
+
+/// The azimuth indexing mechanism: the IMU turns about the base's z (up) axis by the axis angle
+/// (positive counter-clockwise seen from above, i.e. right-handed about z).
+pub struct Indexer<A: AxisAngle> {
+    /// The mechanism's true angle.
+    pub axis: A,
+}
+
+impl<A: AxisAngle> RelativeRotation for Indexer<A> {
+    fn rotation(&self, t: f64) -> UnitQuaternion<f64> {
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), self.axis.angle(t))
+    }
+    fn rate(&self, t: f64) -> Vector3<f64> {
+        Vector3::new(0.0, 0.0, self.axis.rate(t))
+    }
+}
+
+/// Sinusoidal vibration on one axis: amplitude, frequency and phase.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct Tone {
+    /// Amplitude (deg for angular, m/s^2 for linear vibration).
+    pub amplitude: f64,
+    /// Frequency, Hz.
+    pub frequency_hz: f64,
+    /// Phase, deg.
+    #[serde(default)]
+    pub phase_deg: f64,
+}
+
+impl Tone {
+    fn value(&self, t: f64) -> f64 {
+        self.amplitude * (2.0 * PI * self.frequency_hz * t + self.phase_deg.to_radians()).sin()
+    }
+    fn deriv(&self, t: f64) -> f64 {
+        let w = 2.0 * PI * self.frequency_hz;
+        self.amplitude * w * (w * t + self.phase_deg.to_radians()).cos()
+    }
+}
+
+/// Engine and road vibration: angular tones about x, y, z (applied as the rotation sequence
+/// x then y then z, so the rate is exact) and linear tones along x, y, z, each a sum of tones.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct Vibration {
+    /// Angular tones about x, y, z (amplitude in deg).
+    pub angular: [Vec<Tone>; 3],
+    /// Linear tones along x, y, z (amplitude in m/s^2).
+    pub linear: [Vec<Tone>; 3],
+}
+
+impl Vibration {
+    /// A typical land-vehicle spectrum: engine at `engine_hz` and its second harmonic, road
+    /// bumps at a few hertz. `scale` multiplies every amplitude.
+    pub fn vehicle(engine_hz: f64, scale: f64) -> Self {
+        let t = |a: f64, f: f64, p: f64| Tone {
+            amplitude: a * scale,
+            frequency_hz: f,
+            phase_deg: p,
+        };
+        Self {
+            angular: [
+                vec![t(0.02, 3.1, 0.0), t(0.002, engine_hz, 30.0)],
+                vec![t(0.03, 2.3, 60.0), t(0.002, engine_hz, 90.0)],
+                vec![t(0.01, 1.7, 120.0), t(0.001, 2.0 * engine_hz, 0.0)],
+            ],
+            linear: [
+                vec![t(0.2, engine_hz, 10.0)],
+                vec![t(0.3, engine_hz, 50.0), t(0.2, 2.0 * engine_hz, 0.0)],
+                vec![t(0.5, 2.7, 0.0), t(0.4, engine_hz, 70.0)],
+            ],
         }
     }
 
-    fn latitude(&self, _t: f64) -> f64 {
-        self.lat_deg.to_radians()
+    fn angles(&self, t: f64) -> [(f64, f64); 3] {
+        std::array::from_fn(|i| {
+            self.angular[i].iter().fold((0.0, 0.0), |(a, r), tone| {
+                (
+                    a + tone.value(t).to_radians(),
+                    r + tone.deriv(t).to_radians(),
+                )
+            })
+        })
+    }
+
+    /// Linear vibration acceleration at `t`, m/s^2, body axes.
+    pub fn accel(&self, t: f64) -> Vector3<f64> {
+        Vector3::from_fn(|i, _| self.linear[i].iter().map(|x| x.value(t)).sum())
+    }
+}
+
+impl RelativeRotation for Vibration {
+    fn rotation(&self, t: f64) -> UnitQuaternion<f64> {
+        let [(x, _), (y, _), (z, _)] = self.angles(t);
+        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), x)
+            * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), y)
+            * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), z)
+    }
+    fn rate(&self, t: f64) -> Vector3<f64> {
+        let [(_, xd), (y, yd), (z, zd)] = self.angles(t);
+        let ry = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), y);
+        let rz = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), z);
+        (ry * rz).inverse() * Vector3::new(xd, 0.0, 0.0)
+            + rz.inverse() * Vector3::new(0.0, yd, 0.0)
+            + Vector3::new(0.0, 0.0, zd)
+    }
+}
+
+/// A base motion with a relative rotation and linear vibration on top.
+pub struct Composed {
+    /// The base (vehicle, site, lab).
+    pub base: Box<dyn Motion>,
+    /// Rotations of the body relative to the base, applied in order (outermost first).
+    pub relative: Vec<Box<dyn RelativeRotation>>,
+    /// Linear vibration (its acceleration adds to the specific force, body axes).
+    pub linear: Option<Vibration>,
+}
+
+impl Composed {
+    fn chain(&self, t: f64) -> (UnitQuaternion<f64>, Vector3<f64>) {
+        // rate of the body w.r.t. inertial space, walking out from the base
+        let mut q = UnitQuaternion::identity();
+        let mut w = self.base.omega_ib_b(t);
+        for r in &self.relative {
+            let qr = r.rotation(t);
+            w = qr.inverse() * w + r.rate(t);
+            q *= qr;
+        }
+        (q, w)
+    }
+}
+
+impl Motion for Composed {
+    fn omega_ib_b(&self, t: f64) -> Vector3<f64> {
+        self.chain(t).1
+    }
+    fn f_b(&self, t: f64) -> Vector3<f64> {
+        let (q, _) = self.chain(t);
+        let lin = self
+            .linear
+            .as_ref()
+            .map_or(Vector3::zeros(), |v| v.accel(t));
+        q.inverse() * self.base.f_b(t) + lin
+    }
+    fn attitude(&self, t: f64) -> UnitQuaternion<f64> {
+        self.base.attitude(t) * self.chain(t).0
+    }
+    fn inertial_attitude(&self, t: f64) -> UnitQuaternion<f64> {
+        self.base.inertial_attitude(t) * self.chain(t).0
+    }
+    fn latitude(&self, t: f64) -> f64 {
+        self.base.latitude(t)
     }
 }
 
@@ -96,35 +391,31 @@ impl Motion for Static {
 mod tests {
     use super::*;
 
-    #[test]
-    fn level_north_facing_static_sees_earth_rate_and_gravity() {
-        let s = Static {
-            lat_deg: 28.2,
+    fn site(heading_deg: f64, pitch_deg: f64, lat_deg: f64) -> Static {
+        Static {
+            lat_deg,
             lon_deg: 0.0,
             height_m: 0.0,
-            heading_deg: 0.0,
-            pitch_deg: 0.0,
+            heading_deg,
+            pitch_deg,
             roll_deg: 0.0,
-        };
-        let w = s.omega_ib_b();
+        }
+    }
+
+    #[test]
+    fn level_north_facing_static_sees_earth_rate_and_gravity() {
+        let s = site(0.0, 0.0, 28.2);
+        let w = s.rate();
         let lat = 28.2f64.to_radians();
         assert!(w.x.abs() < 1e-15);
         assert!((w.y - earth::OMEGA_IE * lat.cos()).abs() < 1e-15);
         assert!((w.z - earth::OMEGA_IE * lat.sin()).abs() < 1e-15);
-        assert!((s.f_b().z - earth::gravity(lat, 0.0)).abs() < 1e-12);
+        assert!((s.force().z - earth::gravity(lat, 0.0)).abs() < 1e-12);
     }
 
     #[test]
     fn heading_east_puts_north_rate_on_minus_x() {
-        let s = Static {
-            lat_deg: 0.0,
-            lon_deg: 0.0,
-            height_m: 0.0,
-            heading_deg: 90.0,
-            pitch_deg: 0.0,
-            roll_deg: 0.0,
-        };
-        let w = s.omega_ib_b();
+        let w = site(90.0, 0.0, 0.0).rate();
         // facing east, north is to the left (-x)
         assert!((w.x + earth::OMEGA_IE).abs() < 1e-12, "{w}");
         assert!(w.y.abs() < 1e-12);
@@ -132,16 +423,94 @@ mod tests {
 
     #[test]
     fn nose_up_pitch_tilts_gravity_onto_forward_axis() {
-        let s = Static {
-            lat_deg: 0.0,
-            lon_deg: 0.0,
-            height_m: 0.0,
-            heading_deg: 0.0,
-            pitch_deg: 10.0,
-            roll_deg: 0.0,
-        };
-        let f = s.f_b();
+        let f = site(0.0, 10.0, 0.0).force();
         let g = earth::gravity(0.0, 0.0);
         assert!((f.y - g * 10f64.to_radians().sin()).abs() < 1e-9, "{f}");
+    }
+
+    /// Rate from attitude by central differences (independent check of the analytic rates).
+    fn numeric_rate(m: &dyn Motion, t: f64) -> Vector3<f64> {
+        let h = 1e-6;
+        let d = m.attitude(t - h).inverse() * m.attitude(t + h);
+        d.scaled_axis() / (2.0 * h)
+    }
+
+    #[test]
+    fn coning_rate_and_increments_agree_with_its_attitude() {
+        let c = Coning {
+            half_angle_deg: 1.0,
+            frequency_hz: 50.0,
+        };
+        for t in [0.0, 0.0031, 0.7] {
+            let e = (c.omega_ib_b(t) - numeric_rate(&c, t)).norm();
+            assert!(e < 1e-7, "t={t}: {e:e}");
+        }
+        // analytic increments equal the quadrature of the rate
+        let analytic = c.increments(0.1, 0.1005).dtheta;
+        let quad = Motion::increments(
+            &Composed {
+                base: Box::new(c),
+                relative: vec![],
+                linear: None,
+            },
+            0.1,
+            0.1005,
+        )
+        .dtheta;
+        assert!(
+            (analytic - quad).norm() < 1e-15,
+            "{:e}",
+            (analytic - quad).norm()
+        );
+    }
+
+    #[test]
+    fn the_indexer_turn_is_seen_by_the_gyros_and_rotates_gravity_not() {
+        let base = site(0.0, 0.0, 45.0);
+        let m = Composed {
+            base: Box::new(base),
+            relative: vec![Box::new(Indexer {
+                axis: ConstantRate {
+                    angle0: 0.0,
+                    rate: 10f64.to_radians(),
+                },
+            })],
+            linear: None,
+        };
+        // after 9 s at 10 deg/s the IMU faces 90 deg left of the vehicle
+        let t = 9.0;
+        let w = m.omega_ib_b(t);
+        assert!((w.z - (10f64.to_radians() + base.rate().z)).abs() < 1e-12);
+        // the north (horizontal) earth rate is now on +x of the turned body
+        assert!((w.x - base.rate().y).abs() < 1e-12, "{w}");
+        assert!((m.f_b(t) - base.force()).norm() < 1e-9);
+        // integrated increments over a second match the turn
+        let mut sum = Vector3::zeros();
+        for k in 0..2000 {
+            sum += m
+                .increments(k as f64 / 2000.0, (k + 1) as f64 / 2000.0)
+                .dtheta;
+        }
+        assert!((sum.z - 10f64.to_radians() - base.rate().z).abs() < 1e-12);
+        let turned = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 33f64.to_radians());
+        let e = (m.omega_ib_b(3.3) - numeric_rate(&m, 3.3) - turned.inverse() * base.rate()).norm();
+        assert!(e < 1e-8, "{e:e}");
+    }
+
+    #[test]
+    fn vibration_rate_is_exact_for_its_attitude() {
+        let v = Composed {
+            base: Box::new(Coning {
+                half_angle_deg: 0.0,
+                frequency_hz: 1.0,
+            }),
+            relative: vec![Box::new(Vibration::vehicle(40.0, 10.0))],
+            linear: Some(Vibration::vehicle(40.0, 1.0)),
+        };
+        for t in [0.01, 0.123, 1.5] {
+            let e = (v.omega_ib_b(t) - numeric_rate(&v, t)).norm();
+            assert!(e < 1e-7 * v.omega_ib_b(t).norm().max(1e-3), "t={t}: {e:e}");
+        }
+        assert!(v.f_b(0.3).norm() > 0.0);
     }
 }

@@ -1,5 +1,6 @@
 //! The HIL bench: scenarios, runs on vcan, checks and reports.
 
+pub mod replay;
 pub mod report;
 pub mod run;
 pub mod scenario;

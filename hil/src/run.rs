@@ -9,7 +9,6 @@ use emulators::can::{Progress, run_imu};
 use emulators::clock::SimClock;
 use emulators::imu::ImuEmulator;
 use nav::config::{CanConfig, NavConfig, RecordConfig, WatchdogConfig};
-use nav::imu::ImuCalibration;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -53,12 +52,8 @@ fn nav_config(s: &Scenario, iface: &str) -> NavConfig {
             interface: iface.into(),
             rcvbuf_bytes: 8 << 20,
         },
-        imu: ImuCalibration {
-            gyro_pulse_arcsec: s.imu.gyro_pulse_arcsec,
-            accel_pulse_mps: s.imu.accel_pulse_mps,
-            rate_hz: s.imu.rate_hz,
-            ..ImuCalibration::default()
-        },
+        imu: crate::replay::calibration(s),
+        processing: s.processing,
         watchdog: WatchdogConfig {
             imu_timeout_ms: (500.0 / s.speed.max(1.0)).max(100.0) as u64,
         },
@@ -141,8 +136,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     info!(interface = %opts.iface, "starting nav");
     let nav = start_nav(&opts.nav_bin, &cfg_path)?;
 
-    let imu = ImuEmulator::new(Box::new(s.site), s.imu.clone());
-    let (gb, ab) = (imu.gyro_bias_dph(), imu.accel_bias_mps2());
+    let imu = ImuEmulator::new(s.motion(), s.imu.clone());
     let stop = Arc::new(AtomicBool::new(false));
     let progress = Arc::new(Progress::default());
     let clock = SimClock::start(s.speed);
@@ -195,7 +189,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             summary_path.display()
         ),
     };
-    let (checks, lost) = report::checks(s, &tx, gb, ab, &nav_json, nav_exit);
+    let reference = crate::replay::run_in_process(s).context("in-process reference run")?;
+    let (checks, lost) = report::checks(s, &tx, &reference, &nav_json, nav_exit);
     let pass = checks.iter().all(|c| c.pass);
     let r = RunReport {
         scenario: s.clone(),
@@ -204,8 +199,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         wall_seconds: wall,
         frames_per_wall_second: tx.frames as f64 / wall.max(1e-9),
         tx,
-        applied_gyro_bias_dph: gb,
-        applied_accel_bias_mps2: ab,
+        in_process: reference,
         nav_exit,
         nav: nav_json,
         bus_lost_frames: lost,

@@ -3,7 +3,8 @@
 use anyhow::{Context, Result, bail};
 use emulators::can::BusFaults;
 use emulators::imu::ImuParams;
-use emulators::truth::Static;
+use emulators::truth::{Composed, Coning, Motion, Static, Vibration};
+use nav::attitude::ProcessingConfig;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -23,6 +24,16 @@ pub struct Scenario {
     pub max_bus_loss: f64,
     /// Where the vehicle is parked.
     pub site: Static,
+    /// Classical coning on a lab fixture instead of the parked vehicle (inertial; the site then
+    /// only names the place).
+    #[serde(default)]
+    pub coning: Option<Coning>,
+    /// Engine and road vibration on top of the motion.
+    #[serde(default)]
+    pub vibration: Option<Vibration>,
+    /// nav's processing settings for this run (dither filter, coning algorithm).
+    #[serde(default)]
+    pub processing: ProcessingConfig,
     /// IMU parameters.
     #[serde(default)]
     pub imu: ImuParams,
@@ -61,6 +72,14 @@ impl Scenario {
         if !(0.0..1.0).contains(&self.max_bus_loss) {
             bail!("max_bus_loss must be in [0, 1)");
         }
+        self.imu.check().map_err(anyhow::Error::msg)?;
+        if let Some(c) = &self.coning
+            && !(c.half_angle_deg.abs() <= 10.0 && c.frequency_hz >= 0.0 && c.frequency_hz < 500.0)
+        {
+            bail!("coning: half_angle_deg must be within 10 deg and frequency_hz in [0, 500)");
+        }
+        nav::attitude::ImuProcessor::new(&self.processing)
+            .map_err(|e| anyhow::anyhow!("processing: {e}"))?;
         if self.imu.rate_hz != wire::IMU_RATE_HZ {
             bail!(
                 "imu.rate_hz must be {} (the wire contract's rate)",
@@ -68,6 +87,27 @@ impl Scenario {
             );
         }
         Ok(())
+    }
+
+    /// The truth motion of this scenario.
+    pub fn motion(&self) -> Box<dyn Motion> {
+        let base: Box<dyn Motion> = match self.coning {
+            Some(c) => Box::new(c),
+            None => Box::new(self.site),
+        };
+        match &self.vibration {
+            None => base,
+            Some(v) => Box::new(Composed {
+                base,
+                relative: vec![Box::new(v.clone())],
+                linear: Some(v.clone()),
+            }),
+        }
+    }
+
+    /// True when the IMU sits still on the site (static checks apply).
+    pub fn is_static(&self) -> bool {
+        self.coning.is_none() && self.vibration.is_none()
     }
 
     /// The built-in static scenario (paper 003's start point).

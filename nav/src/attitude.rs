@@ -86,7 +86,8 @@ pub struct ImuProcessor {
     dv: [[f64; 3]; 5],
     fill: usize,
     q: UnitQuaternion<f64>,
-    origin: Option<u64>,
+    baseline: Option<u64>,
+    origin: Option<i64>,
     last: u64,
     valid_at: i64,
     stats: ProcessingStats,
@@ -120,6 +121,7 @@ impl ImuProcessor {
             dv: [[0.0; 3]; 5],
             fill: 0,
             q: UnitQuaternion::identity(),
+            baseline: None,
             origin: None,
             last: 0,
             valid_at: 0,
@@ -147,8 +149,15 @@ impl ImuProcessor {
         self.q
     }
 
-    /// The sample the attitude is counted from (the front end's baseline), if any.
-    pub fn origin(&self) -> Option<u64> {
+    /// The sample before the first input (the front end's baseline), if any.
+    pub fn baseline(&self) -> Option<u64> {
+        self.baseline
+    }
+
+    /// The sample the attitude is counted from: the first one after the filter has filled with
+    /// real data (the filter's start-up transient, which would carry the dither angle of the
+    /// first sample into the attitude, is not integrated).
+    pub fn origin(&self) -> Option<i64> {
         self.origin
     }
 
@@ -162,10 +171,9 @@ impl ImuProcessor {
     pub fn push_sample(&mut self, s: &ImuSample, out: &mut Vec<Update>) {
         let span = u64::from(s.span.max(1));
         let first = (s.sample + 1).saturating_sub(span).max(1);
-        if self.origin.is_none() {
-            self.origin = Some(first - 1);
+        if self.baseline.is_none() {
+            self.baseline = Some(first - 1);
             self.last = first - 1;
-            self.valid_at = (first - 1) as i64;
         }
         if s.saturated || s.bit_fail {
             self.stats.suspect_samples += span;
@@ -190,9 +198,7 @@ impl ImuProcessor {
 
     /// Feed raw increments of the next sample (no front end: exact data, experiments).
     pub fn push_increment(&mut self, th: [f64; 3], dv: [f64; 3], out: &mut Vec<Update>) {
-        if self.origin.is_none() {
-            self.origin = Some(0);
-        }
+        self.baseline.get_or_insert(0);
         let k = self.last + 1;
         self.push_at(k, th, dv, out);
     }
@@ -204,10 +210,18 @@ impl ImuProcessor {
         let (th, dv) = match &mut self.fir {
             Some(b) => {
                 let y = b.push([th[0], th[1], th[2], dv[0], dv[1], dv[2]]);
+                if b.filled() < b.len() {
+                    return; // start-up transient
+                }
                 ([y[0], y[1], y[2]], [y[3], y[4], y[5]])
             }
             None => (th, dv),
         };
+        if self.origin.is_none() {
+            let o = k as i64 - 1 - self.delay;
+            self.origin = Some(o);
+            self.valid_at = o;
+        }
         self.th[self.fill] = th;
         self.dv[self.fill] = dv;
         self.fill += 1;
@@ -307,6 +321,7 @@ mod tests {
                 &mut out,
             );
         }
+        assert_eq!(p.origin(), Some(0));
         let truth = cone_truth(a, w, 0.0).inverse() * cone_truth(a, w, n as f64 * dt);
         let err = quaternion_to_rotation_vector(&(truth.inverse() * p.attitude()));
         let e = Vector3::from(err).norm();
@@ -357,7 +372,12 @@ mod tests {
 
     #[test]
     fn rotation_vector_round_trip() {
-        for phi in [[0.0, 0.0, 0.0], [1e-9, 2e-9, -1e-9], [0.3, -0.2, 0.1], [1e-5, 0.0, 0.0]] {
+        for phi in [
+            [0.0, 0.0, 0.0],
+            [1e-9, 2e-9, -1e-9],
+            [0.3, -0.2, 0.1],
+            [1e-5, 0.0, 0.0],
+        ] {
             let q = rotation_vector_to_quaternion(phi);
             assert!((q.norm() - 1.0).abs() < 1e-15);
             let back = quaternion_to_rotation_vector(&q);

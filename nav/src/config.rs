@@ -1,6 +1,7 @@
 //! The `nav` config file (TOML). On a vehicle it names `can0` and `/dev/ttyS1`; on the bench it
 //! names a vcan interface and a pty. Nothing else differs.
 
+use crate::attitude::{ImuProcessor, ProcessingConfig};
 use crate::imu::ImuCalibration;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -15,6 +16,9 @@ pub struct NavConfig {
     /// IMU calibration bound to the unit.
     #[serde(default)]
     pub imu: ImuCalibration,
+    /// Dither filter, coning and sculling compensation.
+    #[serde(default)]
+    pub processing: ProcessingConfig,
     /// Liveness watchdog.
     #[serde(default)]
     pub watchdog: WatchdogConfig,
@@ -124,6 +128,15 @@ impl NavConfig {
                 "imu.rate_hz, gyro_range_dps and accel_range_mps2 must be positive".into(),
             ));
         }
+        if (cfg.processing.fir.fs_hz - c.rate_hz).abs() > 1e-9 {
+            return Err(invalid(format!(
+                "processing.fir.fs_hz ({}) must equal imu.rate_hz ({})",
+                cfg.processing.fir.fs_hz, c.rate_hz
+            )));
+        }
+        if let Err(e) = ImuProcessor::new(&cfg.processing) {
+            return Err(invalid(format!("processing: {e}")));
+        }
         let base = path.parent().unwrap_or(Path::new("."));
         for p in [&mut cfg.record.mcap, &mut cfg.record.summary]
             .into_iter()
@@ -182,6 +195,13 @@ mod tests {
         std::fs::write(&p, "[can]\ninterface = \"can0\"\n[imu]\ngyro_pulse_arcsec = [1.0, 0.0, 1.0]\naccel_pulse_mps=[1e-4,1e-4,1e-4]\ngyro_range_dps=1\naccel_range_mps2=1\nrate_hz=2000\n").unwrap();
         let e = full(NavConfig::load(&p).unwrap_err());
         assert!(e.contains("pulse weights"), "{e}");
+        std::fs::write(
+            &p,
+            "[can]\ninterface = \"can0\"\n[processing.fir]\norder = 20\n",
+        )
+        .unwrap();
+        let e = full(NavConfig::load(&p).unwrap_err());
+        assert!(e.contains("processing") && e.contains("order 20"), "{e}");
         let e = NavConfig::load(&dir.path().join("missing.toml"))
             .unwrap_err()
             .to_string();

@@ -101,7 +101,7 @@ const LAWSON_ITERATIONS: usize = 1000;
 impl Fir {
     /// Design the filter and check it against its specification.
     pub fn design(spec: FirSpec) -> Result<Self, FirError> {
-        if spec.order == 0 || spec.order % 2 != 0 || spec.order > 400 {
+        if spec.order == 0 || !spec.order.is_multiple_of(2) || spec.order > 400 {
             return Err(FirError::BadSpec(format!(
                 "order must be even and in 2..=400, got {}",
                 spec.order
@@ -139,19 +139,29 @@ impl Fir {
         // A(w) = 1 + sum_{k=1..m} a_k (cos(k w) - 1): the DC gain is exactly 1 by construction,
         // which keeps the filter from creating or losing angle.
         let basis = |w: f64, k: usize| ((k + 1) as f64 * w).cos() - 1.0;
+        let rows: Vec<Vec<f64>> = pts
+            .iter()
+            .map(|&(w, _, _)| (0..m).map(|k| basis(w, k)).collect())
+            .collect();
         let mut lawson = vec![1.0; pts.len()];
         let mut a = DVector::<f64>::zeros(m);
+        let mut last_max = f64::INFINITY;
         for _ in 0..LAWSON_ITERATIONS {
             let mut ata = DMatrix::<f64>::zeros(m, m);
             let mut atb = DVector::<f64>::zeros(m);
-            for (j, &(w, d, bw)) in pts.iter().enumerate() {
+            for (j, &(_, d, bw)) in pts.iter().enumerate() {
                 let wt = bw * bw * lawson[j];
-                let row: Vec<f64> = (0..m).map(|k| basis(w, k)).collect();
+                let row = &rows[j];
                 for r in 0..m {
                     atb[r] += wt * row[r] * (d - 1.0);
-                    for c in 0..m {
+                    for c in r..m {
                         ata[(r, c)] += wt * row[r] * row[c];
                     }
+                }
+            }
+            for r in 0..m {
+                for c in 0..r {
+                    ata[(r, c)] = ata[(c, r)];
                 }
             }
             let Some(sol) = ata.lu().solve(&atb) else {
@@ -161,11 +171,17 @@ impl Fir {
             // Lawson update: weight ~ weight * |weighted error|
             let errs: Vec<f64> = pts
                 .iter()
-                .map(|&(w, d, bw)| {
-                    let v: f64 = 1.0 + (0..m).map(|k| a[k] * basis(w, k)).sum::<f64>();
+                .zip(&rows)
+                .map(|(&(_, d, bw), row)| {
+                    let v: f64 = 1.0 + row.iter().zip(a.iter()).map(|(b, x)| b * x).sum::<f64>();
                     bw * (v - d).abs()
                 })
                 .collect();
+            let max = errs.iter().cloned().fold(0.0, f64::max);
+            if (last_max - max).abs() <= 1e-7 * max {
+                break; // converged to the equiripple solution
+            }
+            last_max = max;
             let s: f64 = lawson.iter().zip(&errs).map(|(l, e)| l * e).sum();
             if s <= 0.0 {
                 break;
@@ -184,7 +200,8 @@ impl Fir {
         }
         let fir = Self { spec, taps };
         let r = fir.response();
-        if r.passband_deviation_db > spec.ripple_db || r.stopband_attenuation_db < spec.attenuation_db
+        if r.passband_deviation_db > spec.ripple_db
+            || r.stopband_attenuation_db < spec.attenuation_db
         {
             return Err(FirError::NotMet {
                 order: spec.order,
@@ -230,6 +247,15 @@ impl Fir {
             + (1..=m)
                 .map(|k| 2.0 * self.taps[m + k] * (k as f64 * w).cos())
                 .sum::<f64>()
+    }
+
+    /// `1 - A(w)`, computed without cancellation (`4 sum h_k sin^2(k w / 2)`, as the taps sum
+    /// to 1).
+    pub fn droop_w(&self, w: f64) -> f64 {
+        let m = self.delay();
+        (1..=m)
+            .map(|k| 4.0 * self.taps[m + k] * (k as f64 * w / 2.0).sin().powi(2))
+            .sum()
     }
 
     /// Even Taylor coefficients of the amplitude in `w`: `A(w) = sum_j c[j] w^(2j)`.
@@ -299,6 +325,16 @@ impl<const N: usize> FirBank<N> {
     /// Inputs consumed so far (saturates at the filter length).
     pub fn filled(&self) -> usize {
         self.filled
+    }
+
+    /// Filter length (taps).
+    pub fn len(&self) -> usize {
+        self.hist.len()
+    }
+
+    /// Always false: a filter has at least one tap.
+    pub fn is_empty(&self) -> bool {
+        self.hist.is_empty()
     }
 
     /// Push one input vector, get the filtered output (delayed by the group delay).
@@ -385,7 +421,11 @@ mod tests {
         let fir = Fir::default_dither_filter();
         let c = fir.amplitude_taylor(12);
         for w in [0.01f64, 0.05, 0.1] {
-            let t: f64 = c.iter().enumerate().map(|(j, cj)| cj * w.powi(2 * j as i32)).sum();
+            let t: f64 = c
+                .iter()
+                .enumerate()
+                .map(|(j, cj)| cj * w.powi(2 * j as i32))
+                .sum();
             assert!((t - fir.amplitude_w(w)).abs() < 1e-9, "w {w}");
         }
     }

@@ -2,11 +2,11 @@
 //! recording. The `nav` binary is the production program; it opens the devices named in its
 //! config file and knows nothing of emulators.
 
+pub mod attitude;
 pub mod cli;
 pub mod config;
+pub mod coning;
 pub mod earth;
+pub mod fir;
 pub mod imu;
 pub mod record;
-pub mod coning;
-pub mod fir;
-pub mod attitude;

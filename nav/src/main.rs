@@ -1,11 +1,15 @@
 //! `nav`: the production navigation program. It opens the CAN interface named in its config
-//! file, decodes the IMU stream, checks it, records it, and on SIGINT/SIGTERM finishes its
-//! recording, prints a summary and exits 0.
+//! file, decodes the IMU stream, checks it, removes the dither, integrates the attitude with
+//! coning compensation, records it all, and on SIGINT/SIGTERM finishes its recording, prints a
+//! summary and exits 0.
 
 use anyhow::{Context, Result, bail};
 use clap::Parser;
+use nav::attitude::{ImuProcessor, ProcessingStats, Update, quaternion_to_rotation_vector};
 use nav::config::NavConfig;
+use nav::coning::ConingMethod;
 use nav::earth;
+use nav::fir::FirResponse;
 use nav::imu::{Housekeeping, ImuEvent, ImuFrontEnd, ImuSample, ImuStats};
 use nav::record::{JsonChannel, Record, Recorder, wall_ns};
 use serde::Serialize;
@@ -54,13 +58,44 @@ struct Summary {
     imu_seconds: f64,
     wall_seconds: f64,
     imu_timeouts: u64,
+    /// Mean of the filtered, coning-compensated rate over the run.
     mean_rate_dph: [f64; 3],
+    /// Mean of the filtered, sculling-compensated specific force.
     mean_specific_force_mps2: [f64; 3],
     rate_norm_dph: f64,
     specific_force_norm_mps2: f64,
+    processing: ProcessingStats,
+    attitude: AttitudeSummary,
     housekeeping: Housekeeping,
     mcap: Option<PathBuf>,
     mcap_messages: u64,
+}
+
+/// The integrated attitude at exit.
+#[derive(Debug, Serialize)]
+struct AttitudeSummary {
+    /// The front end's first (baseline) sample.
+    baseline_sample: Option<u64>,
+    /// Sample the attitude is counted from (once the dither filter has filled).
+    origin_sample: Option<i64>,
+    /// Sample the attitude is valid at (last input minus the filter delay).
+    valid_sample: i64,
+    /// Samples between the two.
+    span_samples: i64,
+    /// Rotation of the body from origin to valid sample (inertial), as a rotation vector, deg.
+    rotation_vector_deg: [f64; 3],
+    /// Its angle, deg.
+    angle_deg: f64,
+    /// False when angle was lost (an ambiguous gap): the attitude is then unusable.
+    valid: bool,
+    /// Filter delay, samples.
+    delay_samples: i64,
+    /// The dither filter's measured response (none when it is off).
+    fir: Option<FirResponse>,
+    /// Coning algorithm.
+    coning_method: ConingMethod,
+    /// Coning coefficients k_1..k_(n-1).
+    coning_coefficients: Vec<f64>,
 }
 
 #[derive(Default)]
@@ -70,6 +105,9 @@ struct Sums {
     samples: u64,
     first: Option<u64>,
     last: Option<u64>,
+    phi: [f64; 3],
+    dv_c: [f64; 3],
+    updates: u64,
 }
 
 impl Sums {
@@ -170,6 +208,13 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let mut sigint = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;
     let mut sigterm = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
     let mut fe = ImuFrontEnd::new(cfg.imu);
+    let mut proc = ImuProcessor::new(&cfg.processing).context("processing chain")?;
+    let fir_response = cfg
+        .processing
+        .dither_filter
+        .then(|| nav::fir::Fir::design(cfg.processing.fir).map(|f| f.response()))
+        .transpose()
+        .context("dither filter")?;
     let mut sums = Sums::default();
     let mut by_msg: BTreeMap<&'static str, u64> = BTreeMap::new();
     let mut unknown: BTreeMap<u32, u64> = BTreeMap::new();
@@ -242,7 +287,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                     }
                     Err(e) => report_bad_frame(&e, &raw, iface, &mut unknown, &mut bad_len, &mut invalid, &recorder, fe.stats().samples),
                 }
-                drain(&mut out, &mut ev, &mut sums, &recorder, sample_ns);
+                drain(&mut out, &mut ev, &mut sums, &mut proc, &recorder, sample_ns);
                 if in_timeout && last_imu.elapsed() < timeout {
                     info!(interface = iface, "IMU data back");
                     in_timeout = false;
@@ -261,13 +306,30 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         }
     }
     fe.flush(&mut out, &mut ev);
-    drain(&mut out, &mut ev, &mut sums, &recorder, sample_ns);
-    let n = sums.samples.max(1) as f64;
+    drain(
+        &mut out, &mut ev, &mut sums, &mut proc, &recorder, sample_ns,
+    );
     let dt = 1.0 / cfg.imu.rate_hz;
+    let n = (sums.updates * cfg.processing.coning_samples as u64).max(1) as f64;
     let mean_rate_dph = sums
-        .dtheta
+        .phi
         .map(|x| x / (n * dt) * earth::DEG_PER_HOUR_PER_RAD_S);
-    let mean_f = sums.dv.map(|x| x / (n * dt));
+    let mean_f = sums.dv_c.map(|x| x / (n * dt));
+    let pst = proc.stats();
+    let rv = quaternion_to_rotation_vector(&proc.attitude()).map(f64::to_degrees);
+    let attitude = AttitudeSummary {
+        baseline_sample: proc.baseline(),
+        origin_sample: proc.origin(),
+        valid_sample: proc.valid_sample(),
+        span_samples: proc.valid_sample() - proc.origin().unwrap_or(0),
+        rotation_vector_deg: rv,
+        angle_deg: proc.attitude().angle().to_degrees(),
+        valid: pst.invalid_since.is_none(),
+        delay_samples: proc.delay(),
+        fir: fir_response,
+        coning_method: cfg.processing.coning,
+        coning_coefficients: proc.coefficients().k.clone(),
+    };
     let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     let mut summary = Summary {
         interface: iface.to_string(),
@@ -290,6 +352,8 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         mean_specific_force_mps2: mean_f,
         rate_norm_dph: norm(mean_rate_dph),
         specific_force_norm_mps2: norm(mean_f),
+        processing: pst,
+        attitude,
         housekeeping: fe.housekeeping(),
         mcap: cfg.record.mcap.clone(),
         mcap_messages: 0,
@@ -358,9 +422,11 @@ fn drain(
     out: &mut Vec<ImuSample>,
     ev: &mut Vec<ImuEvent>,
     sums: &mut Sums,
+    proc: &mut ImuProcessor,
     rec: &Option<Recorder>,
     sample_ns: f64,
 ) {
+    let mut updates: Vec<Update> = Vec::new();
     for e in ev.drain(..) {
         match e {
             ImuEvent::Gap { .. } | ImuEvent::AccelMissing { .. } => tracing::debug!("IMU: {e:?}"),
@@ -377,6 +443,32 @@ fn drain(
     }
     for s in out.drain(..) {
         sums.add(&s);
+        let invalid_before = proc.stats().invalid_since.is_some();
+        proc.push_sample(&s, &mut updates);
+        if !invalid_before && let Some(k) = proc.stats().invalid_since {
+            warn!("attitude invalid from sample {k}: counter gap too long to difference");
+        }
+        for u in updates.drain(..) {
+            sums.updates += 1;
+            for a in 0..3 {
+                sums.phi[a] += u.phi[a];
+                sums.dv_c[a] += u.dv[a];
+            }
+            if let Some(r) = rec
+                && sums.updates.is_multiple_of(50)
+            {
+                let rv = quaternion_to_rotation_vector(&proc.attitude()).map(f64::to_degrees);
+                r.send(Record::Json {
+                    channel: JsonChannel::Attitude,
+                    t_ns: wall_ns(),
+                    publish_ns: (u.valid_sample.max(0) as f64 * sample_ns) as u64,
+                    json: format!(
+                        "{{\"valid_sample\":{},\"rotation_vector_deg\":[{:.9},{:.9},{:.9}]}}",
+                        u.valid_sample, rv[0], rv[1], rv[2]
+                    ),
+                });
+            }
+        }
         if let Some(r) = rec {
             let publish_ns = (s.sample as f64 * sample_ns) as u64;
             r.send(Record::Sample {
@@ -429,6 +521,29 @@ fn print_summary(s: &Summary) {
         s.mean_specific_force_mps2[1],
         s.mean_specific_force_mps2[2],
         s.specific_force_norm_mps2
+    );
+    println!(
+        "  attitude          {:.6} deg about [{:.6}, {:.6}, {:.6}] deg over {} samples ({}), filter delay {} samples, coning {} n={}",
+        s.attitude.angle_deg,
+        s.attitude.rotation_vector_deg[0],
+        s.attitude.rotation_vector_deg[1],
+        s.attitude.rotation_vector_deg[2],
+        s.attitude.span_samples,
+        if s.attitude.valid {
+            "valid"
+        } else {
+            "INVALID: angle lost in a gap"
+        },
+        s.attitude.delay_samples,
+        s.attitude.coning_method,
+        s.attitude.coning_coefficients.len() + 1
+    );
+    println!(
+        "  integrity         {} samples filled across gaps, {} lost, {} suspect (saturated/BIT) from {:?}",
+        s.processing.filled_samples,
+        s.processing.lost_samples,
+        s.processing.suspect_samples,
+        s.processing.first_suspect
     );
     println!("  IMU timeouts      {}", s.imu_timeouts);
     if let Some(p) = &s.mcap {

@@ -60,6 +60,8 @@ pub enum JsonChannel {
     Event,
     /// `/nav/summary`.
     Summary,
+    /// `/nav/attitude` (10 Hz).
+    Attitude,
 }
 
 impl JsonChannel {
@@ -68,6 +70,7 @@ impl JsonChannel {
             JsonChannel::ImuSample => "/imu/sample",
             JsonChannel::Event => "/nav/event",
             JsonChannel::Summary => "/nav/summary",
+            JsonChannel::Attitude => "/nav/attitude",
         }
     }
 }

@@ -1,0 +1,223 @@
+//! In-process runs: the scenario's emulator stream (faults included) fed straight into nav's
+//! own front end and processing chain, with no bus in between. The bench compares nav's result
+//! on vcan against this; experiments and Monte Carlo use it directly. Same code, no copies.
+
+use crate::scenario::Scenario;
+use anyhow::{Context, Result};
+use emulators::can::BusStream;
+use emulators::imu::ImuEmulator;
+use emulators::truth::Motion;
+use nalgebra::UnitQuaternion;
+use nav::attitude::{ImuProcessor, ProcessingStats, quaternion_to_rotation_vector};
+use nav::imu::{ImuCalibration, ImuFrontEnd, ImuStats};
+use serde::{Deserialize, Serialize};
+use wire::Message;
+
+/// Result of an in-process run.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct InProcess {
+    /// Front-end counters.
+    pub imu: ImuStats,
+    /// Processing-chain counters.
+    pub processing: ProcessingStats,
+    /// Sample the attitude is counted from.
+    pub origin_sample: Option<i64>,
+    /// Sample the attitude is valid at.
+    pub valid_sample: i64,
+    /// Simulated time of the origin sample, s.
+    pub origin_time_s: f64,
+    /// Integrated attitude (inertial, from the origin), rotation vector, deg.
+    pub rotation_vector_deg: [f64; 3],
+    /// Its error against truth, body axes, deg.
+    pub error_deg: [f64; 3],
+    /// Mean filtered rate over the attitude's span, deg/h.
+    pub mean_rate_dph: [f64; 3],
+    /// Mean filtered specific force, m/s^2.
+    pub mean_specific_force_mps2: [f64; 3],
+    /// Static scenarios: what the mean rate should be (truth through the sensor error model,
+    /// plus the random drift the emulator applied), deg/h.
+    pub expected_rate_dph: Option<[f64; 3]>,
+    /// Static scenarios: the expected mean specific force, m/s^2.
+    pub expected_specific_force_mps2: Option<[f64; 3]>,
+    /// Constant gyro biases applied, deg/h.
+    pub gyro_bias_dph: [f64; 3],
+    /// Accelerometer biases applied, m/s^2.
+    pub accel_bias_mps2: [f64; 3],
+    /// Largest dither-filter gain over the dither band (the residual of the dither angle).
+    pub dither_residual_gain: f64,
+}
+
+/// The calibration nav is given for this scenario's IMU.
+pub fn calibration(s: &Scenario) -> ImuCalibration {
+    ImuCalibration {
+        gyro_pulse_arcsec: s.imu.gyro_pulse_arcsec,
+        accel_pulse_mps: s.imu.accel_pulse_mps,
+        rate_hz: s.imu.rate_hz,
+        ..ImuCalibration::default()
+    }
+}
+
+/// Error of an integrated attitude `q` (body at `t1` relative to body at `t0`, inertial)
+/// against the truth motion, as a rotation vector in body axes, rad.
+pub fn attitude_error(motion: &dyn Motion, t0: f64, t1: f64, q: &UnitQuaternion<f64>) -> [f64; 3] {
+    let truth = motion.inertial_attitude(t0).inverse() * motion.inertial_attitude(t1);
+    quaternion_to_rotation_vector(&(truth.inverse() * q))
+}
+
+/// Run the scenario in process.
+pub fn run_in_process(s: &Scenario) -> Result<InProcess> {
+    let imu = ImuEmulator::new(s.motion(), s.imu.clone());
+    let dt = 1.0 / s.imu.rate_hz;
+    let mut bus = BusStream::new(imu, &s.faults);
+    let mut fe = ImuFrontEnd::new(calibration(s));
+    let mut proc = ImuProcessor::new(&s.processing).context("processing chain")?;
+    let (mut frames, mut out, mut ev, mut upd) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut origin_time = None;
+    let mut sums = ([0.0; 3], [0.0; 3], 0u64);
+    while bus.next_time() <= s.duration_s + 1e-9 {
+        let t = bus.next_time();
+        frames.clear();
+        bus.next_frames(&mut frames);
+        for f in &frames {
+            match Message::decode(f) {
+                Ok(Message::ImuGyro(g)) => {
+                    origin_time.get_or_insert(t);
+                    fe.on_gyro(&g, &mut out, &mut ev);
+                }
+                Ok(Message::ImuAccel(a)) => fe.on_accel(&a, &mut out, &mut ev),
+                Ok(Message::ImuHk(h)) => fe.on_hk(&h),
+                _ => {}
+            }
+        }
+        for smp in out.drain(..) {
+            proc.push_sample(&smp, &mut upd);
+        }
+        ev.clear();
+        sum_updates(&mut upd, &mut sums);
+    }
+    fe.flush(&mut out, &mut ev);
+    for smp in out.drain(..) {
+        proc.push_sample(&smp, &mut upd);
+    }
+    sum_updates(&mut upd, &mut sums);
+    // sample numbers -> simulated time: the baseline frame went out at `origin_time`
+    let t_first = origin_time.unwrap_or(0.0);
+    let base = proc.baseline().unwrap_or(0) as i64;
+    let time_of = |sample: i64| t_first + (sample - base) as f64 * dt;
+    let origin_time_s = time_of(proc.origin().unwrap_or(base));
+    let q = proc.attitude();
+    let imu = bus.imu();
+    let err = attitude_error(
+        imu.motion(),
+        origin_time_s,
+        time_of(proc.valid_sample()),
+        &q,
+    );
+    let n = (sums.2 * s.processing.coning_samples as u64).max(1) as f64 * dt;
+    let dph = nav::earth::DEG_PER_HOUR_PER_RAD_S;
+    let (expected_rate_dph, expected_specific_force_mps2) = if s.is_static() {
+        let m = imu.error_model();
+        let drift = imu.mean_drift_dph();
+        let w = m.gyro(&s.site.rate()) * dph;
+        let f = m.accel(&s.site.force());
+        (
+            Some(std::array::from_fn(|i| w[i] + drift[i])),
+            Some(f.into()),
+        )
+    } else {
+        (None, None)
+    };
+    let fir = s
+        .processing
+        .dither_filter
+        .then(|| nav::fir::Fir::design(s.processing.fir))
+        .transpose()
+        .context("dither filter")?;
+    let dither_residual_gain = fir.map_or(1.0, |f| {
+        (300..=430)
+            .map(|hz| f.amplitude(f64::from(hz)).abs())
+            .fold(0.0, f64::max)
+    });
+    Ok(InProcess {
+        mean_rate_dph: sums.0.map(|x| x / n * dph),
+        mean_specific_force_mps2: sums.1.map(|x| x / n),
+        expected_rate_dph,
+        expected_specific_force_mps2,
+        gyro_bias_dph: imu.gyro_bias_dph(),
+        accel_bias_mps2: imu.accel_bias_mps2(),
+        dither_residual_gain,
+        imu: fe.stats(),
+        processing: proc.stats(),
+        origin_sample: proc.origin(),
+        valid_sample: proc.valid_sample(),
+        origin_time_s,
+        rotation_vector_deg: quaternion_to_rotation_vector(&q).map(f64::to_degrees),
+        error_deg: err.map(f64::to_degrees),
+    })
+}
+
+fn sum_updates(upd: &mut Vec<nav::attitude::Update>, sums: &mut ([f64; 3], [f64; 3], u64)) {
+    for u in upd.drain(..) {
+        for a in 0..3 {
+            sums.0[a] += u.phi[a];
+            sums.1[a] += u.dv[a];
+        }
+        sums.2 += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use emulators::imu::ImuParams;
+    use emulators::truth::Coning;
+
+    #[test]
+    fn static_run_in_process_matches_truth_through_the_error_model() {
+        let mut s = Scenario::builtin_static();
+        s.duration_s = 20.0;
+        let r = run_in_process(&s).unwrap();
+        let t = (r.valid_sample - r.origin_sample.unwrap()) as f64 / 2000.0;
+        assert!(t > 19.9, "{t}");
+        let want = r.expected_rate_dph.unwrap();
+        let lim = 5.0 * s.imu.gyro_arw_dpsh * 60.0 / t.sqrt()
+            + (2.0 + 2.0 * 400.0 * r.dither_residual_gain) / t;
+        for i in 0..3 {
+            let e = (r.mean_rate_dph[i] - want[i]).abs();
+            assert!(
+                e <= lim,
+                "axis {i}: {} vs {} (limit {lim})",
+                r.mean_rate_dph[i],
+                want[i]
+            );
+        }
+        let f = r.expected_specific_force_mps2.unwrap();
+        for i in 0..3 {
+            let e = (r.mean_specific_force_mps2[i] - f[i]).abs();
+            assert!(e <= 5.0 * 0.001 / t.sqrt() + 2e-4 / t, "axis {i}: {e}");
+        }
+    }
+
+    #[test]
+    fn coning_on_an_ideal_imu_tracks_truth_through_frames_and_filter() {
+        let mut s = Scenario::builtin_static();
+        s.duration_s = 10.0;
+        s.coning = Some(Coning {
+            half_angle_deg: 1.0,
+            frequency_hz: 10.0,
+        });
+        s.imu = ImuParams::ideal();
+        let r = run_in_process(&s).unwrap();
+        // the cone axis (x) does not drift beyond quantization (1 arcsec pulses); across it the
+        // filter's passband gain scales the coning's oscillation: |1 - F(10 Hz)| a
+        let fir = nav::fir::Fir::default_dither_filter();
+        let across = (1.0 - fir.amplitude(10.0)).abs() * 3600.0 + 3.0;
+        let e = r.error_deg.map(|x| x * 3600.0);
+        assert!(e[0].abs() < 3.0, "cone-axis error {e:?} arcsec");
+        assert!(
+            e[1].hypot(e[2]) < across,
+            "error across {e:?} arcsec, limit {across}"
+        );
+        assert_eq!(r.imu.missing_samples, 0);
+    }
+}
