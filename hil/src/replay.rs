@@ -182,18 +182,15 @@ mod tests {
         let want = r.expected_rate_dph.unwrap();
         let lim = 5.0 * s.imu.gyro_arw_dpsh * 60.0 / t.sqrt()
             + (2.0 + 2.0 * 400.0 * r.dither_residual_gain) / t;
-        for i in 0..3 {
-            let e = (r.mean_rate_dph[i] - want[i]).abs();
+        for (i, (got, want)) in r.mean_rate_dph.iter().zip(want).enumerate() {
             assert!(
-                e <= lim,
-                "axis {i}: {} vs {} (limit {lim})",
-                r.mean_rate_dph[i],
-                want[i]
+                (got - want).abs() <= lim,
+                "axis {i}: {got} vs {want} (limit {lim})"
             );
         }
         let f = r.expected_specific_force_mps2.unwrap();
-        for i in 0..3 {
-            let e = (r.mean_specific_force_mps2[i] - f[i]).abs();
+        for (i, (got, want)) in r.mean_specific_force_mps2.iter().zip(f).enumerate() {
+            let e = (got - want).abs();
             assert!(e <= 5.0 * 0.001 / t.sqrt() + 2e-4 / t, "axis {i}: {e}");
         }
     }
