@@ -1,5 +1,8 @@
 //! The HIL bench: scenarios, runs on vcan, checks and reports.
 
+pub mod bench;
+pub mod experiment;
+pub mod plot;
 pub mod replay;
 pub mod report;
 pub mod run;

@@ -42,6 +42,38 @@ enum Cmd {
     },
     /// Print the DBC file of the wire contract.
     Dbc,
+    /// Reproduce a paper's tables in process (same emulator and nav code as the bench).
+    #[command(subcommand)]
+    Experiment(Experiment),
+    /// Benchmark nav's IMU front end (decode, dither filter, coning, attitude) on one core.
+    Bench {
+        /// Seconds of 2 kHz IMU data per pass.
+        #[arg(long, default_value_t = 120.0)]
+        seconds: f64,
+        /// Passes (the best is reported).
+        #[arg(long, default_value_t = 3)]
+        passes: u32,
+    },
+}
+
+#[derive(Subcommand)]
+enum Experiment {
+    /// Paper 000, Tables 1-3: coning drift of the classical, Taylor-tuned and fitted
+    /// algorithms on filtered data; writes CSV, JSON, Markdown and an SVG plot.
+    Coning {
+        /// Output folder (default runs/experiment-coning-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Run length for the tables, s.
+        #[arg(long, default_value_t = 60.0)]
+        duration: f64,
+        /// Step of the simulated frequency sweep, Hz.
+        #[arg(long, default_value_t = 2.0)]
+        sweep_step: f64,
+        /// Seed of the emulated IMU (Table 3 analogue).
+        #[arg(long, default_value_t = 7)]
+        seed: u64,
+    },
 }
 
 #[derive(clap::Args, Clone)]
@@ -99,7 +131,58 @@ fn real_main() -> Result<i32> {
             print!("{}", wire::DBC);
             Ok(0)
         }
+        Cmd::Experiment(Experiment::Coning {
+            out,
+            duration,
+            sweep_step,
+            seed,
+        }) => {
+            if !(duration > 1.0 && sweep_step > 0.0) {
+                bail!("--duration must exceed 1 s and --sweep-step be positive");
+            }
+            let out = out.unwrap_or_else(|| default_out("experiment-coning"));
+            let mut opts = hil::experiment::ConingOptions {
+                duration_s: duration,
+                sweep_step_hz: sweep_step,
+                ..Default::default()
+            };
+            opts.imu.seed = seed;
+            let r = hil::experiment::coning(&opts, &out, true)?;
+            print!("{}", hil::experiment::text(&r));
+            println!(" files: {}", out.display());
+            Ok(
+                if r.ours_10x_below_paper_alg3 && r.ours_worse_than_alg2_at.is_empty() {
+                    0
+                } else {
+                    1
+                },
+            )
+        }
+        Cmd::Bench { seconds, passes } => {
+            if !(seconds > 0.1) {
+                bail!("--seconds must exceed 0.1");
+            }
+            let r = hil::bench::frontend(seconds, passes)?;
+            println!(
+                "nav front end (decode + counters + dither FIR + coning/sculling + attitude), one core, {} build:\n  {} samples ({} frames) per pass, best of {}: {:.3e} samples/s, {:.3e} frames/s",
+                r.profile, r.samples, r.frames, r.passes, r.samples_per_second, r.frames_per_second
+            );
+            if r.profile == "debug" {
+                println!(
+                    "  (debug build: run `cargo run --release -p hil -- bench` for the product's figure)"
+                );
+            }
+            Ok(0)
+        }
     }
+}
+
+fn default_out(name: &str) -> PathBuf {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    PathBuf::from("runs").join(format!("{name}-{secs}"))
 }
 
 fn absolute(p: &Path) -> Result<PathBuf> {
@@ -124,13 +207,7 @@ fn run(a: RunArgs) -> Result<i32> {
     s.check()?;
     let out = absolute(&match &a.out {
         Some(o) => o.clone(),
-        None => {
-            let secs = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map(|d| d.as_secs())
-                .unwrap_or(0);
-            PathBuf::from("runs").join(format!("{}-{secs}", s.name))
-        }
+        None => default_out(&s.name),
     })?;
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
     let native = !a.vm || in_guest;

@@ -1,0 +1,85 @@
+//! Throughput benchmark of nav's IMU front end: decode, counter differencing, dither filter,
+//! coning/sculling compensation and attitude update, on one core, over frames prepared in
+//! advance (the emulator's cost is not counted).
+
+use crate::scenario::Scenario;
+use anyhow::{Context, Result};
+use emulators::can::BusStream;
+use emulators::imu::{ImuEmulator, ImuParams};
+use emulators::truth::Coning;
+use nav::attitude::ImuProcessor;
+use nav::imu::ImuFrontEnd;
+use serde::Serialize;
+use std::time::Instant;
+use wire::{Message, RawFrame};
+
+/// Benchmark result.
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchResult {
+    /// IMU samples processed per pass.
+    pub samples: u64,
+    /// CAN frames decoded per pass.
+    pub frames: u64,
+    /// Best pass, samples per second.
+    pub samples_per_second: f64,
+    /// Best pass, frames per second.
+    pub frames_per_second: f64,
+    /// Passes run.
+    pub passes: u32,
+    /// Build profile (`release` or `debug`): figures from debug builds are not the product's.
+    pub profile: &'static str,
+}
+
+/// Run the benchmark on `seconds` of 2 kHz IMU data under 50 Hz coning with dither.
+pub fn frontend(seconds: f64, passes: u32) -> Result<BenchResult> {
+    let mut s = Scenario::builtin_static();
+    s.coning = Some(Coning {
+        half_angle_deg: 1.0,
+        frequency_hz: 50.0,
+    });
+    s.imu = ImuParams::default();
+    let imu = ImuEmulator::new(s.motion(), s.imu.clone());
+    let mut bus = BusStream::new(imu, &Default::default());
+    let mut frames: Vec<RawFrame> = Vec::new();
+    while bus.next_time() <= seconds {
+        bus.next_frames(&mut frames);
+    }
+    let cal = crate::replay::calibration(&s);
+    let mut best = f64::INFINITY;
+    let mut samples = 0;
+    for _ in 0..passes.max(1) {
+        let mut fe = ImuFrontEnd::new(cal);
+        let mut proc = ImuProcessor::new(&s.processing).context("processing chain")?;
+        let (mut out, mut ev, mut upd) = (Vec::new(), Vec::new(), Vec::new());
+        let t0 = Instant::now();
+        for f in &frames {
+            match Message::decode(f) {
+                Ok(Message::ImuGyro(g)) => fe.on_gyro(&g, &mut out, &mut ev),
+                Ok(Message::ImuAccel(a)) => fe.on_accel(&a, &mut out, &mut ev),
+                Ok(Message::ImuHk(h)) => fe.on_hk(&h),
+                _ => {}
+            }
+            for smp in out.drain(..) {
+                proc.push_sample(&smp, &mut upd);
+            }
+            upd.clear();
+            ev.clear();
+        }
+        let dt = t0.elapsed().as_secs_f64();
+        best = best.min(dt);
+        samples = proc.stats().samples;
+        std::hint::black_box(proc.attitude());
+    }
+    Ok(BenchResult {
+        samples,
+        frames: frames.len() as u64,
+        samples_per_second: samples as f64 / best,
+        frames_per_second: frames.len() as f64 / best,
+        passes: passes.max(1),
+        profile: if cfg!(debug_assertions) {
+            "debug"
+        } else {
+            "release"
+        },
+    })
+}
