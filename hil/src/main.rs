@@ -159,7 +159,7 @@ fn real_main() -> Result<i32> {
             )
         }
         Cmd::Bench { seconds, passes } => {
-            if !(seconds > 0.1) {
+            if seconds.is_nan() || seconds <= 0.1 {
                 bail!("--seconds must exceed 0.1");
             }
             let r = hil::bench::frontend(seconds, passes)?;
