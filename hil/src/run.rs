@@ -84,7 +84,7 @@ fn start_nav(bin: &Path, config: &Path) -> Result<NavProcess> {
             let _ = tx.send(l);
         }
     });
-    let deadline = Instant::now() + Duration::from_secs(20);
+    let deadline = Instant::now() + Duration::from_secs(60);
     loop {
         match rx.recv_timeout(Duration::from_millis(100)) {
             Ok(l) if l.starts_with("nav: receiving") => break,
@@ -95,7 +95,7 @@ fn start_nav(bin: &Path, config: &Path) -> Result<NavProcess> {
                 }
                 if Instant::now() > deadline {
                     let _ = child.kill();
-                    bail!("nav did not report ready within 20 s");
+                    bail!("nav did not report ready within 60 s");
                 }
             }
             Err(_) => {

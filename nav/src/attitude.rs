@@ -14,7 +14,7 @@
 //!   sample number, and reported.
 
 use crate::coning::{ConingCoefficients, ConingMethod};
-use crate::fir::{Fir, FirBank, FirError, FirSpec};
+use crate::fir::{Fir, FirBank, FirError, FirResponse, FirSpec};
 use crate::imu::ImuSample;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -80,6 +80,7 @@ pub struct ProcessingStats {
 #[derive(Debug)]
 pub struct ImuProcessor {
     fir: Option<FirBank<6>>,
+    fir_response: Option<FirResponse>,
     delay: i64,
     coeffs: ConingCoefficients,
     th: [[f64; 3]; 5],
@@ -115,6 +116,7 @@ impl ImuProcessor {
     pub fn with(fir: Option<&Fir>, coeffs: ConingCoefficients) -> Self {
         Self {
             fir: fir.map(FirBank::new),
+            fir_response: fir.map(Fir::response),
             delay: fir.map_or(0, |f| f.delay() as i64),
             coeffs,
             th: [[0.0; 3]; 5],
@@ -132,6 +134,11 @@ impl ImuProcessor {
     /// The coefficient set in use.
     pub fn coefficients(&self) -> &ConingCoefficients {
         &self.coeffs
+    }
+
+    /// The dither filter's measured response (none when the filter is off).
+    pub fn fir_response(&self) -> Option<FirResponse> {
+        self.fir_response
     }
 
     /// Filter delay, samples.

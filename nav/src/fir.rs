@@ -95,7 +95,7 @@ pub struct Fir {
     taps: Vec<f64>,
 }
 
-const GRID: usize = 2000;
+const GRID: usize = 600;
 const LAWSON_ITERATIONS: usize = 1000;
 
 impl Fir {

@@ -209,12 +209,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let mut sigterm = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
     let mut fe = ImuFrontEnd::new(cfg.imu);
     let mut proc = ImuProcessor::new(&cfg.processing).context("processing chain")?;
-    let fir_response = cfg
-        .processing
-        .dither_filter
-        .then(|| nav::fir::Fir::design(cfg.processing.fir).map(|f| f.response()))
-        .transpose()
-        .context("dither filter")?;
+    let fir_response = proc.fir_response();
     let mut sums = Sums::default();
     let mut by_msg: BTreeMap<&'static str, u64> = BTreeMap::new();
     let mut unknown: BTreeMap<u32, u64> = BTreeMap::new();

@@ -65,6 +65,14 @@ pub enum JsonChannel {
 }
 
 impl JsonChannel {
+    /// Every JSON channel (each gets its MCAP channel when the file is created).
+    pub const ALL: [JsonChannel; 4] = [
+        JsonChannel::ImuSample,
+        JsonChannel::Event,
+        JsonChannel::Summary,
+        JsonChannel::Attitude,
+    ];
+
     fn topic(self) -> &'static str {
         match self {
             JsonChannel::ImuSample => "/imu/sample",
@@ -129,11 +137,7 @@ impl Recorder {
             .add_channel(0, "/can/raw", RAW_FRAME_ENCODING, &meta)
             .map_err(mcap_err.clone())?;
         let mut json = BTreeMap::new();
-        for c in [
-            JsonChannel::ImuSample,
-            JsonChannel::Event,
-            JsonChannel::Summary,
-        ] {
+        for c in JsonChannel::ALL {
             let schema = w
                 .add_schema(c.topic(), "jsonschema", br#"{"type":"object"}"#)
                 .map_err(mcap_err.clone())?;
