@@ -7,5 +7,6 @@
 
 pub mod can;
 pub mod clock;
+pub mod drive;
 pub mod imu;
 pub mod truth;

@@ -217,4 +217,28 @@ mod tests {
         );
         assert_eq!(r.imu.missing_samples, 0);
     }
+
+    #[test]
+    fn a_drive_on_an_ideal_imu_tracks_the_inertial_attitude() {
+        let mut s = Scenario::builtin_static();
+        s.duration_s = 60.0;
+        s.drive = Some(emulators::drive::DriveSpec {
+            lat_deg: 28.218157,
+            lon_deg: 112.989583,
+            height_m: 0.0,
+            waypoints: vec![[0.0, 200.0], [150.0, 200.0], [150.0, 0.0], [0.0, 0.0]],
+            speed_mps: 12.0,
+            accel_mps2: 1.5,
+            turn_rate_dps: 15.0,
+            lateral_accel_mps2: 2.5,
+            laps: 1,
+            start_wait_s: 2.0,
+        });
+        s.imu = ImuParams::ideal();
+        s.check().unwrap();
+        let r = run_in_process(&s).unwrap();
+        // four 90 deg turns later the attitude is still right to pulse level
+        let e = r.error_deg.map(|x| x * 3600.0);
+        assert!(e.iter().all(|x| x.abs() < 5.0), "error {e:?} arcsec");
+    }
 }

@@ -2,6 +2,7 @@
 
 use anyhow::{Context, Result, bail};
 use emulators::can::BusFaults;
+use emulators::drive::{Drive, DriveSpec};
 use emulators::imu::ImuParams;
 use emulators::truth::{Composed, Coning, Motion, Static, Vibration};
 use nav::attitude::ProcessingConfig;
@@ -28,6 +29,9 @@ pub struct Scenario {
     /// only names the place).
     #[serde(default)]
     pub coning: Option<Coning>,
+    /// A drive along waypoints instead of standing at the site.
+    #[serde(default)]
+    pub drive: Option<DriveSpec>,
     /// Engine and road vibration on top of the motion.
     #[serde(default)]
     pub vibration: Option<Vibration>,
@@ -73,6 +77,12 @@ impl Scenario {
             bail!("max_bus_loss must be in [0, 1)");
         }
         self.imu.check().map_err(anyhow::Error::msg)?;
+        if let Some(d) = &self.drive {
+            Drive::plan(d).map_err(anyhow::Error::msg)?;
+            if self.coning.is_some() {
+                bail!("a scenario has either [coning] or [drive], not both");
+            }
+        }
         if let Some(c) = &self.coning
             && !(c.half_angle_deg.abs() <= 10.0 && c.frequency_hz >= 0.0 && c.frequency_hz < 500.0)
         {
@@ -91,9 +101,14 @@ impl Scenario {
 
     /// The truth motion of this scenario.
     pub fn motion(&self) -> Box<dyn Motion> {
-        let base: Box<dyn Motion> = match self.coning {
-            Some(c) => Box::new(c),
-            None => Box::new(self.site),
+        let base: Box<dyn Motion> = match (&self.coning, &self.drive) {
+            (Some(c), _) => Box::new(*c),
+            // checked in `check`: a plan that fails never gets here
+            (None, Some(d)) => match Drive::plan(d) {
+                Ok(p) => Box::new(p),
+                Err(_) => Box::new(self.site),
+            },
+            (None, None) => Box::new(self.site),
         };
         match &self.vibration {
             None => base,
@@ -107,7 +122,7 @@ impl Scenario {
 
     /// True when the IMU sits still on the site (static checks apply).
     pub fn is_static(&self) -> bool {
-        self.coning.is_none() && self.vibration.is_none()
+        self.coning.is_none() && self.drive.is_none() && self.vibration.is_none()
     }
 
     /// The built-in static scenario (paper 003's start point).
