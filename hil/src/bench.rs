@@ -53,11 +53,8 @@ pub fn frontend(seconds: f64, passes: u32) -> Result<BenchResult> {
         let (mut out, mut ev, mut upd) = (Vec::new(), Vec::new(), Vec::new());
         let t0 = Instant::now();
         for f in &frames {
-            match Message::decode(f) {
-                Ok(Message::ImuGyro(g)) => fe.on_gyro(&g, &mut out, &mut ev),
-                Ok(Message::ImuAccel(a)) => fe.on_accel(&a, &mut out, &mut ev),
-                Ok(Message::ImuHk(h)) => fe.on_hk(&h),
-                _ => {}
+            if let Ok(m) = Message::decode(f) {
+                fe.on_message(&m, &mut out, &mut ev);
             }
             for smp in out.drain(..) {
                 proc.push_sample(&smp, &mut upd);

@@ -79,14 +79,11 @@ pub fn run_in_process(s: &Scenario) -> Result<InProcess> {
         frames.clear();
         bus.next_frames(&mut frames);
         for f in &frames {
-            match Message::decode(f) {
-                Ok(Message::ImuGyro(g)) => {
+            if let Ok(m) = Message::decode(f) {
+                if matches!(m, Message::ImuGyro(_)) {
                     origin_time.get_or_insert(t);
-                    fe.on_gyro(&g, &mut out, &mut ev);
                 }
-                Ok(Message::ImuAccel(a)) => fe.on_accel(&a, &mut out, &mut ev),
-                Ok(Message::ImuHk(h)) => fe.on_hk(&h),
-                _ => {}
+                fe.on_message(&m, &mut out, &mut ev);
             }
         }
         for smp in out.drain(..) {

@@ -380,6 +380,23 @@ impl ImuFrontEnd {
         self.emit(p, out, ev);
     }
 
+    /// Feed any decoded message: IMU messages go to their handler, others are ignored.
+    /// Returns whether the message belonged to the IMU.
+    pub fn on_message(
+        &mut self,
+        m: &wire::Message,
+        out: &mut Vec<ImuSample>,
+        ev: &mut Vec<ImuEvent>,
+    ) -> bool {
+        match m {
+            wire::Message::ImuGyro(g) => self.on_gyro(g, out, ev),
+            wire::Message::ImuAccel(a) => self.on_accel(a, out, ev),
+            wire::Message::ImuHk(h) => self.on_hk(h),
+            _ => return false,
+        }
+        true
+    }
+
     /// Feed an IMU_HK frame.
     pub fn on_hk(&mut self, h: &ImuHk) {
         self.stats.hk_frames += 1;

@@ -270,15 +270,10 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                 match Message::decode(&raw) {
                     Ok(m) => {
                         *by_msg.entry(m.spec().name).or_insert(0) += 1;
-                        match m {
-                            Message::ImuGyro(g) => {
-                                last_imu = Instant::now();
-                                fe.on_gyro(&g, &mut out, &mut ev);
-                            }
-                            Message::ImuAccel(a) => fe.on_accel(&a, &mut out, &mut ev),
-                            Message::ImuHk(h) => fe.on_hk(&h),
-                            _ => {}
+                        if matches!(m, Message::ImuGyro(_)) {
+                            last_imu = Instant::now();
                         }
+                        fe.on_message(&m, &mut out, &mut ev);
                     }
                     Err(e) => report_bad_frame(&e, &raw, iface, &mut unknown, &mut bad_len, &mut invalid, &recorder, fe.stats().samples),
                 }
