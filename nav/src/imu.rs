@@ -191,6 +191,8 @@ pub struct ImuFrontEnd {
     ext: u64,
     pending: Option<ImuSample>,
     was_bit_fail: bool,
+    /// The counters were re-baselined after a backwards jump: the angle in between is unknown.
+    resynced: bool,
     stats: ImuStats,
     hk: Housekeeping,
 }
@@ -213,6 +215,7 @@ impl ImuFrontEnd {
             ext: 0,
             pending: None,
             was_bit_fail: false,
+            resynced: false,
             stats: ImuStats::default(),
             hk: Housekeeping::default(),
         }
@@ -282,6 +285,7 @@ impl ImuFrontEnd {
             self.last_counter = Some(g.sample_counter);
             self.last_gyro = g.counts;
             self.last_accel = None;
+            self.resynced = true;
             return;
         }
         if let Some(p) = self.pending.take() {
@@ -314,6 +318,8 @@ impl ImuFrontEnd {
                 });
             }
         }
+        // after a re-synchronisation the angle since the last good sample is unknown
+        ambiguous |= std::mem::take(&mut self.resynced);
         let dc = diff(g.counts, self.last_gyro);
         self.last_counter = Some(g.sample_counter);
         self.last_gyro = g.counts;
@@ -346,7 +352,10 @@ impl ImuFrontEnd {
             }
             return;
         };
-        if u64::from(a.sample_counter_low) != p.sample & 0xF {
+        // pair by the raw counter (the extended sample number keeps counting across a
+        // re-synchronisation, the wire counter does not)
+        let raw_low = self.last_counter.map_or(0, |c| (c & 0xF) as u8);
+        if a.sample_counter_low != raw_low {
             self.stats.accel_unpaired += 1;
             ev.push(ImuEvent::UnpairedAccel {
                 sample: p.sample,
@@ -538,6 +547,10 @@ mod tests {
             ]
         ));
         assert_eq!(out.len(), 1);
+        // the first sample after the re-synchronisation carries the unknown angle: flagged
+        fe.on_gyro(&gyro(6, [10; 3]), &mut out, &mut ev);
+        fe.on_accel(&accel(6, [2; 3]), &mut out, &mut ev);
+        assert!(out.last().is_some_and(|s| s.ambiguous), "{out:?}");
     }
 
     #[test]
