@@ -10,3 +10,4 @@ pub mod clock;
 pub mod drive;
 pub mod imu;
 pub mod truth;
+pub mod turntable;
