@@ -4,7 +4,7 @@
 use crate::clock::SimClock;
 use crate::imu::ImuEmulator;
 use serde::{Deserialize, Serialize};
-use socketcan::{CanSocket, Socket};
+use socketcan::{CanSocket, Socket, SocketOptions};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -231,4 +231,104 @@ pub fn run_imu(
         max_lag_ms,
         ..bus.stats
     })
+}
+
+/// What the turntable adapter did.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+pub struct TurntableTxStats {
+    /// TT_CMD frames received.
+    pub commands: u64,
+    /// TT_ACK frames sent.
+    pub acks: u64,
+    /// TT_STATUS frames sent.
+    pub status_frames: u64,
+    /// Frames received that were not a valid TT_CMD.
+    pub bad_frames: u64,
+    /// Commands lost on purpose (fault injection: no ack).
+    pub lost_commands: u64,
+}
+
+/// Run the turntable on `iface` until `stop` is set (or `duration_s` of simulated time):
+/// TT_CMD in, TT_ACK out at once, TT_STATUS at the mechanism's status rate, paced by `clock`.
+pub fn run_turntable(
+    iface: &str,
+    mut tt: crate::turntable::Turntable,
+    clock: SimClock,
+    duration_s: f64,
+    stop: &AtomicBool,
+) -> Result<TurntableTxStats, CanTxError> {
+    let open = |iface: &str| {
+        CanSocket::open(iface).map_err(|source| CanTxError::Open {
+            iface: iface.into(),
+            source,
+        })
+    };
+    let sock = open(iface)?;
+    // only commands: the IMU's 4,000 frames/s are not ours to read
+    let _ = sock.set_filters(&[socketcan::CanFilter::new(0x100, 0x7FF)]);
+    let mut st = TurntableTxStats::default();
+    let period = 1.0 / tt.params().status_hz;
+    let mut next_status = 0.0;
+    let mut acks = Vec::new();
+    let send = |m: wire::Message, st: &mut TurntableTxStats| -> Result<(), CanTxError> {
+        if let Ok(f) = m.encode() {
+            write(&sock, iface, &f)?;
+            match m {
+                wire::Message::TtAck(_) => st.acks += 1,
+                _ => st.status_frames += 1,
+            }
+        }
+        Ok(())
+    };
+    while next_status <= duration_s && !stop.load(Ordering::Relaxed) {
+        let due = clock.wall_at(next_status);
+        let wait = due.saturating_duration_since(Instant::now());
+        match sock.read_frame_timeout(wait.max(Duration::from_micros(100))) {
+            Ok(f) => {
+                let t = clock.now();
+                match wire::from_can_frame(&f)
+                    .ok()
+                    .and_then(|r| wire::Message::decode(&r).ok())
+                {
+                    Some(wire::Message::TtCmd(c)) => {
+                        st.commands += 1;
+                        match tt.command(t, c) {
+                            Some(a) => send(wire::Message::TtAck(a), &mut st)?,
+                            None if tt.params().faults.lost_command_seqs.contains(&c.seq) => {
+                                st.lost_commands += 1
+                            }
+                            None => {}
+                        }
+                    }
+                    _ => st.bad_frames += 1,
+                }
+                continue;
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock
+                ) => {}
+            Err(source) => {
+                return Err(CanTxError::Write {
+                    iface: iface.into(),
+                    id: 0x100,
+                    source,
+                });
+            }
+        }
+        if Instant::now() < due {
+            continue;
+        }
+        acks.clear();
+        tt.advance(next_status, &mut acks);
+        for a in acks.drain(..) {
+            send(wire::Message::TtAck(a), &mut st)?;
+        }
+        for s in tt.status(next_status) {
+            send(wire::Message::TtStatus(s), &mut st)?;
+        }
+        next_status += period;
+    }
+    Ok(st)
 }

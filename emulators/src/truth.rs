@@ -233,19 +233,185 @@ impl AxisAngle for ConstantRate {
     }
 }
 
-/// The azimuth indexing mechanism: the IMU turns about the base's z (up) axis by the axis angle
-/// (positive counter-clockwise seen from above, i.e. right-handed about z).
+/// One axis of the indexing mechanism: the IMU turns about a fixed axis of its base by the axis
+/// angle, right-handed (the vehicle's azimuth indexer turns about z, up: positive is
+/// counter-clockwise seen from above).
 pub struct Indexer<A: AxisAngle> {
+    /// The rotation axis in the base frame (unit).
+    pub about: nalgebra::Unit<Vector3<f64>>,
     /// The mechanism's true angle.
     pub axis: A,
 }
 
+impl<A: AxisAngle> Indexer<A> {
+    /// An azimuth (z) axis.
+    pub fn azimuth(axis: A) -> Self {
+        Self {
+            about: Vector3::z_axis(),
+            axis,
+        }
+    }
+}
+
 impl<A: AxisAngle> RelativeRotation for Indexer<A> {
     fn rotation(&self, t: f64) -> UnitQuaternion<f64> {
-        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), self.axis.angle(t))
+        UnitQuaternion::from_axis_angle(&self.about, self.axis.angle(t))
     }
     fn rate(&self, t: f64) -> Vector3<f64> {
-        Vector3::new(0.0, 0.0, self.axis.rate(t))
+        self.about.into_inner() * self.axis.rate(t)
+    }
+}
+
+/// Something that shakes a parked vehicle (drill disturbance scripts).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Disturbance {
+    /// A door slam: a damped roll oscillation on the suspension.
+    DoorSlam {
+        /// When, s.
+        at_s: f64,
+        /// Initial amplitude, deg.
+        #[serde(default = "slam_amp")]
+        amplitude_deg: f64,
+        /// Suspension frequency, Hz.
+        #[serde(default = "slam_f")]
+        frequency_hz: f64,
+        /// Decay time constant, s.
+        #[serde(default = "slam_decay")]
+        decay_s: f64,
+    },
+    /// Someone climbing in: the body rolls and pitches to a new rest over a few seconds.
+    ClimbIn {
+        /// When, s.
+        at_s: f64,
+        /// Roll at the new rest, deg.
+        #[serde(default = "climb_tilt")]
+        tilt_deg: f64,
+        /// Time to settle, s.
+        #[serde(default = "climb_dur")]
+        duration_s: f64,
+    },
+    /// Wind gusts: a slow sway.
+    Wind {
+        /// Start, s.
+        from_s: f64,
+        /// End, s.
+        to_s: f64,
+        /// Sway amplitude, deg.
+        #[serde(default = "wind_amp")]
+        amplitude_deg: f64,
+        /// Sway frequency, Hz.
+        #[serde(default = "wind_f")]
+        frequency_hz: f64,
+    },
+}
+
+fn slam_amp() -> f64 {
+    0.05
+}
+fn slam_f() -> f64 {
+    1.8
+}
+fn slam_decay() -> f64 {
+    0.6
+}
+fn climb_tilt() -> f64 {
+    0.3
+}
+fn climb_dur() -> f64 {
+    3.0
+}
+fn wind_amp() -> f64 {
+    0.003
+}
+fn wind_f() -> f64 {
+    0.7
+}
+
+impl Disturbance {
+    /// (pitch, roll) in rad and their rates at `t`.
+    fn angles(&self, t: f64) -> ([f64; 2], [f64; 2]) {
+        match *self {
+            Disturbance::DoorSlam {
+                at_s,
+                amplitude_deg,
+                frequency_hz,
+                decay_s,
+            } => {
+                if t <= at_s {
+                    return ([0.0; 2], [0.0; 2]);
+                }
+                let tau = t - at_s;
+                let w = 2.0 * PI * frequency_hz;
+                let a = amplitude_deg.to_radians() * (-tau / decay_s).exp();
+                let r = a * (w * tau).sin();
+                let rd = a * (w * (w * tau).cos() - (w * tau).sin() / decay_s);
+                ([0.0, r], [0.0, rd])
+            }
+            Disturbance::ClimbIn {
+                at_s,
+                tilt_deg,
+                duration_s,
+            } => {
+                // smoothstep to the new roll, pitch a third of it
+                let x = ((t - at_s) / duration_s).clamp(0.0, 1.0);
+                let s = x * x * (3.0 - 2.0 * x);
+                let sd = if (0.0..1.0).contains(&x) && t > at_s {
+                    6.0 * x * (1.0 - x) / duration_s
+                } else {
+                    0.0
+                };
+                let r = tilt_deg.to_radians();
+                ([r / 3.0 * s, r * s], [r / 3.0 * sd, r * sd])
+            }
+            Disturbance::Wind {
+                from_s,
+                to_s,
+                amplitude_deg,
+                frequency_hz,
+            } => {
+                if t <= from_s || t >= to_s {
+                    return ([0.0; 2], [0.0; 2]);
+                }
+                // a window that starts and ends at rest: sin^2 envelope
+                let span = to_s - from_s;
+                let u = (t - from_s) / span;
+                let env = (PI * u).sin().powi(2);
+                let envd = PI / span * (2.0 * PI * u).sin();
+                let w = 2.0 * PI * frequency_hz;
+                let a = amplitude_deg.to_radians();
+                let (sw, cw) = ((w * t).sin(), (w * t).cos());
+                let r = a * env * sw;
+                let rd = a * (envd * sw + env * w * cw);
+                ([0.5 * r, r], [0.5 * rd, rd])
+            }
+        }
+    }
+}
+
+/// The vehicle body rocking on its suspension under a script of disturbances.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+pub struct Disturbances(pub Vec<Disturbance>);
+
+impl Disturbances {
+    fn pitch_roll(&self, t: f64) -> ([f64; 2], [f64; 2]) {
+        self.0.iter().fold(([0.0; 2], [0.0; 2]), |(a, d), e| {
+            let (x, xd) = e.angles(t);
+            ([a[0] + x[0], a[1] + x[1]], [d[0] + xd[0], d[1] + xd[1]])
+        })
+    }
+}
+
+impl RelativeRotation for Disturbances {
+    fn rotation(&self, t: f64) -> UnitQuaternion<f64> {
+        let ([p, r], _) = self.pitch_roll(t);
+        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), p)
+            * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), r)
+    }
+    fn rate(&self, t: f64) -> Vector3<f64> {
+        let ([_, r], [pd, rd]) = self.pitch_roll(t);
+        let ry = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), r);
+        ry.inverse() * Vector3::new(pd, 0.0, 0.0) + Vector3::new(0.0, rd, 0.0)
     }
 }
 
@@ -469,12 +635,10 @@ mod tests {
         let base = site(0.0, 0.0, 45.0);
         let m = Composed {
             base: Box::new(base),
-            relative: vec![Box::new(Indexer {
-                axis: ConstantRate {
-                    angle0: 0.0,
-                    rate: 10f64.to_radians(),
-                },
-            })],
+            relative: vec![Box::new(Indexer::azimuth(ConstantRate {
+                angle0: 0.0,
+                rate: 10f64.to_radians(),
+            }))],
             linear: None,
         };
         // after 9 s at 10 deg/s the IMU faces 90 deg left of the vehicle
@@ -495,6 +659,44 @@ mod tests {
         let turned = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 33f64.to_radians());
         let e = (m.omega_ib_b(3.3) - numeric_rate(&m, 3.3) - turned.inverse() * base.rate()).norm();
         assert!(e < 1e-8, "{e:e}");
+    }
+
+    #[test]
+    fn disturbance_rates_are_exact_for_their_attitude() {
+        let d = Composed {
+            base: Box::new(site(30.0, 0.0, 28.2)),
+            relative: vec![Box::new(Disturbances(vec![
+                Disturbance::DoorSlam {
+                    at_s: 1.0,
+                    amplitude_deg: 0.05,
+                    frequency_hz: 1.8,
+                    decay_s: 0.6,
+                },
+                Disturbance::ClimbIn {
+                    at_s: 2.0,
+                    tilt_deg: 0.3,
+                    duration_s: 3.0,
+                },
+                Disturbance::Wind {
+                    from_s: 0.5,
+                    to_s: 8.0,
+                    amplitude_deg: 0.003,
+                    frequency_hz: 0.7,
+                },
+            ]))],
+            linear: None,
+        };
+        for t in [0.7, 1.3, 2.9, 4.4, 7.0] {
+            let e = (d.omega_ib_b(t) - numeric_rate(&d, t)).norm();
+            // numeric_rate is relative to ENU: earth rate is left out of it (1e-4 rad/s)
+            assert!(e < 1e-4, "t={t}: {e:e}");
+            let base = site(30.0, 0.0, 28.2);
+            let rel = d.omega_ib_b(t) - d.attitude(t).inverse() * base.attitude(0.0) * base.rate();
+            assert!((rel - numeric_rate(&d, t)).norm() < 1e-8, "t={t}");
+        }
+        // after the climb the vehicle rests tilted
+        let f = d.f_b(10.0);
+        assert!((f.x / f.z).abs() > 0.004, "{f}");
     }
 
     #[test]
