@@ -4,7 +4,11 @@ use anyhow::{Context, Result, bail};
 use emulators::can::BusFaults;
 use emulators::drive::{Drive, DriveSpec};
 use emulators::imu::ImuParams;
-use emulators::truth::{Composed, Coning, Motion, Static, Vibration};
+use emulators::truth::{
+    Composed, Coning, Disturbance, Disturbances, Indexer, Motion, RelativeRotation, Static,
+    Vibration,
+};
+use emulators::turntable::{ProfileAxis, Turntable, TurntableParams};
 use nav::attitude::ProcessingConfig;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -32,6 +36,12 @@ pub struct Scenario {
     /// A drive along waypoints instead of standing at the site.
     #[serde(default)]
     pub drive: Option<DriveSpec>,
+    /// The indexing mechanism the IMU sits on (none: the IMU is fixed to the vehicle).
+    #[serde(default)]
+    pub turntable: Option<TurntableParams>,
+    /// Disturbances of the parked vehicle (door slams, climbing in, wind).
+    #[serde(default)]
+    pub disturbance: Vec<Disturbance>,
     /// Engine and road vibration on top of the motion.
     #[serde(default)]
     pub vibration: Option<Vibration>,
@@ -77,6 +87,9 @@ impl Scenario {
             bail!("max_bus_loss must be in [0, 1)");
         }
         self.imu.check().map_err(anyhow::Error::msg)?;
+        if let Some(t) = &self.turntable {
+            t.check().map_err(anyhow::Error::msg)?;
+        }
         if let Some(d) = &self.drive {
             Drive::plan(d).map_err(anyhow::Error::msg)?;
             if self.coning.is_some() {
@@ -99,9 +112,42 @@ impl Scenario {
         Ok(())
     }
 
-    /// The truth motion of this scenario.
-    pub fn motion(&self) -> Box<dyn Motion> {
-        let base: Box<dyn Motion> = match (&self.coning, &self.drive) {
+    /// The truth motion and, when the scenario has one, the turntable whose true angle it
+    /// follows (axis 0 turns about the vehicle's z, axis 1 about the IMU's x, axis 2 about y).
+    pub fn build(&self) -> (Box<dyn Motion>, Option<Turntable>) {
+        let Some(tp) = &self.turntable else {
+            return (self.motion(), None);
+        };
+        let tt = Turntable::new(tp.clone());
+        let mut relative: Vec<Box<dyn RelativeRotation>> = Vec::new();
+        if !self.disturbance.is_empty() {
+            relative.push(Box::new(Disturbances(self.disturbance.clone())));
+        }
+        if let Some(v) = &self.vibration {
+            relative.push(Box::new(v.clone()));
+        }
+        let axes = [
+            nalgebra::Vector3::z_axis(),
+            nalgebra::Vector3::x_axis(),
+            nalgebra::Vector3::y_axis(),
+        ];
+        for (i, about) in axes.into_iter().enumerate().take(usize::from(tp.axes)) {
+            relative.push(Box::new(Indexer {
+                about,
+                axis: ProfileAxis(tt.profile(i)),
+            }));
+        }
+        let base = self.base_motion();
+        let m = Composed {
+            base,
+            relative,
+            linear: self.vibration.clone(),
+        };
+        (Box::new(m), Some(tt))
+    }
+
+    fn base_motion(&self) -> Box<dyn Motion> {
+        match (&self.coning, &self.drive) {
             (Some(c), _) => Box::new(*c),
             // checked in `check`: a plan that fails never gets here
             (None, Some(d)) => match Drive::plan(d) {
@@ -109,20 +155,36 @@ impl Scenario {
                 Err(_) => Box::new(self.site),
             },
             (None, None) => Box::new(self.site),
-        };
-        match &self.vibration {
-            None => base,
-            Some(v) => Box::new(Composed {
-                base,
-                relative: vec![Box::new(v.clone())],
-                linear: Some(v.clone()),
-            }),
         }
+    }
+
+    /// The truth motion of this scenario without a turntable.
+    pub fn motion(&self) -> Box<dyn Motion> {
+        let base = self.base_motion();
+        let mut relative: Vec<Box<dyn RelativeRotation>> = Vec::new();
+        if !self.disturbance.is_empty() {
+            relative.push(Box::new(Disturbances(self.disturbance.clone())));
+        }
+        if let Some(v) = &self.vibration {
+            relative.push(Box::new(v.clone()));
+        }
+        if relative.is_empty() {
+            return base;
+        }
+        Box::new(Composed {
+            base,
+            relative,
+            linear: self.vibration.clone(),
+        })
     }
 
     /// True when the IMU sits still on the site (static checks apply).
     pub fn is_static(&self) -> bool {
-        self.coning.is_none() && self.drive.is_none() && self.vibration.is_none()
+        self.coning.is_none()
+            && self.drive.is_none()
+            && self.vibration.is_none()
+            && self.turntable.is_none()
+            && self.disturbance.is_empty()
     }
 
     /// The built-in static scenario (paper 003's start point).

@@ -9,4 +9,5 @@ pub mod coning;
 pub mod earth;
 pub mod fir;
 pub mod imu;
+pub mod northfind;
 pub mod record;

@@ -1,0 +1,236 @@
+//! North-finding drills: in process (for Monte Carlo and tests) with the same emulators and
+//! nav code as on the bench, and the drill's scoring.
+
+use crate::scenario::Scenario;
+use anyhow::{Context, Result, bail};
+use emulators::can::BusStream;
+use emulators::imu::ImuEmulator;
+use nav::attitude::ImuProcessor;
+use nav::imu::ImuFrontEnd;
+use nav::northfind::{NorthFinder, NorthFindingConfig, NorthResult, Progress};
+use serde::{Deserialize, Serialize};
+use wire::Message;
+
+/// The outcome of one drill.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct DrillOutcome {
+    /// True heading of the vehicle (and the IMU at table zero), deg.
+    pub truth_deg: f64,
+    /// Found heading, deg (none when aborted).
+    pub heading_deg: Option<f64>,
+    /// Error, deg, wrapped to (-180, 180].
+    pub error_deg: Option<f64>,
+    /// Estimated sigma, deg.
+    pub sigma_deg: Option<f64>,
+    /// Time to locked at zero, s.
+    pub duration_s: f64,
+    /// Dwells repeated after disturbances.
+    pub repeats: u32,
+    /// Why it was aborted, if it was.
+    pub abort: Option<String>,
+    /// The full result.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub result: Option<serde_json::Value>,
+}
+
+/// Wrap an angle difference to (-180, 180].
+pub fn wrap180(d: f64) -> f64 {
+    let w = d.rem_euclid(360.0);
+    if w > 180.0 { w - 360.0 } else { w }
+}
+
+/// The drill's north-finding settings for a scenario (latitude from the site).
+pub fn nf_config(s: &Scenario, base: &NorthFindingConfig) -> NorthFindingConfig {
+    NorthFindingConfig {
+        enabled: true,
+        latitude_deg: s.site.lat_deg,
+        ..base.clone()
+    }
+}
+
+/// Score a result against truth.
+pub fn outcome(
+    truth_deg: f64,
+    r: Option<&NorthResult>,
+    abort: Option<&str>,
+    t: f64,
+) -> DrillOutcome {
+    DrillOutcome {
+        truth_deg,
+        heading_deg: r.map(|r| r.heading_deg),
+        error_deg: r.map(|r| wrap180(r.heading_deg - truth_deg)),
+        sigma_deg: r.map(|r| r.sigma_deg),
+        duration_s: r.map_or(t, |r| r.duration_s),
+        repeats: r.map_or(0, |r| r.repeats),
+        abort: abort.map(str::to_string),
+        result: r.and_then(|r| serde_json::to_value(r).ok()),
+    }
+}
+
+/// Run a north-finding drill in process: the scenario's IMU and turntable models, nav's front
+/// end, processing chain and north-finder, no bus. `progress` sees every progress change.
+pub fn run_in_process(
+    s: &Scenario,
+    nf: &NorthFindingConfig,
+    mut progress: impl FnMut(&Progress),
+) -> Result<DrillOutcome> {
+    let (motion, tt) = s.build();
+    let Some(mut tt) = tt else {
+        bail!(
+            "scenario {} has no [turntable]: north-finding needs one",
+            s.name
+        );
+    };
+    let imu = ImuEmulator::new(motion, s.imu.clone());
+    let dt = 1.0 / s.imu.rate_hz;
+    let mut bus = BusStream::new(imu, &s.faults);
+    let mut fe = ImuFrontEnd::new(crate::replay::calibration(s));
+    let mut proc = ImuProcessor::new(&s.processing).context("processing chain")?;
+    let mut finder = NorthFinder::new(nf_config(s, nf)).map_err(anyhow::Error::msg)?;
+    let status_every = (s.imu.rate_hz / tt.params().status_hz).round().max(1.0) as u64;
+    let (mut frames, mut out, mut ev, mut upd, mut acks) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut k: u64 = 0;
+    let mut last_phase = None;
+    while bus.next_time() <= s.duration_s + 1e-9 && !finder.finished() {
+        let t = bus.next_time();
+        frames.clear();
+        bus.next_frames(&mut frames);
+        for f in &frames {
+            if let Ok(m) = Message::decode(f) {
+                fe.on_message(&m, &mut out, &mut ev);
+            }
+        }
+        ev.clear();
+        for smp in out.drain(..) {
+            proc.push_sample(&smp, &mut upd);
+        }
+        let base = proc.baseline().unwrap_or(0) as i64;
+        for u in upd.drain(..) {
+            let tv = (u.valid_sample - base) as f64 * dt;
+            finder.on_update(tv, u.phi, u.dv);
+        }
+        if k.is_multiple_of(status_every) {
+            acks.clear();
+            tt.advance(t, &mut acks);
+            for a in &acks {
+                finder.on_ack(a);
+            }
+            for st in tt.status(t) {
+                finder.on_status(&st);
+            }
+        }
+        let tnav = (proc.valid_sample() - proc.baseline().unwrap_or(0) as i64) as f64 * dt;
+        while let Some(c) = finder.poll(tnav.max(0.0)) {
+            if let Some(a) = tt.command(t, c) {
+                finder.on_ack(&a);
+            }
+            if finder.finished() {
+                break;
+            }
+        }
+        let p = finder.progress();
+        if last_phase != Some((p.phase, p.position)) || k.is_multiple_of(2000) {
+            last_phase = Some((p.phase, p.position));
+            progress(&p);
+        }
+        k += 1;
+    }
+    let t = k as f64 * dt;
+    if !finder.finished() {
+        return Ok(outcome(
+            s.site.heading_deg,
+            None,
+            Some(&format!(
+                "not finished within the scenario's {} s (phase {:?})",
+                s.duration_s,
+                finder.phase()
+            )),
+            t,
+        ));
+    }
+    Ok(outcome(
+        s.site.heading_deg,
+        finder.result(),
+        finder.abort_reason(),
+        t,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use emulators::truth::Disturbance;
+    use emulators::turntable::{TurntableFaults, TurntableParams};
+
+    fn drill(heading: f64, dwell: f64) -> (Scenario, NorthFindingConfig) {
+        let mut s = Scenario::builtin_static();
+        s.name = "drill".into();
+        s.duration_s = 4.0 * dwell + 60.0;
+        s.site.heading_deg = heading;
+        s.turntable = Some(TurntableParams::default());
+        let nf = NorthFindingConfig {
+            dwell_s: dwell,
+            ..NorthFindingConfig::default()
+        };
+        (s, nf)
+    }
+
+    #[test]
+    fn four_positions_find_north_within_the_noise() {
+        let (s, nf) = drill(123.4, 20.0);
+        let o = run_in_process(&s, &nf, |_| {}).unwrap();
+        assert!(o.abort.is_none(), "{:?}", o.abort);
+        let (e, sig) = (o.error_deg.unwrap(), o.sigma_deg.unwrap());
+        // bound: ARW / (W cos L sqrt(T)) with T = 80 s: 0.054 deg
+        let bound = (s.imu.gyro_arw_dpsh * 60.0
+            / (15.041 * s.site.lat_deg.to_radians().cos() * 80f64.sqrt()))
+        .to_degrees();
+        assert!(
+            e.abs() < 4.0 * bound.max(sig),
+            "error {e} deg, sigma {sig}, bound {bound}"
+        );
+        assert!(
+            sig < 3.0 * bound && sig > bound / 3.0,
+            "sigma {sig} vs bound {bound}"
+        );
+        assert!(o.duration_s < 4.0 * 20.0 + 40.0, "{}", o.duration_s);
+        assert_eq!(o.repeats, 0, "a quiet base needs no repeats");
+    }
+
+    #[test]
+    fn a_door_slam_during_a_dwell_repeats_it() {
+        let (mut s, nf) = drill(10.0, 20.0);
+        // positions start about every 25 s; slam in the second dwell
+        s.disturbance = vec![Disturbance::DoorSlam {
+            at_s: 40.0,
+            amplitude_deg: 0.05,
+            frequency_hz: 1.8,
+            decay_s: 0.6,
+        }];
+        let o = run_in_process(&s, &nf, |_| {}).unwrap();
+        assert!(o.abort.is_none(), "{:?}", o.abort);
+        assert!(o.repeats >= 1, "the disturbed dwell was repeated");
+        let e = o.error_deg.unwrap();
+        assert!(e.abs() < 0.3, "{e}");
+    }
+
+    #[test]
+    fn a_turntable_fault_aborts_with_the_reason() {
+        let (mut s, nf) = drill(10.0, 10.0);
+        s.turntable = Some(TurntableParams {
+            faults: TurntableFaults {
+                lock_fails: true,
+                ..TurntableFaults::default()
+            },
+            ..TurntableParams::default()
+        });
+        let o = run_in_process(&s, &nf, |_| {}).unwrap();
+        let why = o.abort.unwrap();
+        assert!(
+            why.contains("lock pin") && why.contains("position 1"),
+            "{why}"
+        );
+        assert!(o.heading_deg.is_none());
+    }
+}

@@ -1,0 +1,851 @@
+//! Four-position north-finding on the azimuth indexing mechanism (paper 003).
+//!
+//! Sequence: enable the mechanism; for each position (0, 90, 180, 270 deg by default) unlock,
+//! index, lock at the detent, wait for the base to settle, dwell; then return to zero and lock,
+//! and hand over. During each dwell the gyro angle and the velocity increments (dither-filtered,
+//! coning/sculling compensated, from [`crate::attitude`]) are accumulated.
+//!
+//! Per position: the IMU is levelled from its own mean specific force (the base may tilt
+//! differently under each position), the body rate is rotated into that level frame, and the
+//! rate is the difference of the mean accumulated angle over short windows at both ends of the
+//! dwell (the windows average out what the dither filter leaves of the dither angle, which a
+//! plain end-point difference would turn into a rate error of 0.06 deg/h over a minute).
+//!
+//! With `phi_k` the measured table angle (counter-clockwise), the IMU heading is
+//! `psi_0 - phi_k`, and the level horizontal gyros read
+//! `g_x = -s cos phi_k + c sin phi_k + b_x`, `g_y = s sin phi_k + c cos phi_k + b_y`
+//! with `s = W_N sin psi_0`, `c = W_N cos psi_0`, `W_N = W_ie cos L`: a weighted linear
+//! least-squares problem in `(s, c, b_x, b_y)`. Constant biases cancel between opposite
+//! positions; the heading is `atan2(s, c)` and its sigma follows from the noise measured within
+//! each dwell (the scatter of block rates), so it is the data's own figure, not a datasheet's.
+//!
+//! Disturbances (a door slam, someone climbing in, wind) show as blocks whose rate or specific
+//! force departs from the dwell's first block; the dwell is then repeated once the base is quiet.
+//! Every turntable fault, rejected command, missing acknowledgement or timeout aborts with a
+//! reason naming the position and the command.
+
+use crate::earth;
+use nalgebra::{Matrix4, Rotation3, Vector3, Vector4};
+use serde::{Deserialize, Serialize};
+use wire::{TtAck, TtCmd, TtCommand, TtResult, TtState, TtStatus};
+
+/// North-finding settings (the `[north_finding]` table of nav's config).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct NorthFindingConfig {
+    /// Run north-finding at start-up.
+    pub enabled: bool,
+    /// Latitude of the site, deg (from the last fix or the operator).
+    pub latitude_deg: f64,
+    /// Table positions, deg.
+    pub positions_deg: Vec<f64>,
+    /// Dwell per position, s of IMU time.
+    pub dwell_s: f64,
+    /// Wait after the lock engages before the dwell starts, s.
+    pub settle_s: f64,
+    /// Averaging window at each end of a dwell, s.
+    pub end_window_s: f64,
+    /// Blocks per dwell (noise estimate and disturbance detection).
+    pub blocks: usize,
+    /// A block whose horizontal rate departs from the first block's by more than this is
+    /// disturbed, deg/h.
+    pub disturbance_rate_dph: f64,
+    /// ... or whose specific force departs by more than this, m/s^2.
+    pub disturbance_accel_mps2: f64,
+    /// The base must be quiet this long before a repeated dwell, s.
+    pub quiet_s: f64,
+    /// Repeats allowed per position before giving up.
+    pub max_repeats: u32,
+    /// Turntable axis used.
+    pub axis: u8,
+    /// Heartbeat interval to the turntable, s.
+    pub heartbeat_s: f64,
+    /// Time allowed for an acknowledgement, s (IMU time).
+    pub ack_timeout_s: f64,
+    /// Retries of an unacknowledged command.
+    pub ack_retries: u32,
+    /// Time allowed for a move to finish, s.
+    pub move_timeout_s: f64,
+    /// Time allowed for the lock pin, s.
+    pub lock_timeout_s: f64,
+}
+
+impl Default for NorthFindingConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            latitude_deg: 28.218157,
+            positions_deg: vec![0.0, 90.0, 180.0, 270.0],
+            dwell_s: 60.0,
+            settle_s: 1.0,
+            end_window_s: 0.05,
+            blocks: 10,
+            disturbance_rate_dph: 20.0,
+            disturbance_accel_mps2: 0.02,
+            quiet_s: 3.0,
+            max_repeats: 3,
+            axis: 0,
+            heartbeat_s: 0.25,
+            ack_timeout_s: 0.5,
+            ack_retries: 2,
+            move_timeout_s: 30.0,
+            lock_timeout_s: 3.0,
+        }
+    }
+}
+
+impl NorthFindingConfig {
+    /// Check the settings; the message names the field.
+    pub fn check(&self) -> Result<(), String> {
+        let pos = |x: f64| x.is_finite() && x > 0.0;
+        if !(-89.0..=89.0).contains(&self.latitude_deg) {
+            return Err("north_finding.latitude_deg must be within 89 deg of the equator".into());
+        }
+        if self.positions_deg.len() < 2
+            || self.positions_deg.iter().any(|p| !(0.0..360.0).contains(p))
+        {
+            return Err("north_finding.positions_deg needs two or more angles in [0, 360)".into());
+        }
+        if !(pos(self.dwell_s) && pos(self.end_window_s) && self.end_window_s * 4.0 < self.dwell_s)
+        {
+            return Err("north_finding.dwell_s must exceed 4 end windows".into());
+        }
+        if self.blocks < 2 {
+            return Err("north_finding.blocks must be 2 or more".into());
+        }
+        if !(pos(self.heartbeat_s) && pos(self.ack_timeout_s) && pos(self.move_timeout_s)) {
+            return Err("north_finding timeouts must be positive".into());
+        }
+        Ok(())
+    }
+}
+
+/// Where the sequence is.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// Enabling the mechanism.
+    Enabling,
+    /// Withdrawing the lock pin.
+    Unlocking,
+    /// Indexing to the position.
+    Indexing,
+    /// Engaging the lock pin.
+    Locking,
+    /// Waiting for the base to settle.
+    Settling,
+    /// Measuring.
+    Dwell,
+    /// A disturbance: waiting for quiet before repeating the dwell.
+    Disturbed,
+    /// Returning to zero.
+    Returning,
+    /// Locking at zero.
+    LockingZero,
+    /// Finished: result available.
+    Done,
+    /// Given up: reason available.
+    Aborted,
+}
+
+/// Live progress.
+#[derive(Debug, Clone, Serialize)]
+pub struct Progress {
+    /// Phase.
+    pub phase: Phase,
+    /// Position index (1-based) and count.
+    pub position: usize,
+    /// Positions in all.
+    pub positions: usize,
+    /// Dwell time left at this position, s.
+    pub dwell_left_s: f64,
+    /// Heading estimate so far (from the positions done), deg.
+    pub heading_deg: Option<f64>,
+    /// Its sigma, deg.
+    pub sigma_deg: Option<f64>,
+    /// Elapsed IMU time, s.
+    pub elapsed_s: f64,
+    /// Dwells repeated after disturbances.
+    pub repeats: u32,
+}
+
+/// One position's measurement.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct PositionResult {
+    /// Commanded angle, deg.
+    pub commanded_deg: f64,
+    /// Measured table angle (encoder mean over the dwell), deg.
+    pub table_deg: f64,
+    /// Level-frame rate x, y, z, deg/h.
+    pub rate_dph: [f64; 3],
+    /// Sigma of each horizontal rate from the block scatter, deg/h.
+    pub sigma_dph: f64,
+    /// Pitch and roll of the IMU at this position, deg.
+    pub tilt_deg: [f64; 2],
+    /// Dwell repeats here.
+    pub repeats: u32,
+}
+
+/// The answer.
+#[derive(Debug, Clone, Serialize)]
+pub struct NorthResult {
+    /// Heading of the IMU at table zero (clockwise from true north), deg, [0, 360).
+    pub heading_deg: f64,
+    /// Its sigma, deg.
+    pub sigma_deg: f64,
+    /// Horizontal gyro biases x, y (level frame at table zero), deg/h.
+    pub gyro_bias_dph: [f64; 2],
+    /// Horizontal earth rate found, deg/h (expected `15.041 cos L`).
+    pub horizontal_earth_rate_dph: f64,
+    /// Expected horizontal earth rate, deg/h.
+    pub expected_earth_rate_dph: f64,
+    /// Pitch and roll at table zero, deg.
+    pub tilt_deg: [f64; 2],
+    /// Total dwell time used, s.
+    pub dwell_total_s: f64,
+    /// Time from start to locked at zero, s (IMU time).
+    pub duration_s: f64,
+    /// Dwells repeated after disturbances.
+    pub repeats: u32,
+    /// Per position.
+    pub positions: Vec<PositionResult>,
+}
+
+/// What waits for an acknowledgement.
+#[derive(Debug, Clone, Copy)]
+struct Outstanding {
+    cmd: TtCmd,
+    sent_at: f64,
+    tries: u32,
+}
+
+/// Accumulation of one dwell.
+#[derive(Debug, Clone, Default)]
+struct Dwell {
+    t0: f64,
+    theta: Vector3<f64>,
+    vel: Vector3<f64>,
+    /// Block boundaries: window means at each boundary (time, theta, v).
+    bounds: Vec<(f64, Vector3<f64>, Vector3<f64>)>,
+    cur_win: (f64, Vector3<f64>, Vector3<f64>, u32),
+    enc_sum: f64,
+    enc_n: u32,
+    disturbed: bool,
+    /// Current 0.1 s micro-window: sums of time, theta, v and the count.
+    micro: (f64, Vector3<f64>, Vector3<f64>, u32),
+    micro_t0: f64,
+    last_micro: Option<(f64, Vector3<f64>, Vector3<f64>)>,
+}
+
+/// The north-finding sequence.
+#[derive(Debug)]
+pub struct NorthFinder {
+    cfg: NorthFindingConfig,
+    phase: Phase,
+    k: usize,
+    t: f64,
+    t_start: Option<f64>,
+    phase_since: f64,
+    seq: u8,
+    outstanding: Option<Outstanding>,
+    queue: Vec<(TtCommand, f64)>,
+    returning: bool,
+    last_sent: f64,
+    status: Option<TtStatus>,
+    seen_moving: bool,
+    dwell: Dwell,
+    quiet_since: f64,
+    repeats_here: u32,
+    repeats: u32,
+    results: Vec<PositionResult>,
+    result: Option<NorthResult>,
+    abort: Option<String>,
+}
+
+const DPH: f64 = earth::DEG_PER_HOUR_PER_RAD_S;
+/// Micro-window length for disturbance detection, s.
+const MICRO_S: f64 = 0.1;
+/// Micro-window rates are noisier than block rates: their threshold is this many times the
+/// block threshold.
+const MICRO_RATE_FACTOR: f64 = 2.5;
+
+impl NorthFinder {
+    /// A sequence with these settings (checked).
+    pub fn new(cfg: NorthFindingConfig) -> Result<Self, String> {
+        cfg.check()?;
+        Ok(Self {
+            cfg,
+            phase: Phase::Enabling,
+            k: 0,
+            t: 0.0,
+            t_start: None,
+            phase_since: 0.0,
+            seq: 0,
+            outstanding: None,
+            queue: vec![(TtCommand::Enable, 0.0)],
+            returning: false,
+            last_sent: f64::NEG_INFINITY,
+            status: None,
+            seen_moving: false,
+            dwell: Dwell::default(),
+            quiet_since: 0.0,
+            repeats_here: 0,
+            repeats: 0,
+            results: Vec::new(),
+            result: None,
+            abort: None,
+        })
+    }
+
+    /// Phase.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// Finished (done or aborted)?
+    pub fn finished(&self) -> bool {
+        matches!(self.phase, Phase::Done | Phase::Aborted)
+    }
+
+    /// The result, once done.
+    pub fn result(&self) -> Option<&NorthResult> {
+        self.result.as_ref()
+    }
+
+    /// Why it gave up, if it did.
+    pub fn abort_reason(&self) -> Option<&str> {
+        self.abort.as_deref()
+    }
+
+    fn fail(&mut self, why: String) {
+        if self.abort.is_none() {
+            self.abort = Some(why);
+            self.phase = Phase::Aborted;
+            self.outstanding = None;
+            self.queue.clear();
+        }
+    }
+
+    fn enter(&mut self, p: Phase) {
+        self.phase = p;
+        self.phase_since = self.t;
+        self.seen_moving = false;
+    }
+
+    fn where_(&self) -> String {
+        if self.returning {
+            "returning to zero".into()
+        } else {
+            format!(
+                "position {} of {} ({} deg)",
+                self.k + 1,
+                self.cfg.positions_deg.len(),
+                self.cfg.positions_deg.get(self.k).copied().unwrap_or(0.0)
+            )
+        }
+    }
+
+    /// A turntable status frame arrived.
+    pub fn on_status(&mut self, st: &TtStatus) {
+        if st.axis != self.cfg.axis || self.finished() {
+            return;
+        }
+        if st.faults.any() || st.state == TtState::Fault {
+            let f = st.faults;
+            let mut names = Vec::new();
+            for (b, n) in [
+                (f.stall, "stall"),
+                (f.lock, "lock pin"),
+                (f.encoder, "encoder"),
+                (f.heartbeat, "heartbeat timeout"),
+                (f.estop, "emergency stop"),
+                (f.drive, "drive"),
+                (f.limit, "limit"),
+            ] {
+                if b {
+                    names.push(n);
+                }
+            }
+            let w = self.where_();
+            self.fail(format!(
+                "turntable fault at {w}: {}",
+                if names.is_empty() {
+                    "fault state".to_string()
+                } else {
+                    names.join(", ")
+                }
+            ));
+            return;
+        }
+        if st.state == TtState::Moving {
+            self.seen_moving = true;
+        }
+        if self.phase == Phase::Dwell {
+            self.dwell.enc_sum += st.angle_deg;
+            self.dwell.enc_n += 1;
+        }
+        self.status = Some(*st);
+    }
+
+    /// An acknowledgement arrived.
+    pub fn on_ack(&mut self, a: &TtAck) {
+        let Some(o) = self.outstanding else {
+            return;
+        };
+        if a.seq != o.cmd.seq || a.axis != self.cfg.axis {
+            return;
+        }
+        self.outstanding = None;
+        if a.result != TtResult::Accepted {
+            let name = TtCommand::from_raw(i64::from(o.cmd.command)).map_or_else(
+                || format!("command {}", o.cmd.command),
+                |c| format!("{c:?}"),
+            );
+            let w = self.where_();
+            self.fail(format!("turntable rejected {name} at {w}: {:?}", a.result));
+        }
+    }
+
+    fn send(&mut self, c: TtCommand, arg: f64) -> TtCmd {
+        self.seq = self.seq.wrapping_add(1);
+        let cmd = TtCmd {
+            seq: self.seq,
+            command: c as u8,
+            axis: self.cfg.axis,
+            arg,
+        };
+        self.outstanding = Some(Outstanding {
+            cmd,
+            sent_at: self.t,
+            tries: 0,
+        });
+        self.last_sent = self.t;
+        cmd
+    }
+
+    /// The next command to send at IMU time `t` (s), if any. Call after feeding the inputs.
+    pub fn poll(&mut self, t: f64) -> Option<TtCmd> {
+        self.t = t;
+        self.t_start.get_or_insert(t);
+        if self.finished() {
+            return None;
+        }
+        if let Some(o) = self.outstanding {
+            if t - o.sent_at > self.cfg.ack_timeout_s {
+                if o.tries >= self.cfg.ack_retries {
+                    let name = TtCommand::from_raw(i64::from(o.cmd.command))
+                        .map_or_else(|| "command".to_string(), |c| format!("{c:?}"));
+                    let w = self.where_();
+                    self.fail(format!(
+                        "no acknowledgement of {name} (seq {}) at {w} after {} tries",
+                        o.cmd.seq,
+                        o.tries + 1
+                    ));
+                    return None;
+                }
+                // resend under a new sequence number
+                self.seq = self.seq.wrapping_add(1);
+                let cmd = TtCmd {
+                    seq: self.seq,
+                    ..o.cmd
+                };
+                self.outstanding = Some(Outstanding {
+                    cmd,
+                    sent_at: t,
+                    tries: o.tries + 1,
+                });
+                self.last_sent = t;
+                return Some(cmd);
+            }
+            return None;
+        }
+        if self.queue.is_empty() {
+            self.step();
+            if self.finished() {
+                return None;
+            }
+        }
+        if !self.queue.is_empty() {
+            let (c, arg) = self.queue.remove(0);
+            return Some(self.send(c, arg));
+        }
+        if t - self.last_sent >= self.cfg.heartbeat_s {
+            return Some(self.send(TtCommand::Heartbeat, 0.0));
+        }
+        None
+    }
+
+    fn state(&self) -> Option<TtState> {
+        self.status.map(|s| s.state)
+    }
+
+    /// Advance the sequence on the turntable's state (no command outstanding).
+    fn step(&mut self) {
+        let since = self.t - self.phase_since;
+        let w = self.where_();
+        match self.phase {
+            Phase::Enabling => {
+                if let Some(s) = self.state() {
+                    if s == TtState::Disabled {
+                        if since > self.cfg.move_timeout_s {
+                            self.fail("turntable stays disabled after Enable".into());
+                        }
+                        return;
+                    }
+                    self.k = 0;
+                    self.begin_position();
+                } else if since > self.cfg.move_timeout_s {
+                    self.fail("no turntable status frames: is the mechanism on the bus?".into());
+                }
+            }
+            Phase::Unlocking => match self.state() {
+                Some(TtState::Idle) => {
+                    if self.returning {
+                        self.enter(Phase::Returning);
+                        self.queue.push((TtCommand::Home, 0.0));
+                    } else {
+                        let target = self.target();
+                        self.enter(Phase::Indexing);
+                        self.queue.push((TtCommand::IndexAbs, target));
+                    }
+                }
+                _ if since > self.cfg.lock_timeout_s => {
+                    self.fail(format!("lock pin did not withdraw at {w}"))
+                }
+                _ => {}
+            },
+            Phase::Indexing | Phase::Returning => {
+                if self.state() == Some(TtState::Idle) && (self.seen_moving || since > 1.0) {
+                    // check we are where we asked to be
+                    let want = if self.phase == Phase::Returning {
+                        0.0
+                    } else {
+                        self.target()
+                    };
+                    if let Some(st) = self.status {
+                        let d = (st.angle_deg - want).rem_euclid(360.0);
+                        if d.min(360.0 - d) > 0.05 {
+                            self.fail(format!(
+                                "turntable at {:.4} deg, not at {want} deg, after the move ({w})",
+                                st.angle_deg
+                            ));
+                            return;
+                        }
+                    }
+                    let next = if self.phase == Phase::Returning {
+                        Phase::LockingZero
+                    } else {
+                        Phase::Locking
+                    };
+                    self.enter(next);
+                    self.queue.push((TtCommand::Lock, 0.0));
+                } else if since > self.cfg.move_timeout_s {
+                    self.fail(format!(
+                        "move did not finish within {} s at {w}",
+                        self.cfg.move_timeout_s
+                    ));
+                }
+            }
+            Phase::Locking | Phase::LockingZero => {
+                if self.state() == Some(TtState::Locked) {
+                    if self.phase == Phase::LockingZero {
+                        self.finish();
+                    } else {
+                        self.enter(Phase::Settling);
+                    }
+                } else if since > self.cfg.lock_timeout_s {
+                    self.fail(format!(
+                        "lock pin did not engage within {} s at {w}",
+                        self.cfg.lock_timeout_s
+                    ));
+                }
+            }
+            Phase::Settling => {
+                if since >= self.cfg.settle_s {
+                    self.start_dwell();
+                }
+            }
+            Phase::Dwell | Phase::Disturbed => {}
+            Phase::Done | Phase::Aborted => {}
+        }
+    }
+
+    fn target(&self) -> f64 {
+        self.cfg.positions_deg.get(self.k).copied().unwrap_or(0.0)
+    }
+
+    fn begin_position(&mut self) {
+        self.repeats_here = 0;
+        self.enter(Phase::Unlocking);
+        if self.state() == Some(TtState::Locked) {
+            self.queue.push((TtCommand::Unlock, 0.0));
+        }
+    }
+
+    fn start_dwell(&mut self) {
+        self.enter(Phase::Dwell);
+        self.dwell = Dwell {
+            t0: self.t,
+            ..Dwell::default()
+        };
+    }
+
+    /// An attitude/velocity update from the processing chain, valid at IMU time `t` (s):
+    /// rotation vector `phi` and velocity increment `dv` over the update interval.
+    pub fn on_update(&mut self, t: f64, phi: [f64; 3], dv: [f64; 3]) {
+        self.t = t;
+        match self.phase {
+            Phase::Dwell => self.dwell_update(t, phi, dv),
+            Phase::Disturbed => {
+                // watch for quiet: a block of the quiet length with no departure
+                self.dwell_update(t, phi, dv);
+                if t - self.quiet_since >= self.cfg.quiet_s {
+                    if self.dwell.disturbed {
+                        // still moving: keep waiting
+                        self.quiet_since = t;
+                        self.dwell = Dwell {
+                            t0: t,
+                            ..Dwell::default()
+                        };
+                    } else {
+                        self.start_dwell();
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn dwell_update(&mut self, t: f64, phi: [f64; 3], dv: [f64; 3]) {
+        let d = &mut self.dwell;
+        d.theta += Vector3::from(phi);
+        d.vel += Vector3::from(dv);
+        let w = self.cfg.end_window_s;
+        let tau = t - d.t0;
+        let dur = if self.phase == Phase::Dwell {
+            self.cfg.dwell_s
+        } else {
+            self.cfg.quiet_s
+        };
+        let block = dur / self.cfg.blocks as f64;
+        // window means at each block boundary: the window [b - w/2, b + w/2], clipped to the dwell
+        let next_b = d.bounds.len() as f64 * block;
+        let (lo, hi) = ((next_b - w / 2.0).max(0.0), (next_b + w / 2.0).min(dur));
+        if tau >= lo && tau <= hi {
+            d.cur_win.0 += t;
+            d.cur_win.1 += d.theta;
+            d.cur_win.2 += d.vel;
+            d.cur_win.3 += 1;
+        }
+        if tau > hi && d.cur_win.3 > 0 {
+            let n = f64::from(d.cur_win.3);
+            d.bounds
+                .push((d.cur_win.0 / n, d.cur_win.1 / n, d.cur_win.2 / n));
+            d.cur_win = (0.0, Vector3::zeros(), Vector3::zeros(), 0);
+            // disturbance check on the block just closed against the first block
+            let nb = d.bounds.len();
+            if nb >= 3 {
+                let rate = |i: usize| {
+                    let (t0, a0, v0) = d.bounds[i - 1];
+                    let (t1, a1, v1) = d.bounds[i];
+                    ((a1 - a0) / (t1 - t0), (v1 - v0) / (t1 - t0))
+                };
+                let (w1, f1) = rate(1);
+                let (wn, fn_) = rate(nb - 1);
+                let dw = (wn - w1).xy().norm() * DPH;
+                let df = (fn_ - f1).norm();
+                if dw > self.cfg.disturbance_rate_dph || df > self.cfg.disturbance_accel_mps2 {
+                    d.disturbed = true;
+                }
+            }
+        }
+        // micro-windows: the mean angle over each 0.1 s (which averages the dither residue);
+        // the rate between consecutive ones catches oscillations a block average would hide
+        if d.micro.3 == 0 {
+            d.micro_t0 = t;
+        }
+        d.micro.0 += t;
+        d.micro.1 += d.theta;
+        d.micro.2 += d.vel;
+        d.micro.3 += 1;
+        if t - d.micro_t0 >= MICRO_S {
+            let n = f64::from(d.micro.3);
+            let m = (d.micro.0 / n, d.micro.1 / n, d.micro.2 / n);
+            d.micro = (0.0, Vector3::zeros(), Vector3::zeros(), 0);
+            if let (Some(last), true) = (d.last_micro, d.bounds.len() >= 2) {
+                let dt = m.0 - last.0;
+                let (w, f) = ((m.1 - last.1) / dt, (m.2 - last.2) / dt);
+                let (t0, a0, v0) = d.bounds[0];
+                let (t1, a1, v1) = d.bounds[1];
+                let (wr, fr) = ((a1 - a0) / (t1 - t0), (v1 - v0) / (t1 - t0));
+                if (w - wr).xy().norm() * DPH > MICRO_RATE_FACTOR * self.cfg.disturbance_rate_dph
+                    || (f - fr).norm() > self.cfg.disturbance_accel_mps2
+                {
+                    d.disturbed = true;
+                }
+            }
+            d.last_micro = Some(m);
+        }
+        if self.phase == Phase::Dwell {
+            if self.dwell.disturbed {
+                self.repeats_here += 1;
+                self.repeats += 1;
+                if self.repeats_here > self.cfg.max_repeats {
+                    let w = self.where_();
+                    self.fail(format!(
+                        "base disturbed during {} dwells in a row at {w}",
+                        self.repeats_here
+                    ));
+                    return;
+                }
+                self.enter(Phase::Disturbed);
+                self.quiet_since = t;
+                self.dwell = Dwell {
+                    t0: t,
+                    ..Dwell::default()
+                };
+                return;
+            }
+            if self.dwell.bounds.len() > self.cfg.blocks {
+                self.finish_position();
+            }
+        }
+    }
+
+    fn finish_position(&mut self) {
+        let d = &self.dwell;
+        let nb = d.bounds.len();
+        let (t0, a0, v0) = d.bounds[0];
+        let (t1, a1, v1) = d.bounds[nb - 1];
+        let w_b = (a1 - a0) / (t1 - t0);
+        let f_b = (v1 - v0) / (t1 - t0);
+        // level this position from its own specific force
+        let roll = (-f_b.x).atan2(f_b.z);
+        let pitch = f_b.y.atan2((f_b.x * f_b.x + f_b.z * f_b.z).sqrt());
+        let level = Rotation3::from_axis_angle(&Vector3::x_axis(), pitch)
+            * Rotation3::from_axis_angle(&Vector3::y_axis(), roll);
+        let w_l = level * w_b;
+        // noise: scatter of the block rates (horizontal), scaled to the whole dwell
+        let rates: Vec<Vector3<f64>> = (1..nb)
+            .map(|i| {
+                level * ((d.bounds[i].1 - d.bounds[i - 1].1) / (d.bounds[i].0 - d.bounds[i - 1].0))
+            })
+            .collect();
+        let m = rates.len() as f64;
+        let mean = rates.iter().fold(Vector3::zeros(), |a, r| a + r) / m;
+        let var: f64 = rates
+            .iter()
+            .map(|r| (r - mean).xy().norm_squared() / 2.0)
+            .sum::<f64>()
+            / (m - 1.0).max(1.0);
+        let sigma = (var / m).sqrt();
+        let table = if d.enc_n > 0 {
+            d.enc_sum / f64::from(d.enc_n)
+        } else {
+            self.target()
+        };
+        self.results.push(PositionResult {
+            commanded_deg: self.target(),
+            table_deg: table,
+            rate_dph: [w_l.x * DPH, w_l.y * DPH, w_l.z * DPH],
+            sigma_dph: sigma * DPH,
+            tilt_deg: [pitch.to_degrees(), roll.to_degrees()],
+            repeats: self.repeats_here,
+        });
+        self.k += 1;
+        if self.k < self.cfg.positions_deg.len() {
+            self.begin_position();
+        } else {
+            // back to zero and lock
+            self.returning = true;
+            self.begin_position();
+        }
+    }
+
+    /// Solve for heading and biases from the positions measured so far (two or more).
+    pub fn solve(
+        results: &[PositionResult],
+        latitude_deg: f64,
+    ) -> Option<(f64, f64, [f64; 2], f64)> {
+        if results.len() < 2 {
+            return None;
+        }
+        let mut ata = Matrix4::<f64>::zeros();
+        let mut atb = Vector4::<f64>::zeros();
+        for r in results {
+            let phi = r.table_deg.to_radians();
+            let wgt = 1.0 / r.sigma_dph.max(1e-6).powi(2);
+            for (row, g) in [
+                (Vector4::new(-phi.cos(), phi.sin(), 1.0, 0.0), r.rate_dph[0]),
+                (Vector4::new(phi.sin(), phi.cos(), 0.0, 1.0), r.rate_dph[1]),
+            ] {
+                ata += row * row.transpose() * wgt;
+                atb += row * g * wgt;
+            }
+        }
+        let cov = ata.try_inverse()?;
+        let x = cov * atb;
+        let (s, c) = (x[0], x[1]);
+        let heading = s.atan2(c).to_degrees().rem_euclid(360.0);
+        let n2 = s * s + c * c;
+        let var =
+            (c * c * cov[(0, 0)] + s * s * cov[(1, 1)] - 2.0 * s * c * cov[(0, 1)]) / (n2 * n2);
+        let _ = latitude_deg;
+        Some((
+            heading,
+            var.max(0.0).sqrt().to_degrees(),
+            [x[2], x[3]],
+            n2.sqrt(),
+        ))
+    }
+
+    fn finish(&mut self) {
+        let Some((heading, sigma, bias, wn)) = Self::solve(&self.results, self.cfg.latitude_deg)
+        else {
+            self.fail("too few positions measured to solve".into());
+            return;
+        };
+        let expected = earth::OMEGA_IE * self.cfg.latitude_deg.to_radians().cos() * DPH;
+        self.result = Some(NorthResult {
+            heading_deg: heading,
+            sigma_deg: sigma,
+            gyro_bias_dph: bias,
+            horizontal_earth_rate_dph: wn,
+            expected_earth_rate_dph: expected,
+            tilt_deg: self.results[0].tilt_deg,
+            dwell_total_s: self.cfg.dwell_s * self.results.len() as f64,
+            duration_s: self.t - self.t_start.unwrap_or(self.t),
+            repeats: self.repeats,
+            positions: self.results.clone(),
+        });
+        self.enter(Phase::Done);
+    }
+
+    /// Live progress.
+    pub fn progress(&self) -> Progress {
+        let est = Self::solve(&self.results, self.cfg.latitude_deg);
+        let dwell_left = match self.phase {
+            Phase::Dwell => (self.cfg.dwell_s - (self.t - self.dwell.t0)).max(0.0),
+            Phase::Done | Phase::Aborted | Phase::Returning | Phase::LockingZero => 0.0,
+            _ => self.cfg.dwell_s,
+        };
+        Progress {
+            phase: self.phase,
+            position: (self.k + 1).min(self.cfg.positions_deg.len()),
+            positions: self.cfg.positions_deg.len(),
+            dwell_left_s: dwell_left,
+            heading_deg: self
+                .result
+                .as_ref()
+                .map(|r| r.heading_deg)
+                .or(est.map(|e| e.0)),
+            sigma_deg: self
+                .result
+                .as_ref()
+                .map(|r| r.sigma_deg)
+                .or(est.map(|e| e.1)),
+            elapsed_s: self.t - self.t_start.unwrap_or(self.t),
+            repeats: self.repeats,
+        }
+    }
+}
