@@ -98,11 +98,24 @@ fn write(sock: &CanSocket, iface: &str, f: &RawFrame) -> Result<u64, CanTxError>
     }
 }
 
-/// Live progress shared with the caller: simulated milliseconds sent so far.
+/// Live progress shared with the caller and the other emulators: the simulated time the IMU
+/// stream has reached. It is the bench's "now": when the IMU falls behind the wall clock (a slow
+/// machine at a high speed factor) the other emulators wait for it rather than run ahead.
 #[derive(Debug, Default)]
 pub struct Progress {
-    /// Simulated time reached, ms.
-    pub sim_ms: AtomicU64,
+    /// Simulated time reached, microseconds.
+    pub sim_us: AtomicU64,
+}
+
+impl Progress {
+    /// Simulated time reached, s.
+    pub fn now(&self) -> f64 {
+        self.sim_us.load(Ordering::Acquire) as f64 * 1e-6
+    }
+
+    fn set(&self, t: f64) {
+        self.sim_us.store((t * 1e6) as u64, Ordering::Release);
+    }
 }
 
 /// The IMU's frames as they go on the bus, with the configured faults injected. Pure (no I/O):
@@ -216,15 +229,9 @@ pub fn run_imu(
             retries += write(&sock, iface, f)?;
             written += 1;
         }
-        if bus.stats.samples.is_multiple_of(200) {
-            progress
-                .sim_ms
-                .store((t * 1000.0) as u64, Ordering::Relaxed);
-        }
+        progress.set(t);
     }
-    progress
-        .sim_ms
-        .store((bus.next_time() * 1000.0) as u64, Ordering::Relaxed);
+    progress.set(bus.next_time());
     Ok(TxStats {
         frames: written,
         enobufs_retries: retries,
@@ -249,11 +256,13 @@ pub struct TurntableTxStats {
 }
 
 /// Run the turntable on `iface` until `stop` is set (or `duration_s` of simulated time):
-/// TT_CMD in, TT_ACK out at once, TT_STATUS at the mechanism's status rate, paced by `clock`.
+/// TT_CMD in, TT_ACK out at once, TT_STATUS at the mechanism's status rate. Its time is the IMU
+/// stream's (`progress`), so the mechanism and the gyros share one simulated clock even when the
+/// IMU runs behind the wall clock.
 pub fn run_turntable(
     iface: &str,
     mut tt: crate::turntable::Turntable,
-    clock: SimClock,
+    progress: &Progress,
     duration_s: f64,
     stop: &AtomicBool,
 ) -> Result<TurntableTxStats, CanTxError> {
@@ -281,11 +290,9 @@ pub fn run_turntable(
         Ok(())
     };
     while next_status <= duration_s && !stop.load(Ordering::Relaxed) {
-        let due = clock.wall_at(next_status);
-        let wait = due.saturating_duration_since(Instant::now());
-        match sock.read_frame_timeout(wait.max(Duration::from_micros(100))) {
+        match sock.read_frame_timeout(Duration::from_micros(500)) {
             Ok(f) => {
-                let t = clock.now();
+                let t = progress.now();
                 match wire::from_can_frame(&f)
                     .ok()
                     .and_then(|r| wire::Message::decode(&r).ok())
@@ -317,18 +324,17 @@ pub fn run_turntable(
                 });
             }
         }
-        if Instant::now() < due {
-            continue;
+        while next_status <= progress.now() && next_status <= duration_s {
+            acks.clear();
+            tt.advance(next_status, &mut acks);
+            for a in acks.drain(..) {
+                send(wire::Message::TtAck(a), &mut st)?;
+            }
+            for s in tt.status(next_status) {
+                send(wire::Message::TtStatus(s), &mut st)?;
+            }
+            next_status += period;
         }
-        acks.clear();
-        tt.advance(next_status, &mut acks);
-        for a in acks.drain(..) {
-            send(wire::Message::TtAck(a), &mut st)?;
-        }
-        for s in tt.status(next_status) {
-            send(wire::Message::TtStatus(s), &mut st)?;
-        }
-        next_status += period;
     }
     Ok(st)
 }

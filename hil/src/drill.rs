@@ -33,6 +33,27 @@ pub struct DrillOutcome {
     pub result: Option<serde_json::Value>,
 }
 
+/// One live progress line from a progress object (nav's JSON or [`Progress`]).
+pub fn progress_line(p: &serde_json::Value) -> String {
+    let num = |k: &str| p[k].as_f64();
+    let est = match (num("heading_deg"), num("sigma_deg")) {
+        (Some(h), Some(s)) => format!("heading {h:8.3} deg +- {s:.3}"),
+        _ => "heading   --".into(),
+    };
+    format!(
+        "drill: {:<11} position {}/{}  dwell left {:5.1} s  {est}  t = {:6.1} s{}",
+        p["phase"].as_str().unwrap_or("?"),
+        p["position"].as_u64().unwrap_or(0),
+        p["positions"].as_u64().unwrap_or(0),
+        num("dwell_left_s").unwrap_or(0.0),
+        num("elapsed_s").unwrap_or(0.0),
+        match p["repeats"].as_u64() {
+            Some(0) | None => String::new(),
+            Some(n) => format!("  ({n} dwell(s) repeated)"),
+        }
+    )
+}
+
 /// Wrap an angle difference to (-180, 180].
 pub fn wrap180(d: f64) -> f64 {
     let w = d.rem_euclid(360.0);

@@ -33,8 +33,13 @@ pub struct RunReport {
     pub frames_per_wall_second: f64,
     /// What the emulator sent.
     pub tx: TxStats,
-    /// The same scenario run in process (no bus): the reference nav must reproduce.
-    pub in_process: InProcess,
+    /// The same scenario run in process (no bus): the reference nav must reproduce (none for
+    /// runs with a turntable, which moves on nav's own commands).
+    pub in_process: Option<InProcess>,
+    /// What the turntable emulator did (runs with a turntable).
+    pub turntable: Option<emulators::can::TurntableTxStats>,
+    /// The north-finding drill's outcome (drills).
+    pub drill: Option<crate::drill::DrillOutcome>,
     /// nav's exit status.
     pub nav_exit: Option<i32>,
     /// nav's summary (as nav wrote it).
@@ -68,7 +73,7 @@ fn vec3(v: &Value, key: &str) -> Vector3<f64> {
 pub fn checks(
     s: &Scenario,
     tx: &TxStats,
-    reference: &InProcess,
+    reference: Option<&InProcess>,
     nav: &Value,
     nav_exit: Option<i32>,
 ) -> (Vec<Check>, i64) {
@@ -129,8 +134,11 @@ pub fn checks(
             s.faults.duplicate_samples.len()
         ),
     });
-    let same_stream = lost == 0;
-    attitude_checks(&mut out, reference, nav, same_stream);
+    // a turntable moves on nav's own commands: there is no in-process run to compare with
+    let Some(reference) = reference else {
+        return (out, lost);
+    };
+    attitude_checks(&mut out, reference, nav, lost == 0);
     if let (Some(w_truth), Some(f_truth)) = (
         reference.expected_rate_dph,
         reference.expected_specific_force_mps2,
@@ -145,6 +153,34 @@ pub fn checks(
         );
     }
     (out, lost)
+}
+
+/// The drill's verdict: finished, within tolerance, error against the estimated sigma.
+pub fn drill_checks(out: &mut Vec<Check>, s: &Scenario, o: &crate::drill::DrillOutcome) {
+    out.push(Check {
+        name: "north-finding finished".into(),
+        pass: o.abort.is_none() && o.heading_deg.is_some(),
+        detail: match (&o.abort, o.heading_deg) {
+            (Some(why), _) => format!("aborted: {why}"),
+            (None, Some(h)) => format!(
+                "heading {h:.4} deg in {:.1} s, {} dwell(s) repeated",
+                o.duration_s, o.repeats
+            ),
+            (None, None) => "no result reported".into(),
+        },
+    });
+    if let (Some(e), Some(sig)) = (o.error_deg, o.sigma_deg) {
+        out.push(Check {
+            name: "heading within the drill's tolerance".into(),
+            pass: e.abs() <= s.heading_tolerance_deg,
+            detail: format!(
+                "error {e:+.4} deg (truth {:.4}), tolerance {} deg; estimated sigma {sig:.4} deg, error = {:.2} sigma",
+                o.truth_deg,
+                s.heading_tolerance_deg,
+                e.abs() / sig.max(1e-12)
+            ),
+        });
+    }
 }
 
 /// nav on the bus against the same stream processed in process.
@@ -245,6 +281,29 @@ pub fn card(r: &RunReport) -> String {
         r.tx.frames, r.frames_per_wall_second, r.bus_lost_frames, r.tx.dropped_samples
     );
     let _ = writeln!(s, "{line}");
+    if let Some(d) = &r.drill {
+        let f = |x: Option<f64>, p: usize| x.map_or("--".to_string(), |v| format!("{v:.p$}"));
+        let _ = writeln!(s, " NORTH-FINDING DRILL");
+        let _ = writeln!(
+            s,
+            "   found heading {:>10} deg    truth {:.4} deg    error {:>9} deg",
+            f(d.heading_deg, 4),
+            d.truth_deg,
+            f(d.error_deg, 4)
+        );
+        let _ = writeln!(
+            s,
+            "   sigma         {:>10} deg    duration {:.1} s    dwells repeated {}    tolerance {} deg",
+            f(d.sigma_deg, 4),
+            d.duration_s,
+            d.repeats,
+            r.scenario.heading_tolerance_deg
+        );
+        if let Some(why) = &d.abort {
+            let _ = writeln!(s, "   ABORTED: {why}");
+        }
+        let _ = writeln!(s, "{line}");
+    }
     for c in &r.checks {
         let _ = writeln!(
             s,
@@ -275,6 +334,22 @@ pub fn markdown(r: &RunReport) -> String {
         r.frames_per_wall_second,
         if r.pass { "PASS" } else { "FAIL" }
     );
+    if let Some(d) = &r.drill {
+        let f = |x: Option<f64>| x.map_or("--".to_string(), |v| format!("{v:.4}"));
+        let _ = writeln!(
+            s,
+            "## North-finding drill\n\n| found heading | truth | error | sigma | duration | repeats |\n|---|---|---|---|---|---|\n| {} deg | {:.4} deg | {} deg | {} deg | {:.1} s | {} |\n",
+            f(d.heading_deg),
+            d.truth_deg,
+            f(d.error_deg),
+            f(d.sigma_deg),
+            d.duration_s,
+            d.repeats
+        );
+        if let Some(why) = &d.abort {
+            let _ = writeln!(s, "**Aborted:** {why}\n");
+        }
+    }
     let _ = writeln!(s, "| check | result | detail |\n|---|---|---|");
     for c in &r.checks {
         let _ = writeln!(

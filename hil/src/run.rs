@@ -5,7 +5,7 @@
 use crate::report::{self, RunReport};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
-use emulators::can::{Progress, run_imu};
+use emulators::can::{Progress, run_imu, run_turntable};
 use emulators::clock::SimClock;
 use emulators::imu::ImuEmulator;
 use nav::config::{CanConfig, NavConfig, RecordConfig, WatchdogConfig};
@@ -54,6 +54,11 @@ fn nav_config(s: &Scenario, iface: &str) -> NavConfig {
         },
         imu: crate::replay::calibration(s),
         processing: s.processing,
+        north_finding: s
+            .north_finding
+            .as_ref()
+            .map(|nf| crate::drill::nf_config(s, nf))
+            .unwrap_or_default(),
         watchdog: WatchdogConfig {
             imu_timeout_ms: (500.0 / s.speed.max(1.0)).max(100.0) as u64,
         },
@@ -136,7 +141,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     info!(interface = %opts.iface, "starting nav");
     let nav = start_nav(&opts.nav_bin, &cfg_path)?;
 
-    let imu = ImuEmulator::new(s.motion(), s.imu.clone());
+    let (motion, turntable) = s.build();
+    let imu = ImuEmulator::new(motion, s.imu.clone());
     let stop = Arc::new(AtomicBool::new(false));
     let progress = Arc::new(Progress::default());
     let clock = SimClock::start(s.speed);
@@ -151,11 +157,27 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         );
         std::thread::spawn(move || run_imu(&iface, imu, clock, dur, &faults, &stop, &progress))
     };
+    let tt_thread = turntable.map(|tt| {
+        let (iface, stop, dur, progress) = (
+            opts.iface.clone(),
+            stop.clone(),
+            s.duration_s,
+            progress.clone(),
+        );
+        std::thread::spawn(move || run_turntable(&iface, tt, &progress, dur, &stop))
+    });
+    let mut drill = DrillWatch::default();
     let mut next_report = Instant::now() + Duration::from_secs(5);
     while !tx.is_finished() {
         std::thread::sleep(Duration::from_millis(50));
-        if opts.progress && Instant::now() >= next_report {
-            let t = progress.sim_ms.load(Ordering::Relaxed) as f64 / 1000.0;
+        for l in nav.lines.try_iter() {
+            if drill.line(&l, opts.progress) {
+                // north-finding reported: the drill is over
+                stop.store(true, Ordering::Relaxed);
+            }
+        }
+        if opts.progress && s.north_finding.is_none() && Instant::now() >= next_report {
+            let t = progress.now();
             eprintln!(
                 "hil: {t:.1} / {:.1} s simulated (x{})",
                 s.duration_s, s.speed
@@ -164,9 +186,18 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
     }
     let wall = t0.elapsed().as_secs_f64();
+    stop.store(true, Ordering::Relaxed);
     let tx = tx
         .join()
         .map_err(|_| anyhow::anyhow!("IMU emulator thread panicked"))?;
+    let tt_stats = match tt_thread {
+        Some(h) => Some(
+            h.join()
+                .map_err(|_| anyhow::anyhow!("turntable emulator thread panicked"))?
+                .context("turntable emulator")?,
+        ),
+        None => None,
+    };
     // let nav drain its socket before it is told to stop
     std::thread::sleep(Duration::from_millis(500));
     let (tx, nav_out) = match tx {
@@ -178,7 +209,9 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     };
     let (nav_exit, nav_lines) = nav_out;
     for l in &nav_lines {
-        eprintln!("{l}");
+        if !drill.line(l, false) {
+            eprintln!("{l}");
+        }
     }
     let summary_path = opts.out.join("nav-summary.json");
     let nav_json: serde_json::Value = match std::fs::read_to_string(&summary_path) {
@@ -189,8 +222,25 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             summary_path.display()
         ),
     };
-    let reference = crate::replay::run_in_process(s).context("in-process reference run")?;
-    let (checks, lost) = report::checks(s, &tx, &reference, &nav_json, nav_exit);
+    let reference = match s.turntable {
+        None => Some(crate::replay::run_in_process(s).context("in-process reference run")?),
+        Some(_) => None,
+    };
+    let (mut checks, lost) = report::checks(s, &tx, reference.as_ref(), &nav_json, nav_exit);
+    let drill_outcome = s.north_finding.as_ref().map(|_| {
+        let nf = &nav_json["north_finding"];
+        let result: Option<nav::northfind::NorthResult> =
+            serde_json::from_value(nf["result"].clone()).ok();
+        crate::drill::outcome(
+            s.site.heading_deg,
+            result.as_ref(),
+            nf["abort"].as_str(),
+            wall * s.speed,
+        )
+    });
+    if let Some(o) = &drill_outcome {
+        report::drill_checks(&mut checks, s, o);
+    }
     let pass = checks.iter().all(|c| c.pass);
     let r = RunReport {
         scenario: s.clone(),
@@ -200,6 +250,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         frames_per_wall_second: tx.frames as f64 / wall.max(1e-9),
         tx,
         in_process: reference,
+        turntable: tt_stats,
+        drill: drill_outcome,
         nav_exit,
         nav: nav_json,
         bus_lost_frames: lost,
@@ -212,4 +264,32 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     )?;
     std::fs::write(opts.out.join("report.md"), report::markdown(&r))?;
     Ok(r)
+}
+
+/// Follows nav's north-finding lines during a run.
+#[derive(Default)]
+struct DrillWatch {
+    done: bool,
+}
+
+impl DrillWatch {
+    /// Handle one nav stdout line; true when it is north-finding's final word.
+    fn line(&mut self, l: &str, show: bool) -> bool {
+        if let Some(j) = l.strip_prefix("nav: north-finding progress ") {
+            if show && let Ok(p) = serde_json::from_str::<serde_json::Value>(j) {
+                eprintln!("{}", crate::drill::progress_line(&p));
+            }
+            return false;
+        }
+        if l.starts_with("nav: north-finding result") || l.starts_with("nav: north-finding aborted")
+        {
+            if show {
+                eprintln!("{l}");
+            }
+            let first = !self.done;
+            self.done = true;
+            return first;
+        }
+        false
+    }
 }

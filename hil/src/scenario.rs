@@ -39,6 +39,12 @@ pub struct Scenario {
     /// The indexing mechanism the IMU sits on (none: the IMU is fixed to the vehicle).
     #[serde(default)]
     pub turntable: Option<TurntableParams>,
+    /// nav runs four-position north-finding (needs a turntable); the run ends when it reports.
+    #[serde(default)]
+    pub north_finding: Option<nav::northfind::NorthFindingConfig>,
+    /// A drill passes when the heading error is within this, deg.
+    #[serde(default = "default_tolerance")]
+    pub heading_tolerance_deg: f64,
     /// Disturbances of the parked vehicle (door slams, climbing in, wind).
     #[serde(default)]
     pub disturbance: Vec<Disturbance>,
@@ -58,6 +64,10 @@ pub struct Scenario {
 
 fn one() -> f64 {
     1.0
+}
+
+fn default_tolerance() -> f64 {
+    0.1
 }
 
 impl Scenario {
@@ -89,6 +99,12 @@ impl Scenario {
         self.imu.check().map_err(anyhow::Error::msg)?;
         if let Some(t) = &self.turntable {
             t.check().map_err(anyhow::Error::msg)?;
+        }
+        if let Some(nf) = &self.north_finding {
+            nf.check().map_err(anyhow::Error::msg)?;
+            if self.turntable.is_none() {
+                bail!("north_finding needs a [turntable]");
+            }
         }
         if let Some(d) = &self.drive {
             Drive::plan(d).map_err(anyhow::Error::msg)?;

@@ -19,6 +19,9 @@ pub struct NavConfig {
     /// Dither filter, coning and sculling compensation.
     #[serde(default)]
     pub processing: ProcessingConfig,
+    /// Four-position north-finding on the indexing mechanism at start-up.
+    #[serde(default)]
+    pub north_finding: crate::northfind::NorthFindingConfig,
     /// Liveness watchdog.
     #[serde(default)]
     pub watchdog: WatchdogConfig,
@@ -133,6 +136,9 @@ impl NavConfig {
                 "processing.fir.fs_hz ({}) must equal imu.rate_hz ({})",
                 cfg.processing.fir.fs_hz, c.rate_hz
             )));
+        }
+        if let Err(e) = cfg.north_finding.check() {
+            return Err(invalid(e));
         }
         if let Err(e) = ImuProcessor::new(&cfg.processing) {
             return Err(invalid(format!("processing: {e}")));

@@ -11,6 +11,7 @@ use nav::coning::ConingMethod;
 use nav::earth;
 use nav::fir::FirResponse;
 use nav::imu::{Housekeeping, ImuEvent, ImuFrontEnd, ImuSample, ImuStats};
+use nav::northfind::{NorthFinder, NorthResult, Phase};
 use nav::record::{JsonChannel, Record, Recorder, wall_ns};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -66,9 +67,25 @@ struct Summary {
     specific_force_norm_mps2: f64,
     processing: ProcessingStats,
     attitude: AttitudeSummary,
+    north_finding: Option<NorthFindingSummary>,
     housekeeping: Housekeeping,
     mcap: Option<PathBuf>,
     mcap_messages: u64,
+}
+
+/// North-finding at exit.
+#[derive(Debug, Serialize)]
+struct NorthFindingSummary {
+    /// Last phase.
+    phase: Phase,
+    /// The result, when it finished.
+    result: Option<NorthResult>,
+    /// Why it gave up, when it did.
+    abort: Option<String>,
+    /// Turntable commands sent.
+    commands_sent: u64,
+    /// Turntable frames received (status, acks).
+    turntable_frames: u64,
 }
 
 /// The integrated attitude at exit.
@@ -210,6 +227,16 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let mut fe = ImuFrontEnd::new(cfg.imu);
     let mut proc = ImuProcessor::new(&cfg.processing).context("processing chain")?;
     let fir_response = proc.fir_response();
+    let mut finder = if cfg.north_finding.enabled {
+        Some(NorthFinder::new(cfg.north_finding.clone()).map_err(anyhow::Error::msg)?)
+    } else {
+        None
+    };
+    let mut nf_cmds: Vec<wire::TtCmd> = Vec::new();
+    let (mut nf_sent, mut nf_frames) = (0u64, 0u64);
+    let mut nf_last_print = f64::NEG_INFINITY;
+    let mut nf_last_phase = None;
+    let mut nf_reported = false;
     let mut sums = Sums::default();
     let mut by_msg: BTreeMap<&'static str, u64> = BTreeMap::new();
     let mut unknown: BTreeMap<u32, u64> = BTreeMap::new();
@@ -273,11 +300,30 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                         if matches!(m, Message::ImuGyro(_)) {
                             last_imu = Instant::now();
                         }
+                        if let Some(f) = finder.as_mut() {
+                            match &m {
+                                Message::TtStatus(st) => { nf_frames += 1; f.on_status(st); }
+                                Message::TtAck(a) => { nf_frames += 1; f.on_ack(a); }
+                                _ => {}
+                            }
+                        }
                         fe.on_message(&m, &mut out, &mut ev);
                     }
                     Err(e) => report_bad_frame(&e, &raw, iface, &mut unknown, &mut bad_len, &mut invalid, &recorder, fe.stats().samples),
                 }
-                drain(&mut out, &mut ev, &mut sums, &mut proc, &recorder, sample_ns);
+                drain(&mut out, &mut ev, &mut sums, &mut proc, &recorder, sample_ns, finder.as_mut());
+                if let Some(f) = finder.as_mut() {
+                    let t = proc.valid_sample().saturating_sub(proc.baseline().map_or(0, |b| b as i64)) as f64 / cfg.imu.rate_hz;
+                    while let Some(c) = f.poll(t.max(0.0)) {
+                        nf_cmds.push(c);
+                        if f.finished() { break; }
+                    }
+                    for c in nf_cmds.drain(..) {
+                        send_command(&sock, iface, c).await?;
+                        nf_sent += 1;
+                    }
+                    report_north_finding(f, t, &mut nf_last_print, &mut nf_last_phase, &mut nf_reported, &recorder);
+                }
                 if in_timeout && last_imu.elapsed() < timeout {
                     info!(interface = iface, "IMU data back");
                     in_timeout = false;
@@ -297,7 +343,13 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     }
     fe.flush(&mut out, &mut ev);
     drain(
-        &mut out, &mut ev, &mut sums, &mut proc, &recorder, sample_ns,
+        &mut out,
+        &mut ev,
+        &mut sums,
+        &mut proc,
+        &recorder,
+        sample_ns,
+        finder.as_mut(),
     );
     let dt = 1.0 / cfg.imu.rate_hz;
     let n = (sums.updates * cfg.processing.coning_samples as u64).max(1) as f64;
@@ -344,6 +396,13 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         specific_force_norm_mps2: norm(mean_f),
         processing: pst,
         attitude,
+        north_finding: finder.map(|f| NorthFindingSummary {
+            phase: f.phase(),
+            result: f.result().cloned(),
+            abort: f.abort_reason().map(str::to_string),
+            commands_sent: nf_sent,
+            turntable_frames: nf_frames,
+        }),
         housekeeping: fe.housekeeping(),
         mcap: cfg.record.mcap.clone(),
         mcap_messages: 0,
@@ -408,6 +467,72 @@ fn report_bad_frame(
     }
 }
 
+/// Send one turntable command on the bus.
+async fn send_command(
+    sock: &socketcan::tokio::CanSocket,
+    iface: &str,
+    c: wire::TtCmd,
+) -> Result<()> {
+    let raw = Message::TtCmd(c)
+        .encode()
+        .map_err(|e| anyhow::anyhow!("encoding TT_CMD: {e}"))?;
+    let frame = wire::to_can_frame(&raw).map_err(|e| anyhow::anyhow!("TT_CMD frame: {e}"))?;
+    sock.write_frame(frame)
+        .await
+        .with_context(|| format!("CAN interface {iface}: sending TT_CMD"))?;
+    Ok(())
+}
+
+/// Progress lines on stdout (`nav: north-finding progress {json}` at most once per second of
+/// IMU time and at every phase change; `nav: north-finding result {json}` or
+/// `nav: north-finding aborted: reason` once), and the same as events in the recording.
+fn report_north_finding(
+    f: &NorthFinder,
+    t: f64,
+    last_print: &mut f64,
+    last_phase: &mut Option<(Phase, usize)>,
+    reported: &mut bool,
+    rec: &Option<Recorder>,
+) {
+    let p = f.progress();
+    if last_phase
+        .map(|l| l != (p.phase, p.position))
+        .unwrap_or(true)
+        || t - *last_print >= 1.0
+    {
+        *last_print = t;
+        *last_phase = Some((p.phase, p.position));
+        if let Ok(j) = serde_json::to_string(&p) {
+            println!("nav: north-finding progress {j}");
+            if let Some(r) = rec {
+                r.send(Record::Json {
+                    channel: JsonChannel::Event,
+                    t_ns: wall_ns(),
+                    publish_ns: (t * 1e9) as u64,
+                    json: format!("{{\"kind\":\"north_finding_progress\",\"progress\":{j}}}"),
+                });
+            }
+        }
+    }
+    if f.finished() && !*reported {
+        *reported = true;
+        if let Some(r) = f.result() {
+            let j = serde_json::to_string(r).unwrap_or_default();
+            info!(
+                heading_deg = r.heading_deg,
+                sigma_deg = r.sigma_deg,
+                "north found"
+            );
+            println!("nav: north-finding result {j}");
+        } else {
+            let why = f.abort_reason().unwrap_or("unknown");
+            warn!("north-finding aborted: {why}");
+            println!("nav: north-finding aborted: {why}");
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
 fn drain(
     out: &mut Vec<ImuSample>,
     ev: &mut Vec<ImuEvent>,
@@ -415,6 +540,7 @@ fn drain(
     proc: &mut ImuProcessor,
     rec: &Option<Recorder>,
     sample_ns: f64,
+    mut finder: Option<&mut NorthFinder>,
 ) {
     let mut updates: Vec<Update> = Vec::new();
     for e in ev.drain(..) {
@@ -438,7 +564,15 @@ fn drain(
         if !invalid_before && let Some(k) = proc.stats().invalid_since {
             warn!("attitude invalid from sample {k}: counter gap too long to difference");
         }
+        let base = proc.baseline().map_or(0, |b| b as i64);
         for u in updates.drain(..) {
+            if let Some(f) = finder.as_deref_mut() {
+                f.on_update(
+                    (u.valid_sample - base) as f64 * sample_ns * 1e-9,
+                    u.phi,
+                    u.dv,
+                );
+            }
             sums.updates += 1;
             for a in 0..3 {
                 sums.phi[a] += u.phi[a];

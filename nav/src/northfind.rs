@@ -170,7 +170,7 @@ pub struct Progress {
 }
 
 /// One position's measurement.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct PositionResult {
     /// Commanded angle, deg.
     pub commanded_deg: f64,
@@ -187,7 +187,7 @@ pub struct PositionResult {
 }
 
 /// The answer.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct NorthResult {
     /// Heading of the IMU at table zero (clockwise from true north), deg, [0, 360).
     pub heading_deg: f64,

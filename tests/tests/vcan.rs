@@ -206,3 +206,55 @@ fn nav_names_a_missing_interface_and_exits_nonzero() {
     );
     assert!(!err.contains("panicked"), "{err}");
 }
+
+/// A north-finding drill through vcan at speed factor 10: nav drives the turntable emulator over
+/// CAN (enable, index, lock, dwell, return to zero), finds the heading and lands within 3 sigma of
+/// the truth (sigma: nav's own estimate, about 0.07 deg for 10 s dwells).
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn north_finding_drill_at_x10_lands_within_3_sigma() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = Command::new(bin("hil"))
+        .args([
+            "drill",
+            "north-finding",
+            "--dwell",
+            "10",
+            "--speed",
+            "10",
+            "--heading",
+            "287.5",
+        ])
+        .args([
+            "--tolerance",
+            "0.5",
+            "--iface",
+            "vcan-e2e3",
+            "--json",
+            "--out",
+        ])
+        .arg(dir.path())
+        .output()
+        .expect("hil runs");
+    eprintln!("{}", String::from_utf8_lossy(&o.stderr));
+    let r: Value = serde_json::from_slice(&o.stdout).expect("JSON report");
+    for (name, pass, detail) in checks(&r) {
+        eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
+        assert!(pass, "check failed: {name}: {detail}");
+    }
+    let d = &r["drill"];
+    let (e, sig) = (
+        d["error_deg"].as_f64().unwrap(),
+        d["sigma_deg"].as_f64().unwrap(),
+    );
+    assert!(e.abs() <= 3.0 * sig, "error {e} deg, sigma {sig} deg");
+    assert!(sig < 0.2, "{sig}");
+    let nf = &r["nav"]["north_finding"];
+    assert_eq!(nf["phase"], "done");
+    assert!(
+        nf["commands_sent"].as_u64().unwrap() > 20,
+        "heartbeats and moves went over CAN"
+    );
+    assert!(r["turntable"]["status_frames"].as_u64().unwrap() > 1000);
+    assert!(dir.path().join("report.md").is_file());
+}
