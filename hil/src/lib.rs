@@ -3,8 +3,10 @@
 pub mod bench;
 pub mod drill;
 pub mod experiment;
+pub mod montecarlo;
 pub mod plot;
 pub mod replay;
 pub mod report;
 pub mod run;
 pub mod scenario;
+pub mod validate;

@@ -42,6 +42,9 @@ enum Cmd {
     },
     /// Print the DBC file of the wire contract.
     Dbc,
+    /// Validation suites against a device on a CAN interface (the emulator or real hardware).
+    #[command(subcommand)]
+    Validate(Validate),
     /// Operator drills on vcan (emulators + the production nav binary).
     #[command(subcommand)]
     Drill(Drill),
@@ -57,6 +60,57 @@ enum Cmd {
         #[arg(long, default_value_t = 3)]
         passes: u32,
     },
+}
+
+#[derive(Subcommand)]
+enum Validate {
+    /// The indexing mechanism: index accuracy and settle time at each detent, lock engagement,
+    /// zero return, rate-mode accuracy and stability, rejection of invalid commands, heartbeat
+    /// timeout stop, emergency stop. Prints a pass/fail table and writes validation.json.
+    Turntable(ValidateArgs),
+}
+
+/// Faults the emulated mechanism can be given for validation.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum TtFault {
+    /// The motor stalls on the first move.
+    Stall,
+    /// The lock pin never engages.
+    Lock,
+    /// The encoder reports glitched angles now and then.
+    EncoderGlitch,
+    /// The enable command is lost.
+    LostCommands,
+    /// Every command takes 0.2 s to act and be acknowledged.
+    DelayedCommands,
+}
+
+#[derive(clap::Args, Clone)]
+struct ValidateArgs {
+    /// CAN interface of the mechanism.
+    #[arg(long, default_value = "vcan0")]
+    iface: String,
+    /// Axis to test.
+    #[arg(long, default_value_t = 0)]
+    axis: u8,
+    /// Test real hardware on --iface: do not start the emulator.
+    #[arg(long)]
+    real: bool,
+    /// Inject a fault into the emulated mechanism (the suite must catch it).
+    #[arg(long, value_enum)]
+    fault: Option<TtFault>,
+    /// Speed factor of the emulated mechanism.
+    #[arg(long, default_value_t = 1.0)]
+    speed: f64,
+    /// Output folder (default runs/validate-turntable-<unix time>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print the result as JSON on stdout instead of the table.
+    #[arg(long)]
+    json: bool,
+    /// Always use the QEMU guest.
+    #[arg(long)]
+    vm: bool,
 }
 
 #[derive(Subcommand)]
@@ -106,6 +160,26 @@ struct NorthFindingArgs {
 
 #[derive(Subcommand)]
 enum Experiment {
+    /// Monte Carlo of four-position north-finding in process: heading error RMS against the
+    /// bound ARW / (W_ie cos L sqrt(T)), gyro bias effect, other latitudes, drill time against
+    /// accuracy. Writes runs.csv, report.json and report.md.
+    NorthFinding {
+        /// Runs of the main cases (the other cases run a third as many).
+        #[arg(long, default_value_t = 100)]
+        runs: usize,
+        /// Dwell per position of the main cases, s.
+        #[arg(long, default_value_t = 60.0)]
+        dwell: f64,
+        /// Main latitude, deg.
+        #[arg(long, default_value_t = 28.2)]
+        lat: f64,
+        /// Base seed.
+        #[arg(long, default_value_t = 1000)]
+        seed: u64,
+        /// Output folder (default runs/experiment-north-finding-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Paper 000, Tables 1-3: coning drift of the classical, Taylor-tuned and fitted
     /// algorithms on filtered data; writes CSV, JSON, Markdown and an SVG plot.
     Coning {
@@ -172,6 +246,7 @@ fn real_main() -> Result<i32> {
             vm: false,
         }),
         Cmd::Drill(Drill::NorthFinding(a)) => drill_north_finding(a),
+        Cmd::Validate(Validate::Turntable(a)) => validate_turntable(a),
         Cmd::Busload { bitrate } => {
             print!("{}", wire::busload::report(bitrate));
             Ok(0)
@@ -179,6 +254,29 @@ fn real_main() -> Result<i32> {
         Cmd::Dbc => {
             print!("{}", wire::DBC);
             Ok(0)
+        }
+        Cmd::Experiment(Experiment::NorthFinding {
+            runs,
+            dwell,
+            lat,
+            seed,
+            out,
+        }) => {
+            if runs == 0 || dwell.is_nan() || dwell < 2.0 {
+                bail!("--runs must be positive and --dwell at least 2 s");
+            }
+            let out = out.unwrap_or_else(|| default_out("experiment-north-finding"));
+            let o = hil::montecarlo::McOptions {
+                runs,
+                dwell_s: dwell,
+                latitude_deg: lat,
+                seed,
+                ..Default::default()
+            };
+            let r = hil::montecarlo::north_finding(&o, &out, true)?;
+            print!("{}", hil::montecarlo::text(&r));
+            println!(" files: {}", out.display());
+            Ok(if r.within_1_2 { 0 } else { 1 })
         }
         Cmd::Experiment(Experiment::Coning {
             out,
@@ -224,6 +322,122 @@ fn real_main() -> Result<i32> {
             Ok(0)
         }
     }
+}
+
+fn validate_turntable(a: ValidateArgs) -> Result<i32> {
+    use emulators::turntable::{Turntable, TurntableFaults, TurntableParams};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    if a.speed.is_nan() || a.speed <= 0.0 || a.speed > 100.0 {
+        bail!("--speed must be in (0, 100]");
+    }
+    let out = absolute(
+        &a.out
+            .clone()
+            .unwrap_or_else(|| default_out("validate-turntable")),
+    )?;
+    let in_guest = std::env::var_os(GUEST_ENV).is_some();
+    let here = a.real
+        || ((!a.vm || in_guest) && matches!(vcan_setup::can_support(), CanSupport::Available));
+    if !here {
+        let mut args: Vec<String> = vec![
+            "validate".into(),
+            "turntable".into(),
+            "--iface".into(),
+            a.iface.clone(),
+            "--axis".into(),
+            a.axis.to_string(),
+            "--speed".into(),
+            a.speed.to_string(),
+            "--out".into(),
+            out.to_string_lossy().into_owned(),
+        ];
+        if let Some(f) = a.fault {
+            args.extend([
+                "--fault".into(),
+                clap::ValueEnum::to_possible_value(&f)
+                    .map(|v| v.get_name().to_string())
+                    .unwrap_or_default(),
+            ]);
+        }
+        if a.json {
+            args.push("--json".into());
+        }
+        return run_in_guest(args, &out, vec![], vec![], a.json);
+    }
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let emulator = if a.real {
+        None
+    } else {
+        vcan_setup::ensure_vcan(&a.iface)?;
+        let mut faults = TurntableFaults::default();
+        match a.fault {
+            Some(TtFault::Stall) => faults.stall_from_s = Some(0.0),
+            Some(TtFault::Lock) => faults.lock_fails = true,
+            Some(TtFault::EncoderGlitch) => {
+                faults.encoder_glitch_at_s = (0..400).map(|i| 0.5 + 0.25 * f64::from(i)).collect();
+            }
+            Some(TtFault::LostCommands) => faults.lost_command_seqs = vec![4],
+            Some(TtFault::DelayedCommands) => faults.command_delay_s = 0.2,
+            None => {}
+        }
+        let p = TurntableParams {
+            axes: a.axis + 1,
+            faults,
+            ..TurntableParams::default()
+        };
+        p.check().map_err(anyhow::Error::msg)?;
+        let tt = Turntable::new(p);
+        let progress = Arc::new(emulators::can::Progress::default());
+        let clock = emulators::clock::SimClock::start(a.speed);
+        // the mechanism's time: the simulated clock (no IMU here to follow)
+        let ticker = {
+            let (progress, stop) = (progress.clone(), stop.clone());
+            std::thread::spawn(move || {
+                while !stop.load(Ordering::Relaxed) {
+                    progress
+                        .sim_us
+                        .store((clock.now() * 1e6) as u64, Ordering::Release);
+                    std::thread::sleep(std::time::Duration::from_millis(1));
+                }
+            })
+        };
+        let (iface, stop2) = (a.iface.clone(), stop.clone());
+        let h = std::thread::spawn(move || {
+            emulators::can::run_turntable(&iface, tt, &progress, f64::INFINITY, &stop2)
+        });
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        Some((h, ticker))
+    };
+    let result = hil::validate::run_suite(
+        &a.iface,
+        a.axis,
+        if a.real { 1.0 } else { a.speed },
+        &Default::default(),
+    );
+    stop.store(true, Ordering::Relaxed);
+    if let Some((h, ticker)) = emulator {
+        let _ = ticker.join();
+        match h.join() {
+            Ok(r) => {
+                r.context("turntable emulator")?;
+            }
+            Err(_) => bail!("turntable emulator thread panicked"),
+        }
+    }
+    let v = result?;
+    std::fs::write(
+        out.join("validation.json"),
+        serde_json::to_string_pretty(&v)?,
+    )?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        print!("{}", hil::validate::table(&v));
+        println!(" report: {}", out.join("validation.json").display());
+    }
+    Ok(if v.pass { 0 } else { 1 })
 }
 
 /// Disturbance script file: `[[disturbance]]` entries.
@@ -349,18 +563,9 @@ fn run(a: RunArgs) -> Result<i32> {
         }
         return Ok(if r.pass { 0 } else { 1 });
     }
-    if in_guest {
-        bail!(
-            "inside the QEMU guest and still no CAN support: the guest kernel lacks the can/vcan modules"
-        );
-    }
     // No CAN here: run this same command inside the QEMU guest.
-    eprintln!("hil: this kernel has no CAN support; running on real vcan inside a QEMU guest");
-    vcan_setup::install_prereqs()?;
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let exe = std::env::current_exe()?;
+    let mut args: Vec<String> = vec!["run".into()];
     let mut extra = vec![out.clone()];
-    let mut args: Vec<String> = vec![exe.to_string_lossy().into_owned(), "run".into()];
     if let Some(p) = &a.scenario {
         let p = absolute(p)?;
         extra.push(p.parent().map(Path::to_path_buf).unwrap_or_default());
@@ -386,15 +591,38 @@ fn run(a: RunArgs) -> Result<i32> {
     if a.json {
         args.push("--json".into());
     }
-    let shares = vcan_setup::default_shares(&exe, &extra);
-    let shares = dedupe_nested(shares);
+    run_in_guest(args, &out, extra, vec![nav], a.json)
+}
+
+/// Run this program with `args` inside the QEMU guest (this kernel has no CAN): shares the
+/// workspace, `out` and `extra` folders; returns the guest command's exit status.
+fn run_in_guest(
+    args: Vec<String>,
+    out: &Path,
+    mut extra: Vec<PathBuf>,
+    libs_for: Vec<PathBuf>,
+    json: bool,
+) -> Result<i32> {
+    if std::env::var_os(GUEST_ENV).is_some() {
+        bail!(
+            "inside the QEMU guest and still no CAN support: the guest kernel lacks the can/vcan modules"
+        );
+    }
+    eprintln!("hil: this kernel has no CAN support; running on real vcan inside a QEMU guest");
+    vcan_setup::install_prereqs()?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    extra.push(out.to_path_buf());
+    let exe = std::env::current_exe()?;
+    let mut full = vec![exe.to_string_lossy().into_owned()];
+    full.extend(args);
+    let shares = dedupe_nested(vcan_setup::default_shares(&exe, &extra));
     let opts = VmOptions {
         shares,
-        libs_for: vec![nav],
+        libs_for,
         ..VmOptions::default()
     };
-    let o = vcan_setup::run_in_vm(&args, &opts)?;
-    if a.json {
+    let o = vcan_setup::run_in_vm(&full, &opts)?;
+    if json {
         // the guest's console carries the JSON; hand it on as it came
         print!("{}", o.output);
     }

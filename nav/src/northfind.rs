@@ -351,30 +351,13 @@ impl NorthFinder {
             return;
         }
         if st.faults.any() || st.state == TtState::Fault {
-            let f = st.faults;
-            let mut names = Vec::new();
-            for (b, n) in [
-                (f.stall, "stall"),
-                (f.lock, "lock pin"),
-                (f.encoder, "encoder"),
-                (f.heartbeat, "heartbeat timeout"),
-                (f.estop, "emergency stop"),
-                (f.drive, "drive"),
-                (f.limit, "limit"),
-            ] {
-                if b {
-                    names.push(n);
-                }
-            }
             let w = self.where_();
-            self.fail(format!(
-                "turntable fault at {w}: {}",
-                if names.is_empty() {
-                    "fault state".to_string()
-                } else {
-                    names.join(", ")
-                }
-            ));
+            let names = if st.faults.any() {
+                st.faults.names()
+            } else {
+                "fault state".to_string()
+            };
+            self.fail(format!("turntable fault at {w}: {names}"));
             return;
         }
         if st.state == TtState::Moving {

@@ -258,3 +258,79 @@ fn north_finding_drill_at_x10_lands_within_3_sigma() {
     assert!(r["turntable"]["status_frames"].as_u64().unwrap() > 1000);
     assert!(dir.path().join("report.md").is_file());
 }
+
+/// The turntable validation suite passes on the healthy emulator and, with each injected fault,
+/// fails the check that names that fault, with a reason.
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn turntable_validation_catches_every_injected_fault() {
+    let run = |fault: Option<&str>| -> (Value, i32) {
+        let dir = tempfile::tempdir().unwrap();
+        let mut cmd = Command::new(bin("hil"));
+        cmd.args([
+            "validate",
+            "turntable",
+            "--speed",
+            "5",
+            "--iface",
+            "vcan-e2e4",
+            "--json",
+        ])
+        .arg("--out")
+        .arg(dir.path());
+        if let Some(f) = fault {
+            cmd.args(["--fault", f]);
+        }
+        let o = cmd.output().expect("hil runs");
+        let v: Value = serde_json::from_slice(&o.stdout)
+            .unwrap_or_else(|e| panic!("no JSON ({e}): {}", String::from_utf8_lossy(&o.stderr)));
+        assert!(dir.path().join("validation.json").is_file());
+        (v, o.status.code().unwrap_or(-1))
+    };
+    let failed = |v: &Value| -> Vec<(String, String)> {
+        v["checks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|c| c["pass"] == false)
+            .map(|c| {
+                (
+                    c["name"].as_str().unwrap().to_string(),
+                    c["reason"].as_str().unwrap().to_string(),
+                )
+            })
+            .collect()
+    };
+    let (v, code) = run(None);
+    assert_eq!(failed(&v), vec![], "healthy mechanism");
+    assert_eq!(code, 0);
+    assert!(v["checks"].as_array().unwrap().len() >= 17);
+    for (fault, check, words) in [
+        ("stall", "index accuracy at the detents", "stall"),
+        ("lock", "lock engages at each detent", "lock pin"),
+        (
+            "encoder-glitch",
+            "encoder steady while idle",
+            "encoder glitch",
+        ),
+        (
+            "lost-commands",
+            "every command acknowledged",
+            "no acknowledgement",
+        ),
+        (
+            "delayed-commands",
+            "acknowledges promptly",
+            "acknowledged after",
+        ),
+    ] {
+        let (v, code) = run(Some(fault));
+        assert_eq!(code, 1, "{fault}: the suite fails");
+        let f = failed(&v);
+        let hit = f.iter().find(|(n, _)| n == check);
+        assert!(
+            hit.is_some_and(|(_, r)| r.contains(words)),
+            "{fault}: expected '{check}' to fail mentioning '{words}', got {f:?}"
+        );
+    }
+}

@@ -554,6 +554,31 @@ impl TtFaults {
     pub fn any(self) -> bool {
         self.to_array().iter().any(|b| *b)
     }
+
+    /// The names of the faults set, for messages ("stall, lock pin").
+    pub fn names(self) -> String {
+        const NAMES: [&str; 7] = [
+            "stall",
+            "lock pin",
+            "encoder",
+            "heartbeat timeout",
+            "emergency stop",
+            "drive",
+            "limit",
+        ];
+        let set: Vec<&str> = self
+            .to_array()
+            .iter()
+            .zip(NAMES)
+            .filter(|(b, _)| **b)
+            .map(|(_, n)| n)
+            .collect();
+        if set.is_empty() {
+            "none".into()
+        } else {
+            set.join(", ")
+        }
+    }
 }
 
 /// TT_STATUS: one axis' status.
