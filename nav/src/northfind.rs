@@ -78,7 +78,7 @@ impl Default for NorthFindingConfig {
             positions_deg: vec![0.0, 90.0, 180.0, 270.0],
             dwell_s: 60.0,
             settle_s: 1.0,
-            end_window_s: 0.05,
+            end_window_s: 0.1,
             blocks: 10,
             disturbance_rate_dph: 20.0,
             disturbance_accel_mps2: 0.02,
@@ -364,7 +364,10 @@ impl NorthFinder {
             self.seen_moving = true;
         }
         if self.phase == Phase::Dwell {
-            self.dwell.enc_sum += st.angle_deg;
+            // average the offset from the commanded angle: the encoder wraps at 360 deg, and at
+            // the zero detent its noise straddles the wrap
+            let d = (st.angle_deg - self.target()).rem_euclid(360.0);
+            self.dwell.enc_sum += if d > 180.0 { d - 360.0 } else { d };
             self.dwell.enc_n += 1;
         }
         self.status = Some(*st);
@@ -722,11 +725,12 @@ impl NorthFinder {
             .sum::<f64>()
             / (m - 1.0).max(1.0);
         let sigma = (var / m).sqrt();
-        let table = if d.enc_n > 0 {
-            d.enc_sum / f64::from(d.enc_n)
-        } else {
-            self.target()
-        };
+        let table = self.target()
+            + if d.enc_n > 0 {
+                d.enc_sum / f64::from(d.enc_n)
+            } else {
+                0.0
+            };
         self.results.push(PositionResult {
             commanded_deg: self.target(),
             table_deg: table,
