@@ -25,12 +25,16 @@ struct Cli {
 enum Cmd {
     /// Run a scenario on vcan: emulators + nav, then checks, a result card and a report.
     Run(RunArgs),
-    /// The main job: the built-in static run at the paper's start point, with result card and report.
+    /// The main job: a four-position north-finding drill at the paper's start point with a random
+    /// true heading (the GPS-aided drive follows when issue 5 lands), result card and report.
     Demo {
-        /// Speed factor.
+        /// Speed factor (1 = real time, about 4.5 minutes).
         #[arg(long, default_value_t = 1.0)]
         speed: f64,
-        /// Output folder (default runs/<name>-<unix time>).
+        /// Dwell per position, s.
+        #[arg(long, default_value_t = 60.0)]
+        dwell: f64,
+        /// Output folder (default runs/drill-north-finding-<unix time>).
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -235,16 +239,25 @@ fn main() {
 fn real_main() -> Result<i32> {
     match Cli::parse().cmd {
         Cmd::Run(a) => run(a),
-        Cmd::Demo { speed, out } => run(RunArgs {
-            scenario: None,
-            duration: None,
-            speed: Some(speed),
-            iface: "vcan0".into(),
-            out,
-            nav: None,
-            json: false,
-            vm: false,
-        }),
+        Cmd::Demo { speed, dwell, out } => {
+            let seed = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_secs())
+                .unwrap_or(1);
+            drill_north_finding(NorthFindingArgs {
+                heading: None,
+                lat: 28.218157,
+                dwell,
+                speed,
+                disturbances: None,
+                tolerance: 0.1,
+                seed,
+                iface: "vcan0".into(),
+                out,
+                json: false,
+                vm: false,
+            })
+        }
         Cmd::Drill(Drill::NorthFinding(a)) => drill_north_finding(a),
         Cmd::Validate(Validate::Turntable(a)) => validate_turntable(a),
         Cmd::Busload { bitrate } => {
