@@ -8,6 +8,7 @@
 pub mod can;
 pub mod clock;
 pub mod drive;
+pub mod gps;
 pub mod imu;
 pub mod truth;
 pub mod turntable;

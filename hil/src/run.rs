@@ -48,10 +48,11 @@ pub fn sibling_binary(name: &str) -> Result<PathBuf> {
 
 fn nav_config(s: &Scenario, iface: &str) -> NavConfig {
     NavConfig {
-        can: CanConfig {
+        can: Some(CanConfig {
             interface: iface.into(),
             rcvbuf_bytes: 8 << 20,
-        },
+        }),
+        gps: None,
         imu: crate::replay::calibration(s),
         processing: s.processing,
         north_finding: s

@@ -11,8 +11,12 @@ use thiserror::Error;
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NavConfig {
-    /// CAN bus.
-    pub can: CanConfig,
+    /// CAN bus (IMU, turntable). Without it nav runs on the GPS alone (a receiver bring-up).
+    #[serde(default)]
+    pub can: Option<CanConfig>,
+    /// GPS receiver on a serial port.
+    #[serde(default)]
+    pub gps: Option<GpsConfig>,
     /// IMU calibration bound to the unit.
     #[serde(default)]
     pub imu: ImuCalibration,
@@ -39,6 +43,24 @@ pub struct CanConfig {
     /// Socket receive buffer, bytes. Large enough to ride out scheduling hiccups at 4,000 frames/s.
     #[serde(default = "default_rcvbuf")]
     pub rcvbuf_bytes: usize,
+}
+
+/// GPS receiver settings.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GpsConfig {
+    /// Serial device (`/dev/ttyUSB0`, `/dev/ttyS1`; on the bench a pty).
+    pub port: PathBuf,
+    /// Baud rate.
+    #[serde(default = "default_baud")]
+    pub baud: u32,
+    /// Export of every decoded fix as JSON lines (relative to the config file).
+    #[serde(default)]
+    pub fixes_jsonl: Option<PathBuf>,
+}
+
+fn default_baud() -> u32 {
+    9600
 }
 
 fn default_rcvbuf() -> usize {
@@ -115,8 +137,11 @@ impl NavConfig {
             path: path.into(),
             what,
         };
-        if cfg.can.interface.is_empty() {
+        if cfg.can.as_ref().is_some_and(|c| c.interface.is_empty()) {
             return Err(invalid("can.interface is empty".into()));
+        }
+        if cfg.can.is_none() && cfg.gps.is_none() {
+            return Err(invalid("names no device: give [can] and/or [gps]".into()));
         }
         let c = &cfg.imu;
         if c.gyro_pulse_arcsec
@@ -144,9 +169,11 @@ impl NavConfig {
             return Err(invalid(format!("processing: {e}")));
         }
         let base = path.parent().unwrap_or(Path::new("."));
+        let gps_export = cfg.gps.as_mut().and_then(|g| g.fixes_jsonl.as_mut());
         for p in [&mut cfg.record.mcap, &mut cfg.record.summary]
             .into_iter()
             .flatten()
+            .chain(gps_export)
         {
             if p.is_relative() {
                 *p = base.join(&*p);
@@ -175,7 +202,7 @@ mod tests {
         )
         .unwrap();
         let c = NavConfig::load(&p).unwrap();
-        assert_eq!(c.can.interface, "can0");
+        assert_eq!(c.can.as_ref().unwrap().interface, "can0");
         assert_eq!(c.imu, ImuCalibration::default());
         assert_eq!(
             c.record.mcap.as_deref(),
@@ -183,7 +210,7 @@ mod tests {
         );
         // and it round-trips through the writer
         std::fs::write(&p, c.to_toml()).unwrap();
-        assert_eq!(NavConfig::load(&p).unwrap().can.interface, "can0");
+        assert_eq!(NavConfig::load(&p).unwrap().can.unwrap().interface, "can0");
     }
 
     /// The message with its causes, as the binaries print it.

@@ -9,6 +9,7 @@ pub mod coning;
 pub mod earth;
 pub mod fir;
 pub mod gps;
+pub mod gpsport;
 pub mod imu;
 pub mod northfind;
 pub mod record;

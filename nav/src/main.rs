@@ -68,9 +68,29 @@ struct Summary {
     processing: ProcessingStats,
     attitude: AttitudeSummary,
     north_finding: Option<NorthFindingSummary>,
+    gps: Option<GpsSummary>,
     housekeeping: Housekeeping,
     mcap: Option<PathBuf>,
     mcap_messages: u64,
+}
+
+/// The GPS receiver at exit.
+#[derive(Debug, Serialize)]
+struct GpsSummary {
+    /// Serial device.
+    port: PathBuf,
+    /// Stream counters.
+    stats: nav::gps::GpsStats,
+    /// Port trouble (read errors, the device vanishing), and re-opens.
+    port_errors: u64,
+    /// Times the port was (re)opened.
+    opens: u64,
+    /// Fixes handed to navigation.
+    fixes: u64,
+    /// The last fix.
+    last_fix: Option<nav::gps::GpsFix>,
+    /// Export file.
+    fixes_jsonl: Option<PathBuf>,
 }
 
 /// North-finding at exit.
@@ -209,15 +229,34 @@ fn real_main() -> Result<()> {
 }
 
 async fn run(cfg: &NavConfig) -> Result<Summary> {
-    let iface = cfg.can.interface.as_str();
-    let sock = socketcan::tokio::CanSocket::open(iface)
-        .map_err(|e| anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e)))?;
-    if let Err(e) = set_rcvbuf(sock.as_raw_fd(), cfg.can.rcvbuf_bytes) {
-        warn!(
-            interface = iface,
-            "cannot enlarge the receive buffer to {} bytes: {e}", cfg.can.rcvbuf_bytes
-        );
+    let iface = cfg.can.as_ref().map_or("none", |c| c.interface.as_str());
+    let sock = match &cfg.can {
+        Some(c) => {
+            let sock = socketcan::tokio::CanSocket::open(iface).map_err(|e| {
+                anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e))
+            })?;
+            if let Err(e) = set_rcvbuf(sock.as_raw_fd(), c.rcvbuf_bytes) {
+                warn!(
+                    interface = iface,
+                    "cannot enlarge the receive buffer to {} bytes: {e}", c.rcvbuf_bytes
+                );
+            }
+            Some(sock)
+        }
+        None => None,
+    };
+    let gps = match &cfg.gps {
+        Some(g) => Some(nav::gpsport::GpsPort::start(g)?),
+        None => None,
+    };
+    let (gps_tx, mut gps_rx) = tokio::sync::mpsc::unbounded_channel::<nav::gps::GpsFix>();
+    if let Some(g) = &gps {
+        g.forward(gps_tx);
+    } else {
+        drop(gps_tx);
     }
+    let mut gps_fixes = 0u64;
+    let mut last_fix: Option<nav::gps::GpsFix> = None;
     let recorder = match &cfg.record.mcap {
         Some(p) => Some(Recorder::start(p)?),
         None => None,
@@ -251,7 +290,10 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let mut tick = tokio::time::interval(Duration::from_millis(100));
     let sample_ns = 1e9 / cfg.imu.rate_hz;
     info!(interface = iface, "receiving");
-    println!("nav: receiving on {iface}");
+    match &cfg.gps {
+        Some(g) => println!("nav: receiving on {iface} and {}", g.port.display()),
+        None => println!("nav: receiving on {iface}"),
+    }
     let event = |rec: &Option<Recorder>, sample: u64, json: String| {
         if let Some(r) = rec {
             r.send(Record::Json {
@@ -264,7 +306,12 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     };
     loop {
         tokio::select! {
-            r = sock.read_frame() => {
+            r = async {
+                match &sock {
+                    Some(s) => s.read_frame().await,
+                    None => std::future::pending().await,
+                }
+            } => {
                 let f = match r {
                     Ok(f) => f,
                     Err(e) => {
@@ -319,8 +366,10 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                         if f.finished() { break; }
                     }
                     for c in nf_cmds.drain(..) {
-                        send_command(&sock, iface, c).await?;
-                        nf_sent += 1;
+                        if let Some(s) = &sock {
+                            send_command(s, iface, c).await?;
+                            nf_sent += 1;
+                        }
                     }
                     report_north_finding(f, t, &mut nf_last_print, &mut nf_last_phase, &mut nf_reported, &recorder);
                 }
@@ -336,6 +385,13 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                     warn!(interface = iface, "no IMU frame for {} ms (last sample {:?})", timeout.as_millis(), sums.last);
                     event(&recorder, sums.last.unwrap_or(0), format!("{{\"kind\":\"imu_timeout\",\"after_ms\":{}}}", timeout.as_millis()));
                 }
+            }
+            Some(fix) = gps_rx.recv() => {
+                gps_fixes += 1;
+                if let (Some(r), Ok(json)) = (&recorder, serde_json::to_string(&fix)) {
+                    r.send(Record::Json { channel: JsonChannel::Gps, t_ns: wall_ns(), publish_ns: wall_ns(), json });
+                }
+                last_fix = Some(fix);
             }
             _ = sigint.recv() => { info!("SIGINT: finishing"); break; }
             _ = sigterm.recv() => { info!("SIGTERM: finishing"); break; }
@@ -396,6 +452,21 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         specific_force_norm_mps2: norm(mean_f),
         processing: pst,
         attitude,
+        gps: match gps {
+            Some(g) => {
+                let (stats, port_errors, opens) = g.finish();
+                Some(GpsSummary {
+                    port: cfg.gps.as_ref().map(|c| c.port.clone()).unwrap_or_default(),
+                    stats,
+                    port_errors,
+                    opens,
+                    fixes: gps_fixes,
+                    last_fix,
+                    fixes_jsonl: cfg.gps.as_ref().and_then(|c| c.fixes_jsonl.clone()),
+                })
+            }
+            None => None,
+        },
         north_finding: finder.map(|f| NorthFindingSummary {
             phase: f.phase(),
             result: f.result().cloned(),
@@ -670,6 +741,25 @@ fn print_summary(s: &Summary) {
         s.processing.first_suspect
     );
     println!("  IMU timeouts      {}", s.imu_timeouts);
+    if let Some(g) = &s.gps {
+        let t = &g.stats;
+        println!(
+            "  GPS {}  fixes {} ({} no-fix, {} out of range, {} time backwards); sentences {}, bad checksum {}, unparsed {}, garbage bytes {}, binary lines {}, overlong {}; port errors {}, opens {}",
+            g.port.display(),
+            t.fixes,
+            t.no_fix,
+            t.out_of_range,
+            t.time_backwards,
+            t.accepted,
+            t.bad_checksum,
+            t.unparsed,
+            t.garbage_bytes,
+            t.binary_lines,
+            t.overlong_lines,
+            g.port_errors,
+            g.opens
+        );
+    }
     if let Some(p) = &s.mcap {
         println!(
             "  recording         {} ({} messages)",

@@ -62,15 +62,18 @@ pub enum JsonChannel {
     Summary,
     /// `/nav/attitude` (10 Hz).
     Attitude,
+    /// `/gps/fix`.
+    Gps,
 }
 
 impl JsonChannel {
     /// Every JSON channel (each gets its MCAP channel when the file is created).
-    pub const ALL: [JsonChannel; 4] = [
+    pub const ALL: [JsonChannel; 5] = [
         JsonChannel::ImuSample,
         JsonChannel::Event,
         JsonChannel::Summary,
         JsonChannel::Attitude,
+        JsonChannel::Gps,
     ];
 
     fn topic(self) -> &'static str {
@@ -79,6 +82,7 @@ impl JsonChannel {
             JsonChannel::Event => "/nav/event",
             JsonChannel::Summary => "/nav/summary",
             JsonChannel::Attitude => "/nav/attitude",
+            JsonChannel::Gps => "/gps/fix",
         }
     }
 }
