@@ -4,6 +4,7 @@ pub mod bench;
 pub mod drill;
 pub mod experiment;
 pub mod montecarlo;
+pub mod navrun;
 pub mod plot;
 pub mod replay;
 pub mod report;

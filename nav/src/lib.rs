@@ -13,3 +13,4 @@ pub mod gpsport;
 pub mod imu;
 pub mod northfind;
 pub mod record;
+pub mod strapdown;

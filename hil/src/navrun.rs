@@ -1,0 +1,155 @@
+//! In-process navigation runs: the scenario's IMU stream through nav's front end, processing
+//! chain and strapdown navigation, scored against the truth trajectory.
+
+use crate::scenario::Scenario;
+use anyhow::{Context, Result, bail};
+use emulators::can::BusStream;
+use emulators::drive::Drive;
+use emulators::imu::ImuEmulator;
+use nalgebra::Vector3;
+use nav::attitude::ImuProcessor;
+use nav::imu::ImuFrontEnd;
+use nav::strapdown::NavState;
+use serde::Serialize;
+use wire::Message;
+
+/// The truth state of a drive at `t`.
+pub fn truth_state(d: &Drive, t: f64) -> NavState {
+    let (lat, lon, h) = d.position(t);
+    NavState::from_euler(d.heading(t), 0.0, 0.0, d.velocity(t), lat, lon, h)
+}
+
+/// Errors of a navigation run.
+#[derive(Debug, Clone, Serialize)]
+pub struct NavRun {
+    /// Simulated time navigated, s.
+    pub duration_s: f64,
+    /// Horizontal position error at the end, m.
+    pub end_position_error_m: f64,
+    /// Velocity error at the end, m/s.
+    pub end_velocity_error_mps: f64,
+    /// RMS horizontal position error over the run (1 Hz samples), m.
+    pub rms_position_error_m: f64,
+    /// Heading error at the end, deg.
+    pub end_heading_error_deg: f64,
+}
+
+/// Pure inertial navigation of a drive scenario, initialised from truth.
+pub fn pure_inertial(s: &Scenario) -> Result<NavRun> {
+    let Some(spec) = &s.drive else {
+        bail!("scenario {} has no [drive]", s.name);
+    };
+    let drive = Drive::plan(spec).map_err(anyhow::Error::msg)?;
+    let imu = ImuEmulator::new(s.motion(), s.imu.clone());
+    let dt = 1.0 / s.imu.rate_hz;
+    let mut bus = BusStream::new(imu, &s.faults);
+    let mut fe = ImuFrontEnd::new(crate::replay::calibration(s));
+    let mut proc = ImuProcessor::new(&s.processing).context("processing chain")?;
+    let n = s.processing.coning_samples as f64;
+    let (mut frames, mut out, mut ev, mut upd) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut t_first = None;
+    let mut state: Option<NavState> = None;
+    let (mut sq, mut cnt, mut next_sample) = (0.0, 0u64, 1.0);
+    let mut last_t = 0.0;
+    while bus.next_time() <= s.duration_s + 1e-9 {
+        let t = bus.next_time();
+        frames.clear();
+        bus.next_frames(&mut frames);
+        for f in &frames {
+            if let Ok(m) = Message::decode(f) {
+                if matches!(m, Message::ImuGyro(_)) {
+                    t_first.get_or_insert(t);
+                }
+                fe.on_message(&m, &mut out, &mut ev);
+            }
+        }
+        ev.clear();
+        for smp in out.drain(..) {
+            proc.push_sample(&smp, &mut upd);
+        }
+        let base = proc.baseline().unwrap_or(0) as i64;
+        let tf = t_first.unwrap_or(0.0);
+        for u in upd.drain(..) {
+            let tv = tf + (u.valid_sample - base) as f64 * dt;
+            match state.as_mut() {
+                None => {
+                    // start at the truth of the update's start
+                    let mut st = truth_state(&drive, tv - n * dt);
+                    st.update(u.phi, u.dv, n * dt);
+                    state = Some(st);
+                }
+                Some(st) => st.update(u.phi, u.dv, n * dt),
+            }
+            last_t = tv;
+            if tv >= next_sample {
+                next_sample += 1.0;
+                if let Some(st) = &state {
+                    let e = st.position_error_m(&truth_state(&drive, tv));
+                    sq += e.x * e.x + e.y * e.y;
+                    cnt += 1;
+                }
+            }
+        }
+    }
+    let Some(st) = state else {
+        bail!("no navigation updates");
+    };
+    let tr = truth_state(&drive, last_t);
+    let e = st.position_error_m(&tr);
+    let dh = (st.euler().0 - tr.euler().0).to_degrees();
+    Ok(NavRun {
+        duration_s: last_t,
+        end_position_error_m: Vector3::new(e.x, e.y, 0.0).norm(),
+        end_velocity_error_mps: (st.v - tr.v).norm(),
+        rms_position_error_m: (sq / cnt.max(1) as f64).sqrt(),
+        end_heading_error_deg: (dh + 180.0).rem_euclid(360.0) - 180.0,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use emulators::drive::DriveSpec;
+    use emulators::imu::ImuParams;
+
+    fn loop_scenario(imu: ImuParams, duration: f64) -> Scenario {
+        let mut s = Scenario::builtin_static();
+        s.duration_s = duration;
+        s.drive = Some(DriveSpec {
+            lat_deg: 28.218157,
+            lon_deg: 112.989583,
+            height_m: 0.0,
+            waypoints: vec![[0.0, 300.0], [200.0, 300.0], [200.0, 0.0], [0.0, 0.0]],
+            speed_mps: 10.0,
+            accel_mps2: 1.5,
+            turn_rate_dps: 15.0,
+            lateral_accel_mps2: 2.5,
+            laps: 1,
+            start_wait_s: 2.0,
+        });
+        s.imu = imu;
+        s
+    }
+
+    #[test]
+    fn an_ideal_imu_navigates_a_loop_to_within_a_metre() {
+        let s = loop_scenario(ImuParams::ideal(), 120.0);
+        let r = pure_inertial(&s).unwrap();
+        eprintln!("{r:?}");
+        assert!(r.duration_s > 119.0);
+        assert!(r.end_position_error_m < 1.0, "{r:?}");
+        assert!(r.end_velocity_error_mps < 0.05, "{r:?}");
+        assert!(r.end_heading_error_deg.abs() < 0.01, "{r:?}");
+    }
+
+    #[test]
+    #[ignore = "figures: cargo test -p hil --release -- --ignored --nocapture pure_inertial"]
+    fn pure_inertial_with_the_paper_grade_imu() {
+        let mut s = loop_scenario(ImuParams::default(), 600.0);
+        if let Some(d) = s.drive.as_mut() {
+            d.laps = 3;
+        }
+        let r = pure_inertial(&s).unwrap();
+        eprintln!("paper-grade IMU, pure inertial: {r:?}");
+    }
+}
