@@ -5,10 +5,12 @@ use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
 use emulators::can::BusStream;
 use emulators::drive::Drive;
+use emulators::gps::{GpsError, GpsErrorParams};
 use emulators::imu::ImuEmulator;
 use nalgebra::Vector3;
 use nav::attitude::ImuProcessor;
 use nav::imu::ImuFrontEnd;
+use nav::kf::{FilterConfig, Kf};
 use nav::strapdown::NavState;
 use serde::Serialize;
 use wire::Message;
@@ -36,6 +38,18 @@ pub struct NavRun {
 
 /// Pure inertial navigation of a drive scenario, initialised from truth.
 pub fn pure_inertial(s: &Scenario) -> Result<NavRun> {
+    navigate(s, None, &GpsErrorParams::default(), 0.0)
+}
+
+/// Navigate a drive scenario in process: pure inertial (`filter` none) or SINS/GPS with the
+/// filter, GPS fixes at 1 Hz with `gps` errors. The start is the truth with a heading error of
+/// `heading_err_deg` (north-finding's).
+pub fn navigate(
+    s: &Scenario,
+    filter: Option<&FilterConfig>,
+    gps: &GpsErrorParams,
+    heading_err_deg: f64,
+) -> Result<NavRun> {
     let Some(spec) = &s.drive else {
         bail!("scenario {} has no [drive]", s.name);
     };
@@ -51,6 +65,10 @@ pub fn pure_inertial(s: &Scenario) -> Result<NavRun> {
     let mut state: Option<NavState> = None;
     let (mut sq, mut cnt, mut next_sample) = (0.0, 0u64, 1.0);
     let mut last_t = 0.0;
+    let mut kf = filter.map(|f| Kf::new(f.clone(), spec.lat_deg.to_radians()));
+    let mut gps_err = GpsError::new(gps.clone());
+    let (mut f_acc, mut t_acc) = (Vector3::zeros(), 0.0);
+    let mut next_fix = 1.0;
     while bus.next_time() <= s.duration_s + 1e-9 {
         let t = bus.next_time();
         frames.clear();
@@ -71,29 +89,55 @@ pub fn pure_inertial(s: &Scenario) -> Result<NavRun> {
         let tf = t_first.unwrap_or(0.0);
         for u in upd.drain(..) {
             let tv = tf + (u.valid_sample - base) as f64 * dt;
-            match state.as_mut() {
-                None => {
-                    // start at the truth of the update's start
-                    let mut st = truth_state(&drive, tv - n * dt);
-                    st.update(u.phi, u.dv, n * dt);
-                    state = Some(st);
-                }
-                Some(st) => st.update(u.phi, u.dv, n * dt),
-            }
+            let (phi, dv) = match &kf {
+                Some(k) => k.compensate(u.phi, u.dv, n * dt),
+                None => (u.phi, u.dv),
+            };
+            let st = state.get_or_insert_with(|| {
+                // start at the truth of the update's start, heading off by north-finding's error
+                let mut st = truth_state(&drive, tv - n * dt);
+                st.q_nb = nalgebra::UnitQuaternion::from_axis_angle(
+                    &Vector3::z_axis(),
+                    -heading_err_deg.to_radians(),
+                ) * st.q_nb;
+                st
+            });
+            f_acc += st.q_nb * Vector3::from(dv);
+            t_acc += n * dt;
+            st.update(phi, dv, n * dt);
             last_t = tv;
+            if let Some(k) = kf.as_mut() {
+                if t_acc >= 0.1 {
+                    k.propagate(st, &(f_acc / t_acc), t_acc);
+                    f_acc = Vector3::zeros();
+                    t_acc = 0.0;
+                }
+                if tv >= next_fix {
+                    next_fix += 1.0;
+                    let tr = truth_state(&drive, tv);
+                    let e = gps_err.at(tv);
+                    let (rm, rn) = nav::earth::radii(tr.lat);
+                    k.update(
+                        st,
+                        tr.lat + e[1] / rm,
+                        tr.lon + e[0] / (rn * tr.lat.cos()),
+                        tr.h + e[2],
+                    );
+                }
+            }
             if tv >= next_sample {
                 next_sample += 1.0;
-                if let Some(st) = &state {
-                    let e = st.position_error_m(&truth_state(&drive, tv));
-                    sq += e.x * e.x + e.y * e.y;
-                    cnt += 1;
-                }
+                let best = kf.as_ref().map_or(*st, |k| k.corrected(st));
+                let e = best.position_error_m(&truth_state(&drive, tv));
+                sq += e.x * e.x + e.y * e.y;
+                cnt += 1;
             }
         }
     }
     let Some(st) = state else {
         bail!("no navigation updates");
     };
+    let st = kf.as_ref().map_or(st, |k| k.corrected(&st));
     let tr = truth_state(&drive, last_t);
     let e = st.position_error_m(&tr);
     let dh = (st.euler().0 - tr.euler().0).to_degrees();
@@ -140,6 +184,39 @@ mod tests {
         assert!(r.end_position_error_m < 1.0, "{r:?}");
         assert!(r.end_velocity_error_mps < 0.05, "{r:?}");
         assert!(r.end_heading_error_deg.abs() < 0.01, "{r:?}");
+    }
+
+    #[test]
+    fn the_filter_holds_a_paper_grade_imu_to_the_gps_class() {
+        let mut s = loop_scenario(ImuParams::default(), 400.0);
+        if let Some(d) = s.drive.as_mut() {
+            d.laps = 3;
+        }
+        let pure = navigate(&s, None, &GpsErrorParams::default(), 0.03).unwrap();
+        let std_ = navigate(
+            &s,
+            Some(&FilterConfig {
+                kind: nav::kf::FilterKind::Standard,
+                ..FilterConfig::default()
+            }),
+            &GpsErrorParams::default(),
+            0.03,
+        )
+        .unwrap();
+        let fad = navigate(
+            &s,
+            Some(&FilterConfig::default()),
+            &GpsErrorParams::default(),
+            0.03,
+        )
+        .unwrap();
+        eprintln!("pure {pure:?}\nstandard {std_:?}\nfading {fad:?}");
+        assert!(pure.end_position_error_m > 200.0, "{pure:?}");
+        assert!(std_.end_position_error_m < 25.0, "{std_:?}");
+        assert!(fad.end_position_error_m < 25.0, "{fad:?}");
+        assert!(std_.rms_position_error_m < 25.0 && fad.rms_position_error_m < 25.0);
+        // position-only updates keep the heading too (the turns make it observable)
+        assert!(std_.end_heading_error_deg.abs() < 1.0 && fad.end_heading_error_deg.abs() < 1.0);
     }
 
     #[test]

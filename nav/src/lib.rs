@@ -11,6 +11,7 @@ pub mod fir;
 pub mod gps;
 pub mod gpsport;
 pub mod imu;
+pub mod kf;
 pub mod northfind;
 pub mod record;
 pub mod strapdown;

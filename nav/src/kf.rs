@@ -1,0 +1,353 @@
+//! The 15-state SINS/GPS error-state Kalman filter of paper 003: attitude errors (E, N, U),
+//! velocity errors (E, N, U), position errors (lat, lon, h), gyro drifts (body x, y, z) and
+//! accelerometer biases (body x, y, z); position-only measurements `z = p_INS - p_GPS`,
+//! `H = [0 0 I 0 0]`.
+//!
+//! Error model (ENU, `phi` the computed frame's misalignment: `C_b^n' = (I - phi x) C_b^n`):
+//! `phi' = phi x w_in + dw_in - C_b^n eps`,
+//! `dv' = f^n x phi + v x (2 dw_ie + dw_en) - (2 w_ie + w_en) x dv + C_b^n nabla`,
+//! `dL' = dv_N / (R_M + h) - v_N dh / (R_M + h)^2`,
+//! `dlon' = sec L dv_E / (R_N + h) + v_E sec L tan L dL / (R_N + h) - v_E sec L dh / (R_N + h)^2`,
+//! `dh' = dv_U`; drifts and biases are random constants.
+//!
+//! Variants: the standard filter, and the fading-memory filter (`P <- s P` before each
+//! measurement, `s` = 1.2 by default), which discounts old information and so tolerates a
+//! mis-specified GPS noise. Corrections: closed-loop feedback (the navigation state and the IMU
+//! compensation are corrected and the error states reset) or paper 003's output correction (the
+//! navigation runs free; its output is corrected). Innovations beyond the gate are rejected and
+//! counted (a GPS glitch or multipath jump must not pull the solution).
+
+use crate::earth;
+use crate::strapdown::NavState;
+use nalgebra::{SMatrix, SVector, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+type M15 = SMatrix<f64, 15, 15>;
+type V15 = SVector<f64, 15>;
+
+/// Filter settings (the `[filter]` table of nav's config).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct FilterConfig {
+    /// `standard` or `fading`.
+    pub kind: FilterKind,
+    /// Fading-memory factor (applied at each measurement).
+    pub fading_factor: f64,
+    /// `feedback` (closed loop) or `output` (paper 003's output correction).
+    pub correction: Correction,
+    /// GPS horizontal position noise the filter assumes (1 sigma), m.
+    pub gps_sigma_m: f64,
+    /// GPS height noise the filter assumes, m.
+    pub gps_sigma_h_m: f64,
+    /// Gyro white noise (angle random walk), deg/sqrt(h).
+    pub gyro_arw_dpsh: f64,
+    /// Accelerometer white noise (velocity random walk), m/s/sqrt(s).
+    pub accel_vrw_mpss: f64,
+    /// Initial attitude sigma (E, N, U), deg.
+    pub init_att_deg: [f64; 3],
+    /// Initial velocity sigma, m/s.
+    pub init_vel_mps: f64,
+    /// Initial position sigma, m.
+    pub init_pos_m: f64,
+    /// Initial gyro drift sigma, deg/h.
+    pub init_gyro_dph: f64,
+    /// Initial accelerometer bias sigma, m/s^2.
+    pub init_accel_mps2: f64,
+    /// Reject a fix whose normalized innovation squared exceeds this (3 dof).
+    pub gate_nis: f64,
+    /// Antenna lever arm in the body frame (x right, y forward, z up), m.
+    pub lever_arm_m: [f64; 3],
+}
+
+/// Which filter.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum FilterKind {
+    /// Standard Kalman filter.
+    Standard,
+    /// Fading-memory filter.
+    #[default]
+    Fading,
+}
+
+/// How estimates are applied.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Correction {
+    /// Correct the navigation state and the IMU; reset the error states.
+    #[default]
+    Feedback,
+    /// Leave the navigation free, correct its output.
+    Output,
+}
+
+impl Default for FilterConfig {
+    fn default() -> Self {
+        Self {
+            kind: FilterKind::Fading,
+            fading_factor: 1.2,
+            correction: Correction::Feedback,
+            gps_sigma_m: 25.0,
+            gps_sigma_h_m: 40.0,
+            gyro_arw_dpsh: 0.1 / 60.0,
+            accel_vrw_mpss: 0.001,
+            init_att_deg: [0.05, 0.05, 0.1],
+            init_vel_mps: 0.1,
+            init_pos_m: 10.0,
+            init_gyro_dph: 0.1,
+            init_accel_mps2: 5e-3 * 9.80665,
+            gate_nis: 30.0,
+            lever_arm_m: [0.0; 3],
+        }
+    }
+}
+
+/// Filter counters.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
+pub struct FilterStats {
+    /// Fixes used.
+    pub updates: u64,
+    /// Fixes rejected by the gate.
+    pub rejected: u64,
+    /// Mean normalized innovation squared of the used fixes.
+    pub mean_nis: f64,
+}
+
+/// The filter.
+#[derive(Debug, Clone)]
+pub struct Kf {
+    cfg: FilterConfig,
+    x: V15,
+    p: M15,
+    /// IMU compensation fed back: gyro drift (rad/s) and accelerometer bias (m/s^2), body.
+    gyro_bias: Vector3<f64>,
+    accel_bias: Vector3<f64>,
+    stats: FilterStats,
+    nis_sum: f64,
+    /// Largest variance each state may reach through fading (its initial one, x 100 for the
+    /// navigation states): weakly observable states (heading between turns, drifts) would
+    /// otherwise grow without bound under the fading factor.
+    cap: V15,
+}
+
+fn skew(v: &Vector3<f64>) -> SMatrix<f64, 3, 3> {
+    SMatrix::<f64, 3, 3>::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+impl Kf {
+    /// A filter with these settings at `lat` (rad, for the position sigmas in radians).
+    pub fn new(cfg: FilterConfig, lat: f64) -> Self {
+        let (rm, rn) = earth::radii(lat);
+        let mut p = M15::zeros();
+        let dph = (1.0f64).to_radians() / 3600.0;
+        let d = [
+            cfg.init_att_deg[0].to_radians(),
+            cfg.init_att_deg[1].to_radians(),
+            cfg.init_att_deg[2].to_radians(),
+            cfg.init_vel_mps,
+            cfg.init_vel_mps,
+            cfg.init_vel_mps,
+            cfg.init_pos_m / rm,
+            cfg.init_pos_m / (rn * lat.cos()),
+            cfg.init_pos_m,
+            cfg.init_gyro_dph * dph,
+            cfg.init_gyro_dph * dph,
+            cfg.init_gyro_dph * dph,
+            cfg.init_accel_mps2,
+            cfg.init_accel_mps2,
+            cfg.init_accel_mps2,
+        ];
+        let mut cap = V15::zeros();
+        for (i, s) in d.iter().enumerate() {
+            p[(i, i)] = s * s;
+            cap[i] = s * s * if i < 9 { 100.0 } else { 1.0 };
+        }
+        Self {
+            cap,
+            cfg,
+            x: V15::zeros(),
+            p,
+            gyro_bias: Vector3::zeros(),
+            accel_bias: Vector3::zeros(),
+            stats: FilterStats::default(),
+            nis_sum: 0.0,
+        }
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> FilterStats {
+        self.stats
+    }
+
+    /// Settings.
+    pub fn config(&self) -> &FilterConfig {
+        &self.cfg
+    }
+
+    /// Covariance (for NEES and reports).
+    pub fn covariance(&self) -> &M15 {
+        &self.p
+    }
+
+    /// Remove the estimated IMU errors from an update's increments over `t` s (feedback only).
+    pub fn compensate(&self, phi: [f64; 3], dv: [f64; 3], t: f64) -> ([f64; 3], [f64; 3]) {
+        let g = self.gyro_bias * t;
+        let a = self.accel_bias * t;
+        (
+            [phi[0] - g.x, phi[1] - g.y, phi[2] - g.z],
+            [dv[0] - a.x, dv[1] - a.y, dv[2] - a.z],
+        )
+    }
+
+    /// Propagate the error state over `t` s at navigation state `s` with specific force `f_n`.
+    pub fn propagate(&mut self, s: &NavState, f_n: &Vector3<f64>, t: f64) {
+        let (rm, rn) = earth::radii(s.lat);
+        let (rmh, rnh) = (rm + s.h, rn + s.h);
+        let (sl, cl) = s.lat.sin_cos();
+        let tl = sl / cl;
+        let v = s.v;
+        let w = earth::OMEGA_IE;
+        let (wie, wen) = s.rates();
+        let win = wie + wen;
+        let cbn = s.q_nb.to_rotation_matrix().into_inner();
+        let mut f = M15::zeros();
+        // attitude
+        let m_aa = -skew(&win);
+        // d(w_in)/d(dv)
+        let mut m_av = SMatrix::<f64, 3, 3>::zeros();
+        m_av[(0, 1)] = -1.0 / rmh;
+        m_av[(1, 0)] = 1.0 / rnh;
+        m_av[(2, 0)] = tl / rnh;
+        // d(w_in)/d(dL, dlon, dh)
+        let mut m_ap = SMatrix::<f64, 3, 3>::zeros();
+        m_ap[(1, 0)] = -w * sl;
+        m_ap[(2, 0)] = w * cl + v.x / (rnh * cl * cl);
+        m_ap[(0, 2)] = v.y / (rmh * rmh);
+        m_ap[(1, 2)] = -v.x / (rnh * rnh);
+        m_ap[(2, 2)] = -v.x * tl / (rnh * rnh);
+        f.fixed_view_mut::<3, 3>(0, 0).copy_from(&m_aa);
+        f.fixed_view_mut::<3, 3>(0, 3).copy_from(&m_av);
+        f.fixed_view_mut::<3, 3>(0, 6).copy_from(&m_ap);
+        f.fixed_view_mut::<3, 3>(0, 9).copy_from(&(-cbn));
+        // velocity
+        f.fixed_view_mut::<3, 3>(3, 0).copy_from(&skew(f_n));
+        let m_vv = skew(&v) * m_av - skew(&(2.0 * wie + wen));
+        f.fixed_view_mut::<3, 3>(3, 3).copy_from(&m_vv);
+        let mut dwie = SMatrix::<f64, 3, 3>::zeros();
+        dwie[(1, 0)] = -w * sl;
+        dwie[(2, 0)] = w * cl;
+        let m_vp = skew(&v) * (2.0 * dwie + (m_ap - dwie));
+        f.fixed_view_mut::<3, 3>(3, 6).copy_from(&m_vp);
+        f.fixed_view_mut::<3, 3>(3, 12).copy_from(&cbn);
+        // position
+        f[(6, 4)] = 1.0 / rmh;
+        f[(6, 8)] = -v.y / (rmh * rmh);
+        f[(7, 3)] = 1.0 / (rnh * cl);
+        f[(7, 6)] = v.x * tl / (rnh * cl);
+        f[(7, 8)] = -v.x / (rnh * rnh * cl);
+        f[(8, 5)] = 1.0;
+        let phi = M15::identity() + f * t + f * f * (t * t / 2.0);
+        let mut q = M15::zeros();
+        let arw = self.cfg.gyro_arw_dpsh.to_radians() / 60.0;
+        let vrw = self.cfg.accel_vrw_mpss;
+        for i in 0..3 {
+            q[(i, i)] = arw * arw * t;
+            q[(3 + i, 3 + i)] = vrw * vrw * t;
+        }
+        self.x = phi * self.x;
+        self.p = phi * self.p * phi.transpose() + q;
+        self.p = (self.p + self.p.transpose()) * 0.5;
+    }
+
+    /// A GPS position (rad, rad, m) measured at the state's time. Returns whether it was used.
+    pub fn update(&mut self, s: &mut NavState, lat: f64, lon: f64, h: f64) -> bool {
+        let (rm, rn) = earth::radii(s.lat);
+        // the antenna's position from the INS: lever arm in the navigation frame
+        let l = s.q_nb * Vector3::from(self.cfg.lever_arm_m);
+        let ant = (
+            s.lat + l.y / (rm + s.h),
+            s.lon + l.x / ((rn + s.h) * s.lat.cos()),
+            s.h + l.z,
+        );
+        let z = Vector3::new(ant.0 - lat, ant.1 - lon, ant.2 - h);
+        let mut r = SMatrix::<f64, 3, 3>::zeros();
+        r[(0, 0)] = (self.cfg.gps_sigma_m / (rm + s.h)).powi(2);
+        r[(1, 1)] = (self.cfg.gps_sigma_m / ((rn + s.h) * s.lat.cos())).powi(2);
+        r[(2, 2)] = self.cfg.gps_sigma_h_m.powi(2);
+        if self.cfg.kind == FilterKind::Fading {
+            self.p *= self.cfg.fading_factor;
+            // keep every variance under its cap: P <- D P D with D diagonal (stays positive)
+            let d = V15::from_fn(|i, _| {
+                let v = self.p[(i, i)];
+                if v > self.cap[i] {
+                    (self.cap[i] / v).sqrt()
+                } else {
+                    1.0
+                }
+            });
+            for i in 0..15 {
+                for j in 0..15 {
+                    self.p[(i, j)] *= d[i] * d[j];
+                }
+            }
+        }
+        let hx = Vector3::new(self.x[6], self.x[7], self.x[8]);
+        let innov = z - hx;
+        let ph = self.p.fixed_view::<15, 3>(0, 6).into_owned();
+        let s_mat = self.p.fixed_view::<3, 3>(6, 6).into_owned() + r;
+        let Some(s_inv) = s_mat.try_inverse() else {
+            return false;
+        };
+        let nis = (innov.transpose() * s_inv * innov)[(0, 0)];
+        if !nis.is_finite() || nis > self.cfg.gate_nis {
+            self.stats.rejected += 1;
+            return false;
+        }
+        let k = ph * s_inv;
+        self.x += k * innov;
+        let mut ikh = M15::identity();
+        for i in 0..15 {
+            for j in 0..3 {
+                ikh[(i, 6 + j)] -= k[(i, j)];
+            }
+        }
+        // Joseph form keeps P symmetric and positive
+        self.p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
+        self.stats.updates += 1;
+        self.nis_sum += nis;
+        self.stats.mean_nis = self.nis_sum / self.stats.updates as f64;
+        if self.cfg.correction == Correction::Feedback {
+            self.feedback(s);
+        }
+        true
+    }
+
+    /// Apply the estimate to the navigation state and the IMU compensation; reset.
+    fn feedback(&mut self, s: &mut NavState) {
+        *s = correct(&self.x, s);
+        self.gyro_bias += Vector3::new(self.x[9], self.x[10], self.x[11]);
+        self.accel_bias += Vector3::new(self.x[12], self.x[13], self.x[14]);
+        self.x = V15::zeros();
+    }
+
+    /// The best estimate of the navigation state (output correction applied when the filter
+    /// runs open loop).
+    pub fn corrected(&self, s: &NavState) -> NavState {
+        match self.cfg.correction {
+            Correction::Feedback => *s,
+            Correction::Output => correct(&self.x, s),
+        }
+    }
+}
+
+/// The navigation state with the error estimate `x` removed.
+fn correct(x: &V15, s: &NavState) -> NavState {
+    let phi = Vector3::new(x[0], x[1], x[2]);
+    NavState {
+        q_nb: UnitQuaternion::from_scaled_axis(phi) * s.q_nb,
+        v: s.v - Vector3::new(x[3], x[4], x[5]),
+        lat: s.lat - x[6],
+        lon: s.lon - x[7],
+        h: s.h - x[8],
+    }
+}
