@@ -2,14 +2,9 @@
 //! nav code as on the bench, and the drill's scoring.
 
 use crate::scenario::Scenario;
-use anyhow::{Context, Result, bail};
-use emulators::can::BusStream;
-use emulators::imu::ImuEmulator;
-use nav::attitude::ImuProcessor;
-use nav::imu::ImuFrontEnd;
+use anyhow::{Result, bail};
 use nav::northfind::{NorthFinder, NorthFindingConfig, NorthResult, Progress};
 use serde::{Deserialize, Serialize};
-use wire::Message;
 
 /// The outcome of one drill.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -102,34 +97,18 @@ pub fn run_in_process(
             s.name
         );
     };
-    let imu = ImuEmulator::new(motion, s.imu.clone());
-    let dt = 1.0 / s.imu.rate_hz;
-    let mut bus = BusStream::new(imu, &s.faults);
-    let mut fe = ImuFrontEnd::new(crate::replay::calibration(s));
-    let mut proc = ImuProcessor::new(&s.processing).context("processing chain")?;
+    let mut chain = crate::replay::ImuChain::new(s, motion)?;
     let mut finder = NorthFinder::new(nf_config(s, nf)).map_err(anyhow::Error::msg)?;
     let status_every = (s.imu.rate_hz / tt.params().status_hz).round().max(1.0) as u64;
-    let (mut frames, mut out, mut ev, mut upd, mut acks) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut upd, mut acks) = (Vec::new(), Vec::new());
     let mut k: u64 = 0;
     let mut last_phase = None;
-    while bus.next_time() <= s.duration_s + 1e-9 && !finder.finished() {
-        let t = bus.next_time();
-        frames.clear();
-        bus.next_frames(&mut frames);
-        for f in &frames {
-            if let Ok(m) = Message::decode(f) {
-                fe.on_message(&m, &mut out, &mut ev);
-            }
-        }
-        ev.clear();
-        for smp in out.drain(..) {
-            proc.push_sample(&smp, &mut upd);
-        }
-        let base = proc.baseline().unwrap_or(0) as i64;
+    let dt = 1.0 / s.imu.rate_hz;
+    while chain.next_time() <= s.duration_s + 1e-9 && !finder.finished() {
+        let t = chain.step(&mut upd);
+        let t0 = chain.time_of(chain.processor().baseline().unwrap_or(0) as i64);
         for u in upd.drain(..) {
-            let tv = (u.valid_sample - base) as f64 * dt;
-            finder.on_update(tv, u.phi, u.dv);
+            finder.on_update(chain.time_of(u.valid_sample) - t0, u.phi, u.dv);
         }
         if k.is_multiple_of(status_every) {
             acks.clear();
@@ -141,7 +120,7 @@ pub fn run_in_process(
                 finder.on_status(&st);
             }
         }
-        let tnav = (proc.valid_sample() - proc.baseline().unwrap_or(0) as i64) as f64 * dt;
+        let tnav = chain.time_of(chain.processor().valid_sample()) - t0;
         while let Some(c) = finder.poll(tnav.max(0.0)) {
             if let Some(a) = tt.command(t, c) {
                 finder.on_ack(&a);

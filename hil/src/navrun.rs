@@ -2,18 +2,13 @@
 //! chain and strapdown navigation, scored against the truth trajectory.
 
 use crate::scenario::Scenario;
-use anyhow::{Context, Result, bail};
-use emulators::can::BusStream;
+use anyhow::{Result, bail};
 use emulators::drive::Drive;
 use emulators::gps::{GpsError, GpsErrorParams};
-use emulators::imu::ImuEmulator;
 use nalgebra::Vector3;
-use nav::attitude::ImuProcessor;
-use nav::imu::ImuFrontEnd;
 use nav::kf::{FilterConfig, Kf};
 use nav::strapdown::NavState;
 use serde::Serialize;
-use wire::Message;
 
 /// The truth state of a drive at `t`.
 pub fn truth_state(d: &Drive, t: f64) -> NavState {
@@ -54,14 +49,10 @@ pub fn navigate(
         bail!("scenario {} has no [drive]", s.name);
     };
     let drive = Drive::plan(spec).map_err(anyhow::Error::msg)?;
-    let imu = ImuEmulator::new(s.motion(), s.imu.clone());
     let dt = 1.0 / s.imu.rate_hz;
-    let mut bus = BusStream::new(imu, &s.faults);
-    let mut fe = ImuFrontEnd::new(crate::replay::calibration(s));
-    let mut proc = ImuProcessor::new(&s.processing).context("processing chain")?;
+    let mut chain = crate::replay::ImuChain::new(s, s.motion())?;
     let n = s.processing.coning_samples as f64;
-    let (mut frames, mut out, mut ev, mut upd) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut t_first = None;
+    let mut upd = Vec::new();
     let mut state: Option<NavState> = None;
     let (mut sq, mut cnt, mut next_sample) = (0.0, 0u64, 1.0);
     let mut last_t = 0.0;
@@ -69,26 +60,10 @@ pub fn navigate(
     let mut gps_err = GpsError::new(gps.clone());
     let (mut f_acc, mut t_acc) = (Vector3::zeros(), 0.0);
     let mut next_fix = 1.0;
-    while bus.next_time() <= s.duration_s + 1e-9 {
-        let t = bus.next_time();
-        frames.clear();
-        bus.next_frames(&mut frames);
-        for f in &frames {
-            if let Ok(m) = Message::decode(f) {
-                if matches!(m, Message::ImuGyro(_)) {
-                    t_first.get_or_insert(t);
-                }
-                fe.on_message(&m, &mut out, &mut ev);
-            }
-        }
-        ev.clear();
-        for smp in out.drain(..) {
-            proc.push_sample(&smp, &mut upd);
-        }
-        let base = proc.baseline().unwrap_or(0) as i64;
-        let tf = t_first.unwrap_or(0.0);
+    while chain.next_time() <= s.duration_s + 1e-9 {
+        chain.step(&mut upd);
         for u in upd.drain(..) {
-            let tv = tf + (u.valid_sample - base) as f64 * dt;
+            let tv = chain.time_of(u.valid_sample);
             let (phi, dv) = match &kf {
                 Some(k) => k.compensate(u.phi, u.dv, n * dt),
                 None => (u.phi, u.dv),

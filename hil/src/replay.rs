@@ -64,46 +64,108 @@ pub fn attitude_error(motion: &dyn Motion, t0: f64, t1: f64, q: &UnitQuaternion<
     quaternion_to_rotation_vector(&(truth.inverse() * q))
 }
 
-/// Run the scenario in process.
-pub fn run_in_process(s: &Scenario) -> Result<InProcess> {
-    let imu = ImuEmulator::new(s.motion(), s.imu.clone());
-    let dt = 1.0 / s.imu.rate_hz;
-    let mut bus = BusStream::new(imu, &s.faults);
-    let mut fe = ImuFrontEnd::new(calibration(s));
-    let mut proc = ImuProcessor::new(&s.processing).context("processing chain")?;
-    let (mut frames, mut out, mut ev, mut upd) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut origin_time = None;
-    let mut sums = ([0.0; 3], [0.0; 3], 0u64);
-    while bus.next_time() <= s.duration_s + 1e-9 {
-        let t = bus.next_time();
-        frames.clear();
-        bus.next_frames(&mut frames);
-        for f in &frames {
+/// The scenario's IMU stream (faults included) through nav's front end and processing chain,
+/// one sample at a time: what every in-process run is built on.
+pub struct ImuChain {
+    bus: BusStream,
+    fe: ImuFrontEnd,
+    proc: ImuProcessor,
+    frames: Vec<wire::RawFrame>,
+    out: Vec<nav::imu::ImuSample>,
+    ev: Vec<nav::imu::ImuEvent>,
+    t_first: Option<f64>,
+    dt: f64,
+}
+
+impl ImuChain {
+    /// The chain for scenario `s` with the IMU on `motion`.
+    pub fn new(s: &Scenario, motion: Box<dyn Motion>) -> Result<Self> {
+        Ok(Self {
+            bus: BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
+            fe: ImuFrontEnd::new(calibration(s)),
+            proc: ImuProcessor::new(&s.processing).context("processing chain")?,
+            frames: Vec::new(),
+            out: Vec::new(),
+            ev: Vec::new(),
+            t_first: None,
+            dt: 1.0 / s.imu.rate_hz,
+        })
+    }
+
+    /// Simulated time at the end of the next sample, s.
+    pub fn next_time(&self) -> f64 {
+        self.bus.next_time()
+    }
+
+    /// Produce and process one sample; updates go to `upd`. Returns the sample's time.
+    pub fn step(&mut self, upd: &mut Vec<nav::attitude::Update>) -> f64 {
+        let t = self.bus.next_time();
+        self.frames.clear();
+        self.bus.next_frames(&mut self.frames);
+        for f in &self.frames {
             if let Ok(m) = Message::decode(f) {
                 if matches!(m, Message::ImuGyro(_)) {
-                    origin_time.get_or_insert(t);
+                    self.t_first.get_or_insert(t);
                 }
-                fe.on_message(&m, &mut out, &mut ev);
+                self.fe.on_message(&m, &mut self.out, &mut self.ev);
             }
         }
-        for smp in out.drain(..) {
-            proc.push_sample(&smp, &mut upd);
+        self.ev.clear();
+        for smp in self.out.drain(..) {
+            self.proc.push_sample(&smp, upd);
         }
-        ev.clear();
+        t
+    }
+
+    /// End of stream: a sample still waiting for its accelerometer frame.
+    pub fn flush(&mut self, upd: &mut Vec<nav::attitude::Update>) {
+        self.fe.flush(&mut self.out, &mut self.ev);
+        for smp in self.out.drain(..) {
+            self.proc.push_sample(&smp, upd);
+        }
+    }
+
+    /// Simulated time of a sample number (the baseline frame went out at the first gyro
+    /// frame's time).
+    pub fn time_of(&self, sample: i64) -> f64 {
+        let base = self.proc.baseline().unwrap_or(0) as i64;
+        self.t_first.unwrap_or(0.0) + (sample - base) as f64 * self.dt
+    }
+
+    /// The processing chain.
+    pub fn processor(&self) -> &ImuProcessor {
+        &self.proc
+    }
+
+    /// The front end.
+    pub fn front_end(&self) -> &ImuFrontEnd {
+        &self.fe
+    }
+
+    /// The emulator.
+    pub fn imu(&self) -> &ImuEmulator {
+        self.bus.imu()
+    }
+}
+
+/// Run the scenario in process.
+pub fn run_in_process(s: &Scenario) -> Result<InProcess> {
+    let mut chain = ImuChain::new(s, s.motion())?;
+    let mut upd = Vec::new();
+    let mut sums = ([0.0; 3], [0.0; 3], 0u64);
+    while chain.next_time() <= s.duration_s + 1e-9 {
+        chain.step(&mut upd);
         sum_updates(&mut upd, &mut sums);
     }
-    fe.flush(&mut out, &mut ev);
-    for smp in out.drain(..) {
-        proc.push_sample(&smp, &mut upd);
-    }
+    chain.flush(&mut upd);
     sum_updates(&mut upd, &mut sums);
-    // sample numbers -> simulated time: the baseline frame went out at `origin_time`
-    let t_first = origin_time.unwrap_or(0.0);
+    let dt = 1.0 / s.imu.rate_hz;
+    let proc = chain.processor();
     let base = proc.baseline().unwrap_or(0) as i64;
-    let time_of = |sample: i64| t_first + (sample - base) as f64 * dt;
+    let time_of = |sample: i64| chain.time_of(sample);
     let origin_time_s = time_of(proc.origin().unwrap_or(base));
     let q = proc.attitude();
-    let imu = bus.imu();
+    let imu = chain.imu();
     let err = attitude_error(
         imu.motion(),
         origin_time_s,
@@ -143,7 +205,7 @@ pub fn run_in_process(s: &Scenario) -> Result<InProcess> {
         gyro_bias_dph: imu.gyro_bias_dph(),
         accel_bias_mps2: imu.accel_bias_mps2(),
         dither_residual_gain,
-        imu: fe.stats(),
+        imu: chain.front_end().stats(),
         processing: proc.stats(),
         origin_sample: proc.origin(),
         valid_sample: proc.valid_sample(),
