@@ -4,9 +4,10 @@
 use crate::scenario::Scenario;
 use anyhow::{Result, bail};
 use emulators::drive::Drive;
-use emulators::gps::{GpsError, GpsErrorParams};
+use emulators::gps::{AntennaTruth, GpsErrorParams, NmeaWriter, ReceiverParams};
 use nalgebra::Vector3;
-use nav::kf::{FilterConfig, Kf};
+use nav::kf::FilterConfig;
+use nav::navigator::{NavigationConfig, Navigator};
 use nav::strapdown::NavState;
 use serde::Serialize;
 
@@ -33,12 +34,19 @@ pub struct NavRun {
 
 /// Pure inertial navigation of a drive scenario, initialised from truth.
 pub fn pure_inertial(s: &Scenario) -> Result<NavRun> {
-    navigate(s, None, &GpsErrorParams::default(), 0.0)
+    // the start position from an error-free receiver, then no aiding
+    let exact = GpsErrorParams {
+        gm_sigma_m: 0.0,
+        white_sigma_m: 0.0,
+        ..GpsErrorParams::default()
+    };
+    navigate(s, None, &exact, 0.0)
 }
 
-/// Navigate a drive scenario in process: pure inertial (`filter` none) or SINS/GPS with the
-/// filter, GPS fixes at 1 Hz with `gps` errors. The start is the truth with a heading error of
-/// `heading_err_deg` (north-finding's).
+/// Navigate a drive scenario in process the way nav does: the IMU stream through the chain,
+/// the receiver's NMEA through nav's GPS decoder, fixes tied to the IMU's PPS latch, and nav's
+/// navigator (levelling, strapdown, filter). `filter` none: pure inertial after the start. The
+/// heading handed over is the truth's plus `heading_err_deg` (north-finding's error).
 pub fn navigate(
     s: &Scenario,
     filter: Option<&FilterConfig>,
@@ -49,70 +57,68 @@ pub fn navigate(
         bail!("scenario {} has no [drive]", s.name);
     };
     let drive = Drive::plan(spec).map_err(anyhow::Error::msg)?;
-    let dt = 1.0 / s.imu.rate_hz;
     let mut chain = crate::replay::ImuChain::new(s, s.motion())?;
     let n = s.processing.coning_samples as f64;
+    let dt = 1.0 / s.imu.rate_hz;
+    let mut navigator = Navigator::new(NavigationConfig {
+        enabled: true,
+        initial_heading_deg: Some(drive.heading(0.0).to_degrees() + heading_err_deg),
+        // level while still parked: the first fix comes at about 1 s
+        level_s: (spec.start_wait_s - 1.2).clamp(0.2, 2.0),
+        gps_aiding: filter.is_some(),
+        filter: filter.cloned().unwrap_or_default(),
+    });
+    let receiver = ReceiverParams {
+        errors: gps.clone(),
+        lever_arm_m: [0.0; 3],
+        ..ReceiverParams::default()
+    };
+    let mut writer = NmeaWriter::new(receiver);
+    let mut dec = nav::gps::GpsDecoder::default();
+    let mut fixes = Vec::new();
     let mut upd = Vec::new();
-    let mut state: Option<NavState> = None;
+    // a fix reaches nav 50 ms after its PPS edge
+    let mut pending: Vec<(f64, String)> = Vec::new();
     let (mut sq, mut cnt, mut next_sample) = (0.0, 0u64, 1.0);
     let mut last_t = 0.0;
-    let mut kf = filter.map(|f| Kf::new(f.clone(), spec.lat_deg.to_radians()));
-    let mut gps_err = GpsError::new(gps.clone());
-    let (mut f_acc, mut t_acc) = (Vector3::zeros(), 0.0);
-    let mut next_fix = 1.0;
     while chain.next_time() <= s.duration_s + 1e-9 {
-        chain.step(&mut upd);
+        let t = chain.step(&mut upd);
+        for edge in chain.take_pps() {
+            navigator.on_pps(edge);
+            let tr = truth_state(&drive, edge);
+            let truth = AntennaTruth {
+                lat_deg: tr.lat.to_degrees(),
+                lon_deg: tr.lon.to_degrees(),
+                h_m: tr.h,
+                vel_enu: tr.v.into(),
+            };
+            let (text, _) = writer.fix(edge.floor(), 8.0 * 3600.0, (21, 11, 2026), &truth);
+            pending.push((edge + 0.05, text));
+        }
         for u in upd.drain(..) {
             let tv = chain.time_of(u.valid_sample);
-            let (phi, dv) = match &kf {
-                Some(k) => k.compensate(u.phi, u.dv, n * dt),
-                None => (u.phi, u.dv),
-            };
-            let st = state.get_or_insert_with(|| {
-                // start at the truth of the update's start, heading off by north-finding's error
-                let mut st = truth_state(&drive, tv - n * dt);
-                st.q_nb = nalgebra::UnitQuaternion::from_axis_angle(
-                    &Vector3::z_axis(),
-                    -heading_err_deg.to_radians(),
-                ) * st.q_nb;
-                st
-            });
-            f_acc += st.q_nb * Vector3::from(dv);
-            t_acc += n * dt;
-            st.update(phi, dv, n * dt);
+            navigator.on_update(tv, u.phi, u.dv, n * dt);
             last_t = tv;
-            if let Some(k) = kf.as_mut() {
-                if t_acc >= 0.1 {
-                    k.propagate(st, &(f_acc / t_acc), t_acc);
-                    f_acc = Vector3::zeros();
-                    t_acc = 0.0;
-                }
-                if tv >= next_fix {
-                    next_fix += 1.0;
-                    let tr = truth_state(&drive, tv);
-                    let e = gps_err.at(tv);
-                    let (rm, rn) = nav::earth::radii(tr.lat);
-                    k.update(
-                        st,
-                        tr.lat + e[1] / rm,
-                        tr.lon + e[0] / (rn * tr.lat.cos()),
-                        tr.h + e[2],
-                    );
-                }
-            }
             if tv >= next_sample {
                 next_sample += 1.0;
-                let best = kf.as_ref().map_or(*st, |k| k.corrected(st));
-                let e = best.position_error_m(&truth_state(&drive, tv));
-                sq += e.x * e.x + e.y * e.y;
-                cnt += 1;
+                if let Some(st) = navigator.state() {
+                    let e = st.position_error_m(&truth_state(&drive, tv));
+                    sq += e.x * e.x + e.y * e.y;
+                    cnt += 1;
+                }
+            }
+        }
+        while pending.first().is_some_and(|p| p.0 <= t) {
+            let (_, text) = pending.remove(0);
+            dec.push_bytes(text.as_bytes(), &mut fixes);
+            for f in fixes.drain(..) {
+                navigator.on_fix(&f);
             }
         }
     }
-    let Some(st) = state else {
-        bail!("no navigation updates");
+    let Some(st) = navigator.state() else {
+        bail!("navigation never started (no heading or no fix)");
     };
-    let st = kf.as_ref().map_or(st, |k| k.corrected(&st));
     let tr = truth_state(&drive, last_t);
     let e = st.position_error_m(&tr);
     let dh = (st.euler().0 - tr.euler().0).to_degrees();

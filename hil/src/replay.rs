@@ -75,6 +75,7 @@ pub struct ImuChain {
     ev: Vec<nav::imu::ImuEvent>,
     t_first: Option<f64>,
     dt: f64,
+    pps: Vec<f64>,
 }
 
 impl ImuChain {
@@ -89,6 +90,7 @@ impl ImuChain {
             ev: Vec::new(),
             t_first: None,
             dt: 1.0 / s.imu.rate_hz,
+            pps: Vec::new(),
         })
     }
 
@@ -111,10 +113,25 @@ impl ImuChain {
             }
         }
         self.ev.clear();
+        let base = self.proc.baseline().unwrap_or(0) as i64;
         for smp in self.out.drain(..) {
+            if let Some(o) = smp.pps_offset {
+                let b = if base == 0 {
+                    smp.sample as i64 - 1
+                } else {
+                    base
+                };
+                let ts = self.t_first.unwrap_or(0.0) + (smp.sample as i64 - b) as f64 * self.dt;
+                self.pps.push(ts - o * self.dt);
+            }
             self.proc.push_sample(&smp, upd);
         }
         t
+    }
+
+    /// PPS edges seen since the last call (simulated time, from the IMU's latch).
+    pub fn take_pps(&mut self) -> Vec<f64> {
+        std::mem::take(&mut self.pps)
     }
 
     /// End of stream: a sample still waiting for its accelerometer frame.

@@ -12,6 +12,7 @@ pub mod gps;
 pub mod gpsport;
 pub mod imu;
 pub mod kf;
+pub mod navigator;
 pub mod northfind;
 pub mod record;
 pub mod strapdown;

@@ -1,0 +1,247 @@
+//! The navigation mode: levelling, hand-over (heading from north-finding or the config, position
+//! from the first good GPS fix), strapdown navigation, and the SINS/GPS filter with fixes tied
+//! to IMU time by the receiver's PPS edge latched in the IMU stream.
+
+use crate::gps::GpsFix;
+use crate::kf::{FilterConfig, FilterStats, Kf};
+use crate::strapdown::{NavOutput, NavState};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// Navigation settings (the `[navigation]` table of nav's config).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct NavigationConfig {
+    /// Navigate (after north-finding, when that is enabled).
+    pub enabled: bool,
+    /// Heading at the start when north-finding does not provide one, deg.
+    pub initial_heading_deg: Option<f64>,
+    /// Static levelling time before navigation starts, s.
+    pub level_s: f64,
+    /// Use GPS fixes in the filter (false: pure inertial after the start).
+    pub gps_aiding: bool,
+    /// The filter.
+    pub filter: FilterConfig,
+}
+
+impl Default for NavigationConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            initial_heading_deg: None,
+            level_s: 2.0,
+            gps_aiding: true,
+            filter: FilterConfig::default(),
+        }
+    }
+}
+
+/// Where navigation is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NavPhase {
+    /// Waiting for a heading (north-finding) and a first good fix.
+    Waiting,
+    /// Levelling from the accelerometers.
+    Levelling,
+    /// Navigating.
+    Navigating,
+}
+
+/// Counters and the latest output.
+#[derive(Debug, Clone, Serialize)]
+pub struct NavigatorSummary {
+    /// Phase.
+    pub phase: NavPhase,
+    /// IMU time navigation started, s.
+    pub started_at_s: Option<f64>,
+    /// The latest (filter-corrected) output.
+    pub output: Option<NavOutput>,
+    /// Filter counters.
+    pub filter: Option<FilterStats>,
+    /// Fixes seen, used, ignored (invalid, flagged, before the start).
+    pub fixes_seen: u64,
+    /// Fixes ignored.
+    pub fixes_ignored: u64,
+    /// PPS edges seen.
+    pub pps_edges: u64,
+}
+
+/// The navigator.
+#[derive(Debug)]
+pub struct Navigator {
+    cfg: NavigationConfig,
+    phase: NavPhase,
+    heading: Option<f64>,
+    first_fix: Option<(f64, f64, f64)>,
+    level_sum: Vector3<f64>,
+    level_t: f64,
+    state: Option<NavState>,
+    kf: Option<Kf>,
+    f_acc: Vector3<f64>,
+    t_acc: f64,
+    last_pps: Option<f64>,
+    last_t: f64,
+    started_at: Option<f64>,
+    fixes_seen: u64,
+    fixes_ignored: u64,
+    pps_edges: u64,
+}
+
+impl Navigator {
+    /// A navigator with these settings.
+    pub fn new(cfg: NavigationConfig) -> Self {
+        Self {
+            heading: cfg.initial_heading_deg.map(f64::to_radians),
+            cfg,
+            phase: NavPhase::Waiting,
+            first_fix: None,
+            level_sum: Vector3::zeros(),
+            level_t: 0.0,
+            state: None,
+            kf: None,
+            f_acc: Vector3::zeros(),
+            t_acc: 0.0,
+            last_pps: None,
+            last_t: 0.0,
+            started_at: None,
+            fixes_seen: 0,
+            fixes_ignored: 0,
+            pps_edges: 0,
+        }
+    }
+
+    /// North-finding's heading (deg) becomes available.
+    pub fn set_heading(&mut self, deg: f64) {
+        self.heading = Some(deg.to_radians());
+    }
+
+    /// A PPS edge at IMU time `t`.
+    pub fn on_pps(&mut self, t: f64) {
+        self.pps_edges += 1;
+        self.last_pps = Some(t);
+    }
+
+    /// A processing-chain update valid at IMU time `t` over `dt` s.
+    pub fn on_update(&mut self, t: f64, phi: [f64; 3], dv: [f64; 3], dt: f64) {
+        self.last_t = t;
+        match self.phase {
+            NavPhase::Waiting => {
+                // a heading (north-finding or the config) and a position (the first good fix)
+                if self.heading.is_some() && self.first_fix.is_some() {
+                    self.phase = NavPhase::Levelling;
+                    self.level_sum = Vector3::zeros();
+                    self.level_t = 0.0;
+                }
+            }
+            NavPhase::Levelling => {
+                self.level_sum += Vector3::from(dv);
+                self.level_t += dt;
+                if self.level_t >= self.cfg.level_s {
+                    self.start(t);
+                }
+            }
+            NavPhase::Navigating => {
+                let (Some(st), kf) = (self.state.as_mut(), self.kf.as_mut()) else {
+                    return;
+                };
+                let (phi, dv) = match kf.as_ref() {
+                    Some(k) => k.compensate(phi, dv, dt),
+                    None => (phi, dv),
+                };
+                self.f_acc += st.q_nb * Vector3::from(dv);
+                self.t_acc += dt;
+                st.update(phi, dv, dt);
+                if let Some(k) = kf
+                    && self.t_acc >= 0.1
+                {
+                    k.propagate(st, &(self.f_acc / self.t_acc), self.t_acc);
+                    self.f_acc = Vector3::zeros();
+                    self.t_acc = 0.0;
+                }
+            }
+        }
+    }
+
+    fn start(&mut self, t: f64) {
+        let f = self.level_sum / self.level_t.max(1e-9);
+        let roll = (-f.x).atan2(f.z);
+        let pitch = f.y.atan2((f.x * f.x + f.z * f.z).sqrt());
+        let (lat, lon, h) = self.first_fix.unwrap_or((0.0, 0.0, 0.0));
+        let st = NavState::from_euler(
+            self.heading.unwrap_or(0.0),
+            pitch,
+            roll,
+            Vector3::zeros(),
+            lat,
+            lon,
+            h,
+        );
+        self.kf = self
+            .cfg
+            .gps_aiding
+            .then(|| Kf::new(self.cfg.filter.clone(), lat));
+        self.state = Some(st);
+        self.phase = NavPhase::Navigating;
+        self.started_at = Some(t);
+        tracing::info!(
+            lat_deg = lat.to_degrees(),
+            lon_deg = lon.to_degrees(),
+            heading_deg = self.heading.unwrap_or(0.0).to_degrees(),
+            "navigation started"
+        );
+    }
+
+    /// A decoded GPS fix arrived (now: IMU time of the latest update).
+    pub fn on_fix(&mut self, fix: &GpsFix) {
+        self.fixes_seen += 1;
+        if !fix.valid || fix.time_backwards || fix.quality == 0 {
+            self.fixes_ignored += 1;
+            return;
+        }
+        let alt = fix.alt_m.unwrap_or(0.0);
+        let p = (fix.lat_deg.to_radians(), fix.lon_deg.to_radians(), alt);
+        if self.phase != NavPhase::Navigating {
+            self.first_fix = Some(p);
+            return;
+        }
+        // only GGA carries a full position (RMC repeats it without height)
+        if fix.sentence != "GGA" {
+            return;
+        }
+        let (Some(st), Some(k)) = (self.state.as_mut(), self.kf.as_mut()) else {
+            self.fixes_ignored += 1;
+            return;
+        };
+        // the fix was taken at the last PPS edge: carry it forward to now with the INS velocity
+        let dt = self
+            .last_pps
+            .map_or(0.0, |p| (self.last_t - p).clamp(0.0, 1.0));
+        let (rm, rn) = crate::earth::radii(st.lat);
+        let lat = p.0 + st.v.y * dt / (rm + st.h);
+        let lon = p.1 + st.v.x * dt / ((rn + st.h) * st.lat.cos());
+        let h = p.2 + st.v.z * dt;
+        if !k.update(st, lat, lon, h) {
+            self.fixes_ignored += 1;
+        }
+    }
+
+    /// The best current state.
+    pub fn state(&self) -> Option<NavState> {
+        let st = self.state?;
+        Some(self.kf.as_ref().map_or(st, |k| k.corrected(&st)))
+    }
+
+    /// Summary.
+    pub fn summary(&self) -> NavigatorSummary {
+        NavigatorSummary {
+            phase: self.phase,
+            started_at_s: self.started_at,
+            output: self.state().map(|s| s.output()),
+            filter: self.kf.as_ref().map(Kf::stats),
+            fixes_seen: self.fixes_seen,
+            fixes_ignored: self.fixes_ignored,
+            pps_edges: self.pps_edges,
+        }
+    }
+}
