@@ -53,6 +53,7 @@ fn nav_config(s: &Scenario, iface: &str) -> NavConfig {
             rcvbuf_bytes: 8 << 20,
         }),
         gps: None,
+        navigation: Default::default(),
         imu: crate::replay::calibration(s),
         processing: s.processing,
         north_finding: s

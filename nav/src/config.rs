@@ -26,6 +26,9 @@ pub struct NavConfig {
     /// Four-position north-finding on the indexing mechanism at start-up.
     #[serde(default)]
     pub north_finding: crate::northfind::NorthFindingConfig,
+    /// Navigation after start-up (levelling, hand-over, strapdown, SINS/GPS filter).
+    #[serde(default)]
+    pub navigation: crate::navigator::NavigationConfig,
     /// Liveness watchdog.
     #[serde(default)]
     pub watchdog: WatchdogConfig,

@@ -69,6 +69,7 @@ struct Summary {
     attitude: AttitudeSummary,
     north_finding: Option<NorthFindingSummary>,
     gps: Option<GpsSummary>,
+    navigation: Option<nav::navigator::NavigatorSummary>,
     housekeeping: Housekeeping,
     mcap: Option<PathBuf>,
     mcap_messages: u64,
@@ -256,6 +257,10 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         drop(gps_tx);
     }
     let mut gps_fixes = 0u64;
+    let mut navigator = cfg
+        .navigation
+        .enabled
+        .then(|| nav::navigator::Navigator::new(cfg.navigation.clone()));
     let mut last_fix: Option<nav::gps::GpsFix> = None;
     let recorder = match &cfg.record.mcap {
         Some(p) => Some(Recorder::start(p)?),
@@ -276,6 +281,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let mut nf_last_print = f64::NEG_INFINITY;
     let mut nf_last_phase = None;
     let mut nf_reported = false;
+    let mut nf_handed = false;
     let mut sums = Sums::default();
     let mut by_msg: BTreeMap<&'static str, u64> = BTreeMap::new();
     let mut unknown: BTreeMap<u32, u64> = BTreeMap::new();
@@ -358,7 +364,11 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                     }
                     Err(e) => report_bad_frame(&e, &raw, iface, &mut unknown, &mut bad_len, &mut invalid, &recorder, fe.stats().samples),
                 }
-                drain(&mut out, &mut ev, &mut sums, &mut proc, &recorder, sample_ns, finder.as_mut());
+                drain(&mut out, &mut ev, &mut sums, &mut proc, &recorder, sample_ns, finder.as_mut(), navigator.as_mut(), cfg.processing.coning_samples);
+                if let (Some(n), Some(r)) = (navigator.as_mut(), finder.as_ref().and_then(|f| f.result())) && !nf_handed {
+                    n.set_heading(r.heading_deg);
+                    nf_handed = true;
+                }
                 if let Some(f) = finder.as_mut() {
                     let t = proc.valid_sample().saturating_sub(proc.baseline().map_or(0, |b| b as i64)) as f64 / cfg.imu.rate_hz;
                     while let Some(c) = f.poll(t.max(0.0)) {
@@ -391,6 +401,9 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                 if let (Some(r), Ok(json)) = (&recorder, serde_json::to_string(&fix)) {
                     r.send(Record::Json { channel: JsonChannel::Gps, t_ns: wall_ns(), publish_ns: wall_ns(), json });
                 }
+                if let Some(n) = navigator.as_mut() {
+                    n.on_fix(&fix);
+                }
                 last_fix = Some(fix);
             }
             _ = sigint.recv() => { info!("SIGINT: finishing"); break; }
@@ -406,6 +419,8 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         &recorder,
         sample_ns,
         finder.as_mut(),
+        navigator.as_mut(),
+        cfg.processing.coning_samples,
     );
     let dt = 1.0 / cfg.imu.rate_hz;
     let n = (sums.updates * cfg.processing.coning_samples as u64).max(1) as f64;
@@ -452,6 +467,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         specific_force_norm_mps2: norm(mean_f),
         processing: pst,
         attitude,
+        navigation: navigator.as_ref().map(|n| n.summary()),
         gps: match gps {
             Some(g) => {
                 let (stats, port_errors, opens) = g.finish();
@@ -612,6 +628,8 @@ fn drain(
     rec: &Option<Recorder>,
     sample_ns: f64,
     mut finder: Option<&mut NorthFinder>,
+    mut navigator: Option<&mut nav::navigator::Navigator>,
+    coning_samples: usize,
 ) {
     let mut updates: Vec<Update> = Vec::new();
     for e in ev.drain(..) {
@@ -630,6 +648,10 @@ fn drain(
     }
     for s in out.drain(..) {
         sums.add(&s);
+        if let (Some(n), Some(o)) = (navigator.as_deref_mut(), s.pps_offset) {
+            let base = proc.baseline().map_or(s.sample as i64 - 1, |b| b as i64);
+            n.on_pps(((s.sample as i64 - base) as f64 - o) * sample_ns * 1e-9);
+        }
         let invalid_before = proc.stats().invalid_since.is_some();
         proc.push_sample(&s, &mut updates);
         if !invalid_before && let Some(k) = proc.stats().invalid_since {
@@ -637,12 +659,15 @@ fn drain(
         }
         let base = proc.baseline().map_or(0, |b| b as i64);
         for u in updates.drain(..) {
+            let tu = (u.valid_sample - base) as f64 * sample_ns * 1e-9;
             if let Some(f) = finder.as_deref_mut() {
-                f.on_update(
-                    (u.valid_sample - base) as f64 * sample_ns * 1e-9,
-                    u.phi,
-                    u.dv,
-                );
+                f.on_update(tu, u.phi, u.dv);
+            }
+            // navigation takes over once north-finding (when it runs) is finished
+            if let Some(n) = navigator.as_deref_mut()
+                && finder.as_deref().is_none_or(|f| f.finished())
+            {
+                n.on_update(tu, u.phi, u.dv, coning_samples as f64 * sample_ns * 1e-9);
             }
             sums.updates += 1;
             for a in 0..3 {
@@ -741,6 +766,23 @@ fn print_summary(s: &Summary) {
         s.processing.first_suspect
     );
     println!("  IMU timeouts      {}", s.imu_timeouts);
+    if let Some(n) = &s.navigation {
+        match &n.output {
+            Some(o) => println!(
+                "  navigation        {:?}: lat {:.7} lon {:.7} h {:.1} m, vel [{:.2}, {:.2}, {:.2}] m/s, heading {:.3} deg; filter {:?}",
+                n.phase,
+                o.lat_deg,
+                o.lon_deg,
+                o.h_m,
+                o.vel_enu_mps[0],
+                o.vel_enu_mps[1],
+                o.vel_enu_mps[2],
+                o.hpr_deg[0],
+                n.filter
+            ),
+            None => println!("  navigation        {:?} (not started)", n.phase),
+        }
+    }
     if let Some(g) = &s.gps {
         let t = &g.stats;
         println!(
