@@ -272,32 +272,15 @@ impl ImuFrontEnd {
                 last: self.ext,
                 counter: g.sample_counter,
             });
-            if let Some(p) = self.pending.take() {
-                self.emit(
-                    ImuSample {
-                        accel_missing: true,
-                        ..p
-                    },
-                    out,
-                    ev,
-                );
-            }
+            self.flush(out, ev);
             self.last_counter = Some(g.sample_counter);
             self.last_gyro = g.counts;
             self.last_accel = None;
             self.resynced = true;
             return;
         }
-        if let Some(p) = self.pending.take() {
-            self.emit(
-                ImuSample {
-                    accel_missing: true,
-                    ..p
-                },
-                out,
-                ev,
-            );
-        }
+        // the previous sample's accelerometer frame never came
+        self.flush(out, ev);
         let span = u32::from(d);
         self.ext += u64::from(d);
         let mut ambiguous = false;

@@ -138,8 +138,6 @@ struct AttitudeSummary {
 
 #[derive(Default)]
 struct Sums {
-    dtheta: [f64; 3],
-    dv: [f64; 3],
     samples: u64,
     first: Option<u64>,
     last: Option<u64>,
@@ -152,10 +150,6 @@ impl Sums {
     fn add(&mut self, s: &ImuSample) {
         if s.ambiguous {
             return;
-        }
-        for i in 0..3 {
-            self.dtheta[i] += s.dtheta[i];
-            self.dv[i] += s.dv[i];
         }
         self.samples += u64::from(s.span);
         self.first.get_or_insert(s.sample - u64::from(s.span));
