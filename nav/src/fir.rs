@@ -54,7 +54,7 @@ impl Default for FirSpec {
 }
 
 /// Why a filter could not be designed.
-#[derive(Debug, Error, PartialEq)]
+#[derive(Debug, Clone, Error, PartialEq)]
 pub enum FirError {
     /// The specification itself is inconsistent.
     #[error("invalid FIR specification: {0}")]
@@ -99,8 +99,22 @@ const GRID: usize = 600;
 const LAWSON_ITERATIONS: usize = 1000;
 
 impl Fir {
-    /// Design the filter and check it against its specification.
+    /// Design the filter and check it against its specification. Designs are remembered per
+    /// specification for the life of the process (a design costs tens of milliseconds, and
+    /// config validation, the processing chain and in-process runs all ask for the same one).
     pub fn design(spec: FirSpec) -> Result<Self, FirError> {
+        static CACHE: std::sync::Mutex<Vec<(FirSpec, Result<Fir, FirError>)>> =
+            std::sync::Mutex::new(Vec::new());
+        let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, r)) = cache.iter().find(|(s, _)| *s == spec) {
+            return r.clone();
+        }
+        let r = Self::design_uncached(spec);
+        cache.push((spec, r.clone()));
+        r
+    }
+
+    fn design_uncached(spec: FirSpec) -> Result<Self, FirError> {
         if spec.order == 0 || !spec.order.is_multiple_of(2) || spec.order > 400 {
             return Err(FirError::BadSpec(format!(
                 "order must be even and in 2..=400, got {}",
