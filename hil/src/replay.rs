@@ -113,18 +113,13 @@ impl ImuChain {
             }
         }
         self.ev.clear();
-        let base = self.proc.baseline().unwrap_or(0) as i64;
-        for smp in self.out.drain(..) {
-            if let Some(o) = smp.pps_offset {
-                let b = if base == 0 {
-                    smp.sample as i64 - 1
-                } else {
-                    base
-                };
-                let ts = self.t_first.unwrap_or(0.0) + (smp.sample as i64 - b) as f64 * self.dt;
-                self.pps.push(ts - o * self.dt);
-            }
+        let samples: Vec<_> = self.out.drain(..).collect();
+        for smp in samples {
             self.proc.push_sample(&smp, upd);
+            if let Some(o) = smp.pps_offset {
+                // the edge came `o` samples before the end of this sample
+                self.pps.push(self.time_of(smp.sample as i64) - o * self.dt);
+            }
         }
         t
     }

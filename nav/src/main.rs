@@ -642,12 +642,14 @@ fn drain(
     }
     for s in out.drain(..) {
         sums.add(&s);
-        if let (Some(n), Some(o)) = (navigator.as_deref_mut(), s.pps_offset) {
-            let base = proc.baseline().map_or(s.sample as i64 - 1, |b| b as i64);
-            n.on_pps(((s.sample as i64 - base) as f64 - o) * sample_ns * 1e-9);
-        }
         let invalid_before = proc.stats().invalid_since.is_some();
         proc.push_sample(&s, &mut updates);
+        // the PPS edge came `o` samples before the end of this sample (time from the baseline)
+        if let (Some(n), Some(o), Some(b)) =
+            (navigator.as_deref_mut(), s.pps_offset, proc.baseline())
+        {
+            n.on_pps(((s.sample - b) as f64 - o) * sample_ns * 1e-9);
+        }
         if !invalid_before && let Some(k) = proc.stats().invalid_since {
             warn!("attitude invalid from sample {k}: counter gap too long to difference");
         }
