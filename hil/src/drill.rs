@@ -129,10 +129,10 @@ pub fn run_in_process(
                 break;
             }
         }
-        let p = finder.progress();
-        if last_phase != Some((p.phase, p.position)) || k.is_multiple_of(2000) {
-            last_phase = Some((p.phase, p.position));
-            progress(&p);
+        let stage = finder.stage();
+        if last_phase != Some(stage) || k.is_multiple_of(2000) {
+            last_phase = Some(stage);
+            progress(&finder.progress());
         }
         k += 1;
     }

@@ -575,14 +575,11 @@ fn report_north_finding(
     reported: &mut bool,
     rec: &Option<Recorder>,
 ) {
-    let p = f.progress();
-    if last_phase
-        .map(|l| l != (p.phase, p.position))
-        .unwrap_or(true)
-        || t - *last_print >= 1.0
-    {
+    let stage = f.stage();
+    if *last_phase != Some(stage) || t - *last_print >= 1.0 {
         *last_print = t;
-        *last_phase = Some((p.phase, p.position));
+        *last_phase = Some(stage);
+        let p = f.progress();
         if let Ok(j) = serde_json::to_string(&p) {
             println!("nav: north-finding progress {j}");
             if let Some(r) = rec {

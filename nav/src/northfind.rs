@@ -808,7 +808,12 @@ impl NorthFinder {
         self.enter(Phase::Done);
     }
 
-    /// Live progress.
+    /// Phase and position (1-based): cheap, for deciding when to report progress.
+    pub fn stage(&self) -> (Phase, usize) {
+        (self.phase, (self.k + 1).min(self.cfg.positions_deg.len()))
+    }
+
+    /// Live progress (solves for the estimate so far: call it when reporting, not per sample).
     pub fn progress(&self) -> Progress {
         let est = Self::solve(&self.results, self.cfg.latitude_deg);
         let dwell_left = match self.phase {
@@ -818,7 +823,7 @@ impl NorthFinder {
         };
         Progress {
             phase: self.phase,
-            position: (self.k + 1).min(self.cfg.positions_deg.len()),
+            position: self.stage().1,
             positions: self.cfg.positions_deg.len(),
             dwell_left_s: dwell_left,
             heading_deg: self
