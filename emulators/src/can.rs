@@ -69,6 +69,14 @@ pub enum CanTxError {
         /// Cause.
         source: std::io::Error,
     },
+    /// A read failed (the turntable reading its commands).
+    #[error("CAN interface {iface}: reading turntable commands failed")]
+    Read {
+        /// Interface.
+        iface: String,
+        /// Cause.
+        source: std::io::Error,
+    },
 }
 
 /// Write one frame, retrying while the transmit queue is full; returns the retries.
@@ -317,9 +325,8 @@ pub fn run_turntable(
                     std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock
                 ) => {}
             Err(source) => {
-                return Err(CanTxError::Write {
+                return Err(CanTxError::Read {
                     iface: iface.into(),
-                    id: 0x100,
                     source,
                 });
             }

@@ -465,13 +465,10 @@ fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
     let mut s = Scenario::builtin_static();
     let heading = match a.heading {
         Some(h) => h.rem_euclid(360.0),
+        // random, reproducible from the seed (the same generator as the Monte Carlo)
         None => {
-            // reproducible "random": from the seed
-            let x = a
-                .seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (x >> 11) as f64 / (1u64 << 53) as f64 * 360.0
+            use rand::{Rng, SeedableRng};
+            rand::rngs::StdRng::seed_from_u64(a.seed).random::<f64>() * 360.0
         }
     };
     s.name = "drill-north-finding".into();
