@@ -749,11 +749,9 @@ impl NorthFinder {
         }
     }
 
-    /// Solve for heading and biases from the positions measured so far (two or more).
-    pub fn solve(
-        results: &[PositionResult],
-        latitude_deg: f64,
-    ) -> Option<(f64, f64, [f64; 2], f64)> {
+    /// Solve for heading and biases from the positions measured so far (two or more): heading
+    /// (deg), its sigma (deg), horizontal biases (deg/h), horizontal earth rate found (deg/h).
+    pub fn solve(results: &[PositionResult]) -> Option<(f64, f64, [f64; 2], f64)> {
         if results.len() < 2 {
             return None;
         }
@@ -777,7 +775,6 @@ impl NorthFinder {
         let n2 = s * s + c * c;
         let var =
             (c * c * cov[(0, 0)] + s * s * cov[(1, 1)] - 2.0 * s * c * cov[(0, 1)]) / (n2 * n2);
-        let _ = latitude_deg;
         Some((
             heading,
             var.max(0.0).sqrt().to_degrees(),
@@ -787,8 +784,7 @@ impl NorthFinder {
     }
 
     fn finish(&mut self) {
-        let Some((heading, sigma, bias, wn)) = Self::solve(&self.results, self.cfg.latitude_deg)
-        else {
+        let Some((heading, sigma, bias, wn)) = Self::solve(&self.results) else {
             self.fail("too few positions measured to solve".into());
             return;
         };
@@ -815,7 +811,7 @@ impl NorthFinder {
 
     /// Live progress (solves for the estimate so far: call it when reporting, not per sample).
     pub fn progress(&self) -> Progress {
-        let est = Self::solve(&self.results, self.cfg.latitude_deg);
+        let est = Self::solve(&self.results);
         let dwell_left = match self.phase {
             Phase::Dwell => (self.cfg.dwell_s - (self.t - self.dwell.t0)).max(0.0),
             Phase::Done | Phase::Aborted | Phase::Returning | Phase::LockingZero => 0.0,
