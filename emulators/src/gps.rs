@@ -23,6 +23,17 @@ pub enum PtyError {
         #[source]
         source: std::io::Error,
     },
+    /// The device link could not be made.
+    #[error("pointing the GPS device link {link} at {target}")]
+    Link {
+        /// The link.
+        link: String,
+        /// Where it should point.
+        target: String,
+        /// Cause.
+        #[source]
+        source: std::io::Error,
+    },
 }
 
 /// The emulated receiver's serial port: a pty pair. nav opens [`GpsPty::path`].
@@ -305,6 +316,9 @@ pub struct ReceiverParams {
     pub outage_void: bool,
     /// Multipath jumps: [time s, duration s, metres] added to the north error.
     pub multipath: Vec<[f64; 3]>,
+    /// Periods [start, end] s during which the receiver's device is gone (a USB receiver
+    /// resetting): on the bench its pty closes and a new one appears behind the same link.
+    pub port_drops: Vec<[f64; 2]>,
 }
 
 impl Default for ReceiverParams {
@@ -319,6 +333,7 @@ impl Default for ReceiverParams {
             outages: Vec::new(),
             outage_void: true,
             multipath: Vec::new(),
+            port_drops: Vec::new(),
         }
     }
 }
@@ -498,6 +513,151 @@ impl NmeaWriter {
         out += &with_checksum(&format!("{tk}ZDA,{time},{dd:02},{mo:02},{yy:04},00,00"));
         (out, valid.then_some(e))
     }
+}
+
+/// The antenna's truth on a drive: the vehicle's position and velocity moved by the lever arm
+/// (body frame: x right, y forward, z up; the road is level, so only the heading turns it).
+pub fn antenna_truth(drive: &crate::drive::Drive, t: f64, lever_arm_m: [f64; 3]) -> AntennaTruth {
+    let (lat, lon, h) = drive.position(t);
+    let (_, psi, _, psi_rate, _) = drive.kinematics(t);
+    let v = drive.velocity(t);
+    let [lx, ly, lz] = lever_arm_m;
+    let (s, c) = psi.sin_cos();
+    // lever arm in ENU and its rate as the vehicle turns
+    let (de, dn) = (lx * c + ly * s, -lx * s + ly * c);
+    let (ve, vn) = (
+        psi_rate * (-lx * s + ly * c),
+        psi_rate * (-lx * c - ly * s),
+    );
+    let (rm, rn) = nav::earth::radii(lat);
+    AntennaTruth {
+        lat_deg: (lat + dn / (rm + h)).to_degrees(),
+        lon_deg: (lon + de / ((rn + h) * lat.cos())).to_degrees(),
+        h_m: h + lz,
+        vel_enu: [v.x + ve, v.y + vn, v.z],
+    }
+}
+
+/// What the GPS adapter did on its pty.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize, PartialEq, Eq)]
+pub struct GpsTxStats {
+    /// Fix epochs written with a valid fix.
+    pub fixes: u64,
+    /// Epochs written without a fix (before the first fix, void outages).
+    pub void_epochs: u64,
+    /// Epochs with no sentences at all (silent outages).
+    pub silent_epochs: u64,
+    /// Bytes written.
+    pub bytes: u64,
+    /// Times the port went away and came back (port-drop faults).
+    pub port_drops: u64,
+    /// Epochs lost because nobody read the port (its buffer was full).
+    pub unread_epochs: u64,
+}
+
+/// The GPS receiver on a pty during a bench run. Its clock is the IMU stream's (`progress`): the
+/// fix of each PPS edge (at `k / rate + pps_phase_s`, the same edges the IMU latches) is written
+/// `latency_s` after the IMU has passed the edge, as a receiver outputs its fix shortly after
+/// the pulse. During the receiver's `port_drops` the device is gone: the pty is closed and a
+/// new one appears at `link` afterwards (as a USB receiver re-enumerating behind a
+/// `/dev/serial/by-id` link).
+pub struct GpsRun<'a> {
+    /// The sentence writer (receiver model and its errors).
+    pub writer: NmeaWriter,
+    /// The drive the antenna rides on.
+    pub drive: &'a crate::drive::Drive,
+    /// The IMU's PPS phase, s.
+    pub pps_phase_s: f64,
+    /// Delay from the PPS edge to the sentences, s.
+    pub latency_s: f64,
+    /// UTC second of day at t = 0, and the date (day, month, year).
+    pub utc0_s: f64,
+    /// Date.
+    pub date: (u32, u32, u32),
+}
+
+impl GpsRun<'_> {
+    /// Run until `duration_s` of simulated time or `stop`. `pty` is replaced when the port
+    /// drops; `link` (when given) is re-pointed at the new device.
+    pub fn run(
+        mut self,
+        pty: &mut GpsPty,
+        link: Option<&std::path::Path>,
+        progress: &crate::can::Progress,
+        duration_s: f64,
+        stop: &AtomicBool,
+    ) -> Result<GpsTxStats, PtyError> {
+        let mut st = GpsTxStats::default();
+        let period = 1.0 / self.writer.params().rate_hz.clamp(1.0, 10.0);
+        let lever = self.writer.params().lever_arm_m;
+        let mut k = 1u64;
+        let drops = self.writer.params().port_drops.clone();
+        let mut dropped: Option<usize> = None;
+        loop {
+            let edge = k as f64 * period + self.pps_phase_s;
+            if edge > duration_s || stop.load(Ordering::Relaxed) {
+                break;
+            }
+            if progress.now() < edge + self.latency_s {
+                std::thread::sleep(Duration::from_millis(2));
+                continue;
+            }
+            k += 1;
+            // the device disappears and comes back
+            let in_drop = drops.iter().position(|d| edge >= d[0] && edge < d[1]);
+            match (dropped, in_drop) {
+                (None, Some(i)) => {
+                    *pty = GpsPty::open()?; // the old pair closes: the reader sees EIO
+                    if let Some(l) = link {
+                        let _ = std::fs::remove_file(l);
+                    }
+                    dropped = Some(i);
+                    st.port_drops += 1;
+                }
+                (Some(_), None) => {
+                    if let Some(l) = link {
+                        relink(l, pty.path())?;
+                    }
+                    dropped = None;
+                }
+                _ => {}
+            }
+            let truth = antenna_truth(self.drive, edge, lever);
+            let (text, err) = self.writer.fix(edge.floor(), self.utc0_s, self.date, &truth);
+            if dropped.is_some() {
+                continue;
+            }
+            match (text.is_empty(), err) {
+                (true, _) => st.silent_epochs += 1,
+                (false, Some(_)) => st.fixes += 1,
+                (false, None) => st.void_epochs += 1,
+            }
+            if !text.is_empty() {
+                match pty.write(text.as_bytes()) {
+                    Ok(()) => st.bytes += text.len() as u64,
+                    // nobody reads (nav not started or re-opening): the receiver's output is lost
+                    Err(PtyError::Write { source, .. })
+                        if source.kind() == std::io::ErrorKind::TimedOut =>
+                    {
+                        st.unread_epochs += 1;
+                        pty.clear();
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
+        }
+        Ok(st)
+    }
+}
+
+/// Point the symbolic link `link` at `target` (replacing what was there).
+pub fn relink(link: &std::path::Path, target: &str) -> Result<(), PtyError> {
+    let _ = std::fs::remove_file(link);
+    std::os::unix::fs::symlink(target, link).map_err(|source| PtyError::Link {
+        link: link.display().to_string(),
+        target: target.into(),
+        source,
+    })
 }
 
 #[cfg(test)]

@@ -32,6 +32,48 @@ pub struct NavRun {
     pub end_heading_error_deg: f64,
 }
 
+/// nav's navigation output scored against truth.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct NavScore {
+    /// IMU time of the output, s.
+    pub t_s: f64,
+    /// Horizontal position error, m.
+    pub position_error_m: f64,
+    /// Velocity error, m/s.
+    pub velocity_error_mps: f64,
+    /// Heading error, deg.
+    pub heading_error_deg: f64,
+}
+
+/// Score the navigation output in a nav summary against the drive (none when nav did not
+/// navigate). nav counts time from its first sample, which went out `t_first` s into the run.
+pub fn score_summary(drive: &Drive, nav: &serde_json::Value, t_first: f64) -> Option<NavScore> {
+    let n = &nav["navigation"];
+    let o: nav::strapdown::NavOutput = serde_json::from_value(n["output"].clone()).ok()?;
+    let t = n["output_t_s"].as_f64()? + t_first;
+    let tr = truth_state(drive, t);
+    let st = NavState::from_euler(
+        o.hpr_deg[0].to_radians(),
+        o.hpr_deg[1].to_radians(),
+        o.hpr_deg[2].to_radians(),
+        Vector3::from(o.vel_enu_mps),
+        o.lat_deg.to_radians(),
+        o.lon_deg.to_radians(),
+        o.h_m,
+    );
+    let e = st.position_error_m(&tr);
+    Some(NavScore {
+        t_s: t,
+        position_error_m: e.x.hypot(e.y),
+        velocity_error_mps: (st.v - tr.v).norm(),
+        heading_error_deg: wrap180((st.euler().0 - tr.euler().0).to_degrees()),
+    })
+}
+
+fn wrap180(d: f64) -> f64 {
+    (d + 180.0).rem_euclid(360.0) - 180.0
+}
+
 /// Pure inertial navigation of a drive scenario, initialised from truth.
 pub fn pure_inertial(s: &Scenario) -> Result<NavRun> {
     // the start position from an error-free receiver, then no aiding
@@ -121,13 +163,13 @@ pub fn navigate(
     };
     let tr = truth_state(&drive, last_t);
     let e = st.position_error_m(&tr);
-    let dh = (st.euler().0 - tr.euler().0).to_degrees();
+    let dh = wrap180((st.euler().0 - tr.euler().0).to_degrees());
     Ok(NavRun {
         duration_s: last_t,
         end_position_error_m: Vector3::new(e.x, e.y, 0.0).norm(),
         end_velocity_error_mps: (st.v - tr.v).norm(),
         rms_position_error_m: (sq / cnt.max(1) as f64).sqrt(),
-        end_heading_error_deg: (dh + 180.0).rem_euclid(360.0) - 180.0,
+        end_heading_error_deg: dh,
     })
 }
 

@@ -40,6 +40,10 @@ pub struct RunReport {
     pub turntable: Option<emulators::can::TurntableTxStats>,
     /// The north-finding drill's outcome (drills).
     pub drill: Option<crate::drill::DrillOutcome>,
+    /// What the GPS emulator wrote (runs with a receiver).
+    pub gps: Option<emulators::gps::GpsTxStats>,
+    /// nav's navigation scored against truth (runs that navigate).
+    pub navigation: Option<crate::navrun::NavScore>,
     /// nav's exit status.
     pub nav_exit: Option<i32>,
     /// nav's summary (as nav wrote it).
@@ -180,6 +184,64 @@ pub fn drill_checks(out: &mut Vec<Check>, s: &Scenario, o: &crate::drill::DrillO
                 e.abs() / sig.max(1e-12)
             ),
         });
+    }
+}
+
+/// Checks of a navigation run: nav navigated, used the receiver's fixes, and its end error is
+/// within the scenario's tolerance.
+pub fn navigation_checks(
+    out: &mut Vec<Check>,
+    s: &Scenario,
+    score: Option<&crate::navrun::NavScore>,
+    nav: &Value,
+    gps: Option<&emulators::gps::GpsTxStats>,
+) {
+    let n = &nav["navigation"];
+    out.push(Check {
+        name: "nav navigated".into(),
+        pass: n["phase"].as_str() == Some("navigating"),
+        detail: format!(
+            "phase {}, started at {} s of IMU time",
+            n["phase"],
+            n["started_at_s"]
+        ),
+    });
+    if let Some(g) = gps {
+        let fixes = num(nav, &["gps", "stats", "fixes"]);
+        let bad = num(nav, &["gps", "stats", "bad_checksum"]) + num(nav, &["gps", "stats", "unparsed"]);
+        let used = num(n, &["filter", "updates"]);
+        out.push(Check {
+            name: "GPS fixes received and used".into(),
+            pass: bad == 0.0 && fixes > 0.0 && (s.navigation.as_ref().is_some_and(|c| !c.gps_aiding) || used > 0.0),
+            detail: format!(
+                "emulator wrote {} fix epochs ({} void, {} silent, {} unread, {} port drops); nav decoded {fixes} fixes, {bad} bad sentences; the filter used {used}, rejected {}",
+                g.fixes,
+                g.void_epochs,
+                g.silent_epochs,
+                g.unread_epochs,
+                g.port_drops,
+                num(n, &["filter", "rejected"])
+            ),
+        });
+    }
+    match score {
+        Some(sc) => out.push(Check {
+            name: "navigation error within tolerance".into(),
+            pass: sc.position_error_m <= s.position_tolerance_m,
+            detail: format!(
+                "at {:.1} s: horizontal {:.2} m (limit {} m), velocity {:.3} m/s, heading {:+.4} deg",
+                sc.t_s,
+                sc.position_error_m,
+                s.position_tolerance_m,
+                sc.velocity_error_mps,
+                sc.heading_error_deg
+            ),
+        }),
+        None => out.push(Check {
+            name: "navigation error within tolerance".into(),
+            pass: false,
+            detail: "nav reported no navigation output".into(),
+        }),
     }
 }
 
@@ -349,6 +411,13 @@ pub fn markdown(r: &RunReport) -> String {
         if let Some(why) = &d.abort {
             let _ = writeln!(s, "**Aborted:** {why}\n");
         }
+    }
+    if let Some(n) = &r.navigation {
+        let _ = writeln!(
+            s,
+            "## Navigation (nav's output against truth)\n\n| at | horizontal position error | velocity error | heading error |\n|---|---|---|---|\n| {:.1} s | {:.2} m | {:.3} m/s | {:+.4} deg |\n",
+            n.t_s, n.position_error_m, n.velocity_error_mps, n.heading_error_deg
+        );
     }
     let _ = writeln!(s, "| check | result | detail |\n|---|---|---|");
     for c in &r.checks {

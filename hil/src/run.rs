@@ -8,7 +8,10 @@ use anyhow::{Context, Result, bail};
 use emulators::can::{Progress, run_imu, run_turntable};
 use emulators::clock::SimClock;
 use emulators::imu::ImuEmulator;
-use nav::config::{CanConfig, NavConfig, RecordConfig, WatchdogConfig};
+use emulators::drive::Drive;
+use emulators::gps::{GpsPty, GpsRun, NmeaWriter, relink};
+use nav::config::{CanConfig, GpsConfig, NavConfig, RecordConfig, WatchdogConfig};
+use nav::navigator::NavigationConfig;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -46,14 +49,34 @@ pub fn sibling_binary(name: &str) -> Result<PathBuf> {
     )
 }
 
-fn nav_config(s: &Scenario, iface: &str) -> NavConfig {
+/// nav's `[navigation]` for a scenario: enabled, the surveyed heading when north-finding does
+/// not give one, the receiver's lever arm when the filter's is left at zero.
+pub fn navigation_config(s: &Scenario) -> Option<NavigationConfig> {
+    let mut n = s.navigation.clone()?;
+    n.enabled = true;
+    if s.north_finding.is_none() && n.initial_heading_deg.is_none() {
+        n.initial_heading_deg = Some(s.truth_heading_deg());
+    }
+    if let Some(g) = &s.gps
+        && n.filter.lever_arm_m == [0.0; 3]
+    {
+        n.filter.lever_arm_m = g.lever_arm_m;
+    }
+    Some(n)
+}
+
+fn nav_config(s: &Scenario, iface: &str, gps_port: Option<&Path>) -> NavConfig {
     NavConfig {
         can: Some(CanConfig {
             interface: iface.into(),
             rcvbuf_bytes: 8 << 20,
         }),
-        gps: None,
-        navigation: Default::default(),
+        gps: gps_port.map(|p| GpsConfig {
+            port: p.to_path_buf(),
+            baud: 9600,
+            fixes_jsonl: Some("gps-fixes.jsonl".into()),
+        }),
+        navigation: navigation_config(s).unwrap_or_default(),
         imu: crate::replay::calibration(s),
         processing: s.processing,
         north_finding: s
@@ -138,8 +161,21 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         .with_context(|| format!("creating {}", opts.out.display()))?;
     vcan_setup::ensure_vcan(&opts.iface)?;
     std::fs::write(opts.out.join("scenario.toml"), toml::to_string_pretty(s)?)?;
+    // the receiver's pty, behind a link as a USB receiver sits behind /dev/serial/by-id
+    let gps = match &s.gps {
+        Some(_) => {
+            let pty = GpsPty::open().context("GPS emulator")?;
+            let link = std::env::temp_dir().join(format!("hil-gps-{}", std::process::id()));
+            relink(&link, pty.path()).context("GPS emulator")?;
+            Some((pty, link))
+        }
+        None => None,
+    };
     let cfg_path = opts.out.join("nav.toml");
-    std::fs::write(&cfg_path, nav_config(s, &opts.iface).to_toml())?;
+    std::fs::write(
+        &cfg_path,
+        nav_config(s, &opts.iface, gps.as_ref().map(|g| g.1.as_path())).to_toml(),
+    )?;
     info!(interface = %opts.iface, "starting nav");
     let nav = start_nav(&opts.nav_bin, &cfg_path)?;
 
@@ -147,6 +183,32 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let imu = ImuEmulator::new(motion, s.imu.clone());
     let stop = Arc::new(AtomicBool::new(false));
     let progress = Arc::new(Progress::default());
+    let gps_thread = match (gps, &s.gps, &s.drive) {
+        (Some((mut pty, link)), Some(rx), Some(d)) => {
+            let drive = Drive::plan(d).map_err(anyhow::Error::msg)?;
+            let writer = NmeaWriter::new(rx.clone());
+            let (stop, progress, dur, phase) =
+                (stop.clone(), progress.clone(), s.duration_s, s.imu.pps_phase_s);
+            let utc0 = (std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs())
+                % 86_400) as f64;
+            Some(std::thread::spawn(move || {
+                let r = GpsRun {
+                    writer,
+                    drive: &drive,
+                    pps_phase_s: phase,
+                    latency_s: 0.05,
+                    utc0_s: utc0,
+                    date: (21, 11, 2026),
+                }
+                .run(&mut pty, Some(&link), &progress, dur, &stop);
+                let _ = std::fs::remove_file(&link);
+                r
+            }))
+        }
+        _ => None,
+    };
     let clock = SimClock::start(s.speed);
     let t0 = Instant::now();
     let tx = {
@@ -173,12 +235,12 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     while !tx.is_finished() {
         std::thread::sleep(Duration::from_millis(50));
         for l in nav.lines.try_iter() {
-            if drill.line(&l, opts.progress) {
-                // north-finding reported: the drill is over
+            if drill.line(&l, opts.progress) && s.drive.is_none() {
+                // north-finding reported: the drill is over (a drive goes on to navigate)
                 stop.store(true, Ordering::Relaxed);
             }
         }
-        if opts.progress && s.north_finding.is_none() && Instant::now() >= next_report {
+        if opts.progress && (s.north_finding.is_none() || drill.done) && Instant::now() >= next_report {
             let t = progress.now();
             eprintln!(
                 "hil: {t:.1} / {:.1} s simulated (x{})",
@@ -197,6 +259,14 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             h.join()
                 .map_err(|_| anyhow::anyhow!("turntable emulator thread panicked"))?
                 .context("turntable emulator")?,
+        ),
+        None => None,
+    };
+    let gps_stats = match gps_thread {
+        Some(h) => Some(
+            h.join()
+                .map_err(|_| anyhow::anyhow!("GPS emulator thread panicked"))?
+                .context("GPS emulator")?,
         ),
         None => None,
     };
@@ -234,7 +304,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         let result: Option<nav::northfind::NorthResult> =
             serde_json::from_value(nf["result"].clone()).ok();
         crate::drill::outcome(
-            s.site.heading_deg,
+            s.truth_heading_deg(),
             result.as_ref(),
             nf["abort"].as_str(),
             wall * s.speed,
@@ -243,6 +313,15 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     if let Some(o) = &drill_outcome {
         report::drill_checks(&mut checks, s, o);
     }
+    let navigation = match (&s.navigation, &s.drive) {
+        (Some(_), Some(d)) => {
+            let drive = Drive::plan(d).map_err(anyhow::Error::msg)?;
+            let o = crate::navrun::score_summary(&drive, &nav_json, 1.0 / s.imu.rate_hz);
+            report::navigation_checks(&mut checks, s, o.as_ref(), &nav_json, gps_stats.as_ref());
+            o
+        }
+        _ => None,
+    };
     let pass = checks.iter().all(|c| c.pass);
     let r = RunReport {
         scenario: s.clone(),
@@ -254,6 +333,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         in_process: reference,
         turntable: tt_stats,
         drill: drill_outcome,
+        gps: gps_stats,
+        navigation,
         nav_exit,
         nav: nav_json,
         bus_lost_frames: lost,

@@ -3,7 +3,9 @@
 use anyhow::{Context, Result, bail};
 use emulators::can::BusFaults;
 use emulators::drive::{Drive, DriveSpec};
+use emulators::gps::ReceiverParams;
 use emulators::imu::ImuParams;
+use nav::navigator::NavigationConfig;
 use emulators::truth::{
     Composed, Coning, Disturbance, Disturbances, Indexer, Motion, RelativeRotation, Static,
     Vibration,
@@ -60,6 +62,22 @@ pub struct Scenario {
     /// Faults injected on the bus.
     #[serde(default)]
     pub faults: BusFaults,
+    /// The GPS receiver, writing NMEA on a pty nav reads (needs a [drive]: the antenna rides on
+    /// it).
+    #[serde(default)]
+    pub gps: Option<ReceiverParams>,
+    /// nav navigates with these settings (nav's own `[navigation]` table). Without north-finding
+    /// and without `initial_heading_deg` nav is given the true heading at the start (a surveyed
+    /// heading); an all-zero filter lever arm is taken from the receiver's installation.
+    #[serde(default)]
+    pub navigation: Option<NavigationConfig>,
+    /// A navigation run passes when nav's horizontal position error at the end is within this, m.
+    #[serde(default = "default_position_tolerance")]
+    pub position_tolerance_m: f64,
+}
+
+fn default_position_tolerance() -> f64 {
+    25.0
 }
 
 fn one() -> f64 {
@@ -116,6 +134,30 @@ impl Scenario {
             && !(c.half_angle_deg.abs() <= 10.0 && c.frequency_hz >= 0.0 && c.frequency_hz < 500.0)
         {
             bail!("coning: half_angle_deg must be within 10 deg and frequency_hz in [0, 500)");
+        }
+        if self.gps.is_some() && self.drive.is_none() {
+            bail!("[gps] needs a [drive]: the antenna rides on the vehicle's route");
+        }
+        if let Some(g) = &self.gps
+            && !(1.0..=10.0).contains(&g.rate_hz)
+        {
+            bail!("gps.rate_hz must be in [1, 10]");
+        }
+        if self.navigation.is_some() && self.gps.is_none() {
+            bail!("[navigation] needs a [gps]: nav takes its start position from the first fix");
+        }
+        if let Some(d) = &self.drive
+            && (self.turntable.is_some() || self.north_finding.is_some())
+            && ((d.lat_deg - self.site.lat_deg).abs() > 1e-6
+                || (d.lon_deg - self.site.lon_deg).abs() > 1e-6)
+        {
+            bail!(
+                "drive starts at {} N {} E but the site is {} N {} E: north-finding uses the site's latitude, so they must agree",
+                d.lat_deg, d.lon_deg, self.site.lat_deg, self.site.lon_deg
+            );
+        }
+        if !(self.position_tolerance_m > 0.0) {
+            bail!("position_tolerance_m must be positive");
         }
         nav::attitude::ImuProcessor::new(&self.processing)
             .map_err(|e| anyhow::anyhow!("processing: {e}"))?;
@@ -192,6 +234,14 @@ impl Scenario {
             relative,
             linear: self.vibration.clone(),
         })
+    }
+
+    /// The true heading of the vehicle at the start, deg (the drive's, else the site's).
+    pub fn truth_heading_deg(&self) -> f64 {
+        match self.drive.as_ref().and_then(|d| Drive::plan(d).ok()) {
+            Some(d) => d.heading(0.0).to_degrees(),
+            None => self.site.heading_deg,
+        }
     }
 
     /// True when the IMU sits still on the site (static checks apply).

@@ -57,6 +57,8 @@ pub struct NavigatorSummary {
     pub started_at_s: Option<f64>,
     /// The latest (filter-corrected) output.
     pub output: Option<NavOutput>,
+    /// IMU time of that output, s from the first sample.
+    pub output_t_s: f64,
     /// Filter counters.
     pub filter: Option<FilterStats>,
     /// Fixes seen, used, ignored (invalid, flagged, before the start).
@@ -238,6 +240,7 @@ impl Navigator {
             phase: self.phase,
             started_at_s: self.started_at,
             output: self.state().map(|s| s.output()),
+            output_t_s: self.last_t,
             filter: self.kf.as_ref().map(Kf::stats),
             fixes_seen: self.fixes_seen,
             fixes_ignored: self.fixes_ignored,
