@@ -4,6 +4,7 @@
 
 use serialport::{SerialPort, TTYPort};
 use std::io::Write;
+use std::os::fd::AsRawFd;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 use thiserror::Error;
@@ -48,6 +49,16 @@ impl GpsPty {
     /// Create the pty pair.
     pub fn open() -> Result<Self, PtyError> {
         let (master, slave) = TTYPort::pair().map_err(PtyError::Create)?;
+        // serialport opens the pair without O_CLOEXEC: a process started later (nav) would
+        // inherit the master and keep the device alive after the receiver has gone
+        for fd in [master.as_raw_fd(), slave.as_raw_fd()] {
+            // SAFETY: fcntl(2) on descriptors owned by the ports above.
+            if unsafe { libc::fcntl(fd, libc::F_SETFD, libc::FD_CLOEXEC) } != 0 {
+                return Err(PtyError::Create(serialport::Error::from(
+                    std::io::Error::last_os_error(),
+                )));
+            }
+        }
         let path = slave.name().unwrap_or_default();
         Ok(Self {
             master,
@@ -268,6 +279,26 @@ mod tests {
         let mut buf = [0u8; 64];
         let n = reader.read(&mut buf).unwrap();
         assert_eq!(&buf[..n], b"$GPGSA,A,3*00\r\n");
+    }
+
+    #[test]
+    fn closing_the_pty_hangs_up_its_reader() {
+        let pty = GpsPty::open().unwrap();
+        let mut reader = serialport::new(pty.path(), 9600)
+            .timeout(Duration::from_millis(200))
+            .open()
+            .unwrap();
+        // a process started while the pty is open must not inherit it (nav on the bench)
+        let mut child = std::process::Command::new("sleep").arg("2").spawn().unwrap();
+        drop(pty);
+        let mut buf = [0u8; 64];
+        let r = reader.read(&mut buf);
+        let _ = child.kill();
+        let _ = child.wait();
+        assert!(
+            !matches!(&r, Err(e) if e.kind() == std::io::ErrorKind::TimedOut),
+            "{r:?}"
+        );
     }
 }
 
@@ -714,6 +745,14 @@ mod writer_tests {
             valid,
             [false, false, true, true, true, false, false, true, true]
         );
+        // an epoch without a fix (empty fields, no satellites in view) is well-formed NMEA
+        let mut dec = nav::gps::GpsDecoder::default();
+        let mut fixes = Vec::new();
+        let (text, _) = NmeaWriter::new(p.clone()).fix(0.0, 0.0, (1, 1, 2026), &truth);
+        dec.push_bytes(text.as_bytes(), &mut fixes);
+        let st = dec.stats();
+        assert_eq!((st.accepted, st.unparsed, st.bad_checksum), (6, 0, 0), "{st:?}");
+        assert!(fixes.iter().all(|f| !f.valid));
         let mut silent = NmeaWriter::new(ReceiverParams {
             outage_void: false,
             ..p

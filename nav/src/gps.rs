@@ -188,6 +188,13 @@ impl GpsDecoder {
             // NMEA 2.0 GLL has no mode field, which the parser requires (the checksum was
             // good, or it would have said so)
             Err(nmea::Error::ParsingError(_)) if let Some(g) = gll_v20(l) => ParseResult::GLL(g),
+            // a receiver with no satellites in view sends `$GPGSV,1,1,00`, which the parser
+            // refuses; it is a well-formed sentence that tells nav nothing
+            Err(nmea::Error::ParsingError(_)) if gsv_none_in_view(l) => {
+                self.stats.accepted += 1;
+                self.stats.unused += 1;
+                return LineOutcome::Other;
+            }
             Err(e) => {
                 self.stats.unparsed += 1;
                 return LineOutcome::Unparsed(format!("{e:?}"));
@@ -351,6 +358,13 @@ fn gll_v20(l: &str) -> Option<nmea::sentences::GllData> {
         valid: f[6] == "A",
         faa_mode: None,
     })
+}
+
+/// `$xxGSV,1,1,00*hh`: no satellites in view.
+fn gsv_none_in_view(l: &str) -> bool {
+    let body = l.get(1..).and_then(|b| b.split('*').next()).unwrap_or("");
+    let f: Vec<&str> = body.split(',').collect();
+    f.len() == 4 && f[0].ends_with("GSV") && f[1] == "1" && f[2] == "1" && f[3] == "00"
 }
 
 fn fix_quality(f: nmea::sentences::FixType) -> u8 {

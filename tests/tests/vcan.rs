@@ -259,6 +259,56 @@ fn north_finding_drill_at_x10_lands_within_3_sigma() {
     assert!(dir.path().join("report.md").is_file());
 }
 
+/// A GPS-aided drive through vcan and a pty at speed factor 10 (one 1 km lap of
+/// scenarios/drive-gps.toml, paper-grade IMU, 25 m class receiver), with the receiver misbehaving:
+/// its device vanishes for 4 s and comes back (nav re-opens it), a 10 s outage sends void fixes,
+/// and a multipath jump puts three fixes 2 km off (the innovation gate rejects them). nav's end
+/// position must be within the same 25 m as the in-process filter runs
+/// (`hil::navrun::tests::the_filter_holds_a_paper_grade_imu_to_the_gps_class`).
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn gps_aided_drive_through_vcan_and_a_pty_survives_a_bad_receiver() {
+    let dir = tempfile::tempdir().unwrap();
+    let base =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
+    let text = std::fs::read_to_string(base).unwrap().replace(
+        "talker = \"GP\"\n",
+        "talker = \"GP\"\nport_drops = [[40.0, 44.0]]\noutages = [[85.0, 95.0]]\nmultipath = [[70.0, 3.0, 2000.0]]\n",
+    );
+    assert!(text.contains("port_drops"), "the scenario still has its [gps] talker line");
+    let scen = dir.path().join("drive-bad-gps.toml");
+    std::fs::write(&scen, text).unwrap();
+    let out = dir.path().join("run");
+    let (r, code) = hil_run(
+        &["--scenario", scen.to_str().unwrap(), "--iface", "vcan-e2e5"],
+        &out,
+    );
+    for (name, pass, detail) in checks(&r) {
+        eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
+        assert!(pass, "check failed: {name}: {detail}");
+    }
+    assert_eq!(code, 0);
+    let g = &r["nav"]["gps"];
+    assert_eq!(r["gps"]["port_drops"], 1);
+    assert!(g["opens"].as_u64().unwrap() >= 2, "nav re-opened the port: {g}");
+    assert!(g["port_errors"].as_u64().unwrap() >= 1, "{g}");
+    assert!(
+        g["stats"]["no_fix"].as_u64().unwrap() >= 10,
+        "the outage's void fixes are counted: {g}"
+    );
+    assert_eq!(g["stats"]["bad_checksum"], 0);
+    assert_eq!(g["stats"]["unparsed"], 0);
+    let f = &r["nav"]["navigation"]["filter"];
+    assert!(
+        f["rejected"].as_u64().unwrap() >= 2,
+        "the 2 km jumps were gated out: {f}"
+    );
+    let n = &r["navigation"];
+    eprintln!("navigation against truth: {n}");
+    assert!(n["t_s"].as_f64().unwrap() > 125.0, "{n}");
+    assert!(out.join("gps-fixes.jsonl").is_file());
+}
+
 /// The turntable validation suite passes on the healthy emulator and, with each injected fault,
 /// fails the check that names that fault, with a reason.
 #[test]
