@@ -4,32 +4,18 @@
 use crate::scenario::Scenario;
 use anyhow::{Result, bail};
 use emulators::drive::Drive;
-use emulators::gps::{AntennaTruth, GpsErrorParams, NmeaWriter, ReceiverParams};
+use emulators::gps::{GpsErrorParams, NmeaWriter, ReceiverParams, antenna_truth};
 use nalgebra::Vector3;
 use nav::kf::FilterConfig;
 use nav::navigator::{NavigationConfig, Navigator};
 use nav::strapdown::NavState;
+use crate::drill::wrap180;
 use serde::Serialize;
 
 /// The truth state of a drive at `t`.
 pub fn truth_state(d: &Drive, t: f64) -> NavState {
     let (lat, lon, h) = d.position(t);
     NavState::from_euler(d.heading(t), 0.0, 0.0, d.velocity(t), lat, lon, h)
-}
-
-/// Errors of a navigation run.
-#[derive(Debug, Clone, Serialize)]
-pub struct NavRun {
-    /// Simulated time navigated, s.
-    pub duration_s: f64,
-    /// Horizontal position error at the end, m.
-    pub end_position_error_m: f64,
-    /// Velocity error at the end, m/s.
-    pub end_velocity_error_mps: f64,
-    /// RMS horizontal position error over the run (1 Hz samples), m.
-    pub rms_position_error_m: f64,
-    /// Heading error at the end, deg.
-    pub end_heading_error_deg: f64,
 }
 
 /// nav's navigation output scored against truth.
@@ -70,29 +56,102 @@ pub fn score_summary(drive: &Drive, nav: &serde_json::Value, t_first: f64) -> Op
     })
 }
 
-fn wrap180(d: f64) -> f64 {
-    (d + 180.0).rem_euclid(360.0) - 180.0
+/// One second of a navigation run against truth.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct NavSample {
+    /// Simulated time, s.
+    pub t_s: f64,
+    /// Horizontal position error, m.
+    pub position_error_m: f64,
+    /// Velocity error (east, north, up), m/s.
+    pub velocity_error_mps: [f64; 3],
+    /// Heading error, deg.
+    pub heading_error_deg: f64,
+    /// Normalised estimation error squared of the position (3 dof; none without a filter).
+    pub nees_position: Option<f64>,
+    /// The same for the velocity.
+    pub nees_velocity: Option<f64>,
+}
+
+/// Errors of a navigation run.
+#[derive(Debug, Clone, Serialize)]
+pub struct NavRun {
+    /// Simulated time navigated, s.
+    pub duration_s: f64,
+    /// Horizontal position error at the end, m.
+    pub end_position_error_m: f64,
+    /// Velocity error at the end, m/s.
+    pub end_velocity_error_mps: f64,
+    /// Horizontal velocity error at the end, m/s.
+    pub end_horizontal_velocity_error_mps: f64,
+    /// RMS horizontal position error over the run (1 Hz samples), m.
+    pub rms_position_error_m: f64,
+    /// RMS velocity error over the run, m/s.
+    pub rms_velocity_error_mps: f64,
+    /// Heading error at the end, deg.
+    pub end_heading_error_deg: f64,
+    /// Mean NEES per degree of freedom, position and velocity (1 when the filter's covariance
+    /// is consistent with its errors; none without a filter).
+    pub mean_nees_per_dof: Option<[f64; 2]>,
+    /// Horizontal position error at the end of each receiver outage, m.
+    pub outage_end_errors_m: Vec<f64>,
+    /// Filter counters.
+    pub filter: Option<nav::kf::FilterStats>,
+    /// The run second by second.
+    #[serde(skip)]
+    pub series: Vec<NavSample>,
+}
+
+impl NavRun {
+    /// RMS and largest of the errors at the ends of the outages (none without outages).
+    pub fn outage_drift(&self) -> Option<(f64, f64)> {
+        let e = &self.outage_end_errors_m;
+        if e.is_empty() {
+            return None;
+        }
+        let rms = (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt();
+        Some((rms, e.iter().copied().fold(0.0, f64::max)))
+    }
+}
+
+/// The filter as installed: the receiver's lever arm when the filter's is left at zero.
+pub fn with_lever_arm(filter: &FilterConfig, rx: &ReceiverParams) -> FilterConfig {
+    let mut f = filter.clone();
+    if f.lever_arm_m == [0.0; 3] {
+        f.lever_arm_m = rx.lever_arm_m;
+    }
+    f
 }
 
 /// Pure inertial navigation of a drive scenario, initialised from truth.
 pub fn pure_inertial(s: &Scenario) -> Result<NavRun> {
     // the start position from an error-free receiver, then no aiding
-    let exact = GpsErrorParams {
-        gm_sigma_m: 0.0,
-        white_sigma_m: 0.0,
-        ..GpsErrorParams::default()
+    let exact = ReceiverParams {
+        errors: GpsErrorParams {
+            gm_sigma_m: 0.0,
+            white_sigma_m: 0.0,
+            ..GpsErrorParams::default()
+        },
+        lever_arm_m: [0.0; 3],
+        ..ReceiverParams::default()
     };
     navigate(s, None, &exact, 0.0)
 }
 
+fn nees(e: &[f64; 3], p: &nalgebra::Matrix3<f64>) -> Option<f64> {
+    let e = Vector3::from(*e);
+    p.try_inverse().map(|pi| (e.transpose() * pi * e)[(0, 0)])
+}
+
 /// Navigate a drive scenario in process the way nav does: the IMU stream through the chain,
-/// the receiver's NMEA through nav's GPS decoder, fixes tied to the IMU's PPS latch, and nav's
-/// navigator (levelling, strapdown, filter). `filter` none: pure inertial after the start. The
-/// heading handed over is the truth's plus `heading_err_deg` (north-finding's error).
+/// the receiver's NMEA (model `rx`: errors, lever arm, outages) through nav's GPS decoder, fixes
+/// tied to the IMU's PPS latch, and nav's navigator (levelling, strapdown, filter). `filter`
+/// none: pure inertial after the start. The heading handed over is the truth's plus
+/// `heading_err_deg` (north-finding's error).
 pub fn navigate(
     s: &Scenario,
     filter: Option<&FilterConfig>,
-    gps: &GpsErrorParams,
+    rx: &ReceiverParams,
     heading_err_deg: f64,
 ) -> Result<NavRun> {
     let Some(spec) = &s.drive else {
@@ -108,32 +167,23 @@ pub fn navigate(
         // level while still parked: the first fix comes at about 1 s
         level_s: (spec.start_wait_s - 1.2).clamp(0.2, 2.0),
         gps_aiding: filter.is_some(),
-        filter: filter.cloned().unwrap_or_default(),
+        filter: filter.map(|f| with_lever_arm(f, rx)).unwrap_or_default(),
     });
-    let receiver = ReceiverParams {
-        errors: gps.clone(),
-        lever_arm_m: [0.0; 3],
-        ..ReceiverParams::default()
-    };
-    let mut writer = NmeaWriter::new(receiver);
+    let mut writer = NmeaWriter::new(rx.clone());
     let mut dec = nav::gps::GpsDecoder::default();
     let mut fixes = Vec::new();
     let mut upd = Vec::new();
     // a fix reaches nav 50 ms after its PPS edge
     let mut pending: Vec<(f64, String)> = Vec::new();
-    let (mut sq, mut cnt, mut next_sample) = (0.0, 0u64, 1.0);
+    let mut series = Vec::new();
+    let mut outage_end = Vec::new();
+    let mut next_sample = 1.0;
     let mut last_t = 0.0;
     while chain.next_time() <= s.duration_s + 1e-9 {
         let t = chain.step(&mut upd);
         for edge in chain.take_pps() {
             navigator.on_pps(edge);
-            let tr = truth_state(&drive, edge);
-            let truth = AntennaTruth {
-                lat_deg: tr.lat.to_degrees(),
-                lon_deg: tr.lon.to_degrees(),
-                h_m: tr.h,
-                vel_enu: tr.v.into(),
-            };
+            let truth = antenna_truth(&drive, edge, rx.lever_arm_m);
             let (text, _) = writer.fix(edge.floor(), 8.0 * 3600.0, (21, 11, 2026), &truth);
             pending.push((edge + 0.05, text));
         }
@@ -143,10 +193,12 @@ pub fn navigate(
             last_t = tv;
             if tv >= next_sample {
                 next_sample += 1.0;
-                if let Some(st) = navigator.state() {
-                    let e = st.position_error_m(&truth_state(&drive, tv));
-                    sq += e.x * e.x + e.y * e.y;
-                    cnt += 1;
+                if let Some(x) = score(&navigator, &drive, tv) {
+                    // the last second of an outage: the error fixes will then correct
+                    if rx.outages.iter().any(|o| tv < o[1] && tv + 1.0 >= o[1]) {
+                        outage_end.push(x.position_error_m);
+                    }
+                    series.push(x);
                 }
             }
         }
@@ -158,18 +210,64 @@ pub fn navigate(
             }
         }
     }
-    let Some(st) = navigator.state() else {
+    let Some(end) = score(&navigator, &drive, last_t) else {
         bail!("navigation never started (no heading or no fix)");
     };
-    let tr = truth_state(&drive, last_t);
-    let e = st.position_error_m(&tr);
-    let dh = wrap180((st.euler().0 - tr.euler().0).to_degrees());
+    let rms = |f: &dyn Fn(&NavSample) -> f64| {
+        (series.iter().map(|x| f(x).powi(2)).sum::<f64>() / series.len().max(1) as f64).sqrt()
+    };
+    let norm3 = |v: [f64; 3]| Vector3::from(v).norm();
+    let mean_nees = |f: &dyn Fn(&NavSample) -> Option<f64>| {
+        let v: Vec<f64> = series.iter().filter_map(f).collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64 / 3.0)
+    };
+    let nees = match (
+        mean_nees(&|x| x.nees_position),
+        mean_nees(&|x| x.nees_velocity),
+    ) {
+        (Some(p), Some(v)) => Some([p, v]),
+        _ => None,
+    };
     Ok(NavRun {
         duration_s: last_t,
-        end_position_error_m: Vector3::new(e.x, e.y, 0.0).norm(),
-        end_velocity_error_mps: (st.v - tr.v).norm(),
-        rms_position_error_m: (sq / cnt.max(1) as f64).sqrt(),
-        end_heading_error_deg: dh,
+        end_position_error_m: end.position_error_m,
+        end_velocity_error_mps: norm3(end.velocity_error_mps),
+        end_horizontal_velocity_error_mps: end.velocity_error_mps[0]
+            .hypot(end.velocity_error_mps[1]),
+        rms_position_error_m: rms(&|x| x.position_error_m),
+        rms_velocity_error_mps: rms(&|x| norm3(x.velocity_error_mps)),
+        end_heading_error_deg: end.heading_error_deg,
+        mean_nees_per_dof: nees,
+        outage_end_errors_m: outage_end,
+        filter: navigator.filter().map(nav::kf::Kf::stats),
+        series,
+    })
+}
+
+/// The navigator's state against truth at `t`.
+fn score(navigator: &Navigator, drive: &Drive, t: f64) -> Option<NavSample> {
+    let st = navigator.state()?;
+    let tr = truth_state(drive, t);
+    let e = st.position_error_m(&tr);
+    let dv = st.v - tr.v;
+    let (nees_position, nees_velocity) = match navigator.filter() {
+        Some(k) => {
+            let p = k.covariance();
+            let dpos = [st.lat - tr.lat, st.lon - tr.lon, st.h - tr.h];
+            (
+                nees(&dpos, &p.fixed_view::<3, 3>(6, 6).into_owned()),
+                nees(&dv.into(), &p.fixed_view::<3, 3>(3, 3).into_owned()),
+            )
+        }
+        None => (None, None),
+    };
+    Some(NavSample {
+        t_s: t,
+        position_error_m: e.x.hypot(e.y),
+        velocity_error_mps: dv.into(),
+        heading_error_deg: wrap180((st.euler().0 - tr.euler().0).to_degrees()),
+        nees_position,
+        nees_velocity,
     })
 }
 
@@ -215,21 +313,22 @@ mod tests {
         if let Some(d) = s.drive.as_mut() {
             d.laps = 3;
         }
-        let pure = navigate(&s, None, &GpsErrorParams::default(), 0.03).unwrap();
+        let rx = ReceiverParams::default();
+        let pure = navigate(&s, None, &rx, 0.03).unwrap();
         let std_ = navigate(
             &s,
             Some(&FilterConfig {
                 kind: nav::kf::FilterKind::Standard,
                 ..FilterConfig::default()
             }),
-            &GpsErrorParams::default(),
+            &rx,
             0.03,
         )
         .unwrap();
         let fad = navigate(
             &s,
             Some(&FilterConfig::default()),
-            &GpsErrorParams::default(),
+            &rx,
             0.03,
         )
         .unwrap();

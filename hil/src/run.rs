@@ -57,10 +57,8 @@ pub fn navigation_config(s: &Scenario) -> Option<NavigationConfig> {
     if s.north_finding.is_none() && n.initial_heading_deg.is_none() {
         n.initial_heading_deg = Some(s.truth_heading_deg());
     }
-    if let Some(g) = &s.gps
-        && n.filter.lever_arm_m == [0.0; 3]
-    {
-        n.filter.lever_arm_m = g.lever_arm_m;
+    if let Some(g) = &s.gps {
+        n.filter = crate::navrun::with_lever_arm(&n.filter, g);
     }
     Some(n)
 }

@@ -265,10 +265,7 @@ impl Client {
     }
 }
 
-fn wrap180(d: f64) -> f64 {
-    let w = d.rem_euclid(360.0);
-    if w > 180.0 { w - 360.0 } else { w }
-}
+use crate::drill::wrap180;
 
 fn check(
     out: &mut Vec<VCheck>,

@@ -228,6 +228,11 @@ impl Navigator {
         }
     }
 
+    /// The filter (once navigating with GPS aiding).
+    pub fn filter(&self) -> Option<&Kf> {
+        self.kf.as_ref()
+    }
+
     /// The best current state.
     pub fn state(&self) -> Option<NavState> {
         let st = self.state?;
