@@ -83,63 +83,104 @@ pub fn outcome(
     }
 }
 
-/// Run a north-finding drill in process: the scenario's IMU and turntable models, nav's front
-/// end, processing chain and north-finder, no bus. `progress` sees every progress change.
+/// North-finding in process, sample by sample: nav's north-finder on the chain's updates,
+/// commanding the emulated turntable directly (no bus). The drill and the in-process navigation
+/// runs both step it.
+pub struct NfStepper {
+    tt: emulators::turntable::Turntable,
+    finder: NorthFinder,
+    status_every: u64,
+    acks: Vec<wire::TtAck>,
+    k: u64,
+}
+
+impl NfStepper {
+    /// North-finding of scenario `s` with settings `nf`, on the turntable `s.build()` gave.
+    pub fn new(
+        s: &Scenario,
+        nf: &NorthFindingConfig,
+        tt: emulators::turntable::Turntable,
+    ) -> Result<Self> {
+        Ok(Self {
+            status_every: (s.imu.rate_hz / tt.params().status_hz).round().max(1.0) as u64,
+            finder: NorthFinder::new(nf_config(s, nf)).map_err(anyhow::Error::msg)?,
+            tt,
+            acks: Vec::new(),
+            k: 0,
+        })
+    }
+
+    /// The finder.
+    pub fn finder(&self) -> &NorthFinder {
+        &self.finder
+    }
+
+    /// After the chain's step to simulated time `t` that gave `upd`.
+    pub fn step(&mut self, chain: &crate::replay::ImuChain, t: f64, upd: &[nav::attitude::Update]) {
+        let t0 = chain.time_of(chain.processor().baseline().unwrap_or(0) as i64);
+        for u in upd {
+            self.finder
+                .on_update(chain.time_of(u.valid_sample) - t0, u.phi, u.dv);
+        }
+        if self.k.is_multiple_of(self.status_every) {
+            self.acks.clear();
+            self.tt.advance(t, &mut self.acks);
+            for a in &self.acks {
+                self.finder.on_ack(a);
+            }
+            for st in self.tt.status(t) {
+                self.finder.on_status(&st);
+            }
+        }
+        let tnav = chain.time_of(chain.processor().valid_sample()) - t0;
+        while let Some(c) = self.finder.poll(tnav.max(0.0)) {
+            if let Some(a) = self.tt.command(t, c) {
+                self.finder.on_ack(&a);
+            }
+            if self.finder.finished() {
+                break;
+            }
+        }
+        self.k += 1;
+    }
+}
+
+/// A drill in process (no bus): the same emulators and nav code, stepped sample by sample.
+/// `progress` gets nav's progress at every stage change and every second.
 pub fn run_in_process(
     s: &Scenario,
     nf: &NorthFindingConfig,
     mut progress: impl FnMut(&Progress),
 ) -> Result<DrillOutcome> {
     let (motion, tt) = s.build();
-    let Some(mut tt) = tt else {
+    let Some(tt) = tt else {
         bail!(
             "scenario {} has no [turntable]: north-finding needs one",
             s.name
         );
     };
     let mut chain = crate::replay::ImuChain::new(s, motion)?;
-    let mut finder = NorthFinder::new(nf_config(s, nf)).map_err(anyhow::Error::msg)?;
-    let status_every = (s.imu.rate_hz / tt.params().status_hz).round().max(1.0) as u64;
-    let (mut upd, mut acks) = (Vec::new(), Vec::new());
-    let mut k: u64 = 0;
+    let mut nfs = NfStepper::new(s, nf, tt)?;
+    let mut upd = Vec::new();
     let mut last_phase = None;
     let dt = 1.0 / s.imu.rate_hz;
-    while chain.next_time() <= s.duration_s + 1e-9 && !finder.finished() {
+    let mut k: u64 = 0;
+    while chain.next_time() <= s.duration_s + 1e-9 && !nfs.finder.finished() {
         let t = chain.step(&mut upd);
-        let t0 = chain.time_of(chain.processor().baseline().unwrap_or(0) as i64);
-        for u in upd.drain(..) {
-            finder.on_update(chain.time_of(u.valid_sample) - t0, u.phi, u.dv);
-        }
-        if k.is_multiple_of(status_every) {
-            acks.clear();
-            tt.advance(t, &mut acks);
-            for a in &acks {
-                finder.on_ack(a);
-            }
-            for st in tt.status(t) {
-                finder.on_status(&st);
-            }
-        }
-        let tnav = chain.time_of(chain.processor().valid_sample()) - t0;
-        while let Some(c) = finder.poll(tnav.max(0.0)) {
-            if let Some(a) = tt.command(t, c) {
-                finder.on_ack(&a);
-            }
-            if finder.finished() {
-                break;
-            }
-        }
-        let stage = finder.stage();
+        nfs.step(&chain, t, &upd);
+        upd.clear();
+        let stage = nfs.finder.stage();
         if last_phase != Some(stage) || k.is_multiple_of(2000) {
             last_phase = Some(stage);
-            progress(&finder.progress());
+            progress(&nfs.finder.progress());
         }
         k += 1;
     }
     let t = k as f64 * dt;
+    let finder = &nfs.finder;
     if !finder.finished() {
         return Ok(outcome(
-            s.site.heading_deg,
+            s.truth_heading_deg(),
             None,
             Some(&format!(
                 "not finished within the scenario's {} s (phase {:?})",
@@ -150,7 +191,7 @@ pub fn run_in_process(
         ));
     }
     Ok(outcome(
-        s.site.heading_deg,
+        s.truth_heading_deg(),
         finder.result(),
         finder.abort_reason(),
         t,

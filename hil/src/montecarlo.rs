@@ -41,7 +41,7 @@ impl Default for McOptions {
             dwell_s: 60.0,
             dwell_table_s: vec![15.0, 30.0, 60.0, 120.0],
             seed: 1000,
-            threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            threads: crate::par::threads(),
         }
     }
 }
@@ -114,40 +114,25 @@ fn run_case(
         dwell_s: dwell,
         ..NorthFindingConfig::default()
     };
-    let chunk = jobs.len().div_ceil(threads.max(1)).max(1);
-    let results: Vec<Result<DrillOutcome>> = std::thread::scope(|sc| {
-        let handles: Vec<_> = jobs
-            .chunks(chunk)
-            .map(|part| {
-                let nf = nf.clone();
-                sc.spawn(move || {
-                    part.iter()
-                        .map(|&(heading, s_seed)| {
-                            let mut s = Scenario::builtin_static();
-                            s.site.lat_deg = lat;
-                            s.site.heading_deg = heading;
-                            s.imu.seed = s_seed;
-                            s.imu.gyro_bias_dph = [bias; 3];
-                            s.imu.gyro_bias_instability_dph = drift;
-                            s.turntable = Some(TurntableParams {
-                                seed: s_seed,
-                                ..TurntableParams::default()
-                            });
-                            s.duration_s = 4.0 * dwell + 80.0;
-                            run_in_process(&s, &nf, |_| {})
-                        })
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| {
-                h.join()
-                    .unwrap_or_else(|_| vec![Err(anyhow::anyhow!("worker panicked"))])
-            })
-            .collect()
-    });
+    let results: Vec<Result<DrillOutcome>> = crate::par::map(
+        &jobs,
+        threads,
+        |&(heading, s_seed)| {
+            let mut s = Scenario::builtin_static();
+            s.site.lat_deg = lat;
+            s.site.heading_deg = heading;
+            s.imu.seed = s_seed;
+            s.imu.gyro_bias_dph = [bias; 3];
+            s.imu.gyro_bias_instability_dph = drift;
+            s.turntable = Some(TurntableParams {
+                seed: s_seed,
+                ..TurntableParams::default()
+            });
+            s.duration_s = 4.0 * dwell + 80.0;
+            run_in_process(&s, &nf, |_| {})
+        },
+        || Err(anyhow::anyhow!("worker panicked")),
+    );
     let outs: Vec<DrillOutcome> = results.into_iter().collect::<Result<_>>()?;
     let errs: Vec<f64> = outs.iter().filter_map(|o| o.error_deg).collect();
     let n = errs.len().max(1) as f64;

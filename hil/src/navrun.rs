@@ -97,6 +97,10 @@ pub struct NavRun {
     pub outage_end_errors_m: Vec<f64>,
     /// Filter counters.
     pub filter: Option<nav::kf::FilterStats>,
+    /// North-finding's result (scenarios that find north first).
+    pub north_finding: Option<nav::northfind::NorthResult>,
+    /// IMU time navigation started, s.
+    pub started_at_s: Option<f64>,
     /// The run second by second.
     #[serde(skip)]
     pub series: Vec<NavSample>,
@@ -146,8 +150,9 @@ fn nees(e: &[f64; 3], p: &nalgebra::Matrix3<f64>) -> Option<f64> {
 /// Navigate a drive scenario in process the way nav does: the IMU stream through the chain,
 /// the receiver's NMEA (model `rx`: errors, lever arm, outages) through nav's GPS decoder, fixes
 /// tied to the IMU's PPS latch, and nav's navigator (levelling, strapdown, filter). `filter`
-/// none: pure inertial after the start. The heading handed over is the truth's plus
-/// `heading_err_deg` (north-finding's error).
+/// none: pure inertial after the start. With `[north_finding]` and a turntable the run finds
+/// north first (nav's finder commanding the emulated mechanism) and hands its heading over;
+/// otherwise the heading handed over is the truth's plus `heading_err_deg`.
 pub fn navigate(
     s: &Scenario,
     filter: Option<&FilterConfig>,
@@ -158,17 +163,32 @@ pub fn navigate(
         bail!("scenario {} has no [drive]", s.name);
     };
     let drive = Drive::plan(spec).map_err(anyhow::Error::msg)?;
-    let mut chain = crate::replay::ImuChain::new(s, s.motion())?;
+    let (motion, tt) = s.build();
+    let mut chain = crate::replay::ImuChain::new(s, motion)?;
+    // north-finding first when the scenario has it (as nav does), else the heading is given
+    let mut nf = match (&s.north_finding, tt) {
+        (Some(c), Some(tt)) => Some(crate::drill::NfStepper::new(s, c, tt)?),
+        _ => None,
+    };
     let n = s.processing.coning_samples as f64;
     let dt = 1.0 / s.imu.rate_hz;
+    // level while still parked: the first fix comes at about 1 s
+    let level_s = (spec.start_wait_s - 1.2).clamp(0.2, 2.0);
+    // without north-finding, navigation starts just before the vehicle drives off
+    let start_s = match nf {
+        Some(_) => 0.0,
+        None => (spec.start_wait_s - level_s - 1.0).max(0.0),
+    };
     let mut navigator = Navigator::new(NavigationConfig {
         enabled: true,
-        initial_heading_deg: Some(drive.heading(0.0).to_degrees() + heading_err_deg),
-        // level while still parked: the first fix comes at about 1 s
-        level_s: (spec.start_wait_s - 1.2).clamp(0.2, 2.0),
+        initial_heading_deg: nf
+            .is_none()
+            .then(|| drive.heading(0.0).to_degrees() + heading_err_deg),
+        level_s,
         gps_aiding: filter.is_some(),
         filter: filter.map(|f| with_lever_arm(f, rx)).unwrap_or_default(),
     });
+    let mut nf_result = None;
     let mut writer = NmeaWriter::new(rx.clone());
     let mut dec = nav::gps::GpsDecoder::default();
     let mut fixes = Vec::new();
@@ -181,6 +201,28 @@ pub fn navigate(
     let mut last_t = 0.0;
     while chain.next_time() <= s.duration_s + 1e-9 {
         let t = chain.step(&mut upd);
+        if let Some(f) = nf.as_mut()
+            && nf_result.is_none()
+        {
+            f.step(&chain, t, &upd);
+            upd.clear();
+            if f.finder().finished() {
+                let Some(r) = f.finder().result() else {
+                    bail!(
+                        "north-finding aborted: {}",
+                        f.finder().abort_reason().unwrap_or("no reason given")
+                    );
+                };
+                if t + level_s >= spec.start_wait_s {
+                    bail!(
+                        "north-finding ended at {t:.1} s: with {level_s} s of levelling the vehicle must wait longer than {} s before it drives off",
+                        spec.start_wait_s
+                    );
+                }
+                navigator.set_heading(r.heading_deg);
+                nf_result = Some(r.clone());
+            }
+        }
         for edge in chain.take_pps() {
             navigator.on_pps(edge);
             let truth = antenna_truth(&drive, edge, rx.lever_arm_m);
@@ -189,6 +231,9 @@ pub fn navigate(
         }
         for u in upd.drain(..) {
             let tv = chain.time_of(u.valid_sample);
+            if tv < start_s {
+                continue;
+            }
             navigator.on_update(tv, u.phi, u.dv, n * dt);
             last_t = tv;
             if tv >= next_sample {
@@ -240,6 +285,8 @@ pub fn navigate(
         mean_nees_per_dof: nees,
         outage_end_errors_m: outage_end,
         filter: navigator.filter().map(nav::kf::Kf::stats),
+        north_finding: nf_result,
+        started_at_s: navigator.summary().started_at_s,
         series,
     })
 }

@@ -281,3 +281,23 @@ mod tests {
         assert!(e.to_string().contains("bogus"), "{e}");
     }
 }
+
+#[cfg(test)]
+mod campus_tests {
+    use super::*;
+
+    #[test]
+    fn the_campus_loop_is_six_laps_of_about_a_kilometre() {
+        let s = Scenario::load(Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../scenarios/campus-loop.toml"
+        )))
+        .unwrap();
+        let spec = s.drive.as_ref().unwrap();
+        let d = Drive::plan(spec).unwrap();
+        let drive_s = d.duration() - spec.start_wait_s;
+        eprintln!("drive {drive_s:.1} s, total {:.1} s", d.duration());
+        assert!((1300.0..1400.0).contains(&drive_s), "{drive_s}");
+        assert!((s.truth_heading_deg() + 0.364616).abs() < 1e-3);
+    }
+}

@@ -1,0 +1,501 @@
+//! Paper 003's vehicle test in process (`hil experiment navigation`): the campus loop with
+//! north-finding first, then pure inertial, standard and fading-memory filters (Table 4), the
+//! filters with a mis-specified GPS noise, and 60 s outages every 180 s. Every run is
+//! `navrun::navigate`: the emulators and nav's own code, as on the bench, without the bus.
+
+use crate::navrun::{NavRun, navigate};
+use crate::plot::{LogChart, Series};
+use crate::scenario::Scenario;
+use anyhow::{Context, Result, bail};
+use emulators::gps::ReceiverParams;
+use nav::kf::{FilterConfig, FilterKind};
+use serde::Serialize;
+use std::path::Path;
+
+/// Paper 003, Table 4 (at 1342 s): end position error (m) and velocity error (m/s) of pure
+/// INS, the standard filter and the fading-memory filter.
+pub const PAPER_TABLE4: [(&str, f64, f64); 3] = [
+    ("pure INS", 20_473.0, 75.40),
+    ("standard KF", 20.7, 0.42),
+    ("fading-memory KF", 9.7, 0.24),
+];
+
+/// Settings of the experiment.
+#[derive(Debug, Clone)]
+pub struct NavExpOptions {
+    /// The scenario (a drive with a receiver; north-finding first when it has one).
+    pub scenario: Scenario,
+    /// Repetitions with other IMU and GPS seeds (results are averaged).
+    pub runs: usize,
+    /// The GPS noise the mis-specified filters assume, m (the receiver's is about 19 m).
+    pub misspecified_sigma_m: Vec<f64>,
+    /// Outage length and period, s.
+    pub outage_s: (f64, f64),
+    /// Threads.
+    pub threads: usize,
+}
+
+/// One case: a filter (or none) against a receiver, over the runs.
+#[derive(Debug, Clone, Serialize)]
+pub struct CaseResult {
+    /// Name.
+    pub name: String,
+    /// Mean over the runs of the end position error, m.
+    pub end_position_error_m: f64,
+    /// Mean end velocity error, m/s.
+    pub end_velocity_error_mps: f64,
+    /// Mean RMS position error over the run, m.
+    pub rms_position_error_m: f64,
+    /// Mean RMS velocity error, m/s.
+    pub rms_velocity_error_mps: f64,
+    /// Mean NEES per degree of freedom (position, velocity).
+    pub mean_nees_per_dof: Option<[f64; 2]>,
+    /// RMS and largest error at the ends of the outages, over all runs, m.
+    pub outage_drift_m: Option<(f64, f64)>,
+    /// The runs.
+    pub runs: Vec<NavRun>,
+}
+
+/// The experiment's result.
+#[derive(Debug, Clone, Serialize)]
+pub struct NavExperiment {
+    /// Scenario name.
+    pub scenario: String,
+    /// Seconds navigated (end of the run minus the start of navigation).
+    pub navigated_s: f64,
+    /// North-finding's heading error in the first run, deg.
+    pub north_finding_error_deg: Option<f64>,
+    /// Table 4: pure INS, standard, fading.
+    pub table4: Vec<CaseResult>,
+    /// Mis-specified noise: for each assumed sigma, standard then fading.
+    pub misspecified: Vec<(f64, CaseResult, CaseResult)>,
+    /// Outages: standard, fading.
+    pub outages: Vec<CaseResult>,
+    /// Outage periods used, s.
+    pub outage_periods: Vec<[f64; 2]>,
+    /// Pure INS ends in the kilometre class (over 1 km).
+    pub pure_km_class: bool,
+    /// Both filters end at or below the paper's standard-filter figure (20.7 m).
+    pub filters_within_paper: bool,
+    /// With every mis-specified noise the fading filter's RMS error is no worse than the
+    /// standard one's (within 5 %).
+    pub fading_no_worse_misspecified: bool,
+}
+
+fn filter(kind: FilterKind, sigma: Option<f64>) -> FilterConfig {
+    let mut f = FilterConfig {
+        kind,
+        ..FilterConfig::default()
+    };
+    if let Some(s) = sigma {
+        f.gps_sigma_m = s;
+        f.gps_sigma_h_m = 1.6 * s;
+    }
+    f
+}
+
+/// Outages of `len` s every `period` s once the vehicle drives off, to the end of the drive.
+pub fn outage_periods(s: &Scenario, len: f64, period: f64) -> Vec<[f64; 2]> {
+    let Some(d) = &s.drive else {
+        return Vec::new();
+    };
+    let end = emulators::drive::Drive::plan(d).map_or(s.duration_s, |p| p.duration());
+    let mut out = Vec::new();
+    let mut t = d.start_wait_s + period - len;
+    while t + len <= end.min(s.duration_s) {
+        out.push([t, t + len]);
+        t += period;
+    }
+    out
+}
+
+struct Job {
+    case: usize,
+    filter: Option<FilterConfig>,
+    rx: ReceiverParams,
+    seed: u64,
+}
+
+/// Run the experiment; files go to `out` when given.
+pub fn run(o: &NavExpOptions, out: Option<&Path>, progress: bool) -> Result<NavExperiment> {
+    let s = &o.scenario;
+    let Some(rx0) = s.gps.clone() else {
+        bail!("scenario {} has no [gps]", s.name);
+    };
+    if o.runs == 0 {
+        bail!("runs must be at least 1");
+    }
+    let outages = outage_periods(s, o.outage_s.0, o.outage_s.1);
+    let mut names: Vec<String> = vec![
+        "pure INS".into(),
+        "standard KF".into(),
+        "fading-memory KF".into(),
+    ];
+    let mut cases: Vec<(Option<FilterConfig>, ReceiverParams)> = vec![
+        (None, rx0.clone()),
+        (Some(filter(FilterKind::Standard, None)), rx0.clone()),
+        (Some(filter(FilterKind::Fading, None)), rx0.clone()),
+    ];
+    for &sig in &o.misspecified_sigma_m {
+        for (k, n) in [(FilterKind::Standard, "standard"), (FilterKind::Fading, "fading")] {
+            names.push(format!("{n}, assumes {sig} m"));
+            cases.push((Some(filter(k, Some(sig))), rx0.clone()));
+        }
+    }
+    let with_outages = ReceiverParams {
+        outages: outages.clone(),
+        ..rx0.clone()
+    };
+    for (k, n) in [(FilterKind::Standard, "standard"), (FilterKind::Fading, "fading")] {
+        names.push(format!("{n}, 60 s outages"));
+        cases.push((Some(filter(k, None)), with_outages.clone()));
+    }
+    let jobs: Vec<Job> = (0..o.runs)
+        .flat_map(|r| {
+            cases.iter().enumerate().map(move |(i, (f, rx))| Job {
+                case: i,
+                filter: f.clone(),
+                rx: rx.clone(),
+                seed: r as u64,
+            })
+        })
+        .collect();
+    if progress {
+        eprintln!(
+            "hil: {} runs of {} ({} cases x {} seeds, {} s each) on {} threads",
+            jobs.len(),
+            s.name,
+            cases.len(),
+            o.runs,
+            s.duration_s,
+            o.threads
+        );
+    }
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let t0 = std::time::Instant::now();
+    let results = crate::par::map(
+        &jobs,
+        o.threads,
+        |j| {
+            let mut sc = s.clone();
+            sc.imu.seed = s.imu.seed + 1000 * j.seed;
+            if let Some(t) = sc.turntable.as_mut() {
+                t.seed += j.seed;
+            }
+            let mut rx = j.rx.clone();
+            rx.errors.seed += 1000 * j.seed;
+            let r = navigate(&sc, j.filter.as_ref(), &rx, 0.0)
+                .with_context(|| format!("{} (seed {})", names[j.case], j.seed));
+            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if progress {
+                eprintln!(
+                    "hil: {n}/{} done ({:.0} s): {}{}",
+                    jobs.len(),
+                    t0.elapsed().as_secs_f64(),
+                    names[j.case],
+                    r.as_ref().map_or(String::new(), |r| format!(
+                        ", end error {:.1} m",
+                        r.end_position_error_m
+                    ))
+                );
+            }
+            r
+        },
+        || Err(anyhow::anyhow!("worker panicked")),
+    );
+    let mut per_case: Vec<Vec<NavRun>> = vec![Vec::new(); cases.len()];
+    for (j, r) in jobs.iter().zip(results) {
+        per_case[j.case].push(r?);
+    }
+    let summarize = |i: usize| -> CaseResult {
+        let runs = per_case[i].clone();
+        let m = |f: &dyn Fn(&NavRun) -> f64| runs.iter().map(f).sum::<f64>() / runs.len() as f64;
+        let nees: Vec<[f64; 2]> = runs.iter().filter_map(|r| r.mean_nees_per_dof).collect();
+        let drift: Vec<f64> = runs
+            .iter()
+            .flat_map(|r| r.outage_end_errors_m.iter().copied())
+            .collect();
+        CaseResult {
+            name: names[i].clone(),
+            end_position_error_m: m(&|r| r.end_position_error_m),
+            end_velocity_error_mps: m(&|r| r.end_velocity_error_mps),
+            rms_position_error_m: m(&|r| r.rms_position_error_m),
+            rms_velocity_error_mps: m(&|r| r.rms_velocity_error_mps),
+            mean_nees_per_dof: (!nees.is_empty()).then(|| {
+                let k = nees.len() as f64;
+                [
+                    nees.iter().map(|x| x[0]).sum::<f64>() / k,
+                    nees.iter().map(|x| x[1]).sum::<f64>() / k,
+                ]
+            }),
+            outage_drift_m: (!drift.is_empty()).then(|| {
+                let rms = (drift.iter().map(|x| x * x).sum::<f64>() / drift.len() as f64).sqrt();
+                (rms, drift.iter().copied().fold(0.0, f64::max))
+            }),
+            runs,
+        }
+    };
+    let table4: Vec<CaseResult> = (0..3).map(summarize).collect();
+    let misspecified: Vec<(f64, CaseResult, CaseResult)> = o
+        .misspecified_sigma_m
+        .iter()
+        .enumerate()
+        .map(|(k, &sig)| (sig, summarize(3 + 2 * k), summarize(4 + 2 * k)))
+        .collect();
+    let base = 3 + 2 * o.misspecified_sigma_m.len();
+    let outage_cases = vec![summarize(base), summarize(base + 1)];
+    let first = &table4[1].runs[0];
+    let r = NavExperiment {
+        scenario: s.name.clone(),
+        navigated_s: first.duration_s - first.started_at_s.unwrap_or(0.0),
+        north_finding_error_deg: first
+            .north_finding
+            .as_ref()
+            .map(|n| crate::drill::wrap180(n.heading_deg - s.truth_heading_deg())),
+        pure_km_class: table4[0].end_position_error_m > 1000.0,
+        filters_within_paper: table4[1].end_position_error_m <= PAPER_TABLE4[1].1
+            && table4[2].end_position_error_m <= PAPER_TABLE4[1].1,
+        fading_no_worse_misspecified: misspecified
+            .iter()
+            .all(|(_, st, fa)| fa.rms_position_error_m <= 1.05 * st.rms_position_error_m),
+        table4,
+        misspecified,
+        outages: outage_cases,
+        outage_periods: outages,
+    };
+    if let Some(dir) = out {
+        write_files(&r, dir)?;
+    }
+    Ok(r)
+}
+
+fn write_files(r: &NavExperiment, dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let w = |name: &str, text: String| {
+        std::fs::write(dir.join(name), text).with_context(|| format!("writing {name}"))
+    };
+    w("report.json", serde_json::to_string_pretty(r)?)?;
+    w("report.md", markdown(r))?;
+    // the first run of each Table 4 case and of the outage cases, second by second
+    let mut csv = String::from(
+        "case,t_s,position_error_m,velocity_error_e_mps,velocity_error_n_mps,velocity_error_u_mps,heading_error_deg,nees_position,nees_velocity\n",
+    );
+    let all: Vec<&CaseResult> = r.table4.iter().chain(r.outages.iter()).collect();
+    for c in &all {
+        for x in &c.runs[0].series {
+            let o = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
+            csv += &format!(
+                "{},{:.1},{:.3},{:.4},{:.4},{:.4},{:.5},{},{}\n",
+                c.name,
+                x.t_s,
+                x.position_error_m,
+                x.velocity_error_mps[0],
+                x.velocity_error_mps[1],
+                x.velocity_error_mps[2],
+                x.heading_error_deg,
+                o(x.nees_position),
+                o(x.nees_velocity)
+            );
+        }
+    }
+    w("series.csv", csv)?;
+    let colors = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e"];
+    let chart = |title: &str, y: &str, cases: &[&CaseResult], f: &dyn Fn(&crate::navrun::NavSample) -> f64| {
+        LogChart {
+            title: title.into(),
+            x_label: "time, s".into(),
+            y_label: y.into(),
+            series: cases
+                .iter()
+                .zip(colors)
+                .map(|(c, color)| Series {
+                    name: c.name.clone(),
+                    color,
+                    points: c.runs[0].series.iter().map(|x| (x.t_s, f(x))).collect(),
+                    markers: false,
+                })
+                .collect(),
+        }
+        .svg()
+    };
+    let t4: Vec<&CaseResult> = r.table4.iter().collect();
+    w(
+        "position-error.svg",
+        chart(
+            &format!("{}: horizontal position error", r.scenario),
+            "m",
+            &t4,
+            &|x| x.position_error_m,
+        ),
+    )?;
+    w(
+        "velocity-error.svg",
+        chart(
+            &format!("{}: velocity error", r.scenario),
+            "m/s",
+            &t4,
+            &|x| nalgebra::Vector3::from(x.velocity_error_mps).norm(),
+        ),
+    )?;
+    let oc: Vec<&CaseResult> = r.outages.iter().collect();
+    w(
+        "outages.svg",
+        chart(
+            &format!("{}: 60 s GPS outages every 180 s", r.scenario),
+            "m",
+            &oc,
+            &|x| x.position_error_m,
+        ),
+    )?;
+    Ok(())
+}
+
+fn nees_text(n: Option<[f64; 2]>) -> String {
+    n.map_or("--".into(), |n| format!("{:.2} / {:.2}", n[0], n[1]))
+}
+
+/// The report as Markdown.
+pub fn markdown(r: &NavExperiment) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let runs = r.table4[0].runs.len();
+    let _ = writeln!(
+        s,
+        "# Paper 003 vehicle test in process: {}\n\n{runs} run(s) per case (means shown); {:.0} s navigated after north-finding (error {}).\n",
+        r.scenario,
+        r.navigated_s,
+        r.north_finding_error_deg
+            .map_or("--".into(), |e| format!("{e:+.4} deg"))
+    );
+    let _ = writeln!(
+        s,
+        "## Table 4 (end of the run)\n\n| | paper: position | ours: position | paper: velocity | ours: velocity | ours: RMS position | ours: RMS velocity | NEES/dof pos / vel |\n|---|---|---|---|---|---|---|---|"
+    );
+    for (c, p) in r.table4.iter().zip(PAPER_TABLE4) {
+        let _ = writeln!(
+            s,
+            "| {} | {} m | {:.1} m | {} m/s | {:.2} m/s | {:.1} m | {:.2} m/s | {} |",
+            p.0,
+            p.1,
+            c.end_position_error_m,
+            p.2,
+            c.end_velocity_error_mps,
+            c.rms_position_error_m,
+            c.rms_velocity_error_mps,
+            nees_text(c.mean_nees_per_dof)
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nTargets: pure INS in the kilometre class: **{}**; both filters at or below 20.7 m: **{}**.\n",
+        yes(r.pure_km_class),
+        yes(r.filters_within_paper)
+    );
+    let _ = writeln!(
+        s,
+        "## Mis-specified GPS noise (the receiver's horizontal error is about 19 m RMS)\n\n| filter assumes | standard: end / RMS | fading: end / RMS | NEES/dof pos standard / fading |\n|---|---|---|---|"
+    );
+    for (sig, st, fa) in &r.misspecified {
+        let _ = writeln!(
+            s,
+            "| {sig} m | {:.1} / {:.1} m | {:.1} / {:.1} m | {:.2} / {:.2} |",
+            st.end_position_error_m,
+            st.rms_position_error_m,
+            fa.end_position_error_m,
+            fa.rms_position_error_m,
+            st.mean_nees_per_dof.map_or(f64::NAN, |n| n[0]),
+            fa.mean_nees_per_dof.map_or(f64::NAN, |n| n[0]),
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nFading no worse than standard (RMS, 5 % margin) with every mis-specified noise: **{}**.\n",
+        yes(r.fading_no_worse_misspecified)
+    );
+    let _ = writeln!(
+        s,
+        "## 60 s outages every 180 s ({} outages per run)\n\n| filter | drift at the end of an outage: RMS | max | end error | RMS error |\n|---|---|---|---|---|",
+        r.outage_periods.len()
+    );
+    for c in &r.outages {
+        let (rms, max) = c.outage_drift_m.unwrap_or((f64::NAN, f64::NAN));
+        let _ = writeln!(
+            s,
+            "| {} | {rms:.1} m | {max:.1} m | {:.1} m | {:.1} m |",
+            c.name, c.end_position_error_m, c.rms_position_error_m
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nNEES per degree of freedom is 1 for a consistent filter. The receiver's error is mostly a slow Gauss-Markov wander (12 m, 300 s) that the filter models as white noise, so values above 1 are expected.\n\nFiles: `report.json`, `series.csv` (first run of each case, 1 Hz), `position-error.svg`, `velocity-error.svg`, `outages.svg`."
+    );
+    s
+}
+
+fn yes(b: bool) -> &'static str {
+    if b { "yes" } else { "NO" }
+}
+
+/// Short text for the terminal.
+pub fn text(r: &NavExperiment) -> String {
+    let mut s = String::new();
+    s += &format!(
+        " {}: {:.0} s navigated; north-finding error {}\n",
+        r.scenario,
+        r.navigated_s,
+        r.north_finding_error_deg
+            .map_or("--".into(), |e| format!("{e:+.4} deg"))
+    );
+    s += " Table 4            paper pos   ours pos    paper vel  ours vel   RMS pos\n";
+    for (c, p) in r.table4.iter().zip(PAPER_TABLE4) {
+        s += &format!(
+            " {:<18} {:>9} m {:>9.1} m {:>7} m/s {:>6.2} m/s {:>7.1} m\n",
+            p.0, p.1, c.end_position_error_m, p.2, c.end_velocity_error_mps, c.rms_position_error_m
+        );
+    }
+    for (sig, st, fa) in &r.misspecified {
+        s += &format!(
+            " assumes {sig:>5} m   RMS standard {:.1} m, fading {:.1} m\n",
+            st.rms_position_error_m, fa.rms_position_error_m
+        );
+    }
+    for c in &r.outages {
+        if let Some((rms, max)) = c.outage_drift_m {
+            s += &format!(" {:<24} outage-end drift RMS {rms:.1} m, max {max:.1} m\n", c.name);
+        }
+    }
+    s += &format!(
+        " pure INS km class: {}; filters <= 20.7 m: {}; fading no worse mis-specified: {}\n",
+        yes(r.pure_km_class),
+        yes(r.filters_within_paper),
+        yes(r.fading_no_worse_misspecified)
+    );
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn outages_start_after_drive_off_and_repeat() {
+        let mut s = Scenario::builtin_static();
+        s.drive = Some(emulators::drive::DriveSpec {
+            lat_deg: 28.0,
+            lon_deg: 113.0,
+            height_m: 0.0,
+            waypoints: vec![[0.0, 5000.0]],
+            speed_mps: 10.0,
+            accel_mps2: 1.0,
+            turn_rate_dps: 10.0,
+            lateral_accel_mps2: 2.0,
+            laps: 1,
+            start_wait_s: 10.0,
+        });
+        s.duration_s = 1000.0;
+        let o = outage_periods(&s, 60.0, 180.0);
+        assert_eq!(o[0], [130.0, 190.0]);
+        assert_eq!(o[1], [310.0, 370.0]);
+        assert!(o.iter().all(|p| p[1] <= 515.0), "{o:?}");
+    }
+}
