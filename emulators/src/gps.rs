@@ -289,7 +289,10 @@ mod tests {
             .open()
             .unwrap();
         // a process started while the pty is open must not inherit it (nav on the bench)
-        let mut child = std::process::Command::new("sleep").arg("2").spawn().unwrap();
+        let mut child = std::process::Command::new("sleep")
+            .arg("2")
+            .spawn()
+            .unwrap();
         drop(pty);
         let mut buf = [0u8; 64];
         let r = reader.read(&mut buf);
@@ -556,10 +559,7 @@ pub fn antenna_truth(drive: &crate::drive::Drive, t: f64, lever_arm_m: [f64; 3])
     let (s, c) = psi.sin_cos();
     // lever arm in ENU and its rate as the vehicle turns
     let (de, dn) = (lx * c + ly * s, -lx * s + ly * c);
-    let (ve, vn) = (
-        psi_rate * (-lx * s + ly * c),
-        psi_rate * (-lx * c - ly * s),
-    );
+    let (ve, vn) = (psi_rate * (-lx * s + ly * c), psi_rate * (-lx * c - ly * s));
     let (rm, rn) = nav::earth::radii(lat);
     AntennaTruth {
         lat_deg: (lat + dn / (rm + h)).to_degrees(),
@@ -654,7 +654,9 @@ impl GpsRun<'_> {
                 _ => {}
             }
             let truth = antenna_truth(self.drive, edge, lever);
-            let (text, err) = self.writer.fix(edge.floor(), self.utc0_s, self.date, &truth);
+            let (text, err) = self
+                .writer
+                .fix(edge.floor(), self.utc0_s, self.date, &truth);
             if dropped.is_some() {
                 continue;
             }
@@ -751,7 +753,11 @@ mod writer_tests {
         let (text, _) = NmeaWriter::new(p.clone()).fix(0.0, 0.0, (1, 1, 2026), &truth);
         dec.push_bytes(text.as_bytes(), &mut fixes);
         let st = dec.stats();
-        assert_eq!((st.accepted, st.unparsed, st.bad_checksum), (6, 0, 0), "{st:?}");
+        assert_eq!(
+            (st.accepted, st.unparsed, st.bad_checksum),
+            (6, 0, 0),
+            "{st:?}"
+        );
         assert!(fixes.iter().all(|f| !f.valid));
         let mut silent = NmeaWriter::new(ReceiverParams {
             outage_void: false,

@@ -137,7 +137,10 @@ pub fn run(o: &NavExpOptions, out: Option<&Path>, progress: bool) -> Result<NavE
         (Some(filter(FilterKind::Fading, None)), rx0.clone()),
     ];
     for &sig in &o.misspecified_sigma_m {
-        for (k, n) in [(FilterKind::Standard, "standard"), (FilterKind::Fading, "fading")] {
+        for (k, n) in [
+            (FilterKind::Standard, "standard"),
+            (FilterKind::Fading, "fading"),
+        ] {
             names.push(format!("{n}, assumes {sig} m"));
             cases.push((Some(filter(k, Some(sig))), rx0.clone()));
         }
@@ -146,7 +149,10 @@ pub fn run(o: &NavExpOptions, out: Option<&Path>, progress: bool) -> Result<NavE
         outages: outages.clone(),
         ..rx0.clone()
     };
-    for (k, n) in [(FilterKind::Standard, "standard"), (FilterKind::Fading, "fading")] {
+    for (k, n) in [
+        (FilterKind::Standard, "standard"),
+        (FilterKind::Fading, "fading"),
+    ] {
         names.push(format!("{n}, 60 s outages"));
         cases.push((Some(filter(k, None)), with_outages.clone()));
     }
@@ -300,7 +306,10 @@ fn write_files(r: &NavExperiment, dir: &Path) -> Result<()> {
     }
     w("series.csv", csv)?;
     let colors = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e"];
-    let chart = |title: &str, y: &str, cases: &[&CaseResult], f: &dyn Fn(&crate::navrun::NavSample) -> f64| {
+    let chart = |title: &str,
+                 y: &str,
+                 cases: &[&CaseResult],
+                 f: &dyn Fn(&crate::navrun::NavSample) -> f64| {
         LogChart {
             title: title.into(),
             x_label: "time, s".into(),
@@ -461,7 +470,10 @@ pub fn text(r: &NavExperiment) -> String {
     }
     for c in &r.outages {
         if let Some((rms, max)) = c.outage_drift_m {
-            s += &format!(" {:<24} outage-end drift RMS {rms:.1} m, max {max:.1} m\n", c.name);
+            s += &format!(
+                " {:<24} outage-end drift RMS {rms:.1} m, max {max:.1} m\n",
+                c.name
+            );
         }
     }
     s += &format!(

@@ -1,6 +1,7 @@
 //! In-process navigation runs: the scenario's IMU stream through nav's front end, processing
 //! chain and strapdown navigation, scored against the truth trajectory.
 
+use crate::drill::wrap180;
 use crate::scenario::Scenario;
 use anyhow::{Result, bail};
 use emulators::drive::Drive;
@@ -9,7 +10,6 @@ use nalgebra::Vector3;
 use nav::kf::FilterConfig;
 use nav::navigator::{NavigationConfig, Navigator};
 use nav::strapdown::NavState;
-use crate::drill::wrap180;
 use serde::Serialize;
 
 /// The truth state of a drive at `t`.
@@ -372,13 +372,7 @@ mod tests {
             0.03,
         )
         .unwrap();
-        let fad = navigate(
-            &s,
-            Some(&FilterConfig::default()),
-            &rx,
-            0.03,
-        )
-        .unwrap();
+        let fad = navigate(&s, Some(&FilterConfig::default()), &rx, 0.03).unwrap();
         eprintln!("pure {pure:?}\nstandard {std_:?}\nfading {fad:?}");
         assert!(pure.end_position_error_m > 200.0, "{pure:?}");
         assert!(std_.end_position_error_m < 25.0, "{std_:?}");

@@ -14,12 +14,18 @@ pub fn map<J: Sync, R: Send>(
             .chunks(chunk)
             .map(|part| {
                 let f = &f;
-                (part.len(), sc.spawn(move || part.iter().map(f).collect::<Vec<_>>()))
+                (
+                    part.len(),
+                    sc.spawn(move || part.iter().map(f).collect::<Vec<_>>()),
+                )
             })
             .collect();
         handles
             .into_iter()
-            .flat_map(|(n, h)| h.join().unwrap_or_else(|_| (0..n).map(|_| on_panic()).collect()))
+            .flat_map(|(n, h)| {
+                h.join()
+                    .unwrap_or_else(|_| (0..n).map(|_| on_panic()).collect())
+            })
             .collect()
     })
 }

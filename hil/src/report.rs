@@ -202,13 +202,13 @@ pub fn navigation_checks(
         pass: n["phase"].as_str() == Some("navigating"),
         detail: format!(
             "phase {}, started at {} s of IMU time",
-            n["phase"],
-            n["started_at_s"]
+            n["phase"], n["started_at_s"]
         ),
     });
     if let Some(g) = gps {
         let fixes = num(nav, &["gps", "stats", "fixes"]);
-        let bad = num(nav, &["gps", "stats", "bad_checksum"]) + num(nav, &["gps", "stats", "unparsed"]);
+        let bad =
+            num(nav, &["gps", "stats", "bad_checksum"]) + num(nav, &["gps", "stats", "unparsed"]);
         let used = num(n, &["filter", "updates"]);
         out.push(Check {
             name: "GPS fixes received and used".into(),

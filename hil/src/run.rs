@@ -7,9 +7,9 @@ use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
 use emulators::can::{Progress, run_imu, run_turntable};
 use emulators::clock::SimClock;
-use emulators::imu::ImuEmulator;
 use emulators::drive::Drive;
 use emulators::gps::{GpsPty, GpsRun, NmeaWriter, relink};
+use emulators::imu::ImuEmulator;
 use nav::config::{CanConfig, GpsConfig, NavConfig, RecordConfig, WatchdogConfig};
 use nav::navigator::NavigationConfig;
 use std::io::{BufRead, BufReader};
@@ -185,8 +185,12 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         (Some((mut pty, link)), Some(rx), Some(d)) => {
             let drive = Drive::plan(d).map_err(anyhow::Error::msg)?;
             let writer = NmeaWriter::new(rx.clone());
-            let (stop, progress, dur, phase) =
-                (stop.clone(), progress.clone(), s.duration_s, s.imu.pps_phase_s);
+            let (stop, progress, dur, phase) = (
+                stop.clone(),
+                progress.clone(),
+                s.duration_s,
+                s.imu.pps_phase_s,
+            );
             let utc0 = (std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map_or(0, |d| d.as_secs())
@@ -238,7 +242,10 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
                 stop.store(true, Ordering::Relaxed);
             }
         }
-        if opts.progress && (s.north_finding.is_none() || drill.done) && Instant::now() >= next_report {
+        if opts.progress
+            && (s.north_finding.is_none() || drill.done)
+            && Instant::now() >= next_report
+        {
             let t = progress.now();
             eprintln!(
                 "hil: {t:.1} / {:.1} s simulated (x{})",

@@ -5,13 +5,13 @@ use emulators::can::BusFaults;
 use emulators::drive::{Drive, DriveSpec};
 use emulators::gps::ReceiverParams;
 use emulators::imu::ImuParams;
-use nav::navigator::NavigationConfig;
 use emulators::truth::{
     Composed, Coning, Disturbance, Disturbances, Indexer, Motion, RelativeRotation, Static,
     Vibration,
 };
 use emulators::turntable::{ProfileAxis, Turntable, TurntableParams};
 use nav::attitude::ProcessingConfig;
+use nav::navigator::NavigationConfig;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -153,7 +153,10 @@ impl Scenario {
         {
             bail!(
                 "drive starts at {} N {} E but the site is {} N {} E: north-finding uses the site's latitude, so they must agree",
-                d.lat_deg, d.lon_deg, self.site.lat_deg, self.site.lon_deg
+                d.lat_deg,
+                d.lon_deg,
+                self.site.lat_deg,
+                self.site.lon_deg
             );
         }
         if !(self.position_tolerance_m > 0.0) {

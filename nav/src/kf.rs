@@ -55,6 +55,10 @@ pub struct FilterConfig {
     pub init_accel_mps2: f64,
     /// Reject a fix whose normalized innovation squared exceeds this (3 dof).
     pub gate_nis: f64,
+    /// After this many fixes rejected in a row the filter trusts the receiver again: it widens
+    /// its position uncertainty to the innovation and takes the fix (0: never). An isolated
+    /// jump stays gated out; a filter that has drifted away does not stay lost.
+    pub reanchor_after: u32,
     /// Antenna lever arm in the body frame (x right, y forward, z up), m.
     pub lever_arm_m: [f64; 3],
 }
@@ -97,6 +101,7 @@ impl Default for FilterConfig {
             init_gyro_dph: 0.1,
             init_accel_mps2: 5e-3 * 9.80665,
             gate_nis: 30.0,
+            reanchor_after: 10,
             lever_arm_m: [0.0; 3],
         }
     }
@@ -111,6 +116,8 @@ pub struct FilterStats {
     pub rejected: u64,
     /// Mean normalized innovation squared of the used fixes.
     pub mean_nis: f64,
+    /// Times the filter re-anchored on the receiver after a run of rejections.
+    pub reanchors: u64,
 }
 
 /// The filter.
@@ -124,6 +131,7 @@ pub struct Kf {
     accel_bias: Vector3<f64>,
     stats: FilterStats,
     nis_sum: f64,
+    rejected_in_a_row: u32,
     /// Largest variance each state may reach through fading (its initial one, x 100 for the
     /// navigation states): weakly observable states (heading between turns, drifts) would
     /// otherwise grow without bound under the fading factor.
@@ -171,6 +179,7 @@ impl Kf {
             accel_bias: Vector3::zeros(),
             stats: FilterStats::default(),
             nis_sum: 0.0,
+            rejected_in_a_row: 0,
         }
     }
 
@@ -275,15 +284,15 @@ impl Kf {
         r[(1, 1)] = (self.cfg.gps_sigma_m / ((rn + s.h) * s.lat.cos())).powi(2);
         r[(2, 2)] = self.cfg.gps_sigma_h_m.powi(2);
         if self.cfg.kind == FilterKind::Fading {
+            let before = self.p.diagonal();
             self.p *= self.cfg.fading_factor;
-            // keep every variance under its cap: P <- D P D with D diagonal (stays positive)
+            // the fading may not push a variance over its cap, but never takes back what the
+            // propagation put there (after an outage the position variance is rightly large):
+            // P <- D P D with D diagonal (stays positive)
             let d = V15::from_fn(|i, _| {
                 let v = self.p[(i, i)];
-                if v > self.cap[i] {
-                    (self.cap[i] / v).sqrt()
-                } else {
-                    1.0
-                }
+                let limit = self.cap[i].max(before[i]);
+                if v > limit { (limit / v).sqrt() } else { 1.0 }
             });
             for i in 0..15 {
                 for j in 0..15 {
@@ -293,16 +302,37 @@ impl Kf {
         }
         let hx = Vector3::new(self.x[6], self.x[7], self.x[8]);
         let innov = z - hx;
-        let ph = self.p.fixed_view::<15, 3>(0, 6).into_owned();
-        let s_mat = self.p.fixed_view::<3, 3>(6, 6).into_owned() + r;
-        let Some(s_inv) = s_mat.try_inverse() else {
+        let nis_of = |p: &M15| {
+            let s_mat = p.fixed_view::<3, 3>(6, 6).into_owned() + r;
+            let s_inv = s_mat.try_inverse()?;
+            let nis = (innov.transpose() * s_inv * innov)[(0, 0)];
+            nis.is_finite().then_some((nis, s_inv))
+        };
+        let Some((mut nis, mut s_inv)) = nis_of(&self.p) else {
             return false;
         };
-        let nis = (innov.transpose() * s_inv * innov)[(0, 0)];
-        if !nis.is_finite() || nis > self.cfg.gate_nis {
-            self.stats.rejected += 1;
-            return false;
+        if nis > self.cfg.gate_nis {
+            self.rejected_in_a_row += 1;
+            if self.cfg.reanchor_after == 0 || self.rejected_in_a_row < self.cfg.reanchor_after {
+                self.stats.rejected += 1;
+                return false;
+            }
+            // lost: widen the position uncertainty to the innovation, then take the fix
+            for i in 0..3 {
+                self.p[(6 + i, 6 + i)] += innov[i] * innov[i];
+            }
+            self.stats.reanchors += 1;
+            tracing::warn!(
+                rejected = self.rejected_in_a_row,
+                "filter re-anchored on the receiver after a run of rejected fixes"
+            );
+            let Some(again) = nis_of(&self.p) else {
+                return false;
+            };
+            (nis, s_inv) = again;
         }
+        self.rejected_in_a_row = 0;
+        let ph = self.p.fixed_view::<15, 3>(0, 6).into_owned();
         let k = ph * s_inv;
         self.x += k * innov;
         let mut ikh = M15::identity();
@@ -349,5 +379,82 @@ fn correct(x: &V15, s: &NavState) -> NavState {
         lat: s.lat - x[6],
         lon: s.lon - x[7],
         h: s.h - x[8],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parked() -> NavState {
+        NavState::from_euler(0.0, 0.0, 0.0, Vector3::zeros(), 0.49, 1.97, 0.0)
+    }
+
+    /// After a long outage the propagated position variance is large; the fading filter's
+    /// variance caps must not shrink it, or the first fix after the outage is gated out and
+    /// the filter never recovers.
+    #[test]
+    fn the_first_fix_after_a_long_outage_is_taken_by_both_filters() {
+        for kind in [FilterKind::Standard, FilterKind::Fading] {
+            let mut st = parked();
+            let mut k = Kf::new(
+                FilterConfig {
+                    kind,
+                    ..FilterConfig::default()
+                },
+                st.lat,
+            );
+            let f = Vector3::new(0.0, 0.0, 9.79);
+            for _ in 0..2000 {
+                k.propagate(&st, &f, 0.1);
+            }
+            let sig_n = k.covariance()[(6, 6)].sqrt() * 6.37e6;
+            assert!(sig_n > 300.0, "{kind:?}: {sig_n} m after 200 s");
+            // the INS has drifted 600 m south: the fix is 600 m north of it
+            let (rm, _) = earth::radii(st.lat);
+            let lat = st.lat + 600.0 / rm;
+            let (lat0, lon0) = (st.lat, st.lon);
+            assert!(k.update(&mut st, lat, lon0, 0.0), "{kind:?}: gated out");
+            assert!(((st.lat - lat0) * rm - 600.0).abs() < 100.0, "{kind:?}");
+        }
+    }
+
+    /// An isolated fix kilometres off is rejected and the state is untouched.
+    #[test]
+    fn a_fix_kilometres_off_is_gated_out() {
+        let mut st = parked();
+        let mut k = Kf::new(FilterConfig::default(), st.lat);
+        k.propagate(&st, &Vector3::new(0.0, 0.0, 9.79), 1.0);
+        let before = st;
+        let (rm, _) = earth::radii(st.lat);
+        let (lat, lon) = (st.lat + 2000.0 / rm, st.lon);
+        assert!(!k.update(&mut st, lat, lon, 0.0));
+        assert_eq!(st, before);
+        assert_eq!(k.stats().rejected, 1);
+    }
+
+    /// A filter that disagrees with every fix (it has drifted away) re-anchors after
+    /// `reanchor_after` rejections in a row instead of coasting forever.
+    #[test]
+    fn a_run_of_rejections_ends_in_a_reanchor() {
+        let mut st = parked();
+        let mut k = Kf::new(
+            FilterConfig {
+                reanchor_after: 5,
+                ..FilterConfig::default()
+            },
+            st.lat,
+        );
+        let (rm, _) = earth::radii(st.lat);
+        let (lat, lon) = (st.lat + 2000.0 / rm, st.lon);
+        let taken: Vec<bool> = (0..6)
+            .map(|_| {
+                k.propagate(&st, &Vector3::new(0.0, 0.0, 9.79), 1.0);
+                k.update(&mut st, lat, lon, 0.0)
+            })
+            .collect();
+        assert_eq!(taken, [false, false, false, false, true, true]);
+        assert_eq!((k.stats().rejected, k.stats().reanchors), (4, 1));
+        assert!(((st.lat - lat) * rm).abs() < 50.0);
     }
 }

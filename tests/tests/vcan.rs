@@ -269,13 +269,15 @@ fn north_finding_drill_at_x10_lands_within_3_sigma() {
 #[ignore = "needs vcan: run ./run-tests"]
 fn gps_aided_drive_through_vcan_and_a_pty_survives_a_bad_receiver() {
     let dir = tempfile::tempdir().unwrap();
-    let base =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
+    let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
     let text = std::fs::read_to_string(base).unwrap().replace(
         "talker = \"GP\"\n",
         "talker = \"GP\"\nport_drops = [[40.0, 44.0]]\noutages = [[85.0, 95.0]]\nmultipath = [[70.0, 3.0, 2000.0]]\n",
     );
-    assert!(text.contains("port_drops"), "the scenario still has its [gps] talker line");
+    assert!(
+        text.contains("port_drops"),
+        "the scenario still has its [gps] talker line"
+    );
     let scen = dir.path().join("drive-bad-gps.toml");
     std::fs::write(&scen, text).unwrap();
     let out = dir.path().join("run");
@@ -290,7 +292,10 @@ fn gps_aided_drive_through_vcan_and_a_pty_survives_a_bad_receiver() {
     assert_eq!(code, 0);
     let g = &r["nav"]["gps"];
     assert_eq!(r["gps"]["port_drops"], 1);
-    assert!(g["opens"].as_u64().unwrap() >= 2, "nav re-opened the port: {g}");
+    assert!(
+        g["opens"].as_u64().unwrap() >= 2,
+        "nav re-opened the port: {g}"
+    );
     assert!(g["port_errors"].as_u64().unwrap() >= 1, "{g}");
     assert!(
         g["stats"]["no_fix"].as_u64().unwrap() >= 10,
