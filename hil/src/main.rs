@@ -26,9 +26,10 @@ enum Cmd {
     /// Run a scenario on vcan: emulators + nav, then checks, a result card and a report.
     Run(RunArgs),
     /// The main job: a four-position north-finding drill at the paper's start point with a random
-    /// true heading (the GPS-aided drive follows when issue 5 lands), result card and report.
+    /// true heading, then a short GPS-aided drive (one 1 km lap with the NMEA receiver on a pty),
+    /// each with its result card and report, and a summary of both.
     Demo {
-        /// Speed factor (1 = real time, about 4.5 minutes).
+        /// Speed factor (1 = real time: about 4.5 minutes of drill and 2 of driving).
         #[arg(long, default_value_t = 1.0)]
         speed: f64,
         /// Dwell per position, s.
@@ -258,25 +259,7 @@ fn main() {
 fn real_main() -> Result<i32> {
     match Cli::parse().cmd {
         Cmd::Run(a) => run(a),
-        Cmd::Demo { speed, dwell, out } => {
-            let seed = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map(|d| d.as_secs())
-                .unwrap_or(1);
-            drill_north_finding(NorthFindingArgs {
-                heading: None,
-                lat: 28.218157,
-                dwell,
-                speed,
-                disturbances: None,
-                tolerance: 0.1,
-                seed,
-                iface: "vcan0".into(),
-                out,
-                json: false,
-                vm: false,
-            })
-        }
+        Cmd::Demo { speed, dwell, out } => demo(speed, dwell, out),
         Cmd::Drill(Drill::NorthFinding(a)) => drill_north_finding(a),
         Cmd::Validate(Validate::Turntable(a)) => validate_turntable(a),
         Cmd::Busload { bitrate } => {
@@ -317,7 +300,7 @@ fn real_main() -> Result<i32> {
             out,
         }) => {
             let s = Scenario::load(&scenario)?;
-            if runs == 0 || misspecified.iter().any(|x| !(*x > 0.0)) {
+            if runs == 0 || misspecified.iter().any(|x| x.is_nan() || *x <= 0.0) {
                 bail!("--runs must be positive and every --misspecified sigma positive");
             }
             let out = out.unwrap_or_else(|| default_out("experiment-navigation"));
@@ -565,6 +548,82 @@ fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
         json: a.json,
         vm: a.vm,
     })
+}
+
+/// The built-in GPS-aided drive of the demo.
+const DRIVE_GPS: &str = include_str!("../../scenarios/drive-gps.toml");
+
+fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> {
+    let out = absolute(&out.unwrap_or_else(|| default_out("demo")))?;
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let in_guest = std::env::var_os(GUEST_ENV).is_some();
+    if !in_guest && !matches!(vcan_setup::can_support(), CanSupport::Available) {
+        // one guest boot for both parts
+        let args = vec![
+            "demo".into(),
+            "--speed".into(),
+            speed.to_string(),
+            "--dwell".into(),
+            dwell.to_string(),
+            "--out".into(),
+            out.to_string_lossy().into_owned(),
+        ];
+        let status = run_in_guest(args, &out, vec![], vec![sibling_binary("nav")?], false)?;
+        return Ok(status);
+    }
+    let seed = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(1);
+    eprintln!("hil: demo part 1 of 2: four-position north-finding drill");
+    let drill = drill_north_finding(NorthFindingArgs {
+        heading: None,
+        lat: 28.218157,
+        dwell,
+        speed,
+        disturbances: None,
+        tolerance: 0.1,
+        seed,
+        iface: "vcan0".into(),
+        out: Some(out.join("drill")),
+        json: false,
+        vm: false,
+    })?;
+    eprintln!("hil: demo part 2 of 2: GPS-aided drive (one 1 km lap, NMEA receiver on a pty)");
+    let mut s: Scenario = toml::from_str(DRIVE_GPS).context("built-in drive scenario")?;
+    s.speed = speed;
+    let scen = out.join("drive-gps.toml");
+    std::fs::write(&scen, toml::to_string_pretty(&s)?)?;
+    let drive = run(RunArgs {
+        scenario: Some(scen),
+        duration: None,
+        speed: None,
+        iface: "vcan0".into(),
+        out: Some(out.join("drive")),
+        nav: None,
+        json: false,
+        vm: false,
+    })?;
+    let verdict = |c: i32| if c == 0 { "PASS" } else { "FAIL" };
+    let summary = format!(
+        "# Demo\n\n| part | result | report |\n|---|---|---|\n| north-finding drill | {} | [drill/report.md](drill/report.md) |\n| GPS-aided drive | {} | [drive/report.md](drive/report.md) |\n",
+        verdict(drill),
+        verdict(drive)
+    );
+    std::fs::write(out.join("report.md"), &summary)?;
+    println!("==============================================================================");
+    println!(
+        " DEMO  north-finding drill: {}   GPS-aided drive: {}",
+        verdict(drill),
+        verdict(drive)
+    );
+    println!(
+        " reports: {}/drill/report.md, {}/drive/report.md",
+        out.display(),
+        out.display()
+    );
+    println!("==============================================================================");
+    Ok(if drill == 0 && drive == 0 { 0 } else { 1 })
 }
 
 fn default_out(name: &str) -> PathBuf {

@@ -42,6 +42,8 @@ pub struct RunReport {
     pub drill: Option<crate::drill::DrillOutcome>,
     /// What the GPS emulator wrote (runs with a receiver).
     pub gps: Option<emulators::gps::GpsTxStats>,
+    /// nav's solution frames as the bench received them.
+    pub solution: crate::run::SolutionWatch,
     /// nav's navigation scored against truth (runs that navigate).
     pub navigation: Option<crate::navrun::NavScore>,
     /// nav's exit status.
@@ -185,6 +187,41 @@ pub fn drill_checks(out: &mut Vec<Check>, s: &Scenario, o: &crate::drill::DrillO
             ),
         });
     }
+}
+
+/// nav's solution output: every NAV_* frame nav sent reached the bench and decoded, no epoch
+/// was skipped, and the last position on the bus is nav's final one.
+pub fn solution_checks(out: &mut Vec<Check>, w: &crate::run::SolutionWatch, nav: &Value) {
+    let sent = num(nav, &["solution", "frames_sent"]);
+    let epochs = num(nav, &["solution", "epochs"]);
+    let mut pass = w.frames as f64 == sent && w.bad_frames == 0 && w.seq_gaps == 0 && epochs > 0.0;
+    let mut detail = format!(
+        "nav sent {sent} frames in {epochs} epochs ({} refused by the socket); the bench received {} frames, {} epochs, {} undecodable, {} sequence gaps; last mode {}",
+        num(nav, &["solution", "send_errors"]),
+        w.frames,
+        w.epochs,
+        w.bad_frames,
+        w.seq_gaps,
+        w.last_mode.as_deref().unwrap_or("--")
+    );
+    let out_pos = &nav["navigation"]["output"];
+    if let (Some(p), Some(lat), Some(lon)) = (
+        w.last_position_deg,
+        out_pos["lat_deg"].as_f64(),
+        out_pos["lon_deg"].as_f64(),
+    ) {
+        let (rm, rn) = nav::earth::radii(lat.to_radians());
+        let d = ((p[0] - lat).to_radians() * rm)
+            .hypot((p[1] - lon).to_radians() * rn * lat.to_radians().cos());
+        // the last 50 Hz epoch is at most 20 ms before nav's final state
+        pass &= d < 1.0;
+        detail += &format!("; last NAV_POS {d:.3} m from nav's final position (limit 1 m)");
+    }
+    out.push(Check {
+        name: "solution frames on the bus".into(),
+        pass,
+        detail,
+    });
 }
 
 /// Checks of a navigation run: nav navigated, used the receiver's fixes, and its end error is

@@ -181,6 +181,13 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let imu = ImuEmulator::new(motion, s.imu.clone());
     let stop = Arc::new(AtomicBool::new(false));
     let progress = Arc::new(Progress::default());
+    let watch_stop = Arc::new(AtomicBool::new(false));
+    let watch = {
+        // opened before the IMU starts, so the first epoch is not missed
+        let sock = solution_socket(&opts.iface)?;
+        let (iface, stop) = (opts.iface.clone(), watch_stop.clone());
+        std::thread::spawn(move || watch_solution(sock, &iface, &stop))
+    };
     let gps_thread = match (gps, &s.gps, &s.drive) {
         (Some((mut pty, link)), Some(rx), Some(d)) => {
             let drive = Drive::plan(d).map_err(anyhow::Error::msg)?;
@@ -285,6 +292,10 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
     };
     let (nav_exit, nav_lines) = nav_out;
+    watch_stop.store(true, Ordering::Relaxed);
+    let solution = watch
+        .join()
+        .map_err(|_| anyhow::anyhow!("solution watcher panicked"))??;
     for l in &nav_lines {
         if !drill.line(l, false) {
             eprintln!("{l}");
@@ -318,6 +329,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     if let Some(o) = &drill_outcome {
         report::drill_checks(&mut checks, s, o);
     }
+    report::solution_checks(&mut checks, &solution, &nav_json);
     let navigation = match (&s.navigation, &s.drive) {
         (Some(_), Some(d)) => {
             let drive = Drive::plan(d).map_err(anyhow::Error::msg)?;
@@ -340,6 +352,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         drill: drill_outcome,
         gps: gps_stats,
         navigation,
+        solution,
         nav_exit,
         nav: nav_json,
         bus_lost_frames: lost,
@@ -352,6 +365,76 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     )?;
     std::fs::write(opts.out.join("report.md"), report::markdown(&r))?;
     Ok(r)
+}
+
+/// What the bench saw of nav's solution output on the bus.
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize, PartialEq)]
+pub struct SolutionWatch {
+    /// NAV_* frames received.
+    pub frames: u64,
+    /// NAV_TIME frames (epochs).
+    pub epochs: u64,
+    /// Frames that did not decode.
+    pub bad_frames: u64,
+    /// Epoch sequence numbers skipped.
+    pub seq_gaps: u64,
+    /// The last NAV_POS, deg.
+    pub last_position_deg: Option<[f64; 2]>,
+    /// The last mode.
+    pub last_mode: Option<String>,
+}
+
+/// A socket on `iface` that receives nav's NAV_* frames only.
+fn solution_socket(iface: &str) -> Result<socketcan::CanSocket> {
+    use socketcan::{CanSocket, Socket, SocketOptions};
+    let sock = CanSocket::open(iface)
+        .with_context(|| format!("opening {iface} to watch nav's solution"))?;
+    sock.set_filters(&[socketcan::CanFilter::new(0x200, 0x7F8)])
+        .with_context(|| format!("filtering NAV frames on {iface}"))?;
+    Ok(sock)
+}
+
+/// Listen to nav's NAV_* frames on `sock` until `stop`.
+fn watch_solution(
+    sock: socketcan::CanSocket,
+    iface: &str,
+    stop: &AtomicBool,
+) -> Result<SolutionWatch> {
+    use socketcan::Socket;
+    let mut w = SolutionWatch::default();
+    let mut last_seq: Option<u8> = None;
+    while !stop.load(Ordering::Relaxed) {
+        let f = match sock.read_frame_timeout(Duration::from_millis(50)) {
+            Ok(f) => f,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock
+                ) =>
+            {
+                continue;
+            }
+            Err(e) => return Err(e).with_context(|| format!("reading NAV frames on {iface}")),
+        };
+        w.frames += 1;
+        match wire::from_can_frame(&f)
+            .ok()
+            .and_then(|r| wire::Message::decode(&r).ok())
+        {
+            Some(wire::Message::NavTime(t)) => {
+                w.epochs += 1;
+                if let Some(p) = last_seq {
+                    w.seq_gaps += u64::from(t.seq.wrapping_sub(p).wrapping_sub(1));
+                }
+                last_seq = Some(t.seq);
+                w.last_mode = Some(format!("{:?}", t.mode));
+            }
+            Some(wire::Message::NavPos(p)) => w.last_position_deg = Some([p.lat_deg, p.lon_deg]),
+            Some(_) => {}
+            None => w.bad_frames += 1,
+        }
+    }
+    Ok(w)
 }
 
 /// Follows nav's north-finding lines during a run.

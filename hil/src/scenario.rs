@@ -159,7 +159,7 @@ impl Scenario {
                 self.site.lon_deg
             );
         }
-        if !(self.position_tolerance_m > 0.0) {
+        if self.position_tolerance_m.is_nan() || self.position_tolerance_m <= 0.0 {
             bail!("position_tolerance_m must be positive");
         }
         nav::attitude::ImuProcessor::new(&self.processing)

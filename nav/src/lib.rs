@@ -14,5 +14,6 @@ pub mod imu;
 pub mod kf;
 pub mod navigator;
 pub mod northfind;
+pub mod output;
 pub mod record;
 pub mod strapdown;

@@ -71,8 +71,23 @@ struct Summary {
     gps: Option<GpsSummary>,
     navigation: Option<nav::navigator::NavigatorSummary>,
     housekeeping: Housekeeping,
+    /// The navigation solution sent on the bus (NAV_TIME..NAV_HGT at 50 Hz of IMU time).
+    solution: SolutionSummary,
     mcap: Option<PathBuf>,
     mcap_messages: u64,
+}
+
+/// The solution output on the bus at exit.
+#[derive(Debug, Serialize, Default)]
+struct SolutionSummary {
+    /// Epochs encoded.
+    epochs: u64,
+    /// Frames written.
+    frames_sent: u64,
+    /// Frames the socket refused (the bus full); navigation is never held up by its output.
+    send_errors: u64,
+    /// The last epoch's mode.
+    last_mode: Option<String>,
 }
 
 /// The GPS receiver at exit.
@@ -276,6 +291,11 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let mut nf_last_phase = None;
     let mut nf_reported = false;
     let mut nf_handed = false;
+    let out_every = (cfg.imu.rate_hz / 50.0).round().max(1.0) as u64;
+    let mut next_out: Option<u64> = None;
+    let mut sol_enc = nav::output::SolutionEncoder::default();
+    let mut sol = SolutionSummary::default();
+    let mut sol_frames: Vec<RawFrame> = Vec::new();
     let mut sums = Sums::default();
     let mut by_msg: BTreeMap<&'static str, u64> = BTreeMap::new();
     let mut unknown: BTreeMap<u32, u64> = BTreeMap::new();
@@ -376,6 +396,52 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                         }
                     }
                     report_north_finding(f, t, &mut nf_last_print, &mut nf_last_phase, &mut nf_reported, &recorder);
+                }
+                // the solution at 50 Hz of IMU time
+                if let (Some(s), Some(last)) = (&sock, sums.last)
+                    && last >= *next_out.get_or_insert(last)
+                {
+                    next_out = Some(last + out_every);
+                    let st = fe.stats();
+                    let nf_running = finder.as_ref().is_some_and(|f| !f.finished());
+                    let mode = match (&navigator, nf_running) {
+                        (_, true) => wire::NavMode::NorthFinding,
+                        (Some(n), false) => n.mode(),
+                        (None, false) => wire::NavMode::Init,
+                    };
+                    let sigmas = navigator.as_ref().and_then(|n| n.sigmas());
+                    let solution = nav::output::Solution {
+                        sample_count: last,
+                        mode,
+                        health: wire::NavHealth {
+                            imu_timeout: in_timeout,
+                            imu_gaps: st.gaps > 0,
+                            imu_bit: st.bit_fail_samples > 0,
+                            gps_stale: cfg.gps.is_some() && navigator.as_ref().is_none_or(|n| n.gps_stale()),
+                            turntable: finder.as_ref().is_some_and(|f| f.abort_reason().is_some()),
+                            filter: proc.stats().invalid_since.is_some()
+                                || navigator.as_ref().and_then(|n| n.filter()).is_some_and(|k| k.stats().reanchors > 0),
+                        },
+                        output: navigator.as_ref().and_then(|n| n.state()).map(|x| x.output()),
+                        pos_sigma_m: sigmas.map_or(0.0, |x| x.0),
+                        heading_sigma_deg: sigmas.map_or(0.0, |x| x.1),
+                    };
+                    sol_enc.encode(&solution, &mut sol_frames);
+                    sol.last_mode = Some(format!("{mode:?}"));
+                    for f in sol_frames.drain(..) {
+                        match wire::to_can_frame(&f) {
+                            Ok(frame) => match s.try_write_frame(frame) {
+                                Ok(()) => sol.frames_sent += 1,
+                                Err(e) => {
+                                    sol.send_errors += 1;
+                                    if sol.send_errors <= 3 {
+                                        warn!(interface = iface, "solution frame 0x{:03X} not sent: {e}", f.id);
+                                    }
+                                }
+                            },
+                            Err(_) => sol.send_errors += 1,
+                        }
+                    }
                 }
                 if in_timeout && last_imu.elapsed() < timeout {
                     info!(interface = iface, "IMU data back");
@@ -485,6 +551,10 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
             turntable_frames: nf_frames,
         }),
         housekeeping: fe.housekeeping(),
+        solution: SolutionSummary {
+            epochs: sol_enc.epochs,
+            ..sol
+        },
         mcap: cfg.record.mcap.clone(),
         mcap_messages: 0,
     };

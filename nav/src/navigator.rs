@@ -88,7 +88,11 @@ pub struct Navigator {
     fixes_seen: u64,
     fixes_ignored: u64,
     pps_edges: u64,
+    last_good_fix_t: Option<f64>,
 }
+
+/// A fix older than this (IMU time, s) makes the GPS stale: the solution is coasting.
+pub const GPS_STALE_S: f64 = 2.5;
 
 impl Navigator {
     /// A navigator with these settings.
@@ -110,7 +114,37 @@ impl Navigator {
             fixes_seen: 0,
             fixes_ignored: 0,
             pps_edges: 0,
+            last_good_fix_t: None,
         }
+    }
+
+    /// The mode for the solution header.
+    pub fn mode(&self) -> wire::NavMode {
+        use wire::NavMode;
+        match self.phase {
+            NavPhase::Waiting => NavMode::Init,
+            NavPhase::Levelling => NavMode::Levelling,
+            NavPhase::Navigating if !self.cfg.gps_aiding => NavMode::Navigation,
+            NavPhase::Navigating if self.gps_stale() => NavMode::Coasting,
+            NavPhase::Navigating => NavMode::GpsAided,
+        }
+    }
+
+    /// No good fix within [`GPS_STALE_S`] of IMU time.
+    pub fn gps_stale(&self) -> bool {
+        self.last_good_fix_t
+            .is_none_or(|t| self.last_t - t > GPS_STALE_S)
+    }
+
+    /// The filter's horizontal position sigma (m) and heading sigma (deg); none without it.
+    pub fn sigmas(&self) -> Option<(f64, f64)> {
+        let (k, st) = (self.kf.as_ref()?, self.state.as_ref()?);
+        let p = k.covariance();
+        let (rm, rn) = crate::earth::radii(st.lat);
+        let pos = (p[(6, 6)] * (rm + st.h).powi(2)
+            + p[(7, 7)] * ((rn + st.h) * st.lat.cos()).powi(2))
+        .sqrt();
+        Some((pos, p[(2, 2)].sqrt().to_degrees()))
     }
 
     /// North-finding's heading (deg) becomes available.
@@ -201,6 +235,7 @@ impl Navigator {
             self.fixes_ignored += 1;
             return;
         }
+        self.last_good_fix_t = Some(self.last_t);
         let alt = fix.alt_m.unwrap_or(0.0);
         let p = (fix.lat_deg.to_radians(), fix.lon_deg.to_radians(), alt);
         if self.phase != NavPhase::Navigating {
