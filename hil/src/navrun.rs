@@ -382,6 +382,43 @@ mod tests {
         assert!(std_.end_heading_error_deg.abs() < 1.0 && fad.end_heading_error_deg.abs() < 1.0);
     }
 
+    /// The campus loop's sequence, shortened (8 s dwells, one lap): nav's north-finder drives the
+    /// emulated turntable, its heading goes to the navigator, which levels and navigates with
+    /// the filter while the vehicle drives off.
+    #[test]
+    fn north_finding_hands_its_heading_to_the_filter() {
+        let mut s = Scenario::load(std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../scenarios/campus-loop.toml"
+        )))
+        .unwrap();
+        if let Some(nf) = s.north_finding.as_mut() {
+            nf.dwell_s = 8.0;
+        }
+        let d = s.drive.as_mut().unwrap();
+        d.laps = 1;
+        d.start_wait_s = 70.0;
+        s.duration_s = 70.0 + 240.0;
+        let rx = s.gps.clone().unwrap();
+        let r = navigate(&s, Some(&FilterConfig::default()), &rx, 0.0).unwrap();
+        eprintln!(
+            "{:?} started {:?}, end {:.1} m",
+            r.north_finding, r.started_at_s, r.end_position_error_m
+        );
+        let nf = r.north_finding.as_ref().expect("north-finding ran");
+        let err = crate::drill::wrap180(nf.heading_deg - s.truth_heading_deg());
+        assert!(err.abs() < 4.0 * nf.sigma_deg.max(0.05), "{err} vs {}", nf.sigma_deg);
+        let started = r.started_at_s.unwrap();
+        assert!(started > nf.duration_s && started < 70.0, "{started}");
+        assert!(r.end_position_error_m < 25.0, "{r:?}");
+        assert!(r.filter.unwrap().updates > 200);
+        // too short a wait: the vehicle would drive off during north-finding
+        let mut early = s.clone();
+        early.drive.as_mut().unwrap().start_wait_s = 20.0;
+        let e = navigate(&early, Some(&FilterConfig::default()), &rx, 0.0).unwrap_err();
+        assert!(e.to_string().contains("wait longer"), "{e}");
+    }
+
     #[test]
     #[ignore = "figures: cargo test -p hil --release -- --ignored --nocapture pure_inertial"]
     fn pure_inertial_with_the_paper_grade_imu() {
