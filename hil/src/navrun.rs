@@ -407,7 +407,11 @@ mod tests {
         );
         let nf = r.north_finding.as_ref().expect("north-finding ran");
         let err = crate::drill::wrap180(nf.heading_deg - s.truth_heading_deg());
-        assert!(err.abs() < 4.0 * nf.sigma_deg.max(0.05), "{err} vs {}", nf.sigma_deg);
+        assert!(
+            err.abs() < 4.0 * nf.sigma_deg.max(0.05),
+            "{err} vs {}",
+            nf.sigma_deg
+        );
         let started = r.started_at_s.unwrap();
         assert!(started > nf.duration_s && started < 70.0, "{started}");
         assert!(r.end_position_error_m < 25.0, "{r:?}");
