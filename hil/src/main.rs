@@ -315,7 +315,7 @@ fn real_main() -> Result<i32> {
             print!("{}", hil::navexp::text(&r));
             println!(" files: {}", out.display());
             Ok(
-                if r.pure_km_class && r.filters_within_paper && r.fading_no_worse_misspecified {
+                if r.pure_km_class && r.filters_within_paper && r.fading_no_worse_overstated {
                     0
                 } else {
                     1

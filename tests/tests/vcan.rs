@@ -314,6 +314,70 @@ fn gps_aided_drive_through_vcan_and_a_pty_survives_a_bad_receiver() {
     assert!(out.join("gps-fixes.jsonl").is_file());
 }
 
+/// The campus loop shortened (8 s dwells, one lap of about 1 km, 310 s) through vcan and the pty
+/// at speed factor 10: nav finds north with the turntable over CAN, hands the heading to the
+/// navigator, levels while still parked, and navigates with the fading filter on the receiver's
+/// NMEA. Limits as in process (`hil::navrun::tests::north_finding_hands_its_heading_to_the_filter`):
+/// heading within 0.5 deg, end position within 25 m.
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn campus_loop_shortened_finds_north_then_navigates() {
+    let dir = tempfile::tempdir().unwrap();
+    let base =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/campus-loop.toml");
+    let text = std::fs::read_to_string(base)
+        .unwrap()
+        .replace("duration_s = 1510.0", "duration_s = 310.0")
+        .replace("laps = 6", "laps = 1")
+        .replace("start_wait_s = 165.0", "start_wait_s = 70.0")
+        .replace("dwell_s = 30.0", "dwell_s = 8.0")
+        .replace("heading_tolerance_deg = 0.2", "heading_tolerance_deg = 0.5")
+        .replace("position_tolerance_m = 20.7", "position_tolerance_m = 25.0");
+    for k in [
+        "laps = 1",
+        "dwell_s = 8.0",
+        "start_wait_s = 70.0",
+        "position_tolerance_m = 25.0",
+    ] {
+        assert!(
+            text.contains(k),
+            "campus-loop.toml changed: {k} not applied"
+        );
+    }
+    let scen = dir.path().join("campus-short.toml");
+    std::fs::write(&scen, text).unwrap();
+    let out = dir.path().join("run");
+    let (r, code) = hil_run(
+        &["--scenario", scen.to_str().unwrap(), "--iface", "vcan-e2e6"],
+        &out,
+    );
+    for (name, pass, detail) in checks(&r) {
+        eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
+        assert!(pass, "check failed: {name}: {detail}");
+    }
+    assert_eq!(code, 0);
+    let names: Vec<String> = checks(&r).into_iter().map(|c| c.0).collect();
+    for n in [
+        "north-finding finished",
+        "heading within the drill's tolerance",
+        "navigation error within tolerance",
+        "solution frames on the bus",
+    ] {
+        assert!(names.iter().any(|x| x == n), "missing check {n}: {names:?}");
+    }
+    let nav = &r["nav"];
+    let nf_s = nav["north_finding"]["result"]["duration_s"]
+        .as_f64()
+        .unwrap();
+    let started = nav["navigation"]["started_at_s"].as_f64().unwrap();
+    assert!(
+        started > nf_s && started < 70.0,
+        "navigation started at {started} s, north-finding took {nf_s} s"
+    );
+    assert_eq!(nav["solution"]["last_mode"], "GpsAided");
+    eprintln!("navigation against truth: {}", r["navigation"]);
+}
+
 /// The turntable validation suite passes on the healthy emulator and, with each injected fault,
 /// fails the check that names that fault, with a reason.
 #[test]
