@@ -646,7 +646,8 @@ fn report_north_finding(
     rec: &Option<Recorder>,
 ) {
     let stage = f.stage();
-    if *last_phase != Some(stage) || t - *last_print >= 1.0 {
+    // every stage change, and once a second while it runs (not after it has finished)
+    if *last_phase != Some(stage) || (t - *last_print >= 1.0 && !f.finished()) {
         *last_print = t;
         *last_phase = Some(stage);
         let p = f.progress();

@@ -314,7 +314,7 @@ fn gps_aided_drive_through_vcan_and_a_pty_survives_a_bad_receiver() {
     assert!(out.join("gps-fixes.jsonl").is_file());
 }
 
-/// The campus loop shortened (8 s dwells, one lap of about 1 km, 310 s) through vcan and the pty
+/// The campus loop shortened (6 s dwells, one lap of about 1 km at 6 m/s, 240 s) through vcan and the pty
 /// at speed factor 10: nav finds north with the turntable over CAN, hands the heading to the
 /// navigator, levels while still parked, and navigates with the fading filter on the receiver's
 /// NMEA. Limits as in process (`hil::navrun::tests::north_finding_hands_its_heading_to_the_filter`):
@@ -327,16 +327,18 @@ fn campus_loop_shortened_finds_north_then_navigates() {
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/campus-loop.toml");
     let text = std::fs::read_to_string(base)
         .unwrap()
-        .replace("duration_s = 1510.0", "duration_s = 310.0")
+        .replace("duration_s = 1510.0", "duration_s = 240.0")
         .replace("laps = 6", "laps = 1")
-        .replace("start_wait_s = 165.0", "start_wait_s = 70.0")
-        .replace("dwell_s = 30.0", "dwell_s = 8.0")
+        .replace("speed_mps = 4.3", "speed_mps = 6.0")
+        .replace("start_wait_s = 165.0", "start_wait_s = 60.0")
+        .replace("dwell_s = 30.0", "dwell_s = 6.0")
         .replace("heading_tolerance_deg = 0.2", "heading_tolerance_deg = 0.5")
         .replace("position_tolerance_m = 20.7", "position_tolerance_m = 25.0");
     for k in [
         "laps = 1",
-        "dwell_s = 8.0",
-        "start_wait_s = 70.0",
+        "speed_mps = 6.0",
+        "dwell_s = 6.0",
+        "start_wait_s = 60.0",
         "position_tolerance_m = 25.0",
     ] {
         assert!(
@@ -371,7 +373,7 @@ fn campus_loop_shortened_finds_north_then_navigates() {
         .unwrap();
     let started = nav["navigation"]["started_at_s"].as_f64().unwrap();
     assert!(
-        started > nf_s && started < 70.0,
+        started > nf_s && started < 60.0,
         "navigation started at {started} s, north-finding took {nf_s} s"
     );
     assert_eq!(nav["solution"]["last_mode"], "GpsAided");
