@@ -169,6 +169,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
         None => None,
     };
+    // the link goes when the run ends, however it ends
+    let _link_guard = gps.as_ref().map(|g| RemoveOnDrop(g.1.clone()));
     let cfg_path = opts.out.join("nav.toml");
     std::fs::write(
         &cfg_path,
@@ -212,8 +214,9 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
                     date: (21, 11, 2026),
                 }
                 .run(&mut pty, Some(&link), &progress, dur, &stop);
-                let _ = std::fs::remove_file(&link);
-                r
+                // the device stays until nav has stopped: a receiver vanishing at the very
+                // end would only add port errors to nav's summary
+                r.map(|st| (st, pty, link))
             }))
         }
         _ => None,
@@ -267,7 +270,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         .join()
         .map_err(|_| anyhow::anyhow!("IMU emulator thread panicked"))?;
     let tt_stats = join_emulator(tt_thread, "turntable emulator")?;
-    let gps_stats = join_emulator(gps_thread, "GPS emulator")?;
+    let gps_device = join_emulator(gps_thread, "GPS emulator")?;
     // let nav drain its socket before it is told to stop
     std::thread::sleep(Duration::from_millis(500));
     let (tx, nav_out) = match tx {
@@ -278,6 +281,10 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
     };
     let (nav_exit, nav_lines) = nav_out;
+    let gps_stats = gps_device.map(|(st, pty, _link)| {
+        drop(pty);
+        st
+    });
     watch_stop.store(true, Ordering::Relaxed);
     let solution = watch
         .join()
@@ -351,6 +358,15 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     )?;
     std::fs::write(opts.out.join("report.md"), report::markdown(&r))?;
     Ok(r)
+}
+
+/// Removes a file when dropped.
+struct RemoveOnDrop(PathBuf);
+
+impl Drop for RemoveOnDrop {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
 }
 
 /// Wait for an emulator thread (when there is one) and take its result.
