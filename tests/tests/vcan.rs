@@ -26,6 +26,39 @@ fn hil_run(args: &[&str], out: &std::path::Path) -> (Value, i32) {
     (report, o.status.code().unwrap_or(-1))
 }
 
+/// Run a shipped scenario with some of its lines replaced (each replacement must apply) on
+/// `iface`; every check of the run must pass. Returns the report and the run folder.
+fn run_variant(
+    scenario: &str,
+    replace: &[(&str, &str)],
+    iface: &str,
+) -> (Value, tempfile::TempDir) {
+    let dir = tempfile::tempdir().unwrap();
+    let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenarios")
+        .join(scenario);
+    let mut text = std::fs::read_to_string(base).unwrap();
+    for (from, to) in replace {
+        assert!(
+            text.contains(from),
+            "{scenario} changed: no `{from}` to replace"
+        );
+        text = text.replace(from, to);
+    }
+    let scen = dir.path().join(scenario);
+    std::fs::write(&scen, text).unwrap();
+    let (r, code) = hil_run(
+        &["--scenario", scen.to_str().unwrap(), "--iface", iface],
+        &dir.path().join("run"),
+    );
+    for (name, pass, detail) in checks(&r) {
+        eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
+        assert!(pass, "check failed: {name}: {detail}");
+    }
+    assert_eq!(code, 0);
+    (r, dir)
+}
+
 fn checks(r: &Value) -> Vec<(String, bool, String)> {
     r["checks"]
         .as_array()
@@ -268,28 +301,15 @@ fn north_finding_drill_at_x10_lands_within_3_sigma() {
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn gps_aided_drive_through_vcan_and_a_pty_survives_a_bad_receiver() {
-    let dir = tempfile::tempdir().unwrap();
-    let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
-    let text = std::fs::read_to_string(base).unwrap().replace(
-        "talker = \"GP\"\n",
-        "talker = \"GP\"\nport_drops = [[40.0, 44.0]]\noutages = [[85.0, 95.0]]\nmultipath = [[70.0, 3.0, 2000.0]]\n",
+    let (r, dir) = run_variant(
+        "drive-gps.toml",
+        &[(
+            "talker = \"GP\"\n",
+            "talker = \"GP\"\nport_drops = [[40.0, 44.0]]\noutages = [[85.0, 95.0]]\nmultipath = [[70.0, 3.0, 2000.0]]\n",
+        )],
+        "vcan-e2e5",
     );
-    assert!(
-        text.contains("port_drops"),
-        "the scenario still has its [gps] talker line"
-    );
-    let scen = dir.path().join("drive-bad-gps.toml");
-    std::fs::write(&scen, text).unwrap();
     let out = dir.path().join("run");
-    let (r, code) = hil_run(
-        &["--scenario", scen.to_str().unwrap(), "--iface", "vcan-e2e5"],
-        &out,
-    );
-    for (name, pass, detail) in checks(&r) {
-        eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
-        assert!(pass, "check failed: {name}: {detail}");
-    }
-    assert_eq!(code, 0);
     let g = &r["nav"]["gps"];
     assert_eq!(r["gps"]["port_drops"], 1);
     assert!(
@@ -322,42 +342,19 @@ fn gps_aided_drive_through_vcan_and_a_pty_survives_a_bad_receiver() {
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn campus_loop_shortened_finds_north_then_navigates() {
-    let dir = tempfile::tempdir().unwrap();
-    let base =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/campus-loop.toml");
-    let text = std::fs::read_to_string(base)
-        .unwrap()
-        .replace("duration_s = 1510.0", "duration_s = 240.0")
-        .replace("laps = 6", "laps = 1")
-        .replace("speed_mps = 4.3", "speed_mps = 6.0")
-        .replace("start_wait_s = 165.0", "start_wait_s = 60.0")
-        .replace("dwell_s = 30.0", "dwell_s = 6.0")
-        .replace("heading_tolerance_deg = 0.2", "heading_tolerance_deg = 0.5")
-        .replace("position_tolerance_m = 20.7", "position_tolerance_m = 25.0");
-    for k in [
-        "laps = 1",
-        "speed_mps = 6.0",
-        "dwell_s = 6.0",
-        "start_wait_s = 60.0",
-        "position_tolerance_m = 25.0",
-    ] {
-        assert!(
-            text.contains(k),
-            "campus-loop.toml changed: {k} not applied"
-        );
-    }
-    let scen = dir.path().join("campus-short.toml");
-    std::fs::write(&scen, text).unwrap();
-    let out = dir.path().join("run");
-    let (r, code) = hil_run(
-        &["--scenario", scen.to_str().unwrap(), "--iface", "vcan-e2e6"],
-        &out,
+    let (r, _dir) = run_variant(
+        "campus-loop.toml",
+        &[
+            ("duration_s = 1510.0", "duration_s = 240.0"),
+            ("laps = 6", "laps = 1"),
+            ("speed_mps = 4.3", "speed_mps = 6.0"),
+            ("start_wait_s = 165.0", "start_wait_s = 60.0"),
+            ("dwell_s = 30.0", "dwell_s = 6.0"),
+            ("heading_tolerance_deg = 0.2", "heading_tolerance_deg = 0.5"),
+            ("position_tolerance_m = 20.7", "position_tolerance_m = 25.0"),
+        ],
+        "vcan-e2e6",
     );
-    for (name, pass, detail) in checks(&r) {
-        eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
-        assert!(pass, "check failed: {name}: {detail}");
-    }
-    assert_eq!(code, 0);
     let names: Vec<String> = checks(&r).into_iter().map(|c| c.0).collect();
     for n in [
         "north-finding finished",
