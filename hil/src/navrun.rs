@@ -36,7 +36,45 @@ pub struct NavScore {
 pub fn score_summary(drive: &Drive, nav: &serde_json::Value, t_first: f64) -> Option<NavScore> {
     let n = &nav["navigation"];
     let o: nav::strapdown::NavOutput = serde_json::from_value(n["output"].clone()).ok()?;
-    let t = n["output_t_s"].as_f64()? + t_first;
+    Some(score_output(drive, n["output_t_s"].as_f64()? + t_first, &o))
+}
+
+/// A bench run's navigation over time (from nav's recording).
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct SeriesStats {
+    /// Seconds scored.
+    pub samples: usize,
+    /// RMS horizontal position error, m.
+    pub rms_position_error_m: f64,
+    /// Largest horizontal position error, m.
+    pub max_position_error_m: f64,
+    /// Records that could not be read.
+    pub bad_records: u64,
+}
+
+impl SeriesStats {
+    /// Statistics of `scores`.
+    pub fn of(scores: &[NavScore], bad_records: u64) -> Self {
+        let n = scores.len();
+        Self {
+            samples: n,
+            rms_position_error_m: (scores
+                .iter()
+                .map(|x| x.position_error_m.powi(2))
+                .sum::<f64>()
+                / n.max(1) as f64)
+                .sqrt(),
+            max_position_error_m: scores
+                .iter()
+                .map(|x| x.position_error_m)
+                .fold(0.0, f64::max),
+            bad_records,
+        }
+    }
+}
+
+/// One navigation output at simulated time `t` against the drive's truth.
+pub fn score_output(drive: &Drive, t: f64, o: &nav::strapdown::NavOutput) -> NavScore {
     let tr = truth_state(drive, t);
     let st = NavState::from_euler(
         o.hpr_deg[0].to_radians(),
@@ -48,12 +86,45 @@ pub fn score_summary(drive: &Drive, nav: &serde_json::Value, t_first: f64) -> Op
         o.h_m,
     );
     let e = st.position_error_m(&tr);
-    Some(NavScore {
+    NavScore {
         t_s: t,
         position_error_m: e.x.hypot(e.y),
         velocity_error_mps: (st.v - tr.v).norm(),
         heading_error_deg: wrap180((st.euler().0 - tr.euler().0).to_degrees()),
-    })
+    }
+}
+
+/// nav's recorded solution (`/nav/solution` in its MCAP, 1 Hz) against the drive: one score per
+/// second (nav's time plus `t_first`). Unreadable records are skipped and counted.
+pub fn score_recording(
+    drive: &Drive,
+    mcap_path: &std::path::Path,
+    t_first: f64,
+) -> Result<(Vec<NavScore>, u64)> {
+    let buf = std::fs::read(mcap_path)
+        .map_err(|e| anyhow::anyhow!("reading {}: {e}", mcap_path.display()))?;
+    let mut out = Vec::new();
+    let mut bad = 0u64;
+    for m in mcap::MessageStream::new(&buf)? {
+        let Ok(m) = m else {
+            // a recording cut short still gives what it has
+            bad += 1;
+            break;
+        };
+        if m.channel.topic != "/nav/solution" {
+            continue;
+        }
+        let j: Option<serde_json::Value> = serde_json::from_slice(&m.data).ok();
+        let parsed = j.as_ref().and_then(|j| {
+            let o: nav::strapdown::NavOutput = serde_json::from_value(j["output"].clone()).ok()?;
+            Some((j["t_s"].as_f64()?, o))
+        });
+        match parsed {
+            Some((t, o)) => out.push(score_output(drive, t + t_first, &o)),
+            None => bad += 1,
+        }
+    }
+    Ok((out, bad))
 }
 
 /// One second of a navigation run against truth.

@@ -46,6 +46,8 @@ pub struct RunReport {
     pub solution: crate::run::SolutionWatch,
     /// nav's navigation scored against truth (runs that navigate).
     pub navigation: Option<crate::navrun::NavScore>,
+    /// The same second by second, from nav's recording.
+    pub navigation_series: Option<crate::navrun::SeriesStats>,
     /// nav's exit status.
     pub nav_exit: Option<i32>,
     /// nav's summary (as nav wrote it).
@@ -455,6 +457,13 @@ pub fn markdown(r: &RunReport) -> String {
             "## Navigation (nav's output against truth)\n\n| at | horizontal position error | velocity error | heading error |\n|---|---|---|---|\n| {:.1} s | {:.2} m | {:.3} m/s | {:+.4} deg |\n",
             n.t_s, n.position_error_m, n.velocity_error_mps, n.heading_error_deg
         );
+        if let Some(x) = &r.navigation_series {
+            let _ = writeln!(
+                s,
+                "Over the run ({} s scored from nav's recording): RMS {:.2} m, largest {:.2} m. Plot: `navigation-error.svg`, data: `navigation.csv`.\n",
+                x.samples, x.rms_position_error_m, x.max_position_error_m
+            );
+        }
     }
     let _ = writeln!(s, "| check | result | detail |\n|---|---|---|");
     for c in &r.checks {

@@ -323,10 +323,21 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         report::drill_checks(&mut checks, s, o);
     }
     report::solution_checks(&mut checks, &solution, &nav_json);
+    let mut navigation_series = None;
     let navigation = match (&s.navigation, &s.drive) {
         (Some(_), Some(d)) => {
             let drive = Drive::plan(d).map_err(anyhow::Error::msg)?;
-            let o = crate::navrun::score_summary(&drive, &nav_json, 1.0 / s.imu.rate_hz);
+            let t_first = 1.0 / s.imu.rate_hz;
+            let o = crate::navrun::score_summary(&drive, &nav_json, t_first);
+            // second by second from nav's recording: statistics, CSV and a plot
+            match crate::navrun::score_recording(&drive, &opts.out.join("nav.mcap"), t_first) {
+                Ok((scores, bad)) if !scores.is_empty() => {
+                    navigation_series = Some(crate::navrun::SeriesStats::of(&scores, bad));
+                    write_navigation_series(&opts.out, &s.name, &scores)?;
+                }
+                Ok(_) => {}
+                Err(e) => tracing::warn!("nav's recording: {e:#}"),
+            }
             report::navigation_checks(&mut checks, s, o.as_ref(), &nav_json, gps_stats.as_ref());
             o
         }
@@ -345,6 +356,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         drill: drill_outcome,
         gps: gps_stats,
         navigation,
+        navigation_series,
         solution,
         nav_exit,
         nav: nav_json,
@@ -358,6 +370,35 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     )?;
     std::fs::write(opts.out.join("report.md"), report::markdown(&r))?;
     Ok(r)
+}
+
+/// nav's navigation error second by second: `navigation.csv` and `navigation-error.svg`.
+fn write_navigation_series(
+    out: &Path,
+    name: &str,
+    scores: &[crate::navrun::NavScore],
+) -> Result<()> {
+    let mut csv = String::from("t_s,position_error_m,velocity_error_mps,heading_error_deg\n");
+    for x in scores {
+        csv += &format!(
+            "{:.3},{:.3},{:.4},{:.5}\n",
+            x.t_s, x.position_error_m, x.velocity_error_mps, x.heading_error_deg
+        );
+    }
+    std::fs::write(out.join("navigation.csv"), csv)?;
+    let chart = crate::plot::LogChart {
+        title: format!("{name}: nav's horizontal position error (from its recording)"),
+        x_label: "time, s".into(),
+        y_label: "m".into(),
+        series: vec![crate::plot::Series {
+            name: "nav".into(),
+            color: "#1f77b4",
+            points: scores.iter().map(|x| (x.t_s, x.position_error_m)).collect(),
+            markers: false,
+        }],
+    };
+    std::fs::write(out.join("navigation-error.svg"), chart.svg())?;
+    Ok(())
 }
 
 /// Removes a file when dropped.

@@ -426,6 +426,24 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                         pos_sigma_m: sigmas.map_or(0.0, |x| x.0),
                         heading_sigma_deg: sigmas.map_or(0.0, |x| x.1),
                     };
+                    // once a second of IMU time, the solution goes in the recording too
+                    if sol_enc.epochs.is_multiple_of(50)
+                        && let (Some(r), Some(o), Some(n)) = (&recorder, &solution.output, &navigator)
+                    {
+                        let j = serde_json::json!({
+                            "t_s": n.time(),
+                            "mode": format!("{mode:?}"),
+                            "output": o,
+                            "pos_sigma_m": solution.pos_sigma_m,
+                            "heading_sigma_deg": solution.heading_sigma_deg,
+                        });
+                        r.send(Record::Json {
+                            channel: JsonChannel::Solution,
+                            t_ns: wall_ns(),
+                            publish_ns: (last as f64 * sample_ns) as u64,
+                            json: j.to_string(),
+                        });
+                    }
                     sol_enc.encode(&solution, &mut sol_frames);
                     sol.last_mode = Some(format!("{mode:?}"));
                     for f in sol_frames.drain(..) {

@@ -263,6 +263,11 @@ impl Navigator {
         }
     }
 
+    /// IMU time of the latest update, s.
+    pub fn time(&self) -> f64 {
+        self.last_t
+    }
+
     /// The filter (once navigating with GPS aiding).
     pub fn filter(&self) -> Option<&Kf> {
         self.kf.as_ref()

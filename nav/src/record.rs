@@ -64,16 +64,19 @@ pub enum JsonChannel {
     Attitude,
     /// `/gps/fix`.
     Gps,
+    /// `/nav/solution` (1 Hz of IMU time while navigating).
+    Solution,
 }
 
 impl JsonChannel {
     /// Every JSON channel (each gets its MCAP channel when the file is created).
-    pub const ALL: [JsonChannel; 5] = [
+    pub const ALL: [JsonChannel; 6] = [
         JsonChannel::ImuSample,
         JsonChannel::Event,
         JsonChannel::Summary,
         JsonChannel::Attitude,
         JsonChannel::Gps,
+        JsonChannel::Solution,
     ];
 
     fn topic(self) -> &'static str {
@@ -83,6 +86,7 @@ impl JsonChannel {
             JsonChannel::Summary => "/nav/summary",
             JsonChannel::Attitude => "/nav/attitude",
             JsonChannel::Gps => "/gps/fix",
+            JsonChannel::Solution => "/nav/solution",
         }
     }
 }

@@ -374,6 +374,15 @@ fn campus_loop_shortened_finds_north_then_navigates() {
         "navigation started at {started} s, north-finding took {nf_s} s"
     );
     assert_eq!(nav["solution"]["last_mode"], "GpsAided");
+    // second by second from nav's recording: every second of navigation, within the same 25 m
+    let series = &r["navigation_series"];
+    eprintln!("over the run: {series}");
+    assert!(series["samples"].as_u64().unwrap() > 170, "{series}");
+    assert_eq!(series["bad_records"], 0);
+    assert!(
+        series["rms_position_error_m"].as_f64().unwrap() < 25.0,
+        "{series}"
+    );
     eprintln!("navigation against truth: {}", r["navigation"]);
 }
 
