@@ -90,11 +90,37 @@ enum TtFault {
     DelayedCommands,
 }
 
+/// What every bench command on vcan takes: where, where to write, how to print.
 #[derive(clap::Args, Clone)]
-struct ValidateArgs {
-    /// CAN interface of the mechanism.
+struct BusArgs {
+    /// CAN interface (on the bench created when missing).
     #[arg(long, default_value = "vcan0")]
     iface: String,
+    /// Output folder (default runs/<name>-<unix time>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print the report as JSON on stdout instead of the result card or table.
+    #[arg(long)]
+    json: bool,
+    /// Always use the QEMU guest, even where this kernel has CAN.
+    #[arg(long)]
+    vm: bool,
+}
+
+impl BusArgs {
+    /// Defaults (vcan0, no JSON, the guest only where needed) writing to `out`.
+    fn to(out: PathBuf) -> Self {
+        Self {
+            iface: "vcan0".into(),
+            out: Some(out),
+            json: false,
+            vm: false,
+        }
+    }
+}
+
+#[derive(clap::Args, Clone)]
+struct ValidateArgs {
     /// Axis to test.
     #[arg(long, default_value_t = 0)]
     axis: u8,
@@ -107,15 +133,8 @@ struct ValidateArgs {
     /// Speed factor of the emulated mechanism.
     #[arg(long, default_value_t = 1.0)]
     speed: f64,
-    /// Output folder (default runs/validate-turntable-<unix time>).
-    #[arg(long)]
-    out: Option<PathBuf>,
-    /// Print the result as JSON on stdout instead of the table.
-    #[arg(long)]
-    json: bool,
-    /// Always use the QEMU guest.
-    #[arg(long)]
-    vm: bool,
+    #[command(flatten)]
+    bus: BusArgs,
 }
 
 #[derive(Subcommand)]
@@ -149,18 +168,8 @@ struct NorthFindingArgs {
     /// Random seed (sensor errors, random heading).
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// CAN interface.
-    #[arg(long, default_value = "vcan0")]
-    iface: String,
-    /// Output folder (default runs/drill-north-finding-<unix time>).
-    #[arg(long)]
-    out: Option<PathBuf>,
-    /// Print the report as JSON on stdout instead of the result card.
-    #[arg(long)]
-    json: bool,
-    /// Always use the QEMU guest.
-    #[arg(long)]
-    vm: bool,
+    #[command(flatten)]
+    bus: BusArgs,
 }
 
 #[derive(Subcommand)]
@@ -233,21 +242,11 @@ struct RunArgs {
     /// Override the speed factor (1 = real time).
     #[arg(long)]
     speed: Option<f64>,
-    /// CAN interface (created when missing).
-    #[arg(long, default_value = "vcan0")]
-    iface: String,
-    /// Output folder (default runs/<name>-<unix time>).
-    #[arg(long)]
-    out: Option<PathBuf>,
     /// The nav binary (default: next to hil).
     #[arg(long)]
     nav: Option<PathBuf>,
-    /// Print the report as JSON on stdout instead of the result card.
-    #[arg(long)]
-    json: bool,
-    /// Always use the QEMU guest, even where this kernel has CAN.
-    #[arg(long)]
-    vm: bool,
+    #[command(flatten)]
+    bus: BusArgs,
 }
 
 fn main() {
@@ -376,19 +375,20 @@ fn validate_turntable(a: ValidateArgs) -> Result<i32> {
         bail!("--speed must be in (0, 100]");
     }
     let out = absolute(
-        &a.out
+        &a.bus
+            .out
             .clone()
             .unwrap_or_else(|| default_out("validate-turntable")),
     )?;
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
     let here = a.real
-        || ((!a.vm || in_guest) && matches!(vcan_setup::can_support(), CanSupport::Available));
+        || ((!a.bus.vm || in_guest) && matches!(vcan_setup::can_support(), CanSupport::Available));
     if !here {
         let mut args: Vec<String> = vec![
             "validate".into(),
             "turntable".into(),
             "--iface".into(),
-            a.iface.clone(),
+            a.bus.iface.clone(),
             "--axis".into(),
             a.axis.to_string(),
             "--speed".into(),
@@ -404,17 +404,17 @@ fn validate_turntable(a: ValidateArgs) -> Result<i32> {
                     .unwrap_or_default(),
             ]);
         }
-        if a.json {
+        if a.bus.json {
             args.push("--json".into());
         }
-        return run_in_guest(args, &out, vec![], vec![], a.json);
+        return run_in_guest(args, &out, vec![], vec![], a.bus.json);
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let stop = Arc::new(AtomicBool::new(false));
     let emulator = if a.real {
         None
     } else {
-        vcan_setup::ensure_vcan(&a.iface)?;
+        vcan_setup::ensure_vcan(&a.bus.iface)?;
         let mut faults = TurntableFaults::default();
         match a.fault {
             Some(TtFault::Stall) => faults.stall_from_s = Some(0.0),
@@ -447,7 +447,7 @@ fn validate_turntable(a: ValidateArgs) -> Result<i32> {
                 }
             })
         };
-        let (iface, stop2) = (a.iface.clone(), stop.clone());
+        let (iface, stop2) = (a.bus.iface.clone(), stop.clone());
         let h = std::thread::spawn(move || {
             emulators::can::run_turntable(&iface, tt, &progress, f64::INFINITY, &stop2)
         });
@@ -455,7 +455,7 @@ fn validate_turntable(a: ValidateArgs) -> Result<i32> {
         Some((h, ticker))
     };
     let result = hil::validate::run_suite(
-        &a.iface,
+        &a.bus.iface,
         a.axis,
         if a.real { 1.0 } else { a.speed },
         &Default::default(),
@@ -475,7 +475,7 @@ fn validate_turntable(a: ValidateArgs) -> Result<i32> {
         out.join("validation.json"),
         serde_json::to_string_pretty(&v)?,
     )?;
-    if a.json {
+    if a.bus.json {
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         print!("{}", hil::validate::table(&v));
@@ -527,7 +527,8 @@ fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
     }
     s.check()?;
     let out = absolute(
-        &a.out
+        &a.bus
+            .out
             .clone()
             .unwrap_or_else(|| default_out("drill-north-finding")),
     )?;
@@ -542,11 +543,11 @@ fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
         scenario: Some(scen),
         duration: None,
         speed: None,
-        iface: a.iface,
-        out: Some(out),
         nav: None,
-        json: a.json,
-        vm: a.vm,
+        bus: BusArgs {
+            out: Some(out),
+            ..a.bus
+        },
     })
 }
 
@@ -584,10 +585,7 @@ fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> {
         disturbances: None,
         tolerance: 0.1,
         seed,
-        iface: "vcan0".into(),
-        out: Some(out.join("drill")),
-        json: false,
-        vm: false,
+        bus: BusArgs::to(out.join("drill")),
     })?;
     eprintln!("hil: demo part 2 of 2: GPS-aided drive (one 1 km lap, NMEA receiver on a pty)");
     let mut s: Scenario = toml::from_str(DRIVE_GPS).context("built-in drive scenario")?;
@@ -598,11 +596,8 @@ fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> {
         scenario: Some(scen),
         duration: None,
         speed: None,
-        iface: "vcan0".into(),
-        out: Some(out.join("drive")),
         nav: None,
-        json: false,
-        vm: false,
+        bus: BusArgs::to(out.join("drive")),
     })?;
     let verdict = |c: i32| if c == 0 { "PASS" } else { "FAIL" };
     let summary = format!(
@@ -654,15 +649,15 @@ fn run(a: RunArgs) -> Result<i32> {
         s.speed = x;
     }
     s.check()?;
-    let out = absolute(&match &a.out {
+    let out = absolute(&match &a.bus.out {
         Some(o) => o.clone(),
         None => default_out(&s.name),
     })?;
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
-    let native = !a.vm || in_guest;
+    let native = !a.bus.vm || in_guest;
     if native && matches!(vcan_setup::can_support(), CanSupport::Available) {
         let opts = RunOptions {
-            iface: a.iface.clone(),
+            iface: a.bus.iface.clone(),
             out: out.clone(),
             nav_bin: match &a.nav {
                 Some(n) => n.clone(),
@@ -672,7 +667,7 @@ fn run(a: RunArgs) -> Result<i32> {
         };
         let backend = if in_guest { "vm" } else { "native" };
         let r = run_here(&s, &opts, backend)?;
-        if a.json {
+        if a.bus.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
         } else {
             print!("{}", report::card(&r));
@@ -696,7 +691,7 @@ fn run(a: RunArgs) -> Result<i32> {
     ]);
     args.extend([
         "--iface".into(),
-        a.iface.clone(),
+        a.bus.iface.clone(),
         "--out".into(),
         out.to_string_lossy().into_owned(),
     ]);
@@ -705,10 +700,10 @@ fn run(a: RunArgs) -> Result<i32> {
         None => sibling_binary("nav")?,
     };
     args.extend(["--nav".into(), nav.to_string_lossy().into_owned()]);
-    if a.json {
+    if a.bus.json {
         args.push("--json".into());
     }
-    run_in_guest(args, &out, extra, vec![nav], a.json)
+    run_in_guest(args, &out, extra, vec![nav], a.bus.json)
 }
 
 /// Run this program with `args` inside the QEMU guest (this kernel has no CAN): shares the
