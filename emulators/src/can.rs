@@ -1,11 +1,9 @@
 //! Transport: puts emulator frames on a CAN interface (vcan on the bench), paced by the
 //! simulated clock.
 
-use crate::clock::SimClock;
 use crate::imu::ImuEmulator;
 use serde::{Deserialize, Serialize};
 use socketcan::{CanSocket, Socket, SocketOptions};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 use thiserror::Error;
@@ -80,7 +78,7 @@ pub enum CanTxError {
 }
 
 /// Write one frame, retrying while the transmit queue is full; returns the retries.
-fn write(sock: &CanSocket, iface: &str, f: &RawFrame) -> Result<u64, CanTxError> {
+pub(crate) fn write(sock: &CanSocket, iface: &str, f: &RawFrame) -> Result<u64, CanTxError> {
     let frame = wire::to_can_frame(f).map_err(|e| CanTxError::Write {
         iface: iface.into(),
         id: f.id,
@@ -91,7 +89,11 @@ fn write(sock: &CanSocket, iface: &str, f: &RawFrame) -> Result<u64, CanTxError>
     loop {
         match sock.write_frame(&frame) {
             Ok(()) => return Ok(retries),
-            Err(e) if e.raw_os_error() == Some(libc::ENOBUFS) && Instant::now() < deadline => {
+            Err(e)
+                if (e.raw_os_error() == Some(libc::ENOBUFS)
+                    || e.kind() == std::io::ErrorKind::WouldBlock)
+                    && Instant::now() < deadline =>
+            {
                 retries += 1;
                 std::thread::sleep(Duration::from_micros(200));
             }
@@ -121,7 +123,7 @@ impl Progress {
         self.sim_us.load(Ordering::Acquire) as f64 * 1e-6
     }
 
-    fn set(&self, t: f64) {
+    pub(crate) fn set(&self, t: f64) {
         self.sim_us.store((t * 1e6) as u64, Ordering::Release);
     }
 }
@@ -206,46 +208,6 @@ impl BusStream {
             }
         }
     }
-}
-
-/// Run the IMU on `iface` for `duration_s` of simulated time, paced by `clock`. Stops early when
-/// `stop` is set.
-pub fn run_imu(
-    iface: &str,
-    imu: ImuEmulator,
-    clock: SimClock,
-    duration_s: f64,
-    faults: &BusFaults,
-    stop: &AtomicBool,
-    progress: &Arc<Progress>,
-) -> Result<TxStats, CanTxError> {
-    let sock = CanSocket::open(iface).map_err(|source| CanTxError::Open {
-        iface: iface.into(),
-        source,
-    })?;
-    let mut bus = BusStream::new(imu, faults);
-    let mut frames = Vec::with_capacity(8);
-    let (mut written, mut max_lag_ms, mut retries) = (0u64, 0u64, 0u64);
-    while bus.next_time() <= duration_s + 1e-9 && !stop.load(Ordering::Relaxed) {
-        let t = bus.next_time();
-        clock.sleep_until(t);
-        let lag = Instant::now().saturating_duration_since(clock.wall_at(t));
-        max_lag_ms = max_lag_ms.max(lag.as_millis() as u64);
-        frames.clear();
-        bus.next_frames(&mut frames);
-        for f in &frames {
-            retries += write(&sock, iface, f)?;
-            written += 1;
-        }
-        progress.set(t);
-    }
-    progress.set(bus.next_time());
-    Ok(TxStats {
-        frames: written,
-        enobufs_retries: retries,
-        max_lag_ms,
-        ..bus.stats
-    })
 }
 
 /// What the turntable adapter did.

@@ -323,14 +323,6 @@ impl Drive {
         )
     }
 
-    /// Transport rate (rotation of the ENU frame over the earth), rad/s, from the position mapping.
-    fn transport_rate(&self, t: f64) -> Vector3<f64> {
-        let (lat, ..) = self.position(t);
-        let v = self.velocity(t);
-        let lon_rate = v.x / (self.rn * self.lat0.cos());
-        Vector3::new(-v.y / self.rm, lon_rate * lat.cos(), lon_rate * lat.sin())
-    }
-
     /// Heading, rad (clockwise from north).
     pub fn heading(&self, t: f64) -> f64 {
         self.kinematics(t).1
@@ -358,29 +350,68 @@ impl Segment {
     }
 }
 
+impl Drive {
+    /// Everything rate and force have in common at `t`, each from one trajectory lookup:
+    /// the body-from-ENU rotation, earth and transport rate, and the kinematics.
+    fn frame(&self, t: f64) -> DriveFrame {
+        let (speed, psi, accel, rate, p) = self.kinematics(t);
+        let lat = self.lat0 + p[1] / self.rm;
+        let v = Vector3::new(speed * psi.sin(), speed * psi.cos(), 0.0);
+        let lon_rate = v.x / (self.rn * self.lat0.cos());
+        DriveFrame {
+            speed,
+            psi,
+            accel,
+            rate,
+            lat,
+            v,
+            cnb: c_b_n(psi, 0.0, 0.0).inverse(),
+            wie: Vector3::from(earth::earth_rate_enu(lat)),
+            wen: Vector3::new(-v.y / self.rm, lon_rate * lat.cos(), lon_rate * lat.sin()),
+        }
+    }
+
+    fn omega_of(fr: &DriveFrame) -> Vector3<f64> {
+        fr.cnb * (fr.wie + fr.wen) + Vector3::new(0.0, 0.0, -fr.rate)
+    }
+
+    fn force_of(&self, fr: &DriveFrame) -> Vector3<f64> {
+        let (s, psi) = (fr.speed, fr.psi);
+        let a = Vector3::new(
+            fr.accel * psi.sin() + s * fr.rate * psi.cos(),
+            fr.accel * psi.cos() - s * fr.rate * psi.sin(),
+            0.0,
+        );
+        let g = Vector3::new(0.0, 0.0, -earth::gravity(fr.lat, self.spec.height_m));
+        fr.cnb * (a + (2.0 * fr.wie + fr.wen).cross(&fr.v) - g)
+    }
+}
+
+/// See [`Drive::frame`].
+struct DriveFrame {
+    speed: f64,
+    psi: f64,
+    accel: f64,
+    rate: f64,
+    lat: f64,
+    v: Vector3<f64>,
+    cnb: nalgebra::Rotation3<f64>,
+    wie: Vector3<f64>,
+    wen: Vector3<f64>,
+}
+
 impl Motion for Drive {
     fn omega_ib_b(&self, t: f64) -> Vector3<f64> {
-        let (_, psi, _, rate, _) = self.kinematics(t);
-        let (lat, ..) = self.position(t);
-        let cnb = c_b_n(psi, 0.0, 0.0).inverse();
-        let wie = Vector3::from(earth::earth_rate_enu(lat));
-        let wen = self.transport_rate(t);
-        cnb * (wie + wen) + Vector3::new(0.0, 0.0, -rate)
+        Self::omega_of(&self.frame(t))
     }
 
     fn f_b(&self, t: f64) -> Vector3<f64> {
-        let (s, psi, accel, rate, _) = self.kinematics(t);
-        let (lat, _, h) = self.position(t);
-        let v = self.velocity(t);
-        let a = Vector3::new(
-            accel * psi.sin() + s * rate * psi.cos(),
-            accel * psi.cos() - s * rate * psi.sin(),
-            0.0,
-        );
-        let wie = Vector3::from(earth::earth_rate_enu(lat));
-        let wen = self.transport_rate(t);
-        let g = Vector3::new(0.0, 0.0, -earth::gravity(lat, h));
-        c_b_n(psi, 0.0, 0.0).inverse() * (a + (2.0 * wie + wen).cross(&v) - g)
+        self.force_of(&self.frame(t))
+    }
+
+    fn rate_and_force(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let fr = self.frame(t);
+        (Self::omega_of(&fr), self.force_of(&fr))
     }
 
     fn attitude(&self, t: f64) -> UnitQuaternion<f64> {

@@ -586,17 +586,17 @@ pub struct GpsTxStats {
     pub unread_epochs: u64,
 }
 
-/// The GPS receiver on a pty during a bench run. Its clock is the IMU stream's (`progress`): the
-/// fix of each PPS edge (at `k / rate + pps_phase_s`, the same edges the IMU latches) is written
-/// `latency_s` after the IMU has passed the edge, as a receiver outputs its fix shortly after
-/// the pulse. During the receiver's `port_drops` the device is gone: the pty is closed and a
-/// new one appears at `link` afterwards (as a USB receiver re-enumerating behind a
-/// `/dev/serial/by-id` link).
-pub struct GpsRun<'a> {
+/// The GPS receiver on a pty during a bench run, stepped on the IMU stream's clock by the bus
+/// scheduler ([`crate::bus`]): the fix of each PPS edge (at `k / rate + pps_phase_s`, the same
+/// edges the IMU latches) is written `latency_s` after the IMU has passed the edge, as a receiver
+/// outputs its fix shortly after the pulse. During the receiver's `port_drops` the device is
+/// gone: the pty is closed and a new one appears at `link` afterwards (as a USB receiver
+/// re-enumerating behind a `/dev/serial/by-id` link).
+pub struct GpsRun {
     /// The sentence writer (receiver model and its errors).
     pub writer: NmeaWriter,
     /// The drive the antenna rides on.
-    pub drive: &'a crate::drive::Drive,
+    pub drive: crate::drive::Drive,
     /// The IMU's PPS phase, s.
     pub pps_phase_s: f64,
     /// Delay from the PPS edge to the sentences, s.
@@ -607,57 +607,76 @@ pub struct GpsRun<'a> {
     pub date: (u32, u32, u32),
 }
 
-impl GpsRun<'_> {
-    /// Run until `duration_s` of simulated time or `stop`. `pty` is replaced when the port
-    /// drops; `link` (when given) is re-pointed at the new device.
-    pub fn run(
-        mut self,
-        pty: &mut GpsPty,
-        link: Option<&std::path::Path>,
-        progress: &crate::can::Progress,
-        duration_s: f64,
-        stop: &AtomicBool,
-    ) -> Result<GpsTxStats, PtyError> {
-        let mut st = GpsTxStats::default();
-        let period = 1.0 / self.writer.params().rate_hz.clamp(1.0, 10.0);
-        let lever = self.writer.params().lever_arm_m;
-        let mut k = 1u64;
-        let drops = self.writer.params().port_drops.clone();
-        let mut dropped: Option<usize> = None;
+/// A [`GpsRun`] on its pty, as the bus scheduler steps it.
+pub struct GpsDevice {
+    run: GpsRun,
+    pty: GpsPty,
+    link: Option<std::path::PathBuf>,
+    k: u64,
+    dropped: Option<usize>,
+    /// What was written.
+    pub stats: GpsTxStats,
+}
+
+impl GpsDevice {
+    /// The receiver `run` on `pty`, reached by nav through `link` when given.
+    pub fn new(run: GpsRun, pty: GpsPty, link: Option<std::path::PathBuf>) -> Self {
+        Self {
+            run,
+            pty,
+            link,
+            k: 1,
+            dropped: None,
+            stats: GpsTxStats::default(),
+        }
+    }
+
+    fn period(&self) -> f64 {
+        1.0 / self.run.writer.params().rate_hz.clamp(1.0, 10.0)
+    }
+
+    /// Simulated time at which the next epoch is written, s.
+    pub fn next_write_time(&self) -> f64 {
+        self.k as f64 * self.period() + self.run.pps_phase_s + self.run.latency_s
+    }
+
+    /// The IMU stream has reached `t` (and ends at `duration_s`): write every epoch due by then.
+    pub fn poll(&mut self, t: f64, duration_s: f64) -> Result<(), PtyError> {
+        let period = self.period();
+        let lever = self.run.writer.params().lever_arm_m;
         loop {
-            let edge = k as f64 * period + self.pps_phase_s;
-            if edge > duration_s || stop.load(Ordering::Relaxed) {
-                break;
+            let edge = self.k as f64 * period + self.run.pps_phase_s;
+            if edge > duration_s || t < edge + self.run.latency_s {
+                return Ok(());
             }
-            if progress.now() < edge + self.latency_s {
-                std::thread::sleep(Duration::from_millis(2));
-                continue;
-            }
-            k += 1;
+            self.k += 1;
+            let st = &mut self.stats;
             // the device disappears and comes back
+            let drops = &self.run.writer.params().port_drops;
             let in_drop = drops.iter().position(|d| edge >= d[0] && edge < d[1]);
-            match (dropped, in_drop) {
+            match (self.dropped, in_drop) {
                 (None, Some(i)) => {
-                    *pty = GpsPty::open()?; // the old pair closes: the reader sees EIO
-                    if let Some(l) = link {
+                    self.pty = GpsPty::open()?; // the old pair closes: the reader sees EIO
+                    if let Some(l) = &self.link {
                         let _ = std::fs::remove_file(l);
                     }
-                    dropped = Some(i);
+                    self.dropped = Some(i);
                     st.port_drops += 1;
                 }
                 (Some(_), None) => {
-                    if let Some(l) = link {
-                        relink(l, pty.path())?;
+                    if let Some(l) = &self.link {
+                        relink(l, self.pty.path())?;
                     }
-                    dropped = None;
+                    self.dropped = None;
                 }
                 _ => {}
             }
-            let truth = antenna_truth(self.drive, edge, lever);
-            let (text, err) = self
-                .writer
-                .fix(edge.floor(), self.utc0_s, self.date, &truth);
-            if dropped.is_some() {
+            let truth = antenna_truth(&self.run.drive, edge, lever);
+            let (text, err) =
+                self.run
+                    .writer
+                    .fix(edge.floor(), self.run.utc0_s, self.run.date, &truth);
+            if self.dropped.is_some() {
                 continue;
             }
             match (text.is_empty(), err) {
@@ -666,20 +685,25 @@ impl GpsRun<'_> {
                 (false, None) => st.void_epochs += 1,
             }
             if !text.is_empty() {
-                match pty.write(text.as_bytes()) {
+                match self.pty.write(text.as_bytes()) {
                     Ok(()) => st.bytes += text.len() as u64,
                     // nobody reads (nav not started or re-opening): the receiver's output is lost
                     Err(PtyError::Write { source, .. })
                         if source.kind() == std::io::ErrorKind::TimedOut =>
                     {
                         st.unread_epochs += 1;
-                        pty.clear();
+                        self.pty.clear();
                     }
                     Err(e) => return Err(e),
                 }
             }
         }
-        Ok(st)
+    }
+
+    /// The pty (kept open until nav has stopped: a receiver vanishing at the very end would only
+    /// add port errors to nav's summary).
+    pub fn into_pty(self) -> GpsPty {
+        self.pty
     }
 }
 

@@ -347,6 +347,16 @@ impl ImuEmulator {
         self.motion.as_ref()
     }
 
+    /// Index (0-based) of the next sample.
+    pub fn next_index(&self) -> u64 {
+        self.k
+    }
+
+    /// The 16-bit sample counter the frames of sample `k` (0-based) carry.
+    pub fn sample_counter(&self, k: u64) -> u16 {
+        (u64::from(self.counter0) + k + 1) as u16
+    }
+
     /// Simulated time at the end of the next sample, s.
     pub fn next_time(&self) -> f64 {
         (self.k + 1) as f64 * self.dt
@@ -392,7 +402,7 @@ impl ImuEmulator {
             self.accel[i].add(dv / self.p.accel_pulse_mps[i]);
         }
         let bit_fail = self.p.bit_fail_from_s.is_some_and(|t| t1 >= t);
-        let sample_counter = (u64::from(self.counter0) + self.k + 1) as u16;
+        let sample_counter = self.sample_counter(self.k);
         // PPS: an edge at whole seconds + phase inside (t0, t1]?
         let edge = (t1 - self.p.pps_phase_s).floor() + self.p.pps_phase_s;
         let pps_offset = (edge > t0 && edge <= t1)

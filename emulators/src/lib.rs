@@ -5,6 +5,7 @@
 //! transport ([`can`]: vcan or a real CAN interface). Everything but the transport is pure and
 //! tested without I/O. All emulators share one simulated clock ([`clock::SimClock`]).
 
+pub mod bus;
 pub mod can;
 pub mod clock;
 pub mod drive;

@@ -54,18 +54,32 @@ pub trait Motion: Send {
     }
     /// Geodetic latitude (rad) at `t`.
     fn latitude(&self, t: f64) -> f64;
+    /// Body rate and specific force at `t` together (motions override it to share the work the
+    /// two have in common: one attitude chain, one trajectory lookup).
+    fn rate_and_force(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        (self.omega_ib_b(t), self.f_b(t))
+    }
     /// Exact increments over `(t0, t1]` (default: Gauss-Legendre quadrature of rate and force).
     fn increments(&self, t0: f64, t1: f64) -> Increments {
-        let (c, h) = ((t0 + t1) / 2.0, (t1 - t0) / 2.0);
-        let mut dtheta = Vector3::zeros();
-        let mut dv = Vector3::zeros();
-        for (x, w) in GL6 {
-            let t = c + h * x;
-            dtheta += self.omega_ib_b(t) * (w * h);
-            dv += self.f_b(t) * (w * h);
-        }
-        Increments { dtheta, dv }
+        gauss_legendre(t0, t1, |t| self.rate_and_force(t))
     }
+}
+
+/// 6-point Gauss-Legendre quadrature over `(t0, t1]` of a rate and a force given together.
+pub fn gauss_legendre(
+    t0: f64,
+    t1: f64,
+    f: impl Fn(f64) -> (Vector3<f64>, Vector3<f64>),
+) -> Increments {
+    let (c, h) = ((t0 + t1) / 2.0, (t1 - t0) / 2.0);
+    let mut dtheta = Vector3::zeros();
+    let mut dv = Vector3::zeros();
+    for (x, w) in GL6 {
+        let (r, a) = f(c + h * x);
+        dtheta += r * (w * h);
+        dv += a * (w * h);
+    }
+    Increments { dtheta, dv }
 }
 
 /// Body-to-ENU rotation for heading, pitch, roll (rad).
@@ -147,6 +161,56 @@ impl Motion for Static {
     }
 }
 
+/// A [`Static`] site with its constant rate, force and attitude worked out once: the form the
+/// IMU's truth uses, since a composed motion asks its base for the rate at every quadrature node.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Site {
+    spec: Static,
+    rate: Vector3<f64>,
+    force: Vector3<f64>,
+    attitude: UnitQuaternion<f64>,
+}
+
+impl Static {
+    /// This site with its constants worked out once (the same values [`Static`] computes).
+    pub fn site(&self) -> Site {
+        Site {
+            spec: *self,
+            rate: self.rate(),
+            force: self.force(),
+            attitude: UnitQuaternion::from_rotation_matrix(&self.cbn()),
+        }
+    }
+}
+
+impl Motion for Site {
+    fn omega_ib_b(&self, _t: f64) -> Vector3<f64> {
+        self.rate
+    }
+    fn f_b(&self, _t: f64) -> Vector3<f64> {
+        self.force
+    }
+    fn rate_and_force(&self, _t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        (self.rate, self.force)
+    }
+    fn attitude(&self, _t: f64) -> UnitQuaternion<f64> {
+        self.attitude
+    }
+    fn latitude(&self, _t: f64) -> f64 {
+        self.spec.lat_deg.to_radians()
+    }
+    fn inertial_attitude(&self, t: f64) -> UnitQuaternion<f64> {
+        self.attitude * UnitQuaternion::from_scaled_axis(self.rate * t)
+    }
+    fn increments(&self, t0: f64, t1: f64) -> Increments {
+        let dt = t1 - t0;
+        Increments {
+            dtheta: self.rate * dt,
+            dv: self.force * dt,
+        }
+    }
+}
+
 /// Classical coning in inertial space (paper 000, eq. 5): the rotation vector from the
 /// reference frame is `[0, a cos(W t), a sin(W t)]`; the cone axis is body x.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
@@ -205,6 +269,10 @@ pub trait RelativeRotation: Send {
     fn rotation(&self, t: f64) -> UnitQuaternion<f64>;
     /// Rate of the body relative to the base at `t`, rad/s, body axes.
     fn rate(&self, t: f64) -> Vector3<f64>;
+    /// Rotation and rate together (implementations share the work the two have in common).
+    fn rotation_and_rate(&self, t: f64) -> (UnitQuaternion<f64>, Vector3<f64>) {
+        (self.rotation(t), self.rate(t))
+    }
 }
 
 /// Angle of one mechanism axis as a function of time.
@@ -213,6 +281,10 @@ pub trait AxisAngle: Send + Sync {
     fn angle(&self, t: f64) -> f64;
     /// Rate, rad/s.
     fn rate(&self, t: f64) -> f64;
+    /// Angle and rate together.
+    fn angle_and_rate(&self, t: f64) -> (f64, f64) {
+        (self.angle(t), self.rate(t))
+    }
 }
 
 /// Constant-rate rotation of an axis (a lab table in rate mode).
@@ -259,6 +331,13 @@ impl<A: AxisAngle> RelativeRotation for Indexer<A> {
     }
     fn rate(&self, t: f64) -> Vector3<f64> {
         self.about.into_inner() * self.axis.rate(t)
+    }
+    fn rotation_and_rate(&self, t: f64) -> (UnitQuaternion<f64>, Vector3<f64>) {
+        let (a, r) = self.axis.angle_and_rate(t);
+        (
+            UnitQuaternion::from_axis_angle(&self.about, a),
+            self.about.into_inner() * r,
+        )
     }
 }
 
@@ -404,14 +483,21 @@ impl Disturbances {
 
 impl RelativeRotation for Disturbances {
     fn rotation(&self, t: f64) -> UnitQuaternion<f64> {
-        let ([p, r], _) = self.pitch_roll(t);
-        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), p)
-            * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), r)
+        self.rotation_and_rate(t).0
     }
     fn rate(&self, t: f64) -> Vector3<f64> {
-        let ([_, r], [pd, rd]) = self.pitch_roll(t);
+        self.rotation_and_rate(t).1
+    }
+    fn rotation_and_rate(&self, t: f64) -> (UnitQuaternion<f64>, Vector3<f64>) {
+        if self.0.is_empty() {
+            return (UnitQuaternion::identity(), Vector3::zeros());
+        }
+        let ([p, r], [pd, rd]) = self.pitch_roll(t);
         let ry = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), r);
-        ry.inverse() * Vector3::new(pd, 0.0, 0.0) + Vector3::new(0.0, rd, 0.0)
+        (
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), p) * ry,
+            ry.inverse() * Vector3::new(pd, 0.0, 0.0) + Vector3::new(0.0, rd, 0.0),
+        )
     }
 }
 
@@ -491,18 +577,21 @@ impl Vibration {
 
 impl RelativeRotation for Vibration {
     fn rotation(&self, t: f64) -> UnitQuaternion<f64> {
-        let [(x, _), (y, _), (z, _)] = self.angles(t);
-        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), x)
-            * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), y)
-            * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), z)
+        self.rotation_and_rate(t).0
     }
     fn rate(&self, t: f64) -> Vector3<f64> {
-        let [(_, xd), (y, yd), (z, zd)] = self.angles(t);
+        self.rotation_and_rate(t).1
+    }
+    fn rotation_and_rate(&self, t: f64) -> (UnitQuaternion<f64>, Vector3<f64>) {
+        let [(x, xd), (y, yd), (z, zd)] = self.angles(t);
         let ry = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), y);
         let rz = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), z);
-        (ry * rz).inverse() * Vector3::new(xd, 0.0, 0.0)
-            + rz.inverse() * Vector3::new(0.0, yd, 0.0)
-            + Vector3::new(0.0, 0.0, zd)
+        (
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), x) * ry * rz,
+            (ry * rz).inverse() * Vector3::new(xd, 0.0, 0.0)
+                + rz.inverse() * Vector3::new(0.0, yd, 0.0)
+                + Vector3::new(0.0, 0.0, zd),
+        )
     }
 }
 
@@ -517,16 +606,19 @@ pub struct Composed {
 }
 
 impl Composed {
-    fn chain(&self, t: f64) -> (UnitQuaternion<f64>, Vector3<f64>) {
-        // rate of the body w.r.t. inertial space, walking out from the base
+    /// The relative rotation and the body rate, walking out from the base whose rate is `w`.
+    fn chain_from(&self, t: f64, mut w: Vector3<f64>) -> (UnitQuaternion<f64>, Vector3<f64>) {
         let mut q = UnitQuaternion::identity();
-        let mut w = self.base.omega_ib_b(t);
         for r in &self.relative {
-            let qr = r.rotation(t);
-            w = qr.inverse() * w + r.rate(t);
+            let (qr, rate) = r.rotation_and_rate(t);
+            w = qr.inverse() * w + rate;
             q *= qr;
         }
         (q, w)
+    }
+
+    fn chain(&self, t: f64) -> (UnitQuaternion<f64>, Vector3<f64>) {
+        self.chain_from(t, self.base.omega_ib_b(t))
     }
 }
 
@@ -541,6 +633,15 @@ impl Motion for Composed {
             .as_ref()
             .map_or(Vector3::zeros(), |v| v.accel(t));
         q.inverse() * self.base.f_b(t) + lin
+    }
+    fn rate_and_force(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let (w_base, f_base) = self.base.rate_and_force(t);
+        let (q, w) = self.chain_from(t, w_base);
+        let lin = self
+            .linear
+            .as_ref()
+            .map_or(Vector3::zeros(), |v| v.accel(t));
+        (w, q.inverse() * f_base + lin)
     }
     fn attitude(&self, t: f64) -> UnitQuaternion<f64> {
         self.base.attitude(t) * self.chain(t).0
@@ -697,6 +798,52 @@ mod tests {
         // after the climb the vehicle rests tilted
         let f = d.f_b(10.0);
         assert!((f.x / f.z).abs() > 0.004, "{f}");
+    }
+
+    /// The shared-work paths (one chain per node, a site's constants worked out once) give the
+    /// very same numbers, bit for bit, as rate and force evaluated apart the way they always were.
+    #[test]
+    fn rate_and_force_together_equal_them_apart_bit_for_bit() {
+        let site = site(123.4, 0.2, -33.9);
+        let make = |base: Box<dyn Motion>| Composed {
+            base,
+            relative: vec![
+                Box::new(Disturbances(vec![Disturbance::DoorSlam {
+                    at_s: 0.1,
+                    amplitude_deg: 0.05,
+                    frequency_hz: 1.8,
+                    decay_s: 0.6,
+                }])),
+                Box::new(Vibration::vehicle(40.0, 1.0)),
+                Box::new(Indexer::azimuth(ConstantRate {
+                    angle0: 0.3,
+                    rate: 0.5,
+                })),
+            ],
+            linear: Some(Vibration::vehicle(40.0, 1.0)),
+        };
+        let fast = make(Box::new(site.site()));
+        let slow = make(Box::new(site));
+        for k in 0..50 {
+            let (t0, t1) = (k as f64 * 0.0123, k as f64 * 0.0123 + 0.0005);
+            // the reference: every node evaluated apart, through the separate trait methods
+            let reference = gauss_legendre(t0, t1, |t| {
+                let mut q = UnitQuaternion::identity();
+                let mut w = slow.base.omega_ib_b(t);
+                for r in &slow.relative {
+                    let qr = r.rotation(t);
+                    w = qr.inverse() * w + r.rate(t);
+                    q *= qr;
+                }
+                let lin = slow
+                    .linear
+                    .as_ref()
+                    .map_or(Vector3::zeros(), |v| v.accel(t));
+                (w, q.inverse() * slow.base.f_b(t) + lin)
+            });
+            assert_eq!(fast.increments(t0, t1), reference, "k={k}");
+            assert_eq!(slow.increments(t0, t1), reference, "k={k}");
+        }
     }
 
     #[test]

@@ -136,6 +136,12 @@ impl crate::truth::AxisAngle for ProfileAxis {
         p.read_to(t);
         p.eval(t).1
     }
+    fn angle_and_rate(&self, t: f64) -> (f64, f64) {
+        let mut p = lock(&self.0);
+        p.read_to(t);
+        let (a, r, _) = p.eval(t);
+        (a, r)
+    }
 }
 
 /// Faults the mechanism can be told to have.

@@ -243,8 +243,10 @@ pub fn navigate(
     };
     let n = s.processing.coning_samples as f64;
     let dt = 1.0 / s.imu.rate_hz;
-    // level while still parked: the first fix comes at about 1 s
-    let level_s = (spec.start_wait_s - 1.2).clamp(0.2, 2.0);
+    // level while still parked: the first fix comes at about 1 s and is applied `fix_delay_s`
+    // after its PPS edge
+    let fix_delay = NavigationConfig::default().fix_delay_s;
+    let level_s = (spec.start_wait_s - 1.2 - fix_delay).clamp(0.2, 2.0);
     // without north-finding, navigation starts just before the vehicle drives off
     let start_s = match nf {
         Some(_) => 0.0,
@@ -258,6 +260,7 @@ pub fn navigate(
         level_s,
         gps_aiding: filter.is_some(),
         filter: filter.map(|f| with_lever_arm(f, rx)).unwrap_or_default(),
+        ..NavigationConfig::default()
     });
     let mut nf_result = None;
     let mut writer = NmeaWriter::new(rx.clone());

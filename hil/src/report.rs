@@ -31,6 +31,10 @@ pub struct RunReport {
     pub wall_seconds: f64,
     /// Frames per second of wall time through the interface.
     pub frames_per_wall_second: f64,
+    /// The speed factor reached (simulated seconds per wall second).
+    pub pace_reached: f64,
+    /// How the emulators followed nav (lockstep).
+    pub lockstep: emulators::bus::LockstepStats,
     /// What the emulator sent.
     pub tx: TxStats,
     /// The same scenario run in process (no bus): the reference nav must reproduce (none for
@@ -84,6 +88,7 @@ pub fn checks(
     reference: Option<&InProcess>,
     nav: &Value,
     nav_exit: Option<i32>,
+    lockstep: &emulators::bus::LockstepStats,
 ) -> (Vec<Check>, i64) {
     let mut out = Vec::new();
     out.push(Check {
@@ -91,6 +96,20 @@ pub fn checks(
         pass: nav_exit == Some(0),
         detail: format!("exit status {nav_exit:?}"),
     });
+    if lockstep.enabled {
+        out.push(Check {
+            name: "reproducible: the emulators stayed in lockstep with nav".into(),
+            pass: lockstep.stalls == 0 && lockstep.nav_times > 0,
+            detail: format!(
+                "{} NAV_TIME frames followed, {} waits ({} ms), {} stalls, {} turntable commands placed",
+                lockstep.nav_times,
+                lockstep.waits,
+                lockstep.wait_ms,
+                lockstep.stalls,
+                lockstep.placed_commands
+            ),
+        });
+    }
     let rx_gyro = num(nav, &["imu", "gyro_frames"]) as i64;
     let dup = s.faults.duplicate_samples.len() as i64;
     let lost = tx.gyro_frames as i64 + dup - rx_gyro;

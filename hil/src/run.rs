@@ -5,10 +5,10 @@
 use crate::report::{self, RunReport};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
-use emulators::can::{Progress, run_imu, run_turntable};
+use emulators::can::Progress;
 use emulators::clock::SimClock;
 use emulators::drive::Drive;
-use emulators::gps::{GpsPty, GpsRun, NmeaWriter, relink};
+use emulators::gps::{GpsDevice, GpsPty, GpsRun, NmeaWriter, relink};
 use emulators::imu::ImuEmulator;
 use nav::config::{CanConfig, GpsConfig, NavConfig, RecordConfig, WatchdogConfig};
 use nav::navigator::NavigationConfig;
@@ -179,6 +179,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     info!(interface = %opts.iface, "starting nav");
     let nav = start_nav(&opts.nav_bin, &cfg_path)?;
 
+    let lockstep = emulators::bus::Lockstep::default();
     let (motion, turntable) = s.build();
     let imu = ImuEmulator::new(motion, s.imu.clone());
     let stop = Arc::new(AtomicBool::new(false));
@@ -190,60 +191,51 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         let (iface, stop) = (opts.iface.clone(), watch_stop.clone());
         std::thread::spawn(move || watch_solution(sock, &iface, &stop))
     };
-    let gps_thread = match (gps, &s.gps, &s.drive) {
-        (Some((mut pty, link)), Some(rx), Some(d)) => {
-            let drive = Drive::plan(d).map_err(anyhow::Error::msg)?;
-            let writer = NmeaWriter::new(rx.clone());
-            let (stop, progress, dur, phase) = (
-                stop.clone(),
-                progress.clone(),
-                s.duration_s,
-                s.imu.pps_phase_s,
-            );
-            let utc0 = (std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(0, |d| d.as_secs())
-                % 86_400) as f64;
-            Some(std::thread::spawn(move || {
-                let r = GpsRun {
-                    writer,
-                    drive: &drive,
-                    pps_phase_s: phase,
-                    latency_s: 0.05,
-                    utc0_s: utc0,
-                    date: (21, 11, 2026),
-                }
-                .run(&mut pty, Some(&link), &progress, dur, &stop);
-                // the device stays until nav has stopped: a receiver vanishing at the very
-                // end would only add port errors to nav's summary
-                r.map(|st| (st, pty, link))
-            }))
+    let gps_device = match (gps, &s.gps, &s.drive) {
+        (Some((pty, link)), Some(rx), Some(d)) => {
+            let run = GpsRun {
+                writer: NmeaWriter::new(rx.clone()),
+                drive: Drive::plan(d).map_err(anyhow::Error::msg)?,
+                pps_phase_s: s.imu.pps_phase_s,
+                latency_s: 0.05,
+                // a fixed time of day: the run depends on its scenario and seed only
+                utc0_s: 12.0 * 3600.0,
+                date: (21, 11, 2026),
+            };
+            Some(GpsDevice::new(run, pty, Some(link)))
         }
         _ => None,
+    };
+    let devices = emulators::bus::Devices {
+        imu: emulators::can::BusStream::new(imu, &s.faults),
+        turntable: turntable
+            .map(|tt| emulators::bus::TtBus::new(tt, s.imu.rate_hz, lockstep.latency)),
+        gps: gps_device,
     };
     let clock = SimClock::start(s.speed);
     let t0 = Instant::now();
     let tx = {
-        let (iface, faults, stop, progress, dur) = (
+        let (iface, stop, progress, dur) = (
             opts.iface.clone(),
-            s.faults.clone(),
             stop.clone(),
             progress.clone(),
             s.duration_s,
         );
-        std::thread::spawn(move || run_imu(&iface, imu, clock, dur, &faults, &stop, &progress))
+        std::thread::spawn(move || {
+            emulators::bus::run(
+                &iface,
+                devices,
+                clock,
+                dur,
+                Some(lockstep),
+                &stop,
+                &progress,
+            )
+        })
     };
-    let tt_thread = turntable.map(|tt| {
-        let (iface, stop, dur, progress) = (
-            opts.iface.clone(),
-            stop.clone(),
-            s.duration_s,
-            progress.clone(),
-        );
-        std::thread::spawn(move || run_turntable(&iface, tt, &progress, dur, &stop))
-    });
     let mut drill = DrillWatch::default();
     let mut next_report = Instant::now() + Duration::from_secs(5);
+    let mut last_report = (Instant::now(), 0.0);
     while !tx.is_finished() {
         std::thread::sleep(Duration::from_millis(50));
         for l in nav.lines.try_iter() {
@@ -257,34 +249,33 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             && Instant::now() >= next_report
         {
             let t = progress.now();
+            let reached = (t - last_report.1) / last_report.0.elapsed().as_secs_f64().max(1e-9);
             eprintln!(
-                "hil: {t:.1} / {:.1} s simulated (x{})",
+                "hil: {t:.1} / {:.1} s simulated (x{} asked, x{reached:.1} reached)",
                 s.duration_s, s.speed
             );
+            last_report = (Instant::now(), t);
             next_report += Duration::from_secs(5);
         }
     }
     let wall = t0.elapsed().as_secs_f64();
     stop.store(true, Ordering::Relaxed);
-    let tx = tx
+    let bus = tx
         .join()
-        .map_err(|_| anyhow::anyhow!("IMU emulator thread panicked"))?;
-    let tt_stats = join_emulator(tt_thread, "turntable emulator")?;
-    let gps_device = join_emulator(gps_thread, "GPS emulator")?;
+        .map_err(|_| anyhow::anyhow!("emulator thread panicked"))?;
     // let nav drain its socket before it is told to stop
     std::thread::sleep(Duration::from_millis(500));
-    let (tx, nav_out) = match tx {
-        Ok(st) => (st, stop_nav(nav)?),
+    let (bus, nav_out) = match bus {
+        Ok(b) => (b, stop_nav(nav)?),
         Err(e) => {
             let _ = stop_nav(nav);
-            return Err(e.into());
+            return Err(anyhow::Error::new(e).context("emulators"));
         }
     };
     let (nav_exit, nav_lines) = nav_out;
-    let gps_stats = gps_device.map(|(st, pty, _link)| {
-        drop(pty);
-        st
-    });
+    let (tx, tt_stats, lockstep_stats) = (bus.imu, bus.turntable, bus.lockstep);
+    // the receiver's device stayed until nav had stopped
+    let gps_stats = bus.gps.map(|(st, _pty)| st);
     watch_stop.store(true, Ordering::Relaxed);
     let solution = watch
         .join()
@@ -307,7 +298,14 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         None => Some(crate::replay::run_in_process(s).context("in-process reference run")?),
         Some(_) => None,
     };
-    let (mut checks, lost) = report::checks(s, &tx, reference.as_ref(), &nav_json, nav_exit);
+    let (mut checks, lost) = report::checks(
+        s,
+        &tx,
+        reference.as_ref(),
+        &nav_json,
+        nav_exit,
+        &lockstep_stats,
+    );
     let drill_outcome = s.north_finding.as_ref().map(|_| {
         let nf = &nav_json["north_finding"];
         let result: Option<nav::northfind::NorthResult> =
@@ -316,7 +314,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             s.truth_heading_deg(),
             result.as_ref(),
             nf["abort"].as_str(),
-            wall * s.speed,
+            progress.now(),
         )
     });
     if let Some(o) = &drill_outcome {
@@ -350,6 +348,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         interface: opts.iface.clone(),
         wall_seconds: wall,
         frames_per_wall_second: tx.frames as f64 / wall.max(1e-9),
+        pace_reached: progress.now() / wall.max(1e-9),
+        lockstep: lockstep_stats,
         tx,
         in_process: reference,
         turntable: tt_stats,
@@ -407,21 +407,6 @@ struct RemoveOnDrop(PathBuf);
 impl Drop for RemoveOnDrop {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(&self.0);
-    }
-}
-
-/// Wait for an emulator thread (when there is one) and take its result.
-fn join_emulator<T, E: std::error::Error + Send + Sync + 'static>(
-    h: Option<std::thread::JoinHandle<std::result::Result<T, E>>>,
-    name: &str,
-) -> Result<Option<T>> {
-    match h {
-        Some(h) => Ok(Some(
-            h.join()
-                .map_err(|_| anyhow::anyhow!("{name} thread panicked"))?
-                .with_context(|| name.to_string())?,
-        )),
-        None => Ok(None),
     }
 }
 

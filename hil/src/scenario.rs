@@ -213,9 +213,9 @@ impl Scenario {
             // checked in `check`: a plan that fails never gets here
             (None, Some(d)) => match Drive::plan(d) {
                 Ok(p) => Box::new(p),
-                Err(_) => Box::new(self.site),
+                Err(_) => Box::new(self.site.site()),
             },
-            (None, None) => Box::new(self.site),
+            (None, None) => Box::new(self.site.site()),
         }
     }
 

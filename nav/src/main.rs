@@ -326,6 +326,21 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     };
     loop {
         tokio::select! {
+            // in this order: a signal, then a waiting GPS fix before more IMU frames (a fix is
+            // applied at an IMU time of its own, so it must not wait behind a burst of frames)
+            biased;
+            _ = sigint.recv() => { info!("SIGINT: finishing"); break; }
+            _ = sigterm.recv() => { info!("SIGTERM: finishing"); break; }
+            Some(fix) = gps_rx.recv() => {
+                gps_fixes += 1;
+                if let (Some(r), Ok(json)) = (&recorder, serde_json::to_string(&fix)) {
+                    r.send(Record::Json { channel: JsonChannel::Gps, t_ns: wall_ns(), publish_ns: wall_ns(), json });
+                }
+                if let Some(n) = navigator.as_mut() {
+                    n.on_fix(&fix);
+                }
+                last_fix = Some(fix);
+            }
             r = async {
                 match &sock {
                     Some(s) => s.read_frame().await,
@@ -474,18 +489,6 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                     event(&recorder, sums.last.unwrap_or(0), format!("{{\"kind\":\"imu_timeout\",\"after_ms\":{}}}", timeout.as_millis()));
                 }
             }
-            Some(fix) = gps_rx.recv() => {
-                gps_fixes += 1;
-                if let (Some(r), Ok(json)) = (&recorder, serde_json::to_string(&fix)) {
-                    r.send(Record::Json { channel: JsonChannel::Gps, t_ns: wall_ns(), publish_ns: wall_ns(), json });
-                }
-                if let Some(n) = navigator.as_mut() {
-                    n.on_fix(&fix);
-                }
-                last_fix = Some(fix);
-            }
-            _ = sigint.recv() => { info!("SIGINT: finishing"); break; }
-            _ = sigterm.recv() => { info!("SIGTERM: finishing"); break; }
         }
     }
     fe.flush(&mut out, &mut ev);

@@ -22,6 +22,12 @@ pub struct NavigationConfig {
     pub gps_aiding: bool,
     /// The filter.
     pub filter: FilterConfig,
+    /// A fix is applied when IMU time reaches its PPS edge plus this (s), carried forward from
+    /// the edge with the INS velocity; a fix that arrives later is applied at once and counted
+    /// late. Applying fixes at a time set by the IMU stream, not by when the serial port
+    /// happened to be read, makes the solution depend on the data alone. Allow for the
+    /// receiver's output latency and the serial transfer (a few hundred bytes at 9600 baud).
+    pub fix_delay_s: f64,
 }
 
 impl Default for NavigationConfig {
@@ -32,6 +38,7 @@ impl Default for NavigationConfig {
             level_s: 2.0,
             gps_aiding: true,
             filter: FilterConfig::default(),
+            fix_delay_s: 0.3,
         }
     }
 }
@@ -67,6 +74,8 @@ pub struct NavigatorSummary {
     pub fixes_ignored: u64,
     /// PPS edges seen.
     pub pps_edges: u64,
+    /// Fixes that arrived after their PPS edge plus `fix_delay_s` of IMU time (applied at once).
+    pub late_fixes: u64,
 }
 
 /// The navigator.
@@ -89,6 +98,9 @@ pub struct Navigator {
     fixes_ignored: u64,
     pps_edges: u64,
     last_good_fix_t: Option<f64>,
+    /// Fixes waiting for their time, with the count of PPS edges their own edge makes.
+    held: Vec<(GpsFix, u64)>,
+    late_fixes: u64,
 }
 
 /// A fix older than this (IMU time, s) makes the GPS stale: the solution is coasting.
@@ -115,6 +127,8 @@ impl Navigator {
             fixes_ignored: 0,
             pps_edges: 0,
             last_good_fix_t: None,
+            held: Vec::new(),
+            late_fixes: 0,
         }
     }
 
@@ -161,6 +175,7 @@ impl Navigator {
     /// A processing-chain update valid at IMU time `t` over `dt` s.
     pub fn on_update(&mut self, t: f64, phi: [f64; 3], dv: [f64; 3], dt: f64) {
         self.last_t = t;
+        self.apply_due_fixes();
         match self.phase {
             NavPhase::Waiting => {
                 // a heading (north-finding or the config) and a position (the first good fix)
@@ -228,8 +243,51 @@ impl Navigator {
         );
     }
 
-    /// A decoded GPS fix arrived (now: IMU time of the latest update).
+    /// A decoded GPS fix arrived (IMU time is that of the latest update). It waits until IMU
+    /// time reaches its PPS edge plus `fix_delay_s` (see [`NavigationConfig::fix_delay_s`]).
     pub fn on_fix(&mut self, fix: &GpsFix) {
+        let Some(p) = self.last_pps else {
+            // no PPS in the IMU stream: nothing to tie the fix to but its arrival
+            self.apply_fix(fix);
+            return;
+        };
+        // a fix that comes more than half a second after the last edge the IMU stream has shown
+        // belongs to the next edge (the stream is behind the receiver); otherwise to that edge
+        let edge = if self.last_t - p < 0.5 {
+            self.pps_edges
+        } else {
+            self.pps_edges + 1
+        };
+        if edge == self.pps_edges && self.last_t >= p + self.cfg.fix_delay_s {
+            self.late_fixes += 1;
+            self.apply_fix(fix);
+            return;
+        }
+        self.held.push((fix.clone(), edge));
+    }
+
+    /// Apply the held fixes whose time has come (their edge plus the delay, or a later edge).
+    fn apply_due_fixes(&mut self) {
+        let Some(p) = self.last_pps else { return };
+        let due = |edge: u64, n: u64, t: f64, d: f64| edge < n || (edge == n && t >= p + d);
+        if !self
+            .held
+            .iter()
+            .any(|(_, e)| due(*e, self.pps_edges, self.last_t, self.cfg.fix_delay_s))
+        {
+            return;
+        }
+        let held = std::mem::take(&mut self.held);
+        for (fix, edge) in held {
+            if due(edge, self.pps_edges, self.last_t, self.cfg.fix_delay_s) {
+                self.apply_fix(&fix);
+            } else {
+                self.held.push((fix, edge));
+            }
+        }
+    }
+
+    fn apply_fix(&mut self, fix: &GpsFix) {
         self.fixes_seen += 1;
         if !fix.valid || fix.time_backwards || fix.quality == 0 {
             self.fixes_ignored += 1;
@@ -290,6 +348,7 @@ impl Navigator {
             fixes_seen: self.fixes_seen,
             fixes_ignored: self.fixes_ignored,
             pps_edges: self.pps_edges,
+            late_fixes: self.late_fixes,
         }
     }
 }

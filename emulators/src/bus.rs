@@ -1,0 +1,443 @@
+//! The bench's bus scheduler: every emulated device on one simulated clock, in one thread, so
+//! that what nav receives, and in what order, depends on the scenario and its seed only.
+//!
+//! For each IMU sample the scheduler writes, in this order: the sample's IMU frames; then the
+//! turntable's frames due at that sample (acknowledgements of the commands that take effect
+//! there, then the status frames when due); then the GPS receiver's sentences due by then on
+//! its pty. The frames of one sample therefore always reach nav in the same order, whatever the
+//! machine's speed or the way its processes are scheduled.
+//!
+//! **Lockstep.** Like a flight simulator that advances its physics only when the autopilot has
+//! consumed the last step, the scheduler reads nav's own NAV_TIME frames (sent at 50 Hz of IMU
+//! time, carrying the last IMU sample nav has processed) and never runs more than
+//! [`Lockstep::window`] samples ahead of them. A turntable command nav sends while processing
+//! the samples up to one NAV_TIME (the commands on the bus before that NAV_TIME) takes effect
+//! [`Lockstep::latency`] samples after that NAV_TIME's sample: a fixed, realistic controller
+//! latency, and a time that does not depend on when the frame happened to be read. nav is not
+//! changed for this: it only relies on nav doing what the wire contract says.
+//!
+//! When nav stops confirming (it exited, or it is not the program on the other end), the
+//! scheduler waits [`Lockstep::stall`] of wall time, then counts a stall and runs on at its
+//! pace: the run goes on, and its report says it was not reproducible.
+
+use crate::can::{CanTxError, Progress, TurntableTxStats, TxStats, write};
+use crate::clock::SimClock;
+use crate::gps::{GpsDevice, GpsTxStats, PtyError};
+use crate::turntable::Turntable;
+use serde::{Deserialize, Serialize};
+use socketcan::{CanSocket, Socket, SocketOptions};
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use thiserror::Error;
+use wire::{Message, RawFrame, TtAck, TtCmd};
+
+/// How the scheduler follows nav.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Lockstep {
+    /// Largest lead of the IMU stream over the last sample nav confirmed, samples.
+    pub window: u64,
+    /// A command takes effect this many samples after the NAV_TIME it preceded (at least
+    /// `window`, so it never changes the past the IMU has already sent).
+    pub latency: u64,
+    /// Wall time without a confirmation before the scheduler gives up waiting.
+    pub stall: Duration,
+}
+
+impl Default for Lockstep {
+    fn default() -> Self {
+        // 60 ms of IMU time at 2 kHz: three of nav's 50 Hz output periods in flight
+        Self {
+            window: 120,
+            latency: 120,
+            stall: Duration::from_secs(20),
+        }
+    }
+}
+
+/// What the lockstep saw.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+pub struct LockstepStats {
+    /// Lockstep was asked for.
+    pub enabled: bool,
+    /// NAV_TIME frames read.
+    pub nav_times: u64,
+    /// Times the stream waited for nav.
+    pub waits: u64,
+    /// Wall time spent waiting for nav, ms.
+    pub wait_ms: u64,
+    /// Times nav did not confirm within the stall limit (the run went on without lockstep).
+    pub stalls: u64,
+    /// Turntable commands placed in time by a NAV_TIME.
+    pub placed_commands: u64,
+    /// Turntable commands that arrived while lockstep was off (applied at the next sample).
+    pub unplaced_commands: u64,
+    /// The last IMU sample (0-based) nav confirmed.
+    pub last_confirmed: Option<u64>,
+}
+
+/// The turntable on the bus, without I/O: commands in, frames out after each IMU sample.
+pub struct TtBus {
+    tt: Turntable,
+    status_every: u64,
+    latency: u64,
+    waiting: Vec<TtCmd>,
+    scheduled: VecDeque<(u64, TtCmd)>,
+    acks: Vec<TtAck>,
+    /// What went out.
+    pub stats: TurntableTxStats,
+}
+
+impl TtBus {
+    /// The mechanism `tt` beside an IMU at `imu_rate_hz`; lockstep commands take effect
+    /// `latency` samples after their NAV_TIME.
+    pub fn new(tt: Turntable, imu_rate_hz: f64, latency: u64) -> Self {
+        Self {
+            status_every: (imu_rate_hz / tt.params().status_hz).round().max(1.0) as u64,
+            tt,
+            latency,
+            waiting: Vec::new(),
+            scheduled: VecDeque::new(),
+            acks: Vec::new(),
+            stats: TurntableTxStats::default(),
+        }
+    }
+
+    /// A command arrived; it waits for the next NAV_TIME to be placed in time.
+    pub fn command(&mut self, cmd: TtCmd) {
+        self.stats.commands += 1;
+        self.waiting.push(cmd);
+    }
+
+    /// A command arrived with no lockstep: it takes effect at sample `k`.
+    pub fn command_at(&mut self, k: u64, cmd: TtCmd) {
+        self.stats.commands += 1;
+        self.scheduled.push_back((k, cmd));
+    }
+
+    /// nav has processed sample `k`: the commands that came before take effect at `k + latency`.
+    /// Returns how many were placed.
+    pub fn confirmed(&mut self, k: u64) -> u64 {
+        let n = self.waiting.len() as u64;
+        for c in self.waiting.drain(..) {
+            self.scheduled.push_back((k + self.latency, c));
+        }
+        n
+    }
+
+    /// Commands still waiting for a NAV_TIME.
+    pub fn waiting(&self) -> usize {
+        self.waiting.len()
+    }
+
+    /// The frames due right after IMU sample `k` (which ends at `t`), in bus order.
+    pub fn after_sample(&mut self, k: u64, t: f64, out: &mut Vec<Message>) {
+        while let Some(&(at, cmd)) = self.scheduled.front() {
+            if at > k {
+                break;
+            }
+            self.scheduled.pop_front();
+            match self.tt.command(t, cmd) {
+                Some(a) => out.push(Message::TtAck(a)),
+                None if self.tt.params().faults.lost_command_seqs.contains(&cmd.seq) => {
+                    self.stats.lost_commands += 1
+                }
+                None => {}
+            }
+        }
+        self.acks.clear();
+        self.tt.advance(t, &mut self.acks);
+        out.extend(self.acks.drain(..).map(Message::TtAck));
+        if (k + 1).is_multiple_of(self.status_every) {
+            out.extend(self.tt.status(t).into_iter().map(Message::TtStatus));
+        }
+    }
+
+    /// Count frames that went out.
+    fn sent(&mut self, m: &Message) {
+        match m {
+            Message::TtAck(_) => self.stats.acks += 1,
+            _ => self.stats.status_frames += 1,
+        }
+    }
+}
+
+/// Everything the scheduler drives in one run.
+pub struct Devices {
+    /// The IMU's frames as they go on the bus.
+    pub imu: crate::can::BusStream,
+    /// The turntable, when the scenario has one.
+    pub turntable: Option<TtBus>,
+    /// The GPS receiver on its pty, when the scenario has one.
+    pub gps: Option<GpsDevice>,
+}
+
+/// What the scheduler did.
+pub struct BusOutcome {
+    /// The IMU's frames.
+    pub imu: TxStats,
+    /// The turntable's frames.
+    pub turntable: Option<TurntableTxStats>,
+    /// The receiver's output, and its pty (kept open until nav has stopped).
+    pub gps: Option<(GpsTxStats, crate::gps::GpsPty)>,
+    /// Lockstep.
+    pub lockstep: LockstepStats,
+}
+
+/// Scheduler failures.
+#[derive(Debug, Error)]
+pub enum BusError {
+    /// CAN trouble.
+    #[error(transparent)]
+    Can(#[from] CanTxError),
+    /// pty trouble.
+    #[error("GPS receiver: {0}")]
+    Gps(#[from] PtyError),
+}
+
+/// Run every device on `iface` (and the receiver's pty) for `duration_s` of simulated time,
+/// paced by `clock`, following nav when `lockstep` is given. Stops early when `stop` is set.
+pub fn run(
+    iface: &str,
+    mut dev: Devices,
+    clock: SimClock,
+    duration_s: f64,
+    lockstep: Option<Lockstep>,
+    stop: &AtomicBool,
+    progress: &Progress,
+) -> Result<BusOutcome, BusError> {
+    let open_err = |source| CanTxError::Open {
+        iface: iface.into(),
+        source,
+    };
+    let sock = CanSocket::open(iface).map_err(open_err)?;
+    // what nav sends us: turntable commands and its solution header (NAV_TIME)
+    sock.set_filters(&[
+        socketcan::CanFilter::new(0x100, 0x7FF),
+        socketcan::CanFilter::new(0x200, 0x7FF),
+    ])
+    .map_err(open_err)?;
+    sock.set_nonblocking(true).map_err(open_err)?;
+    let mut ls = LockstepStats {
+        enabled: lockstep.is_some(),
+        ..Default::default()
+    };
+    let mut follow = lockstep;
+    let mut confirmed: Option<u64> = None;
+    let (mut frames, mut msgs) = (Vec::with_capacity(8), Vec::with_capacity(8));
+    let (mut written, mut max_lag_ms, mut retries) = (0u64, 0u64, 0u64);
+    let mut tt_bad = 0u64;
+    while dev.imu.next_time() <= duration_s + 1e-9 && !stop.load(Ordering::Relaxed) {
+        let k = dev.imu.imu().next_index();
+        let t = dev.imu.next_time();
+        // what nav said so far (and, in lockstep, wait until it is close enough behind)
+        let mut waited: Option<Instant> = None;
+        loop {
+            read_nav(
+                &sock,
+                iface,
+                &mut dev,
+                &mut confirmed,
+                follow.is_some(),
+                &mut ls,
+                &mut tt_bad,
+            )?;
+            let Some(l) = follow else { break };
+            if confirmed.map_or(l.window, |c| c + l.window) >= k {
+                break;
+            }
+            let since = *waited.get_or_insert_with(|| {
+                ls.waits += 1;
+                Instant::now()
+            });
+            if since.elapsed() > l.stall {
+                ls.stalls += 1;
+                follow = None;
+                tracing::warn!(
+                    interface = iface,
+                    "nav confirmed no IMU sample past {confirmed:?} for {} s: lockstep off, the run is no longer reproducible",
+                    l.stall.as_secs()
+                );
+                break;
+            }
+            wait_readable(&sock, Duration::from_millis(2));
+        }
+        if let Some(w) = waited {
+            ls.wait_ms += w.elapsed().as_millis() as u64;
+        }
+        clock.sleep_until(t);
+        let lag = Instant::now().saturating_duration_since(clock.wall_at(t));
+        max_lag_ms = max_lag_ms.max(lag.as_millis() as u64);
+        frames.clear();
+        dev.imu.next_frames(&mut frames);
+        if let Some(tt) = dev.turntable.as_mut() {
+            msgs.clear();
+            tt.after_sample(k, t, &mut msgs);
+            for m in &msgs {
+                if let Ok(f) = m.encode() {
+                    frames.push(f);
+                    tt.sent(m);
+                }
+            }
+        }
+        for f in &frames {
+            retries += write(&sock, iface, f)?;
+            written += 1;
+        }
+        if let Some(g) = dev.gps.as_mut() {
+            g.poll(t, duration_s)?;
+        }
+        progress.set(t);
+    }
+    progress.set(dev.imu.next_time());
+    if let Some(tt) = dev.turntable.as_mut() {
+        tt.stats.bad_frames += tt_bad;
+    }
+    let imu_frames = written
+        - dev
+            .turntable
+            .as_ref()
+            .map_or(0, |t| t.stats.acks + t.stats.status_frames);
+    Ok(BusOutcome {
+        imu: TxStats {
+            frames: imu_frames,
+            enobufs_retries: retries,
+            max_lag_ms,
+            ..dev.imu.stats
+        },
+        turntable: dev.turntable.map(|t| t.stats),
+        gps: dev.gps.map(|g| (g.stats, g.into_pty())),
+        lockstep: ls,
+    })
+}
+
+/// Read what nav sent (without blocking): NAV_TIME confirms samples, TT_CMD goes to the
+/// turntable, placed in time by the next NAV_TIME (lockstep) or at the next sample.
+fn read_nav(
+    sock: &CanSocket,
+    iface: &str,
+    dev: &mut Devices,
+    confirmed: &mut Option<u64>,
+    lockstep: bool,
+    ls: &mut LockstepStats,
+    bad: &mut u64,
+) -> Result<(), CanTxError> {
+    loop {
+        let f = match sock.read_frame() {
+            Ok(f) => f,
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return Ok(()),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(source) => {
+                return Err(CanTxError::Read {
+                    iface: iface.into(),
+                    source,
+                });
+            }
+        };
+        let msg = wire::from_can_frame(&f)
+            .ok()
+            .and_then(|r: RawFrame| Message::decode(&r).ok());
+        let next = dev.imu.imu().next_index();
+        match msg {
+            Some(Message::NavTime(nt)) => {
+                ls.nav_times += 1;
+                if next == 0 {
+                    continue;
+                }
+                // the sent sample whose 16-bit counter the NAV_TIME names (the latest such)
+                let newest = next - 1;
+                let back = u64::from(
+                    dev.imu
+                        .imu()
+                        .sample_counter(newest)
+                        .wrapping_sub(nt.sample_count as u16),
+                );
+                let Some(k) = newest.checked_sub(back) else {
+                    continue;
+                };
+                if confirmed.is_none_or(|c| k > c) {
+                    *confirmed = Some(k);
+                    ls.last_confirmed = Some(k);
+                }
+                if lockstep && let Some(tt) = dev.turntable.as_mut() {
+                    ls.placed_commands += tt.confirmed(k);
+                }
+            }
+            Some(Message::TtCmd(c)) => match dev.turntable.as_mut() {
+                Some(tt) if lockstep => tt.command(c),
+                Some(tt) => {
+                    ls.unplaced_commands += 1;
+                    tt.command_at(next, c)
+                }
+                None => *bad += 1,
+            },
+            _ => *bad += 1,
+        }
+    }
+}
+
+/// Wait until `sock` has a frame to read, or `timeout`.
+fn wait_readable(sock: &CanSocket, timeout: Duration) {
+    use std::os::fd::AsRawFd;
+    let mut p = libc::pollfd {
+        fd: sock.as_raw_fd(),
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd for the duration of the call.
+    unsafe { libc::poll(&mut p, 1, timeout.as_millis() as libc::c_int) };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::turntable::TurntableParams;
+    use wire::{TtCommand, TtResult};
+
+    fn cmd(seq: u8, command: TtCommand) -> TtCmd {
+        TtCmd {
+            seq,
+            command: command as u8,
+            axis: 0,
+            arg: 0.0,
+        }
+    }
+
+    #[test]
+    fn a_command_takes_effect_latency_samples_after_the_nav_time_that_followed_it() {
+        let mut b = TtBus::new(Turntable::new(TurntableParams::default()), 2000.0, 120);
+        b.command(cmd(1, TtCommand::Enable));
+        let mut out = Vec::new();
+        // however long nav's NAV_TIME takes to come, nothing happens before it is placed
+        for k in 0..500 {
+            b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
+        }
+        assert!(!out.iter().any(|m| matches!(m, Message::TtAck(_))));
+        assert_eq!(b.confirmed(520), 1);
+        assert_eq!(b.waiting(), 0);
+        for k in 500..640 {
+            out.clear();
+            b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
+            assert!(!out.iter().any(|m| matches!(m, Message::TtAck(_))), "k={k}");
+        }
+        out.clear();
+        b.after_sample(640, 641.0 / 2000.0, &mut out);
+        match out.first() {
+            Some(Message::TtAck(a)) => assert_eq!((a.seq, a.result), (1, TtResult::Accepted)),
+            other => panic!("{other:?}"),
+        }
+        // acknowledgements come first, the status frames at 100 Hz (every 20th sample)
+        assert!(out[1..].iter().all(|m| matches!(m, Message::TtStatus(_))));
+        assert_eq!(out.len(), 1 + usize::from((641 % 20) == 0));
+    }
+
+    #[test]
+    fn status_frames_come_at_the_mechanism_rate() {
+        let mut b = TtBus::new(Turntable::new(TurntableParams::default()), 2000.0, 120);
+        let mut out = Vec::new();
+        for k in 0..2000 {
+            b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
+        }
+        assert_eq!(out.len(), 100);
+    }
+}
