@@ -63,6 +63,36 @@ pub trait Motion: Send {
     fn increments(&self, t0: f64, t1: f64) -> Increments {
         gauss_legendre(t0, t1, |t| self.rate_and_force(t))
     }
+    /// Rate and force are constant for all time (a parked vehicle): increments are rate and
+    /// force times the interval.
+    fn is_static(&self) -> bool {
+        false
+    }
+}
+
+/// Below this (rad) a decaying motion is over: its rate then moves an increment by less than
+/// rounding (1e-12 rad decaying over a 0.08 s settle is 1e-11 rad/s, 6e-15 rad per sample).
+pub const STILL_RAD: f64 = 1e-12;
+
+/// 3-point Gauss-Legendre quadrature over `(t0, t1]`: exact for polynomials to degree 5, so to
+/// rounding for motions whose rate and force are smooth and slow beside the sample interval
+/// (a vehicle's speed and heading), when no corner of the motion falls inside the interval.
+pub fn gauss_legendre3(
+    t0: f64,
+    t1: f64,
+    f: impl Fn(f64) -> (Vector3<f64>, Vector3<f64>),
+) -> Increments {
+    #[allow(clippy::excessive_precision)]
+    const X: f64 = 0.774_596_669_241_483_4;
+    let (c, h) = ((t0 + t1) / 2.0, (t1 - t0) / 2.0);
+    let mut dtheta = Vector3::zeros();
+    let mut dv = Vector3::zeros();
+    for (x, w) in [(-X, 5.0 / 9.0), (0.0, 8.0 / 9.0), (X, 5.0 / 9.0)] {
+        let (r, a) = f(c + h * x);
+        dtheta += r * (w * h);
+        dv += a * (w * h);
+    }
+    Increments { dtheta, dv }
 }
 
 /// 6-point Gauss-Legendre quadrature over `(t0, t1]` of a rate and a force given together.
@@ -151,6 +181,9 @@ impl Motion for Static {
         // the body turns with the earth at a constant body rate
         self.attitude(0.0) * UnitQuaternion::from_scaled_axis(self.rate() * t)
     }
+    fn is_static(&self) -> bool {
+        true
+    }
     fn increments(&self, t0: f64, t1: f64) -> Increments {
         // constant rate about a fixed axis: the integral is exact
         let dt = t1 - t0;
@@ -192,6 +225,9 @@ impl Motion for Site {
     }
     fn rate_and_force(&self, _t: f64) -> (Vector3<f64>, Vector3<f64>) {
         (self.rate, self.force)
+    }
+    fn is_static(&self) -> bool {
+        true
     }
     fn attitude(&self, _t: f64) -> UnitQuaternion<f64> {
         self.attitude
@@ -273,6 +309,10 @@ pub trait RelativeRotation: Send {
     fn rotation_and_rate(&self, t: f64) -> (UnitQuaternion<f64>, Vector3<f64>) {
         (self.rotation(t), self.rate(t))
     }
+    /// The rotation does not change over `[t0, t1]` (to within [`STILL_RAD`]).
+    fn still(&self, _t0: f64, _t1: f64) -> bool {
+        false
+    }
 }
 
 /// Angle of one mechanism axis as a function of time.
@@ -284,6 +324,10 @@ pub trait AxisAngle: Send + Sync {
     /// Angle and rate together.
     fn angle_and_rate(&self, t: f64) -> (f64, f64) {
         (self.angle(t), self.rate(t))
+    }
+    /// The angle does not change over `[t0, t1]` (to within [`STILL_RAD`]).
+    fn still(&self, _t0: f64, _t1: f64) -> bool {
+        false
     }
 }
 
@@ -302,6 +346,9 @@ impl AxisAngle for ConstantRate {
     }
     fn rate(&self, _t: f64) -> f64 {
         self.rate
+    }
+    fn still(&self, _t0: f64, _t1: f64) -> bool {
+        self.rate == 0.0
     }
 }
 
@@ -338,6 +385,9 @@ impl<A: AxisAngle> RelativeRotation for Indexer<A> {
             UnitQuaternion::from_axis_angle(&self.about, a),
             self.about.into_inner() * r,
         )
+    }
+    fn still(&self, t0: f64, t1: f64) -> bool {
+        self.axis.still(t0, t1)
     }
 }
 
@@ -408,6 +458,27 @@ fn wind_f() -> f64 {
 }
 
 impl Disturbance {
+    /// Nothing moves over `[t0, t1]` (before it, after it, or decayed below [`STILL_RAD`]).
+    fn still(&self, t0: f64, t1: f64) -> bool {
+        match *self {
+            Disturbance::DoorSlam {
+                at_s,
+                amplitude_deg,
+                decay_s,
+                ..
+            } => {
+                t1 <= at_s
+                    || (t0 > at_s
+                        && amplitude_deg.to_radians().abs() * (-(t0 - at_s) / decay_s).exp()
+                            < STILL_RAD)
+            }
+            Disturbance::ClimbIn {
+                at_s, duration_s, ..
+            } => t1 <= at_s || t0 >= at_s + duration_s,
+            Disturbance::Wind { from_s, to_s, .. } => t1 <= from_s || t0 >= to_s,
+        }
+    }
+
     /// (pitch, roll) in rad and their rates at `t`.
     fn angles(&self, t: f64) -> ([f64; 2], [f64; 2]) {
         match *self {
@@ -487,6 +558,9 @@ impl RelativeRotation for Disturbances {
     }
     fn rate(&self, t: f64) -> Vector3<f64> {
         self.rotation_and_rate(t).1
+    }
+    fn still(&self, t0: f64, t1: f64) -> bool {
+        self.0.iter().all(|d| d.still(t0, t1))
     }
     fn rotation_and_rate(&self, t: f64) -> (UnitQuaternion<f64>, Vector3<f64>) {
         if self.0.is_empty() {
@@ -633,6 +707,21 @@ impl Motion for Composed {
             .as_ref()
             .map_or(Vector3::zeros(), |v| v.accel(t));
         q.inverse() * self.base.f_b(t) + lin
+    }
+    fn increments(&self, t0: f64, t1: f64) -> Increments {
+        // a parked base with the mechanism locked and nothing shaking: constant rate and force
+        if self.linear.is_none()
+            && self.base.is_static()
+            && self.relative.iter().all(|r| r.still(t0, t1))
+        {
+            let (w, f) = self.rate_and_force(0.5 * (t0 + t1));
+            let dt = t1 - t0;
+            return Increments {
+                dtheta: w * dt,
+                dv: f * dt,
+            };
+        }
+        gauss_legendre(t0, t1, |t| self.rate_and_force(t))
     }
     fn rate_and_force(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
         let (w_base, f_base) = self.base.rate_and_force(t);
@@ -843,6 +932,36 @@ mod tests {
             });
             assert_eq!(fast.increments(t0, t1), reference, "k={k}");
             assert_eq!(slow.increments(t0, t1), reference, "k={k}");
+        }
+    }
+
+    /// A locked mechanism on a parked vehicle (after a door slam has died away) takes the
+    /// constant-rate path; it agrees with the quadrature to rounding.
+    #[test]
+    fn a_still_mechanism_on_a_parked_base_integrates_to_rounding() {
+        let m = Composed {
+            base: Box::new(site(30.0, 0.1, 45.0).site()),
+            relative: vec![
+                Box::new(Disturbances(vec![Disturbance::DoorSlam {
+                    at_s: 1.0,
+                    amplitude_deg: 0.05,
+                    frequency_hz: 1.8,
+                    decay_s: 0.6,
+                }])),
+                Box::new(Indexer::azimuth(ConstantRate {
+                    angle0: 1.2,
+                    rate: 0.0,
+                })),
+            ],
+            linear: None,
+        };
+        for (t0, still) in [(0.5, true), (1.2, false), (30.0, true)] {
+            let t1 = t0 + 0.0005;
+            assert_eq!(m.relative.iter().all(|r| r.still(t0, t1)), still, "t0={t0}");
+            let quad = gauss_legendre(t0, t1, |t| m.rate_and_force(t));
+            let got = m.increments(t0, t1);
+            assert!((got.dtheta - quad.dtheta).norm() < 1e-19, "t0={t0}");
+            assert!((got.dv - quad.dv).norm() < 1e-15, "t0={t0}");
         }
     }
 

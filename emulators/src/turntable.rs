@@ -79,6 +79,22 @@ impl AngleProfile {
         &self.segs[i]
     }
 
+    /// The angle does not change over `[t0, t1]` (to within [`crate::truth::STILL_RAD`]): one
+    /// piece covers it, at rest or settled.
+    pub fn still(&self, t0: f64, t1: f64) -> bool {
+        let i = self.segs.partition_point(|s| s.t0 <= t0).saturating_sub(1);
+        if self.segs.get(i + 1).is_some_and(|n| n.t0 <= t1) {
+            return false;
+        }
+        match self.segs[i].piece {
+            Piece::Poly { w0, alpha, .. } => w0 == 0.0 && alpha == 0.0,
+            Piece::Settle { e0, tau_s, .. } => {
+                e0.abs() * (-(t0 - self.segs[i].t0).max(0.0) / tau_s).exp()
+                    < crate::truth::STILL_RAD
+            }
+        }
+    }
+
     /// Angle (rad), rate (rad/s) and acceleration at `t`.
     pub fn eval(&self, t: f64) -> (f64, f64, f64) {
         self.seg_at(t).eval(t)
@@ -141,6 +157,11 @@ impl crate::truth::AxisAngle for ProfileAxis {
         p.read_to(t);
         let (a, r, _) = p.eval(t);
         (a, r)
+    }
+    fn still(&self, t0: f64, t1: f64) -> bool {
+        let mut p = lock(&self.0);
+        p.read_to(t1);
+        p.still(t0, t1)
     }
 }
 

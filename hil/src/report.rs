@@ -387,13 +387,19 @@ pub fn card(r: &RunReport) -> String {
     let _ = writeln!(s, "{line}");
     let _ = writeln!(
         s,
-        " RUN {}  on {} ({})  {:.0} s simulated at x{}  in {:.1} s wall",
+        " RUN {}  on {} ({})  {:.1} s simulated in {:.1} s wall: x{:.1} reached, x{} asked{}",
         r.scenario.name,
         r.interface,
         r.backend,
-        r.scenario.duration_s,
+        r.pace_reached * r.wall_seconds,
+        r.wall_seconds,
+        r.pace_reached,
         r.scenario.speed,
-        r.wall_seconds
+        if r.pace_reached < 0.9 * r.scenario.speed {
+            " (fell behind; the result does not depend on it)"
+        } else {
+            ""
+        }
     );
     let _ = writeln!(
         s,
