@@ -20,7 +20,7 @@
 //! scheduler waits [`Lockstep::stall`] of wall time, then counts a stall and runs on at its
 //! pace: the run goes on, and its report says it was not reproducible.
 
-use crate::can::{CanTxError, Progress, TurntableTxStats, TxStats, write};
+use crate::can::{CanTxError, Progress, TurntableTxStats, TxStats, write_all};
 use crate::clock::SimClock;
 use crate::gps::{GpsDevice, GpsTxStats, PtyError};
 use crate::turntable::Turntable;
@@ -225,6 +225,9 @@ pub fn run(
     let mut follow = lockstep;
     let mut confirmed: Option<u64> = None;
     let (mut frames, mut msgs) = (Vec::with_capacity(8), Vec::with_capacity(8));
+    // frames go out in batches of a few samples: one system call instead of one per frame
+    let mut outbox: Vec<RawFrame> = Vec::with_capacity(wire::BATCH);
+    let batch_samples = 16u64;
     let (mut written, mut max_lag_ms, mut retries) = (0u64, 0u64, 0u64);
     let mut tt_bad = 0u64;
     while dev.imu.next_time() <= duration_s + 1e-9 && !stop.load(Ordering::Relaxed) {
@@ -233,18 +236,29 @@ pub fn run(
         // what nav said so far (and, in lockstep, wait until it is close enough behind)
         let mut waited: Option<Instant> = None;
         loop {
-            read_nav(
-                &sock,
-                iface,
-                &mut dev,
-                &mut confirmed,
-                follow.is_some(),
-                &mut ls,
-                &mut tt_bad,
-            )?;
+            // read what nav said once a batch, or when it must have said more
+            let behind = follow.is_some_and(|l| confirmed.map_or(l.window, |c| c + l.window) < k);
+            if behind || k.is_multiple_of(batch_samples) {
+                read_nav(
+                    &sock,
+                    iface,
+                    &mut dev,
+                    &mut confirmed,
+                    follow.is_some(),
+                    &mut ls,
+                    &mut tt_bad,
+                )?;
+            }
             let Some(l) = follow else { break };
             if confirmed.map_or(l.window, |c| c + l.window) >= k {
                 break;
+            }
+            // nav cannot confirm what it has not received
+            if !outbox.is_empty() {
+                retries += write_all(&sock, iface, &outbox)?;
+                written += outbox.len() as u64;
+                outbox.clear();
+                continue;
             }
             let since = *waited.get_or_insert_with(|| {
                 ls.waits += 1;
@@ -265,9 +279,11 @@ pub fn run(
         if let Some(w) = waited {
             ls.wait_ms += w.elapsed().as_millis() as u64;
         }
-        clock.sleep_until(t);
-        let lag = Instant::now().saturating_duration_since(clock.wall_at(t));
-        max_lag_ms = max_lag_ms.max(lag.as_millis() as u64);
+        if k.is_multiple_of(batch_samples) {
+            clock.sleep_until(t);
+            let lag = Instant::now().saturating_duration_since(clock.wall_at(t));
+            max_lag_ms = max_lag_ms.max(lag.as_millis() as u64);
+        }
         frames.clear();
         dev.imu.next_frames(&mut frames);
         if let Some(tt) = dev.turntable.as_mut() {
@@ -280,15 +296,20 @@ pub fn run(
                 }
             }
         }
-        for f in &frames {
-            retries += write(&sock, iface, f)?;
-            written += 1;
+        outbox.extend_from_slice(&frames);
+        let gps_due = dev.gps.as_ref().is_some_and(|g| g.next_write_time() <= t);
+        if gps_due || (k + 1).is_multiple_of(batch_samples) || outbox.len() + 8 > wire::BATCH {
+            retries += write_all(&sock, iface, &outbox)?;
+            written += outbox.len() as u64;
+            outbox.clear();
         }
         if let Some(g) = dev.gps.as_mut() {
             g.poll(t, duration_s)?;
         }
         progress.set(t);
     }
+    retries += write_all(&sock, iface, &outbox)?;
+    written += outbox.len() as u64;
     progress.set(dev.imu.next_time());
     if let Some(tt) = dev.turntable.as_mut() {
         tt.stats.bad_frames += tt_bad;
@@ -322,10 +343,12 @@ fn read_nav(
     ls: &mut LockstepStats,
     bad: &mut u64,
 ) -> Result<(), CanTxError> {
+    use std::os::fd::AsRawFd;
+    let mut got = Vec::with_capacity(wire::BATCH);
     loop {
-        let f = match sock.read_frame() {
-            Ok(f) => f,
-            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return Ok(()),
+        got.clear();
+        let n = match wire::recv_batch(sock.as_raw_fd(), &mut got, wire::BATCH) {
+            Ok(n) => n,
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
             Err(source) => {
                 return Err(CanTxError::Read {
@@ -334,45 +357,58 @@ fn read_nav(
                 });
             }
         };
-        let msg = wire::from_can_frame(&f)
-            .ok()
-            .and_then(|r: RawFrame| Message::decode(&r).ok());
-        let next = dev.imu.imu().next_index();
-        match msg {
-            Some(Message::NavTime(nt)) => {
-                ls.nav_times += 1;
-                if next == 0 {
-                    continue;
-                }
-                // the sent sample whose 16-bit counter the NAV_TIME names (the latest such)
-                let newest = next - 1;
-                let back = u64::from(
-                    dev.imu
-                        .imu()
-                        .sample_counter(newest)
-                        .wrapping_sub(nt.sample_count as u16),
-                );
-                let Some(k) = newest.checked_sub(back) else {
-                    continue;
-                };
-                if confirmed.is_none_or(|c| k > c) {
-                    *confirmed = Some(k);
-                    ls.last_confirmed = Some(k);
-                }
-                if lockstep && let Some(tt) = dev.turntable.as_mut() {
-                    ls.placed_commands += tt.confirmed(k);
-                }
-            }
-            Some(Message::TtCmd(c)) => match dev.turntable.as_mut() {
-                Some(tt) if lockstep => tt.command(c),
-                Some(tt) => {
-                    ls.unplaced_commands += 1;
-                    tt.command_at(next, c)
-                }
-                None => *bad += 1,
-            },
-            _ => *bad += 1,
+        for f in got.drain(..) {
+            on_nav_frame(f.ok(), dev, confirmed, lockstep, ls, bad);
         }
+        if n < wire::BATCH {
+            return Ok(());
+        }
+    }
+}
+
+/// One frame from nav (none: not a data frame).
+fn on_nav_frame(
+    f: Option<RawFrame>,
+    dev: &mut Devices,
+    confirmed: &mut Option<u64>,
+    lockstep: bool,
+    ls: &mut LockstepStats,
+    bad: &mut u64,
+) {
+    let next = dev.imu.imu().next_index();
+    match f.and_then(|r| Message::decode(&r).ok()) {
+        Some(Message::NavTime(nt)) => {
+            ls.nav_times += 1;
+            // the sent sample whose 16-bit counter the NAV_TIME names (the latest such)
+            let Some(newest) = next.checked_sub(1) else {
+                return;
+            };
+            let back = u64::from(
+                dev.imu
+                    .imu()
+                    .sample_counter(newest)
+                    .wrapping_sub(nt.sample_count as u16),
+            );
+            let Some(k) = newest.checked_sub(back) else {
+                return;
+            };
+            if confirmed.is_none_or(|c| k > c) {
+                *confirmed = Some(k);
+                ls.last_confirmed = Some(k);
+            }
+            if lockstep && let Some(tt) = dev.turntable.as_mut() {
+                ls.placed_commands += tt.confirmed(k);
+            }
+        }
+        Some(Message::TtCmd(c)) => match dev.turntable.as_mut() {
+            Some(tt) if lockstep => tt.command(c),
+            Some(tt) => {
+                ls.unplaced_commands += 1;
+                tt.command_at(next, c)
+            }
+            None => *bad += 1,
+        },
+        _ => *bad += 1,
     }
 }
 

@@ -108,6 +108,44 @@ pub(crate) fn write(sock: &CanSocket, iface: &str, f: &RawFrame) -> Result<u64, 
     }
 }
 
+/// Write `frames` in order with as few system calls as the kernel allows (`sendmmsg`), retrying
+/// while the transmit queue is full; returns the retries.
+pub(crate) fn write_all(
+    sock: &CanSocket,
+    iface: &str,
+    frames: &[RawFrame],
+) -> Result<u64, CanTxError> {
+    use std::os::fd::AsRawFd;
+    let (mut done, mut retries) = (0, 0u64);
+    let mut deadline = Instant::now() + Duration::from_secs(2);
+    while done < frames.len() {
+        match wire::send_batch(sock.as_raw_fd(), &frames[done..]) {
+            Ok(n) if n > 0 => {
+                done += n;
+                deadline = Instant::now() + Duration::from_secs(2);
+            }
+            Ok(_) => retries += 1,
+            Err(e)
+                if (e.raw_os_error() == Some(libc::ENOBUFS)
+                    || e.kind() == std::io::ErrorKind::WouldBlock
+                    || e.kind() == std::io::ErrorKind::Interrupted)
+                    && Instant::now() < deadline =>
+            {
+                retries += 1;
+                std::thread::sleep(Duration::from_micros(200));
+            }
+            Err(source) => {
+                return Err(CanTxError::Write {
+                    iface: iface.into(),
+                    id: frames[done].id,
+                    source,
+                });
+            }
+        }
+    }
+    Ok(retries)
+}
+
 /// Live progress shared with the caller and the other emulators: the simulated time the IMU
 /// stream has reached. It is the bench's "now": when the IMU falls behind the wall clock (a slow
 /// machine at a high speed factor) the other emulators wait for it rather than run ahead.

@@ -365,7 +365,8 @@ impl Drive {
             rate,
             lat,
             v,
-            cnb: c_b_n(psi, 0.0, 0.0).inverse(),
+            // c_b_n(psi, 0, 0): the zero pitch and roll rotations are exact identities
+            cnb: nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), -psi).inverse(),
             wie: Vector3::from(earth::earth_rate_enu(lat)),
             wen: Vector3::new(-v.y / self.rm, lon_rate * lat.cos(), lon_rate * lat.sin()),
         }

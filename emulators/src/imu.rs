@@ -248,6 +248,8 @@ pub struct ImuEmulator {
     drift_phi: f64,
     drift_drive: f64,
     dither_phase: [f64; 3],
+    /// The dither angle at the end of the last sample (the start of the next), and that time.
+    dither_last: Option<(f64, [f64; 3])>,
     rng: StdRng,
     arw_sigma: f64,
     vrw_sigma: f64,
@@ -305,6 +307,7 @@ impl ImuEmulator {
             drift,
             drift_sum: [0.0; 3],
             dither_phase,
+            dither_last: None,
             p,
             dt,
             k: 0,
@@ -388,12 +391,17 @@ impl ImuEmulator {
         // the error models are linear in the rate, so applying them to the increment is exact
         let g = self.model.gyro(&(dth / self.dt)) * self.dt;
         let a = self.model.accel(&(dvt / self.dt)) * self.dt;
+        // the dither angle at t0 is the one computed at the end of the last sample
+        let d0 = match self.dither_last {
+            Some((t, d)) if t == t0 => d,
+            _ => std::array::from_fn(|i| self.dither(i, t0)),
+        };
+        let d1: [f64; 3] = std::array::from_fn(|i| self.dither(i, t1));
+        self.dither_last = Some((t1, d1));
         for i in 0..3 {
-            let d = g[i]
-                + self.drift[i] * self.dt
-                + self.arw_sigma * n.sample(&mut self.rng)
-                + self.dither(i, t1)
-                - self.dither(i, t0);
+            let d =
+                g[i] + self.drift[i] * self.dt + self.arw_sigma * n.sample(&mut self.rng) + d1[i]
+                    - d0[i];
             self.gyro[i].add(d / (self.p.gyro_pulse_arcsec[i] * ARCSEC));
             self.drift_sum[i] += self.drift[i];
             self.drift[i] =

@@ -63,11 +63,6 @@ pub trait Motion: Send {
     fn increments(&self, t0: f64, t1: f64) -> Increments {
         gauss_legendre(t0, t1, |t| self.rate_and_force(t))
     }
-    /// Rate and force are constant for all time (a parked vehicle): increments are rate and
-    /// force times the interval.
-    fn is_static(&self) -> bool {
-        false
-    }
 }
 
 /// Below this (rad) a decaying motion is over: its rate then moves an increment by less than
@@ -181,9 +176,6 @@ impl Motion for Static {
         // the body turns with the earth at a constant body rate
         self.attitude(0.0) * UnitQuaternion::from_scaled_axis(self.rate() * t)
     }
-    fn is_static(&self) -> bool {
-        true
-    }
     fn increments(&self, t0: f64, t1: f64) -> Increments {
         // constant rate about a fixed axis: the integral is exact
         let dt = t1 - t0;
@@ -225,9 +217,6 @@ impl Motion for Site {
     }
     fn rate_and_force(&self, _t: f64) -> (Vector3<f64>, Vector3<f64>) {
         (self.rate, self.force)
-    }
-    fn is_static(&self) -> bool {
-        true
     }
     fn attitude(&self, _t: f64) -> UnitQuaternion<f64> {
         self.attitude
@@ -709,16 +698,14 @@ impl Motion for Composed {
         q.inverse() * self.base.f_b(t) + lin
     }
     fn increments(&self, t0: f64, t1: f64) -> Increments {
-        // a parked base with the mechanism locked and nothing shaking: constant rate and force
-        if self.linear.is_none()
-            && self.base.is_static()
-            && self.relative.iter().all(|r| r.still(t0, t1))
-        {
-            let (w, f) = self.rate_and_force(0.5 * (t0 + t1));
-            let dt = t1 - t0;
+        // the mechanism locked and nothing shaking: the body is fixed to its base over the
+        // interval, so its increments are the base's own, turned into the body frame
+        if self.linear.is_none() && self.relative.iter().all(|r| r.still(t0, t1)) {
+            let (q, _) = self.chain_from(0.5 * (t0 + t1), Vector3::zeros());
+            let b = self.base.increments(t0, t1);
             return Increments {
-                dtheta: w * dt,
-                dv: f * dt,
+                dtheta: q.inverse() * b.dtheta,
+                dv: q.inverse() * b.dv,
             };
         }
         gauss_legendre(t0, t1, |t| self.rate_and_force(t))
@@ -936,7 +923,7 @@ mod tests {
     }
 
     /// A locked mechanism on a parked vehicle (after a door slam has died away) takes the
-    /// constant-rate path; it agrees with the quadrature to rounding.
+    /// base's own increments; they agree with the quadrature to rounding.
     #[test]
     fn a_still_mechanism_on_a_parked_base_integrates_to_rounding() {
         let m = Composed {

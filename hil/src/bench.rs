@@ -80,3 +80,50 @@ pub fn frontend(seconds: f64, passes: u32) -> Result<BenchResult> {
         },
     })
 }
+
+/// The emulators' own cost for one scenario: its IMU stream (truth, sensor model, wire encoding)
+/// and, where it has one, its turntable's frames, produced in process without a bus.
+#[derive(Debug, Clone, Serialize)]
+pub struct EmulatorBench {
+    /// Scenario name.
+    pub scenario: String,
+    /// Simulated seconds produced.
+    pub seconds: f64,
+    /// Frames produced.
+    pub frames: u64,
+    /// Simulated seconds per wall second (the speed factor the emulators alone could hold).
+    pub speed_factor: f64,
+    /// Frames per wall second.
+    pub frames_per_second: f64,
+}
+
+/// Produce `seconds` of scenario `s`'s bus traffic in process and time it.
+pub fn emulators(s: &Scenario, seconds: f64) -> EmulatorBench {
+    let (motion, tt) = s.build();
+    let imu = ImuEmulator::new(motion, s.imu.clone());
+    let mut bus = BusStream::new(imu, &s.faults);
+    let mut tt = tt.map(|t| emulators::bus::TtBus::new(t, s.imu.rate_hz, 120));
+    let (mut frames, mut msgs) = (Vec::new(), Vec::new());
+    let mut n = 0u64;
+    let t0 = Instant::now();
+    while bus.next_time() <= seconds {
+        let (k, t) = (bus.imu().next_index(), bus.next_time());
+        frames.clear();
+        bus.next_frames(&mut frames);
+        if let Some(tt) = tt.as_mut() {
+            msgs.clear();
+            tt.after_sample(k, t, &mut msgs);
+            frames.extend(msgs.iter().filter_map(|m| m.encode().ok()));
+        }
+        n += frames.len() as u64;
+        std::hint::black_box(&frames);
+    }
+    let dt = t0.elapsed().as_secs_f64().max(1e-9);
+    EmulatorBench {
+        scenario: s.name.clone(),
+        seconds,
+        frames: n,
+        speed_factor: seconds / dt,
+        frames_per_second: n as f64 / dt,
+    }
+}

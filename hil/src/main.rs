@@ -56,7 +56,8 @@ enum Cmd {
     /// Reproduce a paper's tables in process (same emulator and nav code as the bench).
     #[command(subcommand)]
     Experiment(Experiment),
-    /// Benchmark nav's IMU front end (decode, dither filter, coning, attitude) on one core.
+    /// Benchmark nav's IMU front end (decode, dither filter, coning, attitude) and each
+    /// scenario's emulators (truth, sensor model, encoding) on one core, in process.
     Bench {
         /// Seconds of 2 kHz IMU data per pass.
         #[arg(long, default_value_t = 120.0)]
@@ -64,6 +65,9 @@ enum Cmd {
         /// Passes (the best is reported).
         #[arg(long, default_value_t = 3)]
         passes: u32,
+        /// Scenario files whose emulators to time (default: the shipped ones under scenarios/).
+        #[arg(long)]
+        scenario: Vec<PathBuf>,
     },
 }
 
@@ -348,9 +352,35 @@ fn real_main() -> Result<i32> {
                 },
             )
         }
-        Cmd::Bench { seconds, passes } => {
+        Cmd::Bench {
+            seconds,
+            passes,
+            scenario,
+        } => {
             if seconds.is_nan() || seconds <= 0.1 {
                 bail!("--seconds must exceed 0.1");
+            }
+            let files = if scenario.is_empty() {
+                let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+                let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
+                    .with_context(|| format!("listing {}", dir.display()))?
+                    .filter_map(|e| e.ok().map(|e| e.path()))
+                    .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+                    .collect();
+                v.sort();
+                v
+            } else {
+                scenario
+            };
+            println!("emulators (truth + sensor model + encoding), one core, in process:");
+            for f in &files {
+                let s = Scenario::load(f)?;
+                let secs = seconds.min(s.duration_s);
+                let r = hil::bench::emulators(&s, secs);
+                println!(
+                    "  {:<24} {:7.1} s simulated: x{:7.1} real time, {:.3e} frames/s",
+                    r.scenario, r.seconds, r.speed_factor, r.frames_per_second
+                );
             }
             let r = hil::bench::frontend(seconds, passes)?;
             println!(
@@ -728,11 +758,19 @@ fn run_in_guest(
     let mut full = vec![exe.to_string_lossy().into_owned()];
     full.extend(args);
     let shares = dedupe_nested(vcan_setup::default_shares(&exe, &extra));
-    let opts = VmOptions {
+    let mut opts = VmOptions {
         shares,
         libs_for,
         ..VmOptions::default()
     };
+    // long runs (the full campus loop) may need more than the default 40 minutes
+    if let Some(v) = std::env::var_os("HIL_GUEST_TIMEOUT_S") {
+        let s: u64 = v
+            .to_str()
+            .and_then(|v| v.parse().ok())
+            .context("HIL_GUEST_TIMEOUT_S must be a whole number of seconds")?;
+        opts.timeout = std::time::Duration::from_secs(s);
+    }
     let o = vcan_setup::run_in_vm(&full, &opts)?;
     if json {
         // the guest's console carries the JSON; hand it on as it came

@@ -303,6 +303,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         (0u64, 0u64, 0u64, 0u64, 0u64);
     let mut timeouts = 0u64;
     let (mut out, mut ev) = (Vec::new(), Vec::new());
+    let mut batch = Vec::with_capacity(wire::BATCH);
     let start = Instant::now();
     let mut last_imu = Instant::now();
     let mut in_timeout = false;
@@ -361,124 +362,131 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                         }
                     }
                 };
-                total += 1;
-                let raw = match wire::from_can_frame(&f) {
-                    Ok(r) => r,
-                    Err(e) => {
-                        non_data += 1;
-                        if non_data <= 5 {
-                            warn!(interface = iface, "ignored: {e}");
-                        }
-                        event(&recorder, fe.stats().samples, format!("{{\"kind\":\"non_data_frame\",\"detail\":{}}}", serde_json::to_string(&e.to_string())?));
-                        continue;
-                    }
-                };
-                if let Some(r) = &recorder {
-                    r.send(Record::Frame { t_ns: wall_ns(), frame: raw });
+                // every frame already waiting comes in the same system call (recvmmsg)
+                batch.push(wire::from_can_frame(&f));
+                if let Some(s) = &sock {
+                    let _ = wire::recv_batch(s.as_raw_fd(), &mut batch, wire::BATCH - 1);
                 }
-                match Message::decode(&raw) {
-                    Ok(m) => {
-                        *by_msg.entry(m.spec().name).or_insert(0) += 1;
-                        if matches!(m, Message::ImuGyro(_)) {
-                            last_imu = Instant::now();
+                for conv in batch.drain(..) {
+                    total += 1;
+                    let raw = match conv {
+                        Ok(r) => r,
+                        Err(e) => {
+                            non_data += 1;
+                            if non_data <= 5 {
+                                warn!(interface = iface, "ignored: {e}");
+                            }
+                            event(&recorder, fe.stats().samples, format!("{{\"kind\":\"non_data_frame\",\"detail\":{}}}", serde_json::to_string(&e.to_string())?));
+                            continue;
                         }
-                        if let Some(f) = finder.as_mut() {
-                            match &m {
-                                Message::TtStatus(st) => { nf_frames += 1; f.on_status(st); }
-                                Message::TtAck(a) => { nf_frames += 1; f.on_ack(a); }
-                                _ => {}
+                    };
+                    if let Some(r) = &recorder {
+                        r.send(Record::Frame { t_ns: wall_ns(), frame: raw });
+                    }
+                    match Message::decode(&raw) {
+                        Ok(m) => {
+                            *by_msg.entry(m.spec().name).or_insert(0) += 1;
+                            if matches!(m, Message::ImuGyro(_)) {
+                                last_imu = Instant::now();
+                            }
+                            if let Some(f) = finder.as_mut() {
+                                match &m {
+                                    Message::TtStatus(st) => { nf_frames += 1; f.on_status(st); }
+                                    Message::TtAck(a) => { nf_frames += 1; f.on_ack(a); }
+                                    _ => {}
+                                }
+                            }
+                            fe.on_message(&m, &mut out, &mut ev);
+                        }
+                        Err(e) => report_bad_frame(&e, &raw, iface, &mut unknown, &mut bad_len, &mut invalid, &recorder, fe.stats().samples),
+                    }
+                    drain(&mut out, &mut ev, &mut sums, &mut proc, &recorder, sample_ns, finder.as_mut(), navigator.as_mut(), cfg.processing.coning_samples);
+                    if let (Some(n), Some(r)) = (navigator.as_mut(), finder.as_ref().and_then(|f| f.result())) && !nf_handed {
+                        n.set_heading(r.heading_deg);
+                        nf_handed = true;
+                    }
+                    if let Some(f) = finder.as_mut() {
+                        let t = proc.valid_sample().saturating_sub(proc.baseline().map_or(0, |b| b as i64)) as f64 / cfg.imu.rate_hz;
+                        while let Some(c) = f.poll(t.max(0.0)) {
+                            nf_cmds.push(c);
+                            if f.finished() { break; }
+                        }
+                        for c in nf_cmds.drain(..) {
+                            if let Some(s) = &sock {
+                                send_command(s, iface, c).await?;
+                                nf_sent += 1;
                             }
                         }
-                        fe.on_message(&m, &mut out, &mut ev);
+                        report_north_finding(f, t, &mut nf_last_print, &mut nf_last_phase, &mut nf_reported, &recorder);
                     }
-                    Err(e) => report_bad_frame(&e, &raw, iface, &mut unknown, &mut bad_len, &mut invalid, &recorder, fe.stats().samples),
-                }
-                drain(&mut out, &mut ev, &mut sums, &mut proc, &recorder, sample_ns, finder.as_mut(), navigator.as_mut(), cfg.processing.coning_samples);
-                if let (Some(n), Some(r)) = (navigator.as_mut(), finder.as_ref().and_then(|f| f.result())) && !nf_handed {
-                    n.set_heading(r.heading_deg);
-                    nf_handed = true;
-                }
-                if let Some(f) = finder.as_mut() {
-                    let t = proc.valid_sample().saturating_sub(proc.baseline().map_or(0, |b| b as i64)) as f64 / cfg.imu.rate_hz;
-                    while let Some(c) = f.poll(t.max(0.0)) {
-                        nf_cmds.push(c);
-                        if f.finished() { break; }
-                    }
-                    for c in nf_cmds.drain(..) {
-                        if let Some(s) = &sock {
-                            send_command(s, iface, c).await?;
-                            nf_sent += 1;
-                        }
-                    }
-                    report_north_finding(f, t, &mut nf_last_print, &mut nf_last_phase, &mut nf_reported, &recorder);
-                }
-                // the solution at 50 Hz of IMU time
-                if let (Some(s), Some(last)) = (&sock, sums.last)
-                    && last >= *next_out.get_or_insert(last)
-                {
-                    next_out = Some(last + out_every);
-                    let st = fe.stats();
-                    let nf_running = finder.as_ref().is_some_and(|f| !f.finished());
-                    let mode = match (&navigator, nf_running) {
-                        (_, true) => wire::NavMode::NorthFinding,
-                        (Some(n), false) => n.mode(),
-                        (None, false) => wire::NavMode::Init,
-                    };
-                    let sigmas = navigator.as_ref().and_then(|n| n.sigmas());
-                    let solution = nav::output::Solution {
-                        sample_count: last,
-                        mode,
-                        health: wire::NavHealth {
-                            imu_timeout: in_timeout,
-                            imu_gaps: st.gaps > 0,
-                            imu_bit: st.bit_fail_samples > 0,
-                            gps_stale: cfg.gps.is_some() && navigator.as_ref().is_none_or(|n| n.gps_stale()),
-                            turntable: finder.as_ref().is_some_and(|f| f.abort_reason().is_some()),
-                            filter: proc.stats().invalid_since.is_some()
-                                || navigator.as_ref().and_then(|n| n.filter()).is_some_and(|k| k.stats().reanchors > 0),
-                        },
-                        output: navigator.as_ref().and_then(|n| n.state()).map(|x| x.output()),
-                        pos_sigma_m: sigmas.map_or(0.0, |x| x.0),
-                        heading_sigma_deg: sigmas.map_or(0.0, |x| x.1),
-                    };
-                    // once a second of IMU time, the solution goes in the recording too
-                    if sol_enc.epochs.is_multiple_of(50)
-                        && let (Some(r), Some(o), Some(n)) = (&recorder, &solution.output, &navigator)
+                    // the solution at 50 Hz of IMU time
+                    if let (Some(s), Some(last)) = (&sock, sums.last)
+                        && last >= *next_out.get_or_insert(last)
                     {
-                        let j = serde_json::json!({
-                            "t_s": n.time(),
-                            "mode": format!("{mode:?}"),
-                            "output": o,
-                            "pos_sigma_m": solution.pos_sigma_m,
-                            "heading_sigma_deg": solution.heading_sigma_deg,
-                        });
-                        r.send(Record::Json {
-                            channel: JsonChannel::Solution,
-                            t_ns: wall_ns(),
-                            publish_ns: (last as f64 * sample_ns) as u64,
-                            json: j.to_string(),
-                        });
-                    }
-                    sol_enc.encode(&solution, &mut sol_frames);
-                    sol.last_mode = Some(format!("{mode:?}"));
-                    for f in sol_frames.drain(..) {
-                        match wire::to_can_frame(&f) {
-                            Ok(frame) => match s.try_write_frame(frame) {
-                                Ok(()) => sol.frames_sent += 1,
-                                Err(e) => {
-                                    sol.send_errors += 1;
-                                    if sol.send_errors <= 3 {
-                                        warn!(interface = iface, "solution frame 0x{:03X} not sent: {e}", f.id);
-                                    }
-                                }
+                        next_out = Some(last + out_every);
+                        let st = fe.stats();
+                        let nf_running = finder.as_ref().is_some_and(|f| !f.finished());
+                        let mode = match (&navigator, nf_running) {
+                            (_, true) => wire::NavMode::NorthFinding,
+                            (Some(n), false) => n.mode(),
+                            (None, false) => wire::NavMode::Init,
+                        };
+                        let sigmas = navigator.as_ref().and_then(|n| n.sigmas());
+                        let solution = nav::output::Solution {
+                            sample_count: last,
+                            mode,
+                            health: wire::NavHealth {
+                                imu_timeout: in_timeout,
+                                imu_gaps: st.gaps > 0,
+                                imu_bit: st.bit_fail_samples > 0,
+                                gps_stale: cfg.gps.is_some() && navigator.as_ref().is_none_or(|n| n.gps_stale()),
+                                turntable: finder.as_ref().is_some_and(|f| f.abort_reason().is_some()),
+                                filter: proc.stats().invalid_since.is_some()
+                                    || navigator.as_ref().and_then(|n| n.filter()).is_some_and(|k| k.stats().reanchors > 0),
                             },
-                            Err(_) => sol.send_errors += 1,
+                            output: navigator.as_ref().and_then(|n| n.state()).map(|x| x.output()),
+                            pos_sigma_m: sigmas.map_or(0.0, |x| x.0),
+                            heading_sigma_deg: sigmas.map_or(0.0, |x| x.1),
+                        };
+                        // once a second of IMU time, the solution goes in the recording too
+                        if sol_enc.epochs.is_multiple_of(50)
+                            && let (Some(r), Some(o), Some(n)) = (&recorder, &solution.output, &navigator)
+                        {
+                            let j = serde_json::json!({
+                                "t_s": n.time(),
+                                "mode": format!("{mode:?}"),
+                                "output": o,
+                                "pos_sigma_m": solution.pos_sigma_m,
+                                "heading_sigma_deg": solution.heading_sigma_deg,
+                            });
+                            r.send(Record::Json {
+                                channel: JsonChannel::Solution,
+                                t_ns: wall_ns(),
+                                publish_ns: (last as f64 * sample_ns) as u64,
+                                json: j.to_string(),
+                            });
+                        }
+                        sol_enc.encode(&solution, &mut sol_frames);
+                        sol.last_mode = Some(format!("{mode:?}"));
+                        for f in sol_frames.drain(..) {
+                            match wire::to_can_frame(&f) {
+                                Ok(frame) => match s.try_write_frame(frame) {
+                                    Ok(()) => sol.frames_sent += 1,
+                                    Err(e) => {
+                                        sol.send_errors += 1;
+                                        if sol.send_errors <= 3 {
+                                            warn!(interface = iface, "solution frame 0x{:03X} not sent: {e}", f.id);
+                                        }
+                                    }
+                                },
+                                Err(_) => sol.send_errors += 1,
+                            }
                         }
                     }
-                }
-                if in_timeout && last_imu.elapsed() < timeout {
-                    info!(interface = iface, "IMU data back");
-                    in_timeout = false;
+                    if in_timeout && last_imu.elapsed() < timeout {
+                        info!(interface = iface, "IMU data back");
+                        in_timeout = false;
+                    }
                 }
             }
             _ = tick.tick() => {

@@ -86,7 +86,9 @@ pub enum Error {
         source: std::io::Error,
     },
     /// The guest did not finish in time.
-    #[error("the QEMU guest did not finish within {0} s; it was killed")]
+    #[error(
+        "the QEMU guest did not finish within {0} s; it was killed (hil: set HIL_GUEST_TIMEOUT_S for longer runs)"
+    )]
     Timeout(u64),
     /// The guest ended without reporting the command's exit status.
     #[error(

@@ -50,3 +50,105 @@ pub fn to_can_frame(f: &RawFrame) -> Result<CanFrame, FrameConvError> {
     let id = StandardId::new(f.id).ok_or(FrameConvError::BadId(f.id))?;
     CanFrame::new(id, f.payload()).ok_or(FrameConvError::BadId(f.id))
 }
+
+/// The kernel's `struct can_frame` (classic CAN) as `sendmmsg`/`recvmmsg` move it.
+#[repr(C)]
+#[derive(Clone, Copy, Default)]
+struct KernelFrame {
+    can_id: u32,
+    len: u8,
+    pad: u8,
+    res0: u8,
+    len8_dlc: u8,
+    data: [u8; 8],
+}
+
+const CAN_EFF_FLAG: u32 = 0x8000_0000;
+const CAN_RTR_FLAG: u32 = 0x4000_0000;
+const CAN_ERR_FLAG: u32 = 0x2000_0000;
+
+/// Most frames moved by one system call.
+pub const BATCH: usize = 64;
+
+fn mmsg_call(
+    frames: &mut [KernelFrame],
+    call: impl FnOnce(*mut libc::mmsghdr, u32) -> libc::c_int,
+) -> std::io::Result<usize> {
+    let mut iov: Vec<libc::iovec> = frames
+        .iter_mut()
+        .map(|f| libc::iovec {
+            iov_base: (f as *mut KernelFrame).cast(),
+            iov_len: std::mem::size_of::<KernelFrame>(),
+        })
+        .collect();
+    let mut hdrs: Vec<libc::mmsghdr> = iov
+        .iter_mut()
+        .map(|v| {
+            // SAFETY: an all-zero msghdr is valid (no name, no control data).
+            let mut h: libc::mmsghdr = unsafe { std::mem::zeroed() };
+            h.msg_hdr.msg_iov = v;
+            h.msg_hdr.msg_iovlen = 1;
+            h
+        })
+        .collect();
+    let n = call(hdrs.as_mut_ptr(), hdrs.len() as u32);
+    if n < 0 {
+        Err(std::io::Error::last_os_error())
+    } else {
+        Ok(n as usize)
+    }
+}
+
+/// Send `frames` on the CAN raw socket `fd`, up to [`BATCH`] per system call (`sendmmsg`).
+/// Returns how many went out: fewer than given when the socket would block or the transmit queue
+/// is full after the first ones (the caller retries the rest); an error only when none did.
+pub fn send_batch(fd: std::os::fd::RawFd, frames: &[RawFrame]) -> std::io::Result<usize> {
+    let mut k: Vec<KernelFrame> = frames
+        .iter()
+        .take(BATCH)
+        .map(|f| KernelFrame {
+            can_id: u32::from(f.id),
+            len: f.len.min(8),
+            data: f.data,
+            ..Default::default()
+        })
+        .collect();
+    // SAFETY: every header points at one live iovec over one live KernelFrame.
+    mmsg_call(&mut k, |h, n| unsafe { libc::sendmmsg(fd, h, n, 0) })
+}
+
+/// Receive up to `max` (at most [`BATCH`]) waiting frames from the CAN raw socket `fd` without
+/// blocking (`recvmmsg`), each as a data frame or the reason it is not one. Returns how many were
+/// appended to `out`: 0 when none was waiting.
+pub fn recv_batch(
+    fd: std::os::fd::RawFd,
+    out: &mut Vec<Result<RawFrame, FrameConvError>>,
+    max: usize,
+) -> std::io::Result<usize> {
+    let mut k = vec![KernelFrame::default(); max.clamp(1, BATCH)];
+    // SAFETY: every header points at one live iovec over one live KernelFrame.
+    let n = match mmsg_call(&mut k, |h, n| unsafe {
+        libc::recvmmsg(fd, h, n, libc::MSG_DONTWAIT, std::ptr::null_mut())
+    }) {
+        Ok(n) => n,
+        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => 0,
+        Err(e) => return Err(e),
+    };
+    out.extend(k[..n].iter().map(|f| {
+        let id = f.can_id;
+        if id & CAN_ERR_FLAG != 0 {
+            Err(FrameConvError::Error(id & 0x1FFF_FFFF))
+        } else if id & CAN_EFF_FLAG != 0 {
+            Err(FrameConvError::Extended(id & 0x1FFF_FFFF))
+        } else if id & CAN_RTR_FLAG != 0 {
+            Err(FrameConvError::Remote(id & 0x7FF))
+        } else {
+            Ok(RawFrame {
+                id: (id & 0x7FF) as u16,
+                len: f.len.min(8),
+                data: f.data,
+            })
+        }
+    }));
+    Ok(n)
+}
