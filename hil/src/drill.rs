@@ -84,13 +84,18 @@ pub fn outcome(
 }
 
 /// North-finding in process, sample by sample: nav's north-finder on the chain's updates,
-/// commanding the emulated turntable directly (no bus). The drill and the in-process navigation
-/// runs both step it.
+/// commanding the emulated turntable through the same [`emulators::bus::TtBus`] the bench's
+/// scheduler drives, in the order nav meets them on the bus: the sample's IMU frames (updates,
+/// then nav's commands), nav's NAV_TIME every `rate / 50` samples from its first processed sample
+/// (it places the commands sent before it, as the bench's lockstep does), then the turntable's
+/// frames of that sample, each followed by nav's reaction. The result is the bench's, bit for bit.
+/// The drill and the in-process navigation runs both step it.
 pub struct NfStepper {
-    tt: emulators::turntable::Turntable,
+    bus: emulators::bus::TtBus,
     finder: NorthFinder,
-    status_every: u64,
-    acks: Vec<wire::TtAck>,
+    nav_time_every: u64,
+    rate_hz: f64,
+    frames: Vec<wire::Message>,
     k: u64,
 }
 
@@ -102,10 +107,15 @@ impl NfStepper {
         tt: emulators::turntable::Turntable,
     ) -> Result<Self> {
         Ok(Self {
-            status_every: (s.imu.rate_hz / tt.params().status_hz).round().max(1.0) as u64,
             finder: NorthFinder::new(nf_config(s, nf)).map_err(anyhow::Error::msg)?,
-            tt,
-            acks: Vec::new(),
+            bus: emulators::bus::TtBus::new(
+                tt,
+                s.imu.rate_hz,
+                emulators::bus::Lockstep::default().latency,
+            ),
+            nav_time_every: (s.imu.rate_hz / 50.0).round().max(1.0) as u64,
+            rate_hz: s.imu.rate_hz,
+            frames: Vec::new(),
             k: 0,
         })
     }
@@ -115,32 +125,45 @@ impl NfStepper {
         &self.finder
     }
 
-    /// After the chain's step to simulated time `t` that gave `upd`.
-    pub fn step(&mut self, chain: &crate::replay::ImuChain, t: f64, upd: &[nav::attitude::Update]) {
-        let t0 = chain.time_of(chain.processor().baseline().unwrap_or(0) as i64);
-        for u in upd {
-            self.finder
-                .on_update(chain.time_of(u.valid_sample) - t0, u.phi, u.dv);
-        }
-        if self.k.is_multiple_of(self.status_every) {
-            self.acks.clear();
-            self.tt.advance(t, &mut self.acks);
-            for a in &self.acks {
-                self.finder.on_ack(a);
-            }
-            for st in self.tt.status(t) {
-                self.finder.on_status(&st);
-            }
-        }
-        let tnav = chain.time_of(chain.processor().valid_sample()) - t0;
+    /// nav's commands at its IMU time `tnav`, onto the bus.
+    fn poll(&mut self, tnav: f64) {
         while let Some(c) = self.finder.poll(tnav.max(0.0)) {
-            if let Some(a) = self.tt.command(t, c) {
-                self.finder.on_ack(&a);
-            }
+            self.bus.command(c);
             if self.finder.finished() {
                 break;
             }
         }
+    }
+
+    /// After the chain's step to simulated time `t` (the end of sample `k`) that gave `upd`.
+    pub fn step(&mut self, chain: &crate::replay::ImuChain, t: f64, upd: &[nav::attitude::Update]) {
+        let k = self.k;
+        // nav's IMU time, with the very formulas of nav's binary (same bits)
+        let base = chain.processor().baseline().map_or(0, |b| b as i64);
+        let sample_ns = 1e9 / self.rate_hz;
+        for u in upd {
+            let tu = (u.valid_sample - base) as f64 * sample_ns * 1e-9;
+            self.finder.on_update(tu, u.phi, u.dv);
+        }
+        let tnav = chain.processor().valid_sample().saturating_sub(base) as f64 / self.rate_hz;
+        self.poll(tnav);
+        // nav's first processed sample is 1 (sample 0 is its counters' baseline)
+        if k >= 1 && (k - 1).is_multiple_of(self.nav_time_every) {
+            self.bus.confirmed(k);
+        }
+        let mut frames = std::mem::take(&mut self.frames);
+        frames.clear();
+        self.bus.after_sample(k, t, &mut frames);
+        for m in &frames {
+            // as nav gets it: through the wire encoding (angles to the contract's resolution)
+            match m.encode().ok().and_then(|f| wire::Message::decode(&f).ok()) {
+                Some(wire::Message::TtAck(a)) => self.finder.on_ack(&a),
+                Some(wire::Message::TtStatus(st)) => self.finder.on_status(&st),
+                _ => {}
+            }
+            self.poll(tnav);
+        }
+        self.frames = frames;
         self.k += 1;
     }
 }

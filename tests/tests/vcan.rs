@@ -240,18 +240,25 @@ fn nav_names_a_missing_interface_and_exits_nonzero() {
     assert!(!err.contains("panicked"), "{err}");
 }
 
-/// One north-finding drill through vcan (10 s dwells, truth 287.5 deg, seed 7) at `speed`.
-fn drill_at(speed: &str, iface: &str) -> Value {
+/// One north-finding drill (10 s dwells, truth 287.5 deg, seed 7) through vcan at `speed`, or in
+/// process when `speed` is `None`.
+fn drill_at(speed: Option<&str>, iface: &str) -> Value {
     let dir = tempfile::tempdir().unwrap();
-    let o = Command::new(bin("hil"))
-        .args(["drill", "north-finding", "--dwell", "10", "--speed", speed])
+    let mut cmd = Command::new(bin("hil"));
+    cmd.args(["drill", "north-finding", "--dwell", "10"])
         .args(["--heading", "287.5", "--seed", "7", "--tolerance", "0.5"])
         .args(["--iface", iface, "--json", "--out"])
-        .arg(dir.path())
-        .output()
-        .expect("hil runs");
+        .arg(dir.path());
+    match speed {
+        Some(x) => cmd.args(["--speed", x]),
+        None => cmd.arg("--in-process"),
+    };
+    let o = cmd.output().expect("hil runs");
     eprintln!("{}", String::from_utf8_lossy(&o.stderr));
     let r: Value = serde_json::from_slice(&o.stdout).expect("JSON report");
+    if speed.is_none() {
+        return r;
+    }
     for (name, pass, detail) in checks(&r) {
         eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
         assert!(pass, "check failed: {name}: {detail}");
@@ -264,11 +271,12 @@ fn drill_at(speed: &str, iface: &str) -> Value {
 /// index, lock, dwell, return to zero), finds the heading and lands within 3 sigma of the truth
 /// (sigma: nav's own estimate, about 0.07 deg for 10 s dwells). Run twice, at x10 and at x25:
 /// the emulators follow nav in lockstep, so the result is the same bit for bit (heading, sigma,
-/// every dwell's rates and durations) whatever pace the machine reaches.
+/// every dwell's rates and durations) whatever pace the machine reaches; and the same drill in
+/// process (no bus, the Monte Carlo's path) gives that result too.
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
-    let r = drill_at("10", "vcan-e2e3");
+    let r = drill_at(Some("10"), "vcan-e2e3");
     let d = &r["drill"];
     let (e, sig) = (
         d["error_deg"].as_f64().unwrap(),
@@ -284,7 +292,7 @@ fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
     );
     assert!(r["turntable"]["status_frames"].as_u64().unwrap() > 1000);
     assert!(r["lockstep"]["placed_commands"].as_u64().unwrap() > 20);
-    let fast = drill_at("25", "vcan-e2e3");
+    let fast = drill_at(Some("25"), "vcan-e2e3");
     let (a, b) = (&nf["result"], &fast["nav"]["north_finding"]["result"]);
     assert!(
         a["positions"].as_array().is_some_and(|p| p.len() == 4),
@@ -295,6 +303,36 @@ fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
         "the same drill at x10 and x25 must give the same result"
     );
     assert_eq!(r["drill"]["duration_s"], fast["drill"]["duration_s"]);
+    // in process: the same heading, sigma, duration and table angles bit for bit; the dwell
+    // rates to the last bit or two (docs/pace.md)
+    let ip = &drill_at(None, "vcan-e2e3")["drill"]["result"];
+    for key in [
+        "heading_deg",
+        "sigma_deg",
+        "duration_s",
+        "repeats",
+        "tilt_deg",
+    ] {
+        assert_eq!(ip[key], a[key], "in process against the bench: {key}");
+    }
+    for (p, q) in ip["positions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(a["positions"].as_array().unwrap())
+    {
+        assert_eq!(p["table_deg"], q["table_deg"]);
+        for i in 0..3 {
+            let (x, y) = (
+                p["rate_dph"][i].as_f64().unwrap(),
+                q["rate_dph"][i].as_f64().unwrap(),
+            );
+            assert!(
+                (x - y).abs() <= 1e-12 * y.abs().max(1.0),
+                "rate {x} against the bench's {y}"
+            );
+        }
+    }
 }
 
 /// A GPS-aided drive through vcan and a pty at speed factor 10 (one 1 km lap of
