@@ -79,33 +79,7 @@ pub enum CanTxError {
 
 /// Write one frame, retrying while the transmit queue is full; returns the retries.
 pub(crate) fn write(sock: &CanSocket, iface: &str, f: &RawFrame) -> Result<u64, CanTxError> {
-    let frame = wire::to_can_frame(f).map_err(|e| CanTxError::Write {
-        iface: iface.into(),
-        id: f.id,
-        source: std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()),
-    })?;
-    let deadline = Instant::now() + Duration::from_secs(2);
-    let mut retries = 0;
-    loop {
-        match sock.write_frame(&frame) {
-            Ok(()) => return Ok(retries),
-            Err(e)
-                if (e.raw_os_error() == Some(libc::ENOBUFS)
-                    || e.kind() == std::io::ErrorKind::WouldBlock)
-                    && Instant::now() < deadline =>
-            {
-                retries += 1;
-                std::thread::sleep(Duration::from_micros(200));
-            }
-            Err(source) => {
-                return Err(CanTxError::Write {
-                    iface: iface.into(),
-                    id: f.id,
-                    source,
-                });
-            }
-        }
-    }
+    write_all(sock, iface, std::slice::from_ref(f))
 }
 
 /// Write `frames` in order with as few system calls as the kernel allows (`sendmmsg`), retrying

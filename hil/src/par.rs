@@ -1,33 +1,27 @@
-//! Independent in-process runs spread over the machine's cores.
+//! Independent in-process runs spread over the machine's cores (rayon).
 
-/// `f` over `jobs` on up to `threads` threads, results in the jobs' order. A worker that
-/// panics yields `on_panic()` for each of its jobs.
+/// `f` over `jobs` on up to `threads` threads (rayon's work stealing: a long run does not hold
+/// up the short ones queued behind it), results in the jobs' order. A job that panics yields
+/// `on_panic()`.
 pub fn map<J: Sync, R: Send>(
     jobs: &[J],
     threads: usize,
     f: impl Fn(&J) -> R + Sync,
     on_panic: impl Fn() -> R + Sync,
 ) -> Vec<R> {
-    let chunk = jobs.len().div_ceil(threads.max(1)).max(1);
-    std::thread::scope(|sc| {
-        let handles: Vec<_> = jobs
-            .chunks(chunk)
-            .map(|part| {
-                let f = &f;
-                (
-                    part.len(),
-                    sc.spawn(move || part.iter().map(f).collect::<Vec<_>>()),
-                )
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|(n, h)| {
-                h.join()
-                    .unwrap_or_else(|_| (0..n).map(|_| on_panic()).collect())
-            })
-            .collect()
-    })
+    use rayon::prelude::*;
+    let one = |j: &J| {
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(j)))
+            .unwrap_or_else(|_| on_panic())
+    };
+    match rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.max(1))
+        .build()
+    {
+        Ok(pool) => pool.install(|| jobs.par_iter().map(one).collect()),
+        // no threads to be had: one after the other
+        Err(_) => jobs.iter().map(one).collect(),
+    }
 }
 
 /// The number of threads to use by default.
@@ -42,5 +36,20 @@ mod tests {
         let jobs: Vec<u32> = (0..10).collect();
         let r = super::map(&jobs, 3, |j| j * 2, || u32::MAX);
         assert_eq!(r, (0..10).map(|j| j * 2).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn a_job_that_panics_costs_only_its_own_result() {
+        let jobs: Vec<u32> = (0..6).collect();
+        let r = super::map(
+            &jobs,
+            2,
+            |&j| {
+                assert!(j != 3, "job 3 fails");
+                j
+            },
+            || u32::MAX,
+        );
+        assert_eq!(r, vec![0, 1, 2, u32::MAX, 4, 5]);
     }
 }

@@ -40,6 +40,18 @@ pub struct GpsPort {
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
+/// Run the calling thread at a real-time priority when the system allows it (root, or
+/// CAP_SYS_NICE): a fix must reach the navigator within `fix_delay_s` of IMU time, and a reader
+/// that waits behind busy threads for its turn makes it late. Without the right it stays as it is.
+fn realtime_priority() {
+    let p = libc::sched_param { sched_priority: 10 };
+    // SAFETY: sets the scheduling policy of the calling thread with a valid parameter.
+    let r = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &p) };
+    if r != 0 {
+        tracing::debug!("GPS reader stays at normal priority (pthread_setschedparam: {r})");
+    }
+}
+
 fn lock(s: &Mutex<Shared>) -> std::sync::MutexGuard<'_, Shared> {
     s.lock().unwrap_or_else(|e| e.into_inner())
 }
@@ -64,6 +76,7 @@ impl GpsPort {
             std::thread::Builder::new()
                 .name("gps".into())
                 .spawn(move || {
+                    realtime_priority();
                     let mut dec = GpsDecoder::default();
                     let mut buf = [0u8; 1024];
                     let mut fixes = Vec::new();

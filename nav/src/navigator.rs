@@ -26,7 +26,8 @@ pub struct NavigationConfig {
     /// the edge with the INS velocity; a fix that arrives later is applied at once and counted
     /// late. Applying fixes at a time set by the IMU stream, not by when the serial port
     /// happened to be read, makes the solution depend on the data alone. Allow for the
-    /// receiver's output latency and the serial transfer (a few hundred bytes at 9600 baud).
+    /// receiver's output latency and the serial transfer (a few hundred bytes at 9600 baud take
+    /// about 0.4 s).
     pub fix_delay_s: f64,
 }
 
@@ -38,7 +39,7 @@ impl Default for NavigationConfig {
             level_s: 2.0,
             gps_aiding: true,
             filter: FilterConfig::default(),
-            fix_delay_s: 0.3,
+            fix_delay_s: 0.5,
         }
     }
 }

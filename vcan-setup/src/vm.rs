@@ -447,12 +447,15 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     std::fs::write(ctl.path().join("cmd.sh"), script)
         .map_err(io_ctx("writing the guest command"))?;
 
+    // the guest's CPU model: `max` unless VCAN_SETUP_CPU names another (for measuring, e.g. a
+    // model without FMA/AVX, whose libm paths TCG emulates more cheaply or not)
+    let cpu = std::env::var("VCAN_SETUP_CPU").unwrap_or_else(|_| "max".into());
     let mut q = Command::new(&pre.qemu);
     q.args([
         "-accel",
         "tcg,thread=multi",
         "-cpu",
-        "max",
+        cpu.as_str(),
         "-nodefaults",
         "-display",
         "none",
