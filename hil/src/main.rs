@@ -198,6 +198,21 @@ enum Experiment {
         /// Base seed.
         #[arg(long, default_value_t = 1000)]
         seed: u64,
+        /// Run only part K of N (0-based, `K/N`): the drills whose place in the plan is K modulo
+        /// N. Writes part-K-of-N.json to the output folder; `hil experiment merge` makes the
+        /// report of all parts (e.g. the tasks of a Slurm array or a Kubernetes indexed Job).
+        #[arg(long, value_parser = parse_shard)]
+        shard: Option<(usize, usize)>,
+        /// Output folder (default runs/experiment-north-finding-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Merge the parts of a sharded north-finding Monte Carlo (`--shard K/N`) into its report:
+    /// the same tables a single run gives.
+    Merge {
+        /// The part files (part-K-of-N.json), every K once.
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
         /// Output folder (default runs/experiment-north-finding-<unix time>).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -277,11 +292,28 @@ fn real_main() -> Result<i32> {
             print!("{}", wire::DBC);
             Ok(0)
         }
+        Cmd::Experiment(Experiment::Merge { parts, out }) => {
+            let parts = parts
+                .iter()
+                .map(|p| {
+                    let t = std::fs::read_to_string(p)
+                        .with_context(|| format!("reading {}", p.display()))?;
+                    serde_json::from_str::<hil::montecarlo::McPart>(&t)
+                        .with_context(|| format!("{} is not a Monte Carlo part", p.display()))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let out = out.unwrap_or_else(|| default_out("experiment-north-finding"));
+            let r = hil::montecarlo::merge(&parts, &out, true)?;
+            print!("{}", hil::montecarlo::text(&r));
+            println!(" files: {}", out.display());
+            Ok(if r.within_1_2 { 0 } else { 1 })
+        }
         Cmd::Experiment(Experiment::NorthFinding {
             runs,
             dwell,
             lat,
             seed,
+            shard,
             out,
         }) => {
             if runs == 0 || dwell.is_nan() || dwell < 2.0 {
@@ -295,6 +327,20 @@ fn real_main() -> Result<i32> {
                 seed,
                 ..Default::default()
             };
+            if let Some((k, n)) = shard {
+                let part = hil::montecarlo::run_part(&o, k, n)?;
+                std::fs::create_dir_all(&out)
+                    .with_context(|| format!("creating {}", out.display()))?;
+                let f = out.join(format!("part-{k}-of-{n}.json"));
+                std::fs::write(&f, serde_json::to_string(&part)?)
+                    .with_context(|| format!("writing {}", f.display()))?;
+                println!(
+                    "part {k} of {n}: {} drills; merge all parts with `hil experiment merge`: {}",
+                    part.outcomes.len(),
+                    f.display()
+                );
+                return Ok(0);
+            }
             let r = hil::montecarlo::north_finding(&o, &out, true)?;
             print!("{}", hil::montecarlo::text(&r));
             println!(" files: {}", out.display());
@@ -805,6 +851,25 @@ fn run_in_guest(
         o.total_secs - o.boot_secs
     );
     Ok(o.status)
+}
+
+/// `K/N` (0-based part K of N).
+fn parse_shard(s: &str) -> std::result::Result<(usize, usize), String> {
+    let (k, n) = s
+        .split_once('/')
+        .ok_or_else(|| format!("`{s}`: a shard is K/N, e.g. 0/4"))?;
+    let (k, n): (usize, usize) = (
+        k.trim()
+            .parse()
+            .map_err(|_| format!("`{k}` is not a part number"))?,
+        n.trim()
+            .parse()
+            .map_err(|_| format!("`{n}` is not a part count"))?,
+    );
+    if n == 0 || k >= n {
+        return Err(format!("`{s}`: parts are numbered 0 to N-1"));
+    }
+    Ok((k, n))
 }
 
 /// Drop shares that lie inside another share.

@@ -95,57 +95,191 @@ fn bound_deg(arw_dpsh: f64, lat_deg: f64, total_dwell_s: f64) -> f64 {
     (arw_dpsh * 60.0 / (w_n * total_dwell_s.sqrt())).to_degrees()
 }
 
-#[allow(clippy::too_many_arguments)]
-fn run_case(
-    name: &str,
-    lat: f64,
-    dwell: f64,
-    bias: f64,
-    drift: f64,
-    runs: usize,
-    seed: u64,
-    threads: usize,
-) -> Result<(Case, Vec<DrillOutcome>)> {
-    let mut rng = StdRng::seed_from_u64(seed);
-    let jobs: Vec<(f64, u64)> = (0..runs)
-        .map(|i| (rng.random::<f64>() * 360.0, seed + i as u64))
-        .collect();
-    let nf = NorthFindingConfig {
-        dwell_s: dwell,
-        ..NorthFindingConfig::default()
-    };
-    let results: Vec<Result<DrillOutcome>> = crate::par::map(
-        &jobs,
-        threads,
-        |&(heading, s_seed)| {
-            let mut s = Scenario::builtin_static();
-            s.site.lat_deg = lat;
-            s.site.heading_deg = heading;
-            s.imu.seed = s_seed;
-            s.imu.gyro_bias_dph = [bias; 3];
-            s.imu.gyro_bias_instability_dph = drift;
-            s.turntable = Some(TurntableParams {
-                seed: s_seed,
-                ..TurntableParams::default()
-            });
-            s.duration_s = 4.0 * dwell + 80.0;
-            run_in_process(&s, &nf, |_| {})
-        },
-        || Err(anyhow::anyhow!("worker panicked")),
-    );
-    let outs: Vec<DrillOutcome> = results.into_iter().collect::<Result<_>>()?;
-    let errs: Vec<f64> = outs.iter().filter_map(|o| o.error_deg).collect();
-    let n = errs.len().max(1) as f64;
-    let rms = (errs.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
-    let arw = emulators::imu::ImuParams::default().gyro_arw_dpsh;
-    let b = bound_deg(arw, lat, 4.0 * dwell);
-    let case = Case {
-        name: name.into(),
+/// One case of the plan, before it runs.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+pub struct CaseSpec {
+    /// What varies.
+    pub name: String,
+    /// Latitude, deg.
+    pub latitude_deg: f64,
+    /// Dwell per position, s.
+    pub dwell_s: f64,
+    /// Gyro constant bias magnitude, deg/h.
+    pub gyro_bias_dph: f64,
+    /// Gyro bias instability, deg/h.
+    pub gyro_drift_dph: f64,
+    /// Runs.
+    pub runs: usize,
+    /// Seed of the case (headings and the runs' seeds follow from it).
+    pub seed: u64,
+}
+
+/// The cases `o` asks for, in report order. The bound is for white noise: the main cases have
+/// noise and a constant bias; the paper's random drift (a bias that wanders during the drill) is
+/// a case of its own.
+pub fn plan(o: &McOptions) -> Vec<CaseSpec> {
+    let few = (o.runs / 3).max(10);
+    let case = |name: String, lat, dwell, bias, drift, runs, seed| CaseSpec {
+        name,
         latitude_deg: lat,
         dwell_s: dwell,
         gyro_bias_dph: bias,
         gyro_drift_dph: drift,
         runs,
+        seed,
+    };
+    let lat = o.latitude_deg;
+    let mut v = vec![
+        case(
+            "main (bias 0.1 deg/h)".into(),
+            lat,
+            o.dwell_s,
+            0.1,
+            0.0,
+            o.runs,
+            o.seed,
+        ),
+        case(
+            "no gyro bias".into(),
+            lat,
+            o.dwell_s,
+            0.0,
+            0.0,
+            o.runs,
+            o.seed,
+        ),
+        case(
+            "with 0.05 deg/h drift".into(),
+            lat,
+            o.dwell_s,
+            0.1,
+            0.05,
+            few,
+            o.seed + 3,
+        ),
+    ];
+    for &l in &o.other_latitudes_deg {
+        v.push(case(
+            format!("latitude {l}"),
+            l,
+            o.dwell_s,
+            0.1,
+            0.0,
+            few,
+            o.seed + 7,
+        ));
+    }
+    for &d in &o.dwell_table_s {
+        v.push(case(
+            format!("dwell {d} s"),
+            lat,
+            d,
+            0.1,
+            0.0,
+            few,
+            o.seed + 13,
+        ));
+    }
+    v
+}
+
+/// One drill of the plan: its case, true heading and seed.
+#[derive(Debug, Clone, Copy)]
+struct Job {
+    case: usize,
+    heading: f64,
+    seed: u64,
+}
+
+/// Every drill of `cases`, in order (case by case).
+fn jobs(cases: &[CaseSpec]) -> Vec<Job> {
+    let mut v = Vec::new();
+    for (ci, c) in cases.iter().enumerate() {
+        let mut rng = StdRng::seed_from_u64(c.seed);
+        for i in 0..c.runs {
+            v.push(Job {
+                case: ci,
+                heading: rng.random::<f64>() * 360.0,
+                seed: c.seed + i as u64,
+            });
+        }
+    }
+    v
+}
+
+fn run_job(c: &CaseSpec, j: &Job) -> Result<DrillOutcome> {
+    let nf = NorthFindingConfig {
+        dwell_s: c.dwell_s,
+        ..NorthFindingConfig::default()
+    };
+    let mut s = Scenario::builtin_static();
+    s.site.lat_deg = c.latitude_deg;
+    s.site.heading_deg = j.heading;
+    s.imu.seed = j.seed;
+    s.imu.gyro_bias_dph = [c.gyro_bias_dph; 3];
+    s.imu.gyro_bias_instability_dph = c.gyro_drift_dph;
+    s.turntable = Some(TurntableParams {
+        seed: j.seed,
+        ..TurntableParams::default()
+    });
+    s.duration_s = 4.0 * c.dwell_s + 80.0;
+    run_in_process(&s, &nf, |_| {})
+}
+
+/// Part `k` of `n` of a Monte Carlo: the drills whose place in the plan is `k` modulo `n`, with
+/// their outcomes. Parts written by separate processes or machines (a Slurm array, a Kubernetes
+/// indexed Job) merge into the very report a single run gives ([`merge`]).
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+pub struct McPart {
+    /// The plan every part shares.
+    pub cases: Vec<CaseSpec>,
+    /// This part's index (0-based).
+    pub shard: usize,
+    /// Parts in all.
+    pub shards: usize,
+    /// (place in the plan, outcome) of this part's drills.
+    pub outcomes: Vec<(usize, DrillOutcome)>,
+}
+
+/// Run part `shard` of `shards` of the plan of `o` on `o.threads` threads.
+pub fn run_part(o: &McOptions, shard: usize, shards: usize) -> Result<McPart> {
+    if shards == 0 || shard >= shards {
+        anyhow::bail!("shard {shard} of {shards}: the shard must be below the count (0-based)");
+    }
+    let cases = plan(o);
+    let all = jobs(&cases);
+    let mine: Vec<(usize, Job)> = all
+        .into_iter()
+        .enumerate()
+        .filter(|(g, _)| g % shards == shard)
+        .collect();
+    let results = crate::par::map(
+        &mine,
+        o.threads,
+        |(g, j)| run_job(&cases[j.case], j).map(|r| (*g, r)),
+        || Err(anyhow::anyhow!("worker panicked")),
+    );
+    Ok(McPart {
+        outcomes: results.into_iter().collect::<Result<_>>()?,
+        cases,
+        shard,
+        shards,
+    })
+}
+
+fn case_stats(c: &CaseSpec, outs: &[DrillOutcome]) -> Case {
+    let errs: Vec<f64> = outs.iter().filter_map(|o| o.error_deg).collect();
+    let n = errs.len().max(1) as f64;
+    let rms = (errs.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
+    let arw = emulators::imu::ImuParams::default().gyro_arw_dpsh;
+    let b = bound_deg(arw, c.latitude_deg, 4.0 * c.dwell_s);
+    Case {
+        name: c.name.clone(),
+        latitude_deg: c.latitude_deg,
+        dwell_s: c.dwell_s,
+        gyro_bias_dph: c.gyro_bias_dph,
+        gyro_drift_dph: c.gyro_drift_dph,
+        runs: c.runs,
         aborted: outs.iter().filter(|o| o.abort.is_some()).count(),
         rms_deg: rms,
         mean_deg: errs.iter().sum::<f64>() / n,
@@ -154,22 +288,68 @@ fn run_case(
         bound_deg: b,
         ratio: rms / b,
         mean_duration_s: outs.iter().map(|o| o.duration_s).sum::<f64>() / outs.len().max(1) as f64,
-    };
-    Ok((case, outs))
+    }
 }
 
-/// Run the Monte Carlo; print progress; write CSV and JSON to `out`.
-pub fn north_finding(o: &McOptions, out: &Path, progress: bool) -> Result<McReport> {
+/// Merge parts (all of one plan, every shard once) into the report and write CSV, JSON and
+/// Markdown to `out`.
+pub fn merge(parts: &[McPart], out: &Path, progress: bool) -> Result<McReport> {
+    let Some(first) = parts.first() else {
+        anyhow::bail!("no parts to merge");
+    };
+    let mut seen = vec![false; first.shards];
+    for p in parts {
+        if p.cases != first.cases || p.shards != first.shards {
+            anyhow::bail!(
+                "part {} of {} comes from another plan (other options or shard count)",
+                p.shard,
+                p.shards
+            );
+        }
+        match seen.get_mut(p.shard) {
+            Some(s) if !*s => *s = true,
+            _ => anyhow::bail!(
+                "part {} of {} given twice or out of range",
+                p.shard,
+                p.shards
+            ),
+        }
+    }
+    if let Some(m) = seen.iter().position(|s| !s) {
+        anyhow::bail!("part {m} of {} is missing", first.shards);
+    }
+    let cases = &first.cases;
+    let total: usize = cases.iter().map(|c| c.runs).sum();
+    let mut all: Vec<Option<DrillOutcome>> = vec![None; total];
+    for p in parts {
+        for (g, o) in &p.outcomes {
+            match all.get_mut(*g) {
+                Some(slot) => *slot = Some(o.clone()),
+                None => anyhow::bail!("part {} has drill {g} of only {total}", p.shard),
+            }
+        }
+    }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let mut cases = Vec::new();
     let mut csv = String::from(
         "case,latitude_deg,dwell_s,gyro_bias_dph,truth_deg,heading_deg,error_deg,sigma_deg,duration_s,abort\n",
     );
-    let mut add = |c: Case, outs: Vec<DrillOutcome>, cases: &mut Vec<Case>| {
+    let mut rows = Vec::new();
+    let mut at = 0;
+    for c in cases {
+        let outs: Vec<DrillOutcome> = all[at..at + c.runs]
+            .iter()
+            .enumerate()
+            .map(|(i, o)| {
+                o.clone()
+                    .with_context(|| format!("drill {} of case {} missing", i, c.name))
+            })
+            .collect::<Result<_>>()?;
+        at += c.runs;
+        let st = case_stats(c, &outs);
         if progress {
             eprintln!(
                 "montecarlo: {:<28} rms {:.4} deg, bound {:.4} deg, ratio {:.2}",
-                c.name, c.rms_deg, c.bound_deg, c.ratio
+                st.name, st.rms_deg, st.bound_deg, st.ratio
             );
         }
         for r in outs {
@@ -177,10 +357,10 @@ pub fn north_finding(o: &McOptions, out: &Path, progress: bool) -> Result<McRepo
             let _ = writeln!(
                 csv,
                 "{},{},{},{},{},{},{},{},{},{}",
-                c.name,
-                c.latitude_deg,
-                c.dwell_s,
-                c.gyro_bias_dph,
+                st.name,
+                st.latitude_deg,
+                st.dwell_s,
+                st.gyro_bias_dph,
                 r.truth_deg,
                 f(r.heading_deg),
                 f(r.error_deg),
@@ -189,56 +369,13 @@ pub fn north_finding(o: &McOptions, out: &Path, progress: bool) -> Result<McRepo
                 r.abort.unwrap_or_default().replace(',', ";")
             );
         }
-        cases.push(c);
-    };
-    let lat = o.latitude_deg;
-    // the bound is for white noise: the main cases have noise and a constant bias; the paper's
-    // random drift (a bias that wanders during the drill) is a case of its own
-    for (name, bias, drift, runs, seed) in [
-        ("main (bias 0.1 deg/h)", 0.1, 0.0, o.runs, o.seed),
-        ("no gyro bias", 0.0, 0.0, o.runs, o.seed),
-        (
-            "with 0.05 deg/h drift",
-            0.1,
-            0.05,
-            (o.runs / 3).max(10),
-            o.seed + 3,
-        ),
-    ] {
-        let (c, outs) = run_case(name, lat, o.dwell_s, bias, drift, runs, seed, o.threads)?;
-        add(c, outs, &mut cases);
-    }
-    for &l in &o.other_latitudes_deg {
-        let (c, outs) = run_case(
-            &format!("latitude {l}"),
-            l,
-            o.dwell_s,
-            0.1,
-            0.0,
-            (o.runs / 3).max(10),
-            o.seed + 7,
-            o.threads,
-        )?;
-        add(c, outs, &mut cases);
-    }
-    for &d in &o.dwell_table_s {
-        let (c, outs) = run_case(
-            &format!("dwell {d} s"),
-            lat,
-            d,
-            0.1,
-            0.0,
-            (o.runs / 3).max(10),
-            o.seed + 13,
-            o.threads,
-        )?;
-        add(c, outs, &mut cases);
+        rows.push(st);
     }
     std::fs::write(out.join("runs.csv"), csv).context("writing runs.csv")?;
-    let within_1_2 = cases[0].ratio <= 1.2;
-    let bias_effect_ratio = cases[0].rms_deg / cases[1].rms_deg.max(1e-12);
+    let within_1_2 = rows[0].ratio <= 1.2;
+    let bias_effect_ratio = rows[0].rms_deg / rows.get(1).map_or(1e-12, |c| c.rms_deg.max(1e-12));
     let r = McReport {
-        cases,
+        cases: rows,
         within_1_2,
         bias_effect_ratio,
     };
@@ -248,6 +385,13 @@ pub fn north_finding(o: &McOptions, out: &Path, progress: bool) -> Result<McRepo
         format!("# North-finding Monte Carlo\n\n```\n{}```\n", text(&r)),
     )?;
     Ok(r)
+}
+
+/// Run the whole Monte Carlo here (one part of one, merged); print progress; write CSV and JSON
+/// to `out`.
+pub fn north_finding(o: &McOptions, out: &Path, progress: bool) -> Result<McReport> {
+    let part = run_part(o, 0, 1)?;
+    merge(&[part], out, progress)
 }
 
 /// The printed tables.
@@ -299,4 +443,44 @@ pub fn text(r: &McReport) -> String {
         r.bias_effect_ratio
     );
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small plan run whole and in three parts (through their JSON files, as separate
+    /// processes would write them) gives the same report.
+    #[test]
+    fn three_shards_merged_give_the_single_run_report() {
+        let o = McOptions {
+            runs: 2,
+            dwell_s: 3.0,
+            other_latitudes_deg: vec![-40.0],
+            dwell_table_s: vec![],
+            threads: 2,
+            ..McOptions::default()
+        };
+        let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        let one = north_finding(&o, a.path(), false).unwrap();
+        let parts: Vec<McPart> = (0..3)
+            .map(|k| {
+                let p = run_part(&o, k, 3).unwrap();
+                serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap()
+            })
+            .collect();
+        assert!(parts.iter().all(|p| !p.outcomes.is_empty()));
+        let three = merge(&parts, b.path(), false).unwrap();
+        assert_eq!(
+            serde_json::to_string(&one).unwrap(),
+            serde_json::to_string(&three).unwrap()
+        );
+        let csv =
+            |d: &tempfile::TempDir| std::fs::read_to_string(d.path().join("runs.csv")).unwrap();
+        assert_eq!(csv(&a), csv(&b));
+        // a missing or doubled part is refused
+        assert!(merge(&parts[..2], b.path(), false).is_err());
+        let twice = vec![parts[0].clone(), parts[0].clone(), parts[2].clone()];
+        assert!(merge(&twice, b.path(), false).is_err());
+    }
 }
