@@ -15,9 +15,9 @@
 //! `w_ib^b = C_n^b (w_ie^n + w_en^n) + w_nb^b`,
 //! `f^b = C_n^b (dv^n/dt + (2 w_ie^n + w_en^n) x v^n - g^n)`.
 
+use crate::geodesy as earth;
 use crate::truth::{Increments, Motion, c_b_n, gauss_legendre3};
 use nalgebra::{UnitQuaternion, Vector3};
-use nav::earth;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
@@ -444,7 +444,7 @@ impl Motion for Drive {
     fn inertial_attitude(&self, t: f64) -> UnitQuaternion<f64> {
         // inertial <- earth (earth rotation) <- ENU at (lat, lon) <- body
         let (lat, lon, _) = self.position(t);
-        let q_ie = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), earth::OMEGA_IE * t);
+        let q_ie = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), earth::OMEGA * t);
         let q_en = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), lon + PI / 2.0)
             * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI / 2.0 - lat);
         q_ie * q_en * self.attitude(t)
@@ -524,7 +524,7 @@ mod tests {
         }
         // standing still at the start: only earth rate and gravity
         let w = d.omega_ib_b(1.0);
-        assert!((w.norm() - earth::OMEGA_IE).abs() < 1e-12);
+        assert!((w.norm() - earth::OMEGA).abs() < 1e-12);
     }
 
     #[test]

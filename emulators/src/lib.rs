@@ -9,6 +9,7 @@ pub mod bus;
 pub mod can;
 pub mod clock;
 pub mod drive;
+pub mod geodesy;
 pub mod gps;
 pub mod imu;
 pub mod truth;

@@ -14,8 +14,8 @@
 //! angular vibration) and linear vibration on top of any base motion, so the gyros see every
 //! move of the mechanism.
 
+use crate::geodesy as earth;
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
-use nav::earth;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
@@ -751,8 +751,8 @@ mod tests {
         let w = s.rate();
         let lat = 28.2f64.to_radians();
         assert!(w.x.abs() < 1e-15);
-        assert!((w.y - earth::OMEGA_IE * lat.cos()).abs() < 1e-15);
-        assert!((w.z - earth::OMEGA_IE * lat.sin()).abs() < 1e-15);
+        assert!((w.y - earth::OMEGA * lat.cos()).abs() < 1e-15);
+        assert!((w.z - earth::OMEGA * lat.sin()).abs() < 1e-15);
         assert!((s.force().z - earth::gravity(lat, 0.0)).abs() < 1e-12);
     }
 
@@ -760,7 +760,7 @@ mod tests {
     fn heading_east_puts_north_rate_on_minus_x() {
         let w = site(90.0, 0.0, 0.0).rate();
         // facing east, north is to the left (-x)
-        assert!((w.x + earth::OMEGA_IE).abs() < 1e-12, "{w}");
+        assert!((w.x + earth::OMEGA).abs() < 1e-12, "{w}");
         assert!(w.y.abs() < 1e-12);
     }
 

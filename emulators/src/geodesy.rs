@@ -1,0 +1,76 @@
+//! The truth side's own earth model (WGS-84), written apart from nav's so that an error in nav's
+//! geodesy is never made again by the truth and cancelled: radii from the ellipse's two axes,
+//! normal gravity from Somigliana's closed form with the equatorial and polar values, the earth's
+//! rotation as a vector.
+
+/// Semi-major axis, m.
+pub const A: f64 = 6_378_137.0;
+/// Semi-minor axis, m (b = a (1 - f), 1/f = 298.257223563).
+pub const B: f64 = 6_356_752.314_245_179;
+/// Earth rotation rate, rad/s.
+pub const OMEGA: f64 = 7.292_115e-5;
+/// Normal gravity at the equator and at the poles, m/s^2 (WGS-84).
+pub const GAMMA_EQUATOR: f64 = 9.780_325_335_9;
+/// See [`GAMMA_EQUATOR`].
+pub const GAMMA_POLE: f64 = 9.832_184_937_8;
+/// Geocentric gravitational constant, m^3/s^2.
+pub const GM: f64 = 3.986_004_418e14;
+
+/// (meridian, prime-vertical) radii of curvature at geodetic latitude `lat` (rad), m.
+pub fn radii(lat: f64) -> (f64, f64) {
+    let (s, c) = lat.sin_cos();
+    let d = (A * c).powi(2) + (B * s).powi(2);
+    let rn = A * A / d.sqrt();
+    let rm = (A * B).powi(2) / (d * d.sqrt());
+    (rm, rn)
+}
+
+/// Normal gravity (m/s^2) at geodetic latitude `lat` (rad) and height `h` (m): Somigliana's
+/// closed form on the ellipsoid, then the second-order free-air reduction.
+pub fn gravity(lat: f64, h: f64) -> f64 {
+    let (s, c) = lat.sin_cos();
+    let g0 = (A * GAMMA_EQUATOR * c * c + B * GAMMA_POLE * s * s)
+        / ((A * c).powi(2) + (B * s).powi(2)).sqrt();
+    let f = (A - B) / A;
+    let m = OMEGA * OMEGA * A * A * B / GM;
+    g0 * (1.0 - 2.0 / A * (1.0 + f + m - 2.0 * f * s * s) * h + 3.0 * h * h / (A * A))
+}
+
+/// The earth's rotation in ENU axes at latitude `lat` (rad), rad/s.
+pub fn earth_rate_enu(lat: f64) -> [f64; 3] {
+    let (s, c) = lat.sin_cos();
+    [0.0, OMEGA * c, OMEGA * s]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Published WGS-84 values (NIMA TR8350.2): normal gravity at the equator and the pole, the
+    /// radii there.
+    #[test]
+    fn published_wgs84_values() {
+        let half_pi = std::f64::consts::FRAC_PI_2;
+        assert!((gravity(0.0, 0.0) - 9.780_325_335_9).abs() < 1e-10);
+        assert!((gravity(half_pi, 0.0) - 9.832_184_937_8).abs() < 1e-10);
+        assert!((gravity(-half_pi, 0.0) - 9.832_184_937_8).abs() < 1e-10);
+        // 45 deg: 9.806 197 77 (Somigliana with the WGS-84 constants)
+        assert!((gravity(45f64.to_radians(), 0.0) - 9.806_197_77).abs() < 1e-8);
+        let (rm, rn) = radii(0.0);
+        assert!(
+            (rn - A).abs() < 1e-6 && (rm - 6_335_439.327).abs() < 1e-3,
+            "{rm} {rn}"
+        );
+        let (rm, rn) = radii(half_pi);
+        assert!((rm - 6_399_593.626).abs() < 1e-3 && (rn - rm).abs() < 1e-6);
+        // free air: about -3.086e-6 m/s^2 per metre at mid latitudes
+        let dg = gravity(0.5, 1000.0) - gravity(0.5, 0.0);
+        assert!((dg + 3.086e-3).abs() < 2e-5, "{dg}");
+        // hemispheres are mirror images
+        for l in [-80.0f64, -33.9, -5.0, 28.2, 60.0] {
+            let (a, b) = (l.to_radians(), (-l).to_radians());
+            assert!((gravity(a, 100.0) - gravity(b, 100.0)).abs() < 1e-12);
+            assert!((earth_rate_enu(a)[2] + earth_rate_enu(b)[2]).abs() < 1e-18);
+        }
+    }
+}

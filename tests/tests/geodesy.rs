@@ -1,0 +1,33 @@
+//! The truth's earth model (emulators::geodesy: closed forms from the two axes) against nav's
+//! (nav::earth: eccentricity series): written apart, they must agree to rounding at every
+//! latitude of both hemispheres and at altitude, so neither can carry an error the other hides.
+
+#[test]
+fn truth_and_nav_earth_models_agree_everywhere() {
+    for i in -90..=90 {
+        let lat = f64::from(i).to_radians();
+        for h in [-400.0, 0.0, 1500.0, 8000.0] {
+            let (a, b) = (
+                emulators::geodesy::gravity(lat, h),
+                nav::earth::gravity(lat, h),
+            );
+            assert!(
+                (a - b).abs() < 1e-9,
+                "gravity at {i} deg, {h} m: {a} against {b}"
+            );
+        }
+        let ((rm1, rn1), (rm2, rn2)) = (emulators::geodesy::radii(lat), nav::earth::radii(lat));
+        assert!(
+            (rm1 - rm2).abs() < 1e-6 && (rn1 - rn2).abs() < 1e-6,
+            "radii at {i} deg"
+        );
+        let (w1, w2) = (
+            emulators::geodesy::earth_rate_enu(lat),
+            nav::earth::earth_rate_enu(lat),
+        );
+        assert!(
+            (0..3).all(|k| (w1[k] - w2[k]).abs() < 1e-18),
+            "earth rate at {i} deg"
+        );
+    }
+}
