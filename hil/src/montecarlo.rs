@@ -46,21 +46,12 @@ impl Default for McOptions {
     }
 }
 
-/// One case (a set of runs with the same settings).
+/// One case (a set of runs with the same settings) and what it measured.
 #[derive(Debug, Clone, Serialize)]
 pub struct Case {
-    /// What varies.
-    pub name: String,
-    /// Latitude, deg.
-    pub latitude_deg: f64,
-    /// Dwell per position, s.
-    pub dwell_s: f64,
-    /// Gyro constant bias magnitude, deg/h.
-    pub gyro_bias_dph: f64,
-    /// Gyro bias instability (Gauss-Markov sigma, 600 s), deg/h.
-    pub gyro_drift_dph: f64,
-    /// Runs.
-    pub runs: usize,
+    /// The settings.
+    #[serde(flatten)]
+    pub spec: CaseSpec,
     /// Runs that aborted.
     pub aborted: usize,
     /// Heading error RMS, deg.
@@ -274,12 +265,7 @@ fn case_stats(c: &CaseSpec, outs: &[DrillOutcome]) -> Case {
     let arw = emulators::imu::ImuParams::default().gyro_arw_dpsh;
     let b = bound_deg(arw, c.latitude_deg, 4.0 * c.dwell_s);
     Case {
-        name: c.name.clone(),
-        latitude_deg: c.latitude_deg,
-        dwell_s: c.dwell_s,
-        gyro_bias_dph: c.gyro_bias_dph,
-        gyro_drift_dph: c.gyro_drift_dph,
-        runs: c.runs,
+        spec: c.clone(),
         aborted: outs.iter().filter(|o| o.abort.is_some()).count(),
         rms_deg: rms,
         mean_deg: errs.iter().sum::<f64>() / n,
@@ -349,7 +335,7 @@ pub fn merge(parts: &[McPart], out: &Path, progress: bool) -> Result<McReport> {
         if progress {
             eprintln!(
                 "montecarlo: {:<28} rms {:.4} deg, bound {:.4} deg, ratio {:.2}",
-                st.name, st.rms_deg, st.bound_deg, st.ratio
+                st.spec.name, st.rms_deg, st.bound_deg, st.ratio
             );
         }
         for r in outs {
@@ -357,10 +343,10 @@ pub fn merge(parts: &[McPart], out: &Path, progress: bool) -> Result<McReport> {
             let _ = writeln!(
                 csv,
                 "{},{},{},{},{},{},{},{},{},{}",
-                st.name,
-                st.latitude_deg,
-                st.dwell_s,
-                st.gyro_bias_dph,
+                st.spec.name,
+                st.spec.latitude_deg,
+                st.spec.dwell_s,
+                st.spec.gyro_bias_dph,
                 r.truth_deg,
                 f(r.heading_deg),
                 f(r.error_deg),
@@ -416,12 +402,12 @@ pub fn text(r: &McReport) -> String {
         let _ = writeln!(
             s,
             "{:<24} {:>6.1} {:>6.0} {:>6.2} {:>6.2} {:>5} {:>9.4} {:>9.4} {:>9.4} {:>9.4} {:>6.2} {:>9.1}{}",
-            c.name,
-            c.latitude_deg,
-            c.dwell_s,
-            c.gyro_bias_dph,
-            c.gyro_drift_dph,
-            c.runs,
+            c.spec.name,
+            c.spec.latitude_deg,
+            c.spec.dwell_s,
+            c.spec.gyro_bias_dph,
+            c.spec.gyro_drift_dph,
+            c.spec.runs,
             c.rms_deg,
             c.bound_deg,
             c.mean_sigma_deg,
