@@ -379,17 +379,7 @@ fn on_nav_frame(
     match f.and_then(|r| Message::decode(&r).ok()) {
         Some(Message::NavTime(nt)) => {
             ls.nav_times += 1;
-            // the sent sample whose 16-bit counter the NAV_TIME names (the latest such)
-            let Some(newest) = next.checked_sub(1) else {
-                return;
-            };
-            let back = u64::from(
-                dev.imu
-                    .imu()
-                    .sample_counter(newest)
-                    .wrapping_sub(nt.sample_count as u16),
-            );
-            let Some(k) = newest.checked_sub(back) else {
+            let Some(k) = nav_time_sample(dev.imu.imu(), nt.sample_count) else {
                 return;
             };
             if confirmed.is_none_or(|c| k > c) {
@@ -410,6 +400,14 @@ fn on_nav_frame(
         },
         _ => *bad += 1,
     }
+}
+
+/// The IMU sample (0-based index) a NAV_TIME's `sample_count` names: the latest sample already
+/// sent whose 16-bit counter it matches. None before any sample went out.
+pub fn nav_time_sample(imu: &crate::imu::ImuEmulator, sample_count: u32) -> Option<u64> {
+    let newest = imu.next_index().checked_sub(1)?;
+    let back = u64::from(imu.sample_counter(newest).wrapping_sub(sample_count as u16));
+    newest.checked_sub(back)
 }
 
 /// Wait until `sock` has a frame to read, or `timeout`.

@@ -42,6 +42,35 @@ pub fn earth_rate_enu(lat: f64) -> [f64; 3] {
     [0.0, OMEGA * c, OMEGA * s]
 }
 
+/// Earth-centred, earth-fixed coordinates (m) of geodetic latitude, longitude (rad), height (m).
+pub fn ecef(lat: f64, lon: f64, h: f64) -> [f64; 3] {
+    let (_, rn) = radii(lat);
+    let (sl, cl) = lat.sin_cos();
+    let (so, co) = lon.sin_cos();
+    let e2 = 1.0 - (B * B) / (A * A);
+    [
+        (rn + h) * cl * co,
+        (rn + h) * cl * so,
+        (rn * (1.0 - e2) + h) * sl,
+    ]
+}
+
+/// Where point `to` lies from point `from` (both latitude, longitude in rad, height in m), in
+/// east, north, up axes at `from`, m: the straight line between them through ECEF, exact at any
+/// distance (the bench's ruler for nav's position errors, independent of nav's earth model).
+pub fn enu_offset(from: (f64, f64, f64), to: (f64, f64, f64)) -> [f64; 3] {
+    let a = ecef(from.0, from.1, from.2);
+    let b = ecef(to.0, to.1, to.2);
+    let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let (sl, cl) = from.0.sin_cos();
+    let (so, co) = from.1.sin_cos();
+    [
+        -so * d[0] + co * d[1],
+        -sl * co * d[0] - sl * so * d[1] + cl * d[2],
+        cl * co * d[0] + cl * so * d[1] + sl * d[2],
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -71,6 +100,29 @@ mod tests {
             let (a, b) = (l.to_radians(), (-l).to_radians());
             assert!((gravity(a, 100.0) - gravity(b, 100.0)).abs() < 1e-12);
             assert!((earth_rate_enu(a)[2] + earth_rate_enu(b)[2]).abs() < 1e-18);
+        }
+    }
+
+    /// ECEF of published points, and offsets against the radii for short distances.
+    #[test]
+    fn ecef_and_local_offsets() {
+        let p = ecef(0.0, 0.0, 0.0);
+        assert!((p[0] - A).abs() < 1e-6 && p[1].abs() < 1e-6 && p[2].abs() < 1e-6);
+        let n = ecef(std::f64::consts::FRAC_PI_2, 0.0, 0.0);
+        assert!((n[2] - B).abs() < 1e-6 && n[0].abs() < 1e-6, "{n:?}");
+        for lat_deg in [-77.0, -33.92, 0.0, 28.2, 64.0] {
+            let lat = f64::to_radians(lat_deg);
+            let (rm, rn) = radii(lat);
+            let from = (lat, 1.0, 40.0);
+            // 1e-5 rad of latitude and longitude: about 64 m north, up to 64 m east
+            let e = enu_offset(from, (lat + 1e-5, 1.0 + 1e-5, 40.0));
+            assert!((e[1] - 1e-5 * (rm + 40.0)).abs() < 1e-3, "{lat_deg}: {e:?}");
+            assert!(
+                (e[0] - 1e-5 * (rn + 40.0) * lat.cos()).abs() < 1e-3,
+                "{lat_deg}: {e:?}"
+            );
+            let up = enu_offset(from, (lat, 1.0, 52.5));
+            assert!((up[2] - 12.5).abs() < 1e-9 && up[0].abs() < 1e-9 && up[1].abs() < 1e-9);
         }
     }
 }

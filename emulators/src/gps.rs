@@ -607,12 +607,72 @@ pub struct GpsRun {
     pub date: (u32, u32, u32),
 }
 
-/// A [`GpsRun`] on its pty, as the bus scheduler steps it.
-pub struct GpsDevice {
+/// One fix epoch as the receiver puts it out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Epoch {
+    /// Its PPS edge, s.
+    pub edge: f64,
+    /// The sentences (empty in a silent outage).
+    pub text: String,
+    /// It carries a valid fix.
+    pub valid: bool,
+    /// The receiver's device is gone at this epoch (which of its `port_drops`).
+    pub port_drop: Option<usize>,
+}
+
+/// The receiver on the IMU stream's clock, without I/O: epochs out as simulated time passes.
+/// The bench puts them on a pty ([`GpsDevice`]); in-process runs decode them directly.
+pub struct GpsReceiver {
     run: GpsRun,
+    k: u64,
+}
+
+impl GpsReceiver {
+    /// The receiver of `run`; its first epoch is the PPS edge at one period.
+    pub fn new(run: GpsRun) -> Self {
+        Self { run, k: 1 }
+    }
+
+    fn period(&self) -> f64 {
+        1.0 / self.run.writer.params().rate_hz.clamp(1.0, 10.0)
+    }
+
+    /// Simulated time at which the next epoch is put out, s.
+    pub fn next_write_time(&self) -> f64 {
+        self.k as f64 * self.period() + self.run.pps_phase_s + self.run.latency_s
+    }
+
+    /// The next epoch due once the IMU stream has reached `t` (the run ends at `duration_s`).
+    pub fn poll(&mut self, t: f64, duration_s: f64) -> Option<Epoch> {
+        let edge = self.k as f64 * self.period() + self.run.pps_phase_s;
+        if edge > duration_s || t < edge + self.run.latency_s {
+            return None;
+        }
+        self.k += 1;
+        let p = self.run.writer.params();
+        let port_drop = p
+            .port_drops
+            .iter()
+            .position(|d| edge >= d[0] && edge < d[1]);
+        let truth = antenna_truth(&self.run.drive, edge, p.lever_arm_m);
+        let (text, err) = self
+            .run
+            .writer
+            .fix(edge.floor(), self.run.utc0_s, self.run.date, &truth);
+        Some(Epoch {
+            edge,
+            text,
+            valid: err.is_some(),
+            port_drop,
+        })
+    }
+}
+
+/// A [`GpsReceiver`] on its pty, as the bus scheduler steps it.
+pub struct GpsDevice {
+    rx: GpsReceiver,
     pty: GpsPty,
     link: Option<std::path::PathBuf>,
-    k: u64,
     dropped: Option<usize>,
     /// What was written.
     pub stats: GpsTxStats,
@@ -622,39 +682,25 @@ impl GpsDevice {
     /// The receiver `run` on `pty`, reached by nav through `link` when given.
     pub fn new(run: GpsRun, pty: GpsPty, link: Option<std::path::PathBuf>) -> Self {
         Self {
-            run,
+            rx: GpsReceiver::new(run),
             pty,
             link,
-            k: 1,
             dropped: None,
             stats: GpsTxStats::default(),
         }
     }
 
-    fn period(&self) -> f64 {
-        1.0 / self.run.writer.params().rate_hz.clamp(1.0, 10.0)
-    }
-
     /// Simulated time at which the next epoch is written, s.
     pub fn next_write_time(&self) -> f64 {
-        self.k as f64 * self.period() + self.run.pps_phase_s + self.run.latency_s
+        self.rx.next_write_time()
     }
 
     /// The IMU stream has reached `t` (and ends at `duration_s`): write every epoch due by then.
     pub fn poll(&mut self, t: f64, duration_s: f64) -> Result<(), PtyError> {
-        let period = self.period();
-        let lever = self.run.writer.params().lever_arm_m;
-        loop {
-            let edge = self.k as f64 * period + self.run.pps_phase_s;
-            if edge > duration_s || t < edge + self.run.latency_s {
-                return Ok(());
-            }
-            self.k += 1;
+        while let Some(e) = self.rx.poll(t, duration_s) {
             let st = &mut self.stats;
             // the device disappears and comes back
-            let drops = &self.run.writer.params().port_drops;
-            let in_drop = drops.iter().position(|d| edge >= d[0] && edge < d[1]);
-            match (self.dropped, in_drop) {
+            match (self.dropped, e.port_drop) {
                 (None, Some(i)) => {
                     self.pty = GpsPty::open()?; // the old pair closes: the reader sees EIO
                     if let Some(l) = &self.link {
@@ -671,22 +717,17 @@ impl GpsDevice {
                 }
                 _ => {}
             }
-            let truth = antenna_truth(&self.run.drive, edge, lever);
-            let (text, err) =
-                self.run
-                    .writer
-                    .fix(edge.floor(), self.run.utc0_s, self.run.date, &truth);
             if self.dropped.is_some() {
                 continue;
             }
-            match (text.is_empty(), err) {
+            match (e.text.is_empty(), e.valid) {
                 (true, _) => st.silent_epochs += 1,
-                (false, Some(_)) => st.fixes += 1,
-                (false, None) => st.void_epochs += 1,
+                (false, true) => st.fixes += 1,
+                (false, false) => st.void_epochs += 1,
             }
-            if !text.is_empty() {
-                match self.pty.write(text.as_bytes()) {
-                    Ok(()) => st.bytes += text.len() as u64,
+            if !e.text.is_empty() {
+                match self.pty.write(e.text.as_bytes()) {
+                    Ok(()) => st.bytes += e.text.len() as u64,
                     // nobody reads (nav not started or re-opening): the receiver's output is lost
                     Err(PtyError::Write { source, .. })
                         if source.kind() == std::io::ErrorKind::TimedOut =>
@@ -698,6 +739,7 @@ impl GpsDevice {
                 }
             }
         }
+        Ok(())
     }
 
     /// The pty (kept open until nav has stopped: a receiver vanishing at the very end would only

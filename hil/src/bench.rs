@@ -1,17 +1,16 @@
-//! Throughput benchmark of nav's IMU front end: decode, counter differencing, dither filter,
-//! coning/sculling compensation and attitude update, on one core, over frames prepared in
-//! advance (the emulator's cost is not counted).
+//! Throughput benchmark of nav's pipeline on the IMU stream: decode, counter differencing,
+//! dither filter, coning/sculling compensation, attitude update and the solution output, on one
+//! core, over frames prepared in advance (the emulator's cost is not counted).
 
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
 use emulators::can::BusStream;
 use emulators::imu::{ImuEmulator, ImuParams};
 use emulators::truth::Coning;
-use nav::attitude::ImuProcessor;
-use nav::imu::ImuFrontEnd;
+use nav::pipeline::Pipeline;
 use serde::Serialize;
 use std::time::Instant;
-use wire::{Message, RawFrame};
+use wire::RawFrame;
 
 /// Benchmark result.
 #[derive(Debug, Clone, Serialize)]
@@ -44,28 +43,21 @@ pub fn frontend(seconds: f64, passes: u32) -> Result<BenchResult> {
     while bus.next_time() <= seconds {
         bus.next_frames(&mut frames);
     }
-    let cal = crate::replay::calibration(&s);
+    let cfg = crate::inproc::nav_config(&s, None, None);
     let mut best = f64::INFINITY;
     let mut samples = 0;
     for _ in 0..passes.max(1) {
-        let mut fe = ImuFrontEnd::new(cal);
-        let mut proc = ImuProcessor::new(&s.processing).context("processing chain")?;
-        let (mut out, mut ev, mut upd) = (Vec::new(), Vec::new(), Vec::new());
+        let mut p = Pipeline::new(&cfg, false).context("nav's pipeline")?;
+        let mut out = Vec::new();
         let t0 = Instant::now();
         for f in &frames {
-            if let Ok(m) = Message::decode(f) {
-                fe.on_message(&m, &mut out, &mut ev);
-            }
-            for smp in out.drain(..) {
-                proc.push_sample(&smp, &mut upd);
-            }
-            upd.clear();
-            ev.clear();
+            p.on_frame(f, &mut out);
+            out.clear();
         }
         let dt = t0.elapsed().as_secs_f64();
         best = best.min(dt);
-        samples = proc.stats().samples;
-        std::hint::black_box(proc.attitude());
+        samples = p.processor().stats().samples;
+        std::hint::black_box(p.processor().attitude());
     }
     Ok(BenchResult {
         samples,

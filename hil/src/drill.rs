@@ -83,93 +83,9 @@ pub fn outcome(
     }
 }
 
-/// North-finding in process, sample by sample: nav's north-finder on the chain's updates,
-/// commanding the emulated turntable through the same [`emulators::bus::TtBus`] the bench's
-/// scheduler drives, in the order nav meets them on the bus: the sample's IMU frames (updates,
-/// then nav's commands), nav's NAV_TIME every `rate / 50` samples from its first processed sample
-/// (it places the commands sent before it, as the bench's lockstep does), then the turntable's
-/// frames of that sample, each followed by nav's reaction. The result is the bench's, bit for bit.
-/// The drill and the in-process navigation runs both step it.
-pub struct NfStepper {
-    bus: emulators::bus::TtBus,
-    finder: NorthFinder,
-    nav_time_every: u64,
-    rate_hz: f64,
-    frames: Vec<wire::Message>,
-    k: u64,
-}
-
-impl NfStepper {
-    /// North-finding of scenario `s` with settings `nf`, on the turntable `s.build()` gave.
-    pub fn new(
-        s: &Scenario,
-        nf: &NorthFindingConfig,
-        tt: emulators::turntable::Turntable,
-    ) -> Result<Self> {
-        Ok(Self {
-            finder: NorthFinder::new(nf_config(s, nf)).map_err(anyhow::Error::msg)?,
-            bus: emulators::bus::TtBus::new(
-                tt,
-                s.imu.rate_hz,
-                emulators::bus::Lockstep::default().latency,
-            ),
-            nav_time_every: (s.imu.rate_hz / 50.0).round().max(1.0) as u64,
-            rate_hz: s.imu.rate_hz,
-            frames: Vec::new(),
-            k: 0,
-        })
-    }
-
-    /// The finder.
-    pub fn finder(&self) -> &NorthFinder {
-        &self.finder
-    }
-
-    /// nav's commands at its IMU time `tnav`, onto the bus.
-    fn poll(&mut self, tnav: f64) {
-        while let Some(c) = self.finder.poll(tnav.max(0.0)) {
-            self.bus.command(c);
-            if self.finder.finished() {
-                break;
-            }
-        }
-    }
-
-    /// After the chain's step to simulated time `t` (the end of sample `k`) that gave `upd`.
-    pub fn step(&mut self, chain: &crate::replay::ImuChain, t: f64, upd: &[nav::attitude::Update]) {
-        let k = self.k;
-        // nav's IMU time, with the very formulas of nav's binary (same bits)
-        let base = chain.processor().baseline().map_or(0, |b| b as i64);
-        let sample_ns = 1e9 / self.rate_hz;
-        for u in upd {
-            let tu = (u.valid_sample - base) as f64 * sample_ns * 1e-9;
-            self.finder.on_update(tu, u.phi, u.dv);
-        }
-        let tnav = chain.processor().valid_sample().saturating_sub(base) as f64 / self.rate_hz;
-        self.poll(tnav);
-        // nav's first processed sample is 1 (sample 0 is its counters' baseline)
-        if k >= 1 && (k - 1).is_multiple_of(self.nav_time_every) {
-            self.bus.confirmed(k);
-        }
-        let mut frames = std::mem::take(&mut self.frames);
-        frames.clear();
-        self.bus.after_sample(k, t, &mut frames);
-        for m in &frames {
-            // as nav gets it: through the wire encoding (angles to the contract's resolution)
-            match m.encode().ok().and_then(|f| wire::Message::decode(&f).ok()) {
-                Some(wire::Message::TtAck(a)) => self.finder.on_ack(&a),
-                Some(wire::Message::TtStatus(st)) => self.finder.on_status(&st),
-                _ => {}
-            }
-            self.poll(tnav);
-        }
-        self.frames = frames;
-        self.k += 1;
-    }
-}
-
-/// A drill in process (no bus): the same emulators and nav code, stepped sample by sample.
-/// `progress` gets nav's progress at every stage change and every second.
+/// A drill in process (no bus): the scenario's devices driving nav's pipeline, stepped sample
+/// by sample in the bench's bus order ([`crate::inproc::InProcessBench`]); the result is the
+/// bench's, bit for bit. `progress` gets nav's progress at every stage change and every second.
 pub fn run_in_process(
     s: &Scenario,
     nf: &NorthFindingConfig,
@@ -182,25 +98,28 @@ pub fn run_in_process(
             s.name
         );
     };
-    let mut chain = crate::replay::ImuChain::new(s, motion)?;
-    let mut nfs = NfStepper::new(s, nf, tt)?;
-    let mut upd = Vec::new();
+    let mut cfg = crate::inproc::nav_config(s, None, None);
+    cfg.north_finding = nf_config(s, nf);
+    let mut bench = crate::inproc::InProcessBench::new(s, &cfg, motion, Some(tt), None)?;
     let mut last_phase = None;
     let dt = 1.0 / s.imu.rate_hz;
     let mut k: u64 = 0;
-    while chain.next_time() <= s.duration_s + 1e-9 && !nfs.finder.finished() {
-        let t = chain.step(&mut upd);
-        nfs.step(&chain, t, &upd);
-        upd.clear();
-        let stage = nfs.finder.stage();
-        if last_phase != Some(stage) || k.is_multiple_of(2000) {
-            last_phase = Some(stage);
-            progress(&nfs.finder.progress());
+    while bench.running() && !bench.pipeline().finder().is_none_or(NorthFinder::finished) {
+        bench.step();
+        if let Some(f) = bench.pipeline().finder() {
+            let stage = f.stage();
+            if last_phase != Some(stage) || k.is_multiple_of(2000) {
+                last_phase = Some(stage);
+                progress(&f.progress());
+            }
         }
         k += 1;
     }
     let t = k as f64 * dt;
-    let finder = &nfs.finder;
+    let finder = bench
+        .pipeline()
+        .finder()
+        .ok_or_else(|| anyhow::anyhow!("north-finding is not enabled"))?;
     if !finder.finished() {
         return Ok(outcome(
             s.truth_heading_deg(),

@@ -3,10 +3,12 @@
 pub mod bench;
 pub mod drill;
 pub mod experiment;
+pub mod inproc;
 pub mod montecarlo;
 pub mod navexp;
 pub mod navrun;
 pub mod par;
+pub mod playback;
 pub mod plot;
 pub mod replay;
 pub mod report;

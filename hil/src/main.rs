@@ -39,6 +39,18 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Replay a nav recording through nav's pipeline in process and compare what it sends with
+    /// what nav sent (bit for bit on a bench recording). Exit status 1 when they differ.
+    Replay {
+        /// A run folder (with nav.mcap and nav.toml) or an MCAP recording of nav.
+        recording: PathBuf,
+        /// nav's config for the recording (default: nav.toml beside it).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Print the result as JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Print the bus-load table of the wire contract.
     Busload {
         /// Bit rate, bit/s.
@@ -288,6 +300,11 @@ fn real_main() -> Result<i32> {
             print!("{}", wire::busload::report(bitrate));
             Ok(0)
         }
+        Cmd::Replay {
+            recording,
+            config,
+            json,
+        } => replay(&recording, config.as_deref(), json),
         Cmd::Dbc => {
             print!("{}", wire::DBC);
             Ok(0)
@@ -879,4 +896,32 @@ fn dedupe_nested(mut shares: Vec<PathBuf>) -> Vec<PathBuf> {
     shares.retain(|p| !all.iter().any(|q| q != p && p.starts_with(q)));
     shares.dedup();
     shares
+}
+
+fn replay(recording: &Path, config: Option<&Path>, json: bool) -> Result<i32> {
+    let (mcap, cfg) = if recording.is_dir() {
+        (recording.join("nav.mcap"), recording.join("nav.toml"))
+    } else {
+        let beside = recording
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("nav.toml");
+        (recording.to_path_buf(), beside)
+    };
+    let cfg = config.map_or(cfg, Path::to_path_buf);
+    if !cfg.is_file() {
+        bail!(
+            "no nav config for {} (looked for {}; give one with --config)",
+            recording.display(),
+            cfg.display()
+        );
+    }
+    let cfg = nav::config::NavConfig::load(&cfg)?;
+    let r = hil::playback::replay(&mcap, &cfg)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        print!("{}", hil::playback::text(&r));
+    }
+    Ok(i32::from(!r.identical()))
 }

@@ -1,21 +1,35 @@
-//! In-process navigation runs: the scenario's IMU stream through nav's front end, processing
-//! chain and strapdown navigation, scored against the truth trajectory.
+//! In-process navigation runs: the scenario's devices driving nav's pipeline
+//! ([`crate::inproc`]), scored against the truth trajectory with the truth side's geodesy
+//! (ECEF), never with nav's.
 
 use crate::drill::wrap180;
 use crate::scenario::Scenario;
 use anyhow::{Result, bail};
 use emulators::drive::Drive;
-use emulators::gps::{GpsErrorParams, NmeaWriter, ReceiverParams, antenna_truth};
+use emulators::geodesy::enu_offset;
+use emulators::gps::{GpsErrorParams, ReceiverParams};
 use nalgebra::Vector3;
 use nav::kf::FilterConfig;
 use nav::navigator::{NavigationConfig, Navigator};
-use nav::strapdown::NavState;
+use nav::strapdown::NavOutput;
 use serde::Serialize;
 
-/// The truth state of a drive at `t`.
-pub fn truth_state(d: &Drive, t: f64) -> NavState {
-    let (lat, lon, h) = d.position(t);
-    NavState::from_euler(d.heading(t), 0.0, 0.0, d.velocity(t), lat, lon, h)
+/// A navigation output's errors against the drive at simulated time `t`: horizontal position
+/// (m, through ECEF), velocity (east, north, up, m/s), heading (deg).
+fn errors(drive: &Drive, t: f64, o: &NavOutput) -> (f64, [f64; 3], f64) {
+    let truth = drive.position(t);
+    let e = enu_offset(
+        truth,
+        (o.lat_deg.to_radians(), o.lon_deg.to_radians(), o.h_m),
+    );
+    let v = drive.velocity(t);
+    let dv = [
+        o.vel_enu_mps[0] - v.x,
+        o.vel_enu_mps[1] - v.y,
+        o.vel_enu_mps[2] - v.z,
+    ];
+    let dh = wrap180(o.hpr_deg[0] - drive.heading(t).to_degrees());
+    (e[0].hypot(e[1]), dv, dh)
 }
 
 /// nav's navigation output scored against truth.
@@ -33,10 +47,13 @@ pub struct NavScore {
 
 /// Score the navigation output in a nav summary against the drive (none when nav did not
 /// navigate). nav counts time from its first sample, which went out `t_first` s into the run.
-pub fn score_summary(drive: &Drive, nav: &serde_json::Value, t_first: f64) -> Option<NavScore> {
-    let n = &nav["navigation"];
-    let o: nav::strapdown::NavOutput = serde_json::from_value(n["output"].clone()).ok()?;
-    Some(score_output(drive, n["output_t_s"].as_f64()? + t_first, &o))
+pub fn score_summary(drive: &Drive, nav: &nav::summary::Summary, t_first: f64) -> Option<NavScore> {
+    let n = nav.navigation.as_ref()?;
+    Some(score_output(
+        drive,
+        n.output_t_s + t_first,
+        n.output.as_ref()?,
+    ))
 }
 
 /// A bench run's navigation over time (from nav's recording).
@@ -74,23 +91,13 @@ impl SeriesStats {
 }
 
 /// One navigation output at simulated time `t` against the drive's truth.
-pub fn score_output(drive: &Drive, t: f64, o: &nav::strapdown::NavOutput) -> NavScore {
-    let tr = truth_state(drive, t);
-    let st = NavState::from_euler(
-        o.hpr_deg[0].to_radians(),
-        o.hpr_deg[1].to_radians(),
-        o.hpr_deg[2].to_radians(),
-        Vector3::from(o.vel_enu_mps),
-        o.lat_deg.to_radians(),
-        o.lon_deg.to_radians(),
-        o.h_m,
-    );
-    let e = st.position_error_m(&tr);
+pub fn score_output(drive: &Drive, t: f64, o: &NavOutput) -> NavScore {
+    let (p, dv, dh) = errors(drive, t, o);
     NavScore {
         t_s: t,
-        position_error_m: e.x.hypot(e.y),
-        velocity_error_mps: (st.v - tr.v).norm(),
-        heading_error_deg: wrap180((st.euler().0 - tr.euler().0).to_degrees()),
+        position_error_m: p,
+        velocity_error_mps: Vector3::from(dv).norm(),
+        heading_error_deg: dh,
     }
 }
 
@@ -218,12 +225,12 @@ fn nees(e: &[f64; 3], p: &nalgebra::Matrix3<f64>) -> Option<f64> {
     p.try_inverse().map(|pi| (e.transpose() * pi * e)[(0, 0)])
 }
 
-/// Navigate a drive scenario in process the way nav does: the IMU stream through the chain,
-/// the receiver's NMEA (model `rx`: errors, lever arm, outages) through nav's GPS decoder, fixes
-/// tied to the IMU's PPS latch, and nav's navigator (levelling, strapdown, filter). `filter`
-/// none: pure inertial after the start. With `[north_finding]` and a turntable the run finds
-/// north first (nav's finder commanding the emulated mechanism) and hands its heading over;
-/// otherwise the heading handed over is the truth's plus `heading_err_deg`.
+/// Navigate a drive scenario in process as the bench does: its devices (the receiver with
+/// model `rx`: errors, lever arm, outages) driving nav's pipeline. `filter` none: pure inertial
+/// after the start. With `[north_finding]` and a turntable the run finds north first (nav
+/// commanding the emulated mechanism) and hands its heading over; otherwise nav is given the
+/// truth's heading plus `heading_err_deg`. The scenario's `[navigation]` table applies (without
+/// one, levelling is fitted into the wait before the vehicle drives off).
 pub fn navigate(
     s: &Scenario,
     filter: Option<&FilterConfig>,
@@ -235,101 +242,70 @@ pub fn navigate(
     };
     let drive = Drive::plan(spec).map_err(anyhow::Error::msg)?;
     let (motion, tt) = s.build();
-    let mut chain = crate::replay::ImuChain::new(s, motion)?;
-    // north-finding first when the scenario has it (as nav does), else the heading is given
-    let mut nf = match (&s.north_finding, tt) {
-        (Some(c), Some(tt)) => Some(crate::drill::NfStepper::new(s, c, tt)?),
-        _ => None,
-    };
-    let n = s.processing.coning_samples as f64;
-    let dt = 1.0 / s.imu.rate_hz;
-    // level while still parked: the first fix comes at about 1 s and is applied `fix_delay_s`
-    // after its PPS edge
+    let finds_north = s.north_finding.is_some() && tt.is_some();
+    let gps = crate::inproc::gps_run(s, rx)?;
+    let mut cfg = crate::inproc::nav_config(s, None, Some(std::path::Path::new("(in process)")));
     let fix_delay = NavigationConfig::default().fix_delay_s;
-    let level_s = (spec.start_wait_s - 1.2 - fix_delay).clamp(0.2, 2.0);
-    // without north-finding, navigation starts just before the vehicle drives off
-    let start_s = match nf {
-        Some(_) => 0.0,
-        None => (spec.start_wait_s - level_s - 1.0).max(0.0),
-    };
-    let mut navigator = Navigator::new(NavigationConfig {
+    cfg.navigation = NavigationConfig {
         enabled: true,
-        initial_heading_deg: nf
-            .is_none()
+        initial_heading_deg: (!finds_north)
             .then(|| drive.heading(0.0).to_degrees() + heading_err_deg),
-        level_s,
         gps_aiding: filter.is_some(),
         filter: filter.map(|f| with_lever_arm(f, rx)).unwrap_or_default(),
-        ..NavigationConfig::default()
-    });
-    let mut nf_result = None;
-    let mut writer = NmeaWriter::new(rx.clone());
-    let mut dec = nav::gps::GpsDecoder::default();
-    let mut fixes = Vec::new();
-    let mut upd = Vec::new();
-    // a fix reaches nav 50 ms after its PPS edge
-    let mut pending: Vec<(f64, String)> = Vec::new();
+        ..s.navigation.clone().unwrap_or_else(|| NavigationConfig {
+            // the first fix comes at about 1 s and is applied `fix_delay_s` after its edge
+            level_s: (spec.start_wait_s - 1.2 - fix_delay).clamp(0.2, 2.0),
+            ..NavigationConfig::default()
+        })
+    };
+    let level_s = cfg.navigation.level_s;
+    let mut bench = crate::inproc::InProcessBench::new(s, &cfg, motion, tt, gps)?;
     let mut series = Vec::new();
     let mut outage_end = Vec::new();
-    let mut next_sample = 1.0;
-    let mut last_t = 0.0;
-    while chain.next_time() <= s.duration_s + 1e-9 {
-        let t = chain.step(&mut upd);
-        if let Some(f) = nf.as_mut()
-            && nf_result.is_none()
-        {
-            f.step(&chain, t, &upd);
-            upd.clear();
-            if f.finder().finished() {
-                let Some(r) = f.finder().result() else {
-                    bail!(
-                        "north-finding aborted: {}",
-                        f.finder().abort_reason().unwrap_or("no reason given")
-                    );
-                };
-                if t + level_s >= spec.start_wait_s {
-                    bail!(
-                        "north-finding ended at {t:.1} s: with {level_s} s of levelling the vehicle must wait longer than {} s before it drives off",
-                        spec.start_wait_s
-                    );
+    let mut next_score = 1.0;
+    while bench.running() {
+        bench.step();
+        let Some(n) = bench.pipeline().navigator() else {
+            bail!("navigation is not enabled");
+        };
+        let t = bench.sim_time(n.time());
+        if t >= next_score {
+            next_score += 1.0;
+            if let Some(x) = score(n, &drive, t) {
+                // the last second of an outage: the error fixes will then correct
+                if rx.outages.iter().any(|o| t < o[1] && t + 1.0 >= o[1]) {
+                    outage_end.push(x.position_error_m);
                 }
-                navigator.set_heading(r.heading_deg);
-                nf_result = Some(r.clone());
-            }
-        }
-        for edge in chain.take_pps() {
-            navigator.on_pps(edge);
-            let truth = antenna_truth(&drive, edge, rx.lever_arm_m);
-            let (text, _) = writer.fix(edge.floor(), 8.0 * 3600.0, (21, 11, 2026), &truth);
-            pending.push((edge + 0.05, text));
-        }
-        for u in upd.drain(..) {
-            let tv = chain.time_of(u.valid_sample);
-            if tv < start_s {
-                continue;
-            }
-            navigator.on_update(tv, u.phi, u.dv, n * dt);
-            last_t = tv;
-            if tv >= next_sample {
-                next_sample += 1.0;
-                if let Some(x) = score(&navigator, &drive, tv) {
-                    // the last second of an outage: the error fixes will then correct
-                    if rx.outages.iter().any(|o| tv < o[1] && tv + 1.0 >= o[1]) {
-                        outage_end.push(x.position_error_m);
-                    }
-                    series.push(x);
-                }
-            }
-        }
-        while pending.first().is_some_and(|p| p.0 <= t) {
-            let (_, text) = pending.remove(0);
-            dec.push_bytes(text.as_bytes(), &mut fixes);
-            for f in fixes.drain(..) {
-                navigator.on_fix(&f);
+                series.push(x);
             }
         }
     }
-    let Some(end) = score(&navigator, &drive, last_t) else {
+    bench.finish();
+    let p = bench.pipeline();
+    let Some(navigator) = p.navigator() else {
+        bail!("navigation is not enabled");
+    };
+    let nf_result = match p.finder() {
+        Some(f) => {
+            let Some(r) = f.result() else {
+                bail!(
+                    "north-finding did not finish: {}",
+                    f.abort_reason().unwrap_or("out of time")
+                );
+            };
+            if r.duration_s + level_s >= spec.start_wait_s {
+                bail!(
+                    "north-finding ended at {:.1} s: with {level_s} s of levelling the vehicle must wait longer than {} s before it drives off",
+                    r.duration_s,
+                    spec.start_wait_s
+                );
+            }
+            Some(r.clone())
+        }
+        None => None,
+    };
+    let last_t = bench.sim_time(navigator.time());
+    let Some(end) = score(navigator, &drive, last_t) else {
         bail!("navigation never started (no heading or no fix)");
     };
     let rms = |f: &dyn Fn(&NavSample) -> f64| {
@@ -365,28 +341,29 @@ pub fn navigate(
     })
 }
 
-/// The navigator's state against truth at `t`.
+/// The navigator's state against truth at simulated time `t`.
 fn score(navigator: &Navigator, drive: &Drive, t: f64) -> Option<NavSample> {
     let st = navigator.state()?;
-    let tr = truth_state(drive, t);
-    let e = st.position_error_m(&tr);
-    let dv = st.v - tr.v;
+    let (position_error_m, velocity_error_mps, heading_error_deg) = errors(drive, t, &st.output());
+    let (lat, lon, h) = drive.position(t);
+    let v = drive.velocity(t);
     let (nees_position, nees_velocity) = match navigator.filter() {
         Some(k) => {
             let p = k.covariance();
-            let dpos = [st.lat - tr.lat, st.lon - tr.lon, st.h - tr.h];
+            let dpos = [st.lat - lat, st.lon - lon, st.h - h];
+            let dv = [st.v.x - v.x, st.v.y - v.y, st.v.z - v.z];
             (
                 nees(&dpos, &p.fixed_view::<3, 3>(6, 6).into_owned()),
-                nees(&dv.into(), &p.fixed_view::<3, 3>(3, 3).into_owned()),
+                nees(&dv, &p.fixed_view::<3, 3>(3, 3).into_owned()),
             )
         }
         None => (None, None),
     };
     Some(NavSample {
         t_s: t,
-        position_error_m: e.x.hypot(e.y),
-        velocity_error_mps: dv.into(),
-        heading_error_deg: wrap180((st.euler().0 - tr.euler().0).to_degrees()),
+        position_error_m,
+        velocity_error_mps,
+        heading_error_deg,
         nees_position,
         nees_velocity,
     })

@@ -1,17 +1,14 @@
-//! In-process runs: the scenario's emulator stream (faults included) fed straight into nav's
-//! own front end and processing chain, with no bus in between. The bench compares nav's result
-//! on vcan against this; experiments and Monte Carlo use it directly. Same code, no copies.
+//! In-process reference runs: the scenario's devices (faults included) driving nav's own
+//! pipeline with no bus in between ([`crate::inproc`]). The bench compares nav's result on vcan
+//! against this; experiments use it directly. Same code, no copies.
 
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
-use emulators::can::BusStream;
-use emulators::imu::ImuEmulator;
 use emulators::truth::Motion;
 use nalgebra::UnitQuaternion;
-use nav::attitude::{ImuProcessor, ProcessingStats, quaternion_to_rotation_vector};
-use nav::imu::{ImuCalibration, ImuFrontEnd, ImuStats};
+use nav::attitude::{ProcessingStats, quaternion_to_rotation_vector};
+use nav::imu::{ImuCalibration, ImuStats};
 use serde::{Deserialize, Serialize};
-use wire::Message;
 
 /// Result of an in-process run.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -64,127 +61,27 @@ pub fn attitude_error(motion: &dyn Motion, t0: f64, t1: f64, q: &UnitQuaternion<
     quaternion_to_rotation_vector(&(truth.inverse() * q))
 }
 
-/// The scenario's IMU stream (faults included) through nav's front end and processing chain,
-/// one sample at a time: what every in-process run is built on.
-pub struct ImuChain {
-    bus: BusStream,
-    fe: ImuFrontEnd,
-    proc: ImuProcessor,
-    frames: Vec<wire::RawFrame>,
-    out: Vec<nav::imu::ImuSample>,
-    ev: Vec<nav::imu::ImuEvent>,
-    t_first: Option<f64>,
-    dt: f64,
-    pps: Vec<f64>,
-}
-
-impl ImuChain {
-    /// The chain for scenario `s` with the IMU on `motion`.
-    pub fn new(s: &Scenario, motion: Box<dyn Motion>) -> Result<Self> {
-        Ok(Self {
-            bus: BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
-            fe: ImuFrontEnd::new(calibration(s)),
-            proc: ImuProcessor::new(&s.processing).context("processing chain")?,
-            frames: Vec::new(),
-            out: Vec::new(),
-            ev: Vec::new(),
-            t_first: None,
-            dt: 1.0 / s.imu.rate_hz,
-            pps: Vec::new(),
-        })
-    }
-
-    /// Simulated time at the end of the next sample, s.
-    pub fn next_time(&self) -> f64 {
-        self.bus.next_time()
-    }
-
-    /// Produce and process one sample; updates go to `upd`. Returns the sample's time.
-    pub fn step(&mut self, upd: &mut Vec<nav::attitude::Update>) -> f64 {
-        let t = self.bus.next_time();
-        self.frames.clear();
-        self.bus.next_frames(&mut self.frames);
-        for f in &self.frames {
-            if let Ok(m) = Message::decode(f) {
-                if matches!(m, Message::ImuGyro(_)) {
-                    self.t_first.get_or_insert(t);
-                }
-                self.fe.on_message(&m, &mut self.out, &mut self.ev);
-            }
-        }
-        self.ev.clear();
-        let samples: Vec<_> = self.out.drain(..).collect();
-        for smp in samples {
-            self.proc.push_sample(&smp, upd);
-            if let Some(o) = smp.pps_offset {
-                // the edge came `o` samples before the end of this sample
-                self.pps.push(self.time_of(smp.sample as i64) - o * self.dt);
-            }
-        }
-        t
-    }
-
-    /// PPS edges seen since the last call (simulated time, from the IMU's latch).
-    pub fn take_pps(&mut self) -> Vec<f64> {
-        std::mem::take(&mut self.pps)
-    }
-
-    /// End of stream: a sample still waiting for its accelerometer frame.
-    pub fn flush(&mut self, upd: &mut Vec<nav::attitude::Update>) {
-        self.fe.flush(&mut self.out, &mut self.ev);
-        for smp in self.out.drain(..) {
-            self.proc.push_sample(&smp, upd);
-        }
-    }
-
-    /// Simulated time of a sample number (the baseline frame went out at the first gyro
-    /// frame's time).
-    pub fn time_of(&self, sample: i64) -> f64 {
-        let base = self.proc.baseline().unwrap_or(0) as i64;
-        self.t_first.unwrap_or(0.0) + (sample - base) as f64 * self.dt
-    }
-
-    /// The processing chain.
-    pub fn processor(&self) -> &ImuProcessor {
-        &self.proc
-    }
-
-    /// The front end.
-    pub fn front_end(&self) -> &ImuFrontEnd {
-        &self.fe
-    }
-
-    /// The emulator.
-    pub fn imu(&self) -> &ImuEmulator {
-        self.bus.imu()
-    }
-}
-
-/// Run the scenario in process.
+/// Run the scenario in process: its devices driving nav's pipeline
+/// ([`crate::inproc::InProcessBench`]), the integrated attitude scored against the truth.
 pub fn run_in_process(s: &Scenario) -> Result<InProcess> {
-    let mut chain = ImuChain::new(s, s.motion())?;
-    let mut upd = Vec::new();
-    let mut sums = ([0.0; 3], [0.0; 3], 0u64);
-    while chain.next_time() <= s.duration_s + 1e-9 {
-        chain.step(&mut upd);
-        sum_updates(&mut upd, &mut sums);
+    let mut bench = crate::inproc::InProcessBench::of(s)?;
+    while bench.running() {
+        bench.step();
     }
-    chain.flush(&mut upd);
-    sum_updates(&mut upd, &mut sums);
-    let dt = 1.0 / s.imu.rate_hz;
-    let proc = chain.processor();
+    bench.finish();
+    let p = bench.pipeline();
+    let sum = p.summary();
+    let proc = p.processor();
     let base = proc.baseline().unwrap_or(0) as i64;
-    let time_of = |sample: i64| chain.time_of(sample);
-    let origin_time_s = time_of(proc.origin().unwrap_or(base));
+    let origin_time_s = bench.time_of(proc.origin().unwrap_or(base));
     let q = proc.attitude();
-    let imu = chain.imu();
+    let imu = bench.imu();
     let err = attitude_error(
         imu.motion(),
         origin_time_s,
-        time_of(proc.valid_sample()),
+        bench.time_of(proc.valid_sample()),
         &q,
     );
-    let n = (sums.2 * s.processing.coning_samples as u64).max(1) as f64 * dt;
     let dph = nav::earth::DEG_PER_HOUR_PER_RAD_S;
     let (expected_rate_dph, expected_specific_force_mps2) = if s.is_static() {
         let m = imu.error_model();
@@ -210,31 +107,21 @@ pub fn run_in_process(s: &Scenario) -> Result<InProcess> {
             .fold(0.0, f64::max)
     });
     Ok(InProcess {
-        mean_rate_dph: sums.0.map(|x| x / n * dph),
-        mean_specific_force_mps2: sums.1.map(|x| x / n),
+        mean_rate_dph: sum.mean_rate_dph,
+        mean_specific_force_mps2: sum.mean_specific_force_mps2,
         expected_rate_dph,
         expected_specific_force_mps2,
         gyro_bias_dph: imu.gyro_bias_dph(),
         accel_bias_mps2: imu.accel_bias_mps2(),
         dither_residual_gain,
-        imu: chain.front_end().stats(),
-        processing: proc.stats(),
+        imu: sum.imu,
+        processing: sum.processing,
         origin_sample: proc.origin(),
         valid_sample: proc.valid_sample(),
         origin_time_s,
-        rotation_vector_deg: quaternion_to_rotation_vector(&q).map(f64::to_degrees),
+        rotation_vector_deg: sum.attitude.rotation_vector_deg,
         error_deg: err.map(f64::to_degrees),
     })
-}
-
-fn sum_updates(upd: &mut Vec<nav::attitude::Update>, sums: &mut ([f64; 3], [f64; 3], u64)) {
-    for u in upd.drain(..) {
-        for a in 0..3 {
-            sums.0[a] += u.phi[a];
-            sums.1[a] += u.dv[a];
-        }
-        sums.2 += 1;
-    }
 }
 
 #[cfg(test)]

@@ -4,8 +4,8 @@ use crate::replay::InProcess;
 use crate::scenario::Scenario;
 use emulators::can::TxStats;
 use nalgebra::Vector3;
+use nav::summary::Summary;
 use serde::{Deserialize, Serialize};
-use serde_json::Value;
 
 /// One check of a run.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -55,7 +55,7 @@ pub struct RunReport {
     /// nav's exit status.
     pub nav_exit: Option<i32>,
     /// nav's summary (as nav wrote it).
-    pub nav: Value,
+    pub nav: Summary,
     /// IMU frames lost on the bus (sent but not received).
     pub bus_lost_frames: i64,
     /// Checks.
@@ -64,29 +64,12 @@ pub struct RunReport {
     pub pass: bool,
 }
 
-fn num(v: &Value, path: &[&str]) -> f64 {
-    let mut v = v;
-    for p in path {
-        v = &v[*p];
-    }
-    v.as_f64().unwrap_or(f64::NAN)
-}
-
-fn vec3(v: &Value, key: &str) -> Vector3<f64> {
-    let a = &v[key];
-    Vector3::new(
-        a[0].as_f64().unwrap_or(f64::NAN),
-        a[1].as_f64().unwrap_or(f64::NAN),
-        a[2].as_f64().unwrap_or(f64::NAN),
-    )
-}
-
 /// Compute the checks of a finished run.
 pub fn checks(
     s: &Scenario,
     tx: &TxStats,
     reference: Option<&InProcess>,
-    nav: &Value,
+    nav: &Summary,
     nav_exit: Option<i32>,
     lockstep: &emulators::bus::LockstepStats,
 ) -> (Vec<Check>, i64) {
@@ -98,11 +81,10 @@ pub fn checks(
     });
     if lockstep.enabled {
         // a fix that reached nav after its time was applied when it came: timing leaked in
-        let late = num(nav, &["navigation", "late_fixes"]);
-        let late = if late.is_nan() { 0.0 } else { late };
+        let late = nav.navigation.as_ref().map_or(0, |n| n.late_fixes);
         out.push(Check {
             name: "reproducible: the emulators stayed in lockstep with nav".into(),
-            pass: lockstep.stalls == 0 && lockstep.nav_times > 0 && late == 0.0,
+            pass: lockstep.stalls == 0 && lockstep.nav_times > 0 && late == 0,
             detail: format!(
                 "{} NAV_TIME frames followed, {} waits ({} ms), {} stalls, {} turntable commands placed, {late} GPS fixes late",
                 lockstep.nav_times,
@@ -113,10 +95,10 @@ pub fn checks(
             ),
         });
     }
-    let rx_gyro = num(nav, &["imu", "gyro_frames"]) as i64;
+    let rx_gyro = nav.imu.gyro_frames as i64;
     let dup = s.faults.duplicate_samples.len() as i64;
     let lost = tx.gyro_frames as i64 + dup - rx_gyro;
-    let missing = num(nav, &["imu", "missing_samples"]) as i64;
+    let missing = nav.imu.missing_samples as i64;
     let sent = tx.gyro_frames.max(1) as f64;
     out.push(Check {
         name: "every lost IMU frame accounted".into(),
@@ -136,26 +118,26 @@ pub fn checks(
             100.0 * s.max_bus_loss
         ),
     });
-    for (name, key, want) in [
+    for (name, got, want) in [
         (
             "unknown-id frames reported",
-            "unknown_id_frames",
+            nav.unknown_id_frames,
             s.faults.unknown_id_at_s.len(),
         ),
         (
             "wrong-length frames reported",
-            "bad_length_frames",
+            nav.bad_length_frames,
             s.faults.bad_length_at_s.len(),
         ),
     ] {
-        let got = num(nav, &[key]) as usize;
+        let got = got as usize;
         out.push(Check {
             name: name.into(),
             pass: got == want,
             detail: format!("nav counted {got}, {want} injected"),
         });
     }
-    let got = num(nav, &["imu", "duplicates"]) as usize;
+    let got = nav.imu.duplicates as usize;
     out.push(Check {
         name: "duplicate frames reported".into(),
         pass: got == s.faults.duplicate_samples.len(),
@@ -215,28 +197,28 @@ pub fn drill_checks(out: &mut Vec<Check>, s: &Scenario, o: &crate::drill::DrillO
 
 /// nav's solution output: every NAV_* frame nav sent reached the bench and decoded, no epoch
 /// was skipped, and the last position on the bus is nav's final one.
-pub fn solution_checks(out: &mut Vec<Check>, w: &crate::run::SolutionWatch, nav: &Value) {
-    let sent = num(nav, &["solution", "frames_sent"]);
-    let epochs = num(nav, &["solution", "epochs"]);
-    let mut pass = w.frames as f64 == sent && w.bad_frames == 0 && w.seq_gaps == 0 && epochs > 0.0;
+pub fn solution_checks(out: &mut Vec<Check>, w: &crate::run::SolutionWatch, nav: &Summary) {
+    let sent = nav.solution.frames_sent;
+    let epochs = nav.solution.epochs;
+    let mut pass = w.frames == sent && w.bad_frames == 0 && w.seq_gaps == 0 && epochs > 0;
     let mut detail = format!(
         "nav sent {sent} frames in {epochs} epochs ({} refused by the socket); the bench received {} frames, {} epochs, {} undecodable, {} sequence gaps; last mode {}",
-        num(nav, &["solution", "send_errors"]),
+        nav.solution.send_errors,
         w.frames,
         w.epochs,
         w.bad_frames,
         w.seq_gaps,
         w.last_mode.as_deref().unwrap_or("--")
     );
-    let out_pos = &nav["navigation"]["output"];
-    if let (Some(p), Some(lat), Some(lon)) = (
+    if let (Some(p), Some(o)) = (
         w.last_position_deg,
-        out_pos["lat_deg"].as_f64(),
-        out_pos["lon_deg"].as_f64(),
+        nav.navigation.as_ref().and_then(|n| n.output.as_ref()),
     ) {
-        let (rm, rn) = nav::earth::radii(lat.to_radians());
-        let d = ((p[0] - lat).to_radians() * rm)
-            .hypot((p[1] - lon).to_radians() * rn * lat.to_radians().cos());
+        let e = emulators::geodesy::enu_offset(
+            (o.lat_deg.to_radians(), o.lon_deg.to_radians(), o.h_m),
+            (p[0].to_radians(), p[1].to_radians(), o.h_m),
+        );
+        let d = e[0].hypot(e[1]);
         // the last 50 Hz epoch is at most 20 ms before nav's final state
         pass &= d < 1.0;
         detail += &format!("; last NAV_POS {d:.3} m from nav's final position (limit 1 m)");
@@ -248,32 +230,68 @@ pub fn solution_checks(out: &mut Vec<Check>, w: &crate::run::SolutionWatch, nav:
     });
 }
 
+/// nav's recording replayed through its pipeline in process sends exactly what nav sent.
+pub fn replay_check(r: Result<&crate::playback::Playback, &anyhow::Error>) -> Check {
+    let name = "nav's output replays bit for bit from its recording".to_string();
+    match r {
+        Ok(p) => Check {
+            name,
+            pass: p.identical() && p.bad_records == 0 && p.recorded_tx > 0,
+            detail: format!(
+                "{} frames and {} fixes replayed through nav's pipeline in process: {} frames sent, nav sent {}{}",
+                p.frames_in,
+                p.fixes_in,
+                p.replayed_tx,
+                p.recorded_tx,
+                match &p.first_difference {
+                    None => ", identical".to_string(),
+                    Some((i, a, b)) => format!(
+                        "; first difference at frame {i}: nav {}, replay {}",
+                        a.as_deref().unwrap_or("(none)"),
+                        b.as_deref().unwrap_or("(none)")
+                    ),
+                }
+            ),
+        },
+        Err(e) => Check {
+            name,
+            pass: false,
+            detail: format!("cannot replay: {e:#}"),
+        },
+    }
+}
+
 /// Checks of a navigation run: nav navigated, used the receiver's fixes, and its end error is
 /// within the scenario's tolerance.
 pub fn navigation_checks(
     out: &mut Vec<Check>,
     s: &Scenario,
     score: Option<&crate::navrun::NavScore>,
-    nav: &Value,
+    nav: &Summary,
     gps: Option<&emulators::gps::GpsTxStats>,
 ) {
-    let n = &nav["navigation"];
+    let n = nav.navigation.as_ref();
     out.push(Check {
         name: "nav navigated".into(),
-        pass: n["phase"].as_str() == Some("navigating"),
-        detail: format!(
-            "phase {}, started at {} s of IMU time",
-            n["phase"], n["started_at_s"]
-        ),
+        pass: n.is_some_and(|n| n.phase == nav::navigator::NavPhase::Navigating),
+        detail: match n {
+            Some(n) => format!(
+                "phase {:?}, started at {} s of IMU time",
+                n.phase,
+                n.started_at_s
+                    .map_or_else(|| "--".into(), |t| format!("{t:.3}"))
+            ),
+            None => "navigation was not enabled in nav".into(),
+        },
     });
     if let Some(g) = gps {
-        let fixes = num(nav, &["gps", "stats", "fixes"]);
-        let bad =
-            num(nav, &["gps", "stats", "bad_checksum"]) + num(nav, &["gps", "stats", "unparsed"]);
-        let used = num(n, &["filter", "updates"]);
+        let st = nav.gps.as_ref().map(|g| g.stats).unwrap_or_default();
+        let (fixes, bad) = (st.fixes, st.bad_checksum + st.unparsed);
+        let filter = n.and_then(|n| n.filter);
+        let used = filter.map_or(0, |f| f.updates);
         out.push(Check {
             name: "GPS fixes received and used".into(),
-            pass: bad == 0.0 && fixes > 0.0 && (s.navigation.as_ref().is_some_and(|c| !c.gps_aiding) || used > 0.0),
+            pass: bad == 0 && fixes > 0 && (s.navigation.as_ref().is_some_and(|c| !c.gps_aiding) || used > 0),
             detail: format!(
                 "emulator wrote {} fix epochs ({} void, {} silent, {} unread, {} port drops); nav decoded {fixes} fixes, {bad} bad sentences; the filter used {used}, rejected {}",
                 g.fixes,
@@ -281,7 +299,7 @@ pub fn navigation_checks(
                 g.silent_epochs,
                 g.unread_epochs,
                 g.port_drops,
-                num(n, &["filter", "rejected"])
+                filter.map_or(0, |f| f.rejected)
             ),
         });
     }
@@ -307,9 +325,9 @@ pub fn navigation_checks(
 }
 
 /// nav on the bus against the same stream processed in process.
-fn attitude_checks(out: &mut Vec<Check>, reference: &InProcess, nav: &Value, same_stream: bool) {
-    let rv = vec3(&nav["attitude"], "rotation_vector_deg");
-    let valid = nav["attitude"]["valid_sample"].as_i64();
+fn attitude_checks(out: &mut Vec<Check>, reference: &InProcess, nav: &Summary, same_stream: bool) {
+    let rv = Vector3::from(nav.attitude.rotation_vector_deg);
+    let valid = Some(nav.attitude.valid_sample);
     let r = Vector3::from(reference.rotation_vector_deg);
     let e = Vector3::from(reference.error_deg);
     if same_stream {
@@ -349,10 +367,10 @@ fn static_checks(
     reference: &InProcess,
     w_truth: Vector3<f64>,
     f_truth: Vector3<f64>,
-    nav: &Value,
+    nav: &Summary,
 ) {
-    let t = num(nav, &["attitude", "span_samples"]) / s.imu.rate_hz;
-    let w = vec3(nav, "mean_rate_dph");
+    let t = nav.attitude.span_samples as f64 / s.imu.rate_hz;
+    let w = Vector3::from(nav.mean_rate_dph);
     let arw_dph = s.imu.gyro_arw_dpsh * 60.0; // deg/h per sqrt(Hz)
     // one arcsec over the run, in deg/h: arcsec / 3600 deg, per t/3600 h
     let pulse_dph = s.imu.gyro_pulse_arcsec.iter().cloned().fold(0.0, f64::max);
@@ -368,7 +386,7 @@ fn static_checks(
             w.x, w.y, w.z, w_truth.x, w_truth.y, w_truth.z
         ),
     });
-    let f = vec3(nav, "mean_specific_force_mps2");
+    let f = Vector3::from(nav.mean_specific_force_mps2);
     let pulse_a = s.imu.accel_pulse_mps.iter().cloned().fold(0.0, f64::max);
     let lim_f = 5.0 * s.imu.accel_vrw_mpss / t.sqrt() + 2.0 * pulse_a / t;
     let err_f = (f - f_truth).abs().max();

@@ -8,10 +8,8 @@ use anyhow::{Context, Result, bail};
 use emulators::can::Progress;
 use emulators::clock::SimClock;
 use emulators::drive::Drive;
-use emulators::gps::{GpsDevice, GpsPty, GpsRun, NmeaWriter, relink};
+use emulators::gps::{GpsDevice, GpsPty, relink};
 use emulators::imu::ImuEmulator;
-use nav::config::{CanConfig, GpsConfig, NavConfig, RecordConfig, WatchdogConfig};
-use nav::navigator::NavigationConfig;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -47,49 +45,6 @@ pub fn sibling_binary(name: &str) -> Result<PathBuf> {
         "cannot find the {name} binary next to {} (build it with `cargo build --workspace`)",
         exe.display()
     )
-}
-
-/// nav's `[navigation]` for a scenario: enabled, the surveyed heading when north-finding does
-/// not give one, the receiver's lever arm when the filter's is left at zero.
-pub fn navigation_config(s: &Scenario) -> Option<NavigationConfig> {
-    let mut n = s.navigation.clone()?;
-    n.enabled = true;
-    if s.north_finding.is_none() && n.initial_heading_deg.is_none() {
-        n.initial_heading_deg = Some(s.truth_heading_deg());
-    }
-    if let Some(g) = &s.gps {
-        n.filter = crate::navrun::with_lever_arm(&n.filter, g);
-    }
-    Some(n)
-}
-
-fn nav_config(s: &Scenario, iface: &str, gps_port: Option<&Path>) -> NavConfig {
-    NavConfig {
-        can: Some(CanConfig {
-            interface: iface.into(),
-            rcvbuf_bytes: 8 << 20,
-        }),
-        gps: gps_port.map(|p| GpsConfig {
-            port: p.to_path_buf(),
-            baud: 9600,
-            fixes_jsonl: Some("gps-fixes.jsonl".into()),
-        }),
-        navigation: navigation_config(s).unwrap_or_default(),
-        imu: crate::replay::calibration(s),
-        processing: s.processing,
-        north_finding: s
-            .north_finding
-            .as_ref()
-            .map(|nf| crate::drill::nf_config(s, nf))
-            .unwrap_or_default(),
-        watchdog: WatchdogConfig {
-            imu_timeout_ms: (500.0 / s.speed.max(1.0)).max(100.0) as u64,
-        },
-        record: RecordConfig {
-            mcap: Some("nav.mcap".into()),
-            summary: Some("nav-summary.json".into()),
-        },
-    }
 }
 
 struct NavProcess {
@@ -172,10 +127,9 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     // the link goes when the run ends, however it ends
     let _link_guard = gps.as_ref().map(|g| RemoveOnDrop(g.1.clone()));
     let cfg_path = opts.out.join("nav.toml");
-    std::fs::write(
-        &cfg_path,
-        nav_config(s, &opts.iface, gps.as_ref().map(|g| g.1.as_path())).to_toml(),
-    )?;
+    let nav_cfg =
+        crate::inproc::nav_config(s, Some(&opts.iface), gps.as_ref().map(|g| g.1.as_path()));
+    std::fs::write(&cfg_path, nav_cfg.to_toml())?;
     info!(interface = %opts.iface, "starting nav");
     let nav = start_nav(&opts.nav_bin, &cfg_path)?;
 
@@ -191,18 +145,9 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         let (iface, stop) = (opts.iface.clone(), watch_stop.clone());
         std::thread::spawn(move || watch_solution(sock, &iface, &stop))
     };
-    let gps_device = match (gps, &s.gps, &s.drive) {
-        (Some((pty, link)), Some(rx), Some(d)) => {
-            let run = GpsRun {
-                writer: NmeaWriter::new(rx.clone()),
-                drive: Drive::plan(d).map_err(anyhow::Error::msg)?,
-                pps_phase_s: s.imu.pps_phase_s,
-                latency_s: 0.05,
-                // a fixed time of day: the run depends on its scenario and seed only
-                utc0_s: 12.0 * 3600.0,
-                date: (21, 11, 2026),
-            };
-            Some(GpsDevice::new(run, pty, Some(link)))
+    let gps_device = match (gps, &s.gps) {
+        (Some((pty, link)), Some(rx)) => {
+            crate::inproc::gps_run(s, rx)?.map(|run| GpsDevice::new(run, pty, Some(link)))
         }
         _ => None,
     };
@@ -286,13 +231,13 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
     }
     let summary_path = opts.out.join("nav-summary.json");
-    let nav_json: serde_json::Value = match std::fs::read_to_string(&summary_path) {
-        Ok(t) => serde_json::from_str(&t)
-            .with_context(|| format!("parsing {}", summary_path.display()))?,
-        Err(e) => bail!(
-            "nav wrote no summary ({}: {e}); exit status {nav_exit:?}",
-            summary_path.display()
-        ),
+    let nav_json = match nav::summary::Summary::read(&summary_path) {
+        Ok(s) => s,
+        Err(e @ nav::summary::SummaryError::Read { .. }) => {
+            return Err(anyhow::Error::new(e)
+                .context(format!("nav wrote no summary; exit status {nav_exit:?}")));
+        }
+        Err(e) => return Err(e.into()),
     };
     let reference = match s.turntable {
         None => Some(crate::replay::run_in_process(s).context("in-process reference run")?),
@@ -307,13 +252,13 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         &lockstep_stats,
     );
     let drill_outcome = s.north_finding.as_ref().map(|_| {
-        let nf = &nav_json["north_finding"];
-        let result: Option<nav::northfind::NorthResult> =
-            serde_json::from_value(nf["result"].clone()).ok();
+        let nf = nav_json.north_finding.as_ref();
         crate::drill::outcome(
             s.truth_heading_deg(),
-            result.as_ref(),
-            nf["abort"].as_str(),
+            nf.and_then(|n| n.result.as_ref()),
+            nf.map_or(Some("north-finding was not enabled in nav"), |n| {
+                n.abort.as_deref()
+            }),
             progress.now(),
         )
     });
@@ -321,6 +266,10 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         report::drill_checks(&mut checks, s, o);
     }
     report::solution_checks(&mut checks, &solution, &nav_json);
+    // nav's binary is a shell around its pipeline: from its own recording, the pipeline in
+    // process must send exactly what nav sent
+    let replayed = crate::playback::replay(&opts.out.join("nav.mcap"), &nav_cfg);
+    checks.push(report::replay_check(replayed.as_ref()));
     let mut navigation_series = None;
     let navigation = match (&s.navigation, &s.drive) {
         (Some(_), Some(d)) => {

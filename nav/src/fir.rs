@@ -78,7 +78,7 @@ pub enum FirError {
 }
 
 /// Measured response of a designed filter.
-#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
 pub struct FirResponse {
     /// Largest |20 log10 A(f)| over the passband, dB.
     pub passband_deviation_db: f64,

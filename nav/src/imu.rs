@@ -169,7 +169,7 @@ pub struct ImuStats {
 }
 
 /// Latest housekeeping.
-#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
 pub struct Housekeeping {
     /// Gyro block temperature, degC.
     pub temp_gyro_c: f64,

@@ -15,5 +15,7 @@ pub mod kf;
 pub mod navigator;
 pub mod northfind;
 pub mod output;
+pub mod pipeline;
 pub mod record;
 pub mod strapdown;
+pub mod summary;

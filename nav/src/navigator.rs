@@ -45,7 +45,7 @@ impl Default for NavigationConfig {
 }
 
 /// Where navigation is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum NavPhase {
     /// Waiting for a heading (north-finding) and a first good fix.
@@ -57,7 +57,7 @@ pub enum NavPhase {
 }
 
 /// Counters and the latest output.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct NavigatorSummary {
     /// Phase.
     pub phase: NavPhase,

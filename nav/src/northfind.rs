@@ -121,7 +121,7 @@ impl NorthFindingConfig {
 }
 
 /// Where the sequence is.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Phase {
     /// Enabling the mechanism.
@@ -170,7 +170,7 @@ pub struct Progress {
 }
 
 /// One position's measurement.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
 pub struct PositionResult {
     /// Commanded angle, deg.
     pub commanded_deg: f64,
@@ -187,7 +187,7 @@ pub struct PositionResult {
 }
 
 /// The answer.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct NorthResult {
     /// Heading of the IMU at table zero (clockwise from true north), deg, [0, 360).
     pub heading_deg: f64,

@@ -27,6 +27,8 @@ pub struct SolutionEncoder {
     seq: u8,
     /// Epochs encoded.
     pub epochs: u64,
+    /// Frames that could not be encoded (a NaN in the solution): counted, never silent.
+    pub encode_errors: u64,
 }
 
 impl SolutionEncoder {
@@ -64,7 +66,17 @@ impl SolutionEncoder {
                 heading_sigma_deg: s.heading_sigma_deg.clamp(0.0, 6.5),
             }));
         }
-        out.extend(msgs.iter().filter_map(|m| m.encode().ok()));
+        for m in &msgs {
+            match m.encode() {
+                Ok(f) => out.push(f),
+                Err(e) => {
+                    self.encode_errors += 1;
+                    if self.encode_errors <= 3 {
+                        tracing::warn!("solution frame {} not encoded: {e}", m.spec().name);
+                    }
+                }
+            }
+        }
     }
 }
 

@@ -3,6 +3,7 @@
 //! Channels:
 //! - `/can/raw` (encoding `rlg-hil.can-frame.v1`): every received frame as
 //!   `[id: u16 LE][len: u8][data: 8 bytes]`; log time = receive wall time.
+//! - `/can/tx` (same encoding): every frame nav sent (turntable commands, the solution).
 //! - `/imu/sample` (JSON): every decoded IMU sample; publish time = sample time on the IMU clock.
 //! - `/nav/event` (JSON): irregularities (gaps, duplicates, bad frames, timeouts).
 //! - `/nav/summary` (JSON): the run summary, once at the end.
@@ -25,6 +26,13 @@ pub enum Record {
     /// A received frame.
     Frame {
         /// Receive wall time, ns since the epoch.
+        t_ns: u64,
+        /// The frame.
+        frame: RawFrame,
+    },
+    /// A frame nav sent (turntable commands, the solution): `/can/tx`.
+    Sent {
+        /// Send wall time, ns since the epoch.
         t_ns: u64,
         /// The frame.
         frame: RawFrame,
@@ -144,6 +152,9 @@ impl Recorder {
         let raw = w
             .add_channel(0, "/can/raw", RAW_FRAME_ENCODING, &meta)
             .map_err(mcap_err.clone())?;
+        let sent = w
+            .add_channel(0, "/can/tx", RAW_FRAME_ENCODING, &meta)
+            .map_err(mcap_err.clone())?;
         let mut json = BTreeMap::new();
         for c in JsonChannel::ALL {
             let schema = w
@@ -165,11 +176,16 @@ impl Recorder {
                 let mut text: String;
                 for r in rx {
                     let (ch, log, publish, data): (u16, u64, u64, &[u8]) = match &r {
-                        Record::Frame { t_ns, frame } => {
+                        Record::Frame { t_ns, frame } | Record::Sent { t_ns, frame } => {
                             buf[..2].copy_from_slice(&frame.id.to_le_bytes());
                             buf[2] = frame.len;
                             buf[3..].copy_from_slice(&frame.data);
-                            (raw, *t_ns, *t_ns, &buf)
+                            let ch = if matches!(r, Record::Sent { .. }) {
+                                sent
+                            } else {
+                                raw
+                            };
+                            (ch, *t_ns, *t_ns, &buf)
                         }
                         Record::Sample {
                             t_ns,

@@ -264,6 +264,13 @@ fn drill_at(speed: Option<&str>, iface: &str) -> Value {
         assert!(pass, "check failed: {name}: {detail}");
     }
     assert!(dir.path().join("report.md").is_file());
+    // nav's binary and its pipeline in process, from the same recorded input: the same frames
+    assert!(
+        checks(&r)
+            .iter()
+            .any(|c| c.0 == "nav's output replays bit for bit from its recording" && c.1),
+        "the replay check ran and passed"
+    );
     r
 }
 
@@ -380,6 +387,7 @@ fn campus_loop_shortened_finds_north_then_navigates() {
         "heading within the drill's tolerance",
         "navigation error within tolerance",
         "solution frames on the bus",
+        "nav's output replays bit for bit from its recording",
     ] {
         assert!(names.iter().any(|x| x == n), "missing check {n}: {names:?}");
     }

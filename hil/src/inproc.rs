@@ -1,0 +1,261 @@
+//! The bench without a bus: the scenario's devices stepped on the IMU clock in the order the
+//! bench's scheduler ([`emulators::bus`]) puts them on vcan and the pty, driving nav's own
+//! [`Pipeline`] in process. What the pipeline sends goes back to the devices the way it does on
+//! the bus: a turntable command waits for the next NAV_TIME and takes effect the lockstep's
+//! latency after that NAV_TIME's sample. No glue of nav's is copied here: the result of an
+//! in-process run equals the bench's bit for bit (the end-to-end tests check it).
+//!
+//! Also here: what a scenario sets up for both (nav's config, the receiver's model).
+
+use crate::scenario::Scenario;
+use anyhow::{Context, Result};
+use emulators::bus::{Lockstep, TtBus, nav_time_sample};
+use emulators::can::BusStream;
+use emulators::drive::Drive;
+use emulators::gps::{GpsReceiver, GpsRun, NmeaWriter};
+use emulators::imu::ImuEmulator;
+use emulators::truth::Motion;
+use emulators::turntable::Turntable;
+use nav::config::{CanConfig, GpsConfig, NavConfig, RecordConfig, WatchdogConfig};
+use nav::navigator::NavigationConfig;
+use nav::pipeline::{Output, Pipeline};
+use std::path::Path;
+use wire::{Message, RawFrame};
+
+/// nav's `[navigation]` for a scenario: enabled, the surveyed heading when north-finding does
+/// not give one, the receiver's lever arm when the filter's is left at zero.
+pub fn navigation_config(s: &Scenario) -> Option<NavigationConfig> {
+    let mut n = s.navigation.clone()?;
+    n.enabled = true;
+    if s.north_finding.is_none() && n.initial_heading_deg.is_none() {
+        n.initial_heading_deg = Some(s.truth_heading_deg());
+    }
+    if let Some(g) = &s.gps {
+        n.filter = crate::navrun::with_lever_arm(&n.filter, g);
+    }
+    Some(n)
+}
+
+/// nav's config for a scenario. `iface`: the CAN interface (none in process); `gps_port`: the
+/// receiver's port when the scenario has one (in process a name only: nothing opens it).
+pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) -> NavConfig {
+    NavConfig {
+        can: iface.map(|i| CanConfig {
+            interface: i.into(),
+            rcvbuf_bytes: 8 << 20,
+        }),
+        gps: gps_port.map(|p| GpsConfig {
+            port: p.to_path_buf(),
+            baud: 9600,
+            fixes_jsonl: Some("gps-fixes.jsonl".into()),
+        }),
+        navigation: navigation_config(s).unwrap_or_default(),
+        imu: crate::replay::calibration(s),
+        processing: s.processing,
+        north_finding: s
+            .north_finding
+            .as_ref()
+            .map(|nf| crate::drill::nf_config(s, nf))
+            .unwrap_or_default(),
+        watchdog: WatchdogConfig {
+            imu_timeout_ms: (500.0 / s.speed.max(1.0)).max(100.0) as u64,
+        },
+        record: RecordConfig {
+            mcap: Some("nav.mcap".into()),
+            summary: Some("nav-summary.json".into()),
+        },
+    }
+}
+
+/// The receiver of a scenario with a drive and a `[gps]` table, with receiver model `rx`.
+pub fn gps_run(s: &Scenario, rx: &emulators::gps::ReceiverParams) -> Result<Option<GpsRun>> {
+    let Some(d) = &s.drive else { return Ok(None) };
+    Ok(Some(GpsRun {
+        writer: NmeaWriter::new(rx.clone()),
+        drive: Drive::plan(d).map_err(anyhow::Error::msg)?,
+        pps_phase_s: s.imu.pps_phase_s,
+        latency_s: 0.05,
+        // a fixed time of day: the run depends on its scenario and seed only
+        utc0_s: 12.0 * 3600.0,
+        date: (21, 11, 2026),
+    }))
+}
+
+/// The scenario's devices driving nav's pipeline, one IMU sample at a time.
+pub struct InProcessBench {
+    imu: BusStream,
+    tt: Option<TtBus>,
+    gps: Option<GpsReceiver>,
+    decoder: nav::gps::GpsDecoder,
+    pipeline: Pipeline,
+    duration_s: f64,
+    out: Vec<Output>,
+    frames: Vec<RawFrame>,
+    msgs: Vec<Message>,
+    fixes: Vec<nav::gps::GpsFix>,
+    t_first: Option<f64>,
+    sent: Option<Vec<RawFrame>>,
+    bad_from_nav: u64,
+}
+
+impl InProcessBench {
+    /// The devices (IMU on `motion`, the turntable `tt`, the receiver `gps`) of scenario `s`
+    /// driving a pipeline configured by `cfg`.
+    pub fn new(
+        s: &Scenario,
+        cfg: &NavConfig,
+        motion: Box<dyn Motion>,
+        tt: Option<Turntable>,
+        gps: Option<GpsRun>,
+    ) -> Result<Self> {
+        Ok(Self {
+            imu: BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
+            tt: tt.map(|t| TtBus::new(t, s.imu.rate_hz, Lockstep::default().latency)),
+            gps: gps.map(GpsReceiver::new),
+            decoder: nav::gps::GpsDecoder::default(),
+            pipeline: Pipeline::new(cfg, false).context("nav's pipeline")?,
+            duration_s: s.duration_s,
+            out: Vec::new(),
+            frames: Vec::new(),
+            msgs: Vec::new(),
+            fixes: Vec::new(),
+            t_first: None,
+            sent: None,
+            bad_from_nav: 0,
+        })
+    }
+
+    /// Scenario `s` as the bench runs it: its devices and nav's config for it.
+    pub fn of(s: &Scenario) -> Result<Self> {
+        let (motion, tt) = s.build();
+        let gps = match &s.gps {
+            Some(rx) => gps_run(s, rx)?,
+            None => None,
+        };
+        let port = gps.is_some().then(|| Path::new("(in process)"));
+        Self::new(s, &nav_config(s, None, port), motion, tt, gps)
+    }
+
+    /// Keep every frame the pipeline sends (for comparisons with the bench's).
+    pub fn keep_sent_frames(&mut self) {
+        self.sent.get_or_insert_with(Vec::new);
+    }
+
+    /// The frames the pipeline sent, when kept.
+    pub fn sent_frames(&self) -> &[RawFrame] {
+        self.sent.as_deref().unwrap_or(&[])
+    }
+
+    /// Simulated time at the end of the next sample, s.
+    pub fn next_time(&self) -> f64 {
+        self.imu.next_time()
+    }
+
+    /// Whether the scenario's duration is not over yet.
+    pub fn running(&self) -> bool {
+        self.imu.next_time() <= self.duration_s + 1e-9
+    }
+
+    /// One IMU sample: its frames, then the turntable's due after it, then the receiver's
+    /// epochs due by its end, each through the pipeline, whose outputs go back to the devices.
+    /// Returns the sample's simulated time.
+    pub fn step(&mut self) -> f64 {
+        let k = self.imu.imu().next_index();
+        let t = self.imu.next_time();
+        self.frames.clear();
+        self.imu.next_frames(&mut self.frames);
+        if !self.frames.is_empty() {
+            self.t_first.get_or_insert(t);
+        }
+        if let Some(tt) = self.tt.as_mut() {
+            self.msgs.clear();
+            tt.after_sample(k, t, &mut self.msgs);
+            self.frames
+                .extend(self.msgs.iter().filter_map(|m| m.encode().ok()));
+        }
+        let frames = std::mem::take(&mut self.frames);
+        for f in &frames {
+            self.pipeline.on_frame(f, &mut self.out);
+            self.act();
+        }
+        self.frames = frames;
+        if let Some(g) = self.gps.as_mut() {
+            while let Some(e) = g.poll(t, self.duration_s) {
+                // while the receiver's device is gone its output is lost
+                if e.port_drop.is_none() {
+                    self.decoder.push_bytes(e.text.as_bytes(), &mut self.fixes);
+                }
+            }
+            for fix in self.fixes.drain(..) {
+                self.pipeline.on_fix(fix, &mut self.out);
+            }
+            self.act();
+        }
+        t
+    }
+
+    /// The end of the stream.
+    pub fn finish(&mut self) {
+        self.pipeline.flush(&mut self.out);
+        self.act();
+    }
+
+    /// What the pipeline sent, to the devices: commands wait for a NAV_TIME, which places them.
+    fn act(&mut self) {
+        for o in self.out.drain(..) {
+            let f = match o {
+                Output::Command(f) | Output::Solution(f) => f,
+                _ => continue,
+            };
+            if let Some(s) = self.sent.as_mut() {
+                s.push(f);
+            }
+            match Message::decode(&f) {
+                Ok(Message::TtCmd(c)) => match self.tt.as_mut() {
+                    Some(tt) => tt.command(c),
+                    None => self.bad_from_nav += 1,
+                },
+                Ok(Message::NavTime(nt)) => {
+                    if let (Some(tt), Some(k)) = (
+                        self.tt.as_mut(),
+                        nav_time_sample(self.imu.imu(), nt.sample_count),
+                    ) {
+                        tt.confirmed(k);
+                    }
+                }
+                Ok(_) => {}
+                Err(_) => self.bad_from_nav += 1,
+            }
+        }
+    }
+
+    /// nav's pipeline.
+    pub fn pipeline(&self) -> &Pipeline {
+        &self.pipeline
+    }
+
+    /// The IMU emulator.
+    pub fn imu(&self) -> &ImuEmulator {
+        self.imu.imu()
+    }
+
+    /// Simulated time of nav's IMU time `t_nav` (which counts from the first sample).
+    pub fn sim_time(&self, t_nav: f64) -> f64 {
+        self.t_first.unwrap_or(0.0) + t_nav
+    }
+
+    /// Simulated time of nav's sample number `k`.
+    pub fn time_of(&self, k: i64) -> f64 {
+        let base = self.pipeline.processor().baseline().unwrap_or(0) as i64;
+        self.t_first.unwrap_or(0.0) + (k - base) as f64 / self.rate_hz()
+    }
+
+    fn rate_hz(&self) -> f64 {
+        self.imu.imu().params().rate_hz
+    }
+
+    /// Frames nav sent that no device here takes (a TT_CMD without a turntable).
+    pub fn unexpected_frames(&self) -> u64 {
+        self.bad_from_nav
+    }
+}

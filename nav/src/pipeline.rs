@@ -1,0 +1,851 @@
+//! nav's mission logic as one pipeline without I/O: decoded frames and GPS fixes in, what must
+//! go out (turntable commands, solution frames, records, progress lines) back. The `nav` binary
+//! is a thin shell around it (config, sockets, pty, signals, recorder), and every in-process run
+//! of the bench (replay, drills, navigation experiments, Monte Carlo) drives this same pipeline.
+//!
+//! One CAN frame, followed from input to output ([`Pipeline::on_frame`]):
+//! 1. **decode** it with the wire contract; bad frames are counted by kind ([`FrameCounters`]);
+//! 2. **turntable** status and acknowledgements go to the north-finder's indexer link;
+//! 3. the IMU **front end** turns gyro/accel frames into samples on the one IMU clock (the
+//!    extended sample counter);
+//! 4. **processing** (dither filter, coning and sculling) turns samples into updates; a PPS
+//!    edge latched in a sample becomes an IMU time for the navigator;
+//! 5. each update goes to **north-finding**, and once it is finished (or when it is off) to the
+//!    **navigator**: the [hand-over](Pipeline::hand_over) gives it north-finding's heading;
+//! 6. north-finding's **commands** for the indexing mechanism go out;
+//! 7. every `rate / 50` samples the **solution** (mode and health from [`Pipeline::mode`] and
+//!    [`Pipeline::health`]) goes out as NAV_* frames.
+//!
+//! IMU time is `(sample - baseline) / rate`: seconds from the front end's first sample.
+
+use crate::attitude::{ImuProcessor, Update, quaternion_to_rotation_vector};
+use crate::config::NavConfig;
+use crate::earth;
+use crate::gps::GpsFix;
+use crate::imu::{ImuEvent, ImuFrontEnd, ImuSample};
+use crate::navigator::Navigator;
+use crate::northfind::{NorthFinder, Phase};
+use crate::output::{Solution, SolutionEncoder};
+use crate::record::JsonChannel;
+use crate::summary::{AttitudeSummary, NorthFindingSummary, Summary};
+use std::collections::BTreeMap;
+use thiserror::Error;
+use tracing::{info, warn};
+use wire::{DecodeError, Message, RawFrame};
+
+/// What the pipeline asks its shell to do.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Output {
+    /// Send a turntable command on the bus (it must go out: a failure is the shell's error).
+    Command(RawFrame),
+    /// Send a solution frame on the bus (best effort: navigation never waits for its output).
+    Solution(RawFrame),
+    /// Record a JSON message (the shell stamps the wall time).
+    Json {
+        /// Channel.
+        channel: JsonChannel,
+        /// Publish time on the IMU clock, ns.
+        publish_ns: u64,
+        /// The message.
+        json: String,
+    },
+    /// Record a decoded IMU sample.
+    Sample {
+        /// Publish time on the IMU clock, ns.
+        publish_ns: u64,
+        /// The sample.
+        sample: ImuSample,
+    },
+    /// A line for the operator (stdout).
+    Line(String),
+}
+
+/// Setting the pipeline up failed.
+#[derive(Debug, Error)]
+pub enum PipelineError {
+    /// The processing chain's settings.
+    #[error("processing chain: {0}")]
+    Processing(#[from] crate::fir::FirError),
+    /// North-finding's settings.
+    #[error("north-finding: {0}")]
+    NorthFinding(String),
+}
+
+/// Frames received, by outcome.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FrameCounters {
+    /// Data frames.
+    pub total: u64,
+    /// Decoded, by message name.
+    pub by_message: BTreeMap<String, u64>,
+    /// Unknown ids and how often each came.
+    pub unknown: BTreeMap<u32, u64>,
+    /// Wrong length for their id.
+    pub bad_length: u64,
+    /// A value out of its range.
+    pub invalid: u64,
+    /// Remote and error frames.
+    pub non_data: u64,
+}
+
+/// Running sums over the processed samples and updates (the summary's means).
+#[derive(Debug, Clone, Default)]
+struct Sums {
+    samples: u64,
+    first: Option<u64>,
+    last: Option<u64>,
+    phi: [f64; 3],
+    dv: [f64; 3],
+    updates: u64,
+}
+
+impl Sums {
+    fn add_sample(&mut self, s: &ImuSample) {
+        if s.ambiguous {
+            return;
+        }
+        self.samples += u64::from(s.span);
+        self.first.get_or_insert(s.sample - u64::from(s.span));
+        self.last = Some(s.sample);
+    }
+
+    fn add_update(&mut self, u: &Update) {
+        self.updates += 1;
+        for a in 0..3 {
+            self.phi[a] += u.phi[a];
+            self.dv[a] += u.dv[a];
+        }
+    }
+}
+
+/// North-finding with its link to the indexing mechanism and its reporting.
+#[derive(Debug)]
+struct NorthFinding {
+    finder: NorthFinder,
+    commands_sent: u64,
+    frames: u64,
+    last_print: f64,
+    last_stage: Option<(Phase, usize)>,
+    reported: bool,
+    handed_over: bool,
+}
+
+/// The navigation computer's logic.
+pub struct Pipeline {
+    rate_hz: f64,
+    sample_ns: f64,
+    coning_samples: usize,
+    gps_expected: bool,
+    record: bool,
+    fe: ImuFrontEnd,
+    proc: ImuProcessor,
+    fir: Option<crate::fir::FirResponse>,
+    coning_method: crate::coning::ConingMethod,
+    nf: Option<NorthFinding>,
+    navigator: Option<Navigator>,
+    out_every: u64,
+    next_out: Option<u64>,
+    encoder: SolutionEncoder,
+    last_mode: Option<String>,
+    frames: FrameCounters,
+    sums: Sums,
+    imu_timeout: bool,
+    timeouts: u64,
+    fixes: u64,
+    last_fix: Option<GpsFix>,
+    encode_errors: u64,
+    samples: Vec<ImuSample>,
+    events: Vec<ImuEvent>,
+    updates: Vec<Update>,
+    sol_frames: Vec<RawFrame>,
+}
+
+impl Pipeline {
+    /// The pipeline of config `cfg` (its device sections are the shell's). `record`: produce
+    /// records for a recording (off for in-process runs that only want the result).
+    pub fn new(cfg: &NavConfig, record: bool) -> Result<Self, PipelineError> {
+        let proc = ImuProcessor::new(&cfg.processing)?;
+        let nf = if cfg.north_finding.enabled {
+            Some(NorthFinding {
+                finder: NorthFinder::new(cfg.north_finding.clone())
+                    .map_err(PipelineError::NorthFinding)?,
+                commands_sent: 0,
+                frames: 0,
+                last_print: f64::NEG_INFINITY,
+                last_stage: None,
+                reported: false,
+                handed_over: false,
+            })
+        } else {
+            None
+        };
+        Ok(Self {
+            rate_hz: cfg.imu.rate_hz,
+            sample_ns: 1e9 / cfg.imu.rate_hz,
+            coning_samples: cfg.processing.coning_samples,
+            gps_expected: cfg.gps.is_some(),
+            record,
+            fe: ImuFrontEnd::new(cfg.imu),
+            fir: proc.fir_response(),
+            proc,
+            coning_method: cfg.processing.coning,
+            nf,
+            navigator: cfg
+                .navigation
+                .enabled
+                .then(|| Navigator::new(cfg.navigation.clone())),
+            out_every: (cfg.imu.rate_hz / 50.0).round().max(1.0) as u64,
+            next_out: None,
+            encoder: SolutionEncoder::default(),
+            last_mode: None,
+            frames: FrameCounters::default(),
+            sums: Sums::default(),
+            imu_timeout: false,
+            timeouts: 0,
+            fixes: 0,
+            last_fix: None,
+            encode_errors: 0,
+            samples: Vec::new(),
+            events: Vec::new(),
+            updates: Vec::new(),
+            sol_frames: Vec::new(),
+        })
+    }
+
+    /// One data frame from the bus.
+    pub fn on_frame(&mut self, raw: &RawFrame, out: &mut Vec<Output>) {
+        self.frames.total += 1;
+        // 1. decode
+        let m = match Message::decode(raw) {
+            Ok(m) => m,
+            Err(e) => {
+                self.bad_frame(&e, raw, out);
+                return;
+            }
+        };
+        *self
+            .frames
+            .by_message
+            .entry(m.spec().name.to_string())
+            .or_insert(0) += 1;
+        // 2. the indexing mechanism's frames
+        if let Some(nf) = self.nf.as_mut() {
+            match &m {
+                Message::TtStatus(st) => {
+                    nf.frames += 1;
+                    nf.finder.on_status(st);
+                }
+                Message::TtAck(a) => {
+                    nf.frames += 1;
+                    nf.finder.on_ack(a);
+                }
+                _ => {}
+            }
+        }
+        // 3. the IMU front end
+        self.fe.on_message(&m, &mut self.samples, &mut self.events);
+        // 4, 5. processing, north-finding and navigation
+        self.process(out);
+        self.hand_over();
+        // 6. north-finding's commands and progress
+        self.north_finding(out);
+        // 7. the solution at 50 Hz of IMU time
+        self.solution(out);
+    }
+
+    /// A remote or error frame (`what` says which): counted and recorded, otherwise ignored.
+    pub fn on_non_data(&mut self, what: &str, out: &mut Vec<Output>) {
+        self.frames.total += 1;
+        self.frames.non_data += 1;
+        if self.frames.non_data <= 5 {
+            warn!("ignored: {what}");
+        }
+        if self.record {
+            let json = serde_json::json!({"kind": "non_data_frame", "detail": what});
+            self.json(
+                JsonChannel::Event,
+                self.fe.stats().samples,
+                json.to_string(),
+                out,
+            );
+        }
+    }
+
+    /// A decoded GPS fix arrived.
+    pub fn on_fix(&mut self, fix: GpsFix, out: &mut Vec<Output>) {
+        self.fixes += 1;
+        if self.record
+            && let Ok(json) = serde_json::to_string(&fix)
+        {
+            let now = self.sums.last.unwrap_or(0);
+            self.json(JsonChannel::Gps, now, json, out);
+        }
+        if let Some(n) = self.navigator.as_mut() {
+            n.on_fix(&fix);
+        }
+        self.last_fix = Some(fix);
+    }
+
+    /// The shell's liveness watchdog (wall time): IMU frames stopped (`true`) or came back. It
+    /// sets the solution's `imu_timeout` health bit; both changes are recorded as events
+    /// (`imu_timeout`, `imu_back`) so that a replay of the recording applies them where they
+    /// happened.
+    pub fn set_imu_timeout(&mut self, active: bool, after_ms: u64, out: &mut Vec<Output>) {
+        if active == self.imu_timeout {
+            return;
+        }
+        self.imu_timeout = active;
+        if active {
+            self.timeouts += 1;
+            warn!(
+                "no IMU frame for {after_ms} ms (last sample {:?})",
+                self.sums.last
+            );
+            let json = format!("{{\"kind\":\"imu_timeout\",\"after_ms\":{after_ms}}}");
+            self.json(JsonChannel::Event, self.sums.last.unwrap_or(0), json, out);
+        } else {
+            info!("IMU data back");
+            let json = "{\"kind\":\"imu_back\"}".to_string();
+            self.json(JsonChannel::Event, self.sums.last.unwrap_or(0), json, out);
+        }
+    }
+
+    /// IMU gyro frames received so far (the shell's watchdog watches it grow).
+    pub fn gyro_frames(&self) -> u64 {
+        self.fe.stats().gyro_frames
+    }
+
+    /// End of the stream: a sample still waiting for its accelerometer frame is processed.
+    pub fn flush(&mut self, out: &mut Vec<Output>) {
+        self.fe.flush(&mut self.samples, &mut self.events);
+        self.process(out);
+    }
+
+    /// IMU time of sample `k`, s (from the front end's first sample).
+    fn imu_time(&self, k: i64) -> f64 {
+        let base = self.proc.baseline().map_or(0, |b| b as i64);
+        (k - base) as f64 * self.sample_ns * 1e-9
+    }
+
+    /// Steps 4 and 5: the samples the front end produced, through processing, to north-finding
+    /// and navigation.
+    fn process(&mut self, out: &mut Vec<Output>) {
+        for e in self.events.drain(..) {
+            match e {
+                ImuEvent::Gap { .. } | ImuEvent::AccelMissing { .. } => {
+                    tracing::debug!("IMU: {e:?}")
+                }
+                _ => warn!("IMU: {e:?}"),
+            }
+            if self.record
+                && let Ok(json) = serde_json::to_string(&e)
+            {
+                out.push(Output::Json {
+                    channel: JsonChannel::Event,
+                    publish_ns: 0,
+                    json,
+                });
+            }
+        }
+        let samples = std::mem::take(&mut self.samples);
+        for s in &samples {
+            self.sums.add_sample(s);
+            let invalid_before = self.proc.stats().invalid_since.is_some();
+            self.proc.push_sample(s, &mut self.updates);
+            // the PPS edge came `o` samples before the end of this sample
+            if let (Some(n), Some(o), Some(b)) =
+                (self.navigator.as_mut(), s.pps_offset, self.proc.baseline())
+            {
+                n.on_pps(((s.sample - b) as f64 - o) * self.sample_ns * 1e-9);
+            }
+            if !invalid_before && let Some(k) = self.proc.stats().invalid_since {
+                warn!("attitude invalid from sample {k}: counter gap too long to difference");
+            }
+            let updates = std::mem::take(&mut self.updates);
+            for u in &updates {
+                let t = self.imu_time(u.valid_sample);
+                if let Some(nf) = self.nf.as_mut() {
+                    nf.finder.on_update(t, u.phi, u.dv);
+                }
+                // navigation takes over once north-finding (when it runs) is finished
+                if let Some(n) = self.navigator.as_mut()
+                    && self.nf.as_ref().is_none_or(|f| f.finder.finished())
+                {
+                    n.on_update(
+                        t,
+                        u.phi,
+                        u.dv,
+                        self.coning_samples as f64 * self.sample_ns * 1e-9,
+                    );
+                }
+                self.sums.add_update(u);
+                if self.record && self.sums.updates.is_multiple_of(50) {
+                    let rv =
+                        quaternion_to_rotation_vector(&self.proc.attitude()).map(f64::to_degrees);
+                    out.push(Output::Json {
+                        channel: JsonChannel::Attitude,
+                        publish_ns: (u.valid_sample.max(0) as f64 * self.sample_ns) as u64,
+                        json: format!(
+                            "{{\"valid_sample\":{},\"rotation_vector_deg\":[{:.9},{:.9},{:.9}]}}",
+                            u.valid_sample, rv[0], rv[1], rv[2]
+                        ),
+                    });
+                }
+            }
+            self.updates = updates;
+            self.updates.clear();
+            if self.record {
+                out.push(Output::Sample {
+                    publish_ns: (s.sample as f64 * self.sample_ns) as u64,
+                    sample: *s,
+                });
+            }
+        }
+        self.samples = samples;
+        self.samples.clear();
+    }
+
+    /// The hand-over: north-finding's heading goes to the navigator once, when it is found.
+    fn hand_over(&mut self) {
+        if let (Some(n), Some(nf)) = (self.navigator.as_mut(), self.nf.as_mut())
+            && !nf.handed_over
+            && let Some(r) = nf.finder.result()
+        {
+            n.set_heading(r.heading_deg);
+            nf.handed_over = true;
+        }
+    }
+
+    /// Step 6: north-finding's commands at the current IMU time, and its progress lines (at
+    /// most once a second of IMU time and at every stage change; the result or the reason it
+    /// gave up once).
+    fn north_finding(&mut self, out: &mut Vec<Output>) {
+        let Some(nf) = self.nf.as_mut() else { return };
+        let base = self.proc.baseline().map_or(0, |b| b as i64);
+        let t = self.proc.valid_sample().saturating_sub(base) as f64 / self.rate_hz;
+        while let Some(c) = nf.finder.poll(t.max(0.0)) {
+            match Message::TtCmd(c).encode() {
+                Ok(f) => {
+                    out.push(Output::Command(f));
+                    nf.commands_sent += 1;
+                }
+                Err(e) => {
+                    self.encode_errors += 1;
+                    warn!("TT_CMD {c:?} cannot be encoded: {e}");
+                }
+            }
+            if nf.finder.finished() {
+                break;
+            }
+        }
+        let stage = nf.finder.stage();
+        if nf.last_stage != Some(stage) || (t - nf.last_print >= 1.0 && !nf.finder.finished()) {
+            nf.last_print = t;
+            nf.last_stage = Some(stage);
+            if let Ok(j) = serde_json::to_string(&nf.finder.progress()) {
+                out.push(Output::Line(format!("nav: north-finding progress {j}")));
+                if self.record {
+                    out.push(Output::Json {
+                        channel: JsonChannel::Event,
+                        publish_ns: (t * 1e9) as u64,
+                        json: format!("{{\"kind\":\"north_finding_progress\",\"progress\":{j}}}"),
+                    });
+                }
+            }
+        }
+        if nf.finder.finished() && !nf.reported {
+            nf.reported = true;
+            if let Some(r) = nf.finder.result() {
+                info!(
+                    heading_deg = r.heading_deg,
+                    sigma_deg = r.sigma_deg,
+                    "north found"
+                );
+                if let Ok(j) = serde_json::to_string(r) {
+                    out.push(Output::Line(format!("nav: north-finding result {j}")));
+                }
+            } else {
+                let why = nf.finder.abort_reason().unwrap_or("unknown");
+                warn!("north-finding aborted: {why}");
+                out.push(Output::Line(format!("nav: north-finding aborted: {why}")));
+            }
+        }
+    }
+
+    /// The solution's mode: north-finding while it runs, then the navigator's.
+    pub fn mode(&self) -> wire::NavMode {
+        let nf_running = self.nf.as_ref().is_some_and(|f| !f.finder.finished());
+        match (&self.navigator, nf_running) {
+            (_, true) => wire::NavMode::NorthFinding,
+            (Some(n), false) => n.mode(),
+            (None, false) => wire::NavMode::Init,
+        }
+    }
+
+    /// The solution's health bits.
+    pub fn health(&self) -> wire::NavHealth {
+        let st = self.fe.stats();
+        let nav = self.navigator.as_ref();
+        wire::NavHealth {
+            imu_timeout: self.imu_timeout,
+            imu_gaps: st.gaps > 0,
+            imu_bit: st.bit_fail_samples > 0,
+            gps_stale: self.gps_expected && nav.is_none_or(|n| n.gps_stale()),
+            turntable: self
+                .nf
+                .as_ref()
+                .is_some_and(|f| f.finder.abort_reason().is_some()),
+            filter: self.proc.stats().invalid_since.is_some()
+                || nav
+                    .and_then(|n| n.filter())
+                    .is_some_and(|k| k.stats().reanchors > 0),
+        }
+    }
+
+    /// Step 7: the solution epoch, every `rate / 50` samples of IMU time.
+    fn solution(&mut self, out: &mut Vec<Output>) {
+        let Some(last) = self.sums.last else { return };
+        if last < *self.next_out.get_or_insert(last) {
+            return;
+        }
+        self.next_out = Some(last + self.out_every);
+        let mode = self.mode();
+        let sigmas = self.navigator.as_ref().and_then(|n| n.sigmas());
+        let solution = Solution {
+            sample_count: last,
+            mode,
+            health: self.health(),
+            output: self
+                .navigator
+                .as_ref()
+                .and_then(|n| n.state())
+                .map(|x| x.output()),
+            pos_sigma_m: sigmas.map_or(0.0, |x| x.0),
+            heading_sigma_deg: sigmas.map_or(0.0, |x| x.1),
+        };
+        // once a second of IMU time, the solution goes in the recording too
+        if self.record
+            && self.encoder.epochs.is_multiple_of(50)
+            && let (Some(o), Some(n)) = (&solution.output, &self.navigator)
+        {
+            let j = serde_json::json!({
+                "t_s": n.time(),
+                "mode": format!("{mode:?}"),
+                "output": o,
+                "pos_sigma_m": solution.pos_sigma_m,
+                "heading_sigma_deg": solution.heading_sigma_deg,
+            });
+            out.push(Output::Json {
+                channel: JsonChannel::Solution,
+                publish_ns: (last as f64 * self.sample_ns) as u64,
+                json: j.to_string(),
+            });
+        }
+        self.encoder.encode(&solution, &mut self.sol_frames);
+        self.last_mode = Some(format!("{mode:?}"));
+        out.extend(self.sol_frames.drain(..).map(Output::Solution));
+    }
+
+    fn bad_frame(&mut self, e: &DecodeError, raw: &RawFrame, out: &mut Vec<Output>) {
+        let c = &mut self.frames;
+        let first = match e {
+            DecodeError::UnknownId { id } => {
+                let n = c.unknown.entry(*id).or_insert(0);
+                *n += 1;
+                *n == 1
+            }
+            DecodeError::WrongLength { .. } => {
+                c.bad_length += 1;
+                c.bad_length <= 5
+            }
+            _ => {
+                c.invalid += 1;
+                c.invalid <= 5
+            }
+        };
+        let sample = self.fe.stats().samples;
+        if first {
+            warn!(
+                "bad frame near IMU sample {sample}: {e} (data {:02X?})",
+                raw.payload()
+            );
+        }
+        if self.record {
+            let json = serde_json::json!({"kind": "bad_frame", "sample": sample, "id": raw.id, "len": raw.len, "error": e.to_string()});
+            out.push(Output::Json {
+                channel: JsonChannel::Event,
+                publish_ns: 0,
+                json: json.to_string(),
+            });
+        }
+    }
+
+    fn json(&self, channel: JsonChannel, sample: u64, json: String, out: &mut Vec<Output>) {
+        if self.record {
+            out.push(Output::Json {
+                channel,
+                publish_ns: (sample as f64 * self.sample_ns) as u64,
+                json,
+            });
+        }
+    }
+
+    /// The front end.
+    pub fn front_end(&self) -> &ImuFrontEnd {
+        &self.fe
+    }
+
+    /// The processing chain.
+    pub fn processor(&self) -> &ImuProcessor {
+        &self.proc
+    }
+
+    /// The north-finder (when enabled).
+    pub fn finder(&self) -> Option<&NorthFinder> {
+        self.nf.as_ref().map(|n| &n.finder)
+    }
+
+    /// The navigator (when enabled).
+    pub fn navigator(&self) -> Option<&Navigator> {
+        self.navigator.as_ref()
+    }
+
+    /// The frame counters.
+    pub fn frames(&self) -> &FrameCounters {
+        &self.frames
+    }
+
+    /// Fixes received, and the last one.
+    pub fn fixes(&self) -> (u64, Option<&GpsFix>) {
+        (self.fixes, self.last_fix.as_ref())
+    }
+
+    /// Solution epochs encoded.
+    pub fn solution_epochs(&self) -> u64 {
+        self.encoder.epochs
+    }
+
+    /// The last sample processed.
+    pub fn last_sample(&self) -> Option<u64> {
+        self.sums.last
+    }
+
+    /// The run's summary (the shell fills in what only it knows: interface, read errors, wall
+    /// time, the GPS port, the frames it sent, the recording).
+    pub fn summary(&self) -> Summary {
+        let dt = 1.0 / self.rate_hz;
+        let n = (self.sums.updates * self.coning_samples as u64).max(1) as f64;
+        let mean_rate_dph = self
+            .sums
+            .phi
+            .map(|x| x / (n * dt) * earth::DEG_PER_HOUR_PER_RAD_S);
+        let mean_f = self.sums.dv.map(|x| x / (n * dt));
+        let pst = self.proc.stats();
+        let q = self.proc.attitude();
+        let attitude = AttitudeSummary {
+            baseline_sample: self.proc.baseline(),
+            origin_sample: self.proc.origin(),
+            valid_sample: self.proc.valid_sample(),
+            span_samples: self.proc.valid_sample() - self.proc.origin().unwrap_or(0),
+            rotation_vector_deg: quaternion_to_rotation_vector(&q).map(f64::to_degrees),
+            angle_deg: q.angle().to_degrees(),
+            valid: pst.invalid_since.is_none(),
+            delay_samples: self.proc.delay(),
+            fir: self.fir,
+            coning_method: self.coning_method,
+            coning_coefficients: self.proc.coefficients().k.clone(),
+        };
+        let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let c = &self.frames;
+        Summary {
+            interface: String::new(),
+            frames_total: c.total,
+            frames_by_message: c.by_message.clone(),
+            unknown_id_frames: c.unknown.values().sum(),
+            unknown_ids: c.unknown.keys().map(|id| format!("0x{id:03X}")).collect(),
+            bad_length_frames: c.bad_length,
+            invalid_value_frames: c.invalid,
+            non_data_frames: c.non_data,
+            read_errors: 0,
+            imu: self.fe.stats(),
+            max_safe_gap_samples: self.fe.max_span(),
+            first_sample: self.sums.first,
+            last_sample: self.sums.last,
+            imu_seconds: self.sums.samples as f64 * dt,
+            wall_seconds: 0.0,
+            imu_timeouts: self.timeouts,
+            mean_rate_dph,
+            mean_specific_force_mps2: mean_f,
+            rate_norm_dph: norm(mean_rate_dph),
+            specific_force_norm_mps2: norm(mean_f),
+            processing: pst,
+            attitude,
+            north_finding: self.nf.as_ref().map(|f| NorthFindingSummary {
+                phase: f.finder.phase(),
+                result: f.finder.result().cloned(),
+                abort: f.finder.abort_reason().map(str::to_string),
+                commands_sent: f.commands_sent,
+                turntable_frames: f.frames,
+            }),
+            gps: None,
+            navigation: self.navigator.as_ref().map(|n| n.summary()),
+            housekeeping: self.fe.housekeeping(),
+            solution: crate::summary::SolutionSummary {
+                epochs: self.encoder.epochs,
+                frames_sent: 0,
+                send_errors: 0,
+                last_mode: self.last_mode.clone(),
+            },
+            encode_errors: self.encode_errors + self.encoder.encode_errors,
+            mcap: None,
+            mcap_messages: 0,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use wire::{ImuAccel, ImuGyro, NavMode};
+
+    fn config(extra: &str) -> NavConfig {
+        toml::from_str(&format!("[can]\ninterface = \"can0\"\n{extra}")).unwrap()
+    }
+
+    /// The frames of IMU sample `k` of a unit at rest (counters still).
+    fn sample(k: u64) -> [RawFrame; 2] {
+        [
+            Message::ImuGyro(ImuGyro {
+                counts: [0; 3],
+                sample_counter: k as u16,
+            })
+            .encode()
+            .unwrap(),
+            Message::ImuAccel(ImuAccel {
+                counts: [0; 3],
+                sample_counter_low: (k & 0xF) as u8,
+                pps_offset: None,
+                bit_fail: false,
+                saturated: false,
+            })
+            .encode()
+            .unwrap(),
+        ]
+    }
+
+    fn nav_times(out: &[Output]) -> Vec<wire::NavTime> {
+        out.iter()
+            .filter_map(|o| match o {
+                Output::Solution(f) => match Message::decode(f) {
+                    Ok(Message::NavTime(t)) => Some(t),
+                    _ => None,
+                },
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_solution_goes_out_every_40_samples_and_bad_frames_are_counted() {
+        let mut p = Pipeline::new(&config(""), false).unwrap();
+        let mut out = Vec::new();
+        for k in 0..=400 {
+            for f in sample(k) {
+                p.on_frame(&f, &mut out);
+            }
+        }
+        let unknown = RawFrame {
+            id: 0x7EE,
+            len: 2,
+            data: [1, 2, 0, 0, 0, 0, 0, 0],
+        };
+        p.on_frame(&unknown, &mut out);
+        let mut short = sample(401)[0];
+        short.len = 3;
+        p.on_frame(&short, &mut out);
+        let t = nav_times(&out);
+        assert_eq!(t.len(), 10, "{t:?}");
+        for w in t.windows(2) {
+            assert_eq!(w[1].sample_count - w[0].sample_count, 40);
+            assert_eq!(w[1].seq, w[0].seq.wrapping_add(1));
+        }
+        assert!(
+            t.iter()
+                .all(|x| x.mode == NavMode::Init && !x.health.imu_timeout)
+        );
+        let c = p.frames();
+        assert_eq!((c.total, c.bad_length), (804, 1));
+        assert_eq!(c.unknown.get(&0x7EE), Some(&1));
+        assert!(
+            out.iter().all(|o| !matches!(o, Output::Json { .. })),
+            "not recording"
+        );
+        let s = p.summary();
+        assert_eq!(s.imu.samples, 400);
+        assert_eq!(s.solution.epochs, 10);
+    }
+
+    #[test]
+    fn the_watchdog_sets_the_health_bit_and_both_changes_are_recorded() {
+        let mut p = Pipeline::new(&config(""), true).unwrap();
+        let mut out = Vec::new();
+        for f in sample(0).into_iter().chain(sample(1)) {
+            p.on_frame(&f, &mut out);
+        }
+        p.set_imu_timeout(true, 100, &mut out);
+        p.set_imu_timeout(true, 100, &mut out);
+        out.clear();
+        for k in 2..=41 {
+            for f in sample(k) {
+                p.on_frame(&f, &mut out);
+            }
+        }
+        let t = nav_times(&out);
+        assert!(t.len() == 1 && t[0].health.imu_timeout, "{t:?}");
+        out.clear();
+        p.set_imu_timeout(false, 100, &mut out);
+        let events: Vec<&str> = out
+            .iter()
+            .filter_map(|o| match o {
+                Output::Json { channel, json, .. } if *channel == JsonChannel::Event => {
+                    Some(json.as_str())
+                }
+                _ => None,
+            })
+            .collect();
+        assert_eq!(events, ["{\"kind\":\"imu_back\"}"]);
+        assert_eq!(p.summary().imu_timeouts, 1);
+    }
+
+    #[test]
+    fn north_finding_commands_go_out_before_the_solution_that_follows_them() {
+        let cfg = config("[north_finding]\nenabled = true\nlatitude_deg = -33.9\n");
+        let mut p = Pipeline::new(&cfg, false).unwrap();
+        let mut out = Vec::new();
+        for k in 0..=200 {
+            for f in sample(k) {
+                p.on_frame(&f, &mut out);
+            }
+        }
+        let first_cmd = out
+            .iter()
+            .position(|o| matches!(o, Output::Command(_)))
+            .expect("the finder enables the mechanism");
+        match &out[first_cmd] {
+            Output::Command(f) => assert!(matches!(Message::decode(f), Ok(Message::TtCmd(_)))),
+            _ => unreachable!(),
+        }
+        // the NAV_TIME after a command is what places it in time on the bench
+        assert!(
+            out[first_cmd..]
+                .iter()
+                .any(|o| matches!(o, Output::Solution(_)))
+        );
+        assert!(
+            nav_times(&out)
+                .iter()
+                .all(|t| t.mode == NavMode::NorthFinding)
+        );
+        assert!(p.finder().is_some_and(|f| !f.finished()));
+    }
+}
