@@ -97,20 +97,23 @@ fn wrap(a: f64) -> f64 {
 
 impl Drive {
     /// Plan the route; errors name what is wrong with the spec.
-    pub fn plan(spec: &DriveSpec) -> Result<Self, String> {
+    pub fn plan(spec: &DriveSpec) -> Result<Self, crate::ParamError> {
         let pos = |x: f64| x.is_finite() && x > 0.0;
         if !(pos(spec.speed_mps)
             && pos(spec.accel_mps2)
             && pos(spec.turn_rate_dps)
             && pos(spec.lateral_accel_mps2))
         {
-            return Err(
-                "drive: speed_mps, accel_mps2, turn_rate_dps and lateral_accel_mps2 must be positive"
-                    .into(),
-            );
+            return Err(crate::ParamError::new(
+                "drive",
+                "speed_mps, accel_mps2, turn_rate_dps and lateral_accel_mps2 must be positive",
+            ));
         }
         if spec.waypoints.is_empty() || spec.laps == 0 {
-            return Err("drive: needs at least one waypoint and one lap".into());
+            return Err(crate::ParamError::new(
+                "drive",
+                "needs at least one waypoint and one lap",
+            ));
         }
         let mut pts = vec![[0.0, 0.0]];
         for _ in 0..spec.laps {
@@ -119,14 +122,18 @@ impl Drive {
         if spec.laps > 1 {
             let last = spec.waypoints[spec.waypoints.len() - 1];
             if last[0].hypot(last[1]) > 1.0 {
-                return Err(
-                    "drive: with laps > 1 the last waypoint must be the start [0, 0]".into(),
-                );
+                return Err(crate::ParamError::new(
+                    "drive",
+                    "with laps > 1 the last waypoint must be the start [0, 0]",
+                ));
             }
         }
         pts.dedup_by(|a, b| (a[0] - b[0]).hypot(a[1] - b[1]) < 1e-6);
         if pts.len() < 2 {
-            return Err("drive: the waypoints do not leave the start".into());
+            return Err(crate::ParamError::new(
+                "drive",
+                "the waypoints do not leave the start",
+            ));
         }
         let v = spec.speed_mps;
         let rate = spec
@@ -176,8 +183,11 @@ impl Drive {
         let d_acc = v * v / (2.0 * spec.accel_mps2);
         let total: f64 = legs.iter().map(|l| l.0).sum::<f64>() - 2.0 * tangent.iter().sum::<f64>();
         if total < 2.0 * d_acc {
-            return Err(format!(
-                "drive: the route ({total:.0} m of straight road) is too short to reach {v} m/s and stop"
+            return Err(crate::ParamError::new(
+                "drive",
+                format!(
+                    "the route ({total:.0} m of straight road) is too short to reach {v} m/s and stop"
+                ),
             ));
         }
         let mut speed = 0.0;
@@ -577,12 +587,27 @@ mod tests {
     fn bad_routes_say_what_is_wrong() {
         let mut s = square();
         s.waypoints = vec![[0.0, 30.0], [0.0, 0.0]];
-        assert!(Drive::plan(&s).unwrap_err().contains("too short"));
+        assert!(
+            Drive::plan(&s)
+                .unwrap_err()
+                .to_string()
+                .contains("too short")
+        );
         s = square();
         s.waypoints.pop();
-        assert!(Drive::plan(&s).unwrap_err().contains("must be the start"));
+        assert!(
+            Drive::plan(&s)
+                .unwrap_err()
+                .to_string()
+                .contains("must be the start")
+        );
         s = square();
         s.speed_mps = 0.0;
-        assert!(Drive::plan(&s).unwrap_err().contains("positive"));
+        assert!(
+            Drive::plan(&s)
+                .unwrap_err()
+                .to_string()
+                .contains("positive")
+        );
     }
 }

@@ -143,26 +143,35 @@ impl ImuParams {
     }
 
     /// Check ranges; the message names the parameter.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), crate::ParamError> {
         for (i, f) in self.dither_hz.iter().enumerate() {
             if self.dither_arcsec[i] != 0.0 && !(*f > 0.0 && *f < self.rate_hz / 2.0) {
-                return Err(format!(
-                    "imu.dither_hz[{i}] = {f} must lie in (0, {}) Hz",
-                    self.rate_hz / 2.0
+                return Err(crate::ParamError::new(
+                    "imu",
+                    format!(
+                        "dither_hz[{i}] = {f} must lie in (0, {}) Hz",
+                        self.rate_hz / 2.0
+                    ),
                 ));
             }
         }
         let positive = |x: f64| x.is_finite() && x > 0.0;
         if !positive(self.gyro_bias_tau_s) {
-            return Err("imu.gyro_bias_tau_s must be positive".into());
+            return Err(crate::ParamError::new(
+                "imu",
+                "gyro_bias_tau_s must be positive",
+            ));
         }
         if self.gyro_pulse_arcsec.iter().any(|w| !positive(*w))
             || self.accel_pulse_mps.iter().any(|w| !positive(*w))
         {
-            return Err("imu pulse weights must be positive".into());
+            return Err(crate::ParamError::new(
+                "imu",
+                "pulse weights must be positive",
+            ));
         }
         if !(positive(self.gyro_range_dps) && positive(self.accel_range_g)) {
-            return Err("imu ranges must be positive".into());
+            return Err(crate::ParamError::new("imu", "ranges must be positive"));
         }
         Ok(())
     }

@@ -14,3 +14,23 @@ pub mod gps;
 pub mod imu;
 pub mod truth;
 pub mod turntable;
+
+/// A scenario parameter out of its range: which table, and what is wrong (naming the parameter).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("[{table}] {problem}")]
+pub struct ParamError {
+    /// The scenario table (`imu`, `turntable`, `drive`).
+    pub table: &'static str,
+    /// What is wrong, naming the parameter.
+    pub problem: String,
+}
+
+impl ParamError {
+    /// `problem` with a parameter of table `table`.
+    pub fn new(table: &'static str, problem: impl Into<String>) -> Self {
+        Self {
+            table,
+            problem: problem.into(),
+        }
+    }
+}

@@ -244,22 +244,31 @@ impl Default for TurntableParams {
 
 impl TurntableParams {
     /// Check ranges; the message names the parameter.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), crate::ParamError> {
         let pos = |x: f64| x.is_finite() && x > 0.0;
         if !(1..=3).contains(&self.axes) {
-            return Err(format!(
-                "turntable.axes must be 1, 2 or 3, not {}",
-                self.axes
+            return Err(crate::ParamError::new(
+                "turntable",
+                format!("axes must be 1, 2 or 3, not {}", self.axes),
             ));
         }
         if !(pos(self.max_rate_dps) && pos(self.max_accel_dps2) && pos(self.settle_tau_s)) {
-            return Err("turntable rate, acceleration and settle time must be positive".into());
+            return Err(crate::ParamError::new(
+                "turntable",
+                "rate, acceleration and settle time must be positive",
+            ));
         }
         if !(pos(self.status_hz) && self.status_hz <= 1000.0) {
-            return Err("turntable.status_hz must be in (0, 1000]".into());
+            return Err(crate::ParamError::new(
+                "turntable",
+                "status_hz must be in (0, 1000]",
+            ));
         }
         if !pos(self.heartbeat_timeout_s) {
-            return Err("turntable.heartbeat_timeout_s must be positive".into());
+            return Err(crate::ParamError::new(
+                "turntable",
+                "heartbeat_timeout_s must be positive",
+            ));
         }
         Ok(())
     }

@@ -72,7 +72,7 @@ pub fn gps_run(s: &Scenario, rx: &emulators::gps::ReceiverParams) -> Result<Opti
     let Some(d) = &s.drive else { return Ok(None) };
     Ok(Some(GpsRun {
         writer: NmeaWriter::new(rx.clone()),
-        drive: Drive::plan(d).map_err(anyhow::Error::msg)?,
+        drive: Drive::plan(d)?,
         pps_phase_s: s.imu.pps_phase_s,
         latency_s: 0.05,
         // a fixed time of day: the run depends on its scenario and seed only

@@ -528,7 +528,7 @@ fn validate_turntable(a: ValidateArgs) -> Result<i32> {
             faults,
             ..TurntableParams::default()
         };
-        p.check().map_err(anyhow::Error::msg)?;
+        p.check()?;
         let tt = Turntable::new(p);
         let progress = Arc::new(emulators::can::Progress::default());
         let clock = emulators::clock::SimClock::start(a.speed);

@@ -240,7 +240,7 @@ pub fn navigate(
     let Some(spec) = &s.drive else {
         bail!("scenario {} has no [drive]", s.name);
     };
-    let drive = Drive::plan(spec).map_err(anyhow::Error::msg)?;
+    let drive = Drive::plan(spec)?;
     let (motion, tt) = s.build();
     let finds_north = s.north_finding.is_some() && tt.is_some();
     let gps = crate::inproc::gps_run(s, rx)?;

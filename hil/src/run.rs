@@ -273,7 +273,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let mut navigation_series = None;
     let navigation = match (&s.navigation, &s.drive) {
         (Some(_), Some(d)) => {
-            let drive = Drive::plan(d).map_err(anyhow::Error::msg)?;
+            let drive = Drive::plan(d)?;
             let t_first = 1.0 / s.imu.rate_hz;
             let o = crate::navrun::score_summary(&drive, &nav_json, t_first);
             // second by second from nav's recording: statistics, CSV and a plot

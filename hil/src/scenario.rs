@@ -114,18 +114,18 @@ impl Scenario {
         if !(0.0..1.0).contains(&self.max_bus_loss) {
             bail!("max_bus_loss must be in [0, 1)");
         }
-        self.imu.check().map_err(anyhow::Error::msg)?;
+        self.imu.check()?;
         if let Some(t) = &self.turntable {
-            t.check().map_err(anyhow::Error::msg)?;
+            t.check()?;
         }
         if let Some(nf) = &self.north_finding {
-            nf.check().map_err(anyhow::Error::msg)?;
+            nf.check()?;
             if self.turntable.is_none() {
                 bail!("north_finding needs a [turntable]");
             }
         }
         if let Some(d) = &self.drive {
-            Drive::plan(d).map_err(anyhow::Error::msg)?;
+            Drive::plan(d)?;
             if self.coning.is_some() {
                 bail!("a scenario has either [coning] or [drive], not both");
             }

@@ -166,7 +166,7 @@ impl NavConfig {
             )));
         }
         if let Err(e) = cfg.north_finding.check() {
-            return Err(invalid(e));
+            return Err(invalid(e.to_string()));
         }
         if let Err(e) = ImuProcessor::new(&cfg.processing) {
             return Err(invalid(format!("processing: {e}")));

@@ -94,27 +94,49 @@ impl Default for NorthFindingConfig {
     }
 }
 
+/// A north-finding setting out of its range.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("north_finding.{setting}: {requirement}")]
+pub struct NorthFindingConfigError {
+    /// The setting (as in the `[north_finding]` table).
+    pub setting: &'static str,
+    /// What it must be.
+    pub requirement: &'static str,
+}
+
 impl NorthFindingConfig {
-    /// Check the settings; the message names the field.
-    pub fn check(&self) -> Result<(), String> {
+    /// Check the settings; the error names the setting.
+    pub fn check(&self) -> Result<(), NorthFindingConfigError> {
+        let bad = |setting, requirement| {
+            Err(NorthFindingConfigError {
+                setting,
+                requirement,
+            })
+        };
         let pos = |x: f64| x.is_finite() && x > 0.0;
         if !(-89.0..=89.0).contains(&self.latitude_deg) {
-            return Err("north_finding.latitude_deg must be within 89 deg of the equator".into());
+            return bad("latitude_deg", "must be within 89 deg of the equator");
         }
         if self.positions_deg.len() < 2
             || self.positions_deg.iter().any(|p| !(0.0..360.0).contains(p))
         {
-            return Err("north_finding.positions_deg needs two or more angles in [0, 360)".into());
+            return bad("positions_deg", "needs two or more angles in [0, 360)");
         }
         if !(pos(self.dwell_s) && pos(self.end_window_s) && self.end_window_s * 4.0 < self.dwell_s)
         {
-            return Err("north_finding.dwell_s must exceed 4 end windows".into());
+            return bad(
+                "dwell_s",
+                "must be positive and exceed 4 end windows (end_window_s)",
+            );
         }
         if self.blocks < 2 {
-            return Err("north_finding.blocks must be 2 or more".into());
+            return bad("blocks", "must be 2 or more");
         }
         if !(pos(self.heartbeat_s) && pos(self.ack_timeout_s) && pos(self.move_timeout_s)) {
-            return Err("north_finding timeouts must be positive".into());
+            return bad(
+                "heartbeat_s/ack_timeout_s/move_timeout_s",
+                "timeouts must be positive",
+            );
         }
         Ok(())
     }
@@ -184,6 +206,19 @@ pub struct PositionResult {
     pub tilt_deg: [f64; 2],
     /// Dwell repeats here.
     pub repeats: u32,
+}
+
+/// The least-squares solution of the positions measured so far.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeadingSolution {
+    /// Heading of the IMU at table zero (clockwise from true north), deg, [0, 360).
+    pub heading_deg: f64,
+    /// Its sigma from the dwells' scatter, deg.
+    pub sigma_deg: f64,
+    /// Horizontal gyro biases x, y (level frame at table zero), deg/h.
+    pub gyro_bias_dph: [f64; 2],
+    /// Horizontal earth rate found, deg/h.
+    pub horizontal_earth_rate_dph: f64,
 }
 
 /// The answer.
@@ -271,7 +306,7 @@ const MICRO_RATE_FACTOR: f64 = 2.5;
 
 impl NorthFinder {
     /// A sequence with these settings (checked).
-    pub fn new(cfg: NorthFindingConfig) -> Result<Self, String> {
+    pub fn new(cfg: NorthFindingConfig) -> Result<Self, NorthFindingConfigError> {
         cfg.check()?;
         Ok(Self {
             cfg,
@@ -749,9 +784,9 @@ impl NorthFinder {
         }
     }
 
-    /// Solve for heading and biases from the positions measured so far (two or more): heading
-    /// (deg), its sigma (deg), horizontal biases (deg/h), horizontal earth rate found (deg/h).
-    pub fn solve(results: &[PositionResult]) -> Option<(f64, f64, [f64; 2], f64)> {
+    /// Solve for heading and biases from the positions measured so far (two or more; none
+    /// when they do not determine the heading).
+    pub fn solve(results: &[PositionResult]) -> Option<HeadingSolution> {
         if results.len() < 2 {
             return None;
         }
@@ -775,16 +810,22 @@ impl NorthFinder {
         let n2 = s * s + c * c;
         let var =
             (c * c * cov[(0, 0)] + s * s * cov[(1, 1)] - 2.0 * s * c * cov[(0, 1)]) / (n2 * n2);
-        Some((
-            heading,
-            var.max(0.0).sqrt().to_degrees(),
-            [x[2], x[3]],
-            n2.sqrt(),
-        ))
+        Some(HeadingSolution {
+            heading_deg: heading,
+            sigma_deg: var.max(0.0).sqrt().to_degrees(),
+            gyro_bias_dph: [x[2], x[3]],
+            horizontal_earth_rate_dph: n2.sqrt(),
+        })
     }
 
     fn finish(&mut self) {
-        let Some((heading, sigma, bias, wn)) = Self::solve(&self.results) else {
+        let Some(HeadingSolution {
+            heading_deg: heading,
+            sigma_deg: sigma,
+            gyro_bias_dph: bias,
+            horizontal_earth_rate_dph: wn,
+        }) = Self::solve(&self.results)
+        else {
             self.fail("too few positions measured to solve".into());
             return;
         };
@@ -826,14 +867,376 @@ impl NorthFinder {
                 .result
                 .as_ref()
                 .map(|r| r.heading_deg)
-                .or(est.map(|e| e.0)),
+                .or(est.map(|e| e.heading_deg)),
             sigma_deg: self
                 .result
                 .as_ref()
                 .map(|r| r.sigma_deg)
-                .or(est.map(|e| e.1)),
+                .or(est.map(|e| e.sigma_deg)),
             elapsed_s: self.t - self.t_start.unwrap_or(self.t),
             repeats: self.repeats,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use wire::TtFaults;
+
+    const G: f64 = 9.80665;
+
+    fn cfg(lat: f64) -> NorthFindingConfig {
+        NorthFindingConfig {
+            enabled: true,
+            latitude_deg: lat,
+            dwell_s: 2.0,
+            settle_s: 0.2,
+            quiet_s: 0.5,
+            ..NorthFindingConfig::default()
+        }
+    }
+
+    /// A scripted indexing mechanism: acknowledges every command (or rejects one, or says
+    /// nothing), moves in 0.5 s, engages and withdraws its pin at once.
+    #[derive(Default)]
+    struct Mech {
+        state: Option<TtState>,
+        angle: f64,
+        moving: Option<(f64, f64)>,
+        acks: Vec<TtAck>,
+        reject: Option<TtCommand>,
+        silent: bool,
+        faults: TtFaults,
+        sent: Vec<TtCmd>,
+    }
+
+    impl Mech {
+        fn command(&mut self, t: f64, c: TtCmd) {
+            self.sent.push(c);
+            if self.silent {
+                return;
+            }
+            let cmd = TtCommand::from_raw(i64::from(c.command));
+            let result = if cmd.is_some() && cmd == self.reject {
+                TtResult::Faulted
+            } else {
+                TtResult::Accepted
+            };
+            self.acks.push(TtAck {
+                seq: c.seq,
+                command: c.command,
+                axis: c.axis,
+                result,
+            });
+            if result != TtResult::Accepted {
+                return;
+            }
+            match cmd {
+                Some(TtCommand::Enable) => self.state = Some(TtState::Locked),
+                Some(TtCommand::Unlock) => self.state = Some(TtState::Idle),
+                Some(TtCommand::Lock) => self.state = Some(TtState::Locked),
+                Some(TtCommand::IndexAbs) => {
+                    self.state = Some(TtState::Moving);
+                    self.moving = Some((t + 0.5, c.arg));
+                }
+                Some(TtCommand::Home) => {
+                    self.state = Some(TtState::Moving);
+                    self.moving = Some((t + 0.5, 0.0));
+                }
+                _ => {}
+            }
+        }
+
+        fn status(&mut self, t: f64) -> TtStatus {
+            if let Some((until, a)) = self.moving
+                && t >= until
+            {
+                self.angle = a;
+                self.state = Some(TtState::Idle);
+                self.moving = None;
+            }
+            TtStatus {
+                angle_deg: self.angle,
+                rate_dps: 0.0,
+                state: self.state.unwrap_or(TtState::Disabled),
+                axis: 0,
+                faults: self.faults,
+                ack_seq: 0,
+                counter: 0,
+            }
+        }
+    }
+
+    /// The level-frame rate the solve's model gives at table angle `phi` (deg) for heading `h`
+    /// (deg), horizontal earth rate `w` and horizontal biases `b` (deg/h).
+    fn model_rate(phi: f64, h: f64, w: f64, b: [f64; 2]) -> [f64; 2] {
+        let (p, (s, c)) = (phi.to_radians(), h.to_radians().sin_cos());
+        [
+            -p.cos() * w * s + p.sin() * w * c + b[0],
+            p.sin() * w * s + p.cos() * w * c + b[1],
+        ]
+    }
+
+    /// Run the sequence against the mechanism with a noise-free IMU at rest, heading `h` deg, at
+    /// latitude `lat`; `disturb(position, tau)` adds a rate (rad/s, body x) `tau` s after the
+    /// first dwell at `position` began.
+    fn run(
+        f: &mut NorthFinder,
+        m: &mut Mech,
+        h: f64,
+        lat: f64,
+        disturb: impl Fn(usize, f64) -> f64,
+    ) -> Vec<(Phase, usize)> {
+        let b = [0.1, -0.2];
+        let lat_r = lat.to_radians();
+        let (w, wv) = (15.041_067 * lat_r.cos(), 15.041_067 * lat_r.sin());
+        let dt = 0.002;
+        let mut stages = vec![f.stage()];
+        let (mut dwell_t0, mut dwells) = (0.0, 0);
+        for i in 0..60_000 {
+            let t = f64::from(i) * dt;
+            let angle = m.angle;
+            let r = model_rate(angle, h, w, b);
+            let (phase, pos) = f.stage();
+            let extra = if phase == Phase::Dwell || phase == Phase::Disturbed {
+                disturb(pos, t - dwell_t0)
+            } else {
+                0.0
+            };
+            let wb = [r[0] / DPH + extra, r[1] / DPH, wv / DPH];
+            f.on_update(t, wb.map(|x| x * dt), [0.0, 0.0, G * dt]);
+            if i % 5 == 0 {
+                for a in m.acks.drain(..) {
+                    f.on_ack(&a);
+                }
+                let st = m.status(t);
+                f.on_status(&st);
+            }
+            while let Some(c) = f.poll(t) {
+                m.command(t, c);
+            }
+            if stages.last() != Some(&f.stage()) {
+                stages.push(f.stage());
+                // the first dwell at each position: a disturbance comes once, at a time of its own
+                if f.stage().0 == Phase::Dwell && f.stage().1 > dwells {
+                    dwells = f.stage().1;
+                    dwell_t0 = t;
+                }
+            }
+            if f.finished() {
+                break;
+            }
+        }
+        stages
+    }
+
+    #[test]
+    fn the_solve_recovers_heading_biases_and_earth_rate_in_both_hemispheres() {
+        for (h, lat) in [(359.9, -33.9), (0.1, 28.2), (123.4, 60.0), (250.0, -70.0)] {
+            let w = 15.041_067 * f64::to_radians(lat).cos();
+            let results: Vec<PositionResult> = [0.0, 90.0, 180.0, 270.0]
+                .iter()
+                .map(|&phi| {
+                    let r = model_rate(phi, h, w, [0.1, -0.2]);
+                    PositionResult {
+                        commanded_deg: phi,
+                        table_deg: phi,
+                        rate_dph: [r[0], r[1], 0.0],
+                        sigma_dph: 0.01,
+                        tilt_deg: [0.0, 0.0],
+                        repeats: 0,
+                    }
+                })
+                .collect();
+            let s = NorthFinder::solve(&results).unwrap();
+            let e = (s.heading_deg - h + 180.0).rem_euclid(360.0) - 180.0;
+            assert!(e.abs() < 1e-9, "{h} at {lat}: {s:?}");
+            assert!((s.horizontal_earth_rate_dph - w).abs() < 1e-9, "{s:?}");
+            assert!(
+                (s.gyro_bias_dph[0] - 0.1).abs() < 1e-9 && (s.gyro_bias_dph[1] + 0.2).abs() < 1e-9
+            );
+            // each of W sin H, W cos H comes from two opposite positions on two axes: sigma / 2
+            let want = (0.01 / w / 2.0).to_degrees();
+            assert!(
+                (s.sigma_deg / want - 1.0).abs() < 0.01,
+                "{} vs {want}",
+                s.sigma_deg
+            );
+            assert!(NorthFinder::solve(&results[..1]).is_none());
+        }
+    }
+
+    #[test]
+    fn four_positions_in_order_give_the_heading_of_a_noise_free_imu() {
+        let (h, lat) = (359.9, -33.9);
+        let mut f = NorthFinder::new(cfg(lat)).unwrap();
+        let mut m = Mech::default();
+        let stages = run(&mut f, &mut m, h, lat, |_, _| 0.0);
+        let r = f
+            .result()
+            .unwrap_or_else(|| panic!("{:?} {stages:?}", f.abort_reason()));
+        let e = (r.heading_deg - h + 180.0).rem_euclid(360.0) - 180.0;
+        assert!(e.abs() < 1e-6, "{r:?}");
+        assert_eq!(r.repeats, 0);
+        assert_eq!(r.positions.len(), 4);
+        let phases: Vec<Phase> = stages.iter().map(|s| s.0).collect();
+        use Phase::*;
+        for want in [
+            Enabling,
+            Unlocking,
+            Indexing,
+            Locking,
+            Settling,
+            Dwell,
+            Returning,
+            LockingZero,
+            Done,
+        ] {
+            assert!(phases.contains(&want), "{want:?} missing: {stages:?}");
+        }
+        assert_eq!(
+            stages.iter().filter(|s| s.0 == Dwell).count(),
+            4,
+            "{stages:?}"
+        );
+        // sequence numbers go up by one per command sent, heartbeats included
+        for w in m.sent.windows(2) {
+            assert_eq!(w[1].seq, w[0].seq.wrapping_add(1));
+        }
+        let indexes: Vec<f64> = m
+            .sent
+            .iter()
+            .filter(|c| c.command == TtCommand::IndexAbs as u8)
+            .map(|c| c.arg)
+            .collect();
+        assert_eq!(indexes, [0.0, 90.0, 180.0, 270.0]);
+        assert!(
+            m.sent
+                .iter()
+                .any(|c| c.command == TtCommand::Heartbeat as u8)
+        );
+        assert_eq!(m.state, Some(TtState::Locked));
+        assert_eq!(m.angle, 0.0);
+    }
+
+    #[test]
+    fn a_disturbed_dwell_is_repeated_once_the_base_is_quiet() {
+        let (h, lat) = (45.0, 28.2);
+        let mut f = NorthFinder::new(cfg(lat)).unwrap();
+        let mut m = Mech::default();
+        // a door slam in the second dwell: 2 Hz, 0.01 deg about x, for 0.4 s
+        let slam = |pos: usize, tau: f64| {
+            if pos == 2 && (0.5..0.9).contains(&tau) {
+                let w = 2.0 * std::f64::consts::PI * 2.0;
+                0.01f64.to_radians() * w * (w * tau).cos()
+            } else {
+                0.0
+            }
+        };
+        let stages = run(&mut f, &mut m, h, lat, slam);
+        let r = f
+            .result()
+            .unwrap_or_else(|| panic!("{:?}", f.abort_reason()));
+        assert_eq!(r.repeats, 1, "{stages:?}");
+        assert_eq!(r.positions[1].repeats, 1);
+        assert!(stages.contains(&(Phase::Disturbed, 2)), "{stages:?}");
+        let e = (r.heading_deg - h + 180.0).rem_euclid(360.0) - 180.0;
+        assert!(e.abs() < 1e-6, "{r:?}");
+    }
+
+    #[test]
+    fn an_unacknowledged_command_is_resent_under_new_numbers_then_given_up() {
+        let mut f = NorthFinder::new(cfg(28.2)).unwrap();
+        let c1 = f.poll(0.0).unwrap();
+        assert_eq!(c1.command, TtCommand::Enable as u8);
+        assert!(
+            f.poll(0.3).is_none(),
+            "no heartbeat while a command is outstanding"
+        );
+        let c2 = f.poll(0.6).unwrap();
+        assert_eq!((c2.command, c2.seq), (c1.command, c1.seq + 1));
+        let c3 = f.poll(1.2).unwrap();
+        assert_eq!(c3.seq, c1.seq + 2);
+        assert!(f.poll(1.8).is_none());
+        let why = f.abort_reason().unwrap();
+        assert!(
+            why.contains("no acknowledgement of Enable") && why.contains("after 3 tries"),
+            "{why}"
+        );
+        assert_eq!(f.phase(), Phase::Aborted);
+    }
+
+    #[test]
+    fn a_rejected_command_or_a_fault_aborts_with_the_reason_and_the_place() {
+        let mut f = NorthFinder::new(cfg(28.2)).unwrap();
+        let mut m = Mech {
+            reject: Some(TtCommand::Enable),
+            ..Mech::default()
+        };
+        let c = f.poll(0.0).unwrap();
+        m.command(0.0, c);
+        for a in m.acks.drain(..) {
+            f.on_ack(&a);
+        }
+        let why = f.abort_reason().unwrap();
+        assert!(why.contains("rejected Enable at position 1 of 4"), "{why}");
+
+        let mut f = NorthFinder::new(cfg(28.2)).unwrap();
+        let mut m = Mech {
+            faults: TtFaults {
+                lock: true,
+                ..TtFaults::default()
+            },
+            ..Mech::default()
+        };
+        let c = f.poll(0.0).unwrap();
+        m.command(0.0, c);
+        let st = m.status(0.01);
+        f.on_status(&st);
+        let why = f.abort_reason().unwrap();
+        assert!(
+            why.contains("turntable fault at position 1") && why.contains("lock"),
+            "{why}"
+        );
+    }
+
+    #[test]
+    fn heartbeats_keep_the_link_alive_while_the_sequence_waits() {
+        let mut f = NorthFinder::new(cfg(28.2)).unwrap();
+        let c = f.poll(0.0).unwrap();
+        f.on_ack(&TtAck {
+            seq: c.seq,
+            command: c.command,
+            axis: 0,
+            result: TtResult::Accepted,
+        });
+        // the mechanism stays disabled: the sequence waits and keeps the watchdog fed
+        let disabled = TtStatus {
+            angle_deg: 0.0,
+            rate_dps: 0.0,
+            state: TtState::Disabled,
+            axis: 0,
+            faults: TtFaults::default(),
+            ack_seq: c.seq,
+            counter: 0,
+        };
+        let mut beats = Vec::new();
+        for i in 1..=20 {
+            let t = f64::from(i) * 0.05;
+            f.on_status(&disabled);
+            if let Some(b) = f.poll(t) {
+                assert_eq!(b.command, TtCommand::Heartbeat as u8);
+                f.on_ack(&TtAck {
+                    seq: b.seq,
+                    command: b.command,
+                    axis: 0,
+                    result: TtResult::Accepted,
+                });
+                beats.push(t);
+            }
+        }
+        assert_eq!(beats.len(), 4, "every 0.25 s: {beats:?}");
+        assert!(!f.finished());
     }
 }

@@ -67,8 +67,8 @@ pub enum PipelineError {
     #[error("processing chain: {0}")]
     Processing(#[from] crate::fir::FirError),
     /// North-finding's settings.
-    #[error("north-finding: {0}")]
-    NorthFinding(String),
+    #[error(transparent)]
+    NorthFinding(#[from] crate::northfind::NorthFindingConfigError),
 }
 
 /// Frames received, by outcome.
@@ -167,8 +167,7 @@ impl Pipeline {
         let proc = ImuProcessor::new(&cfg.processing)?;
         let nf = if cfg.north_finding.enabled {
             Some(NorthFinding {
-                finder: NorthFinder::new(cfg.north_finding.clone())
-                    .map_err(PipelineError::NorthFinding)?,
+                finder: NorthFinder::new(cfg.north_finding.clone())?,
                 commands_sent: 0,
                 frames: 0,
                 last_print: f64::NEG_INFINITY,
