@@ -7,6 +7,7 @@ pub mod inproc;
 pub mod montecarlo;
 pub mod navexp;
 pub mod navrun;
+pub mod observe;
 pub mod par;
 pub mod playback;
 pub mod plot;

@@ -504,7 +504,13 @@ fn validate_turntable(a: ValidateArgs) -> Result<i32> {
         if a.bus.json {
             args.push("--json".into());
         }
-        return run_in_guest(args, &out, vec![], vec![], a.bus.json);
+        return run_in_guest(
+            args,
+            &out,
+            vec![],
+            vec![],
+            a.bus.json.then_some("validation.json"),
+        );
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let stop = Arc::new(AtomicBool::new(false));
@@ -684,7 +690,7 @@ fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> {
             "--out".into(),
             out.to_string_lossy().into_owned(),
         ];
-        let status = run_in_guest(args, &out, vec![], vec![sibling_binary("nav")?], false)?;
+        let status = run_in_guest(args, &out, vec![], vec![sibling_binary("nav")?], None)?;
         return Ok(status);
     }
     let seed = std::time::SystemTime::now()
@@ -819,7 +825,13 @@ fn run(a: RunArgs) -> Result<i32> {
     if a.bus.json {
         args.push("--json".into());
     }
-    run_in_guest(args, &out, extra, vec![nav], a.bus.json)
+    run_in_guest(
+        args,
+        &out,
+        extra,
+        vec![nav],
+        a.bus.json.then_some("report.json"),
+    )
 }
 
 /// Run this program with `args` inside the QEMU guest (this kernel has no CAN): shares the
@@ -829,7 +841,7 @@ fn run_in_guest(
     out: &Path,
     mut extra: Vec<PathBuf>,
     libs_for: Vec<PathBuf>,
-    json: bool,
+    json: Option<&str>,
 ) -> Result<i32> {
     if std::env::var_os(GUEST_ENV).is_some() {
         bail!(
@@ -858,9 +870,14 @@ fn run_in_guest(
         opts.timeout = std::time::Duration::from_secs(s);
     }
     let o = vcan_setup::run_in_vm(&full, &opts)?;
-    if json {
-        // the guest's console carries the JSON; hand it on as it came
-        print!("{}", o.output);
+    if let Some(name) = json {
+        // the guest's console mixes its stdout and stderr: the JSON comes from the file the run
+        // wrote in the shared output folder, so stdout carries the JSON alone
+        let p = out.join(name);
+        match std::fs::read_to_string(&p) {
+            Ok(j) => println!("{}", j.trim_end()),
+            Err(e) => eprintln!("hil: the run in the guest wrote no {}: {e}", p.display()),
+        }
     }
     eprintln!(
         "hil: guest boot {:.1} s, run {:.1} s",

@@ -47,7 +47,7 @@ pub struct RunReport {
     /// What the GPS emulator wrote (runs with a receiver).
     pub gps: Option<emulators::gps::GpsTxStats>,
     /// nav's solution frames as the bench received them.
-    pub solution: crate::run::SolutionWatch,
+    pub solution: crate::observe::SolutionWatch,
     /// nav's navigation scored against truth (runs that navigate).
     pub navigation: Option<crate::navrun::NavScore>,
     /// The same second by second, from nav's recording.
@@ -197,7 +197,7 @@ pub fn drill_checks(out: &mut Vec<Check>, s: &Scenario, o: &crate::drill::DrillO
 
 /// nav's solution output: every NAV_* frame nav sent reached the bench and decoded, no epoch
 /// was skipped, and the last position on the bus is nav's final one.
-pub fn solution_checks(out: &mut Vec<Check>, w: &crate::run::SolutionWatch, nav: &Summary) {
+pub fn solution_checks(out: &mut Vec<Check>, w: &crate::observe::SolutionWatch, nav: &Summary) {
     let sent = nav.solution.frames_sent;
     let epochs = nav.solution.epochs;
     let mut pass = w.frames == sent && w.bad_frames == 0 && w.seq_gaps == 0 && epochs > 0;

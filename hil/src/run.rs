@@ -2,6 +2,7 @@
 //! file differs from a vehicle's), run the emulators for the scenario's simulated duration,
 //! stop `nav` with SIGTERM, check and report.
 
+use crate::observe::{DrillWatch, solution_socket, watch_solution};
 use crate::report::{self, RunReport};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
@@ -356,103 +357,5 @@ struct RemoveOnDrop(PathBuf);
 impl Drop for RemoveOnDrop {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(&self.0);
-    }
-}
-
-/// What the bench saw of nav's solution output on the bus.
-#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize, PartialEq)]
-pub struct SolutionWatch {
-    /// NAV_* frames received.
-    pub frames: u64,
-    /// NAV_TIME frames (epochs).
-    pub epochs: u64,
-    /// Frames that did not decode.
-    pub bad_frames: u64,
-    /// Epoch sequence numbers skipped.
-    pub seq_gaps: u64,
-    /// The last NAV_POS, deg.
-    pub last_position_deg: Option<[f64; 2]>,
-    /// The last mode.
-    pub last_mode: Option<String>,
-}
-
-/// A socket on `iface` that receives nav's NAV_* frames only.
-fn solution_socket(iface: &str) -> Result<socketcan::CanSocket> {
-    use socketcan::{CanSocket, Socket, SocketOptions};
-    let sock = CanSocket::open(iface)
-        .with_context(|| format!("opening {iface} to watch nav's solution"))?;
-    sock.set_filters(&[socketcan::CanFilter::new(0x200, 0x7F8)])
-        .with_context(|| format!("filtering NAV frames on {iface}"))?;
-    Ok(sock)
-}
-
-/// Listen to nav's NAV_* frames on `sock` until `stop`.
-fn watch_solution(
-    sock: socketcan::CanSocket,
-    iface: &str,
-    stop: &AtomicBool,
-) -> Result<SolutionWatch> {
-    use socketcan::Socket;
-    let mut w = SolutionWatch::default();
-    let mut last_seq: Option<u8> = None;
-    while !stop.load(Ordering::Relaxed) {
-        let f = match sock.read_frame_timeout(Duration::from_millis(50)) {
-            Ok(f) => f,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock
-                ) =>
-            {
-                continue;
-            }
-            Err(e) => return Err(e).with_context(|| format!("reading NAV frames on {iface}")),
-        };
-        w.frames += 1;
-        match wire::from_can_frame(&f)
-            .ok()
-            .and_then(|r| wire::Message::decode(&r).ok())
-        {
-            Some(wire::Message::NavTime(t)) => {
-                w.epochs += 1;
-                if let Some(p) = last_seq {
-                    w.seq_gaps += u64::from(t.seq.wrapping_sub(p).wrapping_sub(1));
-                }
-                last_seq = Some(t.seq);
-                w.last_mode = Some(format!("{:?}", t.mode));
-            }
-            Some(wire::Message::NavPos(p)) => w.last_position_deg = Some([p.lat_deg, p.lon_deg]),
-            Some(_) => {}
-            None => w.bad_frames += 1,
-        }
-    }
-    Ok(w)
-}
-
-/// Follows nav's north-finding lines during a run.
-#[derive(Default)]
-struct DrillWatch {
-    done: bool,
-}
-
-impl DrillWatch {
-    /// Handle one nav stdout line; true when it is north-finding's final word.
-    fn line(&mut self, l: &str, show: bool) -> bool {
-        if let Some(j) = l.strip_prefix("nav: north-finding progress ") {
-            if show && let Ok(p) = serde_json::from_str::<serde_json::Value>(j) {
-                eprintln!("{}", crate::drill::progress_line(&p));
-            }
-            return false;
-        }
-        if l.starts_with("nav: north-finding result") || l.starts_with("nav: north-finding aborted")
-        {
-            if show {
-                eprintln!("{l}");
-            }
-            let first = !self.done;
-            self.done = true;
-            return first;
-        }
-        false
     }
 }
