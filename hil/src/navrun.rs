@@ -431,6 +431,19 @@ mod tests {
         assert!(std_.rms_position_error_m < 25.0 && fad.rms_position_error_m < 25.0);
         // position-only updates keep the heading too (the turns make it observable)
         assert!(std_.end_heading_error_deg.abs() < 1.0 && fad.end_heading_error_deg.abs() < 1.0);
+        // the sigmas are a promise: with the receiver's wander modelled, the standard filter's
+        // errors match its covariance (NEES per dof about 1; one 400 s run scatters, so 0.25-4;
+        // without the wander states it was about 20) and its innovations match their covariance
+        // (mean NIS about 3 for 3 dof)
+        let [p, v] = std_.mean_nees_per_dof.unwrap();
+        assert!(
+            (0.25..4.0).contains(&p) && (0.25..4.0).contains(&v),
+            "NEES {p} / {v}"
+        );
+        for r in [&std_, &fad] {
+            let nis = r.filter.unwrap().mean_nis;
+            assert!((1.5..6.0).contains(&nis), "mean NIS {nis}");
+        }
     }
 
     /// The campus loop's sequence, shortened (8 s dwells, one lap): nav's north-finder drives the

@@ -1,7 +1,15 @@
-//! The 15-state SINS/GPS error-state Kalman filter of paper 003: attitude errors (E, N, U),
-//! velocity errors (E, N, U), position errors (lat, lon, h), gyro drifts (body x, y, z) and
-//! accelerometer biases (body x, y, z); position-only measurements `z = p_INS - p_GPS`,
-//! `H = [0 0 I 0 0]`.
+//! The SINS/GPS error-state Kalman filter of paper 003, with the receiver's correlated error as
+//! three more states: attitude errors (E, N, U), velocity errors (E, N, U), position errors
+//! (lat, lon, h), gyro drifts (body x, y, z), accelerometer biases (body x, y, z) - paper 003's
+//! 15 states - and the receiver's position error (lat, lon, h), a first-order Gauss-Markov
+//! process (`b' = -b / tau + w`, stationary sigma `gps_gm_sigma_m`). Position-only measurements
+//! `z = p_INS - p_GPS = dp - b + v`, `H = [0 0 I 0 0 -I]`, `v` white (`gps_sigma_m`).
+//!
+//! Why the extra states: a standalone receiver's error wanders over minutes (12 m over 300 s for
+//! the 25 m class). A filter that takes it for white noise believes each fix is independent and
+//! becomes over-confident: its position sigma falls far below its error (NEES about 20 per
+//! degree of freedom on the campus loop). With the wander modelled, the reported sigmas match
+//! the errors. `gps_gm_sigma_m = 0` gives paper 003's 15-state filter.
 //!
 //! Error model (ENU, `phi` the computed frame's misalignment: `C_b^n' = (I - phi x) C_b^n`):
 //! `phi' = phi x w_in + dw_in - C_b^n eps`,
@@ -22,8 +30,12 @@ use crate::strapdown::NavState;
 use nalgebra::{SMatrix, SVector, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-type M15 = SMatrix<f64, 15, 15>;
-type V15 = SVector<f64, 15>;
+/// States: paper 003's 15 and the receiver's error.
+pub const N: usize = 18;
+/// The first of the receiver-error states.
+const B: usize = 15;
+type MatN = SMatrix<f64, N, N>;
+type VecN = SVector<f64, N>;
 
 /// Filter settings (the `[filter]` table of nav's config).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -31,14 +43,24 @@ type V15 = SVector<f64, 15>;
 pub struct FilterConfig {
     /// `standard` or `fading`.
     pub kind: FilterKind,
-    /// Fading-memory factor (applied at each measurement).
+    /// Fading-memory factor (applied at each measurement to the navigation and IMU states).
+    /// Paper 003 uses 1.2 with the receiver's error taken for white noise; with the receiver's
+    /// wander modelled, 1.05 (a memory of about 20 fixes) keeps the sigmas consistent (see
+    /// docs/navigation.md).
     pub fading_factor: f64,
     /// `feedback` (closed loop) or `output` (paper 003's output correction).
     pub correction: Correction,
-    /// GPS horizontal position noise the filter assumes (1 sigma), m.
+    /// The receiver's white position noise the filter assumes, per horizontal axis (1 sigma), m.
     pub gps_sigma_m: f64,
-    /// GPS height noise the filter assumes, m.
+    /// Its white height noise, m.
     pub gps_sigma_h_m: f64,
+    /// The receiver's correlated (Gauss-Markov) position error, per horizontal axis (stationary
+    /// 1 sigma), m; 0: not modelled (paper 003's 15-state filter).
+    pub gps_gm_sigma_m: f64,
+    /// Its height part, m.
+    pub gps_gm_sigma_h_m: f64,
+    /// Its correlation time, s.
+    pub gps_gm_tau_s: f64,
     /// Gyro white noise (angle random walk), deg/sqrt(h).
     pub gyro_arw_dpsh: f64,
     /// Accelerometer white noise (velocity random walk), m/s/sqrt(s).
@@ -89,10 +111,15 @@ impl Default for FilterConfig {
     fn default() -> Self {
         Self {
             kind: FilterKind::Fading,
-            fading_factor: 1.2,
+            fading_factor: 1.05,
             correction: Correction::Feedback,
-            gps_sigma_m: 25.0,
-            gps_sigma_h_m: 40.0,
+            // a 25 m class receiver (paper 003's): 12 m over 300 s plus 6 m white per axis, the
+            // height 1.6 times the horizontal
+            gps_sigma_m: 6.0,
+            gps_sigma_h_m: 9.6,
+            gps_gm_sigma_m: 12.0,
+            gps_gm_sigma_h_m: 19.2,
+            gps_gm_tau_s: 300.0,
             gyro_arw_dpsh: 0.1 / 60.0,
             accel_vrw_mpss: 0.001,
             init_att_deg: [0.05, 0.05, 0.1],
@@ -128,8 +155,8 @@ pub struct FilterStats {
 #[derive(Debug, Clone)]
 pub struct Kf {
     cfg: FilterConfig,
-    x: V15,
-    p: M15,
+    x: VecN,
+    p: MatN,
     /// IMU compensation fed back: gyro drift (rad/s) and accelerometer bias (m/s^2), body.
     gyro_bias: Vector3<f64>,
     accel_bias: Vector3<f64>,
@@ -139,7 +166,7 @@ pub struct Kf {
     /// Largest variance each state may reach through fading (its initial one, x 100 for the
     /// navigation states): weakly observable states (heading between turns, drifts) would
     /// otherwise grow without bound under the fading factor.
-    cap: V15,
+    cap: VecN,
 }
 
 fn skew(v: &Vector3<f64>) -> SMatrix<f64, 3, 3> {
@@ -150,7 +177,7 @@ impl Kf {
     /// A filter with these settings at `lat` (rad, for the position sigmas in radians).
     pub fn new(cfg: FilterConfig, lat: f64) -> Self {
         let (rm, rn) = earth::radii(lat);
-        let mut p = M15::zeros();
+        let mut p = MatN::zeros();
         let dph = (1.0f64).to_radians() / 3600.0;
         let d = [
             cfg.init_att_deg[0].to_radians(),
@@ -168,8 +195,11 @@ impl Kf {
             cfg.init_accel_mps2,
             cfg.init_accel_mps2,
             cfg.init_accel_mps2,
+            cfg.gps_gm_sigma_m / rm,
+            cfg.gps_gm_sigma_m / (rn * lat.cos()),
+            cfg.gps_gm_sigma_h_m,
         ];
-        let mut cap = V15::zeros();
+        let mut cap = VecN::zeros();
         for (i, s) in d.iter().enumerate() {
             p[(i, i)] = s * s;
             cap[i] = s * s * if i < 9 { 100.0 } else { 1.0 };
@@ -177,7 +207,7 @@ impl Kf {
         Self {
             cap,
             cfg,
-            x: V15::zeros(),
+            x: VecN::zeros(),
             p,
             gyro_bias: Vector3::zeros(),
             accel_bias: Vector3::zeros(),
@@ -204,8 +234,8 @@ impl Kf {
         &self.cfg
     }
 
-    /// Covariance (for NEES and reports).
-    pub fn covariance(&self) -> &M15 {
+    /// Covariance (for NEES and reports): the states in the order of the module doc.
+    pub fn covariance(&self) -> &MatN {
         &self.p
     }
 
@@ -230,7 +260,7 @@ impl Kf {
         let (wie, wen) = s.rates();
         let win = wie + wen;
         let cbn = s.q_nb.to_rotation_matrix().into_inner();
-        let mut f = M15::zeros();
+        let mut f = MatN::zeros();
         // attitude
         let m_aa = -skew(&win);
         // d(w_in)/d(dv)
@@ -266,13 +296,24 @@ impl Kf {
         f[(7, 6)] = v.x * tl / (rnh * cl);
         f[(7, 8)] = -v.x / (rnh * rnh * cl);
         f[(8, 5)] = 1.0;
-        let phi = M15::identity() + f * t + f * f * (t * t / 2.0);
-        let mut q = M15::zeros();
+        let phi = MatN::identity() + f * t + f * f * (t * t / 2.0);
+        // the receiver's error: first-order Gauss-Markov
+        let tau = self.cfg.gps_gm_tau_s.max(1e-3);
+        for i in 0..3 {
+            f[(B + i, B + i)] = -1.0 / tau;
+        }
+        let mut q = MatN::zeros();
         let arw = self.cfg.gyro_arw_dpsh.to_radians() / 60.0;
         let vrw = self.cfg.accel_vrw_mpss;
+        let gm = [
+            self.cfg.gps_gm_sigma_m / rmh,
+            self.cfg.gps_gm_sigma_m / (rnh * cl),
+            self.cfg.gps_gm_sigma_h_m,
+        ];
         for i in 0..3 {
             q[(i, i)] = arw * arw * t;
             q[(3 + i, 3 + i)] = vrw * vrw * t;
+            q[(B + i, B + i)] = 2.0 * gm[i] * gm[i] / tau * t;
         }
         self.x = phi * self.x;
         self.p = phi * self.p * phi.transpose() + q;
@@ -295,26 +336,37 @@ impl Kf {
         r[(1, 1)] = (self.cfg.gps_sigma_m / ((rn + s.h) * s.lat.cos())).powi(2);
         r[(2, 2)] = self.cfg.gps_sigma_h_m.powi(2);
         if self.cfg.kind == FilterKind::Fading {
+            // fading discounts what the filter learnt of its own (navigation and IMU) states;
+            // the receiver's error is a model of the receiver, not of the INS, and keeps its
+            // memory: P <- D P D with D = sqrt(s) on the first 15 states, 1 on the receiver's
+            // (stays positive). The fading may not push a variance over its cap, but never
+            // takes back what the propagation put there (after an outage the position variance
+            // is rightly large).
             let before = self.p.diagonal();
-            self.p *= self.cfg.fading_factor;
-            // the fading may not push a variance over its cap, but never takes back what the
-            // propagation put there (after an outage the position variance is rightly large):
-            // P <- D P D with D diagonal (stays positive)
-            let d = V15::from_fn(|i, _| {
-                let v = self.p[(i, i)];
+            let f = self.cfg.fading_factor.sqrt();
+            let d = VecN::from_fn(|i, _| {
+                if i >= B {
+                    return 1.0;
+                }
+                let v = self.p[(i, i)] * f * f;
                 let limit = self.cap[i].max(before[i]);
-                if v > limit { (limit / v).sqrt() } else { 1.0 }
+                if v > limit { f * (limit / v).sqrt() } else { f }
             });
-            for i in 0..15 {
-                for j in 0..15 {
+            for i in 0..N {
+                for j in 0..N {
                     self.p[(i, j)] *= d[i] * d[j];
                 }
             }
         }
-        let hx = Vector3::new(self.x[6], self.x[7], self.x[8]);
-        let innov = z - hx;
-        let nis_of = |p: &M15| {
-            let s_mat = p.fixed_view::<3, 3>(6, 6).into_owned() + r;
+        // H = [0 0 I 0 0 -I]: the INS's position error less the receiver's
+        let mut h_mat = SMatrix::<f64, 3, N>::zeros();
+        for i in 0..3 {
+            h_mat[(i, 6 + i)] = 1.0;
+            h_mat[(i, B + i)] = -1.0;
+        }
+        let innov = z - h_mat * self.x;
+        let nis_of = |p: &MatN| {
+            let s_mat = h_mat * p * h_mat.transpose() + r;
             let s_inv = s_mat.try_inverse()?;
             let nis = (innov.transpose() * s_inv * innov)[(0, 0)];
             nis.is_finite().then_some((nis, s_inv))
@@ -343,15 +395,9 @@ impl Kf {
             (nis, s_inv) = again;
         }
         self.rejected_in_a_row = 0;
-        let ph = self.p.fixed_view::<15, 3>(0, 6).into_owned();
-        let k = ph * s_inv;
+        let k = self.p * h_mat.transpose() * s_inv;
         self.x += k * innov;
-        let mut ikh = M15::identity();
-        for i in 0..15 {
-            for j in 0..3 {
-                ikh[(i, 6 + j)] -= k[(i, j)];
-            }
-        }
+        let ikh = MatN::identity() - k * h_mat;
         // Joseph form keeps P symmetric and positive
         self.p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
         self.stats.updates += 1;
@@ -368,7 +414,10 @@ impl Kf {
         *s = correct(&self.x, s);
         self.gyro_bias += Vector3::new(self.x[9], self.x[10], self.x[11]);
         self.accel_bias += Vector3::new(self.x[12], self.x[13], self.x[14]);
-        self.x = V15::zeros();
+        // the navigation and IMU errors were applied; the receiver's error is not ours to remove
+        for i in 0..B {
+            self.x[i] = 0.0;
+        }
     }
 
     /// The best estimate of the navigation state (output correction applied when the filter
@@ -382,7 +431,7 @@ impl Kf {
 }
 
 /// The navigation state with the error estimate `x` removed.
-fn correct(x: &V15, s: &NavState) -> NavState {
+fn correct(x: &VecN, s: &NavState) -> NavState {
     let phi = Vector3::new(x[0], x[1], x[2]);
     NavState {
         q_nb: UnitQuaternion::from_scaled_axis(phi) * s.q_nb,
