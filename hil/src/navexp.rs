@@ -52,6 +52,8 @@ pub struct CaseResult {
     pub mean_nees_per_dof: Option<[f64; 2]>,
     /// RMS and largest error at the ends of the outages, over all runs, m.
     pub outage_drift_m: Option<(f64, f64)>,
+    /// Integrity alarms raised, over all runs.
+    pub integrity_alarms: u64,
     /// The runs.
     pub runs: Vec<NavRun>,
 }
@@ -260,6 +262,7 @@ pub fn run(o: &NavExpOptions, out: Option<&Path>, progress: bool) -> Result<NavE
                 let rms = (drift.iter().map(|x| x * x).sum::<f64>() / drift.len() as f64).sqrt();
                 (rms, drift.iter().copied().fold(0.0, f64::max))
             }),
+            integrity_alarms: runs.iter().map(|r| r.integrity.alarms).sum(),
             runs,
         }
     };
@@ -409,12 +412,12 @@ pub fn markdown(r: &NavExperiment) -> String {
     );
     let _ = writeln!(
         s,
-        "## Table 4 (end of the run)\n\n| | paper: position | ours: position | paper: velocity | ours: velocity | ours: RMS position | ours: RMS velocity | NEES/dof pos / vel |\n|---|---|---|---|---|---|---|---|"
+        "## Table 4 (end of the run)\n\n| | paper: position | ours: position | paper: velocity | ours: velocity | ours: RMS position | ours: RMS velocity | NEES/dof pos / vel | integrity alarms |\n|---|---|---|---|---|---|---|---|---|"
     );
     for (c, p) in r.table4.iter().zip(PAPER_TABLE4) {
         let _ = writeln!(
             s,
-            "| {} | {} m | {:.1} m | {} m/s | {:.2} m/s | {:.1} m | {:.2} m/s | {} |",
+            "| {} | {} m | {:.1} m | {} m/s | {:.2} m/s | {:.1} m | {:.2} m/s | {} | {} |",
             p.0,
             p.1,
             c.end_position_error_m,
@@ -422,7 +425,8 @@ pub fn markdown(r: &NavExperiment) -> String {
             c.end_velocity_error_mps,
             c.rms_position_error_m,
             c.rms_velocity_error_mps,
-            nees_text(c.mean_nees_per_dof)
+            nees_text(c.mean_nees_per_dof),
+            c.integrity_alarms
         );
     }
     let _ = writeln!(

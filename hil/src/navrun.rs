@@ -179,6 +179,8 @@ pub struct NavRun {
     pub north_finding: Option<nav::northfind::NorthResult>,
     /// IMU time navigation started, s.
     pub started_at_s: Option<f64>,
+    /// nav's integrity monitor over the run.
+    pub integrity: nav::integrity::IntegrityStats,
     /// The run second by second.
     #[serde(skip)]
     pub series: Vec<NavSample>,
@@ -337,6 +339,7 @@ pub fn navigate(
         filter: navigator.filter().map(nav::kf::Kf::stats),
         north_finding: nf_result,
         started_at_s: navigator.summary().started_at_s,
+        integrity: navigator.integrity().stats(),
         series,
     })
 }

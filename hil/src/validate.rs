@@ -304,11 +304,17 @@ fn expect(out: &mut Vec<VCheck>, name: &str, a: &Answer, want: TtResult) {
 pub fn run_suite(iface: &str, axis: u8, speed: f64, lim: &Limits) -> Result<Validation> {
     let mut c = Client::open(iface, axis, speed)?;
     let mut out = Vec::new();
-    // the mechanism must be talking
-    c.pump(c.wall(0.3), None)?;
+    // the mechanism must be talking: its first status within 0.3 s of its time, or 2 s of
+    // wall time (an emulator in a software-emulated guest under load may start late)
+    let wait = c.wall(0.3).max(Duration::from_secs(2));
+    let t0 = Instant::now();
+    while c.last.is_none() && t0.elapsed() < wait {
+        c.pump(Duration::from_millis(20), None)?;
+    }
     if c.last.is_none() {
         bail!(
-            "no TT_STATUS frames from axis {axis} on {iface} within 0.3 s: is the mechanism powered and on the bus?"
+            "no TT_STATUS frames from axis {axis} on {iface} within {:.1} s: is the mechanism powered and on the bus?",
+            wait.as_secs_f64()
         );
     }
     // start from a known state

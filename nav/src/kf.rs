@@ -162,6 +162,7 @@ pub struct Kf {
     accel_bias: Vector3<f64>,
     stats: FilterStats,
     nis_sum: f64,
+    last_nis: Option<f64>,
     rejected_in_a_row: u32,
     /// Largest variance each state may reach through fading (its initial one, x 100 for the
     /// navigation states): weakly observable states (heading between turns, drifts) would
@@ -213,6 +214,7 @@ impl Kf {
             accel_bias: Vector3::zeros(),
             stats: FilterStats::default(),
             nis_sum: 0.0,
+            last_nis: None,
             rejected_in_a_row: 0,
         }
     }
@@ -227,6 +229,11 @@ impl Kf {
             accel_bias_mps2: a.into(),
             ..self.stats
         }
+    }
+
+    /// The normalized innovation squared of the last fix offered (before any re-anchor).
+    pub fn last_nis(&self) -> Option<f64> {
+        self.last_nis
     }
 
     /// Settings.
@@ -372,8 +379,10 @@ impl Kf {
             nis.is_finite().then_some((nis, s_inv))
         };
         let Some((mut nis, mut s_inv)) = nis_of(&self.p) else {
+            self.last_nis = None;
             return false;
         };
+        self.last_nis = Some(nis);
         if nis > self.cfg.gate_nis {
             self.rejected_in_a_row += 1;
             if self.cfg.reanchor_after == 0 || self.rejected_in_a_row < self.cfg.reanchor_after {

@@ -11,6 +11,7 @@ pub mod fir;
 pub mod gps;
 pub mod gpsport;
 pub mod imu;
+pub mod integrity;
 pub mod kf;
 pub mod navigator;
 pub mod northfind;

@@ -29,6 +29,8 @@ pub struct NavigationConfig {
     /// receiver's output latency and the serial transfer (a few hundred bytes at 9600 baud take
     /// about 0.4 s).
     pub fix_delay_s: f64,
+    /// The solution's integrity monitor.
+    pub integrity: crate::integrity::IntegrityConfig,
 }
 
 impl Default for NavigationConfig {
@@ -40,6 +42,7 @@ impl Default for NavigationConfig {
             gps_aiding: true,
             filter: FilterConfig::default(),
             fix_delay_s: 0.5,
+            integrity: crate::integrity::IntegrityConfig::default(),
         }
     }
 }
@@ -77,6 +80,8 @@ pub struct NavigatorSummary {
     pub pps_edges: u64,
     /// Fixes that arrived after their PPS edge plus `fix_delay_s` of IMU time (applied at once).
     pub late_fixes: u64,
+    /// The integrity monitor.
+    pub integrity: crate::integrity::IntegrityStats,
 }
 
 /// The navigator.
@@ -102,6 +107,9 @@ pub struct Navigator {
     /// Fixes waiting for their time, with the count of PPS edges their own edge makes.
     held: Vec<(GpsFix, u64)>,
     late_fixes: u64,
+    integrity: crate::integrity::IntegrityMonitor,
+    /// The INS's horizontal velocity (east, north) at the last PPS edge: when the fix was taken.
+    v_at_pps: Option<[f64; 2]>,
 }
 
 /// A fix older than this (IMU time, s) makes the GPS stale: the solution is coasting.
@@ -112,6 +120,7 @@ impl Navigator {
     pub fn new(cfg: NavigationConfig) -> Self {
         Self {
             heading: cfg.initial_heading_deg.map(f64::to_radians),
+            integrity: crate::integrity::IntegrityMonitor::new(cfg.integrity.clone()),
             cfg,
             phase: NavPhase::Waiting,
             first_fix: None,
@@ -130,6 +139,7 @@ impl Navigator {
             last_good_fix_t: None,
             held: Vec::new(),
             late_fixes: 0,
+            v_at_pps: None,
         }
     }
 
@@ -171,6 +181,7 @@ impl Navigator {
     pub fn on_pps(&mut self, t: f64) {
         self.pps_edges += 1;
         self.last_pps = Some(t);
+        self.v_at_pps = self.state().map(|s| [s.v.x, s.v.y]);
     }
 
     /// A processing-chain update valid at IMU time `t` over `dt` s.
@@ -301,6 +312,11 @@ impl Navigator {
             self.first_fix = Some(p);
             return;
         }
+        // RMC's speed and track against the INS's velocity when the fix was taken
+        if let (Some(v), Some(speed), Some(track)) = (self.v_at_pps, fix.speed_mps, fix.track_deg) {
+            let (s, c) = track.to_radians().sin_cos();
+            self.integrity.on_velocity(v, [speed * s, speed * c]);
+        }
         // only GGA carries a full position (RMC repeats it without height)
         if fix.sentence != "GGA" {
             return;
@@ -317,9 +333,18 @@ impl Navigator {
         let lat = p.0 + st.v.y * dt / (rm + st.h);
         let lon = p.1 + st.v.x * dt / ((rn + st.h) * st.lat.cos());
         let h = p.2 + st.v.z * dt;
-        if !k.update(st, lat, lon, h) {
+        let used = k.update(st, lat, lon, h);
+        if !used {
             self.fixes_ignored += 1;
         }
+        if let Some(nis) = k.last_nis() {
+            self.integrity.on_fix(nis, !used);
+        }
+    }
+
+    /// The solution's integrity monitor.
+    pub fn integrity(&self) -> &crate::integrity::IntegrityMonitor {
+        &self.integrity
     }
 
     /// IMU time of the latest update, s.
@@ -350,6 +375,7 @@ impl Navigator {
             fixes_ignored: self.fixes_ignored,
             pps_edges: self.pps_edges,
             late_fixes: self.late_fixes,
+            integrity: self.integrity.stats(),
         }
     }
 }

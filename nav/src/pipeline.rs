@@ -154,6 +154,7 @@ pub struct Pipeline {
     fixes: u64,
     last_fix: Option<GpsFix>,
     encode_errors: u64,
+    integrity: Option<crate::integrity::Symptom>,
     samples: Vec<ImuSample>,
     events: Vec<ImuEvent>,
     updates: Vec<Update>,
@@ -204,6 +205,7 @@ impl Pipeline {
             fixes: 0,
             last_fix: None,
             encode_errors: 0,
+            integrity: None,
             samples: Vec::new(),
             events: Vec::new(),
             updates: Vec::new(),
@@ -250,6 +252,37 @@ impl Pipeline {
         self.north_finding(out);
         // 7. the solution at 50 Hz of IMU time
         self.solution(out);
+        self.integrity_changes(out);
+    }
+
+    /// The integrity monitor's alarm came on or went off: said in the log and the recording
+    /// (the solution's `filter` health bit follows it, [`Pipeline::health`]).
+    fn integrity_changes(&mut self, out: &mut Vec<Output>) {
+        let now = self
+            .navigator
+            .as_ref()
+            .and_then(|n| n.integrity().symptom());
+        if now == self.integrity {
+            return;
+        }
+        self.integrity = now;
+        let t = self.navigator.as_ref().map_or(0.0, |n| n.time());
+        match now {
+            Some(s) => warn!("navigation integrity alarm at {t:.1} s: {s:?}"),
+            None => info!("navigation integrity alarm cleared at {t:.1} s"),
+        }
+        let json = serde_json::json!({
+            "kind": "integrity",
+            "alarm": now.is_some(),
+            "symptom": now.map(|s| format!("{s:?}")),
+            "t_s": t,
+        });
+        self.json(
+            JsonChannel::Event,
+            self.sums.last.unwrap_or(0),
+            json.to_string(),
+            out,
+        );
     }
 
     /// A remote or error frame (`what` says which): counted and recorded, otherwise ignored.
@@ -283,6 +316,7 @@ impl Pipeline {
             n.on_fix(&fix);
         }
         self.last_fix = Some(fix);
+        self.integrity_changes(out);
     }
 
     /// The shell's liveness watchdog (wall time): IMU frames stopped (`true`) or came back. It
@@ -495,9 +529,10 @@ impl Pipeline {
                 .as_ref()
                 .is_some_and(|f| f.finder.abort_reason().is_some()),
             filter: self.proc.stats().invalid_since.is_some()
-                || nav
-                    .and_then(|n| n.filter())
-                    .is_some_and(|k| k.stats().reanchors > 0),
+                || nav.is_some_and(|n| {
+                    n.filter().is_some_and(|k| k.stats().reanchors > 0)
+                        || n.integrity().symptom().is_some()
+                }),
         }
     }
 
