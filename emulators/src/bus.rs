@@ -56,7 +56,7 @@ impl Default for Lockstep {
 }
 
 /// What the lockstep saw.
-#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
 pub struct LockstepStats {
     /// Lockstep was asked for.
     pub enabled: bool,
@@ -74,6 +74,50 @@ pub struct LockstepStats {
     pub unplaced_commands: u64,
     /// The last IMU sample (0-based) nav confirmed.
     pub last_confirmed: Option<u64>,
+    /// Frame-in to solution-out on the bus: wall time from writing a sample's frames to reading
+    /// nav's NAV_TIME that names it (as the scheduler sees it: it reads nav's frames once per
+    /// batch of 16 samples, so this includes up to one batch of its own polling), median, ms.
+    pub latency_p50_ms: f64,
+    /// Its 99th percentile, ms.
+    pub latency_p99_ms: f64,
+    /// NAV_TIMEs the latency was measured on.
+    pub latency_samples: u64,
+}
+
+/// When each batch of samples went out, and how long nav took to confirm them.
+#[derive(Default)]
+struct Latency {
+    sent: VecDeque<(u64, Instant)>,
+    ms: Vec<f32>,
+}
+
+impl Latency {
+    /// Samples up to `last` were just written.
+    fn flushed(&mut self, last: Option<u64>) {
+        if let Some(k) = last {
+            self.sent.push_back((k, Instant::now()));
+        }
+    }
+
+    /// nav confirmed sample `k`.
+    fn confirmed(&mut self, k: u64) {
+        while self.sent.front().is_some_and(|s| s.0 < k) {
+            self.sent.pop_front();
+        }
+        if let Some(&(_, t)) = self.sent.front() {
+            self.ms.push(t.elapsed().as_secs_f32() * 1e3);
+        }
+    }
+
+    /// Median and 99th percentile, ms, and the count.
+    fn percentiles(&mut self) -> (f64, f64, u64) {
+        if self.ms.is_empty() {
+            return (0.0, 0.0, 0);
+        }
+        self.ms.sort_by(f32::total_cmp);
+        let at = |q: f64| f64::from(self.ms[((self.ms.len() - 1) as f64 * q).round() as usize]);
+        (at(0.5), at(0.99), self.ms.len() as u64)
+    }
 }
 
 /// The turntable on the bus, without I/O: commands in, frames out after each IMU sample.
@@ -229,6 +273,8 @@ pub fn run(
     let mut outbox: Vec<RawFrame> = Vec::with_capacity(wire::BATCH);
     let batch_samples = 16u64;
     let (mut written, mut max_lag_ms, mut retries) = (0u64, 0u64, 0u64);
+    let mut latency = Latency::default();
+    let mut outbox_last: Option<u64> = None;
     let mut tt_bad = 0u64;
     while dev.imu.next_time() <= duration_s + 1e-9 && !stop.load(Ordering::Relaxed) {
         let k = dev.imu.imu().next_index();
@@ -247,6 +293,7 @@ pub fn run(
                     follow.is_some(),
                     &mut ls,
                     &mut tt_bad,
+                    &mut latency,
                 )?;
             }
             let Some(l) = follow else { break };
@@ -258,6 +305,7 @@ pub fn run(
                 retries += write_all(&sock, iface, &outbox)?;
                 written += outbox.len() as u64;
                 outbox.clear();
+                latency.flushed(outbox_last.take());
                 continue;
             }
             let since = *waited.get_or_insert_with(|| {
@@ -297,11 +345,13 @@ pub fn run(
             }
         }
         outbox.extend_from_slice(&frames);
+        outbox_last = Some(k);
         let gps_due = dev.gps.as_ref().is_some_and(|g| g.next_write_time() <= t);
         if gps_due || (k + 1).is_multiple_of(batch_samples) || outbox.len() + 8 > wire::BATCH {
             retries += write_all(&sock, iface, &outbox)?;
             written += outbox.len() as u64;
             outbox.clear();
+            latency.flushed(outbox_last.take());
         }
         if let Some(g) = dev.gps.as_mut() {
             g.poll(t, duration_s)?;
@@ -311,6 +361,7 @@ pub fn run(
     retries += write_all(&sock, iface, &outbox)?;
     written += outbox.len() as u64;
     progress.set(dev.imu.next_time());
+    (ls.latency_p50_ms, ls.latency_p99_ms, ls.latency_samples) = latency.percentiles();
     if let Some(tt) = dev.turntable.as_mut() {
         tt.stats.bad_frames += tt_bad;
     }
@@ -334,6 +385,7 @@ pub fn run(
 
 /// Read what nav sent (without blocking): NAV_TIME confirms samples, TT_CMD goes to the
 /// turntable, placed in time by the next NAV_TIME (lockstep) or at the next sample.
+#[allow(clippy::too_many_arguments)]
 fn read_nav(
     sock: &CanSocket,
     iface: &str,
@@ -342,6 +394,7 @@ fn read_nav(
     lockstep: bool,
     ls: &mut LockstepStats,
     bad: &mut u64,
+    latency: &mut Latency,
 ) -> Result<(), CanTxError> {
     use std::os::fd::AsRawFd;
     let mut got = Vec::with_capacity(wire::BATCH);
@@ -358,7 +411,7 @@ fn read_nav(
             }
         };
         for f in got.drain(..) {
-            on_nav_frame(f.ok(), dev, confirmed, lockstep, ls, bad);
+            on_nav_frame(f.ok(), dev, confirmed, lockstep, ls, bad, latency);
         }
         if n < wire::BATCH {
             return Ok(());
@@ -367,6 +420,7 @@ fn read_nav(
 }
 
 /// One frame from nav (none: not a data frame).
+#[allow(clippy::too_many_arguments)]
 fn on_nav_frame(
     f: Option<RawFrame>,
     dev: &mut Devices,
@@ -374,6 +428,7 @@ fn on_nav_frame(
     lockstep: bool,
     ls: &mut LockstepStats,
     bad: &mut u64,
+    latency: &mut Latency,
 ) {
     let next = dev.imu.imu().next_index();
     match f.and_then(|r| Message::decode(&r).ok()) {
@@ -385,6 +440,7 @@ fn on_nav_frame(
             if confirmed.is_none_or(|c| k > c) {
                 *confirmed = Some(k);
                 ls.last_confirmed = Some(k);
+                latency.confirmed(k);
             }
             if lockstep && let Some(tt) = dev.turntable.as_mut() {
                 ls.placed_commands += tt.confirmed(k);

@@ -86,12 +86,14 @@ pub fn checks(
             name: "reproducible: the emulators stayed in lockstep with nav".into(),
             pass: lockstep.stalls == 0 && lockstep.nav_times > 0 && late == 0,
             detail: format!(
-                "{} NAV_TIME frames followed, {} waits ({} ms), {} stalls, {} turntable commands placed, {late} GPS fixes late",
+                "{} NAV_TIME frames followed, {} waits ({} ms), {} stalls, {} turntable commands placed, {late} GPS fixes late; frame-in to NAV_TIME-out {:.1} ms median, {:.1} ms p99",
                 lockstep.nav_times,
                 lockstep.waits,
                 lockstep.wait_ms,
                 lockstep.stalls,
-                lockstep.placed_commands
+                lockstep.placed_commands,
+                lockstep.latency_p50_ms,
+                lockstep.latency_p99_ms
             ),
         });
     }
