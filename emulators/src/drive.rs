@@ -150,6 +150,20 @@ impl Drive {
             .collect();
         // turn at each inner waypoint; its tangent length comes off both legs
         let turns: Vec<f64> = legs.windows(2).map(|w| wrap(w[1].1 - w[0].1)).collect();
+        // a reversal has no arc to drive (its tangent is infinite): say where it is
+        if let Some(i) = turns.iter().position(|d| d.abs() > 170f64.to_radians()) {
+            let at = pts[i + 1];
+            return Err(crate::ParamError::new(
+                "drive",
+                format!(
+                    "the route turns back on itself by {:.0} deg at [{:.1}, {:.1}] (waypoint {} of the laps); U-turns are not driven: add a waypoint to turn around, or end each lap heading the way the next begins",
+                    turns[i].abs().to_degrees(),
+                    at[0],
+                    at[1],
+                    i + 1
+                ),
+            ));
+        }
         let tangent: Vec<f64> = turns.iter().map(|d| r * (d.abs() / 2.0).tan()).collect();
         let mut segs = Vec::new();
         let mut t = 0.0;
@@ -585,8 +599,16 @@ mod tests {
 
     #[test]
     fn bad_routes_say_what_is_wrong() {
+        // a lap that ends heading south into a lap that starts heading north: a reversal
         let mut s = square();
-        s.waypoints = vec![[0.0, 30.0], [0.0, 0.0]];
+        s.waypoints = vec![[0.0, 200.0], [0.0, 0.0]];
+        let e = Drive::plan(&s).unwrap_err().to_string();
+        assert!(
+            e.contains("turns back on itself by 180 deg at [0.0, 200.0]"),
+            "{e}"
+        );
+        let mut s = square();
+        s.waypoints = vec![[0.0, 30.0], [30.0, 30.0], [30.0, 0.0], [0.0, 0.0]];
         assert!(
             Drive::plan(&s)
                 .unwrap_err()

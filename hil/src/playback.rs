@@ -38,6 +38,18 @@ impl Playback {
     pub fn identical(&self) -> bool {
         self.first_difference.is_none() && self.recorded_tx == self.replayed_tx
     }
+
+    /// `identical, bit for bit`, or where the two first part.
+    pub fn verdict(&self) -> String {
+        match &self.first_difference {
+            None => "identical, bit for bit".to_string(),
+            Some((i, a, b)) => format!(
+                "DIFFERENT from frame {i}: nav sent {}, the replay {}",
+                a.as_deref().unwrap_or("(none)"),
+                b.as_deref().unwrap_or("(none)")
+            ),
+        }
+    }
 }
 
 fn frame_of(data: &[u8]) -> Option<RawFrame> {
@@ -154,14 +166,7 @@ pub fn text(r: &Playback) -> String {
         r.bad_records,
         r.recorded_tx,
         r.replayed_tx,
-        match &r.first_difference {
-            None => "identical, bit for bit".to_string(),
-            Some((i, a, b)) => format!(
-                "DIFFERENT from frame {i}: recorded {}, replayed {}",
-                a.as_deref().unwrap_or("(none)"),
-                b.as_deref().unwrap_or("(none)")
-            ),
-        }
+        r.verdict()
     );
     s += &r.summary.text();
     s

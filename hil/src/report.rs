@@ -240,19 +240,12 @@ pub fn replay_check(r: Result<&crate::playback::Playback, &anyhow::Error>) -> Ch
             name,
             pass: p.identical() && p.bad_records == 0 && p.recorded_tx > 0,
             detail: format!(
-                "{} frames and {} fixes replayed through nav's pipeline in process: {} frames sent, nav sent {}{}",
+                "{} frames and {} fixes replayed through nav's pipeline in process: {} frames sent, nav sent {}: {}",
                 p.frames_in,
                 p.fixes_in,
                 p.replayed_tx,
                 p.recorded_tx,
-                match &p.first_difference {
-                    None => ", identical".to_string(),
-                    Some((i, a, b)) => format!(
-                        "; first difference at frame {i}: nav {}, replay {}",
-                        a.as_deref().unwrap_or("(none)"),
-                        b.as_deref().unwrap_or("(none)")
-                    ),
-                }
+                p.verdict()
             ),
         },
         Err(e) => Check {

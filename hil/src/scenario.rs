@@ -274,6 +274,33 @@ mod tests {
         assert_eq!(s.site.lat_deg, 28.218157);
     }
 
+    /// Every shipped scenario loads and passes its checks; every route drives off after the
+    /// wait and ends before the scenario does (its navigation is scored parked, not cut off).
+    #[test]
+    fn every_shipped_scenario_is_valid() {
+        let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios"));
+        let mut n = 0;
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_none_or(|x| x != "toml") {
+                continue;
+            }
+            let s = Scenario::load(&p).unwrap_or_else(|e| panic!("{}: {e:#}", p.display()));
+            if let Some(d) = &s.drive {
+                let plan = Drive::plan(d).unwrap();
+                assert!(
+                    plan.duration() <= s.duration_s,
+                    "{}: the drive takes {} s, the scenario {} s",
+                    p.display(),
+                    plan.duration(),
+                    s.duration_s
+                );
+            }
+            n += 1;
+        }
+        assert!(n >= 7, "{n} scenarios");
+    }
+
     #[test]
     fn bad_scenarios_say_what_is_wrong() {
         let mut s = Scenario::builtin_static();
