@@ -4,7 +4,8 @@
 //!   consistent filter gives (3 per fix for 3 degrees of freedom);
 //! - rejections: a run of fixes the gate refused;
 //! - velocity: the INS's ground velocity against the receiver's speed and track (RMC), which
-//!   a position-only filter does not measure and so cannot see go wrong by itself.
+//!   a position-only filter does not measure and so cannot see go wrong by itself; while parked,
+//!   the INS's whole speed (a parked land vehicle does not climb) against the receiver's.
 //!
 //! While any of them holds, the solution's `filter` health bit is set (nav's pipeline) and the
 //! change is reported as an event; the summary counts what was seen.
@@ -109,14 +110,15 @@ impl IntegrityMonitor {
         self.evaluate()
     }
 
-    /// A receiver velocity (east, north, m/s) against the INS's at the same time. Returns the
-    /// alarm's change, if any.
-    pub fn on_velocity(&mut self, ins: [f64; 2], receiver: [f64; 2]) -> Option<Option<Symptom>> {
+    /// A receiver velocity (east, north, m/s) against the INS's (east, north, up) at the same
+    /// time. Returns the alarm's change, if any.
+    pub fn on_velocity(&mut self, ins: [f64; 3], receiver: [f64; 2]) -> Option<Option<Symptom>> {
         let speed = receiver[0].hypot(receiver[1]);
         let (d, limit) = if speed < self.cfg.min_speed_mps {
-            // slow or parked: the receiver's track means nothing, its speed still does
+            // slow or parked: the receiver's track means nothing, its speed still does, and a
+            // parked land vehicle does not climb: the INS's whole speed against the receiver's
             (
-                (ins[0].hypot(ins[1]) - speed).abs(),
+                (ins[0].hypot(ins[1]).hypot(ins[2]) - speed).abs(),
                 self.cfg.max_parked_speed_diff_mps,
             )
         } else {
@@ -215,23 +217,23 @@ mod tests {
         let mut m = IntegrityMonitor::new(IntegrityConfig::default());
         // parked: the receiver's track is noise, only the speeds count
         for _ in 0..5 {
-            assert_eq!(m.on_velocity([0.1, -0.2], [0.2, 0.1]), None);
+            assert_eq!(m.on_velocity([0.1, -0.2, 0.0], [0.2, 0.1]), None);
         }
-        assert_eq!(m.on_velocity([10.0, 0.0], [7.0, 0.0]), None);
-        assert_eq!(m.on_velocity([10.0, 0.0], [7.0, 0.0]), None);
+        assert_eq!(m.on_velocity([10.0, 0.0, 0.0], [7.0, 0.0]), None);
+        assert_eq!(m.on_velocity([10.0, 0.0, 0.0], [7.0, 0.0]), None);
         assert_eq!(
-            m.on_velocity([10.0, 0.0], [7.0, 0.0]),
+            m.on_velocity([10.0, 0.0, 0.0], [7.0, 0.0]),
             Some(Some(Symptom::Velocity))
         );
-        assert_eq!(m.on_velocity([10.0, 0.0], [8.5, 0.3]), Some(None));
+        assert_eq!(m.on_velocity([10.0, 0.0, 0.0], [8.5, 0.3]), Some(None));
         assert_eq!(m.stats().velocity_alarms, 1);
         assert!((m.stats().max_velocity_diff_mps - 3.0).abs() < 1e-12);
-        // a parked INS that believes it moves at 2 m/s
+        // a parked INS that believes it sinks at 1.5 m/s
         for _ in 0..2 {
-            assert_eq!(m.on_velocity([2.0, 0.0], [0.05, 0.0]), None);
+            assert_eq!(m.on_velocity([0.1, 0.0, -1.5], [0.05, 0.0]), None);
         }
         assert_eq!(
-            m.on_velocity([2.0, 0.0], [0.05, 0.0]),
+            m.on_velocity([0.1, 0.0, -1.5], [0.05, 0.0]),
             Some(Some(Symptom::Velocity))
         );
     }

@@ -343,16 +343,17 @@ impl Kf {
         r[(1, 1)] = (self.cfg.gps_sigma_m / ((rn + s.h) * s.lat.cos())).powi(2);
         r[(2, 2)] = self.cfg.gps_sigma_h_m.powi(2);
         if self.cfg.kind == FilterKind::Fading {
-            // fading discounts what the filter learnt of its own (navigation and IMU) states;
-            // the receiver's error is a model of the receiver, not of the INS, and keeps its
-            // memory: P <- D P D with D = sqrt(s) on the first 15 states, 1 on the receiver's
-            // (stays positive). The fading may not push a variance over its cap, but never
+            // fading discounts what the filter learnt of its own horizontal navigation and IMU
+            // states; the receiver's error (a model of the receiver, not of the INS) keeps its
+            // memory, and so does the vertical channel, which would otherwise follow each fix's
+            // white height noise with nothing to check its velocity against: P <- D P D with
+            // D = sqrt(s) on those states, 1 on the others (stays positive). The fading may not push a variance over its cap, but never
             // takes back what the propagation put there (after an outage the position variance
             // is rightly large).
             let before = self.p.diagonal();
             let f = self.cfg.fading_factor.sqrt();
             let d = VecN::from_fn(|i, _| {
-                if i >= B {
+                if i >= B || i == 5 || i == 8 {
                     return 1.0;
                 }
                 let v = self.p[(i, i)] * f * f;

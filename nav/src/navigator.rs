@@ -108,8 +108,8 @@ pub struct Navigator {
     held: Vec<(GpsFix, u64)>,
     late_fixes: u64,
     integrity: crate::integrity::IntegrityMonitor,
-    /// The INS's horizontal velocity (east, north) at the last PPS edge: when the fix was taken.
-    v_at_pps: Option<[f64; 2]>,
+    /// The INS's velocity (east, north, up) at the last PPS edge: when the fix was taken.
+    v_at_pps: Option<[f64; 3]>,
 }
 
 /// A fix older than this (IMU time, s) makes the GPS stale: the solution is coasting.
@@ -181,7 +181,7 @@ impl Navigator {
     pub fn on_pps(&mut self, t: f64) {
         self.pps_edges += 1;
         self.last_pps = Some(t);
-        self.v_at_pps = self.state().map(|s| [s.v.x, s.v.y]);
+        self.v_at_pps = self.state().map(|s| [s.v.x, s.v.y, s.v.z]);
     }
 
     /// A processing-chain update valid at IMU time `t` over `dt` s.
