@@ -1,0 +1,88 @@
+//! `hil drill north-finding`: the operator drill, on the bus or in process.
+
+use crate::*;
+
+/// Disturbance script file: `[[disturbance]]` entries.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct DisturbanceScript {
+    #[serde(default)]
+    disturbance: Vec<emulators::truth::Disturbance>,
+}
+
+pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
+    let mut s = Scenario::builtin_static();
+    let heading = match a.heading {
+        Some(h) => h.rem_euclid(360.0),
+        // random, reproducible from the seed (the same generator as the Monte Carlo)
+        None => {
+            use rand::{Rng, SeedableRng};
+            rand::rngs::StdRng::seed_from_u64(a.seed).random::<f64>() * 360.0
+        }
+    };
+    s.name = "drill-north-finding".into();
+    s.site.heading_deg = heading;
+    s.site.lat_deg = a.lat;
+    s.speed = a.speed;
+    s.imu.seed = a.seed;
+    s.turntable = Some(emulators::turntable::TurntableParams {
+        seed: a.seed,
+        ..Default::default()
+    });
+    s.north_finding = Some(nav::northfind::NorthFindingConfig {
+        dwell_s: a.dwell,
+        ..Default::default()
+    });
+    s.heading_tolerance_deg = a.tolerance;
+    // enough simulated time for four dwells, the moves and a few repeats
+    s.duration_s = 4.0 * a.dwell + 120.0 + 2.0 * a.dwell;
+    if let Some(p) = &a.disturbances {
+        let text = std::fs::read_to_string(p)
+            .with_context(|| format!("cannot read disturbance script {}", p.display()))?;
+        let d: DisturbanceScript =
+            toml::from_str(&text).with_context(|| format!("disturbance script {}", p.display()))?;
+        s.disturbance = d.disturbance;
+    }
+    s.check()?;
+    let out = absolute(
+        &a.bus
+            .out
+            .clone()
+            .unwrap_or_else(|| default_out("drill-north-finding")),
+    )?;
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let scen = out.join("drill.toml");
+    std::fs::write(&scen, toml::to_string_pretty(&s)?)?;
+    eprintln!(
+        "hil: north-finding drill at {:.4} deg heading, latitude {} deg, {} s dwell, x{}",
+        heading, a.lat, a.dwell, a.speed
+    );
+    if a.in_process {
+        let nf = s.north_finding.clone().unwrap_or_default();
+        let o = hil::drill::run_in_process(&s, &nf, |_| {})?;
+        let j = serde_json::json!({ "in_process": true, "drill": o });
+        std::fs::write(out.join("report.json"), serde_json::to_string_pretty(&j)?)?;
+        if a.bus.json {
+            println!("{}", serde_json::to_string_pretty(&j)?);
+        } else {
+            match (o.heading_deg, o.error_deg, o.sigma_deg) {
+                (Some(h), Some(e), Some(sg)) => println!(
+                    "in process: found {h:.4} deg, truth {:.4}, error {e:+.4} deg, sigma {sg:.4} deg, {:.1} s",
+                    o.truth_deg, o.duration_s
+                ),
+                _ => println!("in process: aborted: {}", o.abort.as_deref().unwrap_or("?")),
+            }
+        }
+        return Ok(i32::from(o.error_deg.is_none_or(|e| e.abs() > a.tolerance)));
+    }
+    run(RunArgs {
+        scenario: Some(scen),
+        duration: None,
+        speed: None,
+        nav: None,
+        bus: BusArgs {
+            out: Some(out),
+            ..a.bus
+        },
+    })
+}

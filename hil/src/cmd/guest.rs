@@ -1,0 +1,81 @@
+//! Running a command inside the QEMU guest where this kernel has no CAN, and the output folders.
+
+use crate::*;
+
+pub(crate) fn default_out(name: &str) -> PathBuf {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    PathBuf::from("runs").join(format!("{name}-{secs}"))
+}
+
+pub(crate) fn absolute(p: &Path) -> Result<PathBuf> {
+    Ok(if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        std::env::current_dir()?.join(p)
+    })
+}
+
+/// Run this program with `args` inside the QEMU guest (this kernel has no CAN): shares the
+/// workspace, `out` and `extra` folders; returns the guest command's exit status.
+pub(crate) fn run_in_guest(
+    args: Vec<String>,
+    out: &Path,
+    mut extra: Vec<PathBuf>,
+    libs_for: Vec<PathBuf>,
+    json: Option<&str>,
+) -> Result<i32> {
+    if std::env::var_os(GUEST_ENV).is_some() {
+        bail!(
+            "inside the QEMU guest and still no CAN support: the guest kernel lacks the can/vcan modules"
+        );
+    }
+    eprintln!("hil: this kernel has no CAN support; running on real vcan inside a QEMU guest");
+    vcan_setup::install_prereqs()?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    extra.push(out.to_path_buf());
+    let exe = std::env::current_exe()?;
+    let mut full = vec![exe.to_string_lossy().into_owned()];
+    full.extend(args);
+    let shares = dedupe_nested(vcan_setup::default_shares(&exe, &extra));
+    let mut opts = VmOptions {
+        shares,
+        libs_for,
+        ..VmOptions::default()
+    };
+    // long runs (the full campus loop) may need more than the default 40 minutes
+    if let Some(v) = std::env::var_os("HIL_GUEST_TIMEOUT_S") {
+        let s: u64 = v
+            .to_str()
+            .and_then(|v| v.parse().ok())
+            .context("HIL_GUEST_TIMEOUT_S must be a whole number of seconds")?;
+        opts.timeout = std::time::Duration::from_secs(s);
+    }
+    let o = vcan_setup::run_in_vm(&full, &opts)?;
+    if let Some(name) = json {
+        // the guest's console mixes its stdout and stderr: the JSON comes from the file the run
+        // wrote in the shared output folder, so stdout carries the JSON alone
+        let p = out.join(name);
+        match std::fs::read_to_string(&p) {
+            Ok(j) => println!("{}", j.trim_end()),
+            Err(e) => eprintln!("hil: the run in the guest wrote no {}: {e}", p.display()),
+        }
+    }
+    eprintln!(
+        "hil: guest boot {:.1} s, run {:.1} s",
+        o.boot_secs,
+        o.total_secs - o.boot_secs
+    );
+    Ok(o.status)
+}
+
+/// Drop shares that lie inside another share.
+pub(crate) fn dedupe_nested(mut shares: Vec<PathBuf>) -> Vec<PathBuf> {
+    shares.retain(|p| !p.as_os_str().is_empty());
+    let all = shares.clone();
+    shares.retain(|p| !all.iter().any(|q| q != p && p.starts_with(q)));
+    shares.dedup();
+    shares
+}

@@ -1,0 +1,126 @@
+//! `hil validate turntable`: the validation suite against the mechanism on a bus.
+
+use crate::*;
+
+pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
+    use emulators::turntable::{Turntable, TurntableFaults, TurntableParams};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    if a.speed.is_nan() || a.speed <= 0.0 || a.speed > 100.0 {
+        bail!("--speed must be in (0, 100]");
+    }
+    let out = absolute(
+        &a.bus
+            .out
+            .clone()
+            .unwrap_or_else(|| default_out("validate-turntable")),
+    )?;
+    let in_guest = std::env::var_os(GUEST_ENV).is_some();
+    let here = a.real
+        || ((!a.bus.vm || in_guest) && matches!(vcan_setup::can_support(), CanSupport::Available));
+    if !here {
+        let mut args: Vec<String> = vec![
+            "validate".into(),
+            "turntable".into(),
+            "--iface".into(),
+            a.bus.iface.clone(),
+            "--axis".into(),
+            a.axis.to_string(),
+            "--speed".into(),
+            a.speed.to_string(),
+            "--out".into(),
+            out.to_string_lossy().into_owned(),
+        ];
+        if let Some(f) = a.fault {
+            args.extend([
+                "--fault".into(),
+                clap::ValueEnum::to_possible_value(&f)
+                    .map(|v| v.get_name().to_string())
+                    .unwrap_or_default(),
+            ]);
+        }
+        if a.bus.json {
+            args.push("--json".into());
+        }
+        return run_in_guest(
+            args,
+            &out,
+            vec![],
+            vec![],
+            a.bus.json.then_some("validation.json"),
+        );
+    }
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let emulator = if a.real {
+        None
+    } else {
+        vcan_setup::ensure_vcan(&a.bus.iface)?;
+        let mut faults = TurntableFaults::default();
+        match a.fault {
+            Some(TtFault::Stall) => faults.stall_from_s = Some(0.0),
+            Some(TtFault::Lock) => faults.lock_fails = true,
+            Some(TtFault::EncoderGlitch) => {
+                faults.encoder_glitch_at_s = (0..400).map(|i| 0.5 + 0.25 * f64::from(i)).collect();
+            }
+            Some(TtFault::LostCommands) => faults.lost_command_seqs = vec![4],
+            Some(TtFault::DelayedCommands) => faults.command_delay_s = 0.2,
+            None => {}
+        }
+        let p = TurntableParams {
+            axes: a.axis + 1,
+            faults,
+            ..TurntableParams::default()
+        };
+        p.check()?;
+        let tt = Turntable::new(p);
+        let progress = Arc::new(emulators::can::Progress::default());
+        let clock = emulators::clock::SimClock::start(a.speed);
+        // the mechanism's time: the simulated clock (no IMU here to follow)
+        let ticker = {
+            let (progress, stop) = (progress.clone(), stop.clone());
+            std::thread::spawn(move || {
+                while !stop.load(Ordering::Relaxed) {
+                    progress
+                        .sim_us
+                        .store((clock.now() * 1e6) as u64, Ordering::Release);
+                    std::thread::sleep(std::time::Duration::from_millis(1));
+                }
+            })
+        };
+        let (iface, stop2) = (a.bus.iface.clone(), stop.clone());
+        let h = std::thread::spawn(move || {
+            emulators::can::run_turntable(&iface, tt, &progress, f64::INFINITY, &stop2)
+        });
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        Some((h, ticker))
+    };
+    let result = hil::validate::run_suite(
+        &a.bus.iface,
+        a.axis,
+        if a.real { 1.0 } else { a.speed },
+        &Default::default(),
+    );
+    stop.store(true, Ordering::Relaxed);
+    if let Some((h, ticker)) = emulator {
+        let _ = ticker.join();
+        match h.join() {
+            Ok(r) => {
+                r.context("turntable emulator")?;
+            }
+            Err(_) => bail!("turntable emulator thread panicked"),
+        }
+    }
+    let v = result?;
+    std::fs::write(
+        out.join("validation.json"),
+        serde_json::to_string_pretty(&v)?,
+    )?;
+    if a.bus.json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        print!("{}", hil::validate::table(&v));
+        println!(" report: {}", out.join("validation.json").display());
+    }
+    Ok(if v.pass { 0 } else { 1 })
+}
