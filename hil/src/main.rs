@@ -76,7 +76,7 @@ enum Cmd {
     /// Reproduce a paper's tables in process (same emulator and nav code as the bench).
     #[command(subcommand)]
     Experiment(Experiment),
-    /// Benchmark nav's IMU front end (decode, dither filter, coning, attitude) and each
+    /// Benchmark nav's pipeline on the IMU stream (decode, dither filter, coning, attitude) and each
     /// scenario's emulators (truth, sensor model, encoding) on one core, in process.
     Bench {
         /// Seconds of 2 kHz IMU data per pass.
