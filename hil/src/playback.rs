@@ -52,19 +52,6 @@ impl Playback {
     }
 }
 
-fn frame_of(data: &[u8]) -> Option<RawFrame> {
-    if data.len() != 11 || data[2] > 8 {
-        return None;
-    }
-    let mut d = [0u8; 8];
-    d.copy_from_slice(&data[3..]);
-    Some(RawFrame {
-        id: u16::from_le_bytes([data[0], data[1]]),
-        len: data[2],
-        data: d,
-    })
-}
-
 fn show(f: &RawFrame) -> String {
     format!("0x{:03X} [{}] {:02X?}", f.id, f.len, f.payload())
 }
@@ -92,14 +79,14 @@ pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
         };
         match m.channel.topic.as_str() {
             "/can/raw" | "/can/tx" if m.channel.message_encoding != RAW_FRAME_ENCODING => bad += 1,
-            "/can/raw" => match frame_of(&m.data) {
+            "/can/raw" => match nav::record::decode_frame(&m.data) {
                 Some(f) => {
                     frames_in += 1;
                     p.on_frame(&f, &mut out);
                 }
                 None => bad += 1,
             },
-            "/can/tx" => match frame_of(&m.data) {
+            "/can/tx" => match nav::record::decode_frame(&m.data) {
                 Some(f) => recorded.push(f),
                 None => bad += 1,
             },

@@ -77,7 +77,7 @@ pub struct FrameCounters {
     /// Data frames.
     pub total: u64,
     /// Decoded, by message name.
-    pub by_message: BTreeMap<String, u64>,
+    pub by_message: BTreeMap<&'static str, u64>,
     /// Unknown ids and how often each came.
     pub unknown: BTreeMap<u32, u64>,
     /// Wrong length for their id.
@@ -224,11 +224,7 @@ impl Pipeline {
                 return;
             }
         };
-        *self
-            .frames
-            .by_message
-            .entry(m.spec().name.to_string())
-            .or_insert(0) += 1;
+        *self.frames.by_message.entry(m.spec().name).or_insert(0) += 1;
         // 2. the indexing mechanism's frames
         if let Some(nf) = self.nf.as_mut() {
             match &m {
@@ -694,7 +690,11 @@ impl Pipeline {
         Summary {
             interface: String::new(),
             frames_total: c.total,
-            frames_by_message: c.by_message.clone(),
+            frames_by_message: c
+                .by_message
+                .iter()
+                .map(|(k, v)| (k.to_string(), *v))
+                .collect(),
             unknown_id_frames: c.unknown.values().sum(),
             unknown_ids: c.unknown.keys().map(|id| format!("0x{id:03X}")).collect(),
             bad_length_frames: c.bad_length,

@@ -17,8 +17,34 @@ use std::thread::JoinHandle;
 use thiserror::Error;
 use wire::RawFrame;
 
-/// Message encoding of `/can/raw`.
+/// Message encoding of `/can/raw` and `/can/tx`.
 pub const RAW_FRAME_ENCODING: &str = "rlg-hil.can-frame.v1";
+
+/// Bytes of one frame in [`RAW_FRAME_ENCODING`].
+pub const RAW_FRAME_BYTES: usize = 11;
+
+/// A frame in [`RAW_FRAME_ENCODING`]: `[id: u16 LE][len: u8][data: 8 bytes]`.
+pub fn encode_frame(frame: &RawFrame) -> [u8; RAW_FRAME_BYTES] {
+    let mut buf = [0u8; RAW_FRAME_BYTES];
+    buf[..2].copy_from_slice(&frame.id.to_le_bytes());
+    buf[2] = frame.len;
+    buf[3..].copy_from_slice(&frame.data);
+    buf
+}
+
+/// The frame of a [`RAW_FRAME_ENCODING`] message (none when it is not one).
+pub fn decode_frame(data: &[u8]) -> Option<RawFrame> {
+    if data.len() != RAW_FRAME_BYTES || data[2] > 8 {
+        return None;
+    }
+    let mut d = [0u8; 8];
+    d.copy_from_slice(&data[3..]);
+    Some(RawFrame {
+        id: u16::from_le_bytes([data[0], data[1]]),
+        len: data[2],
+        data: d,
+    })
+}
 
 /// One thing to record.
 #[derive(Debug)]
@@ -172,14 +198,12 @@ impl Recorder {
             .spawn(move || -> Result<u64, RecordError> {
                 let mut seq: BTreeMap<u16, u32> = BTreeMap::new();
                 let mut n = 0u64;
-                let mut buf = [0u8; 11];
+                let mut buf: [u8; RAW_FRAME_BYTES];
                 let mut text: String;
                 for r in rx {
                     let (ch, log, publish, data): (u16, u64, u64, &[u8]) = match &r {
                         Record::Frame { t_ns, frame } | Record::Sent { t_ns, frame } => {
-                            buf[..2].copy_from_slice(&frame.id.to_le_bytes());
-                            buf[2] = frame.len;
-                            buf[3..].copy_from_slice(&frame.data);
+                            buf = encode_frame(frame);
                             let ch = if matches!(r, Record::Sent { .. }) {
                                 sent
                             } else {
@@ -257,4 +281,23 @@ pub fn wall_ns() -> u64 {
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_nanos() as u64)
         .unwrap_or(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_recorded_frame_reads_back_and_a_bad_one_does_not() {
+        let f = RawFrame {
+            id: 0x203,
+            len: 6,
+            data: [1, 2, 3, 4, 5, 6, 0, 0],
+        };
+        assert_eq!(decode_frame(&encode_frame(&f)), Some(f));
+        assert_eq!(decode_frame(&encode_frame(&f)[..10]), None);
+        let mut b = encode_frame(&f);
+        b[2] = 9;
+        assert_eq!(decode_frame(&b), None);
+    }
 }
