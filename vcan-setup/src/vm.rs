@@ -447,13 +447,182 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     std::fs::write(ctl.path().join("cmd.sh"), script)
         .map_err(io_ctx("writing the guest command"))?;
 
+    let launch = |kvm: bool, boot_limit: Option<Duration>| {
+        launch(&Launch {
+            pre: &pre,
+            ctl: ctl.path(),
+            initrd: &initrd,
+            shares: &shares,
+            opts,
+            kvm,
+            boot_limit,
+            start,
+            prog,
+        })
+    };
+    let launched = match Accel::choose() {
+        Accel::Tcg => launch(false, None)?,
+        Accel::Kvm => launch(true, None)?,
+        Accel::Probe(cache) => match launch(true, Some(KVM_BOOT_LIMIT))? {
+            Launched::NoBoot(why) => {
+                eprintln!(
+                    "vcan-setup: KVM did not start the guest ({why}); using software emulation (TCG){}",
+                    cache.as_ref().map_or(String::new(), |c| format!(
+                        " from now on (remembered in {}; delete it to probe again)",
+                        c.display()
+                    ))
+                );
+                remember_kvm(cache.as_deref(), false);
+                launch(false, None)?
+            }
+            done => {
+                remember_kvm(cache.as_deref(), true);
+                done
+            }
+        },
+    };
+    let Launched::Done {
+        mut output,
+        preboot,
+        boot_secs,
+    } = launched
+    else {
+        return Err(Error::NoStatus("the guest did not boot".into()));
+    };
+    let rc = std::fs::read_to_string(ctl.path().join("rc"))
+        .ok()
+        .and_then(|s| s.trim().parse::<i32>().ok());
+    let Some(status) = rc else {
+        if boot_secs.is_none() {
+            output = preboot;
+        }
+        let tail: Vec<&str> = output.lines().rev().take(30).collect();
+        return Err(Error::NoStatus(
+            tail.into_iter().rev().collect::<Vec<_>>().join("\n"),
+        ));
+    };
+    Ok(RunOutcome {
+        status,
+        output,
+        backend: Backend::Vm,
+        boot_secs: boot_secs.unwrap_or(0.0),
+        total_secs: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// How long a KVM guest may take to come up before the probe gives up on KVM (a KVM guest is
+/// up in about a second; where nested virtualisation does not work it hangs at boot).
+const KVM_BOOT_LIMIT: Duration = Duration::from_secs(15);
+
+/// The accelerator the guest runs on.
+enum Accel {
+    /// Software emulation.
+    Tcg,
+    /// KVM, asked for: no fall-back.
+    Kvm,
+    /// KVM if it starts the guest, else software emulation; the answer is remembered here.
+    Probe(Option<PathBuf>),
+}
+
+impl Accel {
+    /// `VCAN_SETUP_ACCEL` = `tcg`, `kvm` or `auto` (the default: KVM where `/dev/kvm` opens
+    /// and a guest has come up on it before or has not been tried).
+    fn choose() -> Self {
+        match std::env::var("VCAN_SETUP_ACCEL").as_deref() {
+            Ok("tcg") => return Self::Tcg,
+            Ok("kvm") => return Self::Kvm,
+            _ => {}
+        }
+        let usable = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open("/dev/kvm")
+            .is_ok();
+        if !usable {
+            return Self::Tcg;
+        }
+        let cache = kvm_cache();
+        match cache
+            .as_deref()
+            .and_then(|c| std::fs::read_to_string(c).ok())
+        {
+            Some(s) if s.trim() == "no" => Self::Tcg,
+            _ => Self::Probe(cache),
+        }
+    }
+}
+
+/// Where the KVM probe's answer is kept: `$XDG_CACHE_HOME/vcan-setup/kvm` (or under
+/// `$HOME/.cache`), one file per host kernel.
+fn kvm_cache() -> Option<PathBuf> {
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
+    let release = std::fs::read_to_string("/proc/sys/kernel/osrelease").ok()?;
+    Some(
+        base.join("vcan-setup")
+            .join(format!("kvm-{}", release.trim())),
+    )
+}
+
+/// Keeps the probe's answer (best effort: without it the next run probes again).
+fn remember_kvm(cache: Option<&Path>, works: bool) {
+    if let Some(c) = cache {
+        if let Some(d) = c.parent() {
+            let _ = std::fs::create_dir_all(d);
+        }
+        let _ = std::fs::write(c, if works { "yes\n" } else { "no\n" });
+    }
+}
+
+/// One start of QEMU.
+struct Launch<'a> {
+    pre: &'a VmPrereqs,
+    ctl: &'a Path,
+    initrd: &'a Path,
+    shares: &'a [PathBuf],
+    opts: &'a VmOptions,
+    kvm: bool,
+    /// Give up (kill QEMU, `Launched::NoBoot`) when the guest is not up by then.
+    boot_limit: Option<Duration>,
+    start: Instant,
+    prog: &'a str,
+}
+
+/// What a start of QEMU gave.
+enum Launched {
+    /// The guest ran (the command's status is in the control folder, if it got one).
+    Done {
+        output: String,
+        preboot: String,
+        boot_secs: Option<f64>,
+    },
+    /// The guest did not come up within the boot limit.
+    NoBoot(String),
+}
+
+/// Starts QEMU, echoes and collects the guest's output until it powers off.
+fn launch(l: &Launch<'_>) -> Result<Launched> {
     // the guest's CPU model: `max` unless VCAN_SETUP_CPU names another (for measuring, e.g. a
     // model without FMA/AVX, whose libm paths TCG emulates more cheaply or not)
-    let cpu = std::env::var("VCAN_SETUP_CPU").unwrap_or_else(|_| "max".into());
+    let Launch {
+        pre,
+        ctl,
+        initrd,
+        shares,
+        opts,
+        kvm,
+        boot_limit,
+        start,
+        prog,
+    } = *l;
+    let cpu = std::env::var("VCAN_SETUP_CPU")
+        .unwrap_or_else(|_| if kvm { "host" } else { "max" }.into());
+    let launched = Instant::now();
     let mut q = Command::new(&pre.qemu);
     q.args([
         "-accel",
-        "tcg,thread=multi",
+        if kvm { "kvm" } else { "tcg,thread=multi" },
         "-cpu",
         cpu.as_str(),
         "-nodefaults",
@@ -470,12 +639,12 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     .arg("-kernel")
     .arg(&pre.kernel)
     .arg("-initrd")
-    .arg(&initrd)
+    .arg(initrd)
     .args(["-append", "console=ttyS0 quiet loglevel=3 panic=-1"])
     .arg("-virtfs")
     .arg(format!(
         "local,path={},mount_tag=ctl,security_model=none",
-        ctl.path().display()
+        ctl.display()
     ));
     for (i, s) in shares.iter().enumerate() {
         q.arg("-virtfs").arg(format!(
@@ -522,9 +691,10 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
                     boot_secs = Some(start.elapsed().as_secs_f64());
                     if opts.echo {
                         eprintln!(
-                            "vcan-setup: guest up after {:.1} s (kernel {}), running {prog}",
+                            "vcan-setup: guest up after {:.1} s (kernel {}, {}), running {prog}",
                             start.elapsed().as_secs_f64(),
-                            pre.kernel_version
+                            pre.kernel_version,
+                            if kvm { "KVM" } else { "software emulation" }
                         );
                     }
                     continue;
@@ -543,8 +713,29 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
                 output.push_str(&line);
                 output.push('\n');
             }
-            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+            Err(mpsc::RecvTimeoutError::Disconnected) => {
+                if boot_secs.is_none() && boot_limit.is_some() {
+                    let _ = child.wait();
+                    let last = preboot.iter().rev().find(|l| !l.trim().is_empty());
+                    return Ok(Launched::NoBoot(format!(
+                        "QEMU ended before the guest was up: {}",
+                        last.map_or("no output", |l| l.as_str())
+                    )));
+                }
+                break;
+            }
             Err(mpsc::RecvTimeoutError::Timeout) => {
+                if let Some(limit) = boot_limit
+                    && boot_secs.is_none()
+                    && launched.elapsed() > limit
+                {
+                    let _ = child.kill();
+                    let _ = child.wait();
+                    return Ok(Launched::NoBoot(format!(
+                        "not up within {} s",
+                        limit.as_secs()
+                    )));
+                }
                 if Instant::now() > deadline {
                     let _ = child.kill();
                     let _ = child.wait();
@@ -556,24 +747,10 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     let _ = t1.join();
     let _ = t2.join();
     let _ = child.wait();
-    let rc = std::fs::read_to_string(ctl.path().join("rc"))
-        .ok()
-        .and_then(|s| s.trim().parse::<i32>().ok());
-    let Some(status) = rc else {
-        if boot_secs.is_none() {
-            output = preboot.join("\n");
-        }
-        let tail: Vec<&str> = output.lines().rev().take(30).collect();
-        return Err(Error::NoStatus(
-            tail.into_iter().rev().collect::<Vec<_>>().join("\n"),
-        ));
-    };
-    Ok(RunOutcome {
-        status,
+    Ok(Launched::Done {
         output,
-        backend: Backend::Vm,
-        boot_secs: boot_secs.unwrap_or(0.0),
-        total_secs: start.elapsed().as_secs_f64(),
+        preboot: preboot.join("\n"),
+        boot_secs,
     })
 }
 
