@@ -6,11 +6,8 @@ use crate::observe::{DrillWatch, solution_socket, watch_solution};
 use crate::report::{self, RunReport};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
-use emulators::can::Progress;
-use emulators::clock::SimClock;
 use emulators::drive::Drive;
 use emulators::gps::{GpsDevice, GpsPty, relink};
-use emulators::imu::ImuEmulator;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -134,11 +131,6 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     info!(interface = %opts.iface, "starting nav");
     let nav = start_nav(&opts.nav_bin, &cfg_path)?;
 
-    let lockstep = emulators::bus::Lockstep::default();
-    let (motion, turntable) = s.build();
-    let imu = ImuEmulator::new(motion, s.imu.clone());
-    let stop = Arc::new(AtomicBool::new(false));
-    let progress = Arc::new(Progress::default());
     let watch_stop = Arc::new(AtomicBool::new(false));
     let watch = {
         // opened before the IMU starts, so the first epoch is not missed
@@ -152,49 +144,24 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
         _ => None,
     };
-    let devices = emulators::bus::Devices {
-        imu: emulators::can::BusStream::new(imu, &s.faults),
-        turntable: turntable
-            .map(|tt| emulators::bus::TtBus::new(tt, s.imu.rate_hz, lockstep.latency)),
-        gps: gps_device,
-    };
-    let clock = SimClock::start(s.speed);
     let t0 = Instant::now();
-    let tx = {
-        let (iface, stop, progress, dur) = (
-            opts.iface.clone(),
-            stop.clone(),
-            progress.clone(),
-            s.duration_s,
-        );
-        std::thread::spawn(move || {
-            emulators::bus::run(
-                &iface,
-                devices,
-                clock,
-                dur,
-                Some(lockstep),
-                &stop,
-                &progress,
-            )
-        })
-    };
+    let devices = crate::devices::start_scenario(s, &opts.iface, gps_device)?;
     let mut drill = DrillWatch::default();
     let mut next_report = Instant::now() + Duration::from_secs(5);
     let mut last_report = (Instant::now(), 0.0);
-    while !tx.is_finished() {
+    while !devices.is_finished() {
         std::thread::sleep(Duration::from_millis(50));
         for l in nav.lines.try_iter() {
             if drill.line(&l, opts.progress) && s.drive.is_none() {
                 // north-finding reported: the drill is over (a drive goes on to navigate)
-                stop.store(true, Ordering::Relaxed);
+                devices.stop();
             }
         }
         if opts.progress
             && (s.north_finding.is_none() || drill.done)
             && Instant::now() >= next_report
         {
-            let t = progress.now();
+            let t = devices.sim_time();
             let reached = (t - last_report.1) / last_report.0.elapsed().as_secs_f64().max(1e-9);
             eprintln!(
                 "hil: {t:.1} / {:.1} s simulated (x{} asked, x{reached:.1} reached)",
@@ -205,17 +172,15 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
     }
     let wall = t0.elapsed().as_secs_f64();
-    stop.store(true, Ordering::Relaxed);
-    let bus = tx
-        .join()
-        .map_err(|_| anyhow::anyhow!("emulator thread panicked"))?;
+    let sim_reached = devices.sim_time();
+    let bus = devices.join();
     // let nav drain its socket before it is told to stop
     std::thread::sleep(Duration::from_millis(500));
     let (bus, nav_out) = match bus {
         Ok(b) => (b, stop_nav(nav)?),
         Err(e) => {
             let _ = stop_nav(nav);
-            return Err(anyhow::Error::new(e).context("emulators"));
+            return Err(e);
         }
     };
     let (nav_exit, nav_lines) = nav_out;
@@ -260,7 +225,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             nf.map_or(Some("north-finding was not enabled in nav"), |n| {
                 n.abort.as_deref()
             }),
-            progress.now(),
+            sim_reached,
         )
     });
     if let Some(o) = &drill_outcome {
@@ -298,7 +263,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         interface: opts.iface.clone(),
         wall_seconds: wall,
         frames_per_wall_second: tx.frames as f64 / wall.max(1e-9),
-        pace_reached: progress.now() / wall.max(1e-9),
+        pace_reached: sim_reached / wall.max(1e-9),
         lockstep: lockstep_stats,
         tx,
         in_process: reference,

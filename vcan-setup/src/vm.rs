@@ -616,8 +616,8 @@ fn launch(l: &Launch<'_>) -> Result<Launched> {
         start,
         prog,
     } = *l;
-    let cpu = std::env::var("VCAN_SETUP_CPU")
-        .unwrap_or_else(|_| if kvm { "host" } else { "max" }.into());
+    let cpu =
+        std::env::var("VCAN_SETUP_CPU").unwrap_or_else(|_| if kvm { "host" } else { "max" }.into());
     let launched = Instant::now();
     let mut q = Command::new(&pre.qemu);
     q.args([

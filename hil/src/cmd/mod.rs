@@ -1,8 +1,10 @@
 //! The commands of `hil`, one module each (the argument types and the dispatch are in
 //! `main.rs`; the work is in the `hil` library).
 
+pub(crate) mod bench;
 pub(crate) mod demo;
 pub(crate) mod drill;
+pub(crate) mod experiment;
 pub(crate) mod guest;
 pub(crate) mod replay;
 pub(crate) mod run;

@@ -4,8 +4,6 @@ use crate::*;
 
 pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
     use emulators::turntable::{Turntable, TurntableFaults, TurntableParams};
-    use std::sync::Arc;
-    use std::sync::atomic::{AtomicBool, Ordering};
     if a.speed.is_nan() || a.speed <= 0.0 || a.speed > 100.0 {
         bail!("--speed must be in (0, 100]");
     }
@@ -51,7 +49,6 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
         );
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let stop = Arc::new(AtomicBool::new(false));
     let emulator = if a.real {
         None
     } else {
@@ -73,27 +70,9 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
             ..TurntableParams::default()
         };
         p.check()?;
-        let tt = Turntable::new(p);
-        let progress = Arc::new(emulators::can::Progress::default());
-        let clock = emulators::clock::SimClock::start(a.speed);
-        // the mechanism's time: the simulated clock (no IMU here to follow)
-        let ticker = {
-            let (progress, stop) = (progress.clone(), stop.clone());
-            std::thread::spawn(move || {
-                while !stop.load(Ordering::Relaxed) {
-                    progress
-                        .sim_us
-                        .store((clock.now() * 1e6) as u64, Ordering::Release);
-                    std::thread::sleep(std::time::Duration::from_millis(1));
-                }
-            })
-        };
-        let (iface, stop2) = (a.bus.iface.clone(), stop.clone());
-        let h = std::thread::spawn(move || {
-            emulators::can::run_turntable(&iface, tt, &progress, f64::INFINITY, &stop2)
-        });
+        let tt = hil::devices::start_turntable(&a.bus.iface, Turntable::new(p), a.speed)?;
         std::thread::sleep(std::time::Duration::from_millis(50));
-        Some((h, ticker))
+        Some(tt)
     };
     let result = hil::validate::run_suite(
         &a.bus.iface,
@@ -101,15 +80,8 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
         if a.real { 1.0 } else { a.speed },
         &Default::default(),
     );
-    stop.store(true, Ordering::Relaxed);
-    if let Some((h, ticker)) = emulator {
-        let _ = ticker.join();
-        match h.join() {
-            Ok(r) => {
-                r.context("turntable emulator")?;
-            }
-            Err(_) => bail!("turntable emulator thread panicked"),
-        }
+    if let Some(tt) = emulator {
+        tt.join()?;
     }
     let v = result?;
     std::fs::write(

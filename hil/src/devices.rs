@@ -1,0 +1,144 @@
+//! The one place that puts the bench's emulated devices on a bus and takes them off again: a
+//! scenario's devices behind the bus scheduler (IMU, turntable, GPS receiver, in lockstep with
+//! nav), or the indexing mechanism alone on its simulated clock for validation.
+
+use crate::scenario::Scenario;
+use anyhow::{Context, Result, anyhow};
+use emulators::bus::{BusOutcome, Devices, Lockstep};
+use emulators::can::{BusStream, Progress, TurntableTxStats};
+use emulators::clock::SimClock;
+use emulators::gps::GpsDevice;
+use emulators::imu::ImuEmulator;
+use emulators::turntable::Turntable;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// Devices running on a bus in their own thread.
+pub struct Running<T> {
+    thread: JoinHandle<Result<T>>,
+    ticker: Option<JoinHandle<()>>,
+    stop: Arc<AtomicBool>,
+    progress: Arc<Progress>,
+}
+
+impl<T> Running<T> {
+    /// Whether the devices have stopped by themselves (the scenario's end, or an error).
+    pub fn is_finished(&self) -> bool {
+        self.thread.is_finished()
+    }
+
+    /// Simulated time the devices have reached, s.
+    pub fn sim_time(&self) -> f64 {
+        self.progress.now()
+    }
+
+    /// Asks the devices to stop at their next sample.
+    pub fn stop(&self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+
+    /// Stops the devices and waits for them: their statistics, or what went wrong.
+    pub fn join(self) -> Result<T> {
+        self.stop();
+        if let Some(t) = self.ticker {
+            t.join().map_err(|_| anyhow!("the device clock panicked"))?;
+        }
+        self.thread
+            .join()
+            .map_err(|_| anyhow!("the emulator thread panicked"))?
+    }
+}
+
+/// Starts a scenario's devices on `iface` behind the bus scheduler, at the scenario's speed
+/// factor and in lockstep with nav: the IMU (with the scenario's stream faults), the turntable
+/// when the scenario has one, and `gps` (the receiver on its pty) when given.
+pub fn start_scenario(
+    s: &Scenario,
+    iface: &str,
+    gps: Option<GpsDevice>,
+) -> Result<Running<BusOutcome>> {
+    let lockstep = Lockstep::default();
+    let (motion, turntable) = s.build();
+    let devices = Devices {
+        imu: BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
+        turntable: turntable
+            .map(|tt| emulators::bus::TtBus::new(tt, s.imu.rate_hz, lockstep.latency)),
+        gps,
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let progress = Arc::new(Progress::default());
+    let clock = SimClock::start(s.speed);
+    let thread = {
+        let (iface, stop, progress, duration) = (
+            iface.to_string(),
+            stop.clone(),
+            progress.clone(),
+            s.duration_s,
+        );
+        std::thread::Builder::new()
+            .name("bus".into())
+            .spawn(move || {
+                emulators::bus::run(
+                    &iface,
+                    devices,
+                    clock,
+                    duration,
+                    Some(lockstep),
+                    &stop,
+                    &progress,
+                )
+                .context("emulators")
+            })
+            .context("starting the emulator thread")?
+    };
+    Ok(Running {
+        thread,
+        ticker: None,
+        stop,
+        progress,
+    })
+}
+
+/// Starts the indexing mechanism alone on `iface`, on a simulated clock paced at `speed` (no IMU
+/// to follow), until stopped.
+pub fn start_turntable(
+    iface: &str,
+    tt: Turntable,
+    speed: f64,
+) -> Result<Running<TurntableTxStats>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let progress = Arc::new(Progress::default());
+    let clock = SimClock::start(speed);
+    let ticker = {
+        let (progress, stop) = (progress.clone(), stop.clone());
+        std::thread::Builder::new()
+            .name("turntable-clock".into())
+            .spawn(move || {
+                while !stop.load(Ordering::Relaxed) {
+                    progress
+                        .sim_us
+                        .store((clock.now() * 1e6) as u64, Ordering::Release);
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            })
+            .context("starting the turntable's clock")?
+    };
+    let thread = {
+        let (iface, stop, progress) = (iface.to_string(), stop.clone(), progress.clone());
+        std::thread::Builder::new()
+            .name("turntable".into())
+            .spawn(move || {
+                emulators::can::run_turntable(&iface, tt, &progress, f64::INFINITY, &stop)
+                    .context("turntable emulator")
+            })
+            .context("starting the turntable emulator")?
+    };
+    Ok(Running {
+        thread,
+        ticker: Some(ticker),
+        stop,
+        progress,
+    })
+}
