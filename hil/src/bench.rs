@@ -119,3 +119,393 @@ pub fn emulators(s: &Scenario, seconds: f64) -> EmulatorBench {
         frames_per_second: n as f64 / dt,
     }
 }
+
+/// The raw vcan limit on this machine: a trivial writer and reader, nothing else on the bus.
+#[derive(Debug, Clone, Serialize)]
+pub struct RawVcan {
+    /// Frames per write: 1 (as `cangen -g 0` writes) or a `sendmmsg` batch (as the bench's
+    /// scheduler writes).
+    pub frames_per_write: usize,
+    /// Frames written.
+    pub sent: u64,
+    /// Frames the reader received.
+    pub received: u64,
+    /// Frames lost between them.
+    pub lost: u64,
+    /// From the first write to the last frame read, s.
+    pub seconds: f64,
+    /// Frames received per second.
+    pub frames_per_second: f64,
+}
+
+/// Write `frames` frames on `iface` as fast as the kernel takes them, `per_write` per system
+/// call, while a reader (receive buffer 8 MiB, `recvmmsg`) counts them.
+pub fn raw_vcan(iface: &str, frames: u64, per_write: usize) -> Result<RawVcan> {
+    use socketcan::{CanSocket, Socket, SocketOptions};
+    use std::os::fd::AsRawFd;
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::Duration;
+    let rx = CanSocket::open(iface).with_context(|| format!("opening {iface} to read"))?;
+    rx.set_filters(&[socketcan::CanFilter::new(u32::from(RAW_ID), 0x7FF)])
+        .with_context(|| format!("filtering {iface}"))?;
+    if let Err(e) = wire::set_rcvbuf(rx.as_raw_fd(), 8 << 20) {
+        tracing::warn!("{iface}: receive buffer stays at the default: {e}");
+    }
+    let tx = CanSocket::open(iface).with_context(|| format!("opening {iface} to write"))?;
+    let done = Arc::new(AtomicBool::new(false));
+    let reader = {
+        let done = done.clone();
+        std::thread::spawn(move || -> std::io::Result<(u64, Instant)> {
+            let fd = rx.as_raw_fd();
+            let (mut n, mut last) = (0u64, Instant::now());
+            let mut buf = Vec::with_capacity(wire::BATCH);
+            loop {
+                let mut p = libc::pollfd {
+                    fd,
+                    events: libc::POLLIN,
+                    revents: 0,
+                };
+                // SAFETY: one live pollfd.
+                unsafe { libc::poll(&mut p, 1, 50) };
+                buf.clear();
+                let k = wire::recv_batch(fd, &mut buf, wire::BATCH)? as u64;
+                if k > 0 {
+                    n += k;
+                    last = Instant::now();
+                } else if done.load(Ordering::Acquire)
+                    && last.elapsed() > Duration::from_millis(300)
+                {
+                    return Ok((n, last));
+                }
+            }
+        })
+    };
+    let per_write = per_write.clamp(1, wire::BATCH);
+    let batch: Vec<RawFrame> = (0..per_write)
+        .map(|_| RawFrame {
+            id: RAW_ID,
+            len: 8,
+            data: [0; 8],
+        })
+        .collect();
+    let fd = tx.as_raw_fd();
+    let t0 = Instant::now();
+    let mut sent = 0u64;
+    while sent < frames {
+        let want = (frames - sent).min(per_write as u64) as usize;
+        let mut chunk = batch[..want].to_vec();
+        for (i, f) in chunk.iter_mut().enumerate() {
+            f.data = (sent + i as u64).to_le_bytes();
+        }
+        let r = if per_write == 1 {
+            wire::send_batch(fd, &chunk[..1]).map(|_| 1)
+        } else {
+            wire::send_batch(fd, &chunk)
+        };
+        match r {
+            Ok(k) => sent += k as u64,
+            Err(e) if e.raw_os_error() == Some(libc::ENOBUFS) => std::thread::yield_now(),
+            Err(e) => {
+                done.store(true, Ordering::Release);
+                return Err(anyhow::Error::new(e).context(format!("writing on {iface}")));
+            }
+        }
+    }
+    done.store(true, Ordering::Release);
+    let (received, last) = reader
+        .join()
+        .map_err(|_| anyhow::anyhow!("the reader panicked"))?
+        .with_context(|| format!("reading {iface}"))?;
+    let seconds = last.duration_since(t0).as_secs_f64().max(1e-9);
+    Ok(RawVcan {
+        frames_per_write: per_write,
+        sent,
+        received,
+        lost: sent.saturating_sub(received),
+        seconds,
+        frames_per_second: received as f64 / seconds,
+    })
+}
+
+/// The id the raw benchmark writes (outside the contract's ids).
+const RAW_ID: u16 = 0x7EE;
+
+/// nav's whole pipeline on a GPS-aided drive, without a bus: front end, navigator (strapdown
+/// and Kalman filter with its receiver error states) and solution output, over the scenario's
+/// frames and fixes prepared in advance (the emulators' cost is not counted).
+#[derive(Debug, Clone, Serialize)]
+pub struct PipelineBench {
+    /// Scenario name.
+    pub scenario: String,
+    /// Simulated seconds.
+    pub seconds: f64,
+    /// Frames through the pipeline.
+    pub frames: u64,
+    /// GPS fixes through the pipeline.
+    pub fixes: u64,
+    /// Filter updates made.
+    pub updates: u64,
+    /// Simulated seconds per wall second.
+    pub speed_factor: f64,
+    /// Frames per wall second.
+    pub frames_per_second: f64,
+}
+
+/// Time nav's pipeline on `seconds` of drive scenario `s` (a drive with a receiver and no
+/// turntable: nothing nav sends changes what the devices do).
+pub fn pipeline_drive(s: &Scenario, seconds: f64) -> Result<PipelineBench> {
+    use emulators::gps::GpsReceiver;
+    enum Input {
+        Frame(RawFrame),
+        Fix(nav::gps::GpsFix),
+    }
+    let rx = s.gps.as_ref().context("the scenario has no [gps]")?;
+    anyhow::ensure!(
+        s.turntable.is_none(),
+        "{}: a scenario with a turntable is a closed loop; choose a drive without one",
+        s.name
+    );
+    let seconds = seconds.min(s.duration_s);
+    let run = crate::inproc::gps_run(s, rx)?.context("the scenario has no [drive]")?;
+    let mut gps = GpsReceiver::new(run);
+    let (motion, _) = s.build();
+    let mut bus = BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults);
+    let mut decoder = nav::gps::GpsDecoder::default();
+    let (mut inputs, mut frames, mut fixes) = (Vec::new(), Vec::new(), Vec::new());
+    while bus.next_time() <= seconds {
+        let t = bus.next_time();
+        frames.clear();
+        bus.next_frames(&mut frames);
+        inputs.extend(frames.iter().copied().map(Input::Frame));
+        while let Some(e) = gps.poll(t, seconds) {
+            if e.port_drop.is_none() {
+                decoder.push_bytes(e.text.as_bytes(), &mut fixes);
+            }
+        }
+        inputs.extend(fixes.drain(..).map(Input::Fix));
+    }
+    let cfg = crate::inproc::nav_config(s, None, Some(std::path::Path::new("(in process)")));
+    let mut p = Pipeline::new(&cfg, false).context("nav's pipeline")?;
+    let mut out = Vec::new();
+    let (mut n_frames, mut n_fixes) = (0u64, 0u64);
+    let t0 = Instant::now();
+    for i in inputs {
+        match i {
+            Input::Frame(f) => {
+                n_frames += 1;
+                p.on_frame(&f, &mut out);
+            }
+            Input::Fix(x) => {
+                n_fixes += 1;
+                p.on_fix(x, &mut out);
+            }
+        }
+        out.clear();
+    }
+    p.flush(&mut out);
+    let dt = t0.elapsed().as_secs_f64().max(1e-9);
+    let updates = p
+        .summary()
+        .navigation
+        .and_then(|n| n.filter)
+        .map_or(0, |f| f.updates);
+    Ok(PipelineBench {
+        scenario: s.name.clone(),
+        seconds,
+        frames: n_frames,
+        fixes: n_fixes,
+        updates,
+        speed_factor: seconds / dt,
+        frames_per_second: n_frames as f64 / dt,
+    })
+}
+
+/// One scenario through the bench on vcan, as fast as lockstep with nav allows.
+#[derive(Debug, Clone, Serialize)]
+pub struct BusPace {
+    /// Scenario name.
+    pub scenario: String,
+    /// Simulated seconds run.
+    pub simulated_s: f64,
+    /// Wall seconds.
+    pub wall_s: f64,
+    /// Simulated seconds per wall second.
+    pub pace_reached: f64,
+    /// Frames written per wall second (IMU stream).
+    pub frames_per_second: f64,
+    /// `frames_per_second` over the raw vcan limit measured in the same run.
+    pub fraction_of_limit: Option<f64>,
+    /// Frames the bench counted lost between the emulators and nav.
+    pub lost: i64,
+    /// Frame-in to NAV_TIME-out latency on the bus, median, ms.
+    pub latency_p50_ms: f64,
+    /// The same, 99th percentile, ms.
+    pub latency_p99_ms: f64,
+    /// Times the scheduler gave up waiting for nav.
+    pub stalls: u64,
+}
+
+impl BusPace {
+    /// The pace figures of run `r`, with the raw limit `limit` (frames/s) when measured.
+    pub fn of(r: &crate::report::RunReport, limit: Option<f64>) -> Self {
+        Self {
+            scenario: r.scenario.name.clone(),
+            simulated_s: r.pace_reached * r.wall_seconds,
+            wall_s: r.wall_seconds,
+            pace_reached: r.pace_reached,
+            frames_per_second: r.frames_per_wall_second,
+            fraction_of_limit: limit.map(|l| r.frames_per_wall_second / l),
+            lost: r.bus_lost_frames,
+            latency_p50_ms: r.lockstep.latency_p50_ms,
+            latency_p99_ms: r.lockstep.latency_p99_ms,
+            stalls: r.lockstep.stalls,
+        }
+    }
+}
+
+/// The whole suite's figures, from one run on one machine.
+#[derive(Debug, Clone, Serialize)]
+pub struct Suite {
+    /// Where it ran: `native` or `vm` (the QEMU guest).
+    pub backend: String,
+    /// The machine: CPUs, CPU model, kernel.
+    pub machine: String,
+    /// Build profile of these binaries.
+    pub profile: &'static str,
+    /// The raw vcan limit, one frame per write and batched.
+    pub raw_vcan: Vec<RawVcan>,
+    /// Each scenario through the bench on vcan.
+    pub bus: Vec<BusPace>,
+    /// Each scenario's emulators alone, in process.
+    pub emulators: Vec<EmulatorBench>,
+    /// nav's front end on the IMU stream, in process.
+    pub front_end: Option<BenchResult>,
+    /// nav's whole pipeline (with the filter) on a GPS-aided drive, in process.
+    pub pipeline: Option<PipelineBench>,
+}
+
+impl Suite {
+    /// An empty suite for `backend`, describing this machine.
+    pub fn new(backend: &str) -> Self {
+        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let model = std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|c| {
+                c.lines()
+                    .find(|l| l.starts_with("model name"))
+                    .and_then(|l| l.split_once(':'))
+                    .map(|(_, m)| m.trim().to_string())
+            })
+            .unwrap_or_else(|| "unknown CPU".into());
+        let kernel = std::fs::read_to_string("/proc/sys/kernel/osrelease")
+            .map(|k| k.trim().to_string())
+            .unwrap_or_default();
+        Self {
+            backend: backend.into(),
+            machine: format!("{cpus} CPUs, {model}, kernel {kernel}"),
+            profile: if cfg!(debug_assertions) {
+                "debug"
+            } else {
+                "release"
+            },
+            raw_vcan: Vec::new(),
+            bus: Vec::new(),
+            emulators: Vec::new(),
+            front_end: None,
+            pipeline: None,
+        }
+    }
+
+    /// The raw vcan limit: the best of the raw measurements, frames/s.
+    pub fn raw_limit(&self) -> Option<f64> {
+        self.raw_vcan
+            .iter()
+            .map(|r| r.frames_per_second)
+            .max_by(f64::total_cmp)
+    }
+}
+
+/// The suite as Markdown tables.
+pub fn markdown(s: &Suite) -> String {
+    let mut m = format!(
+        "# hil bench\n\n{} build, {} ({})\n\n",
+        s.profile,
+        s.machine,
+        if s.backend == "vm" {
+            "inside the QEMU guest"
+        } else {
+            "native"
+        }
+    );
+    if !s.raw_vcan.is_empty() {
+        m += "## Raw vcan (a trivial writer and reader, nothing else on the bus)\n\n";
+        m += "| frames per write | sent | received | lost | frames/s | x of the IMU stream |\n|---:|---:|---:|---:|---:|---:|\n";
+        for r in &s.raw_vcan {
+            m += &format!(
+                "| {} | {} | {} | {} | {:.0} | x{:.1} |\n",
+                r.frames_per_write,
+                r.sent,
+                r.received,
+                r.lost,
+                r.frames_per_second,
+                r.frames_per_second / IMU_FRAMES_PER_S
+            );
+        }
+        m += "\n";
+    }
+    if !s.bus.is_empty() {
+        m += "## Each scenario through the bench on vcan (emulators + nav, lockstep, as fast as it goes)\n\n";
+        m += "| scenario | simulated s | wall s | pace | frames/s | of the raw limit | lost | latency p50 / p99, ms | stalls |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+        for b in &s.bus {
+            m += &format!(
+                "| {} | {:.1} | {:.1} | x{:.1} | {:.0} | {} | {} | {:.1} / {:.1} | {} |\n",
+                b.scenario,
+                b.simulated_s,
+                b.wall_s,
+                b.pace_reached,
+                b.frames_per_second,
+                b.fraction_of_limit
+                    .map_or("-".into(), |f| format!("{:.0} %", 100.0 * f)),
+                b.lost,
+                b.latency_p50_ms,
+                b.latency_p99_ms,
+                b.stalls
+            );
+        }
+        m += "\n";
+    }
+    if !s.emulators.is_empty() {
+        m += "## Each scenario's emulators alone (truth + sensor model + encoding), one core, in process\n\n";
+        m += "| scenario | simulated s | pace | frames/s |\n|---|---:|---:|---:|\n";
+        for e in &s.emulators {
+            m += &format!(
+                "| {} | {:.1} | x{:.1} | {:.3e} |\n",
+                e.scenario, e.seconds, e.speed_factor, e.frames_per_second
+            );
+        }
+        m += "\n";
+    }
+    if s.front_end.is_some() || s.pipeline.is_some() {
+        m += "## nav, one core, in process\n\n| what | samples or frames | per second | pace |\n|---|---:|---:|---:|\n";
+        if let Some(f) = &s.front_end {
+            m += &format!(
+                "| front end (decode, dither FIR, coning/sculling, attitude) | {} samples | {:.3e} samples/s | x{:.0} |\n",
+                f.samples,
+                f.samples_per_second,
+                f.samples_per_second / 2000.0
+            );
+        }
+        if let Some(p) = &s.pipeline {
+            m += &format!(
+                "| whole pipeline with the filter on {} ({} fixes, {} updates) | {} frames | {:.3e} frames/s | x{:.0} |\n",
+                p.scenario, p.fixes, p.updates, p.frames, p.frames_per_second, p.speed_factor
+            );
+        }
+    }
+    m
+}
+
+/// Frames per second of the 2 kHz IMU stream (gyro and accelerometer frames per sample, and
+/// housekeeping every 200th).
+const IMU_FRAMES_PER_S: f64 = 2000.0 * 2.0 + 10.0;

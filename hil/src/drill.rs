@@ -49,6 +49,27 @@ pub fn progress_line(p: &serde_json::Value) -> String {
     )
 }
 
+/// The operator drill as a scenario: the vehicle parked at `heading_deg` at latitude `lat_deg`,
+/// four-position north-finding with `dwell_s` per position, IMU and mechanism seeded by `seed`,
+/// and enough simulated time for the four dwells, the moves and a few repeats.
+pub fn scenario(heading_deg: f64, lat_deg: f64, dwell_s: f64, seed: u64) -> Scenario {
+    let mut s = Scenario::builtin_static();
+    s.name = "drill-north-finding".into();
+    s.site.heading_deg = heading_deg;
+    s.site.lat_deg = lat_deg;
+    s.imu.seed = seed;
+    s.turntable = Some(emulators::turntable::TurntableParams {
+        seed,
+        ..Default::default()
+    });
+    s.north_finding = Some(nav::northfind::NorthFindingConfig {
+        dwell_s,
+        ..Default::default()
+    });
+    s.duration_s = 4.0 * dwell_s + 120.0 + 2.0 * dwell_s;
+    s
+}
+
 /// Wrap an angle difference to (-180, 180].
 pub fn wrap180(d: f64) -> f64 {
     let w = d.rem_euclid(360.0);

@@ -78,19 +78,35 @@ enum Cmd {
     /// Reproduce a paper's tables in process (same emulator and nav code as the bench).
     #[command(subcommand)]
     Experiment(Experiment),
-    /// Benchmark nav's pipeline on the IMU stream (decode, dither filter, coning, attitude) and each
-    /// scenario's emulators (truth, sensor model, encoding) on one core, in process.
-    Bench {
-        /// Seconds of 2 kHz IMU data per pass.
-        #[arg(long, default_value_t = 120.0)]
-        seconds: f64,
-        /// Passes (the best is reported).
-        #[arg(long, default_value_t = 3)]
-        passes: u32,
-        /// Scenario files whose emulators to time (default: the shipped ones under scenarios/).
-        #[arg(long)]
-        scenario: Vec<PathBuf>,
-    },
+    /// The benchmark suite: the raw vcan limit (a trivial writer and reader), each scenario's
+    /// pace through the bench on vcan (speed factor, fraction of the limit, loss, frame-in to
+    /// NAV_TIME-out latency), each scenario's emulators and nav's pipeline in process. Runs where
+    /// vcan is: natively, or all of it inside the QEMU guest. Writes bench.json and bench.md.
+    Bench(BenchArgs),
+}
+
+#[derive(clap::Args, Clone)]
+struct BenchArgs {
+    /// Seconds of 2 kHz IMU data per pass of the in-process figures.
+    #[arg(long, default_value_t = 120.0)]
+    seconds: f64,
+    /// Passes of nav's front end (the best is reported).
+    #[arg(long, default_value_t = 3)]
+    passes: u32,
+    /// Scenario files (default: the shipped ones under scenarios/; the bus part adds the drill).
+    #[arg(long)]
+    scenario: Vec<PathBuf>,
+    /// Simulated seconds of each scenario through the bus (its first seconds).
+    #[arg(long, default_value_t = 30.0)]
+    bus_seconds: f64,
+    /// Frames per raw vcan measurement.
+    #[arg(long, default_value_t = 200_000)]
+    raw_frames: u64,
+    /// In-process figures only: no bus, no guest.
+    #[arg(long)]
+    no_bus: bool,
+    #[command(flatten)]
+    bus: BusArgs,
 }
 
 #[derive(Subcommand)]
@@ -320,11 +336,7 @@ fn real_main() -> Result<i32> {
             Ok(0)
         }
         Cmd::Experiment(e) => experiment(e),
-        Cmd::Bench {
-            seconds,
-            passes,
-            scenario,
-        } => bench(seconds, passes, scenario),
+        Cmd::Bench(a) => bench(a),
     }
 }
 

@@ -3,9 +3,7 @@
 //! effect of gyro bias, and drill time against accuracy.
 
 use crate::drill::{DrillOutcome, run_in_process};
-use crate::scenario::Scenario;
 use anyhow::{Context, Result};
-use emulators::turntable::TurntableParams;
 use nav::northfind::NorthFindingConfig;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -203,16 +201,9 @@ fn run_job(c: &CaseSpec, j: &Job) -> Result<DrillOutcome> {
         dwell_s: c.dwell_s,
         ..NorthFindingConfig::default()
     };
-    let mut s = Scenario::builtin_static();
-    s.site.lat_deg = c.latitude_deg;
-    s.site.heading_deg = j.heading;
-    s.imu.seed = j.seed;
+    let mut s = crate::drill::scenario(j.heading, c.latitude_deg, c.dwell_s, j.seed);
     s.imu.gyro_bias_dph = [c.gyro_bias_dph; 3];
     s.imu.gyro_bias_instability_dph = c.gyro_drift_dph;
-    s.turntable = Some(TurntableParams {
-        seed: j.seed,
-        ..TurntableParams::default()
-    });
     s.duration_s = 4.0 * c.dwell_s + 80.0;
     run_in_process(&s, &nf, |_| {})
 }

@@ -27,6 +27,10 @@ pub struct RunOptions {
     pub nav_bin: PathBuf,
     /// Print progress.
     pub progress: bool,
+    /// After the run, also check nav against the in-process reference run, replay nav's
+    /// recording through the pipeline and score navigation from it (off for benchmarks, which
+    /// want the pace only).
+    pub reference_checks: bool,
 }
 
 /// The `nav` binary next to the running executable (cargo puts all workspace binaries together).
@@ -206,8 +210,10 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         Err(e) => return Err(e.into()),
     };
     let reference = match s.turntable {
-        None => Some(crate::replay::run_in_process(s).context("in-process reference run")?),
-        Some(_) => None,
+        None if opts.reference_checks => {
+            Some(crate::replay::run_in_process(s).context("in-process reference run")?)
+        }
+        _ => None,
     };
     let (mut checks, lost) = report::checks(
         s,
@@ -234,11 +240,13 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     report::solution_checks(&mut checks, &solution, &nav_json);
     // nav's binary is a shell around its pipeline: from its own recording, the pipeline in
     // process must send exactly what nav sent
-    let replayed = crate::playback::replay(&opts.out.join("nav.mcap"), &nav_cfg);
-    checks.push(report::replay_check(replayed.as_ref()));
+    if opts.reference_checks {
+        let replayed = crate::playback::replay(&opts.out.join("nav.mcap"), &nav_cfg);
+        checks.push(report::replay_check(replayed.as_ref()));
+    }
     let mut navigation_series = None;
     let navigation = match (&s.navigation, &s.drive) {
-        (Some(_), Some(d)) => {
+        (Some(_), Some(d)) if opts.reference_checks => {
             let drive = Drive::plan(d)?;
             let t_first = 1.0 / s.imu.rate_hz;
             let o = crate::navrun::score_summary(&drive, &nav_json, t_first);

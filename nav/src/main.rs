@@ -35,24 +35,6 @@ struct Cli {
     json: bool,
 }
 
-fn set_rcvbuf(fd: i32, bytes: usize) -> std::io::Result<()> {
-    let v = bytes as libc::c_int;
-    let len = std::mem::size_of::<libc::c_int>() as libc::socklen_t;
-    let p = &v as *const libc::c_int as *const libc::c_void;
-    // SAFETY: fd is an open socket, p points to a c_int of the given length.
-    let r = unsafe { libc::setsockopt(fd, libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, p, len) };
-    if r == 0 {
-        return Ok(());
-    }
-    // SAFETY: as above; without CAP_NET_ADMIN fall back to the capped SO_RCVBUF.
-    let r = unsafe { libc::setsockopt(fd, libc::SOL_SOCKET, libc::SO_RCVBUF, p, len) };
-    if r == 0 {
-        Ok(())
-    } else {
-        Err(std::io::Error::last_os_error())
-    }
-}
-
 /// Whether this kernel can open CAN sockets at all.
 fn kernel_has_can() -> bool {
     // SAFETY: plain socket(2); the descriptor is closed at once.
@@ -108,7 +90,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
             let sock = socketcan::tokio::CanSocket::open(iface).map_err(|e| {
                 anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e))
             })?;
-            if let Err(e) = set_rcvbuf(sock.as_raw_fd(), c.rcvbuf_bytes) {
+            if let Err(e) = wire::set_rcvbuf(sock.as_raw_fd(), c.rcvbuf_bytes) {
                 warn!(
                     interface = iface,
                     "cannot enlarge the receive buffer to {} bytes: {e}", c.rcvbuf_bytes

@@ -170,6 +170,10 @@ impl Recorder {
         };
         let mut w = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
+            // zstd's fastest level, in this writer thread: no extra compression threads
+            // competing with the front end for the vehicle computer's cores
+            .compression_level(1)
+            .compression_threads(0)
             .chunk_size(Some(256 * 1024))
             .profile("")
             .create(BufWriter::new(file))

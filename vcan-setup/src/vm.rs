@@ -640,7 +640,10 @@ fn launch(l: &Launch<'_>) -> Result<Launched> {
     .arg(&pre.kernel)
     .arg("-initrd")
     .arg(initrd)
-    .args(["-append", "console=ttyS0 quiet loglevel=3 panic=-1"])
+    .args([
+        "-append",
+        "console=ttyS0 quiet loglevel=3 panic=-1 clocksource=tsc tsc=reliable",
+    ])
     .arg("-virtfs")
     .arg(format!(
         "local,path={},mount_tag=ctl,security_model=none",

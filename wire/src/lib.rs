@@ -17,7 +17,9 @@ mod sock;
 pub use codec::{DecodeError, EncodeError, MessageSpec, RawFrame, SignalSpec};
 pub use messages::*;
 #[cfg(feature = "socketcan")]
-pub use sock::{BATCH, FrameConvError, from_can_frame, recv_batch, send_batch, to_can_frame};
+pub use sock::{
+    BATCH, FrameConvError, from_can_frame, recv_batch, send_batch, set_rcvbuf, to_can_frame,
+};
 
 /// The DBC file text, embedded so tools can print or ship it.
 pub const DBC: &str = include_str!("../bench.dbc");

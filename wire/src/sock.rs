@@ -152,3 +152,23 @@ pub fn recv_batch(
     }));
     Ok(n)
 }
+
+/// Sets the receive buffer of socket `fd` to `bytes`: past the system's cap where allowed
+/// (`SO_RCVBUFFORCE`, CAP_NET_ADMIN), else up to the cap (`SO_RCVBUF`).
+pub fn set_rcvbuf(fd: i32, bytes: usize) -> std::io::Result<()> {
+    let v = bytes as libc::c_int;
+    let len = std::mem::size_of::<libc::c_int>() as libc::socklen_t;
+    let p = &v as *const libc::c_int as *const libc::c_void;
+    // SAFETY: fd is an open socket, p points to a c_int of the given length.
+    let r = unsafe { libc::setsockopt(fd, libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, p, len) };
+    if r == 0 {
+        return Ok(());
+    }
+    // SAFETY: as above; without CAP_NET_ADMIN fall back to the capped SO_RCVBUF.
+    let r = unsafe { libc::setsockopt(fd, libc::SOL_SOCKET, libc::SO_RCVBUF, p, len) };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}

@@ -1,42 +1,145 @@
-//! `hil bench`: the benchmark suite.
+//! `hil bench`: the benchmark suite, where vcan is (natively, or all of it in the guest).
 
 use crate::*;
+use hil::bench::{BusPace, Suite};
 
-pub(crate) fn bench(seconds: f64, passes: u32, scenario: Vec<PathBuf>) -> Result<i32> {
-    if seconds.is_nan() || seconds <= 0.1 {
-        bail!("--seconds must exceed 0.1");
+pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
+    if a.seconds.is_nan() || a.seconds <= 0.1 || a.bus_seconds.is_nan() || a.bus_seconds < 1.0 {
+        bail!("--seconds must exceed 0.1 and --bus-seconds be at least 1");
     }
-    let files = if scenario.is_empty() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
-        let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
-            .with_context(|| format!("listing {}", dir.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-            .collect();
-        v.sort();
-        v
-    } else {
-        scenario
+    let out = absolute(&a.bus.out.clone().unwrap_or_else(|| default_out("bench")))?;
+    let files = scenario_files(&a.scenario)?;
+    let in_guest = std::env::var_os(GUEST_ENV).is_some();
+    let here = a.no_bus
+        || ((!a.bus.vm || in_guest) && matches!(vcan_setup::can_support(), CanSupport::Available));
+    if !here {
+        let mut args: Vec<String> = vec![
+            "bench".into(),
+            "--seconds".into(),
+            a.seconds.to_string(),
+            "--passes".into(),
+            a.passes.to_string(),
+            "--bus-seconds".into(),
+            a.bus_seconds.to_string(),
+            "--raw-frames".into(),
+            a.raw_frames.to_string(),
+            "--iface".into(),
+            a.bus.iface.clone(),
+            "--out".into(),
+            out.to_string_lossy().into_owned(),
+        ];
+        let mut extra = vec![];
+        // the scenarios asked for (none: the shipped ones and the drill, chosen in the guest)
+        for f in &a.scenario {
+            let f = absolute(f)?;
+            extra.push(f.parent().map(Path::to_path_buf).unwrap_or_default());
+            args.extend(["--scenario".into(), f.to_string_lossy().into_owned()]);
+        }
+        if a.bus.json {
+            args.push("--json".into());
+        }
+        let nav = sibling_binary("nav")?;
+        return run_in_guest(
+            args,
+            &out,
+            extra,
+            vec![nav],
+            a.bus.json.then_some("bench.json"),
+        );
+    }
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let scenarios = files
+        .iter()
+        .map(|f| Scenario::load(f))
+        .collect::<Result<Vec<_>>>()?;
+    let say = |line: String| {
+        if !a.bus.json {
+            eprintln!("{line}");
+        }
     };
-    println!("emulators (truth + sensor model + encoding), one core, in process:");
-    for f in &files {
-        let s = Scenario::load(f)?;
-        let secs = seconds.min(s.duration_s);
-        let r = hil::bench::emulators(&s, secs);
-        println!(
-            "  {:<24} {:7.1} s simulated: x{:7.1} real time, {:.3e} frames/s",
-            r.scenario, r.seconds, r.speed_factor, r.frames_per_second
-        );
+    let mut suite = Suite::new(if in_guest { "vm" } else { "native" });
+    for s in &scenarios {
+        let r = hil::bench::emulators(s, a.seconds.min(s.duration_s));
+        say(format!(
+            "hil bench: emulators of {}: x{:.1}",
+            r.scenario, r.speed_factor
+        ));
+        suite.emulators.push(r);
     }
-    let r = hil::bench::frontend(seconds, passes)?;
-    println!(
-        "nav front end (decode + counters + dither FIR + coning/sculling + attitude), one core, {} build:\n  {} samples ({} frames) per pass, best of {}: {:.3e} samples/s, {:.3e} frames/s",
-        r.profile, r.samples, r.frames, r.passes, r.samples_per_second, r.frames_per_second
-    );
-    if r.profile == "debug" {
-        println!(
-            "  (debug build: run `cargo run --release -p hil -- bench` for the product's figure)"
-        );
+    suite.front_end = Some(hil::bench::frontend(a.seconds, a.passes)?);
+    say("hil bench: nav's front end timed".into());
+    if let Some(s) = scenarios
+        .iter()
+        .find(|s| s.gps.is_some() && s.drive.is_some() && s.turntable.is_none())
+    {
+        let r = hil::bench::pipeline_drive(s, a.seconds)?;
+        say(format!(
+            "hil bench: nav's pipeline on {}: x{:.1}",
+            r.scenario, r.speed_factor
+        ));
+        suite.pipeline = Some(r);
+    }
+    if !a.no_bus {
+        vcan_setup::ensure_vcan(&a.bus.iface)?;
+        for per_write in [1, wire::BATCH] {
+            let r = hil::bench::raw_vcan(&a.bus.iface, a.raw_frames, per_write)?;
+            say(format!(
+                "hil bench: raw vcan, {per_write} frame(s) per write: {:.0} frames/s",
+                r.frames_per_second
+            ));
+            suite.raw_vcan.push(r);
+        }
+        let nav_bin = sibling_binary("nav")?;
+        let mut bus_scenarios: Vec<Scenario> = scenarios.clone();
+        if a.scenario.is_empty() {
+            bus_scenarios.push(hil::drill::scenario(359.97, -33.92, 10.0, 7));
+        }
+        for mut s in bus_scenarios {
+            s.duration_s = s.duration_s.min(a.bus_seconds);
+            s.speed = 100.0;
+            let opts = hil::run::RunOptions {
+                iface: a.bus.iface.clone(),
+                out: out.join(format!("bus-{}", s.name)),
+                nav_bin: nav_bin.clone(),
+                progress: false,
+                reference_checks: false,
+            };
+            let r = run_here(&s, &opts, if in_guest { "vm" } else { "native" })
+                .with_context(|| format!("{} through the bus", s.name))?;
+            let p = BusPace::of(&r, suite.raw_limit());
+            say(format!(
+                "hil bench: {} through the bus: x{:.1}, {} lost",
+                p.scenario, p.pace_reached, p.lost
+            ));
+            suite.bus.push(p);
+        }
+    }
+    let md = hil::bench::markdown(&suite);
+    std::fs::write(
+        out.join("bench.json"),
+        serde_json::to_string_pretty(&suite)?,
+    )?;
+    std::fs::write(out.join("bench.md"), &md)?;
+    if a.bus.json {
+        println!("{}", serde_json::to_string_pretty(&suite)?);
+    } else {
+        print!("{md}");
+        println!(" files: {}", out.join("bench.md").display());
     }
     Ok(0)
+}
+
+/// The scenario files given, or the shipped ones under scenarios/.
+fn scenario_files(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    if !given.is_empty() {
+        return Ok(given.to_vec());
+    }
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+    let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .with_context(|| format!("listing {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    v.sort();
+    Ok(v)
 }

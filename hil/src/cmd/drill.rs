@@ -11,7 +11,6 @@ pub(crate) struct DisturbanceScript {
 }
 
 pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
-    let mut s = Scenario::builtin_static();
     let heading = match a.heading {
         Some(h) => h.rem_euclid(360.0),
         // random, reproducible from the seed (the same generator as the Monte Carlo)
@@ -20,22 +19,9 @@ pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
             rand::rngs::StdRng::seed_from_u64(a.seed).random::<f64>() * 360.0
         }
     };
-    s.name = "drill-north-finding".into();
-    s.site.heading_deg = heading;
-    s.site.lat_deg = a.lat;
+    let mut s = hil::drill::scenario(heading, a.lat, a.dwell, a.seed);
     s.speed = a.speed;
-    s.imu.seed = a.seed;
-    s.turntable = Some(emulators::turntable::TurntableParams {
-        seed: a.seed,
-        ..Default::default()
-    });
-    s.north_finding = Some(nav::northfind::NorthFindingConfig {
-        dwell_s: a.dwell,
-        ..Default::default()
-    });
     s.heading_tolerance_deg = a.tolerance;
-    // enough simulated time for four dwells, the moves and a few repeats
-    s.duration_s = 4.0 * a.dwell + 120.0 + 2.0 * a.dwell;
     if let Some(p) = &a.disturbances {
         let text = std::fs::read_to_string(p)
             .with_context(|| format!("cannot read disturbance script {}", p.display()))?;

@@ -29,6 +29,7 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
                 None => sibling_binary("nav")?,
             },
             progress: true,
+            reference_checks: true,
         };
         let backend = if in_guest { "vm" } else { "native" };
         let r = run_here(&s, &opts, backend)?;
