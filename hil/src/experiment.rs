@@ -10,7 +10,7 @@ use emulators::truth::{Coning, Motion};
 use nav::attitude::ImuProcessor;
 use nav::coning::{self, ConingCoefficients, ConingMethod};
 use nav::fir::Fir;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -138,7 +138,7 @@ pub fn emulated_drift(alg: Alg, f_hz: f64, duration_s: f64, imu: &ImuParams) -> 
 }
 
 /// Options of the coning experiment.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ConingOptions {
     /// Run length for the tables, s (the paper's 60 s).
     pub duration_s: f64,
@@ -183,7 +183,7 @@ pub struct CoefficientRow {
 }
 
 /// One row of a table.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Row {
     /// Coning frequency, Hz.
     pub f_hz: f64,
@@ -210,8 +210,115 @@ pub struct ConingReport {
     pub ours_worse_than_alg2_at: Vec<f64>,
 }
 
-/// Run the experiment, print the tables, write CSV, JSON and SVG to `out`.
+/// One row of the experiment's tables: which table, at which coning frequency.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+enum RowJob {
+    /// Table 2 (ideal coning through the filter) at f Hz.
+    Table2(f64),
+    /// The Table 3 analogue (the emulated IMU) at f Hz.
+    Table3(f64),
+    /// A point of the frequency sweep at f Hz.
+    Sweep(f64),
+}
+
+fn row_jobs(opts: &ConingOptions) -> Vec<RowJob> {
+    let mut v: Vec<RowJob> = TABLE_F.iter().map(|&f| RowJob::Table2(f)).collect();
+    v.extend(TABLE_F.iter().map(|&f| RowJob::Table3(f)));
+    let mut f = opts.sweep_step_hz;
+    while f <= 100.0 + 1e-9 {
+        v.push(RowJob::Sweep(f));
+        f += opts.sweep_step_hz;
+    }
+    v
+}
+
+fn run_row(job: RowJob, opts: &ConingOptions, fir: &Fir) -> Result<Row> {
+    Ok(match job {
+        RowJob::Table2(f) => Row {
+            f_hz: f,
+            drift: Alg::ALL
+                .iter()
+                .map(|a| Some(ideal_drift(*a, fir, f, opts.duration_s)))
+                .collect(),
+        },
+        RowJob::Table3(f) => {
+            let mut drift = vec![None];
+            for a in &Alg::ALL[1..] {
+                drift.push(Some(emulated_drift(*a, f, opts.duration_s, &opts.imu)?));
+            }
+            Row { f_hz: f, drift }
+        }
+        RowJob::Sweep(f) => Row {
+            f_hz: f,
+            drift: Alg::ALL
+                .iter()
+                .map(|a| Some(ideal_drift(*a, fir, f, opts.sweep_duration_s)))
+                .collect(),
+        },
+    })
+}
+
+/// Part `k` of `n` of the coning experiment: its rows (see [`crate::shard`]).
+pub type ConingPart = crate::shard::Part<Row>;
+
+/// The coning experiment's name in its parts.
+pub const CONING: &str = "coning";
+
+/// Run part `shard` of `shards` of the coning experiment: the table rows whose place in the
+/// plan is `shard` modulo `shards`, on the machine's cores.
+pub fn coning_part(
+    opts: &ConingOptions,
+    shard: usize,
+    shards: usize,
+    progress: bool,
+) -> Result<ConingPart> {
+    let fir = Fir::default_dither_filter();
+    let all = row_jobs(opts);
+    let total = all.len();
+    let mine = crate::shard::select(all, shard, shards)?;
+    if progress {
+        eprintln!(
+            "experiment: {} of {total} rows (Tables 2 and 3 at {} frequencies, the sweep in {} Hz steps)",
+            mine.len(),
+            TABLE_F.len(),
+            opts.sweep_step_hz
+        );
+    }
+    let rows = crate::par::map(
+        &mine,
+        crate::par::threads(),
+        |(g, j)| run_row(*j, opts, &fir).map(|r| (*g, r)),
+        || Err(anyhow::anyhow!("worker panicked")),
+    );
+    Ok(ConingPart {
+        experiment: CONING.into(),
+        plan: serde_json::to_value(opts)?,
+        shard,
+        shards,
+        total,
+        outcomes: rows.into_iter().collect::<Result<_>>()?,
+    })
+}
+
+/// Run the coning experiment (one part of one, merged) and write its files to `out`.
 pub fn coning(opts: &ConingOptions, out: &Path, progress: bool) -> Result<ConingReport> {
+    let part = coning_part(opts, 0, 1, progress)?;
+    coning_merge(&[part], out)
+}
+
+/// Merge the parts of a coning experiment (every part once) into its report, written to `out`.
+pub fn coning_merge(parts: &[ConingPart], out: &Path) -> Result<ConingReport> {
+    let rows = crate::shard::assemble(parts)?;
+    let opts: ConingOptions = serde_json::from_value(parts[0].plan.clone())
+        .context("the parts' plan is not a coning experiment's")?;
+    let jobs = row_jobs(&opts);
+    if jobs.len() != rows.len() {
+        anyhow::bail!(
+            "the parts hold {} rows, their plan {}",
+            rows.len(),
+            jobs.len()
+        );
+    }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let fir = Fir::default_dither_filter();
     let coefficients = (2..=5)
@@ -223,42 +330,13 @@ pub fn coning(opts: &ConingOptions, out: &Path, progress: bool) -> Result<Coning
             fitted: ConingCoefficients::fitted(n, &fir, fir.spec().passband_hz).k,
         })
         .collect();
-    let say = |m: String| {
-        if progress {
-            eprintln!("experiment: {m}");
+    let (mut table2, mut table3, mut sweep) = (Vec::new(), Vec::new(), Vec::new());
+    for (j, r) in jobs.iter().zip(rows) {
+        match j {
+            RowJob::Table2(_) => table2.push(r),
+            RowJob::Table3(_) => table3.push(r),
+            RowJob::Sweep(_) => sweep.push(r),
         }
-    };
-    let mut table2 = Vec::new();
-    for f in TABLE_F {
-        say(format!("Table 2, {f} Hz"));
-        let drift = Alg::ALL
-            .iter()
-            .map(|a| Some(ideal_drift(*a, &fir, f, opts.duration_s)))
-            .collect();
-        table2.push(Row { f_hz: f, drift });
-    }
-    let mut table3 = Vec::new();
-    for f in TABLE_F {
-        say(format!("Table 3 analogue, {f} Hz"));
-        let mut drift = vec![None];
-        for a in &Alg::ALL[1..] {
-            drift.push(Some(emulated_drift(*a, f, opts.duration_s, &opts.imu)?));
-        }
-        table3.push(Row { f_hz: f, drift });
-    }
-    let mut sweep = Vec::new();
-    let mut f = opts.sweep_step_hz;
-    say(format!(
-        "sweep {}..100 Hz in {} Hz steps",
-        opts.sweep_step_hz, opts.sweep_step_hz
-    ));
-    while f <= 100.0 + 1e-9 {
-        let drift = Alg::ALL
-            .iter()
-            .map(|a| Some(ideal_drift(*a, &fir, f, opts.sweep_duration_s)))
-            .collect();
-        sweep.push(Row { f_hz: f, drift });
-        f += opts.sweep_step_hz;
     }
     let at = |rows: &[Row], f: f64, a: usize| {
         rows.iter()
@@ -527,5 +605,30 @@ mod tests {
         assert!(ours * 3.0 < a3, "ours {ours:e} alg3 {a3:e}");
         // and the ideal algorithm drifts least of all
         assert!(d(Alg::Ideal) < ours);
+    }
+
+    /// The coning tables run whole and in three parts (through their JSON) are the same.
+    #[test]
+    fn coning_in_three_parts_merged_is_the_single_run() {
+        let o = ConingOptions {
+            duration_s: 2.0,
+            sweep_step_hz: 40.0,
+            sweep_duration_s: 1.0,
+            ..ConingOptions::default()
+        };
+        let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        let one = coning(&o, a.path(), false).unwrap();
+        let parts: Vec<ConingPart> = (0..3)
+            .map(|k| {
+                let p = coning_part(&o, k, 3, false).unwrap();
+                serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap()
+            })
+            .collect();
+        let three = coning_merge(&parts, b.path()).unwrap();
+        assert_eq!(
+            serde_json::to_string(&one).unwrap(),
+            serde_json::to_string(&three).unwrap()
+        );
+        assert_eq!(one.sweep.len(), 2);
     }
 }

@@ -239,19 +239,19 @@ enum Experiment {
         /// Run only part K of N (0-based, `K/N`): the drills whose place in the plan is K modulo
         /// N. Writes part-K-of-N.json to the output folder; `hil experiment merge` makes the
         /// report of all parts (e.g. the tasks of a Slurm array or a Kubernetes indexed Job).
-        #[arg(long, value_parser = parse_shard)]
+        #[arg(long, value_parser = hil::shard::parse)]
         shard: Option<(usize, usize)>,
         /// Output folder (default runs/experiment-north-finding-<unix time>).
         #[arg(long)]
         out: Option<PathBuf>,
     },
-    /// Merge the parts of a sharded north-finding Monte Carlo (`--shard K/N`) into its report:
-    /// the same tables a single run gives.
+    /// Merge the parts of an experiment run in parts (`--shard K/N`) into its report: the same
+    /// tables a single run gives.
     Merge {
         /// The part files (part-K-of-N.json), every K once.
         #[arg(required = true)]
         parts: Vec<PathBuf>,
-        /// Output folder (default runs/experiment-north-finding-<unix time>).
+        /// Output folder (default runs/experiment-<name>-<unix time>).
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -270,6 +270,11 @@ enum Experiment {
         /// GPS noise the mis-specified filters assume, m (comma-separated).
         #[arg(long, value_delimiter = ',', default_value = "5,100")]
         misspecified: Vec<f64>,
+        /// Run only part K of N (0-based, `K/N`): the runs whose place in the plan is K modulo
+        /// N. Writes part-K-of-N.json to the output folder; `hil experiment merge` makes the
+        /// report of all parts.
+        #[arg(long, value_parser = hil::shard::parse)]
+        shard: Option<(usize, usize)>,
         /// Output folder (default runs/experiment-navigation-<unix time>).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -289,6 +294,11 @@ enum Experiment {
         /// Seed of the emulated IMU (Table 3 analogue).
         #[arg(long, default_value_t = 7)]
         seed: u64,
+        /// Run only part K of N (0-based, `K/N`): the table rows whose place in the plan is K
+        /// modulo N. Writes part-K-of-N.json to the output folder; `hil experiment merge`
+        /// makes the report of all parts.
+        #[arg(long, value_parser = hil::shard::parse)]
+        shard: Option<(usize, usize)>,
     },
 }
 
@@ -338,23 +348,4 @@ fn real_main() -> Result<i32> {
         Cmd::Experiment(e) => experiment(e),
         Cmd::Bench(a) => bench(a),
     }
-}
-
-/// `K/N` (0-based part K of N).
-fn parse_shard(s: &str) -> std::result::Result<(usize, usize), String> {
-    let (k, n) = s
-        .split_once('/')
-        .ok_or_else(|| format!("`{s}`: a shard is K/N, e.g. 0/4"))?;
-    let (k, n): (usize, usize) = (
-        k.trim()
-            .parse()
-            .map_err(|_| format!("`{k}` is not a part number"))?,
-        n.trim()
-            .parse()
-            .map_err(|_| format!("`{n}` is not a part count"))?,
-    );
-    if n == 0 || k >= n {
-        return Err(format!("`{s}`: parts are numbered 0 to N-1"));
-    }
-    Ok((k, n))
 }

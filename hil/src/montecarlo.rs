@@ -209,32 +209,19 @@ fn run_job(c: &CaseSpec, j: &Job) -> Result<DrillOutcome> {
 }
 
 /// Part `k` of `n` of a Monte Carlo: the drills whose place in the plan is `k` modulo `n`, with
-/// their outcomes. Parts written by separate processes or machines (a Slurm array, a Kubernetes
-/// indexed Job) merge into the very report a single run gives ([`merge`]).
-#[derive(Debug, Clone, Serialize, serde::Deserialize)]
-pub struct McPart {
-    /// The plan every part shares.
-    pub cases: Vec<CaseSpec>,
-    /// This part's index (0-based).
-    pub shard: usize,
-    /// Parts in all.
-    pub shards: usize,
-    /// (place in the plan, outcome) of this part's drills.
-    pub outcomes: Vec<(usize, DrillOutcome)>,
-}
+/// their outcomes; the plan is the cases. Parts written by separate processes or machines merge
+/// into the very report a single run gives ([`merge`]).
+pub type McPart = crate::shard::Part<DrillOutcome>;
+
+/// The experiment's name in its parts.
+pub const EXPERIMENT: &str = "north-finding";
 
 /// Run part `shard` of `shards` of the plan of `o` on `o.threads` threads.
 pub fn run_part(o: &McOptions, shard: usize, shards: usize) -> Result<McPart> {
-    if shards == 0 || shard >= shards {
-        anyhow::bail!("shard {shard} of {shards}: the shard must be below the count (0-based)");
-    }
     let cases = plan(o);
     let all = jobs(&cases);
-    let mine: Vec<(usize, Job)> = all
-        .into_iter()
-        .enumerate()
-        .filter(|(g, _)| g % shards == shard)
-        .collect();
+    let total = all.len();
+    let mine = crate::shard::select(all, shard, shards)?;
     let results = crate::par::map(
         &mine,
         o.threads,
@@ -242,10 +229,12 @@ pub fn run_part(o: &McOptions, shard: usize, shards: usize) -> Result<McPart> {
         || Err(anyhow::anyhow!("worker panicked")),
     );
     Ok(McPart {
+        experiment: EXPERIMENT.into(),
+        plan: serde_json::to_value(&cases)?,
         outcomes: results.into_iter().collect::<Result<_>>()?,
-        cases,
         shard,
         shards,
+        total,
     })
 }
 
@@ -271,41 +260,14 @@ fn case_stats(c: &CaseSpec, outs: &[DrillOutcome]) -> Case {
 /// Merge parts (all of one plan, every shard once) into the report and write CSV, JSON and
 /// Markdown to `out`.
 pub fn merge(parts: &[McPart], out: &Path, progress: bool) -> Result<McReport> {
-    let Some(first) = parts.first() else {
-        anyhow::bail!("no parts to merge");
-    };
-    let mut seen = vec![false; first.shards];
-    for p in parts {
-        if p.cases != first.cases || p.shards != first.shards {
-            anyhow::bail!(
-                "part {} of {} comes from another plan (other options or shard count)",
-                p.shard,
-                p.shards
-            );
-        }
-        match seen.get_mut(p.shard) {
-            Some(s) if !*s => *s = true,
-            _ => anyhow::bail!(
-                "part {} of {} given twice or out of range",
-                p.shard,
-                p.shards
-            ),
-        }
-    }
-    if let Some(m) = seen.iter().position(|s| !s) {
-        anyhow::bail!("part {m} of {} is missing", first.shards);
-    }
-    let cases = &first.cases;
+    let all = crate::shard::assemble(parts)?;
+    let cases: Vec<CaseSpec> = serde_json::from_value(parts[0].plan.clone())
+        .context("the parts' plan is not a north-finding Monte Carlo's")?;
     let total: usize = cases.iter().map(|c| c.runs).sum();
-    let mut all: Vec<Option<DrillOutcome>> = vec![None; total];
-    for p in parts {
-        for (g, o) in &p.outcomes {
-            match all.get_mut(*g) {
-                Some(slot) => *slot = Some(o.clone()),
-                None => anyhow::bail!("part {} has drill {g} of only {total}", p.shard),
-            }
-        }
+    if total != all.len() {
+        anyhow::bail!("the parts hold {} drills, their plan {total}", all.len());
     }
+    let cases = &cases;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut csv = String::from(
         "case,latitude_deg,dwell_s,gyro_bias_dph,truth_deg,heading_deg,error_deg,sigma_deg,duration_s,abort\n",
@@ -313,14 +275,7 @@ pub fn merge(parts: &[McPart], out: &Path, progress: bool) -> Result<McReport> {
     let mut rows = Vec::new();
     let mut at = 0;
     for c in cases {
-        let outs: Vec<DrillOutcome> = all[at..at + c.runs]
-            .iter()
-            .enumerate()
-            .map(|(i, o)| {
-                o.clone()
-                    .with_context(|| format!("drill {} of case {} missing", i, c.name))
-            })
-            .collect::<Result<_>>()?;
+        let outs: Vec<DrillOutcome> = all[at..at + c.runs].to_vec();
         at += c.runs;
         let st = case_stats(c, &outs);
         if progress {

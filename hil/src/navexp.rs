@@ -3,13 +3,13 @@
 //! filters with a mis-specified GPS noise, and 60 s outages every 180 s. Every run is
 //! `navrun::navigate`: the emulators and nav's own code, as on the bench, without the bus.
 
-use crate::navrun::{NavRun, navigate};
+use crate::navrun::{NavRun, NavSample, navigate};
 use crate::plot::{LogChart, Series};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
 use emulators::gps::ReceiverParams;
 use nav::kf::{FilterConfig, FilterKind};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Paper 003, Table 4 (at 1342 s): end position error (m) and velocity error (m/s) of pure
@@ -131,8 +131,40 @@ struct Job {
     seed: u64,
 }
 
-/// Run the experiment; files go to `out` when given.
-pub fn run(o: &NavExpOptions, out: Option<&Path>, progress: bool) -> Result<NavExperiment> {
+/// What every part of the experiment shares.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct NavPlan {
+    scenario: Scenario,
+    runs: usize,
+    misspecified_sigma_m: Vec<f64>,
+    outage_s: (f64, f64),
+}
+
+/// One run of a part: its errors and its second-by-second series (for the plots).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PartRun {
+    /// The run's errors.
+    pub run: NavRun,
+    /// Second by second.
+    pub series: Vec<NavSample>,
+}
+
+/// Part `k` of `n` of the experiment (see [`crate::shard`]).
+pub type NavPart = crate::shard::Part<PartRun>;
+
+/// The experiment's name in its parts.
+pub const EXPERIMENT: &str = "navigation";
+
+/// The cases of the experiment, in table order.
+struct Plan {
+    names: Vec<String>,
+    cases: Vec<(Option<FilterConfig>, ReceiverParams)>,
+    outages: Vec<[f64; 2]>,
+    rx0: ReceiverParams,
+    jobs: Vec<Job>,
+}
+
+fn plan(o: &NavExpOptions) -> Result<Plan> {
     let s = &o.scenario;
     let Some(rx0) = s.gps.clone() else {
         bail!("scenario {} has no [gps]", s.name);
@@ -190,10 +222,35 @@ pub fn run(o: &NavExpOptions, out: Option<&Path>, progress: bool) -> Result<NavE
             })
         })
         .collect();
+    Ok(Plan {
+        names,
+        cases,
+        outages,
+        rx0,
+        jobs,
+    })
+}
+
+/// Run the experiment; files go to `out` when given.
+pub fn run(o: &NavExpOptions, out: Option<&Path>, progress: bool) -> Result<NavExperiment> {
+    let part = run_part(o, 0, 1, progress)?;
+    merge(&[part], out)
+}
+
+/// Run part `shard` of `shards` of the experiment: the runs whose place in the plan is `shard`
+/// modulo `shards`.
+pub fn run_part(o: &NavExpOptions, shard: usize, shards: usize, progress: bool) -> Result<NavPart> {
+    let s = &o.scenario;
+    let Plan {
+        names, cases, jobs, ..
+    } = plan(o)?;
+    let total = jobs.len();
+    let mine = crate::shard::select(jobs, shard, shards)?;
     if progress {
         eprintln!(
-            "hil: {} runs of {} ({} cases x {} seeds, {} s each) on {} threads",
-            jobs.len(),
+            "hil: {} of {} runs of {} ({} cases x {} seeds, {} s each) on {} threads",
+            mine.len(),
+            total,
             s.name,
             cases.len(),
             o.runs,
@@ -204,9 +261,9 @@ pub fn run(o: &NavExpOptions, out: Option<&Path>, progress: bool) -> Result<NavE
     let done = std::sync::atomic::AtomicUsize::new(0);
     let t0 = std::time::Instant::now();
     let results = crate::par::map(
-        &jobs,
+        &mine,
         o.threads,
-        |j| {
+        |(g, j)| {
             let mut sc = s.clone();
             sc.imu.seed = s.imu.seed + 1000 * j.seed;
             if let Some(t) = sc.turntable.as_mut() {
@@ -220,7 +277,7 @@ pub fn run(o: &NavExpOptions, out: Option<&Path>, progress: bool) -> Result<NavE
             if progress {
                 eprintln!(
                     "hil: {n}/{} done ({:.0} s): {}{}",
-                    jobs.len(),
+                    mine.len(),
                     t0.elapsed().as_secs_f64(),
                     names[j.case],
                     r.as_ref().map_or(String::new(), |r| format!(
@@ -229,10 +286,61 @@ pub fn run(o: &NavExpOptions, out: Option<&Path>, progress: bool) -> Result<NavE
                     ))
                 );
             }
-            r
+            r.map(|mut run| {
+                let series = std::mem::take(&mut run.series);
+                (*g, PartRun { run, series })
+            })
         },
         || Err(anyhow::anyhow!("worker panicked")),
     );
+    Ok(NavPart {
+        experiment: EXPERIMENT.into(),
+        plan: serde_json::to_value(NavPlan {
+            scenario: s.clone(),
+            runs: o.runs,
+            misspecified_sigma_m: o.misspecified_sigma_m.clone(),
+            outage_s: o.outage_s,
+        })?,
+        shard,
+        shards,
+        total,
+        outcomes: results.into_iter().collect::<Result<_>>()?,
+    })
+}
+
+/// Merge the parts of one experiment (every part once) into its report; files go to `out`
+/// when given.
+pub fn merge(parts: &[NavPart], out: Option<&Path>) -> Result<NavExperiment> {
+    let all = crate::shard::assemble(parts)?;
+    let p: NavPlan = serde_json::from_value(parts[0].plan.clone())
+        .context("the parts' plan is not a navigation experiment's")?;
+    let o = NavExpOptions {
+        scenario: p.scenario,
+        runs: p.runs,
+        misspecified_sigma_m: p.misspecified_sigma_m,
+        outage_s: p.outage_s,
+        threads: 1,
+    };
+    let s = &o.scenario;
+    let Plan {
+        names,
+        cases,
+        outages,
+        rx0,
+        jobs,
+    } = plan(&o)?;
+    if jobs.len() != all.len() {
+        bail!(
+            "the parts hold {} runs, their plan {}",
+            all.len(),
+            jobs.len()
+        );
+    }
+    let results = all.into_iter().map(|r| {
+        let mut run = r.run;
+        run.series = r.series;
+        Ok::<_, anyhow::Error>(run)
+    });
     let mut per_case: Vec<Vec<NavRun>> = vec![Vec::new(); cases.len()];
     for (j, r) in jobs.iter().zip(results) {
         per_case[j.case].push(r?);
@@ -571,5 +679,43 @@ mod tests {
         assert_eq!(o[0], [130.0, 190.0]);
         assert_eq!(o[1], [310.0, 370.0]);
         assert!(o.iter().all(|p| p[1] <= 515.0), "{o:?}");
+    }
+
+    /// A short drive run whole and in three parts (through their JSON, as separate processes
+    /// would write them) gives the same report, plots included.
+    #[test]
+    fn three_parts_merged_give_the_single_run_report() {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
+        let mut scenario = Scenario::load(&path).unwrap();
+        scenario.duration_s = 40.0;
+        let o = NavExpOptions {
+            scenario,
+            runs: 1,
+            misspecified_sigma_m: vec![5.0],
+            outage_s: (10.0, 20.0),
+            threads: 2,
+        };
+        let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        let one = run(&o, Some(a.path()), false).unwrap();
+        let parts: Vec<NavPart> = (0..3)
+            .map(|k| {
+                let p = run_part(&o, k, 3, false).unwrap();
+                serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap()
+            })
+            .collect();
+        let three = merge(&parts, Some(b.path())).unwrap();
+        assert_eq!(
+            serde_json::to_string(&one).unwrap(),
+            serde_json::to_string(&three).unwrap()
+        );
+        for f in ["series.csv", "report.md"] {
+            let read = |d: &tempfile::TempDir| std::fs::read_to_string(d.path().join(f)).unwrap();
+            assert_eq!(read(&a), read(&b), "{f}");
+        }
+        assert!(
+            merge(&parts[1..], None).is_err(),
+            "a missing part is refused"
+        );
     }
 }

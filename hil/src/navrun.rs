@@ -135,7 +135,7 @@ pub fn score_recording(
 }
 
 /// One second of a navigation run against truth.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Serialize, serde::Deserialize)]
 pub struct NavSample {
     /// Simulated time, s.
     pub t_s: f64,
@@ -152,7 +152,7 @@ pub struct NavSample {
 }
 
 /// Errors of a navigation run.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct NavRun {
     /// Simulated time navigated, s.
     pub duration_s: f64,

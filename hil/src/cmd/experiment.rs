@@ -5,20 +5,32 @@ use crate::*;
 pub(crate) fn experiment(e: Experiment) -> Result<i32> {
     match e {
         Experiment::Merge { parts, out } => {
-            let parts = parts
-                .iter()
-                .map(|p| {
-                    let t = std::fs::read_to_string(p)
-                        .with_context(|| format!("reading {}", p.display()))?;
-                    serde_json::from_str::<hil::montecarlo::McPart>(&t)
-                        .with_context(|| format!("{} is not a Monte Carlo part", p.display()))
-                })
-                .collect::<Result<Vec<_>>>()?;
-            let out = out.unwrap_or_else(|| default_out("experiment-north-finding"));
-            let r = hil::montecarlo::merge(&parts, &out, true)?;
-            print!("{}", hil::montecarlo::text(&r));
-            println!(" files: {}", out.display());
-            Ok(if r.within_1_2 { 0 } else { 1 })
+            let kind = hil::shard::experiment_of(&parts[0])?;
+            let out = out.unwrap_or_else(|| default_out(&format!("experiment-{kind}")));
+            match kind.as_str() {
+                hil::montecarlo::EXPERIMENT => {
+                    let r = hil::montecarlo::merge(&hil::shard::read(&parts)?, &out, true)?;
+                    print!("{}", hil::montecarlo::text(&r));
+                    println!(" files: {}", out.display());
+                    Ok(if r.within_1_2 { 0 } else { 1 })
+                }
+                hil::navexp::EXPERIMENT => {
+                    let r = hil::navexp::merge(&hil::shard::read(&parts)?, Some(&out))?;
+                    print!("{}", hil::navexp::text(&r));
+                    println!(" files: {}", out.display());
+                    Ok(navigation_status(&r))
+                }
+                hil::experiment::CONING => {
+                    let r = hil::experiment::coning_merge(&hil::shard::read(&parts)?, &out)?;
+                    print!("{}", hil::experiment::text(&r));
+                    println!(" files: {}", out.display());
+                    Ok(coning_status(&r))
+                }
+                other => bail!(
+                    "{}: parts of a `{other}` experiment cannot be merged",
+                    parts[0].display()
+                ),
+            }
         }
         Experiment::NorthFinding {
             runs,
@@ -41,17 +53,7 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
             };
             if let Some((k, n)) = shard {
                 let part = hil::montecarlo::run_part(&o, k, n)?;
-                std::fs::create_dir_all(&out)
-                    .with_context(|| format!("creating {}", out.display()))?;
-                let f = out.join(format!("part-{k}-of-{n}.json"));
-                std::fs::write(&f, serde_json::to_string(&part)?)
-                    .with_context(|| format!("writing {}", f.display()))?;
-                println!(
-                    "part {k} of {n}: {} drills; merge all parts with `hil experiment merge`: {}",
-                    part.outcomes.len(),
-                    f.display()
-                );
-                return Ok(0);
+                return written(&part, &out);
             }
             let r = hil::montecarlo::north_finding(&o, &out, true)?;
             print!("{}", hil::montecarlo::text(&r));
@@ -62,6 +64,7 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
             scenario,
             runs,
             misspecified,
+            shard,
             out,
         } => {
             let s = Scenario::load(&scenario)?;
@@ -76,22 +79,21 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 outage_s: (60.0, 180.0),
                 threads: hil::par::threads(),
             };
+            if let Some((k, n)) = shard {
+                let part = hil::navexp::run_part(&o, k, n, true)?;
+                return written(&part, &out);
+            }
             let r = hil::navexp::run(&o, Some(&out), true)?;
             print!("{}", hil::navexp::text(&r));
             println!(" files: {}", out.display());
-            Ok(
-                if r.pure_km_class && r.filters_within_paper && r.fading_no_worse_overstated {
-                    0
-                } else {
-                    1
-                },
-            )
+            Ok(navigation_status(&r))
         }
         Experiment::Coning {
             out,
             duration,
             sweep_step,
             seed,
+            shard,
         } => {
             if !(duration > 1.0 && sweep_step > 0.0) {
                 bail!("--duration must exceed 1 s and --sweep-step be positive");
@@ -103,16 +105,45 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 ..Default::default()
             };
             opts.imu.seed = seed;
+            if let Some((k, n)) = shard {
+                let part = hil::experiment::coning_part(&opts, k, n, true)?;
+                return written(&part, &out);
+            }
             let r = hil::experiment::coning(&opts, &out, true)?;
             print!("{}", hil::experiment::text(&r));
             println!(" files: {}", out.display());
-            Ok(
-                if r.ours_10x_below_paper_alg3 && r.ours_worse_than_alg2_at.is_empty() {
-                    0
-                } else {
-                    1
-                },
-            )
+            Ok(coning_status(&r))
         }
+    }
+}
+
+/// Writes one part of an experiment and says how to merge the parts.
+fn written<T: serde::Serialize>(part: &hil::shard::Part<T>, out: &Path) -> Result<i32> {
+    let f = hil::shard::write(part, out)?;
+    println!(
+        "part {} of {}: {} runs; merge all parts with `hil experiment merge`: {}",
+        part.shard,
+        part.shards,
+        part.outcomes.len(),
+        f.display()
+    );
+    Ok(0)
+}
+
+/// The navigation experiment's exit status: 0 when it meets its targets.
+fn navigation_status(r: &hil::navexp::NavExperiment) -> i32 {
+    if r.pure_km_class && r.filters_within_paper && r.fading_no_worse_overstated {
+        0
+    } else {
+        1
+    }
+}
+
+/// The coning experiment's exit status: 0 when it meets its targets.
+fn coning_status(r: &hil::experiment::ConingReport) -> i32 {
+    if r.ours_10x_below_paper_alg3 && r.ours_worse_than_alg2_at.is_empty() {
+        0
+    } else {
+        1
     }
 }
