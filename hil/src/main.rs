@@ -321,7 +321,9 @@ struct RunArgs {
 }
 
 fn main() {
-    nav::cli::init_tracing();
+    // nav's pipeline runs in process here (drills, experiments, replays): its progress goes in
+    // the results, not in a log line per run
+    nav::cli::init_tracing_with("info,nav=warn");
     // exit 0: pass, 1: a check failed or the run could not go on
     std::process::exit(nav::cli::exit_code("hil", real_main(), |code| code));
 }

@@ -196,7 +196,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         .join()
         .map_err(|_| anyhow::anyhow!("solution watcher panicked"))??;
     for l in &nav_lines {
-        if !drill.line(l, false) {
+        // nav's own words (its summary, warnings), unless the caller wants the figures only
+        if !drill.line(l, false) && opts.progress {
             eprintln!("{l}");
         }
     }

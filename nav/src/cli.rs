@@ -2,6 +2,12 @@
 
 /// Log to stderr with `tracing`, level from `RUST_LOG` (default `info`), colour only on a terminal.
 pub fn init_tracing() {
+    init_tracing_with("info");
+}
+
+/// The same with `default` as the filter when `RUST_LOG` is not set (e.g. `info,nav=warn` in a
+/// program that runs many pipelines in process and would otherwise log every one's progress).
+pub fn init_tracing_with(default: &str) {
     tracing_subscriber::fmt()
         .with_ansi(
             std::io::IsTerminal::is_terminal(&std::io::stderr())
@@ -9,7 +15,7 @@ pub fn init_tracing() {
         )
         .with_writer(std::io::stderr)
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| default.into()),
         )
         .init();
 }
