@@ -14,6 +14,7 @@ pub mod playback;
 pub mod plot;
 pub mod replay;
 pub mod report;
+pub mod routes;
 pub mod run;
 pub mod scenario;
 pub mod shard;

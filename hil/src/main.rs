@@ -279,6 +279,27 @@ enum Experiment {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// The filters over a set of routes in process: end and RMS position and velocity error,
+    /// NEES per degree of freedom (target [0.5, 2]), NIS, rejected fixes and integrity alarms
+    /// per route and filter kind; plots of the errors against the filters' 3-sigma bounds.
+    /// Writes report.md/json and SVGs. Use a release build (about a minute per run and core).
+    Routes {
+        /// Route scenarios (drives with a [gps]); default: every shipped one under scenarios/.
+        #[arg(long)]
+        scenario: Vec<PathBuf>,
+        /// Runs per route and filter with other IMU and receiver seeds (results are averaged).
+        #[arg(long, default_value_t = 1)]
+        runs: usize,
+        /// Filter kinds (comma-separated).
+        #[arg(long, value_delimiter = ',', default_value = "standard,fading")]
+        filters: Vec<String>,
+        /// Run only part K of N (0-based, `K/N`); `hil experiment merge` makes the report.
+        #[arg(long, value_parser = hil::shard::parse)]
+        shard: Option<(usize, usize)>,
+        /// Output folder (default runs/experiment-routes-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Paper 000, Tables 1-3: coning drift of the classical, Taylor-tuned and fitted
     /// algorithms on filtered data; writes CSV, JSON, Markdown and an SVG plot.
     Coning {

@@ -91,7 +91,9 @@ pub struct NavExperiment {
     pub fading_no_worse_understated: bool,
 }
 
-fn filter(kind: FilterKind, sigma: Option<f64>) -> FilterConfig {
+/// The filter of kind `kind` as the experiments run it; `sigma`: the total receiver noise it
+/// assumes, m (none: the default receiver model).
+pub(crate) fn filter(kind: FilterKind, sigma: Option<f64>) -> FilterConfig {
     let mut f = FilterConfig {
         kind,
         ..FilterConfig::default()

@@ -149,6 +149,13 @@ pub struct NavSample {
     pub nees_position: Option<f64>,
     /// The same for the velocity.
     pub nees_velocity: Option<f64>,
+    /// The filter's horizontal position sigma, `sqrt(sigma_N^2 + sigma_E^2)`, m (the RMS bound
+    /// of the horizontal error; none without a filter).
+    #[serde(default)]
+    pub position_sigma_m: Option<f64>,
+    /// The filter's velocity sigma, `sqrt(trace P_v)`, m/s.
+    #[serde(default)]
+    pub velocity_sigma_mps: Option<f64>,
 }
 
 /// Errors of a navigation run.
@@ -350,18 +357,27 @@ fn score(navigator: &Navigator, drive: &Drive, t: f64) -> Option<NavSample> {
     let (position_error_m, velocity_error_mps, heading_error_deg) = errors(drive, t, &st.output());
     let (lat, lon, h) = drive.position(t);
     let v = drive.velocity(t);
-    let (nees_position, nees_velocity) = match navigator.filter() {
-        Some(k) => {
-            let p = k.covariance();
-            let dpos = [st.lat - lat, st.lon - lon, st.h - h];
-            let dv = [st.v.x - v.x, st.v.y - v.y, st.v.z - v.z];
-            (
-                nees(&dpos, &p.fixed_view::<3, 3>(6, 6).into_owned()),
-                nees(&dv, &p.fixed_view::<3, 3>(3, 3).into_owned()),
-            )
-        }
-        None => (None, None),
-    };
+    let (nees_position, nees_velocity, position_sigma_m, velocity_sigma_mps) =
+        match navigator.filter() {
+            Some(k) => {
+                let p = k.covariance();
+                let dpos = [st.lat - lat, st.lon - lon, st.h - h];
+                let dv = [st.v.x - v.x, st.v.y - v.y, st.v.z - v.z];
+                // the filter's position variances are in rad^2: to metres with the truth
+                // side's radii
+                let (rm, rn) = emulators::geodesy::radii(lat);
+                let (mn, me) = (rm + h, (rn + h) * lat.cos());
+                let var_h = p[(6, 6)] * mn * mn + p[(7, 7)] * me * me;
+                let var_v = p[(3, 3)] + p[(4, 4)] + p[(5, 5)];
+                (
+                    nees(&dpos, &p.fixed_view::<3, 3>(6, 6).into_owned()),
+                    nees(&dv, &p.fixed_view::<3, 3>(3, 3).into_owned()),
+                    (var_h >= 0.0).then(|| var_h.sqrt()),
+                    (var_v >= 0.0).then(|| var_v.sqrt()),
+                )
+            }
+            None => (None, None, None, None),
+        };
     Some(NavSample {
         t_s: t,
         position_error_m,
@@ -369,6 +385,8 @@ fn score(navigator: &Navigator, drive: &Drive, t: f64) -> Option<NavSample> {
         heading_error_deg,
         nees_position,
         nees_velocity,
+        position_sigma_m,
+        velocity_sigma_mps,
     })
 }
 

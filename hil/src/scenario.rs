@@ -89,6 +89,19 @@ fn default_tolerance() -> f64 {
 }
 
 impl Scenario {
+    /// The scenario files shipped under `scenarios/`, sorted.
+    pub fn shipped_files() -> anyhow::Result<Vec<std::path::PathBuf>> {
+        use anyhow::Context;
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+        let mut v: Vec<std::path::PathBuf> = std::fs::read_dir(&dir)
+            .with_context(|| format!("listing {}", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        v.sort();
+        Ok(v)
+    }
+
     /// Load and check a scenario file.
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
@@ -278,13 +291,8 @@ mod tests {
     /// wait and ends before the scenario does (its navigation is scored parked, not cut off).
     #[test]
     fn every_shipped_scenario_is_valid() {
-        let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios"));
         let mut n = 0;
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.extension().is_none_or(|x| x != "toml") {
-                continue;
-            }
+        for p in Scenario::shipped_files().unwrap() {
             let s = Scenario::load(&p).unwrap_or_else(|e| panic!("{}: {e:#}", p.display()));
             if let Some(d) = &s.drive {
                 let plan = Drive::plan(d).unwrap();

@@ -240,10 +240,11 @@ impl Navigator {
             lon,
             h,
         );
-        self.kf = self
-            .cfg
-            .gps_aiding
-            .then(|| Kf::new(self.cfg.filter.clone(), lat));
+        self.kf = self.cfg.gps_aiding.then(|| {
+            let mut k = Kf::new(self.cfg.filter.clone(), lat);
+            k.levelled(&st.q_nb, f.norm());
+            k
+        });
         self.state = Some(st);
         self.phase = NavPhase::Navigating;
         self.started_at = Some(t);

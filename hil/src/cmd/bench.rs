@@ -131,15 +131,9 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
 
 /// The scenario files given, or the shipped ones under scenarios/.
 fn scenario_files(given: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    if !given.is_empty() {
-        return Ok(given.to_vec());
+    if given.is_empty() {
+        Scenario::shipped_files()
+    } else {
+        Ok(given.to_vec())
     }
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
-    let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .with_context(|| format!("listing {}", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-        .collect();
-    v.sort();
-    Ok(v)
 }

@@ -20,6 +20,12 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                     println!(" files: {}", out.display());
                     Ok(navigation_status(&r))
                 }
+                hil::routes::EXPERIMENT => {
+                    let r = hil::routes::merge(&hil::shard::read(&parts)?, Some(&out))?;
+                    print!("{}", hil::routes::markdown(&r));
+                    println!(" files: {}", out.display());
+                    Ok(routes_status(&r))
+                }
                 hil::experiment::CONING => {
                     let r = hil::experiment::coning_merge(&hil::shard::read(&parts)?, &out)?;
                     print!("{}", hil::experiment::text(&r));
@@ -88,6 +94,49 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
             println!(" files: {}", out.display());
             Ok(navigation_status(&r))
         }
+        Experiment::Routes {
+            scenario,
+            runs,
+            filters,
+            shard,
+            out,
+        } => {
+            let files = if scenario.is_empty() {
+                shipped_routes()?
+            } else {
+                scenario
+            };
+            let scenarios = files
+                .iter()
+                .map(|f| Scenario::load(f))
+                .collect::<Result<Vec<_>>>()?;
+            let kinds = filters
+                .iter()
+                .map(|f| {
+                    serde_json::from_value::<nav::kf::FilterKind>(serde_json::Value::String(
+                        f.trim().to_string(),
+                    ))
+                    .map_err(|_| {
+                        anyhow::anyhow!("--filters: `{f}` is not a filter kind (standard, fading)")
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let o = hil::routes::RoutesOptions {
+                scenarios,
+                runs,
+                kinds,
+                threads: hil::par::threads(),
+            };
+            let out = out.unwrap_or_else(|| default_out("experiment-routes"));
+            if let Some((k, n)) = shard {
+                let part = hil::routes::run_part(&o, k, n, true)?;
+                return written(&part, &out);
+            }
+            let r = hil::routes::run(&o, Some(&out), true)?;
+            print!("{}", hil::routes::markdown(&r));
+            println!(" files: {}", out.display());
+            Ok(routes_status(&r))
+        }
         Experiment::Coning {
             out,
             duration,
@@ -146,4 +195,26 @@ fn coning_status(r: &hil::experiment::ConingReport) -> i32 {
     } else {
         1
     }
+}
+
+/// The routes experiment's exit status: 0 when every filter is consistent on every route and no
+/// velocity error went unflagged.
+fn routes_status(r: &hil::routes::RoutesReport) -> i32 {
+    if r.all_consistent && r.no_unflagged_velocity_errors {
+        0
+    } else {
+        1
+    }
+}
+
+/// The shipped scenarios that are routes: a drive with a receiver.
+fn shipped_routes() -> Result<Vec<PathBuf>> {
+    let mut v = Vec::new();
+    for p in Scenario::shipped_files()? {
+        let s = Scenario::load(&p)?;
+        if s.drive.is_some() && s.gps.is_some() {
+            v.push(p);
+        }
+    }
+    Ok(v)
 }

@@ -1,0 +1,476 @@
+//! The filters over a set of routes (`hil experiment routes`): every shipped drive with a
+//! receiver, each filter kind, in process with the bench's devices and nav's pipeline. One table:
+//! end and RMS position and velocity error, NEES per degree of freedom, NIS, rejected fixes and
+//! integrity alarms; plots of each route's errors against the filter's own sigma.
+//!
+//! The promise checked: on every route every filter's NEES per degree of freedom lies in
+//! [0.5, 2] for position and velocity (the sigmas nav sends are honest), and no run ends with a
+//! velocity error above 1 m/s without nav's integrity monitor having flagged it.
+
+use crate::navexp::filter;
+use crate::navrun::{NavRun, NavSample, navigate};
+use crate::plot::{LogChart, Series};
+use crate::scenario::Scenario;
+use anyhow::{Context, Result, bail};
+use nav::kf::FilterKind;
+use serde::{Deserialize, Serialize};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// NEES per degree of freedom a consistent filter stays within.
+pub const NEES_BOUNDS: [f64; 2] = [0.5, 2.0];
+
+/// A velocity error nav must have flagged, m/s.
+pub const VELOCITY_FLAG_MPS: f64 = 1.0;
+
+/// Settings of the experiment.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RoutesOptions {
+    /// The routes (drives with a `[gps]`).
+    pub scenarios: Vec<Scenario>,
+    /// Runs per route and filter with other IMU and receiver seeds.
+    pub runs: usize,
+    /// The filter kinds compared.
+    pub kinds: Vec<FilterKind>,
+    /// Threads (not part of the plan).
+    #[serde(skip)]
+    pub threads: usize,
+}
+
+/// One route and filter over its runs.
+#[derive(Debug, Clone, Serialize)]
+pub struct RouteRow {
+    /// Route (scenario name).
+    pub route: String,
+    /// Filter kind.
+    pub filter: FilterKind,
+    /// Runs.
+    pub runs: usize,
+    /// Seconds navigated (first run).
+    pub navigated_s: f64,
+    /// Mean end horizontal position error, m.
+    pub end_position_error_m: f64,
+    /// Mean RMS horizontal position error, m.
+    pub rms_position_error_m: f64,
+    /// Mean end velocity error, m/s.
+    pub end_velocity_error_mps: f64,
+    /// Mean RMS velocity error, m/s.
+    pub rms_velocity_error_mps: f64,
+    /// Mean NEES per degree of freedom, position and velocity.
+    pub nees_per_dof: [f64; 2],
+    /// Mean NIS of the fixes (3 for a consistent filter).
+    pub mean_nis: f64,
+    /// Fixes rejected by the innovation gate, over the runs.
+    pub rejected: u64,
+    /// Integrity alarms raised, over the runs.
+    pub integrity_alarms: u64,
+    /// NEES within [`NEES_BOUNDS`] for position and velocity.
+    pub consistent: bool,
+    /// Runs ending with a velocity error above [`VELOCITY_FLAG_MPS`] that nav did not flag.
+    pub unflagged_velocity_errors: usize,
+}
+
+/// The experiment's result.
+#[derive(Debug, Clone, Serialize)]
+pub struct RoutesReport {
+    /// One row per route and filter.
+    pub rows: Vec<RouteRow>,
+    /// Every row consistent.
+    pub all_consistent: bool,
+    /// No run ended with an unflagged velocity error.
+    pub no_unflagged_velocity_errors: bool,
+}
+
+/// One run of a part: its errors and its series (for the plots).
+pub type PartRun = crate::navexp::PartRun;
+
+/// Part `k` of `n` of the experiment (see [`crate::shard`]).
+pub type RoutesPart = crate::shard::Part<PartRun>;
+
+/// The experiment's name in its parts.
+pub const EXPERIMENT: &str = "routes";
+
+struct Job {
+    route: usize,
+    kind: FilterKind,
+    seed: u64,
+}
+
+fn jobs(o: &RoutesOptions) -> Vec<Job> {
+    let mut v = Vec::new();
+    for route in 0..o.scenarios.len() {
+        for &kind in &o.kinds {
+            for seed in 0..o.runs as u64 {
+                v.push(Job { route, kind, seed });
+            }
+        }
+    }
+    v
+}
+
+fn check(o: &RoutesOptions) -> Result<()> {
+    if o.runs == 0 || o.kinds.is_empty() || o.scenarios.is_empty() {
+        bail!("at least one route, one filter kind and one run");
+    }
+    for s in &o.scenarios {
+        if s.drive.is_none() || s.gps.is_none() {
+            bail!("{}: a route needs a [drive] and a [gps]", s.name);
+        }
+    }
+    Ok(())
+}
+
+/// Run part `shard` of `shards`: the runs whose place in the plan is `shard` modulo `shards`.
+pub fn run_part(
+    o: &RoutesOptions,
+    shard: usize,
+    shards: usize,
+    progress: bool,
+) -> Result<RoutesPart> {
+    check(o)?;
+    let all = jobs(o);
+    let total = all.len();
+    let mine = crate::shard::select(all, shard, shards)?;
+    if progress {
+        eprintln!(
+            "hil: {} of {total} runs ({} routes x {} filters x {} seeds) on {} threads",
+            mine.len(),
+            o.scenarios.len(),
+            o.kinds.len(),
+            o.runs,
+            o.threads
+        );
+    }
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let t0 = std::time::Instant::now();
+    let results = crate::par::map(
+        &mine,
+        o.threads,
+        |(g, j)| {
+            let s = &o.scenarios[j.route];
+            let mut sc = s.clone();
+            sc.imu.seed = s.imu.seed + 1000 * j.seed;
+            if let Some(t) = sc.turntable.as_mut() {
+                t.seed += j.seed;
+            }
+            let Some(mut rx) = s.gps.clone() else {
+                bail!("{}: no [gps]", s.name);
+            };
+            rx.errors.seed += 1000 * j.seed;
+            let r = navigate(&sc, Some(&filter(j.kind, None)), &rx, 0.0)
+                .with_context(|| format!("{}, {:?} filter, seed {}", s.name, j.kind, j.seed));
+            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if progress {
+                eprintln!(
+                    "hil: {n}/{} done ({:.0} s): {} {:?}{}",
+                    mine.len(),
+                    t0.elapsed().as_secs_f64(),
+                    s.name,
+                    j.kind,
+                    r.as_ref().map_or(String::new(), |r| format!(
+                        ", end error {:.1} m",
+                        r.end_position_error_m
+                    ))
+                );
+            }
+            r.map(|mut run| {
+                let series = std::mem::take(&mut run.series);
+                (*g, PartRun { run, series })
+            })
+        },
+        || Err(anyhow::anyhow!("worker panicked")),
+    );
+    Ok(RoutesPart {
+        experiment: EXPERIMENT.into(),
+        plan: serde_json::to_value(o)?,
+        shard,
+        shards,
+        total,
+        outcomes: results.into_iter().collect::<Result<_>>()?,
+    })
+}
+
+/// Run the whole experiment here; files go to `out` when given.
+pub fn run(o: &RoutesOptions, out: Option<&Path>, progress: bool) -> Result<RoutesReport> {
+    let part = run_part(o, 0, 1, progress)?;
+    merge(&[part], out)
+}
+
+/// Merge the parts (every part once) into the report; files go to `out` when given.
+pub fn merge(parts: &[RoutesPart], out: Option<&Path>) -> Result<RoutesReport> {
+    let all = crate::shard::assemble(parts)?;
+    let o: RoutesOptions = serde_json::from_value(parts[0].plan.clone())
+        .context("the parts' plan is not a routes experiment's")?;
+    let jobs = jobs(&o);
+    if jobs.len() != all.len() {
+        bail!(
+            "the parts hold {} runs, their plan {}",
+            all.len(),
+            jobs.len()
+        );
+    }
+    let mut rows = Vec::new();
+    let mut firsts: Vec<(usize, FilterKind, Vec<NavSample>)> = Vec::new();
+    for (route, s) in o.scenarios.iter().enumerate() {
+        for &kind in &o.kinds {
+            let runs: Vec<&PartRun> = jobs
+                .iter()
+                .zip(&all)
+                .filter(|(j, _)| j.route == route && j.kind == kind)
+                .map(|(_, r)| r)
+                .collect();
+            if let Some(first) = runs.first() {
+                firsts.push((route, kind, first.series.clone()));
+            }
+            rows.push(row(
+                s,
+                kind,
+                &runs.iter().map(|r| &r.run).collect::<Vec<_>>(),
+            ));
+        }
+    }
+    let r = RoutesReport {
+        all_consistent: rows.iter().all(|r| r.consistent),
+        no_unflagged_velocity_errors: rows.iter().all(|r| r.unflagged_velocity_errors == 0),
+        rows,
+    };
+    if let Some(dir) = out {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let w = |name: &str, text: String| {
+            std::fs::write(dir.join(name), text).with_context(|| format!("writing {name}"))
+        };
+        w("report.json", serde_json::to_string_pretty(&r)?)?;
+        w("report.md", markdown(&r))?;
+        for (route, s) in o.scenarios.iter().enumerate() {
+            let mine: Vec<&(usize, FilterKind, Vec<NavSample>)> =
+                firsts.iter().filter(|f| f.0 == route).collect();
+            w(&format!("{}-series.csv", s.name), series_csv(&mine))?;
+            w(
+                &format!("{}-position.svg", s.name),
+                sigma_chart(s, &mine, true),
+            )?;
+            w(
+                &format!("{}-velocity.svg", s.name),
+                sigma_chart(s, &mine, false),
+            )?;
+        }
+    }
+    Ok(r)
+}
+
+fn row(s: &Scenario, kind: FilterKind, runs: &[&NavRun]) -> RouteRow {
+    let n = runs.len().max(1) as f64;
+    let mean = |f: &dyn Fn(&NavRun) -> f64| runs.iter().map(|r| f(r)).sum::<f64>() / n;
+    let nees = [
+        mean(&|r| r.mean_nees_per_dof.map_or(f64::NAN, |x| x[0])),
+        mean(&|r| r.mean_nees_per_dof.map_or(f64::NAN, |x| x[1])),
+    ];
+    let within = |x: f64| (NEES_BOUNDS[0]..=NEES_BOUNDS[1]).contains(&x);
+    RouteRow {
+        route: s.name.clone(),
+        filter: kind,
+        runs: runs.len(),
+        navigated_s: runs
+            .first()
+            .map_or(0.0, |r| r.duration_s - r.started_at_s.unwrap_or(0.0)),
+        end_position_error_m: mean(&|r| r.end_position_error_m),
+        rms_position_error_m: mean(&|r| r.rms_position_error_m),
+        end_velocity_error_mps: mean(&|r| r.end_velocity_error_mps),
+        rms_velocity_error_mps: mean(&|r| r.rms_velocity_error_mps),
+        nees_per_dof: nees,
+        mean_nis: mean(&|r| r.filter.map_or(f64::NAN, |f| f.mean_nis)),
+        rejected: runs
+            .iter()
+            .map(|r| r.filter.map_or(0, |f| f.rejected))
+            .sum(),
+        integrity_alarms: runs.iter().map(|r| r.integrity.alarms).sum(),
+        consistent: within(nees[0]) && within(nees[1]),
+        unflagged_velocity_errors: runs
+            .iter()
+            .filter(|r| r.end_velocity_error_mps > VELOCITY_FLAG_MPS && r.integrity.alarms == 0)
+            .count(),
+    }
+}
+
+/// Each filter's first run on one route, second by second: errors, sigmas and NEES.
+fn series_csv(runs: &[&(usize, FilterKind, Vec<NavSample>)]) -> String {
+    let mut c = String::from(
+        "filter,t_s,position_error_m,position_sigma_m,velocity_error_mps,velocity_sigma_mps,nees_position,nees_velocity\n",
+    );
+    let o = |x: Option<f64>| x.map_or(String::new(), |v| format!("{v:.4}"));
+    for (_, kind, samples) in runs {
+        for x in samples {
+            let v = x.velocity_error_mps;
+            let _ = writeln!(
+                c,
+                "{kind:?},{:.3},{:.3},{},{:.4},{},{},{}",
+                x.t_s,
+                x.position_error_m,
+                o(x.position_sigma_m),
+                (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
+                o(x.velocity_sigma_mps),
+                o(x.nees_position),
+                o(x.nees_velocity)
+            );
+        }
+    }
+    c
+}
+
+/// Each filter's error on one route against its own sigma (first run).
+fn sigma_chart(
+    s: &Scenario,
+    runs: &[&(usize, FilterKind, Vec<NavSample>)],
+    position: bool,
+) -> String {
+    const COLORS: [&str; 4] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"];
+    let mut series = Vec::new();
+    for (i, (_, kind, samples)) in runs.iter().enumerate() {
+        let color = COLORS[i % COLORS.len()];
+        type Points = Vec<(f64, f64)>;
+        let (err, sig): (Points, Points) = samples
+            .iter()
+            .map(|x| {
+                if position {
+                    (
+                        (x.t_s, x.position_error_m),
+                        (x.t_s, 3.0 * x.position_sigma_m.unwrap_or(f64::NAN)),
+                    )
+                } else {
+                    let v = x.velocity_error_mps;
+                    (
+                        (x.t_s, (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()),
+                        (x.t_s, 3.0 * x.velocity_sigma_mps.unwrap_or(f64::NAN)),
+                    )
+                }
+            })
+            .unzip();
+        series.push(Series {
+            name: format!("{kind:?} error"),
+            color,
+            points: err,
+            markers: false,
+        });
+        series.push(Series {
+            name: format!("{kind:?} 3 sigma"),
+            color,
+            points: sig,
+            markers: true,
+        });
+    }
+    LogChart {
+        title: format!(
+            "{}: {} error against the filter's 3-sigma bound",
+            s.name,
+            if position {
+                "horizontal position"
+            } else {
+                "velocity"
+            }
+        ),
+        x_label: "time, s".into(),
+        y_label: if position { "m" } else { "m/s" }.into(),
+        series,
+    }
+    .svg()
+}
+
+/// The table as Markdown.
+pub fn markdown(r: &RoutesReport) -> String {
+    let mut m = String::from(
+        "# The filters over the routes\n\n| route | filter | runs | navigated s | end pos m | RMS pos m | end vel m/s | RMS vel m/s | NEES/dof pos | NEES/dof vel | mean NIS | rejected | alarms | consistent |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n",
+    );
+    for x in &r.rows {
+        let _ = writeln!(
+            m,
+            "| {} | {:?} | {} | {:.0} | {:.1} | {:.1} | {:.3} | {:.3} | {:.2} | {:.2} | {:.2} | {} | {} | {} |",
+            x.route,
+            x.filter,
+            x.runs,
+            x.navigated_s,
+            x.end_position_error_m,
+            x.rms_position_error_m,
+            x.end_velocity_error_mps,
+            x.rms_velocity_error_mps,
+            x.nees_per_dof[0],
+            x.nees_per_dof[1],
+            x.mean_nis,
+            x.rejected,
+            x.integrity_alarms,
+            if x.consistent { "yes" } else { "NO" }
+        );
+    }
+    let _ = write!(
+        m,
+        "\nNEES per degree of freedom within [{}, {}] everywhere: {}\n\nNo run ends with a velocity error above {} m/s that nav did not flag: {}\n",
+        NEES_BOUNDS[0],
+        NEES_BOUNDS[1],
+        if r.all_consistent { "MET" } else { "NOT MET" },
+        VELOCITY_FLAG_MPS,
+        if r.no_unflagged_velocity_errors {
+            "MET"
+        } else {
+            "NOT MET"
+        }
+    );
+    m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A short route run whole and in two parts (through their JSON) gives the same table, and
+    /// the table carries what the promise is judged on.
+    #[test]
+    fn two_parts_merged_give_the_single_run_table() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
+        let mut s = Scenario::load(&path).unwrap();
+        s.duration_s = 40.0;
+        let o = RoutesOptions {
+            scenarios: vec![s],
+            runs: 1,
+            kinds: vec![FilterKind::Standard, FilterKind::Fading],
+            threads: 2,
+        };
+        let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        let one = run(&o, Some(a.path()), false).unwrap();
+        assert_eq!(one.rows.len(), 2);
+        for r in &one.rows {
+            assert!(
+                r.nees_per_dof.iter().all(|x| x.is_finite() && *x > 0.0),
+                "{r:?}"
+            );
+            assert!(r.mean_nis.is_finite() && r.navigated_s > 20.0, "{r:?}");
+            let within = |x: f64| (NEES_BOUNDS[0]..=NEES_BOUNDS[1]).contains(&x);
+            assert_eq!(
+                r.consistent,
+                within(r.nees_per_dof[0]) && within(r.nees_per_dof[1])
+            );
+        }
+        let parts: Vec<RoutesPart> = (0..2)
+            .map(|k| {
+                let p = run_part(&o, k, 2, false).unwrap();
+                serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap()
+            })
+            .collect();
+        let two = merge(&parts, Some(b.path())).unwrap();
+        assert_eq!(
+            serde_json::to_string(&one).unwrap(),
+            serde_json::to_string(&two).unwrap()
+        );
+        for f in [
+            "report.md",
+            "drive-gps-position.svg",
+            "drive-gps-velocity.svg",
+        ] {
+            let read = |d: &tempfile::TempDir| std::fs::read_to_string(d.path().join(f)).unwrap();
+            assert_eq!(read(&a), read(&b), "{f}");
+        }
+        assert!(
+            std::fs::read_to_string(a.path().join("drive-gps-position.svg"))
+                .unwrap()
+                .contains("3 sigma")
+        );
+    }
+}
