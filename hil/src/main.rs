@@ -13,6 +13,7 @@ use cmd::bench::bench;
 use cmd::demo::demo;
 use cmd::drill::drill_north_finding;
 use cmd::experiment::experiment;
+use cmd::fuzz::fuzz;
 use cmd::guest::{absolute, default_out, run_in_guest};
 use cmd::replay::replay;
 use cmd::run::run;
@@ -60,6 +61,24 @@ enum Cmd {
         /// Print the result as JSON.
         #[arg(long)]
         json: bool,
+    },
+    /// Hostile input: a seeded mutation fuzzer over nav's CAN pipeline, its NMEA framer and
+    /// decoder, its config parser and the scenario parser (stable toolchain). Counts inputs,
+    /// panics (each input saved), hangs and the slowest input; writes fuzz.md and fuzz.json.
+    /// Exit status 1 on any panic or hang. Use a release build for long runs.
+    Fuzz {
+        /// Targets (default: all).
+        #[arg(long, value_enum)]
+        target: Vec<hil::fuzz::Target>,
+        /// Inputs per target.
+        #[arg(long, default_value_t = 1_000_000)]
+        inputs: u64,
+        /// Seed (the run is reproducible from it).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Output folder (default runs/fuzz-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// Print the bus-load table of the wire contract.
     Busload {
@@ -364,6 +383,12 @@ fn real_main() -> Result<i32> {
             config,
             json,
         } => replay(&recording, config.as_deref(), json),
+        Cmd::Fuzz {
+            target,
+            inputs,
+            seed,
+            out,
+        } => fuzz(target, inputs, seed, out),
         Cmd::Dbc => {
             print!("{}", wire::DBC);
             Ok(0)

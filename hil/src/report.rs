@@ -72,8 +72,21 @@ pub fn checks(
     nav: &Summary,
     nav_exit: Option<i32>,
     lockstep: &emulators::bus::LockstepStats,
+    turntable: Option<&emulators::can::TurntableTxStats>,
 ) -> (Vec<Check>, i64) {
     let mut out = Vec::new();
+    // nobody else writes on the bench's bus, and nav drains its socket before it stops
+    let tt_frames = turntable.map_or(0, |t| t.acks + t.status_frames);
+    let sent = tx.frames + tt_frames;
+    let reached = nav.frames_total + nav.non_data_frames + nav.kernel_dropped_frames;
+    out.push(Check {
+        name: "every frame written reached nav or is in the kernel's drop count".into(),
+        pass: sent == reached,
+        detail: format!(
+            "the emulators wrote {sent} frames ({} IMU stream, {tt_frames} turntable); nav received {} data and {} other frames, and its socket dropped {} (receive buffer full)",
+            tx.frames, nav.frames_total, nav.non_data_frames, nav.kernel_dropped_frames
+        ),
+    });
     out.push(Check {
         name: "nav exited cleanly".into(),
         pass: nav_exit == Some(0),

@@ -223,6 +223,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         &nav_json,
         nav_exit,
         &lockstep_stats,
+        tt_stats.as_ref(),
     );
     let drill_outcome = s.north_finding.as_ref().map(|_| {
         let nf = nav_json.north_finding.as_ref();

@@ -106,10 +106,13 @@ impl Scenario {
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read scenario {}", path.display()))?;
-        let s: Scenario =
-            toml::from_str(&text).with_context(|| format!("scenario {}", path.display()))?;
-        s.check()
-            .with_context(|| format!("scenario {}", path.display()))?;
+        Self::from_text(&text).with_context(|| format!("scenario {}", path.display()))
+    }
+
+    /// Parse and check a scenario's text.
+    pub fn from_text(text: &str) -> Result<Self> {
+        let s: Scenario = toml::from_str(text)?;
+        s.check()?;
         Ok(s)
     }
 

@@ -132,7 +132,13 @@ impl NavConfig {
             path: path.into(),
             source,
         })?;
-        let mut cfg: NavConfig = toml::from_str(&text).map_err(|source| ConfigError::Parse {
+        Self::from_text(&text, path)
+    }
+
+    /// Parse and check a config's text; `path` names it in errors and anchors relative record
+    /// paths.
+    pub fn from_text(text: &str, path: &Path) -> Result<Self, ConfigError> {
+        let mut cfg: NavConfig = toml::from_str(text).map_err(|source| ConfigError::Parse {
             path: path.into(),
             source,
         })?;

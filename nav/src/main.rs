@@ -174,18 +174,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                 if let Some(s) = &sock {
                     let _ = wire::recv_batch(s.as_raw_fd(), &mut batch, wire::BATCH - 1);
                 }
-                for conv in batch.drain(..) {
-                    match conv {
-                        Ok(raw) => {
-                            if let Some(r) = shell.recorder {
-                                r.send(Record::Frame { t_ns: wall_ns(), frame: raw });
-                            }
-                            pipeline.on_frame(&raw, &mut out);
-                        }
-                        Err(e) => pipeline.on_non_data(&e.to_string(), &mut out),
-                    }
-                    shell.act(&mut out).await?;
-                }
+                take_frames(&mut batch, &mut pipeline, &mut shell, &mut out).await?;
                 if pipeline.gyro_frames() > gyro_frames {
                     gyro_frames = pipeline.gyro_frames();
                     last_imu = Instant::now();
@@ -201,11 +190,37 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
             }
         }
     }
+    // what reached the socket before the signal is processed, not left unread: every frame on
+    // the bus is then either received or in the kernel's drop count
+    if let Some(s) = &sock {
+        loop {
+            batch.clear();
+            match wire::recv_batch(s.as_raw_fd(), &mut batch, wire::BATCH) {
+                Ok(0) => break,
+                Ok(_) => {}
+                Err(e) => {
+                    read_errors += 1;
+                    warn!(interface = iface, "read error while draining: {e}");
+                    break;
+                }
+            }
+            take_frames(&mut batch, &mut pipeline, &mut shell, &mut out).await?;
+        }
+    }
     pipeline.flush(&mut out);
     shell.act(&mut out).await?;
     let mut summary = pipeline.summary();
     summary.interface = iface.to_string();
     summary.read_errors = read_errors;
+    if let Some(s) = &sock {
+        match wire::socket_drops(s.as_raw_fd()) {
+            Ok(n) => summary.kernel_dropped_frames = n,
+            Err(e) => warn!(
+                interface = iface,
+                "cannot read the socket's drop counter: {e}"
+            ),
+        }
+    }
     summary.wall_seconds = start.elapsed().as_secs_f64();
     summary.solution.frames_sent = shell.frames_sent;
     summary.solution.send_errors = shell.send_errors;
@@ -237,6 +252,32 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
             .with_context(|| format!("writing summary {}", p.display()))?;
     }
     Ok(summary)
+}
+
+/// Received frames (or why they are not data frames) through the pipeline, each recorded as it
+/// came, and what the pipeline asks done.
+async fn take_frames(
+    batch: &mut Vec<Result<wire::RawFrame, wire::FrameConvError>>,
+    pipeline: &mut Pipeline,
+    shell: &mut Shell<'_>,
+    out: &mut Vec<Output>,
+) -> Result<()> {
+    for conv in batch.drain(..) {
+        match conv {
+            Ok(raw) => {
+                if let Some(r) = shell.recorder {
+                    r.send(Record::Frame {
+                        t_ns: wall_ns(),
+                        frame: raw,
+                    });
+                }
+                pipeline.on_frame(&raw, out);
+            }
+            Err(e) => pipeline.on_non_data(&e.to_string(), out),
+        }
+        shell.act(out).await?;
+    }
+    Ok(())
 }
 
 /// The devices the pipeline's outputs go to.

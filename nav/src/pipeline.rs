@@ -701,6 +701,7 @@ impl Pipeline {
             invalid_value_frames: c.invalid,
             non_data_frames: c.non_data,
             read_errors: 0,
+            kernel_dropped_frames: 0,
             imu: self.fe.stats(),
             max_safe_gap_samples: self.fe.max_span(),
             first_sample: self.sums.first,

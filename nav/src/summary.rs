@@ -34,6 +34,10 @@ pub struct Summary {
     pub non_data_frames: u64,
     /// Socket read errors.
     pub read_errors: u64,
+    /// Frames the kernel dropped because nav's receive buffer was full (the socket's drop
+    /// counter, `SO_RXQ_OVFL`'s count): what reached the bus but not nav, counted exactly.
+    #[serde(default)]
+    pub kernel_dropped_frames: u64,
     /// Front-end counters.
     pub imu: ImuStats,
     /// Longest counter gap the front end can difference, samples.
@@ -180,6 +184,11 @@ impl Summary {
             "  frames received   {} ({})",
             s.frames_total,
             by.join(", ")
+        );
+        let _ = writeln!(
+            o,
+            "  dropped by kernel {} (receive buffer full)",
+            s.kernel_dropped_frames
         );
         let _ = writeln!(
             o,

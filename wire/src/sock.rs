@@ -172,3 +172,27 @@ pub fn set_rcvbuf(fd: i32, bytes: usize) -> std::io::Result<()> {
         Err(std::io::Error::last_os_error())
     }
 }
+
+/// Frames the kernel has dropped on socket `fd` because its receive buffer was full: the
+/// socket's drop counter (`sk_drops`, the count `SO_RXQ_OVFL` reports with each message), read
+/// with `SO_MEMINFO`.
+pub fn socket_drops(fd: std::os::fd::RawFd) -> std::io::Result<u64> {
+    /// `SO_MEMINFO` (asm-generic/socket.h; not in the libc crate).
+    const SO_MEMINFO: libc::c_int = 55;
+    let mut info = [0u32; 9];
+    let mut len = std::mem::size_of_val(&info) as libc::socklen_t;
+    // SAFETY: `info` is a live buffer of `len` bytes; the kernel writes at most `len`.
+    let r = unsafe {
+        libc::getsockopt(
+            fd,
+            libc::SOL_SOCKET,
+            SO_MEMINFO,
+            info.as_mut_ptr().cast(),
+            &mut len,
+        )
+    };
+    if r != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(u64::from(info[libc::SK_MEMINFO_DROPS as usize]))
+}

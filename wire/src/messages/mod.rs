@@ -283,6 +283,15 @@ impl Message {
             }
             0x102 => {
                 use tt_status::*;
+                // the DBC's range is [0, 359.9999] deg; the 22-bit field could hold more
+                let raw = ANGLE.get(&d);
+                if raw >= 3_600_000 {
+                    return Err(DecodeError::InvalidValue {
+                        message: spec.name,
+                        signal: ANGLE.name,
+                        raw,
+                    });
+                }
                 Message::TtStatus(TtStatus {
                     angle_deg: ANGLE.phys(&d),
                     rate_dps: RATE.phys(&d),
@@ -304,6 +313,15 @@ impl Message {
             }
             0x201 => {
                 use nav_att::*;
+                // headings are [0, 360): a raw 360 deg or more is not defined
+                let raw = HEADING.get(&d);
+                if raw >= 900_000 {
+                    return Err(DecodeError::InvalidValue {
+                        message: spec.name,
+                        signal: HEADING.name,
+                        raw,
+                    });
+                }
                 Message::NavAtt(NavAtt {
                     seq: u8_of(&SEQ),
                     heading_deg: HEADING.phys(&d),

@@ -1,0 +1,57 @@
+//! `hil fuzz`: hostile input for nav's decoders and the bench's parsers.
+
+use crate::*;
+use hil::fuzz::Target;
+
+pub(crate) fn fuzz(
+    targets: Vec<Target>,
+    inputs: u64,
+    seed: u64,
+    out: Option<PathBuf>,
+) -> Result<i32> {
+    if inputs == 0 {
+        bail!("--inputs must be positive");
+    }
+    let targets = if targets.is_empty() {
+        vec![Target::Can, Target::Nmea, Target::Config, Target::Scenario]
+    } else {
+        targets
+    };
+    let out = absolute(&out.unwrap_or_else(|| default_out("fuzz")))?;
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let mut reports = Vec::new();
+    for t in targets {
+        let t0 = std::time::Instant::now();
+        let r = hil::fuzz::run(t, inputs, seed, &out, |i| {
+            if i > 0 {
+                eprintln!(
+                    "hil fuzz: {t:?}: {i} of {inputs} inputs ({:.0} s)",
+                    t0.elapsed().as_secs_f64()
+                );
+            }
+        })?;
+        eprintln!(
+            "hil fuzz: {t:?}: {} inputs, {} panics, {} hangs, slowest {:.2} ms",
+            r.inputs, r.panics, r.hangs, r.slowest_ms
+        );
+        reports.push(r);
+    }
+    let md = hil::fuzz::markdown(&reports);
+    std::fs::write(out.join("fuzz.md"), &md)?;
+    std::fs::write(
+        out.join("fuzz.json"),
+        serde_json::to_string_pretty(&reports)?,
+    )?;
+    print!("{md}");
+    for r in &reports {
+        for c in &r.crashes {
+            println!(" crash input: {}", c.display());
+        }
+    }
+    println!(" files: {}", out.display());
+    Ok(if reports.iter().all(|r| r.panics == 0 && r.hangs == 0) {
+        0
+    } else {
+        1
+    })
+}
