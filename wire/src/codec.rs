@@ -134,6 +134,23 @@ impl SignalSpec {
         self.put_wrapping(data, raw as i64);
         Ok(())
     }
+
+    /// Put an angle in degrees on a circle of `[0, 360)`: wrapped before and after quantization,
+    /// so that 359.99999 deg, which rounds to a whole turn, goes out as 0 and never as 360.
+    pub fn put_angle_deg(&self, data: &mut [u8; 8], deg: f64) -> Result<(), EncodeError> {
+        let turn = (360.0 / self.factor).round();
+        let raw = (deg.rem_euclid(360.0) / self.factor).round();
+        if !raw.is_finite() {
+            return Err(EncodeError::OutOfRange {
+                signal: self.name,
+                value: deg,
+                min: 0.0,
+                max: 360.0,
+            });
+        }
+        let raw = if raw >= turn { raw - turn } else { raw };
+        self.put_phys(data, raw * self.factor)
+    }
 }
 
 /// One frame type of the contract.

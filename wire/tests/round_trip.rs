@@ -234,3 +234,47 @@ fn out_of_range_values_do_not_encode() {
         "axis 4 does not fit 2 bits"
     );
 }
+
+/// Angles go out on [0, 360): one that rounds to a whole turn goes out as 0, never as the 360
+/// the decoder refuses.
+#[test]
+fn angles_wrap_after_quantization() {
+    for (deg, want) in [
+        (359.99999, 0.0),
+        (-0.00001, 0.0),
+        (720.5, 0.5),
+        (359.9, 359.9),
+    ] {
+        let st = TtStatus {
+            angle_deg: deg,
+            rate_dps: 0.0,
+            state: TtState::ALL[0],
+            axis: 0,
+            faults: TtFaults::default(),
+            ack_seq: 0,
+            counter: 0,
+        };
+        let Message::TtStatus(back) = rt(Message::TtStatus(st)) else {
+            panic!("not a TT_STATUS");
+        };
+        assert!(
+            close(back.angle_deg, want, 1e-4),
+            "{deg} -> {}",
+            back.angle_deg
+        );
+        let att = NavAtt {
+            seq: 1,
+            heading_deg: deg,
+            pitch_deg: 0.0,
+            roll_deg: 0.0,
+        };
+        let Message::NavAtt(back) = rt(Message::NavAtt(att)) else {
+            panic!("not a NAV_ATT");
+        };
+        assert!(
+            close(back.heading_deg, want, 4e-4),
+            "{deg} -> {}",
+            back.heading_deg
+        );
+    }
+}

@@ -184,7 +184,7 @@ impl Message {
             }
             Message::TtStatus(m) => {
                 use tt_status::*;
-                ANGLE.put_phys(&mut d, m.angle_deg.rem_euclid(360.0) % 360.0)?;
+                ANGLE.put_angle_deg(&mut d, m.angle_deg)?;
                 RATE.put_phys(&mut d, m.rate_dps)?;
                 STATE.put(&mut d, m.state as i64)?;
                 AXIS.put(&mut d, i64::from(m.axis))?;
@@ -202,7 +202,7 @@ impl Message {
             Message::NavAtt(m) => {
                 use nav_att::*;
                 SEQ.put(&mut d, i64::from(m.seq))?;
-                HEADING.put_phys(&mut d, m.heading_deg.rem_euclid(360.0))?;
+                HEADING.put_angle_deg(&mut d, m.heading_deg)?;
                 PITCH.put_phys(&mut d, m.pitch_deg)?;
                 ROLL.put_phys(&mut d, m.roll_deg)?;
             }
