@@ -88,20 +88,23 @@ pub const HALF_ANGLE_DEG: f64 = 1.0;
 pub const N: usize = 4;
 
 /// The chain for `alg` (the filter is nav's default dither filter).
-pub fn processor(alg: Alg, fir: &Fir) -> ImuProcessor {
+pub fn processor(alg: Alg, fir: &Fir) -> Result<ImuProcessor> {
     let f = alg.filtered().then_some(fir);
-    ImuProcessor::with(f, ConingCoefficients::for_method(alg.method(), N, f))
+    Ok(ImuProcessor::with(
+        f,
+        ConingCoefficients::for_method(alg.method(), N, f)?,
+    ))
 }
 
 /// Cone-axis drift (deg per 60 s) of `alg` on exact (noise-free, unquantized) increments of
 /// classical coning at `f_hz`, over `duration_s`.
-pub fn ideal_drift(alg: Alg, fir: &Fir, f_hz: f64, duration_s: f64) -> f64 {
+pub fn ideal_drift(alg: Alg, fir: &Fir, f_hz: f64, duration_s: f64) -> Result<f64> {
     let motion = Coning {
         half_angle_deg: HALF_ANGLE_DEG,
         frequency_hz: f_hz,
     };
     let dt = 1.0 / fir.spec().fs_hz;
-    let mut p = processor(alg, fir);
+    let mut p = processor(alg, fir)?;
     let mut upd = Vec::new();
     let n = (duration_s / dt).round() as u64;
     for k in 0..n {
@@ -114,7 +117,7 @@ pub fn ideal_drift(alg: Alg, fir: &Fir, f_hz: f64, duration_s: f64) -> f64 {
         p.valid_sample() as f64 * dt,
     );
     let e = crate::replay::attitude_error(&motion, t0, t1, &p.attitude());
-    e[0].to_degrees() * 60.0 / (t1 - t0)
+    Ok(e[0].to_degrees() * 60.0 / (t1 - t0))
 }
 
 /// Cone-axis drift (deg per 60 s) of `alg` on the emulated IMU (dither, noise, drift,
@@ -238,8 +241,8 @@ fn run_row(job: RowJob, opts: &ConingOptions, fir: &Fir) -> Result<Row> {
             f_hz: f,
             drift: Alg::ALL
                 .iter()
-                .map(|a| Some(ideal_drift(*a, fir, f, opts.duration_s)))
-                .collect(),
+                .map(|a| ideal_drift(*a, fir, f, opts.duration_s).map(Some))
+                .collect::<Result<_>>()?,
         },
         RowJob::Table3(f) => {
             let mut drift = vec![None];
@@ -252,8 +255,8 @@ fn run_row(job: RowJob, opts: &ConingOptions, fir: &Fir) -> Result<Row> {
             f_hz: f,
             drift: Alg::ALL
                 .iter()
-                .map(|a| Some(ideal_drift(*a, fir, f, opts.sweep_duration_s)))
-                .collect(),
+                .map(|a| ideal_drift(*a, fir, f, opts.sweep_duration_s).map(Some))
+                .collect::<Result<_>>()?,
         },
     })
 }
@@ -327,7 +330,9 @@ pub fn coning_merge(parts: &[ConingPart], out: &Path) -> Result<ConingReport> {
             classical: coning::classical(n).k,
             paper_tuned: coning::paper_000_tuned(n),
             taylor: ConingCoefficients::taylor(n, &fir).k,
-            fitted: ConingCoefficients::fitted(n, &fir, fir.spec().passband_hz).k,
+            fitted: ConingCoefficients::fitted(n, &fir, fir.spec().passband_hz)
+                .map(|c| c.k)
+                .unwrap_or_default(),
         })
         .collect();
     let (mut table2, mut table3, mut sweep) = (Vec::new(), Vec::new(), Vec::new());
@@ -408,9 +413,9 @@ fn write_files(r: &ConingReport, fir: &Fir, out: &Path) -> Result<()> {
         .iter()
         .map(|al| {
             let f = al.filtered().then_some(fir);
-            (f, ConingCoefficients::for_method(al.method(), N, f))
+            Ok((f, ConingCoefficients::for_method(al.method(), N, f)?))
         })
-        .collect();
+        .collect::<Result<_>>()?;
     let mut predicted: Vec<Vec<(f64, f64)>> = vec![Vec::new(); 4];
     for i in 1..=200 {
         let f = 0.5 * f64::from(i);
@@ -577,9 +582,10 @@ mod tests {
             (Alg::FilteredClassical, 80.0),
             (Alg::FilteredTaylor, 80.0),
         ] {
-            let sim = ideal_drift(alg, &fir, f, 5.0);
+            let sim = ideal_drift(alg, &fir, f, 5.0).unwrap();
             let fl = alg.filtered().then_some(&fir);
             let pred = ConingCoefficients::for_method(alg.method(), N, fl)
+                .unwrap()
                 .predicted_drift(fl, a, f, 2000.0)
                 .to_degrees()
                 * 60.0;
@@ -595,7 +601,7 @@ mod tests {
     #[test]
     fn ours_beats_algorithm_2_and_3_at_high_frequency() {
         let fir = Fir::default_dither_filter();
-        let d = |alg| ideal_drift(alg, &fir, 80.0, 5.0).abs();
+        let d = |alg| ideal_drift(alg, &fir, 80.0, 5.0).unwrap().abs();
         let (a2, a3, ours) = (
             d(Alg::FilteredClassical),
             d(Alg::FilteredTaylor),

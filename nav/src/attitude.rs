@@ -108,7 +108,7 @@ impl ImuProcessor {
         } else {
             None
         };
-        let coeffs = ConingCoefficients::for_method(cfg.coning, cfg.coning_samples, fir.as_ref());
+        let coeffs = ConingCoefficients::for_method(cfg.coning, cfg.coning_samples, fir.as_ref())?;
         Ok(Self::with(fir.as_ref(), coeffs))
     }
 
@@ -402,7 +402,8 @@ mod tests {
         let (amp, b) = (1f64.to_radians(), 1.0);
         let w = 2.0 * std::f64::consts::PI * f_hz;
         let dt = 1.0 / 2000.0;
-        let mut p = ImuProcessor::with(fir, ConingCoefficients::for_method(method, 4, fir));
+        let mut p =
+            ImuProcessor::with(fir, ConingCoefficients::for_method(method, 4, fir).unwrap());
         let mut out = Vec::new();
         let mut v = Vector3::zeros();
         let mut q = UnitQuaternion::identity();

@@ -201,6 +201,17 @@ impl NavConfig {
 mod tests {
     use super::*;
 
+    /// Found by `hil fuzz`: a 1 Hz passband made the fitted coning coefficients' system
+    /// singular and nav panicked at start-up; it must refuse the config and say why.
+    #[test]
+    fn a_degenerate_coning_fit_is_refused_not_fatal() {
+        let text = "[can]\ninterface = \"can0\"\n[processing.fir]\npassband_hz = 1.0\n";
+        let e = NavConfig::from_text(text, Path::new("/etc/nav.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("/etc/nav.toml") && e.contains("coning"), "{e}");
+    }
+
     #[test]
     fn minimal_config_loads_with_defaults_and_resolves_paths() {
         let dir = tempfile::tempdir().unwrap();

@@ -164,12 +164,24 @@ pub fn required_coning(n: usize, fir: Option<&Fir>, lambda: f64) -> f64 {
 impl ConingCoefficients {
     /// The coefficient set `method` for `n` sub-samples on data filtered by `fir`
     /// (`None`: unfiltered data).
-    pub fn for_method(method: ConingMethod, n: usize, fir: Option<&Fir>) -> Self {
-        match (method, fir) {
+    /// Fails when the fit over the filter's passband has no unique solution (a filter spec
+    /// whose passband makes the basis degenerate), naming the way out.
+    pub fn for_method(
+        method: ConingMethod,
+        n: usize,
+        fir: Option<&Fir>,
+    ) -> Result<Self, crate::fir::FirError> {
+        Ok(match (method, fir) {
             (ConingMethod::Classical, _) | (_, None) => classical(n),
             (ConingMethod::Taylor, Some(f)) => Self::taylor(n, f),
-            (ConingMethod::Fitted, Some(f)) => Self::fitted(n, f, f.spec().passband_hz),
-        }
+            (ConingMethod::Fitted, Some(f)) => Self::fitted(n, f, f.spec().passband_hz)
+                .ok_or_else(|| {
+                    crate::fir::FirError::BadSpec(format!(
+                        "the fitted coning coefficients have no unique solution over a {} Hz passband: choose coning = \"taylor\" or another [processing.fir]",
+                        f.spec().passband_hz
+                    ))
+                })?,
+        })
     }
 
     /// Paper 000's method: match the Taylor coefficients of `lambda^3 .. lambda^(2n-1)`.
@@ -235,7 +247,8 @@ impl ConingCoefficients {
     /// of the true coning: pure relative weighting spends the coefficients on low frequencies
     /// where every set's drift is negligible, pure absolute weighting on the band edge only; the
     /// square root balances the two. Solved by Lawson's iteratively re-weighted least squares.
-    pub fn fitted(n: usize, fir: &Fir, f_max_hz: f64) -> Self {
+    /// None when the fit has no unique solution (a degenerate band).
+    pub fn fitted(n: usize, fir: &Fir, f_max_hz: f64) -> Option<Self> {
         assert!(valid_n(n), "n must be 2..=5");
         let lmax = 2.0 * std::f64::consts::PI * f_max_hz / fir.spec().fs_hz;
         let m = n - 1;
@@ -264,7 +277,10 @@ impl ConingCoefficients {
                     }
                 }
             }
-            sol = kkt.lu().solve(&rhs).expect("fit system is regular");
+            sol = kkt.lu().solve(&rhs)?;
+            if sol.iter().any(|k| !k.is_finite()) {
+                return None;
+            }
             let errs: Vec<f64> = pts
                 .iter()
                 .map(|(row, target)| {
@@ -279,10 +295,10 @@ impl ConingCoefficients {
                 *wi = *wi * e / total * grid as f64;
             }
         }
-        Self {
+        Some(Self {
             n,
             k: sol.iter().take(m).cloned().collect(),
-        }
+        })
     }
 
     /// Algorithm coning estimate minus true coning per interval, per `sin^2 a`, at `lambda`
@@ -372,7 +388,7 @@ mod tests {
         for n in 2..=5 {
             let c = classical(n);
             let t = ConingCoefficients::taylor(n, &fir);
-            let f = ConingCoefficients::fitted(n, &fir, 100.0);
+            let f = ConingCoefficients::fitted(n, &fir, 100.0).unwrap();
             for hz in [1.0, 10.0, 50.0, 80.0] {
                 let e = |k: &ConingCoefficients| k.coning_error(Some(&fir), lam(hz)).abs();
                 let (ec, et, ef) = (e(&c), e(&t), e(&f));
