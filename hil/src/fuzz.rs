@@ -57,7 +57,7 @@ pub struct FuzzReport {
     pub seconds: f64,
     /// Seed.
     pub seed: u64,
-    /// Files holding the inputs that panicked.
+    /// Files holding the inputs that panicked or hung.
     pub crashes: Vec<PathBuf>,
 }
 
@@ -106,6 +106,13 @@ pub fn run(
         r.slowest_ms = r.slowest_ms.max(dt.as_secs_f64() * 1e3);
         if dt > HANG {
             r.hangs += 1;
+            if r.crashes.len() < 20 {
+                std::fs::create_dir_all(out)
+                    .with_context(|| format!("creating {}", out.display()))?;
+                let f = out.join(format!("hang-{target:?}-{seed}-{i}.bin").to_lowercase());
+                std::fs::write(&f, &input).with_context(|| format!("writing {}", f.display()))?;
+                r.crashes.push(f);
+            }
         }
         match outcome {
             Ok(true) => r.accepted += 1,

@@ -151,6 +151,61 @@ pub struct PartRun {
     pub series: Vec<NavSample>,
 }
 
+/// One run of an experiment: the scenario's IMU and mechanism and the receiver re-seeded for
+/// run `seed`, navigated with `filter`, its series split off for the part file.
+pub(crate) fn seeded_run(
+    s: &Scenario,
+    filter: Option<&FilterConfig>,
+    rx: &ReceiverParams,
+    seed: u64,
+) -> Result<PartRun> {
+    let mut sc = s.clone();
+    sc.imu.seed = s.imu.seed + 1000 * seed;
+    if let Some(t) = sc.turntable.as_mut() {
+        t.seed += seed;
+    }
+    let mut rx = rx.clone();
+    rx.errors.seed += 1000 * seed;
+    let mut run = navigate(&sc, filter, &rx, 0.0)?;
+    let series = std::mem::take(&mut run.series);
+    Ok(PartRun { run, series })
+}
+
+/// Progress of a part's runs, one line per finished run.
+pub(crate) struct Tally {
+    done: std::sync::atomic::AtomicUsize,
+    total: usize,
+    t0: std::time::Instant,
+    on: bool,
+}
+
+impl Tally {
+    pub(crate) fn new(total: usize, on: bool) -> Self {
+        Self {
+            done: Default::default(),
+            total,
+            t0: std::time::Instant::now(),
+            on,
+        }
+    }
+
+    /// Run `label` has finished with `r`.
+    pub(crate) fn done(&self, label: &str, r: &Result<PartRun>) {
+        let n = self.done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        if self.on {
+            eprintln!(
+                "hil: {n}/{} done ({:.0} s): {label}{}",
+                self.total,
+                self.t0.elapsed().as_secs_f64(),
+                r.as_ref().map_or(String::new(), |r| format!(
+                    ", end error {:.1} m",
+                    r.run.end_position_error_m
+                ))
+            );
+        }
+    }
+}
+
 /// Part `k` of `n` of the experiment (see [`crate::shard`]).
 pub type NavPart = crate::shard::Part<PartRun>;
 
@@ -260,38 +315,15 @@ pub fn run_part(o: &NavExpOptions, shard: usize, shards: usize, progress: bool) 
             o.threads
         );
     }
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let t0 = std::time::Instant::now();
+    let tally = Tally::new(mine.len(), progress);
     let results = crate::par::map(
         &mine,
         o.threads,
         |(g, j)| {
-            let mut sc = s.clone();
-            sc.imu.seed = s.imu.seed + 1000 * j.seed;
-            if let Some(t) = sc.turntable.as_mut() {
-                t.seed += j.seed;
-            }
-            let mut rx = j.rx.clone();
-            rx.errors.seed += 1000 * j.seed;
-            let r = navigate(&sc, j.filter.as_ref(), &rx, 0.0)
+            let r = seeded_run(s, j.filter.as_ref(), &j.rx, j.seed)
                 .with_context(|| format!("{} (seed {})", names[j.case], j.seed));
-            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            if progress {
-                eprintln!(
-                    "hil: {n}/{} done ({:.0} s): {}{}",
-                    mine.len(),
-                    t0.elapsed().as_secs_f64(),
-                    names[j.case],
-                    r.as_ref().map_or(String::new(), |r| format!(
-                        ", end error {:.1} m",
-                        r.end_position_error_m
-                    ))
-                );
-            }
-            r.map(|mut run| {
-                let series = std::mem::take(&mut run.series);
-                (*g, PartRun { run, series })
-            })
+            tally.done(&names[j.case], &r);
+            r.map(|r| (*g, r))
         },
         || Err(anyhow::anyhow!("worker panicked")),
     );

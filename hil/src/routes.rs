@@ -8,7 +8,7 @@
 //! velocity error above 1 m/s without nav's integrity monitor having flagged it.
 
 use crate::navexp::filter;
-use crate::navrun::{NavRun, NavSample, navigate};
+use crate::navrun::{NavRun, NavSample};
 use crate::plot::{LogChart, Series};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
@@ -141,42 +141,20 @@ pub fn run_part(
             o.threads
         );
     }
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let t0 = std::time::Instant::now();
+    let tally = crate::navexp::Tally::new(mine.len(), progress);
     let results = crate::par::map(
         &mine,
         o.threads,
         |(g, j)| {
             let s = &o.scenarios[j.route];
-            let mut sc = s.clone();
-            sc.imu.seed = s.imu.seed + 1000 * j.seed;
-            if let Some(t) = sc.turntable.as_mut() {
-                t.seed += j.seed;
-            }
-            let Some(mut rx) = s.gps.clone() else {
+            let Some(rx) = &s.gps else {
                 bail!("{}: no [gps]", s.name);
             };
-            rx.errors.seed += 1000 * j.seed;
-            let r = navigate(&sc, Some(&filter(j.kind, None)), &rx, 0.0)
-                .with_context(|| format!("{}, {:?} filter, seed {}", s.name, j.kind, j.seed));
-            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            if progress {
-                eprintln!(
-                    "hil: {n}/{} done ({:.0} s): {} {:?}{}",
-                    mine.len(),
-                    t0.elapsed().as_secs_f64(),
-                    s.name,
-                    j.kind,
-                    r.as_ref().map_or(String::new(), |r| format!(
-                        ", end error {:.1} m",
-                        r.end_position_error_m
-                    ))
-                );
-            }
-            r.map(|mut run| {
-                let series = std::mem::take(&mut run.series);
-                (*g, PartRun { run, series })
-            })
+            let label = format!("{} {:?}", s.name, j.kind);
+            let r = crate::navexp::seeded_run(s, Some(&filter(j.kind, None)), rx, j.seed)
+                .with_context(|| format!("{label}, seed {}", j.seed));
+            tally.done(&label, &r);
+            r.map(|r| (*g, r))
         },
         || Err(anyhow::anyhow!("worker panicked")),
     );

@@ -45,7 +45,7 @@ pub(crate) fn fuzz(
     print!("{md}");
     for r in &reports {
         for c in &r.crashes {
-            println!(" crash input: {}", c.display());
+            println!(" input kept: {}", c.display());
         }
     }
     println!(" files: {}", out.display());
