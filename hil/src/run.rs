@@ -167,6 +167,11 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         {
             let t = devices.sim_time();
             let reached = (t - last_report.1) / last_report.0.elapsed().as_secs_f64().max(1e-9);
+            // nothing to say while the devices stand (a finished drill being stopped)
+            if t <= last_report.1 {
+                next_report += Duration::from_secs(5);
+                continue;
+            }
             eprintln!(
                 "hil: {t:.1} / {:.1} s simulated (x{} asked, x{reached:.1} reached)",
                 s.duration_s, s.speed
