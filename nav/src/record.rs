@@ -14,6 +14,7 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::thread::JoinHandle;
+use std::time::Instant;
 use thiserror::Error;
 use wire::RawFrame;
 
@@ -204,48 +205,62 @@ impl Recorder {
                 let mut n = 0u64;
                 let mut buf: [u8; RAW_FRAME_BYTES];
                 let mut text: String;
-                for r in rx {
-                    let (ch, log, publish, data): (u16, u64, u64, &[u8]) = match &r {
-                        Record::Frame { t_ns, frame } | Record::Sent { t_ns, frame } => {
-                            buf = encode_frame(frame);
-                            let ch = if matches!(r, Record::Sent { .. }) {
-                                sent
-                            } else {
-                                raw
-                            };
-                            (ch, *t_ns, *t_ns, &buf)
-                        }
-                        Record::Sample {
-                            t_ns,
-                            publish_ns,
-                            sample,
-                        } => {
-                            text = serde_json::to_string(sample).unwrap_or_default();
-                            (
-                                json[&JsonChannel::ImuSample],
-                                *t_ns,
-                                *publish_ns,
-                                text.as_bytes(),
-                            )
-                        }
-                        Record::Json {
-                            channel,
-                            t_ns,
-                            publish_ns,
-                            json: j,
-                        } => (json[channel], *t_ns, *publish_ns, j.as_bytes()),
+                let mut last_flush = Instant::now();
+                loop {
+                    let r = match rx.recv_timeout(FLUSH_EVERY.saturating_sub(last_flush.elapsed()))
+                    {
+                        Ok(r) => Some(r),
+                        Err(mpsc::RecvTimeoutError::Timeout) => None,
+                        Err(mpsc::RecvTimeoutError::Disconnected) => break,
                     };
-                    let s = seq.entry(ch).or_insert(0);
-                    *s += 1;
-                    let h = mcap::records::MessageHeader {
-                        channel_id: ch,
-                        sequence: *s,
-                        log_time: log,
-                        publish_time: publish,
-                    };
-                    w.write_to_known_channel(&h, data)
-                        .map_err(mcap_err.clone())?;
-                    n += 1;
+                    if let Some(r) = r {
+                        let (ch, log, publish, data): (u16, u64, u64, &[u8]) = match &r {
+                            Record::Frame { t_ns, frame } | Record::Sent { t_ns, frame } => {
+                                buf = encode_frame(frame);
+                                let ch = if matches!(r, Record::Sent { .. }) {
+                                    sent
+                                } else {
+                                    raw
+                                };
+                                (ch, *t_ns, *t_ns, &buf)
+                            }
+                            Record::Sample {
+                                t_ns,
+                                publish_ns,
+                                sample,
+                            } => {
+                                text = serde_json::to_string(sample).unwrap_or_default();
+                                (
+                                    json[&JsonChannel::ImuSample],
+                                    *t_ns,
+                                    *publish_ns,
+                                    text.as_bytes(),
+                                )
+                            }
+                            Record::Json {
+                                channel,
+                                t_ns,
+                                publish_ns,
+                                json: j,
+                            } => (json[channel], *t_ns, *publish_ns, j.as_bytes()),
+                        };
+                        let s = seq.entry(ch).or_insert(0);
+                        *s += 1;
+                        let h = mcap::records::MessageHeader {
+                            channel_id: ch,
+                            sequence: *s,
+                            log_time: log,
+                            publish_time: publish,
+                        };
+                        w.write_to_known_channel(&h, data)
+                            .map_err(mcap_err.clone())?;
+                        n += 1;
+                    }
+                    // a chunk on disk at least this often: a nav killed outright loses no more
+                    if last_flush.elapsed() >= FLUSH_EVERY {
+                        w.flush().map_err(mcap_err.clone())?;
+                        last_flush = Instant::now();
+                    }
                 }
                 w.finish().map_err(mcap_err)?;
                 Ok(n)
@@ -278,6 +293,10 @@ impl Recorder {
         }
     }
 }
+
+/// How often the writer closes its chunk and writes it out (wall time): what a nav killed
+/// outright (SIGKILL, power loss) loses from its recording.
+pub const FLUSH_EVERY: std::time::Duration = std::time::Duration::from_millis(500);
 
 /// Wall time now, ns since the epoch.
 pub fn wall_ns() -> u64 {
