@@ -91,13 +91,31 @@ pub struct EmulatorBench {
 
 /// Produce `seconds` of scenario `s`'s bus traffic in process and time it.
 pub fn emulators(s: &Scenario, seconds: f64) -> EmulatorBench {
-    let (motion, tt) = s.build();
-    let imu = ImuEmulator::new(motion, s.imu.clone());
-    let mut bus = BusStream::new(imu, &s.faults);
-    let mut tt = tt.map(|t| emulators::bus::TtBus::new(t, s.imu.rate_hz, 120));
-    let (mut frames, mut msgs) = (Vec::new(), Vec::new());
     let mut n = 0u64;
     let t0 = Instant::now();
+    each_sample(s, seconds, |frames| {
+        n += frames.len() as u64;
+        std::hint::black_box(frames);
+    });
+    let dt = t0.elapsed().as_secs_f64().max(1e-9);
+    EmulatorBench {
+        scenario: s.name.clone(),
+        seconds,
+        frames: n,
+        speed_factor: seconds / dt,
+        frames_per_second: n as f64 / dt,
+    }
+}
+
+/// A scenario's bus traffic without nav, sample by sample up to `seconds` of simulated time:
+/// each IMU sample's frames, then the turntable's frames due after it (the scheduler's order;
+/// nothing answers the turntable, so it only reports its status).
+pub fn each_sample(s: &Scenario, seconds: f64, mut f: impl FnMut(&[RawFrame])) {
+    let (motion, tt) = s.build();
+    let mut bus = BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults);
+    let latency = emulators::bus::Lockstep::default().latency;
+    let mut tt = tt.map(|t| emulators::bus::TtBus::new(t, s.imu.rate_hz, latency));
+    let (mut frames, mut msgs) = (Vec::new(), Vec::new());
     while bus.next_time() <= seconds {
         let (k, t) = (bus.imu().next_index(), bus.next_time());
         frames.clear();
@@ -107,16 +125,7 @@ pub fn emulators(s: &Scenario, seconds: f64) -> EmulatorBench {
             tt.after_sample(k, t, &mut msgs);
             frames.extend(msgs.iter().filter_map(|m| m.encode().ok()));
         }
-        n += frames.len() as u64;
-        std::hint::black_box(&frames);
-    }
-    let dt = t0.elapsed().as_secs_f64().max(1e-9);
-    EmulatorBench {
-        scenario: s.name.clone(),
-        seconds,
-        frames: n,
-        speed_factor: seconds / dt,
-        frames_per_second: n as f64 / dt,
+        f(&frames);
     }
 }
 
@@ -182,28 +191,23 @@ pub fn raw_vcan(iface: &str, frames: u64, per_write: usize) -> Result<RawVcan> {
         })
     };
     let per_write = per_write.clamp(1, wire::BATCH);
-    let batch: Vec<RawFrame> = (0..per_write)
-        .map(|_| RawFrame {
+    let mut chunk = vec![
+        RawFrame {
             id: RAW_ID,
             len: 8,
             data: [0; 8],
-        })
-        .collect();
+        };
+        per_write
+    ];
     let fd = tx.as_raw_fd();
     let t0 = Instant::now();
     let mut sent = 0u64;
     while sent < frames {
         let want = (frames - sent).min(per_write as u64) as usize;
-        let mut chunk = batch[..want].to_vec();
-        for (i, f) in chunk.iter_mut().enumerate() {
+        for (i, f) in chunk[..want].iter_mut().enumerate() {
             f.data = (sent + i as u64).to_le_bytes();
         }
-        let r = if per_write == 1 {
-            wire::send_batch(fd, &chunk[..1]).map(|_| 1)
-        } else {
-            wire::send_batch(fd, &chunk)
-        };
-        match r {
+        match wire::send_batch(fd, &chunk[..want]) {
             Ok(k) => sent += k as u64,
             Err(e) if e.raw_os_error() == Some(libc::ENOBUFS) => std::thread::yield_now(),
             Err(e) => {

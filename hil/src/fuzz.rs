@@ -13,6 +13,7 @@
 //! - `config`: nav's config file text through its parser and checks;
 //! - `scenario`: scenario file text through the bench's parser and checks.
 
+use crate::bench::each_sample;
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
 use nav::pipeline::Pipeline;
@@ -147,29 +148,10 @@ fn corpus(target: Target) -> Result<Vec<Vec<u8>>> {
         Target::Can => {
             // a drill's first seconds: IMU frames, turntable status and acknowledgements
             let s = crate::drill::scenario(37.0, 28.2, 10.0, 1);
-            let (motion, tt) = s.build();
-            let mut stream = emulators::can::BusStream::new(
-                emulators::imu::ImuEmulator::new(motion, s.imu.clone()),
-                &s.faults,
-            );
-            let mut tt = tt.map(|t| emulators::bus::TtBus::new(t, s.imu.rate_hz, 120));
-            let (mut frames, mut msgs) = (Vec::new(), Vec::new());
             let mut corpus = Vec::new();
-            for _ in 0..400 {
-                let (k, t) = (stream.imu().next_index(), stream.next_time());
-                frames.clear();
-                stream.next_frames(&mut frames);
-                if let Some(tt) = tt.as_mut() {
-                    msgs.clear();
-                    tt.after_sample(k, t, &mut msgs);
-                    frames.extend(msgs.iter().filter_map(|m| m.encode().ok()));
-                }
-                let mut bytes = Vec::new();
-                for f in &frames {
-                    bytes.extend_from_slice(&encode(f));
-                }
-                corpus.push(bytes);
-            }
+            each_sample(&s, 400.0 / s.imu.rate_hz, |frames| {
+                corpus.push(frames.iter().flat_map(encode).collect());
+            });
             corpus
         }
         Target::Nmea => {

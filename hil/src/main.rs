@@ -169,6 +169,13 @@ struct BusArgs {
 }
 
 impl BusArgs {
+    /// Whether the run goes here: this kernel has CAN and the guest was not asked for (or this
+    /// is the guest). Otherwise the command runs again inside the QEMU guest.
+    fn here(&self) -> bool {
+        let in_guest = std::env::var_os(GUEST_ENV).is_some();
+        (!self.vm || in_guest) && matches!(vcan_setup::can_support(), CanSupport::Available)
+    }
+
     /// Defaults (vcan0, no JSON, the guest only where needed) writing to `out`.
     fn to(out: PathBuf) -> Self {
         Self {

@@ -10,8 +10,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
     let out = absolute(&a.bus.out.clone().unwrap_or_else(|| default_out("bench")))?;
     let files = scenario_files(&a.scenario)?;
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
-    let here = a.no_bus
-        || ((!a.bus.vm || in_guest) && matches!(vcan_setup::can_support(), CanSupport::Available));
+    let here = a.no_bus || a.bus.here();
     if !here {
         let mut args: Vec<String> = vec![
             "bench".into(),

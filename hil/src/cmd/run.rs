@@ -19,8 +19,7 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
         None => default_out(&s.name),
     })?;
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
-    let native = !a.bus.vm || in_guest;
-    if native && matches!(vcan_setup::can_support(), CanSupport::Available) {
+    if a.bus.here() {
         let opts = RunOptions {
             iface: a.bus.iface.clone(),
             out: out.clone(),

@@ -13,9 +13,7 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
             .clone()
             .unwrap_or_else(|| default_out("validate-turntable")),
     )?;
-    let in_guest = std::env::var_os(GUEST_ENV).is_some();
-    let here = a.real
-        || ((!a.bus.vm || in_guest) && matches!(vcan_setup::can_support(), CanSupport::Available));
+    let here = a.real || a.bus.here();
     if !here {
         let mut args: Vec<String> = vec![
             "validate".into(),
