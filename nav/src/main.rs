@@ -171,8 +171,12 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                 };
                 // every frame already waiting comes in the same system call (recvmmsg)
                 batch.push(wire::from_can_frame(&f));
-                if let Some(s) = &sock {
-                    let _ = wire::recv_batch(s.as_raw_fd(), &mut batch, wire::BATCH - 1);
+                if let Some(s) = &sock
+                    && let Err(e) = wire::recv_batch(s.as_raw_fd(), &mut batch, wire::BATCH - 1)
+                {
+                    // the frame already read still goes through; the error is counted
+                    read_errors += 1;
+                    warn!(interface = iface, "read error: {e}");
                 }
                 take_frames(&mut batch, &mut pipeline, &mut shell, &mut out).await?;
                 if pipeline.gyro_frames() > gyro_frames {
