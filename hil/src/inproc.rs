@@ -96,6 +96,7 @@ pub struct InProcessBench {
     t_first: Option<f64>,
     sent: Option<Vec<RawFrame>>,
     bad_from_nav: u64,
+    receiver_errors: Vec<(f64, [f64; 3])>,
 }
 
 impl InProcessBench {
@@ -122,6 +123,7 @@ impl InProcessBench {
             t_first: None,
             sent: None,
             bad_from_nav: 0,
+            receiver_errors: Vec::new(),
         })
     }
 
@@ -184,6 +186,9 @@ impl InProcessBench {
                 // while the receiver's device is gone its output is lost
                 if e.port_drop.is_none() {
                     self.decoder.push_bytes(e.text.as_bytes(), &mut self.fixes);
+                    if let Some(err) = e.error_enu {
+                        self.receiver_errors.push((e.edge, err));
+                    }
                 }
             }
             for fix in self.fixes.drain(..) {
@@ -192,6 +197,11 @@ impl InProcessBench {
             self.act();
         }
         t
+    }
+
+    /// The receiver's error (east, north, up, m) in each fix nav was sent, by PPS edge (s).
+    pub fn receiver_errors(&self) -> &[(f64, [f64; 3])] {
+        &self.receiver_errors
     }
 
     /// The end of the stream.

@@ -296,6 +296,10 @@ enum Experiment {
         /// GPS noise the mis-specified filters assume, m (comma-separated).
         #[arg(long, value_delimiter = ',', default_value = "5,100")]
         misspecified: Vec<f64>,
+        /// Surroundings of the mis-modelled receiver: `paper-003` (paper 003's campus: the
+        /// satellites used change, multipath bursts), `urban` or `open-sky`.
+        #[arg(long, default_value = "paper-003")]
+        environment: String,
         /// Run only part K of N (0-based, `K/N`): the runs whose place in the plan is K modulo
         /// N. Writes part-K-of-N.json to the output folder; `hil experiment merge` makes the
         /// report of all parts.
@@ -317,7 +321,7 @@ enum Experiment {
         #[arg(long, default_value_t = 1)]
         runs: usize,
         /// Filter kinds (comma-separated).
-        #[arg(long, value_delimiter = ',', default_value = "standard,fading")]
+        #[arg(long, value_delimiter = ',', default_value = "standard,fading,adaptive")]
         filters: Vec<String>,
         /// Run only part K of N (0-based, `K/N`); `hil experiment merge` makes the report.
         #[arg(long, value_parser = hil::shard::parse)]

@@ -161,6 +161,11 @@ pub struct NavSample {
 /// Errors of a navigation run.
 #[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct NavRun {
+    /// The receiver's slow horizontal error at the end: its error averaged over the last 60 s
+    /// of fixes, m (none without fixes then). No filter can know it: it is the floor of the
+    /// end error.
+    #[serde(default)]
+    pub end_receiver_wander_m: Option<f64>,
     /// Simulated time navigated, s.
     pub duration_s: f64,
     /// Horizontal position error at the end, m.
@@ -332,7 +337,22 @@ pub fn navigate(
         (Some(p), Some(v)) => Some([p, v]),
         _ => None,
     };
+    // the receiver's slow error at the end: its horizontal error averaged over the last 60 s of
+    // fixes (the white noise and short bursts average out, the wander of minutes does not)
+    let tail: Vec<[f64; 3]> = bench
+        .receiver_errors()
+        .iter()
+        .filter(|(t, _)| *t > last_t - 60.0)
+        .map(|x| x.1)
+        .collect();
+    let end_receiver_wander_m = (!tail.is_empty()).then(|| {
+        let k = tail.len() as f64;
+        let e = tail.iter().map(|x| x[0]).sum::<f64>() / k;
+        let n = tail.iter().map(|x| x[1]).sum::<f64>() / k;
+        e.hypot(n)
+    });
     Ok(NavRun {
+        end_receiver_wander_m,
         duration_s: last_t,
         end_position_error_m: end.position_error_m,
         end_velocity_error_mps: norm3(end.velocity_error_mps),

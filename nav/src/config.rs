@@ -174,6 +174,9 @@ impl NavConfig {
         if let Err(e) = cfg.north_finding.check() {
             return Err(invalid(e.to_string()));
         }
+        if let Err(e) = cfg.navigation.filter.check() {
+            return Err(invalid(format!("navigation.{e}")));
+        }
         if let Err(e) = ImuProcessor::new(&cfg.processing) {
             return Err(invalid(format!("processing: {e}")));
         }
@@ -255,6 +258,13 @@ mod tests {
         .unwrap();
         let e = full(NavConfig::load(&p).unwrap_err());
         assert!(e.contains("processing") && e.contains("order 20"), "{e}");
+        std::fs::write(
+            &p,
+            "[can]\ninterface = \"can0\"\n[navigation.filter]\nkind = \"adaptive\"\nadaptive_forgetting = 1.5\n",
+        )
+        .unwrap();
+        let e = full(NavConfig::load(&p).unwrap_err());
+        assert!(e.contains("navigation.filter.adaptive_forgetting"), "{e}");
         let e = NavConfig::load(&dir.path().join("missing.toml"))
             .unwrap_err()
             .to_string();

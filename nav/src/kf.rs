@@ -18,9 +18,15 @@
 //! `dlon' = sec L dv_E / (R_N + h) + v_E sec L tan L dL / (R_N + h) - v_E sec L dh / (R_N + h)^2`,
 //! `dh' = dv_U`; drifts and biases are random constants.
 //!
-//! Variants: the standard filter, and the fading-memory filter (`P <- s P` before each
-//! measurement, `s` = 1.2 by default), which discounts old information and so tolerates a
-//! mis-specified GPS noise. Corrections: closed-loop feedback (the navigation state and the IMU
+//! Variants: the standard filter; the fading-memory filter (`P <- s P` before each
+//! measurement, `s` = 1.02 by default), which discounts old information and so tolerates a
+//! mis-specified GPS noise; and the adaptive filter, which estimates the receiver's white noise
+//! from its innovations (Sage-Husa with exponential forgetting:
+//! `R_k = b R_{k-1} + (1 - b) (e e^T - H P H^T)`, starting from the configured noise, diagonal,
+//! bounded to a quarter and 400 times the configured
+//! variance), so that a receiver whose noise changes along the route (multipath, poor geometry)
+//! is weighted by what it does rather than by what it was assumed to do. Any kind may scale the
+//! white noise with the HDOP the receiver reports (`hdop_ref`). Corrections: closed-loop feedback (the navigation state and the IMU
 //! compensation are corrected and the error states reset) or paper 003's output correction (the
 //! navigation runs free; its output is corrected). Innovations beyond the gate are rejected and
 //! counted (a GPS glitch or multipath jump must not pull the solution).
@@ -41,13 +47,19 @@ type VecN = SVector<f64, N>;
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct FilterConfig {
-    /// `standard` or `fading`.
+    /// `standard`, `fading` or `adaptive`.
     pub kind: FilterKind,
     /// Fading-memory factor (applied at each measurement to the navigation and IMU states).
     /// Paper 003 uses 1.2 with the receiver's error taken for white noise; with the receiver's
     /// wander modelled, 1.02 (a memory of about 50 fixes) keeps the sigmas consistent (see
     /// docs/navigation.md).
     pub fading_factor: f64,
+    /// The adaptive filter's forgetting factor `b` (0-1): its noise estimate remembers about
+    /// `1 / (1 - b)` fixes.
+    pub adaptive_forgetting: f64,
+    /// The HDOP at which `gps_sigma_m` and `gps_sigma_h_m` hold: the white noise assumed for
+    /// each fix is scaled by its HDOP over this (0: the HDOP is not used).
+    pub hdop_ref: f64,
     /// `feedback` (closed loop) or `output` (paper 003's output correction).
     pub correction: Correction,
     /// The receiver's white position noise the filter assumes, per horizontal axis (1 sigma), m.
@@ -85,6 +97,71 @@ pub struct FilterConfig {
     pub lever_arm_m: [f64; 3],
 }
 
+impl FilterConfig {
+    /// Refuse settings the filter cannot run with, naming the field.
+    pub fn check(&self) -> Result<(), String> {
+        let positive = [
+            ("gps_sigma_m", self.gps_sigma_m),
+            ("gps_sigma_h_m", self.gps_sigma_h_m),
+            ("gps_gm_tau_s", self.gps_gm_tau_s),
+            ("gate_nis", self.gate_nis),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("filter.{name} must be a positive number, got {v}"));
+            }
+        }
+        let non_negative = [
+            ("gps_gm_sigma_m", self.gps_gm_sigma_m),
+            ("gps_gm_sigma_h_m", self.gps_gm_sigma_h_m),
+            ("hdop_ref", self.hdop_ref),
+            ("gyro_arw_dpsh", self.gyro_arw_dpsh),
+            ("accel_vrw_mpss", self.accel_vrw_mpss),
+            ("init_vel_mps", self.init_vel_mps),
+            ("init_pos_m", self.init_pos_m),
+            ("init_gyro_dph", self.init_gyro_dph),
+            ("init_accel_mps2", self.init_accel_mps2),
+        ];
+        for (name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("filter.{name} must be a number >= 0, got {v}"));
+            }
+        }
+        if !(self.fading_factor.is_finite() && (1.0..=10.0).contains(&self.fading_factor)) {
+            return Err(format!(
+                "filter.fading_factor must be 1-10 (1: no fading), got {}",
+                self.fading_factor
+            ));
+        }
+        if !(0.0..1.0).contains(&self.adaptive_forgetting) {
+            return Err(format!(
+                "filter.adaptive_forgetting must be in [0, 1), got {}",
+                self.adaptive_forgetting
+            ));
+        }
+        if self.init_att_deg.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(format!(
+                "filter.init_att_deg must be numbers >= 0, got {:?}",
+                self.init_att_deg
+            ));
+        }
+        if self.lever_arm_m.iter().any(|v| !v.is_finite()) {
+            return Err(format!(
+                "filter.lever_arm_m must be finite, got {:?}",
+                self.lever_arm_m
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Largest attitude error an open-loop filter carries before it folds its estimate into the
+/// navigation state, deg (the small-angle error model is good to about 1 % there).
+pub const LINEAR_ATTITUDE_DEG: f64 = 0.5;
+/// Largest velocity error it carries, m/s (the error model's transport-rate and Coriolis terms
+/// are evaluated at the uncorrected velocity).
+pub const LINEAR_VELOCITY_MPS: f64 = 2.0;
+
 /// Which filter.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
@@ -94,6 +171,8 @@ pub enum FilterKind {
     /// Fading-memory filter.
     #[default]
     Fading,
+    /// Adaptive (Sage-Husa) estimate of the receiver's white noise.
+    Adaptive,
 }
 
 /// How estimates are applied.
@@ -112,6 +191,8 @@ impl Default for FilterConfig {
         Self {
             kind: FilterKind::Fading,
             fading_factor: 1.02,
+            adaptive_forgetting: 0.95,
+            hdop_ref: 0.0,
             correction: Correction::Feedback,
             // a 25 m class receiver (paper 003's): 12 m over 300 s plus 6 m white per axis, the
             // height 1.6 times the horizontal
@@ -145,10 +226,16 @@ pub struct FilterStats {
     pub mean_nis: f64,
     /// Times the filter re-anchored on the receiver after a run of rejections.
     pub reanchors: u64,
+    /// Times the open-loop (output correction) filter's error estimate left the range where
+    /// its linear model holds and was folded into the navigation state.
+    pub relinearised: u64,
     /// Estimated gyro drifts (body x, y, z), deg/h (fed back, plus the pending estimate).
     pub gyro_bias_dph: [f64; 3],
     /// Estimated accelerometer biases (body x, y, z), m/s^2.
     pub accel_bias_mps2: [f64; 3],
+    /// The white noise the filter assumes now (north, east, up; 1 sigma at the reference HDOP),
+    /// m: the configured one, or the adaptive filter's estimate.
+    pub gps_sigma_now_m: [f64; 3],
 }
 
 /// The filter.
@@ -168,6 +255,9 @@ pub struct Kf {
     /// navigation states): weakly observable states (heading between turns, drifts) would
     /// otherwise grow without bound under the fading factor.
     cap: VecN,
+    /// The receiver's white noise variance (north, east, up; at the reference HDOP), m^2: the
+    /// configured one, or the adaptive filter's estimate.
+    r_m2: [f64; 3],
 }
 
 fn skew(v: &Vector3<f64>) -> SMatrix<f64, 3, 3> {
@@ -200,6 +290,11 @@ impl Kf {
             cfg.gps_gm_sigma_m / (rn * lat.cos()),
             cfg.gps_gm_sigma_h_m,
         ];
+        let r_m2 = [
+            cfg.gps_sigma_m.powi(2),
+            cfg.gps_sigma_m.powi(2),
+            cfg.gps_sigma_h_m.powi(2),
+        ];
         let mut cap = VecN::zeros();
         for (i, s) in d.iter().enumerate() {
             p[(i, i)] = s * s;
@@ -216,6 +311,7 @@ impl Kf {
             nis_sum: 0.0,
             last_nis: None,
             rejected_in_a_row: 0,
+            r_m2,
         }
     }
 
@@ -258,6 +354,7 @@ impl Kf {
         FilterStats {
             gyro_bias_dph: g.into(),
             accel_bias_mps2: a.into(),
+            gps_sigma_now_m: self.r_m2.map(f64::sqrt),
             ..self.stats
         }
     }
@@ -358,8 +455,16 @@ impl Kf {
         self.p = (self.p + self.p.transpose()) * 0.5;
     }
 
-    /// A GPS position (rad, rad, m) measured at the state's time. Returns whether it was used.
-    pub fn update(&mut self, s: &mut NavState, lat: f64, lon: f64, h: f64) -> bool {
+    /// A GPS position (rad, rad, m) measured at the state's time, with the HDOP the receiver
+    /// reported. Returns whether it was used.
+    pub fn update(
+        &mut self,
+        s: &mut NavState,
+        lat: f64,
+        lon: f64,
+        h: f64,
+        hdop: Option<f64>,
+    ) -> bool {
         let (rm, rn) = earth::radii(s.lat);
         // the antenna's position from the INS: lever arm in the navigation frame
         let l = s.q_nb * Vector3::from(self.cfg.lever_arm_m);
@@ -369,10 +474,21 @@ impl Kf {
             s.h + l.z,
         );
         let z = Vector3::new(ant.0 - lat, ant.1 - lon, ant.2 - h);
-        let mut r = SMatrix::<f64, 3, 3>::zeros();
-        r[(0, 0)] = (self.cfg.gps_sigma_m / (rm + s.h)).powi(2);
-        r[(1, 1)] = (self.cfg.gps_sigma_m / ((rn + s.h) * s.lat.cos())).powi(2);
-        r[(2, 2)] = self.cfg.gps_sigma_h_m.powi(2);
+        // metres per state unit of the position axes (lat, lon, h)
+        let m_per = [rm + s.h, (rn + s.h) * s.lat.cos(), 1.0];
+        // the white noise of this fix: the assumed (or estimated) one at the reference HDOP,
+        // scaled by the fix's HDOP
+        let hdop_scale = match hdop {
+            Some(d) if self.cfg.hdop_ref > 0.0 && d.is_finite() && d > 0.0 => {
+                (d / self.cfg.hdop_ref).clamp(0.2, 20.0)
+            }
+            _ => 1.0,
+        };
+        let r_of = |r_m2: &[f64; 3]| {
+            SMatrix::<f64, 3, 3>::from_diagonal(&Vector3::from_fn(|i, _| {
+                r_m2[i] * hdop_scale * hdop_scale / (m_per[i] * m_per[i])
+            }))
+        };
         if self.cfg.kind == FilterKind::Fading {
             // fading discounts what the filter learnt of its own horizontal navigation and IMU
             // states; the receiver's error (a model of the receiver, not of the INS) keeps its
@@ -404,6 +520,11 @@ impl Kf {
             h_mat[(i, B + i)] = -1.0;
         }
         let innov = z - h_mat * self.x;
+        let r_before = self.r_m2;
+        if self.cfg.kind == FilterKind::Adaptive {
+            self.adapt_noise(&h_mat, &innov, &m_per, hdop_scale);
+        }
+        let r = r_of(&self.r_m2);
         let nis_of = |p: &MatN| {
             let s_mat = h_mat * p * h_mat.transpose() + r;
             let s_inv = s_mat.try_inverse()?;
@@ -419,6 +540,10 @@ impl Kf {
             self.rejected_in_a_row += 1;
             if self.cfg.reanchor_after == 0 || self.rejected_in_a_row < self.cfg.reanchor_after {
                 self.stats.rejected += 1;
+                // a rejected fix teaches the noise estimate nothing
+                if self.cfg.kind == FilterKind::Adaptive {
+                    self.r_m2 = r_before;
+                }
                 return false;
             }
             // lost: widen the position uncertainty to the innovation, then take the fix
@@ -444,10 +569,60 @@ impl Kf {
         self.stats.updates += 1;
         self.nis_sum += nis;
         self.stats.mean_nis = self.nis_sum / self.stats.updates as f64;
-        if self.cfg.correction == Correction::Feedback {
-            self.feedback(s);
+        match self.cfg.correction {
+            Correction::Feedback => self.feedback(s),
+            Correction::Output if self.beyond_linear_range() => {
+                // the free INS has drifted so far that the error model (small angles, the
+                // navigation state as the linearisation point) no longer describes its error:
+                // the sigmas would stop meaning anything. Fold the estimate into the
+                // navigation state once and go on open loop from there.
+                tracing::warn!(
+                    attitude_deg = Vector3::new(self.x[0], self.x[1], self.x[2])
+                        .norm()
+                        .to_degrees(),
+                    velocity_mps = Vector3::new(self.x[3], self.x[4], self.x[5]).norm(),
+                    "output correction: the error estimate left the linear range; folded into the navigation state"
+                );
+                self.stats.relinearised += 1;
+                self.feedback(s);
+            }
+            Correction::Output => {}
         }
         true
+    }
+
+    /// The open-loop error estimate is too large for the linear error model: an attitude error
+    /// over [`LINEAR_ATTITUDE_DEG`] or a velocity error over [`LINEAR_VELOCITY_MPS`].
+    fn beyond_linear_range(&self) -> bool {
+        Vector3::new(self.x[0], self.x[1], self.x[2]).norm() > LINEAR_ATTITUDE_DEG.to_radians()
+            || Vector3::new(self.x[3], self.x[4], self.x[5]).norm() > LINEAR_VELOCITY_MPS
+    }
+
+    /// Sage-Husa: move the white-noise estimate towards this fix's innovation less what the
+    /// filter's own uncertainty explains, with the weight `1 - b` (a memory of `1 / (1 - b)`
+    /// fixes; the configured noise is the prior); bounded to [1/4, 400] times the configured
+    /// variance.
+    fn adapt_noise(
+        &mut self,
+        h_mat: &SMatrix<f64, 3, N>,
+        innov: &Vector3<f64>,
+        m_per: &[f64; 3],
+        hdop_scale: f64,
+    ) {
+        let b = self.cfg.adaptive_forgetting.clamp(0.0, 0.999);
+        let d = 1.0 - b;
+        let hph = h_mat * self.p * h_mat.transpose();
+        let base = [
+            self.cfg.gps_sigma_m.powi(2),
+            self.cfg.gps_sigma_m.powi(2),
+            self.cfg.gps_sigma_h_m.powi(2),
+        ];
+        for i in 0..3 {
+            let k2 = m_per[i] * m_per[i] / (hdop_scale * hdop_scale);
+            let sample = (innov[i] * innov[i] - hph[(i, i)]) * k2;
+            let r = (1.0 - d) * self.r_m2[i] + d * sample;
+            self.r_m2[i] = r.clamp(0.25 * base[i], 400.0 * base[i]);
+        }
     }
 
     /// Apply the estimate to the navigation state and the IMU compensation; reset.
@@ -546,7 +721,7 @@ mod tests {
     /// the filter never recovers.
     #[test]
     fn the_first_fix_after_a_long_outage_is_taken_by_both_filters() {
-        for kind in [FilterKind::Standard, FilterKind::Fading] {
+        for kind in [FilterKind::Standard, FilterKind::Fading, FilterKind::Adaptive] {
             let mut st = parked();
             let mut k = Kf::new(
                 FilterConfig {
@@ -565,7 +740,7 @@ mod tests {
             let (rm, _) = earth::radii(st.lat);
             let lat = st.lat + 600.0 / rm;
             let (lat0, lon0) = (st.lat, st.lon);
-            assert!(k.update(&mut st, lat, lon0, 0.0), "{kind:?}: gated out");
+            assert!(k.update(&mut st, lat, lon0, 0.0, None), "{kind:?}: gated out");
             assert!(((st.lat - lat0) * rm - 600.0).abs() < 100.0, "{kind:?}");
         }
     }
@@ -579,7 +754,7 @@ mod tests {
         let before = st;
         let (rm, _) = earth::radii(st.lat);
         let (lat, lon) = (st.lat + 2000.0 / rm, st.lon);
-        assert!(!k.update(&mut st, lat, lon, 0.0));
+        assert!(!k.update(&mut st, lat, lon, 0.0, None));
         assert_eq!(st, before);
         assert_eq!(k.stats().rejected, 1);
     }
@@ -601,7 +776,7 @@ mod tests {
         let taken: Vec<bool> = (0..6)
             .map(|_| {
                 k.propagate(&st, &Vector3::new(0.0, 0.0, 9.79), 1.0);
-                k.update(&mut st, lat, lon, 0.0)
+                k.update(&mut st, lat, lon, 0.0, None)
             })
             .collect();
         assert_eq!(taken, [false, false, false, false, true, true]);

@@ -334,7 +334,7 @@ impl Navigator {
         let lat = p.0 + st.v.y * dt / (rm + st.h);
         let lon = p.1 + st.v.x * dt / ((rn + st.h) * st.lat.cos());
         let h = p.2 + st.v.z * dt;
-        let used = k.update(st, lat, lon, h);
+        let used = k.update(st, lat, lon, h, fix.hdop);
         if !used {
             self.fixes_ignored += 1;
         }

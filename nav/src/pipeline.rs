@@ -155,6 +155,8 @@ pub struct Pipeline {
     last_fix: Option<GpsFix>,
     encode_errors: u64,
     integrity: Option<crate::integrity::Symptom>,
+    /// The filter's re-anchors and relinearisations last reported.
+    filter_resets: (u64, u64),
     samples: Vec<ImuSample>,
     events: Vec<ImuEvent>,
     updates: Vec<Update>,
@@ -206,6 +208,7 @@ impl Pipeline {
             last_fix: None,
             encode_errors: 0,
             integrity: None,
+            filter_resets: (0, 0),
             samples: Vec::new(),
             events: Vec::new(),
             updates: Vec::new(),
@@ -254,6 +257,7 @@ impl Pipeline {
     /// The integrity monitor's alarm came on or went off: said in the log and the recording
     /// (the solution's `filter` health bit follows it, [`Pipeline::health`]).
     fn integrity_changes(&mut self, out: &mut Vec<Output>) {
+        self.filter_resets(out);
         let now = self
             .navigator
             .as_ref()
@@ -272,6 +276,40 @@ impl Pipeline {
             "alarm": now.is_some(),
             "symptom": now.map(|s| format!("{s:?}")),
             "t_s": t,
+        });
+        self.json(
+            JsonChannel::Event,
+            self.sums.last.unwrap_or(0),
+            json.to_string(),
+            out,
+        );
+    }
+
+    /// The filter re-anchored on the receiver or folded an open-loop estimate that left the
+    /// linear range: a `filter` event in the recording (the log has the filter's warning).
+    fn filter_resets(&mut self, out: &mut Vec<Output>) {
+        let Some(n) = self.navigator.as_ref() else {
+            return;
+        };
+        let Some(f) = n.filter().map(|k| k.stats()) else {
+            return;
+        };
+        let now = (f.reanchors, f.relinearised);
+        if now == self.filter_resets {
+            return;
+        }
+        let what = if now.0 > self.filter_resets.0 {
+            "reanchored on the receiver after a run of rejected fixes"
+        } else {
+            "open-loop error estimate left the linear range and was folded into the navigation state"
+        };
+        self.filter_resets = now;
+        let json = serde_json::json!({
+            "kind": "filter",
+            "what": what,
+            "reanchors": now.0,
+            "relinearised": now.1,
+            "t_s": n.time(),
         });
         self.json(
             JsonChannel::Event,

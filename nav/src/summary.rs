@@ -311,11 +311,15 @@ impl Summary {
             if let Some(f) = &n.filter {
                 let _ = writeln!(
                     o,
-                    "  filter            {} fixes used, {} rejected, mean NIS {:.2}, {} re-anchored; gyro drift {} deg/h, accel bias {} m/s^2",
+                    "  filter            {} fixes used, {} rejected, mean NIS {:.2}, {} re-anchored, {} relinearised; white noise now {:.1}/{:.1}/{:.1} m; gyro drift {} deg/h, accel bias {} m/s^2",
                     f.updates,
                     f.rejected,
                     f.mean_nis,
                     f.reanchors,
+                    f.relinearised,
+                    f.gps_sigma_now_m[0],
+                    f.gps_sigma_now_m[1],
+                    f.gps_sigma_now_m[2],
                     v3(f.gyro_bias_dph, 3),
                     v3(f.accel_bias_mps2, 5)
                 );

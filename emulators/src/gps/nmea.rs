@@ -56,7 +56,8 @@ impl NmeaWriter {
             return (String::new(), None);
         }
         let valid = t >= self.p.ttff_s && !in_outage;
-        let mut e = self.err.at(t);
+        let sample = self.err.sample(t);
+        let mut e = sample.enu;
         for m in &self.p.multipath {
             if t >= m[0] && t < m[0] + m[1] {
                 e[1] += m[2];
@@ -80,19 +81,9 @@ impl NmeaWriter {
         let (dd, mo, yy) = date;
         let (la, ns) = dm(lat, 2, 'N', 'S');
         let (lo, ew) = dm(lon, 3, 'E', 'W');
-        // HDOP and satellites consistent with the error size
-        let sats: u32 = if valid {
-            (12.0 - self.p.errors.gm_sigma_m.min(20.0) / 4.0)
-                .round()
-                .clamp(4.0, 12.0) as u32
-        } else {
-            0
-        };
-        let hdop = if valid {
-            (self.p.errors.gm_sigma_m.hypot(self.p.errors.white_sigma_m) / 6.0).clamp(0.6, 9.9)
-        } else {
-            99.9
-        };
+        // the satellites used and the HDOP of the error model's geometry
+        let sats: u32 = if valid { sample.satellites } else { 0 };
+        let hdop = if valid { sample.hdop } else { 99.9 };
         let geoid = 0.0;
         let tk = &self.p.talker;
         let mut out = String::new();

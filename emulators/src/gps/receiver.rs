@@ -77,6 +77,9 @@ pub struct Epoch {
     pub text: String,
     /// It carries a valid fix.
     pub valid: bool,
+    /// The receiver's position error in it (east, north, up), m (none without a fix): truth
+    /// for the bench's scoring, never on the wire.
+    pub error_enu: Option<[f64; 3]>,
     /// The receiver's device is gone at this epoch (which of its `port_drops`).
     pub port_drop: Option<usize>,
 }
@@ -124,6 +127,7 @@ impl GpsReceiver {
             edge,
             text,
             valid: err.is_some(),
+            error_enu: err,
             port_drop,
         })
     }

@@ -70,10 +70,19 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
             scenario,
             runs,
             misspecified,
+            environment,
             shard,
             out,
         } => {
             let s = Scenario::load(&scenario)?;
+            let preset: emulators::gps::errors::EnvironmentPreset =
+                serde_json::from_value(serde_json::Value::String(environment.clone())).map_err(
+                    |_| {
+                        anyhow::anyhow!(
+                            "--environment: `{environment}` is not a preset (paper-003, urban, open-sky)"
+                        )
+                    },
+                )?;
             if runs == 0 || misspecified.iter().any(|x| x.is_nan() || *x <= 0.0) {
                 bail!("--runs must be positive and every --misspecified sigma positive");
             }
@@ -83,6 +92,7 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 runs,
                 misspecified_sigma_m: misspecified,
                 outage_s: (60.0, 180.0),
+                environment: emulators::gps::errors::Environment::preset(preset),
                 threads: hil::par::threads(),
             };
             if let Some((k, n)) = shard {
@@ -117,7 +127,7 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                         f.trim().to_string(),
                     ))
                     .map_err(|_| {
-                        anyhow::anyhow!("--filters: `{f}` is not a filter kind (standard, fading)")
+                        anyhow::anyhow!("--filters: `{f}` is not a filter kind (standard, fading, adaptive)")
                     })
                 })
                 .collect::<Result<Vec<_>>>()?;
@@ -181,7 +191,11 @@ fn written<T: serde::Serialize>(part: &hil::shard::Part<T>, out: &Path) -> Resul
 
 /// The navigation experiment's exit status: 0 when it meets its targets.
 fn navigation_status(r: &hil::navexp::NavExperiment) -> i32 {
-    if r.pure_km_class && r.filters_within_paper && r.fading_no_worse_overstated {
+    if r.pure_km_class
+        && r.filters_within_paper
+        && r.fading_no_worse_overstated
+        && r.beats_standard_by_paper_margin
+    {
         0
     } else {
         1
