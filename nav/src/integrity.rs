@@ -5,7 +5,9 @@
 //! - rejections: a run of fixes the gate refused;
 //! - velocity: the INS's ground velocity against the receiver's speed and track (RMC), which
 //!   a position-only filter does not measure and so cannot see go wrong by itself; while parked,
-//!   the INS's whole speed (a parked land vehicle does not climb) against the receiver's.
+//!   the INS's whole speed (a parked land vehicle does not climb) against the receiver's;
+//! - covariance growth: the filter's own horizontal position sigma beyond a limit (a long
+//!   outage, or a filter that no longer converges).
 //!
 //! While any of them holds, the solution's `filter` health bit is set (nav's pipeline) and the
 //! change is reported as an event; the summary counts what was seen.
@@ -34,6 +36,9 @@ pub struct IntegrityConfig {
     pub velocity_fixes: u32,
     /// Below this speed the receiver's track is noise: only the speeds are compared, m/s.
     pub min_speed_mps: f64,
+    /// Alarm while the filter's horizontal position sigma (1 sigma, the root of the two axes'
+    /// variances) exceeds this, m: three times a 25 m class receiver's error.
+    pub max_position_sigma_m: f64,
 }
 
 impl Default for IntegrityConfig {
@@ -46,6 +51,7 @@ impl Default for IntegrityConfig {
             max_parked_speed_diff_mps: 1.0,
             velocity_fixes: 3,
             min_speed_mps: 1.0,
+            max_position_sigma_m: 60.0,
         }
     }
 }
@@ -63,6 +69,9 @@ pub struct IntegrityStats {
     pub rejection_alarms: u64,
     /// Of which: the velocity disagreed with the receiver's.
     pub velocity_alarms: u64,
+    /// Of which: the position sigma grew beyond its limit.
+    #[serde(default)]
+    pub covariance_alarms: u64,
     /// Mean NIS of the current window.
     pub window_mean_nis: f64,
     /// Largest INS-receiver horizontal velocity difference seen, m/s.
@@ -78,6 +87,8 @@ pub enum Symptom {
     Rejections,
     /// The velocity disagrees with the receiver's.
     Velocity,
+    /// The filter's position sigma has grown beyond its limit.
+    Covariance,
 }
 
 /// The monitor.
@@ -87,6 +98,7 @@ pub struct IntegrityMonitor {
     /// The last fixes: (NIS, rejected).
     window: VecDeque<(f64, bool)>,
     velocity_run: u32,
+    sigma_over: bool,
     symptom: Option<Symptom>,
     stats: IntegrityStats,
 }
@@ -136,6 +148,17 @@ impl IntegrityMonitor {
         self.evaluate()
     }
 
+    /// The filter's horizontal position sigma now, m. Returns the alarm's change, if any (cheap
+    /// when nothing changes: call it at every update).
+    pub fn on_position_sigma(&mut self, sigma_m: f64) -> Option<Option<Symptom>> {
+        let over = !(sigma_m <= self.cfg.max_position_sigma_m);
+        if over == self.sigma_over {
+            return None;
+        }
+        self.sigma_over = over;
+        self.evaluate()
+    }
+
     fn evaluate(&mut self) -> Option<Option<Symptom>> {
         let used: Vec<f64> = self.window.iter().filter(|w| !w.1).map(|w| w.0).collect();
         let mean = if used.is_empty() {
@@ -151,6 +174,8 @@ impl IntegrityMonitor {
             Some(Symptom::Innovations)
         } else if self.velocity_run >= self.cfg.velocity_fixes.max(1) {
             Some(Symptom::Velocity)
+        } else if self.sigma_over {
+            Some(Symptom::Covariance)
         } else {
             None
         };
@@ -164,6 +189,7 @@ impl IntegrityMonitor {
             Some(Symptom::Innovations) => self.stats.nis_alarms += 1,
             Some(Symptom::Rejections) => self.stats.rejection_alarms += 1,
             Some(Symptom::Velocity) => self.stats.velocity_alarms += 1,
+            Some(Symptom::Covariance) => self.stats.covariance_alarms += 1,
             None => {}
         }
         self.symptom = now;
@@ -227,6 +253,15 @@ mod tests {
         );
         assert_eq!(m.on_velocity([10.0, 0.0, 0.0], [8.5, 0.3]), Some(None));
         assert_eq!(m.stats().velocity_alarms, 1);
+        // the position sigma grows beyond its limit and comes back
+        let mut m = IntegrityMonitor::new(IntegrityConfig::default());
+        assert_eq!(m.on_position_sigma(20.0), None);
+        assert_eq!(m.on_position_sigma(59.0), None);
+        assert_eq!(m.on_position_sigma(61.0), Some(Some(Symptom::Covariance)));
+        assert_eq!(m.on_position_sigma(80.0), None);
+        assert_eq!(m.on_position_sigma(f64::NAN), None);
+        assert_eq!(m.on_position_sigma(30.0), Some(None));
+        assert_eq!(m.stats().covariance_alarms, 1);
         assert!((m.stats().max_velocity_diff_mps - 3.0).abs() < 1e-12);
         // a parked INS that believes it sinks at 1.5 m/s
         for _ in 0..2 {

@@ -431,12 +431,14 @@ impl Kf {
         f[(7, 6)] = v.x * tl / (rnh * cl);
         f[(7, 8)] = -v.x / (rnh * rnh * cl);
         f[(8, 5)] = 1.0;
-        let phi = MatN::identity() + f * t + f * f * (t * t / 2.0);
-        // the receiver's error: first-order Gauss-Markov
+        // the receiver's error: first-order Gauss-Markov (in F before the transition matrix is
+        // formed: without its decay the receiver's error became a random walk and the position
+        // sigma grew without bound, 14 m to 50 m over the campus loop)
         let tau = self.cfg.gps_gm_tau_s.max(1e-3);
         for i in 0..3 {
             f[(B + i, B + i)] = -1.0 / tau;
         }
+        let phi = MatN::identity() + f * t + f * f * (t * t / 2.0);
         let mut q = MatN::zeros();
         let arw = self.cfg.gyro_arw_dpsh.to_radians() / 60.0;
         let vrw = self.cfg.accel_vrw_mpss;

@@ -221,6 +221,9 @@ impl Navigator {
                     k.propagate(st, &(self.f_acc / self.t_acc), self.t_acc);
                     self.f_acc = Vector3::zeros();
                     self.t_acc = 0.0;
+                    if let Some((sigma, _)) = self.sigmas() {
+                        self.integrity.on_position_sigma(sigma);
+                    }
                 }
             }
         }

@@ -324,6 +324,18 @@ impl Summary {
                     v3(f.accel_bias_mps2, 5)
                 );
             }
+            let i = &n.integrity;
+            let _ = writeln!(
+                o,
+                "  integrity         {} alarms (innovations {}, rejections {}, velocity {}, covariance {}){}; largest INS-receiver velocity difference {:.2} m/s",
+                i.alarms,
+                i.nis_alarms,
+                i.rejection_alarms,
+                i.velocity_alarms,
+                i.covariance_alarms,
+                if i.alarm { ", ON at the end" } else { "" },
+                i.max_velocity_diff_mps
+            );
         }
         if let Some(g) = &s.gps {
             let t = &g.stats;
