@@ -193,7 +193,14 @@ impl TtBus {
         self.tt.advance(t, &mut self.acks);
         out.extend(self.acks.drain(..).map(Message::TtAck));
         if (k + 1).is_multiple_of(self.status_every) {
-            out.extend(self.tt.status(t).into_iter().map(Message::TtStatus));
+            let status = self.tt.status(t);
+            let silent = self.tt.params().faults.status_silent_s.iter();
+            if silent.clone().any(|w| t >= w[0] && t < w[1]) {
+                // the mechanism's controller hangs: no heartbeat
+                self.stats.silenced_status += status.len() as u64;
+            } else {
+                out.extend(status.into_iter().map(Message::TtStatus));
+            }
         }
     }
 
@@ -239,6 +246,24 @@ pub enum BusError {
     Gps(#[from] PtyError),
 }
 
+/// Count a write; frames lost to a downed interface never reach nav, so the lockstep takes
+/// their samples as confirmed (nav cannot confirm what it never received).
+fn account(
+    w: crate::can::Written,
+    retries: &mut u64,
+    lost_down: &mut u64,
+    confirmed: &mut Option<u64>,
+    last: Option<u64>,
+) {
+    *retries += w.retries;
+    if w.lost_down > 0 {
+        *lost_down += w.lost_down;
+        if let Some(k) = last {
+            *confirmed = Some(confirmed.map_or(k, |c| c.max(k)));
+        }
+    }
+}
+
 /// Run every device on `iface` (and the receiver's pty) for `duration_s` of simulated time,
 /// paced by `clock`, following nav when `lockstep` is given. Stops early when `stop` is set.
 pub fn run(
@@ -272,7 +297,7 @@ pub fn run(
     // frames go out in batches of a few samples: one system call instead of one per frame
     let mut outbox: Vec<RawFrame> = Vec::with_capacity(wire::BATCH);
     let batch_samples = 16u64;
-    let (mut written, mut max_lag_ms, mut retries) = (0u64, 0u64, 0u64);
+    let (mut written, mut max_lag_ms, mut retries, mut lost_down) = (0u64, 0u64, 0u64, 0u64);
     let mut latency = Latency::default();
     let mut outbox_last: Option<u64> = None;
     let mut tt_bad = 0u64;
@@ -302,8 +327,9 @@ pub fn run(
             }
             // nav cannot confirm what it has not received
             if !outbox.is_empty() {
-                retries += write_all(&sock, iface, &outbox)?;
-                written += outbox.len() as u64;
+                let w = write_all(&sock, iface, &outbox)?;
+                account(w, &mut retries, &mut lost_down, &mut confirmed, outbox_last);
+                written += outbox.len() as u64 - w.lost_down;
                 outbox.clear();
                 latency.flushed(outbox_last.take());
                 continue;
@@ -333,7 +359,13 @@ pub fn run(
             max_lag_ms = max_lag_ms.max(lag.as_millis() as u64);
         }
         frames.clear();
+        let dropped = dev.imu.stats.dropped_samples;
         dev.imu.next_frames(&mut frames);
+        if dev.imu.stats.dropped_samples > dropped {
+            // a sample deliberately not sent (a fault): nav cannot confirm it, so the lockstep
+            // does not wait for it (an IMU that stops for seconds is then paced by the clock)
+            confirmed = Some(confirmed.map_or(k, |c| c.max(k)));
+        }
         if let Some(tt) = dev.turntable.as_mut() {
             msgs.clear();
             tt.after_sample(k, t, &mut msgs);
@@ -348,8 +380,9 @@ pub fn run(
         outbox_last = Some(k);
         let gps_due = dev.gps.as_ref().is_some_and(|g| g.next_write_time() <= t);
         if gps_due || (k + 1).is_multiple_of(batch_samples) || outbox.len() + 8 > wire::BATCH {
-            retries += write_all(&sock, iface, &outbox)?;
-            written += outbox.len() as u64;
+            let w = write_all(&sock, iface, &outbox)?;
+            account(w, &mut retries, &mut lost_down, &mut confirmed, outbox_last);
+            written += outbox.len() as u64 - w.lost_down;
             outbox.clear();
             latency.flushed(outbox_last.take());
         }
@@ -358,8 +391,9 @@ pub fn run(
         }
         progress.set(t);
     }
-    retries += write_all(&sock, iface, &outbox)?;
-    written += outbox.len() as u64;
+    let w = write_all(&sock, iface, &outbox)?;
+    account(w, &mut retries, &mut lost_down, &mut confirmed, outbox_last);
+    written += outbox.len() as u64 - w.lost_down;
     progress.set(dev.imu.next_time());
     (ls.latency_p50_ms, ls.latency_p99_ms, ls.latency_samples) = latency.percentiles();
     if let Some(tt) = dev.turntable.as_mut() {
@@ -374,6 +408,7 @@ pub fn run(
         imu: TxStats {
             frames: imu_frames,
             enobufs_retries: retries,
+            lost_iface_down: lost_down,
             max_lag_ms,
             ..dev.imu.stats
         },
@@ -403,6 +438,8 @@ fn read_nav(
         let n = match wire::recv_batch(sock.as_raw_fd(), &mut got, wire::BATCH) {
             Ok(n) => n,
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            // the interface went down: the socket reports it once; nothing to read meanwhile
+            Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => return Ok(()),
             Err(source) => {
                 return Err(CanTxError::Read {
                     iface: iface.into(),

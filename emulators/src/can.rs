@@ -21,6 +21,16 @@ pub struct BusFaults {
     pub unknown_id_at_s: Vec<f64>,
     /// Simulated times (s) at which an IMU_GYRO frame with a wrong length is sent.
     pub bad_length_at_s: Vec<f64>,
+    /// Periods [start, end] s in which the IMU sends nothing at all (the stream stops).
+    pub stop_s: Vec<[f64; 2]>,
+    /// Sample indices whose IMU_ACCEL frame is not sent.
+    pub drop_accel_samples: Vec<u64>,
+    /// Frames held back: [sample index, samples]: that sample's frames go out after those of
+    /// the given number of later samples (1: reordered with the next; more: delayed).
+    pub delay_samples: Vec<[u64; 2]>,
+    /// Floods of foreign frames: [start s, end s, frames per IMU sample] with an id outside
+    /// the contract (0x7E6), interleaved with the IMU's.
+    pub flood_s: Vec<[f64; 3]>,
 }
 
 /// What the adapter sent.
@@ -38,8 +48,17 @@ pub struct TxStats {
     pub frames: u64,
     /// Samples deliberately dropped.
     pub dropped_samples: u64,
-    /// Deliberately injected bad frames (unknown id, wrong length, duplicates).
+    /// Deliberately injected bad frames (unknown id, wrong length, duplicates, floods).
     pub injected_frames: u64,
+    /// Of which: foreign frames of floods.
+    #[serde(default)]
+    pub flood_frames: u64,
+    /// IMU_ACCEL frames deliberately not sent.
+    #[serde(default)]
+    pub dropped_accel_frames: u64,
+    /// Frames that could not be written because the interface was down (and were lost).
+    #[serde(default)]
+    pub lost_iface_down: u64,
     /// Writes retried after ENOBUFS (transmit queue full).
     pub enobufs_retries: u64,
     /// Largest lag behind the simulated clock, ms of wall time.
@@ -79,16 +98,26 @@ pub enum CanTxError {
 
 /// Write one frame, retrying while the transmit queue is full; returns the retries.
 pub(crate) fn write(sock: &CanSocket, iface: &str, f: &RawFrame) -> Result<u64, CanTxError> {
-    write_all(sock, iface, std::slice::from_ref(f))
+    write_all(sock, iface, std::slice::from_ref(f)).map(|w| w.retries)
+}
+
+/// What a write did.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Written {
+    /// Retries while the transmit queue was full.
+    pub retries: u64,
+    /// Frames lost because the interface was down (`ip link set ... down`).
+    pub lost_down: u64,
 }
 
 /// Write `frames` in order with as few system calls as the kernel allows (`sendmmsg`), retrying
-/// while the transmit queue is full; returns the retries.
+/// while the transmit queue is full. While the interface is down the frames are lost, as on a
+/// bus whose controller is off: counted, not an error.
 pub(crate) fn write_all(
     sock: &CanSocket,
     iface: &str,
     frames: &[RawFrame],
-) -> Result<u64, CanTxError> {
+) -> Result<Written, CanTxError> {
     use std::os::fd::AsRawFd;
     let (mut done, mut retries) = (0, 0u64);
     let mut deadline = Instant::now() + Duration::from_secs(2);
@@ -99,6 +128,13 @@ pub(crate) fn write_all(
                 deadline = Instant::now() + Duration::from_secs(2);
             }
             Ok(_) => retries += 1,
+            Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => {
+                tracing::debug!(interface = iface, "interface down: frames lost");
+                return Ok(Written {
+                    retries,
+                    lost_down: (frames.len() - done) as u64,
+                });
+            }
             Err(e)
                 if (e.raw_os_error() == Some(libc::ENOBUFS)
                     || e.kind() == std::io::ErrorKind::WouldBlock
@@ -117,7 +153,10 @@ pub(crate) fn write_all(
             }
         }
     }
-    Ok(retries)
+    Ok(Written {
+        retries,
+        lost_down: 0,
+    })
 }
 
 /// Live progress shared with the caller and the other emulators: the simulated time the IMU
@@ -147,6 +186,8 @@ pub struct BusStream {
     faults: BusFaults,
     unknown: Vec<f64>,
     badlen: Vec<f64>,
+    /// Samples' frames held back (`delay_samples`): released after sample index .0.
+    held: Vec<(u64, Vec<RawFrame>)>,
     /// Counts of what was yielded (`frames` counts frames handed out).
     pub stats: TxStats,
 }
@@ -158,6 +199,7 @@ impl BusStream {
             imu,
             unknown: faults.unknown_id_at_s.clone(),
             badlen: faults.bad_length_at_s.clone(),
+            held: Vec::new(),
             faults: faults.clone(),
             stats: TxStats::default(),
         }
@@ -179,16 +221,57 @@ impl BusStream {
         let s = self.imu.next_sample();
         let st = &mut self.stats;
         st.samples += 1;
-        if self.faults.drop_samples.contains(&s.k) {
+        let stopped = self.faults.stop_s.iter().any(|p| t >= p[0] && t < p[1]);
+        if stopped || self.faults.drop_samples.contains(&s.k) {
             st.dropped_samples += 1;
             return;
         }
+        let drop_accel = self.faults.drop_accel_samples.contains(&s.k);
+        let delay = self
+            .faults
+            .delay_samples
+            .iter()
+            .find(|d| d[0] == s.k)
+            .map(|d| d[1]);
+        let start = out.len();
         for f in &s.frames {
-            out.push(*f);
             match f.id {
                 0x080 => st.gyro_frames += 1,
+                0x081 if drop_accel => {
+                    st.dropped_accel_frames += 1;
+                    continue;
+                }
                 0x081 => st.accel_frames += 1,
                 _ => st.hk_frames += 1,
+            }
+            out.push(*f);
+        }
+        if let Some(n) = delay {
+            // held back until the frames of `n` later samples are out
+            let frames = out.drain(start..).collect();
+            self.held.push((s.k + n, frames));
+        }
+        if self.held.iter().any(|(after, _)| *after <= s.k) {
+            let held = std::mem::take(&mut self.held);
+            for (after, frames) in held {
+                if after <= s.k {
+                    out.extend(frames);
+                } else {
+                    self.held.push((after, frames));
+                }
+            }
+        }
+        for w in &self.faults.flood_s {
+            if t >= w[0] && t < w[1] {
+                for i in 0..w[2].max(0.0).round() as u32 {
+                    out.push(RawFrame {
+                        id: 0x7E6,
+                        len: 8,
+                        data: [0xF1, 0x00, (i & 0xFF) as u8, 0, 0, 0, 0, 0],
+                    });
+                    st.injected_frames += 1;
+                    st.flood_frames += 1;
+                }
             }
         }
         if self.faults.duplicate_samples.contains(&s.k) {
@@ -235,6 +318,9 @@ pub struct TurntableTxStats {
     pub bad_frames: u64,
     /// Commands lost on purpose (fault injection: no ack).
     pub lost_commands: u64,
+    /// Status frames withheld on purpose (fault injection: heartbeat loss).
+    #[serde(default)]
+    pub silenced_status: u64,
 }
 
 /// Run the turntable on `iface` until `stop` is set (or `duration_s` of simulated time):

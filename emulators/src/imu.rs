@@ -89,6 +89,13 @@ pub struct ImuParams {
     pub temp_c: f64,
     /// Simulated time from which the built-in test reports a failure (none by default).
     pub bit_fail_from_s: Option<f64>,
+    /// Periods [start, end] s in which the IMU flags saturation (a shock beyond its range).
+    pub saturated_s: Vec<[f64; 2]>,
+    /// Periods [start, end] s in which the PPS input is missing (no edge latched).
+    pub pps_missing_s: Vec<[f64; 2]>,
+    /// Firmware counter jumps: [sample index, jump]: from that sample on, the sample counter
+    /// on the wire runs `jump` ahead (the samples themselves are not lost).
+    pub counter_jumps: Vec<[u64; 2]>,
 }
 
 impl Default for ImuParams {
@@ -118,6 +125,9 @@ impl Default for ImuParams {
             pps_phase_s: 0.000_123,
             temp_c: 42.0,
             bit_fail_from_s: None,
+            saturated_s: Vec::new(),
+            pps_missing_s: Vec::new(),
+            counter_jumps: Vec::new(),
         }
     }
 }
@@ -366,7 +376,14 @@ impl ImuEmulator {
 
     /// The 16-bit sample counter the frames of sample `k` (0-based) carry.
     pub fn sample_counter(&self, k: u64) -> u16 {
-        (u64::from(self.counter0) + k + 1) as u16
+        let jumps: u64 = self
+            .p
+            .counter_jumps
+            .iter()
+            .filter(|j| k >= j[0])
+            .map(|j| j[1])
+            .sum();
+        (u64::from(self.counter0) + k + 1 + jumps) as u16
     }
 
     /// Simulated time at the end of the next sample, s.
@@ -422,7 +439,9 @@ impl ImuEmulator {
         let sample_counter = self.sample_counter(self.k);
         // PPS: an edge at whole seconds + phase inside (t0, t1]?
         let edge = (t1 - self.p.pps_phase_s).floor() + self.p.pps_phase_s;
-        let pps_offset = (edge > t0 && edge <= t1)
+        let within = |w: &[[f64; 2]], t: f64| w.iter().any(|p| t >= p[0] && t < p[1]);
+        saturated |= within(&self.p.saturated_s, t1);
+        let pps_offset = (edge > t0 && edge <= t1 && !within(&self.p.pps_missing_s, edge))
             .then(|| (((t1 - edge) / self.dt) * 256.0).floor().clamp(0.0, 255.0) as u8);
         let gf = ImuGyro {
             counts: [

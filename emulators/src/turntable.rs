@@ -179,6 +179,9 @@ pub struct TurntableFaults {
     pub lost_command_seqs: Vec<u8>,
     /// Extra delay before a command takes effect and is acknowledged, s.
     pub command_delay_s: f64,
+    /// Periods [start, end] s in which the controller sends no status frames (its heartbeat
+    /// is lost; the mechanism itself goes on).
+    pub status_silent_s: Vec<[f64; 2]>,
 }
 
 /// Mechanism parameters (the `[turntable]` table of a scenario).

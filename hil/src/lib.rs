@@ -4,6 +4,7 @@ pub mod bench;
 pub mod devices;
 pub mod drill;
 pub mod experiment;
+pub mod faults;
 pub mod fuzz;
 pub mod inproc;
 pub mod montecarlo;

@@ -13,6 +13,7 @@ use cmd::bench::bench;
 use cmd::demo::demo;
 use cmd::drill::drill_north_finding;
 use cmd::experiment::experiment;
+use cmd::faults::faults;
 use cmd::fuzz::fuzz;
 use cmd::guest::{absolute, default_out, run_in_guest};
 use cmd::replay::replay;
@@ -102,6 +103,31 @@ enum Cmd {
     /// NAV_TIME-out latency), each scenario's emulators and nav's pipeline in process. Runs where
     /// vcan is: natively, or all of it inside the QEMU guest. Writes bench.json and bench.md.
     Bench(BenchArgs),
+    /// The fault matrix: 25 faults (IMU frames dropped, duplicated, reordered, delayed, counter
+    /// jump, BIT failure, saturation, accelerometer frames missing, IMU stream stopping, CAN
+    /// interface down and up, a flood of foreign frames, bad frames; GPS outages void and silent,
+    /// position jump, time going backwards, garbage, receiver unplugged, PPS missing; turntable
+    /// stall, lock failure, encoder glitch, lost and late acknowledgements, heartbeat loss), each
+    /// injected into the emulators or by the bench, run through vcan and the pty against the
+    /// unmodified nav, and judged against what nav must do and by when. Writes faults.md and
+    /// faults.json (fault, expected, observed, detection latency, pass/fail) and one run folder
+    /// per fault. Exit status 1 when a row fails.
+    Faults(FaultsArgs),
+}
+
+#[derive(clap::Args, Clone)]
+struct FaultsArgs {
+    /// Only these faults (comma-separated names, as in the table).
+    #[arg(long, value_delimiter = ',')]
+    only: Vec<String>,
+    /// Speed factor of every run.
+    #[arg(long, default_value_t = 10.0)]
+    speed: f64,
+    /// List the faults and exit.
+    #[arg(long)]
+    list: bool,
+    #[command(flatten)]
+    bus: BusArgs,
 }
 
 #[derive(clap::Args, Clone)]
@@ -412,5 +438,6 @@ fn real_main(cli: Cli) -> Result<i32> {
         }
         Cmd::Experiment(e) => experiment(e),
         Cmd::Bench(a) => bench(a),
+        Cmd::Faults(a) => faults(a),
     }
 }

@@ -20,6 +20,33 @@ pub struct SolutionWatch {
     pub last_position_deg: Option<[f64; 2]>,
     /// The last mode.
     pub last_mode: Option<String>,
+    /// Reads that found the interface down.
+    #[serde(default)]
+    pub link_down_errors: u64,
+    /// Each health bit's first NAV_TIME with it set: (bit, IMU sample count).
+    #[serde(default)]
+    pub health_first: Vec<(String, u64)>,
+    /// Every change of mode: (mode, IMU sample count of the first NAV_TIME in it).
+    #[serde(default)]
+    pub modes: Vec<(String, u64)>,
+}
+
+impl SolutionWatch {
+    /// The IMU sample count at which health bit `bit` was first set, if it was.
+    pub fn health_on_at(&self, bit: &str) -> Option<u64> {
+        self.health_first
+            .iter()
+            .find(|(b, _)| b == bit)
+            .map(|(_, k)| *k)
+    }
+
+    /// The IMU sample count at which nav first reported `mode` at or after sample `from`.
+    pub fn mode_at(&self, mode: &str, from: u64) -> Option<u64> {
+        self.modes
+            .iter()
+            .find(|(m, k)| m == mode && *k >= from)
+            .map(|(_, k)| *k)
+    }
 }
 
 /// A socket on `iface` that receives nav's NAV_* frames only.
@@ -52,6 +79,11 @@ pub fn watch_solution(
             {
                 continue;
             }
+            // the interface was taken down (a fault of the matrix): reported once, go on
+            Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => {
+                w.link_down_errors += 1;
+                continue;
+            }
             Err(e) => return Err(e).with_context(|| format!("reading NAV frames on {iface}")),
         };
         w.frames += 1;
@@ -65,7 +97,25 @@ pub fn watch_solution(
                     w.seq_gaps += u64::from(t.seq.wrapping_sub(p).wrapping_sub(1));
                 }
                 last_seq = Some(t.seq);
-                w.last_mode = Some(format!("{:?}", t.mode));
+                let mode = format!("{:?}", t.mode);
+                let k = u64::from(t.sample_count);
+                if w.last_mode.as_deref() != Some(mode.as_str()) {
+                    w.modes.push((mode.clone(), k));
+                }
+                w.last_mode = Some(mode);
+                let h = t.health;
+                for (bit, on) in [
+                    ("imu_timeout", h.imu_timeout),
+                    ("imu_gaps", h.imu_gaps),
+                    ("imu_bit", h.imu_bit),
+                    ("gps_stale", h.gps_stale),
+                    ("turntable", h.turntable),
+                    ("filter", h.filter),
+                ] {
+                    if on && !w.health_first.iter().any(|(b, _)| b == bit) {
+                        w.health_first.push((bit.to_string(), k));
+                    }
+                }
             }
             Some(wire::Message::NavPos(p)) => w.last_position_deg = Some([p.lat_deg, p.lon_deg]),
             Some(_) => {}

@@ -31,6 +31,9 @@ pub struct RunOptions {
     /// recording through the pipeline and score navigation from it (off for benchmarks, which
     /// want the pace only).
     pub reference_checks: bool,
+    /// Take the interface down during the run: [simulated time s, wall time down ms] (the
+    /// fault matrix's "CAN interface down and up").
+    pub link_downs: Vec<[f64; 2]>,
 }
 
 /// The `nav` binary next to the running executable (cargo puts all workspace binaries together).
@@ -153,8 +156,19 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let mut drill = DrillWatch::default();
     let mut next_report = Instant::now() + Duration::from_secs(5);
     let mut last_report = (Instant::now(), 0.0);
+    let mut link_downs = opts.link_downs.clone();
     while !devices.is_finished() {
         std::thread::sleep(Duration::from_millis(50));
+        if let Some(i) = link_downs.iter().position(|d| devices.sim_time() >= d[0]) {
+            let [at, ms] = link_downs.swap_remove(i);
+            info!(interface = %opts.iface, "taking the interface down at {at} s for {ms} ms");
+            vcan_setup::set_link(&opts.iface, false)?;
+            std::thread::sleep(Duration::from_secs_f64(ms.max(0.0) / 1000.0));
+            vcan_setup::set_link(&opts.iface, true)?;
+            let flags = std::fs::read_to_string(format!("/sys/class/net/{}/flags", opts.iface))
+                .unwrap_or_default();
+            info!(interface = %opts.iface, flags = flags.trim(), "the interface is back up");
+        }
         for l in nav.lines.try_iter() {
             if drill.line(&l, opts.progress) && s.drive.is_none() {
                 // north-finding reported: the drill is over (a drive goes on to navigate)

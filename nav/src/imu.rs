@@ -104,6 +104,15 @@ pub enum ImuEvent {
         /// The repeated sample.
         sample: u64,
     },
+    /// A gyro frame came late (its counter a little behind the last one, the frames after it
+    /// already taken): dropped. The counters are cumulative, so the gap it left was differenced
+    /// across and no angle is lost.
+    Late {
+        /// Last good sample.
+        last: u64,
+        /// Samples it was behind.
+        behind: u32,
+    },
     /// The counter went backwards: the stream was re-synchronised.
     Backwards {
         /// Last good sample.
@@ -135,6 +144,10 @@ pub enum ImuEvent {
     },
 }
 
+/// More late frames in a row than this is not a frame overtaken on the bus but a counter that
+/// went back for good (the IMU restarted): the stream is re-synchronised.
+pub const LATE_RUN_MAX: u32 = 8;
+
 /// Counters of the IMU stream.
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
 pub struct ImuStats {
@@ -156,6 +169,9 @@ pub struct ImuStats {
     pub duplicates: u64,
     /// Backwards jumps (re-synchronisations).
     pub backwards: u64,
+    /// Gyro frames that came late (behind frames already taken) and were dropped.
+    #[serde(default)]
+    pub late_frames: u64,
     /// Samples whose IMU_ACCEL frame was lost.
     pub accel_missing: u64,
     /// IMU_ACCEL frames that matched no pending sample.
@@ -193,6 +209,8 @@ pub struct ImuFrontEnd {
     was_bit_fail: bool,
     /// The counters were re-baselined after a backwards jump: the angle in between is unknown.
     resynced: bool,
+    /// Late frames in a row (a device reset looks like an endless run of them).
+    late_run: u32,
     stats: ImuStats,
     hk: Housekeeping,
 }
@@ -216,6 +234,7 @@ impl ImuFrontEnd {
             pending: None,
             was_bit_fail: false,
             resynced: false,
+            late_run: 0,
             stats: ImuStats::default(),
             hk: Housekeeping::default(),
         }
@@ -267,6 +286,18 @@ impl ImuFrontEnd {
             return;
         }
         if d > 32768 {
+            let behind = u32::from(last.wrapping_sub(g.sample_counter));
+            if behind <= self.max_span && self.late_run < LATE_RUN_MAX {
+                // one frame overtaken by later ones (reordered or delayed on the bus)
+                self.late_run += 1;
+                self.stats.late_frames += 1;
+                ev.push(ImuEvent::Late {
+                    last: self.ext,
+                    behind,
+                });
+                return;
+            }
+            self.late_run = 0;
             self.stats.backwards += 1;
             ev.push(ImuEvent::Backwards {
                 last: self.ext,
@@ -279,6 +310,7 @@ impl ImuFrontEnd {
             self.resynced = true;
             return;
         }
+        self.late_run = 0;
         // the previous sample's accelerometer frame never came
         self.flush(out, ev);
         let span = u32::from(d);
@@ -517,23 +549,55 @@ mod tests {
         fe.on_accel(&accel(11, [1; 3]), &mut out, &mut ev);
         fe.on_gyro(&gyro(11, [5; 3]), &mut out, &mut ev);
         assert_eq!(fe.stats().duplicates, 1);
-        fe.on_gyro(&gyro(5, [9; 3]), &mut out, &mut ev);
+        // further back than any frame can be late: the counter went back for good (a restart)
+        let back = 11u16.wrapping_sub(fe.max_span() as u16 + 1);
+        fe.on_gyro(&gyro(back, [9; 3]), &mut out, &mut ev);
         assert_eq!(fe.stats().backwards, 1);
-        assert!(matches!(
-            ev[..],
-            [
-                ImuEvent::Duplicate { sample: 11 },
-                ImuEvent::Backwards {
-                    last: 11,
-                    counter: 5
-                }
-            ]
-        ));
+        assert!(
+            matches!(
+                ev[..],
+                [
+                    ImuEvent::Duplicate { sample: 11 },
+                    ImuEvent::Backwards { last: 11, counter }
+                ] if counter == back
+            ),
+            "{ev:?}"
+        );
         assert_eq!(out.len(), 1);
         // the first sample after the re-synchronisation carries the unknown angle: flagged
-        fe.on_gyro(&gyro(6, [10; 3]), &mut out, &mut ev);
-        fe.on_accel(&accel(6, [2; 3]), &mut out, &mut ev);
+        fe.on_gyro(&gyro(back.wrapping_add(1), [10; 3]), &mut out, &mut ev);
+        fe.on_accel(&accel(back.wrapping_add(1), [2; 3]), &mut out, &mut ev);
         assert!(out.last().is_some_and(|s| s.ambiguous), "{out:?}");
+    }
+
+    /// A frame overtaken on the bus (sample 12 after 13) is dropped and counted; the gap it left
+    /// was differenced across (cumulative counters: no angle lost) and nothing is flagged
+    /// ambiguous. A counter that stays behind is a restart: re-synchronised after a few frames.
+    #[test]
+    fn a_late_frame_is_dropped_and_a_counter_that_stays_back_resynchronises() {
+        let mut fe = ImuFrontEnd::new(ImuCalibration::default());
+        let (mut out, mut ev) = (Vec::new(), Vec::new());
+        for k in [10u16, 11, 13, 12, 14] {
+            fe.on_gyro(&gyro(k, [k; 3]), &mut out, &mut ev);
+            fe.on_accel(&accel(k, [0; 3]), &mut out, &mut ev);
+        }
+        let st = fe.stats();
+        assert_eq!((st.late_frames, st.backwards, st.gaps), (1, 0, 1), "{ev:?}");
+        assert!(out.iter().all(|s| !s.ambiguous), "{out:?}");
+        // the samples emitted span every sample from 10 to 14, and carry every count
+        assert_eq!(out.iter().map(|s| s.span).sum::<u32>(), 4, "{out:?}");
+        let pulse = ImuCalibration::default().gyro_pulse_arcsec[0];
+        let total: f64 = out.iter().map(|s| s.dtheta[0]).sum::<f64>();
+        assert!(
+            (total - 4.0 * pulse * std::f64::consts::PI / 648_000.0).abs() < 1e-12,
+            "{total}"
+        );
+        // a restart: the counter goes back 30 and counts on from there
+        let from = 14u16.wrapping_sub(30);
+        for k in 0..LATE_RUN_MAX as u16 + 2 {
+            fe.on_gyro(&gyro(from.wrapping_add(k), [0; 3]), &mut out, &mut ev);
+        }
+        assert_eq!(fe.stats().backwards, 1, "{ev:?}");
     }
 
     #[test]

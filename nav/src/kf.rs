@@ -578,7 +578,7 @@ impl Kf {
                 // navigation state as the linearisation point) no longer describes its error:
                 // the sigmas would stop meaning anything. Fold the estimate into the
                 // navigation state once and go on open loop from there.
-                tracing::warn!(
+                tracing::info!(
                     attitude_deg = Vector3::new(self.x[0], self.x[1], self.x[2])
                         .norm()
                         .to_degrees(),

@@ -83,21 +83,25 @@ fn real_main() -> Result<()> {
     Ok(())
 }
 
+/// Open the CAN socket of `c` with its receive buffer.
+fn open_can(c: &nav::config::CanConfig) -> Result<socketcan::tokio::CanSocket> {
+    let iface = c.interface.as_str();
+    let sock = socketcan::tokio::CanSocket::open(iface).map_err(|e| {
+        anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e))
+    })?;
+    if let Err(e) = wire::set_rcvbuf(sock.as_raw_fd(), c.rcvbuf_bytes) {
+        warn!(
+            interface = iface,
+            "cannot enlarge the receive buffer to {} bytes: {e}", c.rcvbuf_bytes
+        );
+    }
+    Ok(sock)
+}
+
 async fn run(cfg: &NavConfig) -> Result<Summary> {
     let iface = cfg.can.as_ref().map_or("none", |c| c.interface.as_str());
     let sock = match &cfg.can {
-        Some(c) => {
-            let sock = socketcan::tokio::CanSocket::open(iface).map_err(|e| {
-                anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e))
-            })?;
-            if let Err(e) = wire::set_rcvbuf(sock.as_raw_fd(), c.rcvbuf_bytes) {
-                warn!(
-                    interface = iface,
-                    "cannot enlarge the receive buffer to {} bytes: {e}", c.rcvbuf_bytes
-                );
-            }
-            Some(sock)
-        }
+        Some(c) => Some(open_can(c)?),
         None => None,
     };
     let gps = match &cfg.gps {
@@ -119,7 +123,8 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let mut sigterm = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
     let mut shell = Shell {
         iface,
-        sock: sock.as_ref(),
+        sock,
+        command_errors: 0,
         recorder: recorder.as_ref(),
         frames_sent: 0,
         send_errors: 0,
@@ -150,7 +155,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                 shell.act(&mut out).await?;
             }
             r = async {
-                match &sock {
+                match &shell.sock {
                     Some(s) => s.read_frame().await,
                     None => std::future::pending().await,
                 }
@@ -162,6 +167,9 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                         match e.raw_os_error() {
                             Some(libc::ENODEV) | Some(libc::ENXIO) => bail!("CAN interface {iface} disappeared: {e}"),
                             _ => {
+                                // the interface went down (a controller restart, a cable
+                                // pulled): the socket says so once and receives again once the
+                                // interface is back (tests/tests/vcan.rs checks it)
                                 warn!(interface = iface, "read error: {e}");
                                 tokio::time::sleep(Duration::from_millis(10)).await;
                                 continue;
@@ -171,7 +179,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                 };
                 // every frame already waiting comes in the same system call (recvmmsg)
                 batch.push(wire::from_can_frame(&f));
-                if let Some(s) = &sock
+                if let Some(s) = &shell.sock
                     && let Err(e) = wire::recv_batch(s.as_raw_fd(), &mut batch, wire::BATCH - 1)
                 {
                     // the frame already read still goes through; the error is counted
@@ -196,10 +204,10 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     }
     // what reached the socket before the signal is processed, not left unread: every frame on
     // the bus is then either received or in the kernel's drop count
-    if let Some(s) = &sock {
+    if let Some(fd) = shell.sock.as_ref().map(|s| s.as_raw_fd()) {
         loop {
             batch.clear();
-            match wire::recv_batch(s.as_raw_fd(), &mut batch, wire::BATCH) {
+            match wire::recv_batch(fd, &mut batch, wire::BATCH) {
                 Ok(0) => break,
                 Ok(_) => {}
                 Err(e) => {
@@ -216,7 +224,8 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let mut summary = pipeline.summary();
     summary.interface = iface.to_string();
     summary.read_errors = read_errors;
-    if let Some(s) = &sock {
+    summary.command_send_errors = shell.command_errors;
+    if let Some(s) = &shell.sock {
         match wire::socket_drops(s.as_raw_fd()) {
             Ok(n) => summary.kernel_dropped_frames = n,
             Err(e) => warn!(
@@ -287,7 +296,9 @@ async fn take_frames(
 /// The devices the pipeline's outputs go to.
 struct Shell<'a> {
     iface: &'a str,
-    sock: Option<&'a socketcan::tokio::CanSocket>,
+    sock: Option<socketcan::tokio::CanSocket>,
+    /// Turntable commands the socket refused (the finder sends them again).
+    command_errors: u64,
     recorder: Option<&'a Recorder>,
     /// Solution frames written.
     frames_sent: u64,
@@ -300,17 +311,22 @@ impl Shell<'_> {
         for o in out.drain(..) {
             match o {
                 Output::Command(f) => {
-                    if let Some(s) = self.sock {
+                    if let Some(s) = &self.sock {
                         let frame = wire::to_can_frame(&f)
                             .map_err(|e| anyhow::anyhow!("TT_CMD frame: {e}"))?;
-                        s.write_frame(frame).await.with_context(|| {
-                            format!("CAN interface {}: sending TT_CMD", self.iface)
-                        })?;
-                        self.record_sent(f);
+                        match s.write_frame(frame).await {
+                            Ok(()) => self.record_sent(f),
+                            // counted: north-finding sends it again when no acknowledgement
+                            // comes
+                            Err(e) => {
+                                self.command_errors += 1;
+                                warn!(interface = self.iface, "TT_CMD not sent: {e}");
+                            }
+                        }
                     }
                 }
                 Output::Solution(f) => {
-                    let Some(s) = self.sock else { continue };
+                    let Some(s) = &self.sock else { continue };
                     match wire::to_can_frame(&f).map(|frame| s.try_write_frame(frame)) {
                         Ok(Ok(())) => {
                             self.frames_sent += 1;

@@ -80,6 +80,10 @@ pub struct NavigatorSummary {
     pub pps_edges: u64,
     /// Fixes that arrived after their PPS edge plus `fix_delay_s` of IMU time (applied at once).
     pub late_fixes: u64,
+    /// Fixes whose PPS edge never came (the PPS input missing): applied at their arrival less
+    /// `fix_delay_s`, without the PPS tie.
+    #[serde(default)]
+    pub untied_fixes: u64,
     /// The integrity monitor.
     pub integrity: crate::integrity::IntegrityStats,
 }
@@ -104,13 +108,20 @@ pub struct Navigator {
     fixes_ignored: u64,
     pps_edges: u64,
     last_good_fix_t: Option<f64>,
-    /// Fixes waiting for their time, with the count of PPS edges their own edge makes.
-    held: Vec<(GpsFix, u64)>,
+    /// Fixes waiting for their time, with the count of PPS edges their own edge makes and the
+    /// IMU time they arrived at.
+    held: Vec<(GpsFix, u64, f64)>,
     late_fixes: u64,
+    untied_fixes: u64,
     integrity: crate::integrity::IntegrityMonitor,
     /// The INS's velocity (east, north, up) at the last PPS edge: when the fix was taken.
     v_at_pps: Option<[f64; 3]>,
 }
+
+/// A fix waits at most this long (IMU time, s) past `fix_delay_s` for its PPS edge (1 Hz: the
+/// edge comes within a second); then the PPS input is taken for missing and the fix is applied
+/// at its arrival.
+pub const PPS_WAIT_S: f64 = 1.2;
 
 /// A fix older than this (IMU time, s) makes the GPS stale: the solution is coasting.
 pub const GPS_STALE_S: f64 = 2.5;
@@ -139,6 +150,7 @@ impl Navigator {
             last_good_fix_t: None,
             held: Vec::new(),
             late_fixes: 0,
+            untied_fixes: 0,
             v_at_pps: None,
         }
     }
@@ -264,7 +276,7 @@ impl Navigator {
     pub fn on_fix(&mut self, fix: &GpsFix) {
         let Some(p) = self.last_pps else {
             // no PPS in the IMU stream: nothing to tie the fix to but its arrival
-            self.apply_fix(fix);
+            self.apply_fix(fix, self.last_t - self.cfg.fix_delay_s);
             return;
         };
         // a fix that comes more than half a second after the last edge the IMU stream has shown
@@ -276,34 +288,66 @@ impl Navigator {
         };
         if edge == self.pps_edges && self.last_t >= p + self.cfg.fix_delay_s {
             self.late_fixes += 1;
-            self.apply_fix(fix);
+            self.apply_fix(fix, p);
             return;
         }
-        self.held.push((fix.clone(), edge));
+        self.held.push((fix.clone(), edge, self.last_t));
+    }
+
+    /// Fixes whose PPS edge has not come within [`PPS_WAIT_S`] plus `fix_delay_s` of their
+    /// arrival: the PPS input is missing. They are applied at their arrival less `fix_delay_s` and counted, rather than
+    /// held until an edge comes back and then applied at the wrong time.
+    fn apply_untied_fixes(&mut self) {
+        let wait = PPS_WAIT_S + self.cfg.fix_delay_s;
+        if !self
+            .held
+            .iter()
+            .any(|(_, _, arrived)| self.last_t - arrived > wait)
+        {
+            return;
+        }
+        let held = std::mem::take(&mut self.held);
+        for (fix, edge, arrived) in held {
+            if self.last_t - arrived > wait {
+                self.untied_fixes += 1;
+                if self.untied_fixes == 1 {
+                    tracing::warn!(
+                        "a GPS fix waited {wait} s for its PPS edge: the PPS input is missing; fixes are applied at their arrival"
+                    );
+                }
+                self.apply_fix(&fix, arrived - self.cfg.fix_delay_s);
+            } else {
+                self.held.push((fix, edge, arrived));
+            }
+        }
     }
 
     /// Apply the held fixes whose time has come (their edge plus the delay, or a later edge).
     fn apply_due_fixes(&mut self) {
+        self.apply_untied_fixes();
         let Some(p) = self.last_pps else { return };
         let due = |edge: u64, n: u64, t: f64, d: f64| edge < n || (edge == n && t >= p + d);
         if !self
             .held
             .iter()
-            .any(|(_, e)| due(*e, self.pps_edges, self.last_t, self.cfg.fix_delay_s))
+            .any(|(_, e, _)| due(*e, self.pps_edges, self.last_t, self.cfg.fix_delay_s))
         {
             return;
         }
         let held = std::mem::take(&mut self.held);
-        for (fix, edge) in held {
+        for (fix, edge, arrived) in held {
             if due(edge, self.pps_edges, self.last_t, self.cfg.fix_delay_s) {
-                self.apply_fix(&fix);
+                // taken at its own edge: the last one, or an earlier one when it waited long
+                let behind = self.pps_edges.saturating_sub(edge) as f64;
+                self.apply_fix(&fix, p - behind);
             } else {
-                self.held.push((fix, edge));
+                self.held.push((fix, edge, arrived));
             }
         }
     }
 
-    fn apply_fix(&mut self, fix: &GpsFix) {
+    /// Apply a fix taken at IMU time `taken_at`.
+    fn apply_fix(&mut self, fix: &GpsFix, taken_at: f64) {
         self.fixes_seen += 1;
         if !fix.valid || fix.time_backwards || fix.quality == 0 {
             self.fixes_ignored += 1;
@@ -329,10 +373,8 @@ impl Navigator {
             self.fixes_ignored += 1;
             return;
         };
-        // the fix was taken at the last PPS edge: carry it forward to now with the INS velocity
-        let dt = self
-            .last_pps
-            .map_or(0.0, |p| (self.last_t - p).clamp(0.0, 1.0));
+        // carry the fix forward from when it was taken to now with the INS velocity
+        let dt = (self.last_t - taken_at).clamp(0.0, 2.0);
         let (rm, rn) = crate::earth::radii(st.lat);
         let lat = p.0 + st.v.y * dt / (rm + st.h);
         let lon = p.1 + st.v.x * dt / ((rn + st.h) * st.lat.cos());
@@ -379,6 +421,7 @@ impl Navigator {
             fixes_ignored: self.fixes_ignored,
             pps_edges: self.pps_edges,
             late_fixes: self.late_fixes,
+            untied_fixes: self.untied_fixes,
             integrity: self.integrity.stats(),
         }
     }

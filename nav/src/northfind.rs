@@ -66,6 +66,9 @@ pub struct NorthFindingConfig {
     pub ack_retries: u32,
     /// Time allowed for a move to finish, s.
     pub move_timeout_s: f64,
+    /// Longest silence of the mechanism's status frames (its heartbeat, 100 Hz) before the
+    /// drill gives up, s of IMU time.
+    pub status_timeout_s: f64,
     /// Time allowed for the lock pin, s.
     pub lock_timeout_s: f64,
 }
@@ -89,6 +92,7 @@ impl Default for NorthFindingConfig {
             ack_timeout_s: 0.5,
             ack_retries: 2,
             move_timeout_s: 30.0,
+            status_timeout_s: 0.5,
             lock_timeout_s: 3.0,
         }
     }
@@ -132,9 +136,13 @@ impl NorthFindingConfig {
         if self.blocks < 2 {
             return bad("blocks", "must be 2 or more");
         }
-        if !(pos(self.heartbeat_s) && pos(self.ack_timeout_s) && pos(self.move_timeout_s)) {
+        if !(pos(self.heartbeat_s)
+            && pos(self.ack_timeout_s)
+            && pos(self.move_timeout_s)
+            && pos(self.status_timeout_s))
+        {
             return bad(
-                "heartbeat_s/ack_timeout_s/move_timeout_s",
+                "heartbeat_s/ack_timeout_s/move_timeout_s/status_timeout_s",
                 "timeouts must be positive",
             );
         }
@@ -295,6 +303,12 @@ pub struct NorthFinder {
     results: Vec<PositionResult>,
     result: Option<NorthResult>,
     abort: Option<String>,
+    /// IMU time of the last status frame.
+    last_status_t: Option<f64>,
+    /// Commands sent again after no acknowledgement within `ack_timeout_s`.
+    retries: u64,
+    /// Acknowledgements that matched no outstanding command (late or unknown).
+    stale_acks: u64,
 }
 
 const DPH: f64 = earth::DEG_PER_HOUR_PER_RAD_S;
@@ -329,6 +343,9 @@ impl NorthFinder {
             results: Vec::new(),
             result: None,
             abort: None,
+            last_status_t: None,
+            retries: 0,
+            stale_acks: 0,
         })
     }
 
@@ -345,6 +362,12 @@ impl NorthFinder {
     /// The result, once done.
     pub fn result(&self) -> Option<&NorthResult> {
         self.result.as_ref()
+    }
+
+    /// Commands sent again for want of an acknowledgement, and acknowledgements that came too
+    /// late (or matched nothing).
+    pub fn ack_counters(&self) -> (u64, u64) {
+        (self.retries, self.stale_acks)
     }
 
     /// Why it gave up, if it did.
@@ -406,16 +429,19 @@ impl NorthFinder {
             self.dwell.enc_n += 1;
         }
         self.status = Some(*st);
+        self.last_status_t = Some(self.t);
     }
 
     /// An acknowledgement arrived.
     pub fn on_ack(&mut self, a: &TtAck) {
-        let Some(o) = self.outstanding else {
-            return;
-        };
-        if a.seq != o.cmd.seq || a.axis != self.cfg.axis {
+        if a.axis != self.cfg.axis {
             return;
         }
+        let Some(o) = self.outstanding.filter(|o| o.cmd.seq == a.seq) else {
+            // an acknowledgement of a command already given up on (it came late) or never sent
+            self.stale_acks += 1;
+            return;
+        };
         self.outstanding = None;
         if a.result != TtResult::Accepted {
             let name = TtCommand::from_raw(i64::from(o.cmd.command)).map_or_else(
@@ -451,6 +477,16 @@ impl NorthFinder {
         if self.finished() {
             return None;
         }
+        if let Some(ls) = self.last_status_t
+            && t - ls > self.cfg.status_timeout_s
+        {
+            let w = self.where_();
+            self.fail(format!(
+                "no turntable status for {:.2} s at {w}: the mechanism's heartbeat is lost",
+                t - ls
+            ));
+            return None;
+        }
         if let Some(o) = self.outstanding {
             if t - o.sent_at > self.cfg.ack_timeout_s {
                 if o.tries >= self.cfg.ack_retries {
@@ -465,6 +501,7 @@ impl NorthFinder {
                     return None;
                 }
                 // resend under a new sequence number
+                self.retries += 1;
                 self.seq = self.seq.wrapping_add(1);
                 let cmd = TtCmd {
                     seq: self.seq,

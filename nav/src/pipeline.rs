@@ -370,6 +370,11 @@ impl Pipeline {
             );
             let json = format!("{{\"kind\":\"imu_timeout\",\"after_ms\":{after_ms}}}");
             self.json(JsonChannel::Event, self.sums.last.unwrap_or(0), json, out);
+            // the solution epochs follow IMU time and stop with it: one more epoch now tells
+            // whoever reads NAV_TIME that the solution is no longer current
+            if let Some(last) = self.sums.last {
+                self.emit_solution(last, out);
+            }
         } else {
             info!("IMU data back");
             let json = "{\"kind\":\"imu_back\"}".to_string();
@@ -577,6 +582,11 @@ impl Pipeline {
             return;
         }
         self.next_out = Some(last + self.out_every);
+        self.emit_solution(last, out);
+    }
+
+    /// One solution epoch (NAV_TIME and, once navigating, the rest) at IMU sample `last`.
+    fn emit_solution(&mut self, last: u64, out: &mut Vec<Output>) {
         let mode = self.mode();
         let sigmas = self.navigator.as_ref().and_then(|n| n.sigmas());
         let solution = Solution {
@@ -739,6 +749,7 @@ impl Pipeline {
             invalid_value_frames: c.invalid,
             non_data_frames: c.non_data,
             read_errors: 0,
+            command_send_errors: 0,
             kernel_dropped_frames: 0,
             imu: self.fe.stats(),
             max_safe_gap_samples: self.fe.max_span(),
@@ -759,6 +770,8 @@ impl Pipeline {
                 abort: f.finder.abort_reason().map(str::to_string),
                 commands_sent: f.commands_sent,
                 turntable_frames: f.frames,
+                command_retries: f.finder.ack_counters().0,
+                stale_acks: f.finder.ack_counters().1,
             }),
             gps: None,
             navigation: self.navigator.as_ref().map(|n| n.summary()),

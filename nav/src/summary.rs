@@ -34,6 +34,9 @@ pub struct Summary {
     pub non_data_frames: u64,
     /// Socket read errors.
     pub read_errors: u64,
+    /// Turntable commands the CAN socket refused (sent again by north-finding).
+    #[serde(default)]
+    pub command_send_errors: u64,
     /// Frames the kernel dropped because nav's receive buffer was full (the socket's drop
     /// counter, `SO_RXQ_OVFL`'s count): what reached the bus but not nav, counted exactly.
     #[serde(default)]
@@ -130,6 +133,12 @@ pub struct NorthFindingSummary {
     pub commands_sent: u64,
     /// Turntable frames received (status, acks).
     pub turntable_frames: u64,
+    /// Commands sent again for want of an acknowledgement.
+    #[serde(default)]
+    pub command_retries: u64,
+    /// Acknowledgements that came too late (or matched no command).
+    #[serde(default)]
+    pub stale_acks: u64,
 }
 
 /// The integrated attitude at exit.

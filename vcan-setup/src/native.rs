@@ -115,6 +115,27 @@ pub fn ensure_vcan(name: &str) -> Result<()> {
     })
 }
 
+/// Take interface `name` down (`up = false`) or bring it back up, as `ip link set NAME down|up`
+/// does (a CAN controller switched off and on, a cable pulled and put back).
+pub fn set_link(name: &str, up: bool) -> Result<()> {
+    let action = if up { "bring up" } else { "take down" };
+    let iface = CanInterface::open(name).map_err(|e| Error::Netlink {
+        name: name.into(),
+        action: "open",
+        detail: e.to_string(),
+    })?;
+    let r = if up {
+        iface.bring_up()
+    } else {
+        iface.bring_down()
+    };
+    r.map_err(|e| Error::Netlink {
+        name: name.into(),
+        action,
+        detail: e.to_string(),
+    })
+}
+
 /// Run the command on the host, streaming its output.
 pub(crate) fn run_native(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     let start = Instant::now();

@@ -71,7 +71,13 @@ impl NmeaWriter {
         let vn = truth.vel_enu[1] + self.p.velocity_sigma_mps * n.sample(&mut self.rng);
         let speed = ve.hypot(vn);
         let track = ve.atan2(vn).to_degrees().rem_euclid(360.0);
-        let tod = (utc0_s + t).rem_euclid(86_400.0);
+        let at = |times: &[f64]| times.iter().any(|x| (t - x.floor()).abs() < 0.5);
+        let back = if at(&self.p.time_backwards_at_s) {
+            10.0
+        } else {
+            0.0
+        };
+        let tod = (utc0_s + t - back).rem_euclid(86_400.0);
         let (hh, mm, ss) = (
             (tod / 3600.0).floor(),
             ((tod % 3600.0) / 60.0).floor(),
@@ -87,6 +93,11 @@ impl NmeaWriter {
         let geoid = 0.0;
         let tk = &self.p.talker;
         let mut out = String::new();
+        if at(&self.p.garbage_at_s) {
+            // line noise before a start character, then a line with binary bytes
+            out += "~#\u{1}noise\u{7f}%%";
+            out += "$GPGGA,\u{1}\u{2}\u{3}\u{4}\r\n";
+        }
         let (la_s, lo_s) = if valid {
             (la.as_str(), lo.as_str())
         } else {

@@ -28,6 +28,12 @@ pub struct ReceiverParams {
     /// Periods [start, end] s during which the receiver's device is gone (a USB receiver
     /// resetting): on the bench its pty closes and a new one appears behind the same link.
     pub port_drops: Vec<[f64; 2]>,
+    /// Fix times (s) whose sentences carry a UTC time 10 s earlier than the last (a receiver
+    /// whose clock steps back).
+    pub time_backwards_at_s: Vec<f64>,
+    /// Fix times (s) before whose sentences the receiver puts out line noise and a line of
+    /// binary bytes (a receiver switching protocols, a noisy cable).
+    pub garbage_at_s: Vec<f64>,
 }
 
 impl Default for ReceiverParams {
@@ -43,6 +49,8 @@ impl Default for ReceiverParams {
             outage_void: true,
             multipath: Vec::new(),
             port_drops: Vec::new(),
+            time_backwards_at_s: Vec::new(),
+            garbage_at_s: Vec::new(),
         }
     }
 }

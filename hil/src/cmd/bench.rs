@@ -102,6 +102,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
                 nav_bin: nav_bin.clone(),
                 progress: false,
                 reference_checks: false,
+                link_downs: Vec::new(),
             };
             let r = run_here(&s, &opts, if in_guest { "vm" } else { "native" })
                 .with_context(|| format!("{} through the bus", s.name))?;

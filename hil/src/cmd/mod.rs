@@ -5,6 +5,7 @@ pub(crate) mod bench;
 pub(crate) mod demo;
 pub(crate) mod drill;
 pub(crate) mod experiment;
+pub(crate) mod faults;
 pub(crate) mod fuzz;
 pub(crate) mod guest;
 pub(crate) mod replay;

@@ -1,0 +1,65 @@
+//! `hil faults`: the fault matrix, where vcan is (natively, or all of it in the guest).
+
+use crate::*;
+use hil::faults::{FaultOptions, matrix, run_matrix};
+
+pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
+    if a.list {
+        for c in matrix() {
+            println!("{:<28} {}", c.name, c.injected);
+        }
+        return Ok(0);
+    }
+    if !(a.speed.is_finite() && a.speed > 0.0 && a.speed <= 100.0) {
+        bail!("--speed must be in (0, 100]");
+    }
+    let known: Vec<&str> = matrix().iter().map(|c| c.name).collect();
+    if let Some(bad) = a.only.iter().find(|n| !known.contains(&n.as_str())) {
+        bail!(
+            "--only: `{bad}` is not a fault of the matrix (see `hil faults --list`)"
+        );
+    }
+    let out = absolute(&a.bus.out.clone().unwrap_or_else(|| default_out("faults")))?;
+    if !a.bus.here() {
+        let mut args: Vec<String> = vec![
+            "faults".into(),
+            "--speed".into(),
+            a.speed.to_string(),
+            "--iface".into(),
+            a.bus.iface.clone(),
+            "--out".into(),
+            out.to_string_lossy().into_owned(),
+        ];
+        if !a.only.is_empty() {
+            args.extend(["--only".into(), a.only.join(",")]);
+        }
+        if a.bus.json {
+            args.push("--json".into());
+        }
+        let nav = sibling_binary("nav")?;
+        return run_in_guest(
+            args,
+            &out,
+            vec![],
+            vec![nav],
+            a.bus.json.then_some("faults.json"),
+        );
+    }
+    let in_guest = std::env::var_os(GUEST_ENV).is_some();
+    let o = FaultOptions {
+        iface: a.bus.iface.clone(),
+        out: out.clone(),
+        nav_bin: sibling_binary("nav")?,
+        only: a.only.clone(),
+        speed: a.speed,
+        progress: !a.bus.json,
+    };
+    let m = run_matrix(&o, if in_guest { "vm" } else { "native" })?;
+    if a.bus.json {
+        println!("{}", serde_json::to_string_pretty(&m)?);
+    } else {
+        print!("{}", hil::faults::markdown(&m));
+        println!("\n files: {}", out.display());
+    }
+    Ok(if m.pass { 0 } else { 1 })
+}
