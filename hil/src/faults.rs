@@ -21,7 +21,7 @@ use std::path::Path;
 pub enum Base {
     /// The IMU alone, static, 6 s.
     Imu,
-    /// A parked vehicle navigating with its receiver (surveyed heading), 24 s.
+    /// A parked vehicle navigating with its receiver (surveyed heading), 16 s.
     Gps,
     /// A north-finding drill with 6 s dwells, cut at 45 s.
     Drill,
@@ -96,16 +96,16 @@ fn imu_time(r: &RunReport, k: u64) -> f64 {
 
 /// Latency of health bit `bit` after `at_s`, s.
 fn bit_latency(r: &RunReport, bit: &str, at_s: f64) -> Option<f64> {
-    r.solution
-        .health_on_at(bit)
-        .map(|k| imu_time(r, k) - at_s)
+    r.solution.health_on_at(bit).map(|k| imu_time(r, k) - at_s)
 }
 
 /// Latency of mode `mode` after `at_s`, s.
 fn mode_latency(r: &RunReport, mode: &str, at_s: f64) -> Option<f64> {
     let first = r.nav.first_sample.unwrap_or(0);
     let from = first + (at_s * r.scenario.imu.rate_hz) as u64;
-    r.solution.mode_at(mode, from).map(|k| imu_time(r, k) - at_s)
+    r.solution
+        .mode_at(mode, from)
+        .map(|k| imu_time(r, k) - at_s)
 }
 
 fn verdict(pass: bool, observed: String, latency_s: Option<f64>) -> Verdict {
@@ -348,14 +348,14 @@ pub fn matrix() -> Vec<FaultCase> {
         FaultCase {
             name: "imu-stream-stops",
             base: Base::Imu,
-            injected: "the IMU sends nothing from 2 s to 4 s (0.2 s of wall time at x10; the bench's nav watchdog: 100 ms)",
+            injected: "the IMU sends nothing from 1.5 s to 5 s (0.35 s of wall time at x10; the bench's nav watchdog: 100 ms)",
             expected: "the watchdog reports an IMU timeout (an event, the counter, a NAV_TIME with the imu_timeout bit) and the data's return; the stop's samples counted missing",
-            at_s: 2.0,
-            inject: |s, _| s.faults.stop_s = vec![[2.0, 4.0]],
+            at_s: 1.5,
+            inject: |s, _| s.faults.stop_s = vec![[1.5, 5.0]],
             judge: |r, at| {
                 let i = &r.nav.imu;
                 let l = bit_latency(r, "imu_timeout", at);
-                let stop = (2.0 * r.scenario.imu.rate_hz) as i64;
+                let stop = (3.5 * r.scenario.imu.rate_hz) as i64;
                 let pass = survived(r)
                     && r.nav.imu_timeouts >= 1
                     && l.is_some()
@@ -390,9 +390,9 @@ pub fn matrix() -> Vec<FaultCase> {
                     && lost > 0
                     && i.missing_samples > 0
                     && r.nav.read_errors >= 1
-                    && r.nav.last_sample.is_some_and(|k| {
-                        imu_time(r, k) > r.scenario.duration_s - 0.5
-                    });
+                    && r.nav
+                        .last_sample
+                        .is_some_and(|k| imu_time(r, k) > r.scenario.duration_s - 0.5);
                 verdict(
                     pass,
                     format!(
@@ -455,12 +455,12 @@ pub fn matrix() -> Vec<FaultCase> {
         FaultCase {
             name: "gps-void-outage",
             base: Base::Gps,
-            injected: "the receiver sends void sentences (no fix) from 10 s to 16 s",
+            injected: "the receiver sends void sentences (no fix) from 7 s to 13 s",
             expected: "the void fixes counted, gps_stale and mode Coasting within 3.5 s (2.5 s without a fix and the fix delay), GpsAided again after",
-            at_s: 10.0,
+            at_s: 7.0,
             inject: |s, _| {
                 if let Some(g) = s.gps.as_mut() {
-                    g.outages = vec![[10.0, 16.0]];
+                    g.outages = vec![[7.0, 13.0]];
                     g.outage_void = true;
                 }
             },
@@ -469,12 +469,12 @@ pub fn matrix() -> Vec<FaultCase> {
         FaultCase {
             name: "gps-silent-outage",
             base: Base::Gps,
-            injected: "the receiver falls silent from 10 s to 16 s",
+            injected: "the receiver falls silent from 7 s to 13 s",
             expected: "gps_stale and mode Coasting within 3.5 s, GpsAided again after",
-            at_s: 10.0,
+            at_s: 7.0,
             inject: |s, _| {
                 if let Some(g) = s.gps.as_mut() {
-                    g.outages = vec![[10.0, 16.0]];
+                    g.outages = vec![[7.0, 13.0]];
                     g.outage_void = false;
                 }
             },
@@ -483,20 +483,16 @@ pub fn matrix() -> Vec<FaultCase> {
         FaultCase {
             name: "gps-position-jump",
             base: Base::Gps,
-            injected: "three fixes 2 km north (10-12 s)",
+            injected: "three fixes 2 km north (7-9 s)",
             expected: "the three fixes rejected by the gate, the integrity alarm (filter bit) within 3.5 s, the position unharmed (within 25 m at the end)",
-            at_s: 10.0,
+            at_s: 7.0,
             inject: |s, _| {
                 if let Some(g) = s.gps.as_mut() {
-                    g.multipath = vec![[10.0, 3.0, 2000.0]];
+                    g.multipath = vec![[7.0, 3.0, 2000.0]];
                 }
             },
             judge: |r, at| {
-                let f = r
-                    .nav
-                    .navigation
-                    .as_ref()
-                    .and_then(|n| n.filter.as_ref());
+                let f = r.nav.navigation.as_ref().and_then(|n| n.filter.as_ref());
                 let rejected = f.map_or(0, |f| f.rejected);
                 let l = bit_latency(r, "filter", at);
                 let end = end_error(r);
@@ -518,12 +514,12 @@ pub fn matrix() -> Vec<FaultCase> {
         FaultCase {
             name: "gps-time-backwards",
             base: Base::Gps,
-            injected: "the fix of 10 s carries a UTC time 10 s earlier",
+            injected: "the fix of 7 s carries a UTC time 10 s earlier",
             expected: "counted as time going backwards and not used",
-            at_s: 10.0,
+            at_s: 7.0,
             inject: |s, _| {
                 if let Some(g) = s.gps.as_mut() {
-                    g.time_backwards_at_s = vec![10.0];
+                    g.time_backwards_at_s = vec![7.0];
                 }
             },
             judge: |r, _| {
@@ -535,12 +531,12 @@ pub fn matrix() -> Vec<FaultCase> {
         FaultCase {
             name: "gps-garbage",
             base: Base::Gps,
-            injected: "line noise and a line of binary bytes before the fixes of 8 s and 12 s",
+            injected: "line noise and a line of binary bytes before the fixes of 6 s and 9 s",
             expected: "the garbage bytes and the two binary lines counted, every fix still decoded",
-            at_s: 8.0,
+            at_s: 6.0,
             inject: |s, _| {
                 if let Some(g) = s.gps.as_mut() {
-                    g.garbage_at_s = vec![8.0, 12.0];
+                    g.garbage_at_s = vec![6.0, 9.0];
                 }
             },
             judge: |r, _| {
@@ -566,12 +562,12 @@ pub fn matrix() -> Vec<FaultCase> {
         FaultCase {
             name: "gps-unplugged",
             base: Base::Gps,
-            injected: "the receiver's device vanishes from 10 s to 13 s and comes back behind the same link",
+            injected: "the receiver's device vanishes from 7 s to 10 s and comes back behind the same link",
             expected: "the hang-up counted, the port re-opened, gps_stale and Coasting within 3.5 s, GpsAided again after",
-            at_s: 10.0,
+            at_s: 7.0,
             inject: |s, _| {
                 if let Some(g) = s.gps.as_mut() {
-                    g.port_drops = vec![[10.0, 13.0]];
+                    g.port_drops = vec![[7.0, 10.0]];
                 }
             },
             judge: |r, at| {
@@ -601,10 +597,10 @@ pub fn matrix() -> Vec<FaultCase> {
         FaultCase {
             name: "pps-missing",
             base: Base::Gps,
-            injected: "no PPS edge latched in the IMU data from 10 s to 14 s",
+            injected: "no PPS edge latched in the IMU data from 7 s to 11 s",
             expected: "the fixes that found no edge applied at their arrival and counted, the solution stays GPS-aided",
-            at_s: 10.0,
-            inject: |s, _| s.imu.pps_missing_s = vec![[10.0, 14.0]],
+            at_s: 7.0,
+            inject: |s, _| s.imu.pps_missing_s = vec![[7.0, 11.0]],
             judge: |r, at| {
                 let n = r.nav.navigation.as_ref();
                 let untied = n.map_or(0, |n| n.untied_fixes);
@@ -687,7 +683,10 @@ pub fn matrix() -> Vec<FaultCase> {
                 let (retries, stale) = nf.map_or((0, 0), |n| (n.command_retries, n.stale_acks));
                 verdict(
                     v.pass && retries >= 1 && stale >= 1,
-                    format!("{}; retries {retries}, late acknowledgements {stale}", v.observed),
+                    format!(
+                        "{}; retries {retries}, late acknowledgements {stale}",
+                        v.observed
+                    ),
                     v.latency_s,
                 )
             },
@@ -748,11 +747,7 @@ fn gps_outage(r: &RunReport, at: f64, end: f64, void: bool) -> Verdict {
 /// North-finding aborted with `word` in its reason and the turntable health bit set; latency
 /// from `at` to the bit.
 fn nf_abort(r: &RunReport, at: f64, word: &str) -> Verdict {
-    let abort = r
-        .nav
-        .north_finding
-        .as_ref()
-        .and_then(|n| n.abort.clone());
+    let abort = r.nav.north_finding.as_ref().and_then(|n| n.abort.clone());
     let l = bit_latency(r, "turntable", at);
     let pass = survived(r)
         && abort
@@ -781,7 +776,7 @@ pub fn base_scenario(b: Base, name: &str) -> Result<Scenario> {
         Base::Gps => {
             let mut s = Scenario::from_text(include_str!("../../scenarios/drive-gps.toml"))
                 .context("the drive-gps scenario")?;
-            s.duration_s = 24.0;
+            s.duration_s = 16.0;
             if let Some(d) = s.drive.as_mut() {
                 // parked the whole run: the faults, not the drive, are what is looked at
                 d.start_wait_s = 1000.0;

@@ -347,7 +347,11 @@ enum Experiment {
         #[arg(long, default_value_t = 1)]
         runs: usize,
         /// Filter kinds (comma-separated).
-        #[arg(long, value_delimiter = ',', default_value = "standard,fading,adaptive")]
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "standard,fading,adaptive"
+        )]
         filters: Vec<String>,
         /// Run only part K of N (0-based, `K/N`); `hil experiment merge` makes the report.
         #[arg(long, value_parser = hil::shard::parse)]

@@ -197,8 +197,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let wall = t0.elapsed().as_secs_f64();
     let sim_reached = devices.sim_time();
     let bus = devices.join();
-    // let nav drain its socket before it is told to stop
-    std::thread::sleep(Duration::from_millis(500));
+    // a moment for nav to take the last frames (it also drains its socket when told to stop)
+    std::thread::sleep(Duration::from_millis(100));
     let (bus, nav_out) = match bus {
         Ok(b) => (b, stop_nav(nav)?),
         Err(e) => {

@@ -328,17 +328,21 @@ mod tests {
     fn receiver_surroundings_take_a_preset_and_overrides() {
         use emulators::gps::errors::{Environment, EnvironmentPreset};
         let base = "name='x'\nduration_s=10\n[site]\nlat_deg=1\n[gps.errors.environment]\n";
-        let s = Scenario::from_text(&format!(
+        let s = toml::from_str::<Scenario>(&format!(
             "{base}preset = 'paper-003'\nmultipath_every_s = 60.0\n"
         ))
         .unwrap();
         let e = &s.gps.as_ref().unwrap().errors.environment;
         let paper = Environment::preset(EnvironmentPreset::Paper003);
         assert_eq!(e.multipath_every_s, 60.0);
-        assert_eq!(e.constellation_change_every_s, paper.constellation_change_every_s);
+        assert_eq!(
+            e.constellation_change_every_s,
+            paper.constellation_change_every_s
+        );
         assert_eq!(e.preset, EnvironmentPreset::Paper003);
         // no table: open sky
-        let s = Scenario::from_text("name='x'\nduration_s=10\n[site]\nlat_deg=1\n[gps]\n").unwrap();
+        let s = toml::from_str::<Scenario>("name='x'\nduration_s=10\n[site]\nlat_deg=1\n[gps]\n")
+            .unwrap();
         assert!(s.gps.unwrap().errors.environment.is_open_sky());
         for (bad, named) in [
             ("preset = 'moon'", "moon"),
@@ -346,7 +350,10 @@ mod tests {
             ("min_satellites = 2", "min_satellites"),
             ("multipath_sigma = 3.0", "multipath_sigma"),
         ] {
-            let e = format!("{:#}", Scenario::from_text(&format!("{base}{bad}\n")).unwrap_err());
+            let e = format!(
+                "{:#}",
+                toml::from_str::<Scenario>(&format!("{base}{bad}\n")).unwrap_err()
+            );
             assert!(e.contains(named), "{bad}: {e}");
         }
     }

@@ -151,7 +151,7 @@ impl IntegrityMonitor {
     /// The filter's horizontal position sigma now, m. Returns the alarm's change, if any (cheap
     /// when nothing changes: call it at every update).
     pub fn on_position_sigma(&mut self, sigma_m: f64) -> Option<Option<Symptom>> {
-        let over = !(sigma_m <= self.cfg.max_position_sigma_m);
+        let over = sigma_m.is_nan() || sigma_m > self.cfg.max_position_sigma_m;
         if over == self.sigma_over {
             return None;
         }

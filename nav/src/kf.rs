@@ -139,7 +139,11 @@ impl FilterConfig {
                 self.adaptive_forgetting
             ));
         }
-        if self.init_att_deg.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+        if self
+            .init_att_deg
+            .iter()
+            .any(|v| !(v.is_finite() && *v >= 0.0))
+        {
             return Err(format!(
                 "filter.init_att_deg must be numbers >= 0, got {:?}",
                 self.init_att_deg
@@ -723,7 +727,11 @@ mod tests {
     /// the filter never recovers.
     #[test]
     fn the_first_fix_after_a_long_outage_is_taken_by_both_filters() {
-        for kind in [FilterKind::Standard, FilterKind::Fading, FilterKind::Adaptive] {
+        for kind in [
+            FilterKind::Standard,
+            FilterKind::Fading,
+            FilterKind::Adaptive,
+        ] {
             let mut st = parked();
             let mut k = Kf::new(
                 FilterConfig {
@@ -742,7 +750,10 @@ mod tests {
             let (rm, _) = earth::radii(st.lat);
             let lat = st.lat + 600.0 / rm;
             let (lat0, lon0) = (st.lat, st.lon);
-            assert!(k.update(&mut st, lat, lon0, 0.0, None), "{kind:?}: gated out");
+            assert!(
+                k.update(&mut st, lat, lon0, 0.0, None),
+                "{kind:?}: gated out"
+            );
             assert!(((st.lat - lat0) * rm - 600.0).abs() < 100.0, "{kind:?}");
         }
     }

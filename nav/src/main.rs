@@ -86,9 +86,8 @@ fn real_main() -> Result<()> {
 /// Open the CAN socket of `c` with its receive buffer.
 fn open_can(c: &nav::config::CanConfig) -> Result<socketcan::tokio::CanSocket> {
     let iface = c.interface.as_str();
-    let sock = socketcan::tokio::CanSocket::open(iface).map_err(|e| {
-        anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e))
-    })?;
+    let sock = socketcan::tokio::CanSocket::open(iface)
+        .map_err(|e| anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e)))?;
     if let Err(e) = wire::set_rcvbuf(sock.as_raw_fd(), c.rcvbuf_bytes) {
         warn!(
             interface = iface,

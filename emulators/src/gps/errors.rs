@@ -214,13 +214,19 @@ impl TryFrom<EnvironmentSpec> for Environment {
                 Err(format!("{name} must be a finite number >= 0, got {v}"))
             }
         };
-        finite_non_neg("constellation_change_every_s", e.constellation_change_every_s)?;
+        finite_non_neg(
+            "constellation_change_every_s",
+            e.constellation_change_every_s,
+        )?;
         finite_non_neg("constellation_step_sigma_m", e.constellation_step_sigma_m)?;
         finite_non_neg("hdop", e.hdop)?;
         finite_non_neg("multipath_every_s", e.multipath_every_s)?;
         finite_non_neg("multipath_sigma_m", e.multipath_sigma_m)?;
         if !(e.multipath_tau_s.is_finite() && e.multipath_tau_s > 0.0) {
-            return Err(format!("multipath_tau_s must be > 0, got {}", e.multipath_tau_s));
+            return Err(format!(
+                "multipath_tau_s must be > 0, got {}",
+                e.multipath_tau_s
+            ));
         }
         let [d0, d1] = e.multipath_duration_s;
         if !(d0.is_finite() && d1.is_finite() && 0.0 < d0 && d0 <= d1) {
@@ -229,7 +235,10 @@ impl TryFrom<EnvironmentSpec> for Environment {
             ));
         }
         if !(4..=12).contains(&e.min_satellites) {
-            return Err(format!("min_satellites must be 4-12, got {}", e.min_satellites));
+            return Err(format!(
+                "min_satellites must be 4-12, got {}",
+                e.min_satellites
+            ));
         }
         if e.satellites != 0 && !(e.min_satellites..=12).contains(&e.satellites) {
             return Err(format!(
@@ -446,7 +455,10 @@ mod error_tests {
         for i in 0..3600 {
             let t = f64::from(i);
             let o = open.sample(t);
-            assert_eq!((o.satellites, o.hdop, o.multipath), (9, 12f64.hypot(6.0) / 6.0, false));
+            assert_eq!(
+                (o.satellites, o.hdop, o.multipath),
+                (9, 12f64.hypot(6.0) / 6.0, false)
+            );
             let s = paper.sample(t);
             sats.push(s.satellites);
             hdops.push(s.hdop);

@@ -75,14 +75,14 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
             out,
         } => {
             let s = Scenario::load(&scenario)?;
-            let preset: emulators::gps::errors::EnvironmentPreset =
-                serde_json::from_value(serde_json::Value::String(environment.clone())).map_err(
-                    |_| {
-                        anyhow::anyhow!(
-                            "--environment: `{environment}` is not a preset (paper-003, urban, open-sky)"
-                        )
-                    },
-                )?;
+            let preset: emulators::gps::errors::EnvironmentPreset = serde_json::from_value(
+                serde_json::Value::String(environment.clone()),
+            )
+            .map_err(|_| {
+                anyhow::anyhow!(
+                    "--environment: `{environment}` is not a preset (paper-003, urban, open-sky)"
+                )
+            })?;
             if runs == 0 || misspecified.iter().any(|x| x.is_nan() || *x <= 0.0) {
                 bail!("--runs must be positive and every --misspecified sigma positive");
             }
@@ -127,7 +127,9 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                         f.trim().to_string(),
                     ))
                     .map_err(|_| {
-                        anyhow::anyhow!("--filters: `{f}` is not a filter kind (standard, fading, adaptive)")
+                        anyhow::anyhow!(
+                            "--filters: `{f}` is not a filter kind (standard, fading, adaptive)"
+                        )
                     })
                 })
                 .collect::<Result<Vec<_>>>()?;

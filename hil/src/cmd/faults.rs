@@ -15,9 +15,7 @@ pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
     }
     let known: Vec<&str> = matrix().iter().map(|c| c.name).collect();
     if let Some(bad) = a.only.iter().find(|n| !known.contains(&n.as_str())) {
-        bail!(
-            "--only: `{bad}` is not a fault of the matrix (see `hil faults --list`)"
-        );
+        bail!("--only: `{bad}` is not a fault of the matrix (see `hil faults --list`)");
     }
     let out = absolute(&a.bus.out.clone().unwrap_or_else(|| default_out("faults")))?;
     if !a.bus.here() {
