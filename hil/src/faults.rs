@@ -453,6 +453,34 @@ pub fn matrix() -> Vec<FaultCase> {
             },
         },
         FaultCase {
+            name: "nav-killed",
+            base: Base::Imu,
+            injected: "nav killed outright (SIGKILL) at a random time between 2 s and 5 s, at real-time pace",
+            expected: "its recording reads back up to the cut (nav's own reader rebuilds the summary from it), at most 1 s of IMU data lost",
+            at_s: 2.0,
+            inject: |s, o| {
+                s.speed = 1.0;
+                let nanos = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0, |d| d.subsec_nanos());
+                o.kill_nav_at_s = Some(2.0 + 3.0 * f64::from(nanos % 1000) / 1000.0);
+            },
+            judge: |r, _| {
+                let Some(k) = &r.killed else {
+                    return verdict(false, "nav was not killed".into(), None);
+                };
+                let pass = k.recorded_frames > 0 && k.lost_s <= 1.0 && k.lost_s >= 0.0;
+                verdict(
+                    pass,
+                    format!(
+                        "killed at {:.2} s; recording read back: {} frames up to {:.2} s, {:.2} s of data lost, {} unreadable records at the cut",
+                        k.at_s, k.recorded_frames, k.recorded_until_s, k.lost_s, k.bad_records
+                    ),
+                    None,
+                )
+            },
+        },
+        FaultCase {
             name: "gps-void-outage",
             base: Base::Gps,
             injected: "the receiver sends void sentences (no fix) from 7 s to 13 s",
@@ -839,6 +867,7 @@ pub fn run_matrix(o: &FaultOptions, backend: &str) -> Result<FaultMatrix> {
             progress: false,
             reference_checks: false,
             link_downs: Vec::new(),
+            kill_nav_at_s: None,
         };
         (c.inject)(&mut s, &mut opts);
         s.check()
@@ -947,6 +976,7 @@ mod tests {
                 progress: false,
                 reference_checks: false,
                 link_downs: Vec::new(),
+            kill_nav_at_s: None,
             };
             (c.inject)(&mut s, &mut o);
             s.check().unwrap_or_else(|e| panic!("{}: {e:#}", c.name));

@@ -54,8 +54,11 @@ pub struct RunReport {
     pub navigation_series: Option<crate::navrun::SeriesStats>,
     /// nav's exit status.
     pub nav_exit: Option<i32>,
-    /// nav's summary (as nav wrote it).
+    /// nav's summary (as nav wrote it; rebuilt from its recording when it was killed).
     pub nav: Summary,
+    /// nav was killed outright during the run: what its recording kept.
+    #[serde(default)]
+    pub killed: Option<crate::run::KillOutcome>,
     /// IMU frames lost on the bus (sent but not received).
     pub bus_lost_frames: i64,
     /// Checks.

@@ -34,6 +34,24 @@ pub struct RunOptions {
     /// Take the interface down during the run: [simulated time s, wall time down ms] (the
     /// fault matrix's "CAN interface down and up").
     pub link_downs: Vec<[f64; 2]>,
+    /// Kill nav outright (SIGKILL) at this simulated time, s; its recording is then read back
+    /// and its summary rebuilt from it.
+    pub kill_nav_at_s: Option<f64>,
+}
+
+/// What a nav killed outright left behind.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize, PartialEq)]
+pub struct KillOutcome {
+    /// Simulated time the IMU stream had reached at the kill, s.
+    pub at_s: f64,
+    /// Frames read back from its recording.
+    pub recorded_frames: u64,
+    /// IMU time of the last sample in the recording, s.
+    pub recorded_until_s: f64,
+    /// IMU data lost: the kill's time less the last recorded sample's, s.
+    pub lost_s: f64,
+    /// Records that could not be read (the cut end).
+    pub bad_records: u64,
 }
 
 /// The `nav` binary next to the running executable (cargo puts all workspace binaries together).
@@ -157,8 +175,19 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let mut next_report = Instant::now() + Duration::from_secs(5);
     let mut last_report = (Instant::now(), 0.0);
     let mut link_downs = opts.link_downs.clone();
+    let mut killed_at: Option<f64> = None;
     while !devices.is_finished() {
         std::thread::sleep(Duration::from_millis(50));
+        if let Some(k) = opts.kill_nav_at_s
+            && killed_at.is_none()
+            && devices.sim_time() >= k
+        {
+            let t = devices.sim_time();
+            info!("killing nav (SIGKILL) at {t:.2} s");
+            // SAFETY: kill(2) on our own child's pid.
+            unsafe { libc::kill(nav.child.id() as libc::pid_t, libc::SIGKILL) };
+            killed_at = Some(t);
+        }
         if let Some(i) = link_downs.iter().position(|d| devices.sim_time() >= d[0]) {
             let [at, ms] = link_downs.swap_remove(i);
             info!(interface = %opts.iface, "taking the interface down at {at} s for {ms} ms");
@@ -221,8 +250,29 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
     }
     let summary_path = opts.out.join("nav-summary.json");
+    let mut killed = None;
     let nav_json = match nav::summary::Summary::read(&summary_path) {
         Ok(s) => s,
+        Err(nav::summary::SummaryError::Read { .. }) if killed_at.is_some() => {
+            // killed outright: what it recorded is all there is; nav's pipeline rebuilds the
+            // summary from it
+            let p = crate::playback::replay(&opts.out.join("nav.mcap"), &nav_cfg)
+                .context("reading back the recording of the killed nav")?;
+            let at_s = killed_at.unwrap_or(0.0);
+            let sm = &p.summary;
+            let recorded_until_s = match (sm.first_sample, sm.last_sample) {
+                (Some(a), Some(b)) => (b.saturating_sub(a) + 1) as f64 / s.imu.rate_hz,
+                _ => 0.0,
+            };
+            killed = Some(KillOutcome {
+                at_s,
+                recorded_frames: p.frames_in,
+                recorded_until_s,
+                lost_s: at_s - recorded_until_s,
+                bad_records: p.bad_records,
+            });
+            p.summary
+        }
         Err(e @ nav::summary::SummaryError::Read { .. }) => {
             return Err(anyhow::Error::new(e)
                 .context(format!("nav wrote no summary; exit status {nav_exit:?}")));
@@ -304,6 +354,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         solution,
         nav_exit,
         nav: nav_json,
+        killed,
         bus_lost_frames: lost,
         checks,
         pass,

@@ -103,6 +103,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
                 progress: false,
                 reference_checks: false,
                 link_downs: Vec::new(),
+            kill_nav_at_s: None,
             };
             let r = run_here(&s, &opts, if in_guest { "vm" } else { "native" })
                 .with_context(|| format!("{} through the bus", s.name))?;

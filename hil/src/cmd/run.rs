@@ -30,6 +30,7 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
             progress: true,
             reference_checks: true,
             link_downs: Vec::new(),
+            kill_nav_at_s: None,
         };
         let backend = if in_guest { "vm" } else { "native" };
         let r = run_here(&s, &opts, backend)?;
