@@ -186,63 +186,19 @@ pub fn matrix() -> Vec<FaultCase> {
             name: "imu-frames-reordered",
             base: Base::Imu,
             injected: "the frames of sample 4000 sent after those of 4001",
-            expected: "the late frame counted and dropped, the gap it left counted and differenced across (cumulative counters: no angle lost, attitude valid), imu_gaps health bit within 0.1 s",
+            expected: LATE_FRAME,
             at_s: 2.0,
             inject: |s, _| s.faults.delay_samples = vec![[4000, 1]],
-            judge: |r, at| {
-                let i = &r.nav.imu;
-                let l = bit_latency(r, "imu_gaps", at);
-                let pass = survived(r)
-                    && i.gaps >= 1
-                    && i.late_frames == 1
-                    && i.backwards == 0
-                    && r.nav.attitude.valid
-                    && l.is_some_and(|l| (0.0..=0.1).contains(&l));
-                verdict(
-                    pass,
-                    format!(
-                        "late frames {}, gaps {}, missing {}, re-synchronisations {}, attitude valid {}, imu_gaps after {}",
-                        i.late_frames,
-                        i.gaps,
-                        i.missing_samples,
-                        i.backwards,
-                        r.nav.attitude.valid,
-                        lat_text(l)
-                    ),
-                    l,
-                )
-            },
+            judge: late_frame,
         },
         FaultCase {
             name: "imu-frames-delayed",
             base: Base::Imu,
             injected: "the frames of sample 4000 held back 20 samples (10 ms)",
-            expected: "the late frame counted and dropped, the gap it left counted and differenced across (cumulative counters: no angle lost, attitude valid), imu_gaps health bit within 0.1 s",
+            expected: LATE_FRAME,
             at_s: 2.0,
             inject: |s, _| s.faults.delay_samples = vec![[4000, 20]],
-            judge: |r, at| {
-                let i = &r.nav.imu;
-                let l = bit_latency(r, "imu_gaps", at);
-                let pass = survived(r)
-                    && i.gaps >= 1
-                    && i.late_frames == 1
-                    && i.backwards == 0
-                    && r.nav.attitude.valid
-                    && l.is_some_and(|l| (0.0..=0.1).contains(&l));
-                verdict(
-                    pass,
-                    format!(
-                        "late frames {}, gaps {}, missing {}, re-synchronisations {}, attitude valid {}, imu_gaps after {}",
-                        i.late_frames,
-                        i.gaps,
-                        i.missing_samples,
-                        i.backwards,
-                        r.nav.attitude.valid,
-                        lat_text(l)
-                    ),
-                    l,
-                )
-            },
+            judge: late_frame,
         },
         FaultCase {
             name: "imu-counter-jump",
@@ -748,6 +704,35 @@ fn end_error(r: &RunReport) -> Option<f64> {
     crate::navrun::score_summary(&drive, &r.nav, t_first).map(|n| n.position_error_m)
 }
 
+/// What nav must do with a frame overtaken on the bus.
+const LATE_FRAME: &str = "the late frame counted and dropped, the gap it left counted and differenced across (cumulative counters: no angle lost, attitude valid), imu_gaps health bit within 0.1 s";
+
+/// A frame overtaken on the bus: dropped and counted, the gap differenced across, no
+/// re-synchronisation, the attitude valid, `imu_gaps` within 0.1 s.
+fn late_frame(r: &RunReport, at: f64) -> Verdict {
+    let i = &r.nav.imu;
+    let l = bit_latency(r, "imu_gaps", at);
+    let pass = survived(r)
+        && i.gaps >= 1
+        && i.late_frames == 1
+        && i.backwards == 0
+        && r.nav.attitude.valid
+        && l.is_some_and(|l| (0.0..=0.1).contains(&l));
+    verdict(
+        pass,
+        format!(
+            "late frames {}, gaps {}, missing {}, re-synchronisations {}, attitude valid {}, imu_gaps after {}",
+            i.late_frames,
+            i.gaps,
+            i.missing_samples,
+            i.backwards,
+            r.nav.attitude.valid,
+            lat_text(l)
+        ),
+        l,
+    )
+}
+
 /// A GPS outage from `at` to `end`: Coasting within 3.5 s of its start, GpsAided again after
 /// its end.
 fn gps_outage(r: &RunReport, at: f64, end: f64, void: bool) -> Verdict {
@@ -976,7 +961,7 @@ mod tests {
                 progress: false,
                 reference_checks: false,
                 link_downs: Vec::new(),
-            kill_nav_at_s: None,
+                kill_nav_at_s: None,
             };
             (c.inject)(&mut s, &mut o);
             s.check().unwrap_or_else(|e| panic!("{}: {e:#}", c.name));

@@ -15,7 +15,7 @@ use cmd::drill::drill_north_finding;
 use cmd::experiment::experiment;
 use cmd::faults::faults;
 use cmd::fuzz::fuzz;
-use cmd::guest::{absolute, default_out, run_in_guest};
+use cmd::guest::{absolute, default_out, rerun_in_guest, run_in_guest};
 use cmd::replay::replay;
 use cmd::run::run;
 use cmd::validate::validate_turntable;

@@ -34,17 +34,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
             extra.push(f.parent().map(Path::to_path_buf).unwrap_or_default());
             args.extend(["--scenario".into(), f.to_string_lossy().into_owned()]);
         }
-        if a.bus.json {
-            args.push("--json".into());
-        }
-        let nav = sibling_binary("nav")?;
-        return run_in_guest(
-            args,
-            &out,
-            extra,
-            vec![nav],
-            a.bus.json.then_some("bench.json"),
-        );
+        return rerun_in_guest(args, a.bus.json, &out, extra, "bench.json");
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let scenarios = files
@@ -103,7 +93,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
                 progress: false,
                 reference_checks: false,
                 link_downs: Vec::new(),
-            kill_nav_at_s: None,
+                kill_nav_at_s: None,
             };
             let r = run_here(&s, &opts, if in_guest { "vm" } else { "native" })
                 .with_context(|| format!("{} through the bus", s.name))?;

@@ -31,17 +31,7 @@ pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
         if !a.only.is_empty() {
             args.extend(["--only".into(), a.only.join(",")]);
         }
-        if a.bus.json {
-            args.push("--json".into());
-        }
-        let nav = sibling_binary("nav")?;
-        return run_in_guest(
-            args,
-            &out,
-            vec![],
-            vec![nav],
-            a.bus.json.then_some("faults.json"),
-        );
+        return rerun_in_guest(args, a.bus.json, &out, vec![], "faults.json");
     }
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
     let o = FaultOptions {

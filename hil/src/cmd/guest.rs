@@ -20,6 +20,22 @@ pub(crate) fn absolute(p: &Path) -> Result<PathBuf> {
 
 /// Run this program with `args` inside the QEMU guest (this kernel has no CAN): shares the
 /// workspace, `out` and `extra` folders; returns the guest command's exit status.
+/// Run the hil command `args` again inside the guest with nav's libraries, `--json` added when
+/// asked; the run's JSON file `json_file` then goes to stdout alone.
+pub(crate) fn rerun_in_guest(
+    mut args: Vec<String>,
+    json: bool,
+    out: &Path,
+    extra: Vec<PathBuf>,
+    json_file: &str,
+) -> Result<i32> {
+    if json {
+        args.push("--json".into());
+    }
+    let nav = crate::sibling_binary("nav")?;
+    run_in_guest(args, out, extra, vec![nav], json.then_some(json_file))
+}
+
 pub(crate) fn run_in_guest(
     args: Vec<String>,
     out: &Path,
