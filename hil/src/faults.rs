@@ -845,15 +845,7 @@ pub fn run_matrix(o: &FaultOptions, backend: &str) -> Result<FaultMatrix> {
         let mut s = base_scenario(c.base, c.name)?;
         s.speed = o.speed;
         let dir = o.out.join(c.name);
-        let mut opts = RunOptions {
-            iface: o.iface.clone(),
-            out: dir.clone(),
-            nav_bin: o.nav_bin.clone(),
-            progress: false,
-            reference_checks: false,
-            link_downs: Vec::new(),
-            kill_nav_at_s: None,
-        };
+        let mut opts = RunOptions::new(&o.iface, dir.clone(), o.nav_bin.clone());
         (c.inject)(&mut s, &mut opts);
         s.check()
             .with_context(|| format!("the scenario of fault {}", c.name))?;
@@ -954,15 +946,7 @@ mod tests {
         assert_eq!(names.len(), m.len(), "a name is used twice");
         for c in &m {
             let mut s = base_scenario(c.base, c.name).unwrap();
-            let mut o = RunOptions {
-                iface: "vcan0".into(),
-                out: "/tmp".into(),
-                nav_bin: "nav".into(),
-                progress: false,
-                reference_checks: false,
-                link_downs: Vec::new(),
-                kill_nav_at_s: None,
-            };
+            let mut o = RunOptions::new("vcan0", "/tmp".into(), "nav".into());
             (c.inject)(&mut s, &mut o);
             s.check().unwrap_or_else(|e| panic!("{}: {e:#}", c.name));
             assert!(c.at_s < s.duration_s, "{}", c.name);

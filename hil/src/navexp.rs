@@ -319,12 +319,7 @@ fn plan(o: &NavExpOptions) -> Result<Plan> {
     let mut mis_modelled = rx0.clone();
     mis_modelled.errors.environment = o.environment.clone();
     // the HDOP the receiver reports at its nominal geometry: where the assumed white noise holds
-    let hdop_ref = if o.environment.hdop > 0.0 {
-        o.environment.hdop
-    } else {
-        let e = &rx0.errors;
-        (e.gm_sigma_m.hypot(e.white_sigma_m) / 6.0).clamp(0.6, 9.9)
-    };
+    let hdop_ref = mis_modelled.errors.nominal_hdop();
     for hdop in [false, true] {
         for (k, n) in KINDS {
             let mut f = filter(k, None);

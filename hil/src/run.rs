@@ -39,6 +39,22 @@ pub struct RunOptions {
     pub kill_nav_at_s: Option<f64>,
 }
 
+impl RunOptions {
+    /// A run of `nav_bin` on `iface` writing to `out`: quiet, no reference checks, no bench
+    /// actions.
+    pub fn new(iface: &str, out: PathBuf, nav_bin: PathBuf) -> Self {
+        Self {
+            iface: iface.into(),
+            out,
+            nav_bin,
+            progress: false,
+            reference_checks: false,
+            link_downs: Vec::new(),
+            kill_nav_at_s: None,
+        }
+    }
+}
+
 /// What a nav killed outright left behind.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize, PartialEq)]
 pub struct KillOutcome {

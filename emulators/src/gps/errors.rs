@@ -55,6 +55,16 @@ impl GpsErrorParams {
         }
     }
 
+    /// The HDOP the receiver reports at its nominal geometry: the surroundings' `hdop`, or the
+    /// one consistent with the error size. A filter's `hdop_ref` for this receiver.
+    pub fn nominal_hdop(&self) -> f64 {
+        if self.environment.hdop > 0.0 {
+            self.environment.hdop
+        } else {
+            self.steady_geometry().1
+        }
+    }
+
     /// The satellites used and the HDOP when the surroundings say nothing: consistent with the
     /// error size (a 25 m class receiver: 9 satellites, HDOP 2.2).
     fn steady_geometry(&self) -> (u32, f64) {
@@ -358,9 +368,9 @@ impl GpsError {
             let s = self.p.gm_sigma_m * if i == 2 { v } else { 1.0 };
             *g = phi * *g + s * drive * n.sample(&mut self.rng);
         }
-        let (steady_sats, steady_hdop) = self.p.steady_geometry();
+        let steady_sats = self.p.steady_geometry().0;
+        let hdop0 = self.p.nominal_hdop();
         let e = &self.p.environment;
-        let hdop0 = if e.hdop > 0.0 { e.hdop } else { steady_hdop };
         // the surroundings: satellites changing (the solution steps), multipath bursts,
         // stretches of poor geometry; the white noise scales with the HDOP
         let (mut sats, mut scale, mut extra, mut multipath) = (steady_sats, 1.0, [0.0; 2], false);

@@ -86,15 +86,11 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
         for mut s in bus_scenarios {
             s.duration_s = s.duration_s.min(a.bus_seconds);
             s.speed = 100.0;
-            let opts = hil::run::RunOptions {
-                iface: a.bus.iface.clone(),
-                out: out.join(format!("bus-{}", s.name)),
-                nav_bin: nav_bin.clone(),
-                progress: false,
-                reference_checks: false,
-                link_downs: Vec::new(),
-                kill_nav_at_s: None,
-            };
+            let opts = hil::run::RunOptions::new(
+                &a.bus.iface,
+                out.join(format!("bus-{}", s.name)),
+                nav_bin.clone(),
+            );
             let r = run_here(&s, &opts, if in_guest { "vm" } else { "native" })
                 .with_context(|| format!("{} through the bus", s.name))?;
             let p = BusPace::of(&r, suite.raw_limit());

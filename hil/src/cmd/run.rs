@@ -20,17 +20,14 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
     })?;
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
     if a.bus.here() {
+        let nav_bin = match &a.nav {
+            Some(n) => n.clone(),
+            None => sibling_binary("nav")?,
+        };
         let opts = RunOptions {
-            iface: a.bus.iface.clone(),
-            out: out.clone(),
-            nav_bin: match &a.nav {
-                Some(n) => n.clone(),
-                None => sibling_binary("nav")?,
-            },
             progress: true,
             reference_checks: true,
-            link_downs: Vec::new(),
-            kill_nav_at_s: None,
+            ..RunOptions::new(&a.bus.iface, out.clone(), nav_bin)
         };
         let backend = if in_guest { "vm" } else { "native" };
         let r = run_here(&s, &opts, backend)?;
