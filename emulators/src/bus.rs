@@ -269,7 +269,7 @@ fn account(
 pub fn run(
     iface: &str,
     mut dev: Devices,
-    clock: SimClock,
+    mut clock: SimClock,
     duration_s: f64,
     lockstep: Option<Lockstep>,
     stop: &AtomicBool,
@@ -301,6 +301,7 @@ pub fn run(
     let mut latency = Latency::default();
     let mut outbox_last: Option<u64> = None;
     let mut tt_bad = 0u64;
+    let mut silent = false;
     while dev.imu.next_time() <= duration_s + 1e-9 && !stop.load(Ordering::Relaxed) {
         let k = dev.imu.imu().next_index();
         let t = dev.imu.next_time();
@@ -365,6 +366,15 @@ pub fn run(
             // a sample deliberately not sent (a fault): nav cannot confirm it, so the lockstep
             // does not wait for it (an IMU that stops for seconds is then paced by the clock)
             confirmed = Some(confirmed.map_or(k, |c| c.max(k)));
+            if !silent {
+                // a silence starts: it lasts its paced wall time even when the stream ran
+                // behind the clock (else a stop of seconds would pass in no time at all and
+                // nav's watchdog would never see it)
+                clock.catch_up(t);
+                silent = true;
+            }
+        } else {
+            silent = false;
         }
         if let Some(tt) = dev.turntable.as_mut() {
             msgs.clear();
