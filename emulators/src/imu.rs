@@ -93,6 +93,11 @@ pub struct ImuParams {
     pub saturated_s: Vec<[f64; 2]>,
     /// Periods [start, end] s in which the PPS input is missing (no edge latched).
     pub pps_missing_s: Vec<[f64; 2]>,
+    /// Jitter of the PPS edge latch, s (one sigma, Gaussian, drawn per second from the seed:
+    /// a pure function of time, independent of the sensor noise's draws).
+    pub pps_jitter_s: f64,
+    /// Spurious PPS edges (a glitch on the PPS line) latched at these simulated times, s.
+    pub pps_spurious_at_s: Vec<f64>,
     /// Firmware counter jumps: [sample index, jump]: from that sample on, the sample counter
     /// on the wire runs `jump` ahead (the samples themselves are not lost).
     pub counter_jumps: Vec<[u64; 2]>,
@@ -127,6 +132,8 @@ impl Default for ImuParams {
             bit_fail_from_s: None,
             saturated_s: Vec::new(),
             pps_missing_s: Vec::new(),
+            pps_jitter_s: 0.0,
+            pps_spurious_at_s: Vec::new(),
             counter_jumps: Vec::new(),
         }
     }
@@ -182,6 +189,15 @@ impl ImuParams {
         }
         if !(positive(self.gyro_range_dps) && positive(self.accel_range_g)) {
             return Err(crate::ParamError::new("imu", "ranges must be positive"));
+        }
+        if !(self.pps_jitter_s.is_finite() && (0.0..=0.1).contains(&self.pps_jitter_s)) {
+            return Err(crate::ParamError::new(
+                "imu",
+                format!(
+                    "pps_jitter_s = {} must lie in [0, 0.1] s",
+                    self.pps_jitter_s
+                ),
+            ));
         }
         Ok(())
     }
@@ -391,6 +407,42 @@ impl ImuEmulator {
         (self.k + 1) as f64 * self.dt
     }
 
+    /// The PPS edge of second `n`: `n` + phase + that second's jitter, s.
+    fn pps_edge(&self, n: f64) -> f64 {
+        let mut e = n + self.p.pps_phase_s;
+        if self.p.pps_jitter_s > 0.0 {
+            // two uniforms from a hash of (seed, second): Box-Muller
+            let h = |salt: u64| {
+                let mut z = self
+                    .p
+                    .seed
+                    .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                    .wrapping_add((n as i64 as u64).wrapping_mul(0xBF58_476D_1CE4_E5B9))
+                    .wrapping_add(salt);
+                z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+                z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+                z ^= z >> 31;
+                ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+            };
+            let (u1, u2) = (h(0x5050_5331), h(0x5050_5332));
+            e += self.p.pps_jitter_s
+                * (-2.0 * u1.ln()).sqrt()
+                * (2.0 * std::f64::consts::PI * u2).cos();
+        }
+        e
+    }
+
+    /// The PPS edge latched in (t0, t1], if any.
+    fn pps_edge_in(&self, t0: f64, t1: f64) -> Option<f64> {
+        let n = (t1 - self.p.pps_phase_s).floor();
+        // jitter can move an edge across a whole-second boundary's neighbour samples
+        let reach = if self.p.pps_jitter_s > 0.0 { 1.0 } else { 0.0 };
+        [n - reach, n, n + reach]
+            .into_iter()
+            .map(|m| self.pps_edge(m))
+            .find(|e| *e > t0 && *e <= t1)
+    }
+
     fn dither(&self, i: usize, t: f64) -> f64 {
         self.p.dither_arcsec[i]
             * ARCSEC
@@ -437,12 +489,21 @@ impl ImuEmulator {
         }
         let bit_fail = self.p.bit_fail_from_s.is_some_and(|t| t1 >= t);
         let sample_counter = self.sample_counter(self.k);
-        // PPS: an edge at whole seconds + phase inside (t0, t1]?
-        let edge = (t1 - self.p.pps_phase_s).floor() + self.p.pps_phase_s;
+        // PPS: an edge (whole seconds + phase + jitter, or a spurious one) inside (t0, t1]?
         let within = |w: &[[f64; 2]], t: f64| w.iter().any(|p| t >= p[0] && t < p[1]);
         saturated |= within(&self.p.saturated_s, t1);
-        let pps_offset = (edge > t0 && edge <= t1 && !within(&self.p.pps_missing_s, edge))
-            .then(|| (((t1 - edge) / self.dt) * 256.0).floor().clamp(0.0, 255.0) as u8);
+        let edge = self
+            .pps_edge_in(t0, t1)
+            .filter(|e| !within(&self.p.pps_missing_s, *e))
+            .or_else(|| {
+                self.p
+                    .pps_spurious_at_s
+                    .iter()
+                    .copied()
+                    .find(|e| *e > t0 && *e <= t1)
+            });
+        let pps_offset =
+            edge.map(|edge| (((t1 - edge) / self.dt) * 256.0).floor().clamp(0.0, 255.0) as u8);
         let gf = ImuGyro {
             counts: [
                 self.gyro[0].wire(),
@@ -560,6 +621,67 @@ mod tests {
         }
         assert_eq!(pps, 2, "one PPS edge per simulated second");
         assert_eq!(hk, 20, "housekeeping at 10 Hz");
+    }
+
+    /// PPS edges as latched: IMU time of each edge (sample end less the offset), s.
+    fn pps_edges(p: ImuParams, samples: usize) -> Vec<f64> {
+        let site = Static {
+            lat_deg: -33.9,
+            lon_deg: 18.4,
+            height_m: 0.0,
+            heading_deg: 10.0,
+            pitch_deg: 0.0,
+            roll_deg: 0.0,
+        };
+        let mut imu = ImuEmulator::new(Box::new(site), p);
+        let dt = 1.0 / imu.p.rate_hz;
+        let mut out = Vec::new();
+        for _ in 0..samples {
+            let t1 = imu.next_time();
+            for f in imu.next_sample().frames {
+                if let Ok(Message::ImuAccel(a)) = Message::decode(&f)
+                    && let Some(o) = a.pps_offset
+                {
+                    out.push(t1 - f64::from(o) / 256.0 * dt);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn pps_jitter_moves_edges_by_its_sigma_and_spurious_edges_come_where_asked() {
+        let base = ImuParams {
+            pps_phase_s: 0.25,
+            ..ImuParams::default()
+        };
+        let n = 2000 * 40;
+        let clean = pps_edges(base.clone(), n);
+        assert_eq!(clean.len(), 40);
+        let jittered = pps_edges(
+            ImuParams {
+                pps_jitter_s: 0.001,
+                pps_spurious_at_s: vec![7.6],
+                ..base
+            },
+            n,
+        );
+        assert_eq!(jittered.len(), 41, "{jittered:?}");
+        let spurious: Vec<_> = jittered
+            .iter()
+            .filter(|e| (*e - 7.6).abs() < 0.001)
+            .collect();
+        assert_eq!(spurious.len(), 1);
+        let dev: Vec<f64> = jittered
+            .iter()
+            .filter(|e| (*e - 7.6).abs() >= 0.001)
+            .zip(&clean)
+            .map(|(j, c)| j - c)
+            .collect();
+        let rms = (dev.iter().map(|d| d * d).sum::<f64>() / dev.len() as f64).sqrt();
+        // 40 draws of sigma 1 ms (quantised to 1/256 of a sample)
+        assert!((0.0006..0.0015).contains(&rms), "{rms} {dev:?}");
+        assert!(dev.iter().all(|d| d.abs() < 0.005));
     }
 
     #[test]

@@ -52,7 +52,7 @@ impl<T> Running<T> {
 }
 
 /// Starts a scenario's devices on `iface` behind the bus scheduler, at the scenario's speed
-/// factor and in lockstep with nav: the IMU (with the scenario's stream faults), the turntable
+/// factor and in lockstep with nav (unless the scenario's `[bus]` says otherwise): the IMU (with the scenario's stream faults), the turntable
 /// when the scenario has one, and `gps` (the receiver on its pty) when given.
 pub fn start_scenario(
     s: &Scenario,
@@ -60,6 +60,7 @@ pub fn start_scenario(
     gps: Option<GpsDevice>,
 ) -> Result<Running<BusOutcome>> {
     let lockstep = Lockstep::default();
+    let follow = s.bus.lockstep.then_some(lockstep);
     let (motion, turntable) = s.build();
     let devices = Devices {
         imu: BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
@@ -80,16 +81,8 @@ pub fn start_scenario(
         std::thread::Builder::new()
             .name("bus".into())
             .spawn(move || {
-                emulators::bus::run(
-                    &iface,
-                    devices,
-                    clock,
-                    duration,
-                    Some(lockstep),
-                    &stop,
-                    &progress,
-                )
-                .context("emulators")
+                emulators::bus::run(&iface, devices, clock, duration, follow, &stop, &progress)
+                    .context("emulators")
             })
             .context("starting the emulator thread")?
     };

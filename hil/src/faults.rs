@@ -394,6 +394,39 @@ pub fn matrix() -> Vec<FaultCase> {
             },
         },
         FaultCase {
+            name: "bus-overload",
+            base: Base::Imu,
+            injected: "the emulators run free (no lockstep) at x40, 80,000 IMU samples/s, into a nav whose socket receive buffer is 64 KiB",
+            expected: "nav falls behind and the kernel drops frames: every frame written is either received by nav or in the socket's drop count (SO_RXQ_OVFL), the lost samples counted missing; no crash",
+            at_s: 0.0,
+            inject: |s, _| {
+                s.speed = 40.0;
+                s.bus.lockstep = false;
+                s.bus.nav_rcvbuf_bytes = 65536;
+            },
+            judge: |r, _| {
+                let dropped = r.nav.kernel_dropped_frames;
+                let accounted = r
+                    .checks
+                    .iter()
+                    .find(|c| c.name.starts_with("every frame written"));
+                let missing = r.nav.imu.missing_samples;
+                let pass = survived(r)
+                    && dropped > 0
+                    && accounted.is_some_and(|c| c.pass)
+                    && missing > 0
+                    && missing <= dropped;
+                verdict(
+                    pass,
+                    format!(
+                        "{}; IMU samples missing {missing}",
+                        accounted.map_or("no frame accounting", |c| c.detail.as_str())
+                    ),
+                    None,
+                )
+            },
+        },
+        FaultCase {
             name: "bad-length-frames",
             base: Base::Imu,
             injected: "IMU_GYRO frames of 5 bytes at 2 s and 3 s",
@@ -601,6 +634,38 @@ pub fn matrix() -> Vec<FaultCase> {
                     format!(
                         "fixes without a PPS edge {untied}, PPS edges {}, coasted {}",
                         n.map_or(0, |n| n.pps_edges),
+                        if coasted { "yes" } else { "no" }
+                    ),
+                    None,
+                )
+            },
+        },
+        FaultCase {
+            name: "pps-jitter",
+            base: Base::Gps,
+            injected: "the PPS latch jitters by 0.5 ms (one sigma) and the PPS line glitches twice, at 7.4 s and 11.7 s",
+            expected: "every true edge taken despite the jitter, both glitches rejected and counted, no fix left without its edge, the solution stays GPS-aided",
+            at_s: 7.4,
+            inject: |s, _| {
+                s.imu.pps_jitter_s = 0.0005;
+                s.imu.pps_spurious_at_s = vec![7.4, 11.7];
+            },
+            judge: |r, at| {
+                let n = r.nav.navigation.as_ref();
+                let (edges, rejected, untied) =
+                    n.map_or((0, 0, 0), |n| (n.pps_edges, n.pps_rejected, n.untied_fixes));
+                let coasted = mode_latency(r, "Coasting", at).is_some();
+                let whole = r.scenario.duration_s.floor() as u64;
+                let pass = survived(r)
+                    && rejected == 2
+                    && edges + 1 >= whole
+                    && edges <= whole
+                    && untied == 0
+                    && !coasted;
+                verdict(
+                    pass,
+                    format!(
+                        "PPS edges taken {edges} (of {whole} true ones), rejected {rejected}, fixes without an edge {untied}, coasted {}",
                         if coasted { "yes" } else { "no" }
                     ),
                     None,

@@ -42,7 +42,7 @@ pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) ->
     NavConfig {
         can: iface.map(|i| CanConfig {
             interface: i.into(),
-            rcvbuf_bytes: 8 << 20,
+            rcvbuf_bytes: s.bus.nav_rcvbuf_bytes,
         }),
         gps: gps_port.map(|p| GpsConfig {
             port: p.to_path_buf(),

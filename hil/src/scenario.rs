@@ -74,6 +74,41 @@ pub struct Scenario {
     /// A navigation run passes when nav's horizontal position error at the end is within this, m.
     #[serde(default = "default_position_tolerance")]
     pub position_tolerance_m: f64,
+    /// How the bench's bus runs (lockstep, nav's receive buffer).
+    #[serde(default)]
+    pub bus: BusSettings,
+}
+
+/// How the bench's bus runs.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BusSettings {
+    /// The emulators follow nav's NAV_TIME frames so that a run depends on its scenario and seed
+    /// only (default). Off: they run free at the scenario's speed, as hardware does; a nav that
+    /// falls behind then loses frames in its socket, which the kernel counts and nav reports.
+    #[serde(default = "yes")]
+    pub lockstep: bool,
+    /// nav's CAN receive buffer, bytes (`[can] rcvbuf_bytes` of its config; the kernel doubles
+    /// it for its bookkeeping and has a floor of about 2 KiB).
+    #[serde(default = "default_rcvbuf")]
+    pub nav_rcvbuf_bytes: usize,
+}
+
+impl Default for BusSettings {
+    fn default() -> Self {
+        Self {
+            lockstep: true,
+            nav_rcvbuf_bytes: default_rcvbuf(),
+        }
+    }
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn default_rcvbuf() -> usize {
+    8 << 20
 }
 
 fn default_position_tolerance() -> f64 {
@@ -123,6 +158,12 @@ impl Scenario {
         }
         if !(self.speed > 0.0 && self.speed <= 1000.0) {
             bail!("speed must be in (0, 1000]");
+        }
+        if !(1024..=(1 << 30)).contains(&self.bus.nav_rcvbuf_bytes) {
+            bail!(
+                "bus.nav_rcvbuf_bytes {} is not in [1024, 2^30]",
+                self.bus.nav_rcvbuf_bytes
+            );
         }
         if !(-90.0..=90.0).contains(&self.site.lat_deg) {
             bail!("site.lat_deg {} is not a latitude", self.site.lat_deg);

@@ -177,6 +177,12 @@ impl NavConfig {
         if let Err(e) = cfg.navigation.filter.check() {
             return Err(invalid(format!("navigation.{e}")));
         }
+        let tol = cfg.navigation.pps_tolerance_s;
+        if !(tol > 0.0 && tol < 0.5) {
+            return Err(invalid(format!(
+                "navigation.pps_tolerance_s ({tol}) must lie in (0, 0.5) s"
+            )));
+        }
         if let Err(e) = ImuProcessor::new(&cfg.processing) {
             return Err(invalid(format!("processing: {e}")));
         }

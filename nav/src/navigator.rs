@@ -31,7 +31,14 @@ pub struct NavigationConfig {
     pub fix_delay_s: f64,
     /// The solution's integrity monitor.
     pub integrity: crate::integrity::IntegrityConfig,
+    /// A PPS edge is taken when it lies a whole number of seconds after the last one taken
+    /// (or after the last one seen) within this, s, plus 100 ppm of the interval for the IMU's
+    /// clock; any other edge (a glitch on the PPS line) is rejected and counted.
+    pub pps_tolerance_s: f64,
 }
+
+/// The IMU clock's allowance in the PPS check, per second of interval (100 ppm).
+pub const PPS_CLOCK_ALLOWANCE: f64 = 1e-4;
 
 impl Default for NavigationConfig {
     fn default() -> Self {
@@ -43,6 +50,7 @@ impl Default for NavigationConfig {
             filter: FilterConfig::default(),
             fix_delay_s: 0.5,
             integrity: crate::integrity::IntegrityConfig::default(),
+            pps_tolerance_s: 0.002,
         }
     }
 }
@@ -84,6 +92,9 @@ pub struct NavigatorSummary {
     /// `fix_delay_s`, without the PPS tie.
     #[serde(default)]
     pub untied_fixes: u64,
+    /// PPS edges rejected: not a whole number of seconds after the last edge (a glitch).
+    #[serde(default)]
+    pub pps_rejected: u64,
     /// The integrity monitor.
     pub integrity: crate::integrity::IntegrityStats,
 }
@@ -102,6 +113,9 @@ pub struct Navigator {
     f_acc: Vector3<f64>,
     t_acc: f64,
     last_pps: Option<f64>,
+    /// The last edge seen, taken or not.
+    last_pps_seen: Option<f64>,
+    pps_rejected: u64,
     last_t: f64,
     started_at: Option<f64>,
     fixes_seen: u64,
@@ -142,6 +156,8 @@ impl Navigator {
             f_acc: Vector3::zeros(),
             t_acc: 0.0,
             last_pps: None,
+            last_pps_seen: None,
+            pps_rejected: 0,
             last_t: 0.0,
             started_at: None,
             fixes_seen: 0,
@@ -189,11 +205,35 @@ impl Navigator {
         self.heading = Some(deg.to_radians());
     }
 
-    /// A PPS edge at IMU time `t`.
-    pub fn on_pps(&mut self, t: f64) {
+    /// A PPS edge at IMU time `t`; false when it was rejected (see
+    /// [`NavigationConfig::pps_tolerance_s`]).
+    pub fn on_pps(&mut self, t: f64) -> bool {
+        let tol = self.cfg.pps_tolerance_s;
+        let fits = |r: Option<f64>| {
+            r.is_some_and(|r| {
+                let d = t - r;
+                let n = d.round();
+                n >= 1.0 && (d - n).abs() <= tol + PPS_CLOCK_ALLOWANCE * d
+            })
+        };
+        // the first edge, one that keeps the rhythm, or the second of a new rhythm (the last
+        // edge taken was the glitch)
+        let take = self.last_pps.is_none() || fits(self.last_pps) || fits(self.last_pps_seen);
+        self.last_pps_seen = Some(t);
+        if !take {
+            self.pps_rejected += 1;
+            if self.pps_rejected == 1 {
+                tracing::warn!(
+                    "a PPS edge at IMU time {t:.4} s is {:.4} s after the last one: not a whole second, rejected",
+                    self.last_pps.map_or(0.0, |p| t - p)
+                );
+            }
+            return false;
+        }
         self.pps_edges += 1;
         self.last_pps = Some(t);
         self.v_at_pps = self.state().map(|s| [s.v.x, s.v.y, s.v.z]);
+        true
     }
 
     /// A processing-chain update valid at IMU time `t` over `dt` s.
@@ -422,7 +462,38 @@ impl Navigator {
             pps_edges: self.pps_edges,
             late_fixes: self.late_fixes,
             untied_fixes: self.untied_fixes,
+            pps_rejected: self.pps_rejected,
             integrity: self.integrity.stats(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A PPS line with jitter within the tolerance keeps every edge; a glitch between two edges
+    /// is rejected and counted, the rhythm goes on; a gap of whole seconds (PPS missing) is no
+    /// glitch; when the first edge ever was the glitch, the true rhythm is taken from its
+    /// second edge on.
+    #[test]
+    fn pps_edges_off_the_whole_second_are_rejected_and_counted() {
+        let mut n = Navigator::new(NavigationConfig::default());
+        let taken: Vec<bool> = [1.0, 2.0008, 2.9993, 4.0, 4.37, 5.0011, 9.0, 10.0]
+            .into_iter()
+            .map(|t| n.on_pps(t))
+            .collect();
+        assert_eq!(taken, [true, true, true, true, false, true, true, true]);
+        let s = n.summary();
+        assert_eq!((s.pps_edges, s.pps_rejected), (7, 1));
+        assert_eq!(n.last_pps, Some(10.0));
+
+        let mut n = Navigator::new(NavigationConfig::default());
+        for t in [0.63, 1.0, 2.0, 3.0] {
+            n.on_pps(t);
+        }
+        let s = n.summary();
+        assert_eq!((s.pps_edges, s.pps_rejected), (3, 1));
+        assert_eq!(n.last_pps, Some(3.0));
     }
 }

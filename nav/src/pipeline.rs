@@ -428,7 +428,14 @@ impl Pipeline {
             if let (Some(n), Some(o), Some(b)) =
                 (self.navigator.as_mut(), s.pps_offset, self.proc.baseline())
             {
-                n.on_pps(((s.sample - b) as f64 - o) * self.sample_ns * 1e-9);
+                let t = ((s.sample - b) as f64 - o) * self.sample_ns * 1e-9;
+                if !n.on_pps(t) && self.record {
+                    out.push(Output::Json {
+                        channel: JsonChannel::Event,
+                        publish_ns: (t.max(0.0) * 1e9) as u64,
+                        json: format!("{{\"kind\":\"pps_rejected\",\"imu_time_s\":{t:.6}}}"),
+                    });
+                }
             }
             if !invalid_before && let Some(k) = self.proc.stats().invalid_since {
                 warn!("attitude invalid from sample {k}: counter gap too long to difference");

@@ -314,8 +314,13 @@ impl Summary {
             }
             let _ = writeln!(
                 o,
-                "  fixes             {} seen, {} ignored, {} late; PPS edges {}",
-                n.fixes_seen, n.fixes_ignored, n.late_fixes, n.pps_edges
+                "  fixes             {} seen, {} ignored, {} late, {} without a PPS edge; PPS edges {}, {} rejected",
+                n.fixes_seen,
+                n.fixes_ignored,
+                n.late_fixes,
+                n.untied_fixes,
+                n.pps_edges,
+                n.pps_rejected
             );
             if let Some(f) = &n.filter {
                 let _ = writeln!(
