@@ -37,7 +37,102 @@ pub struct RunOptions {
     /// Kill nav outright (SIGKILL) at this simulated time, s; its recording is then read back
     /// and its summary rebuilt from it.
     pub kill_nav_at_s: Option<f64>,
+    /// Run nav as this user and group id (see [`nav_account`]); none: as the bench's user.
+    pub nav_account: Option<(u32, u32)>,
 }
+
+/// The account nav runs as. nav needs no privilege (a raw CAN socket, and the serial port it
+/// is given), so a bench running as root (in the VM, or natively under sudo) proves it by
+/// running nav as `nobody` (65534); `HIL_NAV_UID` names another user id (0 keeps root).
+/// Not root: nav runs as the bench's user.
+pub fn nav_account() -> Option<(u32, u32)> {
+    // SAFETY: geteuid(2) cannot fail.
+    if unsafe { libc::geteuid() } != 0 {
+        return None;
+    }
+    match std::env::var("HIL_NAV_UID")
+        .ok()
+        .map(|v| v.trim().parse::<u32>())
+    {
+        Some(Ok(0)) => None,
+        Some(Ok(uid)) => Some((uid, uid)),
+        Some(Err(_)) => {
+            tracing::warn!("HIL_NAV_UID is not a user id: nav runs as nobody (65534)");
+            Some((NOBODY, NOBODY))
+        }
+        None => Some((NOBODY, NOBODY)),
+    }
+}
+
+/// `nobody`'s user and group id.
+pub const NOBODY: u32 = 65534;
+
+/// A folder nav (run as another user) may write in: its files are moved into the run folder
+/// when nav is done, or when the run ends however it ends. The run folder (perhaps behind a
+/// private parent) stays the bench user's.
+struct NavFolder {
+    dir: PathBuf,
+    out: PathBuf,
+    staged: bool,
+}
+
+impl NavFolder {
+    fn new(out: &Path, account: Option<(u32, u32)>) -> Result<Self> {
+        let Some((uid, gid)) = account else {
+            return Ok(Self {
+                dir: out.to_path_buf(),
+                out: out.to_path_buf(),
+                staged: false,
+            });
+        };
+        let dir = std::env::temp_dir().join(format!(
+            "hil-nav-{}-{}",
+            std::process::id(),
+            NAV_FOLDERS.fetch_add(1, Ordering::Relaxed)
+        ));
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        std::os::unix::fs::chown(&dir, Some(uid), Some(gid))
+            .with_context(|| format!("giving {} to uid {uid}", dir.display()))?;
+        Ok(Self {
+            dir,
+            out: out.to_path_buf(),
+            staged: true,
+        })
+    }
+
+    /// Move nav's files into the run folder.
+    fn finish(&mut self) -> Result<()> {
+        if !self.staged {
+            return Ok(());
+        }
+        self.staged = false;
+        for e in std::fs::read_dir(&self.dir)
+            .with_context(|| format!("listing {}", self.dir.display()))?
+        {
+            let from = e?.path();
+            let Some(name) = from.file_name() else {
+                continue;
+            };
+            let to = self.out.join(name);
+            if std::fs::rename(&from, &to).is_err() {
+                std::fs::copy(&from, &to)
+                    .with_context(|| format!("moving {} to {}", from.display(), to.display()))?;
+                std::fs::remove_file(&from)?;
+            }
+        }
+        std::fs::remove_dir(&self.dir).with_context(|| format!("removing {}", self.dir.display()))
+    }
+}
+
+impl Drop for NavFolder {
+    fn drop(&mut self) {
+        if let Err(e) = self.finish() {
+            tracing::warn!("nav's files: {e:#}");
+        }
+    }
+}
+
+static NAV_FOLDERS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 impl RunOptions {
     /// A run of `nav_bin` on `iface` writing to `out`: quiet, no reference checks, no bench
@@ -51,6 +146,7 @@ impl RunOptions {
             reference_checks: false,
             link_downs: Vec::new(),
             kill_nav_at_s: None,
+            nav_account: nav_account(),
         }
     }
 }
@@ -91,14 +187,24 @@ struct NavProcess {
     lines: std::sync::mpsc::Receiver<String>,
 }
 
-fn start_nav(bin: &Path, config: &Path) -> Result<NavProcess> {
-    let mut child = Command::new(bin)
-        .arg("--config")
+fn start_nav(bin: &Path, config: &Path, account: Option<(u32, u32)>) -> Result<NavProcess> {
+    use std::os::unix::process::CommandExt;
+    let mut cmd = Command::new(bin);
+    cmd.arg("--config")
         .arg(config)
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .with_context(|| format!("starting {}", bin.display()))?;
+        .stderr(Stdio::inherit());
+    if let Some((uid, gid)) = account {
+        // std drops the supplementary groups too when root changes the user
+        cmd.uid(uid).gid(gid);
+    }
+    let mut child = cmd.spawn().with_context(|| {
+        format!(
+            "starting {}{}",
+            bin.display(),
+            account.map_or(String::new(), |(u, _)| format!(" as uid {u}"))
+        )
+    })?;
     let out = child.stdout.take().context("nav stdout")?;
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
@@ -165,12 +271,18 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     };
     // the link goes when the run ends, however it ends
     let _link_guard = gps.as_ref().map(|g| RemoveOnDrop(g.1.clone()));
-    let cfg_path = opts.out.join("nav.toml");
+    let mut nav_folder = NavFolder::new(&opts.out, opts.nav_account)?;
+    if let (Some((uid, gid)), Some((pty, _))) = (opts.nav_account, &gps) {
+        // the receiver's port is nav's to open, as udev gives a vehicle's serial port to nav's
+        // group
+        pty.give_to(uid, gid)?;
+    }
+    let cfg_path = nav_folder.dir.join("nav.toml");
     let nav_cfg =
         crate::inproc::nav_config(s, Some(&opts.iface), gps.as_ref().map(|g| g.1.as_path()));
     std::fs::write(&cfg_path, nav_cfg.to_toml())?;
-    info!(interface = %opts.iface, "starting nav");
-    let nav = start_nav(&opts.nav_bin, &cfg_path)?;
+    info!(interface = %opts.iface, account = ?opts.nav_account, "starting nav");
+    let nav = start_nav(&opts.nav_bin, &cfg_path, opts.nav_account)?;
 
     let watch_stop = Arc::new(AtomicBool::new(false));
     let watch = {
@@ -180,9 +292,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         std::thread::spawn(move || watch_solution(sock, &iface, &stop))
     };
     let gps_device = match (gps, &s.gps) {
-        (Some((pty, link)), Some(rx)) => {
-            crate::inproc::gps_run(s, rx)?.map(|run| GpsDevice::new(run, pty, Some(link)))
-        }
+        (Some((pty, link)), Some(rx)) => crate::inproc::gps_run(s, rx)?
+            .map(|run| GpsDevice::new(run, pty, Some(link)).with_owner(opts.nav_account)),
         _ => None,
     };
     let t0 = Instant::now();
@@ -252,6 +363,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
     };
     let (nav_exit, nav_lines) = nav_out;
+    nav_folder.finish()?;
     let (tx, tt_stats, lockstep_stats) = (bus.imu, bus.turntable, bus.lockstep);
     // the receiver's device stayed until nav had stopped
     let gps_stats = bus.gps.map(|(st, _pty)| st);

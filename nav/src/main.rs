@@ -88,11 +88,17 @@ fn open_can(c: &nav::config::CanConfig) -> Result<socketcan::tokio::CanSocket> {
     let iface = c.interface.as_str();
     let sock = socketcan::tokio::CanSocket::open(iface)
         .map_err(|e| anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e)))?;
-    if let Err(e) = wire::set_rcvbuf(sock.as_raw_fd(), c.rcvbuf_bytes) {
-        warn!(
+    match wire::set_rcvbuf(sock.as_raw_fd(), c.rcvbuf_bytes) {
+        Ok(got) if got < c.rcvbuf_bytes => warn!(
+            interface = iface,
+            "the receive buffer is {got} bytes, not the {} asked for: the system caps it (raise net.core.rmem_max, or give nav CAP_NET_ADMIN)",
+            c.rcvbuf_bytes
+        ),
+        Ok(_) => {}
+        Err(e) => warn!(
             interface = iface,
             "cannot enlarge the receive buffer to {} bytes: {e}", c.rcvbuf_bytes
-        );
+        ),
     }
     Ok(sock)
 }
@@ -224,6 +230,8 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     summary.interface = iface.to_string();
     summary.read_errors = read_errors;
     summary.command_send_errors = shell.command_errors;
+    // SAFETY: getuid(2) cannot fail.
+    summary.process_uid = Some(unsafe { libc::getuid() });
     if let Some(s) = &shell.sock {
         match wire::socket_drops(s.as_raw_fd()) {
             Ok(n) => summary.kernel_dropped_frames = n,

@@ -758,6 +758,7 @@ impl Pipeline {
             read_errors: 0,
             command_send_errors: 0,
             kernel_dropped_frames: 0,
+            process_uid: None,
             imu: self.fe.stats(),
             max_safe_gap_samples: self.fe.max_span(),
             first_sample: self.sums.first,

@@ -41,6 +41,10 @@ pub struct Summary {
     /// counter, `SO_RXQ_OVFL`'s count): what reached the bus but not nav, counted exactly.
     #[serde(default)]
     pub kernel_dropped_frames: u64,
+    /// The user id nav's process ran as (none in in-process runs). nav needs no privilege:
+    /// a raw CAN socket and the serial port it is given.
+    #[serde(default)]
+    pub process_uid: Option<u32>,
     /// Front-end counters.
     pub imu: ImuStats,
     /// Longest counter gap the front end can difference, samples.

@@ -74,7 +74,8 @@ fn checks(r: &Value) -> Vec<(String, bool, String)> {
         .collect()
 }
 
-/// 60 s of static data at 2 kHz, speed factor 10. Tolerated loss: none is expected (nav's socket
+/// 60 s of static data at 2 kHz, speed factor 10, nav run as an unprivileged user (nobody).
+/// Tolerated loss: none is expected (nav's socket
 /// has an 8 MiB receive buffer); the run fails above 0.1 % (the scenario's max_bus_loss), and
 /// every lost frame must show up in nav's gap count, sample for sample.
 #[test]
@@ -92,6 +93,8 @@ fn static_60s_at_x10_every_frame_arrives_and_the_recording_reads_back() {
     assert_eq!(code, 0);
     assert_eq!(r["nav_exit"], 0, "nav exited cleanly on SIGTERM");
     let nav = &r["nav"];
+    // the bench is root in the guest; nav needs no privilege and runs as nobody
+    assert_eq!(nav["process_uid"], 65534, "nav ran unprivileged");
     let tx = &r["tx"];
     assert_eq!(tx["samples"], 120_000, "60 s at 2 kHz");
     let lost = r["bus_lost_frames"].as_i64().unwrap();

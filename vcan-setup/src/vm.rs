@@ -366,6 +366,9 @@ mount -t proc proc /proc; mount -t sysfs sys /sys; mount -t devtmpfs dev /dev
 mkdir -p /dev/pts /dev/shm; mount -t devpts devpts /dev/pts; mount -t tmpfs tmp /tmp; mount -t tmpfs shm /dev/shm
 for m in {mods}; do insmod /lib/modules/$m || echo "vcan-setup-guest: insmod $m failed"; done
 ip link set lo up
+# nav runs unprivileged: the socket buffer it asks for is capped by rmem_max (set-up's job, as
+# on a vehicle's image)
+echo 16777216 > /proc/sys/net/core/rmem_max
 mount -t 9p -o trans=virtio,version=9p2000.L,msize=512000 ctl /run/vcan-setup
 {mounts}echo "{READY} $(cut -d' ' -f1 /proc/uptime) s"
 sh /run/vcan-setup/cmd.sh

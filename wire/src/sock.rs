@@ -154,23 +154,38 @@ pub fn recv_batch(
 }
 
 /// Sets the receive buffer of socket `fd` to `bytes`: past the system's cap where allowed
-/// (`SO_RCVBUFFORCE`, CAP_NET_ADMIN), else up to the cap (`SO_RCVBUF`).
-pub fn set_rcvbuf(fd: i32, bytes: usize) -> std::io::Result<()> {
-    let v = bytes as libc::c_int;
+/// (`SO_RCVBUFFORCE`, CAP_NET_ADMIN), else up to the cap (`SO_RCVBUF`, `net.core.rmem_max`).
+/// Returns the size the socket got, bytes of payload (the kernel reports twice that, its
+/// bookkeeping included): less than asked when the cap applied.
+pub fn set_rcvbuf(fd: i32, bytes: usize) -> std::io::Result<usize> {
+    let v = bytes.min(i32::MAX as usize / 2) as libc::c_int;
     let len = std::mem::size_of::<libc::c_int>() as libc::socklen_t;
     let p = &v as *const libc::c_int as *const libc::c_void;
     // SAFETY: fd is an open socket, p points to a c_int of the given length.
-    let r = unsafe { libc::setsockopt(fd, libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, p, len) };
-    if r == 0 {
-        return Ok(());
+    let mut r = unsafe { libc::setsockopt(fd, libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, p, len) };
+    if r != 0 {
+        // SAFETY: as above; without CAP_NET_ADMIN fall back to the capped SO_RCVBUF.
+        r = unsafe { libc::setsockopt(fd, libc::SOL_SOCKET, libc::SO_RCVBUF, p, len) };
     }
-    // SAFETY: as above; without CAP_NET_ADMIN fall back to the capped SO_RCVBUF.
-    let r = unsafe { libc::setsockopt(fd, libc::SOL_SOCKET, libc::SO_RCVBUF, p, len) };
-    if r == 0 {
-        Ok(())
-    } else {
-        Err(std::io::Error::last_os_error())
+    if r != 0 {
+        return Err(std::io::Error::last_os_error());
     }
+    let mut got: libc::c_int = 0;
+    let mut glen = len;
+    // SAFETY: `got` is a live c_int of `glen` bytes.
+    let r = unsafe {
+        libc::getsockopt(
+            fd,
+            libc::SOL_SOCKET,
+            libc::SO_RCVBUF,
+            (&mut got as *mut libc::c_int).cast(),
+            &mut glen,
+        )
+    };
+    if r != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(got.max(0) as usize / 2)
 }
 
 /// Frames the kernel has dropped on socket `fd` because its receive buffer was full: the

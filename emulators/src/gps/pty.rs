@@ -35,6 +35,17 @@ pub enum PtyError {
         #[source]
         source: std::io::Error,
     },
+    /// The device could not be given to its reader's account.
+    #[error("giving the GPS pty {path} to uid {uid}")]
+    Owner {
+        /// The slave path.
+        path: String,
+        /// The reader's user id.
+        uid: u32,
+        /// Cause.
+        #[source]
+        source: std::io::Error,
+    },
 }
 
 /// The emulated receiver's serial port: a pty pair. nav opens [`GpsPty::path`].
@@ -70,6 +81,18 @@ impl GpsPty {
     /// The device path nav opens (`/dev/pts/N`).
     pub fn path(&self) -> &str {
         &self.path
+    }
+
+    /// Give the device to the account that reads it (as udev gives a vehicle's serial port to
+    /// the navigation service's group): needs root.
+    pub fn give_to(&self, uid: u32, gid: u32) -> Result<(), PtyError> {
+        std::os::unix::fs::chown(&self.path, Some(uid), Some(gid)).map_err(|source| {
+            PtyError::Owner {
+                path: self.path.clone(),
+                uid,
+                source,
+            }
+        })
     }
 
     /// Write bytes as the receiver would.
@@ -176,6 +199,7 @@ pub struct GpsDevice {
     rx: GpsReceiver,
     pty: GpsPty,
     link: Option<std::path::PathBuf>,
+    owner: Option<(u32, u32)>,
     dropped: Option<usize>,
     /// What was written.
     pub stats: GpsTxStats,
@@ -188,9 +212,16 @@ impl GpsDevice {
             rx: GpsReceiver::new(run),
             pty,
             link,
+            owner: None,
             dropped: None,
             stats: GpsTxStats::default(),
         }
+    }
+
+    /// A device re-plugged (a port-drop fault) is given to this account, like the first.
+    pub fn with_owner(mut self, owner: Option<(u32, u32)>) -> Self {
+        self.owner = owner;
+        self
     }
 
     /// Simulated time at which the next epoch is written, s.
@@ -206,6 +237,9 @@ impl GpsDevice {
             match (self.dropped, e.port_drop) {
                 (None, Some(i)) => {
                     self.pty = GpsPty::open()?; // the old pair closes: the reader sees EIO
+                    if let Some((uid, gid)) = self.owner {
+                        self.pty.give_to(uid, gid)?;
+                    }
                     if let Some(l) = &self.link {
                         let _ = std::fs::remove_file(l);
                     }
