@@ -59,6 +59,9 @@ pub struct RunReport {
     /// nav was killed outright during the run: what its recording kept.
     #[serde(default)]
     pub killed: Option<crate::run::KillOutcome>,
+    /// nav's memory over the run (read from /proc).
+    #[serde(default)]
+    pub nav_memory: Option<crate::run::NavMemory>,
     /// IMU frames lost on the bus (sent but not received).
     pub bus_lost_frames: i64,
     /// Checks.
@@ -438,6 +441,9 @@ pub fn card(r: &RunReport) -> String {
         " IMU frames sent {} ({:.0} frames/s wall), lost on the bus {}, dropped on purpose {}",
         r.tx.frames, r.frames_per_wall_second, r.bus_lost_frames, r.tx.dropped_samples
     );
+    if let Some(m) = &r.nav_memory {
+        let _ = writeln!(s, " {}", memory_line(m));
+    }
     let _ = writeln!(s, "{line}");
     if let Some(d) = &r.drill {
         let f = |x: Option<f64>, p: usize| x.map_or("--".to_string(), |v| format!("{v:.p$}"));
@@ -474,6 +480,19 @@ pub fn card(r: &RunReport) -> String {
     let _ = writeln!(s, "{line}");
     let _ = writeln!(s, " RESULT: {}", if r.pass { "PASS" } else { "FAIL" });
     s
+}
+
+/// nav's memory in one line.
+fn memory_line(m: &crate::run::NavMemory) -> String {
+    format!(
+        "nav's memory (resident): {} KiB after {:.0} s, {} KiB at the end, peak {} KiB{}",
+        m.start_kib,
+        m.warm_s,
+        m.end_kib,
+        m.peak_kib,
+        m.growth_kib_per_hour
+            .map_or(String::new(), |g| format!(", trend {g:+.0} KiB per simulated hour"))
+    )
 }
 
 /// Markdown version of the report.
@@ -521,6 +540,9 @@ pub fn markdown(r: &RunReport) -> String {
                 x.samples, x.rms_position_error_m, x.max_position_error_m
             );
         }
+    }
+    if let Some(m) = &r.nav_memory {
+        let _ = writeln!(s, "{}\n", memory_line(m));
     }
     let _ = writeln!(s, "| check | result | detail |\n|---|---|---|");
     for c in &r.checks {

@@ -85,11 +85,18 @@ impl NavFolder {
                 staged: false,
             });
         };
-        let dir = std::env::temp_dir().join(format!(
-            "hil-nav-{}-{}",
+        // beside the run folder when nav can reach it (moving is then a rename, however large
+        // the recording), else in the temporary folder
+        let name = format!(
+            ".hil-nav-{}-{}",
             std::process::id(),
             NAV_FOLDERS.fetch_add(1, Ordering::Relaxed)
-        ));
+        );
+        let dir = if reachable_by_others(out) {
+            out.join(name)
+        } else {
+            std::env::temp_dir().join(name)
+        };
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         std::os::unix::fs::chown(&dir, Some(uid), Some(gid))
             .with_context(|| format!("giving {} to uid {uid}", dir.display()))?;
@@ -132,6 +139,17 @@ impl Drop for NavFolder {
     }
 }
 
+/// Every folder from the root down to `dir` may be entered by any user.
+fn reachable_by_others(dir: &Path) -> bool {
+    use std::os::unix::fs::PermissionsExt;
+    let Ok(dir) = dir.canonicalize() else {
+        return false;
+    };
+    dir.ancestors().all(|d| {
+        std::fs::metadata(d).is_ok_and(|m| m.is_dir() && m.permissions().mode() & 0o001 != 0)
+    })
+}
+
 static NAV_FOLDERS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 impl RunOptions {
@@ -164,6 +182,77 @@ pub struct KillOutcome {
     pub lost_s: f64,
     /// Records that could not be read (the cut end).
     pub bad_records: u64,
+}
+
+/// nav's resident memory over a run, read from `/proc/PID/status` once a second of wall time.
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize, PartialEq)]
+pub struct NavMemory {
+    /// Simulated time after which the growth is judged (start-up buffers filled), s.
+    pub warm_s: f64,
+    /// Resident set at the warm-up's end, KiB.
+    pub start_kib: u64,
+    /// Resident set at the last reading before nav was told to stop, KiB.
+    pub end_kib: u64,
+    /// Peak resident set (`VmHWM`), KiB.
+    pub peak_kib: u64,
+    /// Growth after the warm-up, KiB per hour of simulated time (least-squares slope over
+    /// the readings; none with fewer than 10 readings).
+    pub growth_kib_per_hour: Option<f64>,
+    /// Readings: [simulated time s, resident set KiB].
+    pub readings: Vec<[f64; 2]>,
+}
+
+impl NavMemory {
+    /// The warm-up for a run of `duration_s`: a tenth of it, at most 60 s.
+    pub fn new(duration_s: f64) -> Self {
+        Self {
+            warm_s: (0.1 * duration_s).min(60.0),
+            ..Self::default()
+        }
+    }
+
+    /// Read process `pid`'s memory at simulated time `t`.
+    pub fn read(&mut self, pid: u32, t: f64) {
+        let Ok(text) = std::fs::read_to_string(format!("/proc/{pid}/status")) else {
+            return;
+        };
+        let field = |name: &str| {
+            text.lines()
+                .find(|l| l.starts_with(name))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|v| v.parse::<u64>().ok())
+        };
+        if let Some(rss) = field("VmRSS:") {
+            self.readings.push([t, rss as f64]);
+            self.end_kib = rss;
+        }
+        if let Some(hwm) = field("VmHWM:") {
+            self.peak_kib = hwm;
+        }
+    }
+
+    /// Fill in the warm-up reading and the growth.
+    pub fn finish(&mut self) {
+        let warm: Vec<[f64; 2]> = self
+            .readings
+            .iter()
+            .copied()
+            .filter(|r| r[0] >= self.warm_s)
+            .collect();
+        self.start_kib = warm.first().map_or(self.end_kib, |r| r[1] as u64);
+        if warm.len() >= 10 {
+            let n = warm.len() as f64;
+            let (mt, mm) = (
+                warm.iter().map(|r| r[0]).sum::<f64>() / n,
+                warm.iter().map(|r| r[1]).sum::<f64>() / n,
+            );
+            let sxy: f64 = warm.iter().map(|r| (r[0] - mt) * (r[1] - mm)).sum();
+            let sxx: f64 = warm.iter().map(|r| (r[0] - mt).powi(2)).sum();
+            if sxx > 0.0 {
+                self.growth_kib_per_hour = Some(sxy / sxx * 3600.0);
+            }
+        }
+    }
 }
 
 /// The `nav` binary next to the running executable (cargo puts all workspace binaries together).
@@ -303,8 +392,14 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let mut last_report = (Instant::now(), 0.0);
     let mut link_downs = opts.link_downs.clone();
     let mut killed_at: Option<f64> = None;
+    let mut memory = NavMemory::new(s.duration_s);
+    let mut next_memory = Instant::now();
     while !devices.is_finished() {
         std::thread::sleep(Duration::from_millis(50));
+        if killed_at.is_none() && Instant::now() >= next_memory {
+            memory.read(nav.child.id(), devices.sim_time());
+            next_memory += Duration::from_secs(1);
+        }
         if let Some(k) = opts.kill_nav_at_s
             && killed_at.is_none()
             && devices.sim_time() >= k
@@ -355,6 +450,9 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let bus = devices.join();
     // a moment for nav to take the last frames (it also drains its socket when told to stop)
     std::thread::sleep(Duration::from_millis(100));
+    if killed_at.is_none() {
+        memory.read(nav.child.id(), sim_reached);
+    }
     let (bus, nav_out) = match bus {
         Ok(b) => (b, stop_nav(nav)?),
         Err(e) => {
@@ -362,6 +460,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             return Err(e);
         }
     };
+    memory.finish();
     let (nav_exit, nav_lines) = nav_out;
     nav_folder.finish()?;
     let (tx, tt_stats, lockstep_stats) = (bus.imu, bus.turntable, bus.lockstep);
@@ -483,6 +582,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         nav_exit,
         nav: nav_json,
         killed,
+        nav_memory: Some(memory),
         bus_lost_frames: lost,
         checks,
         pass,
