@@ -16,7 +16,7 @@ use cmd::experiment::experiment;
 use cmd::faults::faults;
 use cmd::fuzz::fuzz;
 use cmd::guest::{absolute, default_out, rerun_in_guest, run_in_guest};
-use cmd::replay::replay;
+use cmd::replay::{candump, replay};
 use cmd::run::run;
 use cmd::validate::validate_turntable;
 
@@ -54,7 +54,8 @@ enum Cmd {
     /// Replay a nav recording through nav's pipeline in process and compare what it sends with
     /// what nav sent (bit for bit on a bench recording). Exit status 1 when they differ.
     Replay {
-        /// A run folder (with nav.mcap and nav.toml) or an MCAP recording of nav.
+        /// A run folder (with nav.mcap and nav.toml), an MCAP recording of nav, or a
+        /// `candump -l` log of the bus (the frames nav sends, by the DBC, are what it sent).
         recording: PathBuf,
         /// nav's config for the recording (default: nav.toml beside it).
         #[arg(long)]
@@ -62,6 +63,19 @@ enum Cmd {
         /// Print the result as JSON.
         #[arg(long)]
         json: bool,
+    },
+    /// Export a nav recording's CAN frames (received and sent) as a `candump -l` log, which
+    /// can-utils' `canplayer` plays back, `cantools` decodes with `hil dbc`, and `hil replay`
+    /// replays.
+    Candump {
+        /// A run folder (with nav.mcap) or an MCAP recording of nav.
+        recording: PathBuf,
+        /// Output file (default: stdout).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Interface name written in the log (canplayer maps it: `vcan0=can0`).
+        #[arg(long, default_value = "can0")]
+        iface: String,
     },
     /// Hostile input: a seeded mutation fuzzer over nav's CAN pipeline, its NMEA framer and
     /// decoder, its config parser and the scenario parser (stable toolchain). Counts inputs,
@@ -430,6 +444,11 @@ fn real_main(cli: Cli) -> Result<i32> {
             config,
             json,
         } => replay(&recording, config.as_deref(), json),
+        Cmd::Candump {
+            recording,
+            out,
+            iface,
+        } => candump(&recording, out.as_deref(), &iface),
         Cmd::Fuzz {
             target,
             inputs,

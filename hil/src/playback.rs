@@ -56,15 +56,102 @@ fn show(f: &RawFrame) -> String {
     format!("0x{:03X} [{}] {:02X?}", f.id, f.len, f.payload())
 }
 
+/// One thing met in a recording, in order.
+enum Input {
+    /// A frame nav received.
+    Frame(RawFrame),
+    /// A frame nav sent.
+    Sent(RawFrame),
+    /// A fix nav decoded.
+    Fix(Box<nav::gps::GpsFix>),
+    /// The watchdog's change: active, after ms.
+    Timeout(bool, u64),
+    /// An unreadable record.
+    Bad,
+}
+
+/// The pipeline being fed, and what came out.
+struct Replayer {
+    p: Pipeline,
+    out: Vec<Output>,
+    replayed: Vec<RawFrame>,
+    recorded: Vec<RawFrame>,
+    frames_in: u64,
+    fixes_in: u64,
+    bad: u64,
+}
+
+impl Replayer {
+    fn new(cfg: &NavConfig) -> Result<Self> {
+        Ok(Self {
+            p: Pipeline::new(cfg, false).context("nav's pipeline")?,
+            out: Vec::new(),
+            replayed: Vec::new(),
+            recorded: Vec::new(),
+            frames_in: 0,
+            fixes_in: 0,
+            bad: 0,
+        })
+    }
+
+    fn feed(&mut self, i: Input) {
+        match i {
+            Input::Frame(f) => {
+                self.frames_in += 1;
+                self.p.on_frame(&f, &mut self.out);
+            }
+            Input::Sent(f) => self.recorded.push(f),
+            Input::Fix(fix) => {
+                self.fixes_in += 1;
+                self.p.on_fix(*fix, &mut self.out);
+            }
+            Input::Timeout(active, ms) => self.p.set_imu_timeout(active, ms, &mut self.out),
+            Input::Bad => self.bad += 1,
+        }
+        self.take_sent();
+    }
+
+    fn take_sent(&mut self) {
+        self.replayed
+            .extend(self.out.drain(..).filter_map(|o| match o {
+                Output::Command(f) | Output::Solution(f) => Some(f),
+                _ => None,
+            }));
+    }
+
+    fn finish(mut self, what: &str) -> Playback {
+        self.p.flush(&mut self.out);
+        self.take_sent();
+        let (recorded, replayed) = (&self.recorded, &self.replayed);
+        let n = recorded.len().max(replayed.len());
+        let first_difference = (0..n)
+            .find(|&i| recorded.get(i) != replayed.get(i))
+            .map(|i| {
+                (
+                    i as u64,
+                    recorded.get(i).map(show),
+                    replayed.get(i).map(show),
+                )
+            });
+        let mut summary = self.p.summary();
+        summary.interface = format!("replay of {what}");
+        Playback {
+            frames_in: self.frames_in,
+            fixes_in: self.fixes_in,
+            recorded_tx: recorded.len() as u64,
+            replayed_tx: replayed.len() as u64,
+            first_difference,
+            bad_records: self.bad,
+            summary,
+        }
+    }
+}
+
 /// Replay the recording `mcap` through the pipeline of config `cfg`.
 pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
     let buf =
         std::fs::read(mcap_path).with_context(|| format!("reading {}", mcap_path.display()))?;
-    let mut p = Pipeline::new(cfg, false).context("nav's pipeline")?;
-    let mut out = Vec::new();
-    let mut replayed: Vec<RawFrame> = Vec::new();
-    let mut recorded: Vec<RawFrame> = Vec::new();
-    let (mut frames_in, mut fixes_in, mut bad) = (0u64, 0u64, 0u64);
+    let mut r = Replayer::new(cfg)?;
     let stream = mcap::MessageStream::new(&buf)
         .with_context(|| format!("{} is not an MCAP file", mcap_path.display()))?;
     for m in stream {
@@ -73,75 +160,113 @@ pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
             Err(e) => {
                 // a recording cut short still replays what it has
                 tracing::warn!("{}: {e}; replaying what came before", mcap_path.display());
-                bad += 1;
+                r.feed(Input::Bad);
                 break;
             }
         };
-        match m.channel.topic.as_str() {
-            "/can/raw" | "/can/tx" if m.channel.message_encoding != RAW_FRAME_ENCODING => bad += 1,
-            "/can/raw" => match nav::record::decode_frame(&m.data) {
-                Some(f) => {
-                    frames_in += 1;
-                    p.on_frame(&f, &mut out);
-                }
-                None => bad += 1,
-            },
-            "/can/tx" => match nav::record::decode_frame(&m.data) {
-                Some(f) => recorded.push(f),
-                None => bad += 1,
-            },
+        let frame = |m: &mcap::Message| match nav::record::decode_frame(&m.data) {
+            Some(f) if m.channel.message_encoding == RAW_FRAME_ENCODING => Some(f),
+            _ => None,
+        };
+        let input = match m.channel.topic.as_str() {
+            "/can/raw" => frame(&m).map_or(Input::Bad, Input::Frame),
+            "/can/tx" => frame(&m).map_or(Input::Bad, Input::Sent),
             // the liveness watchdog's changes, where they happened
             "/nav/event" => match serde_json::from_slice::<serde_json::Value>(&m.data) {
                 Ok(e) => match e["kind"].as_str() {
                     Some("imu_timeout") => {
-                        let ms = e["after_ms"].as_u64().unwrap_or(0);
-                        p.set_imu_timeout(true, ms, &mut out);
+                        Input::Timeout(true, e["after_ms"].as_u64().unwrap_or(0))
                     }
-                    Some("imu_back") => p.set_imu_timeout(false, 0, &mut out),
-                    _ => {}
+                    Some("imu_back") => Input::Timeout(false, 0),
+                    _ => continue,
                 },
-                Err(_) => bad += 1,
+                Err(_) => Input::Bad,
             },
             "/gps/fix" => match serde_json::from_slice::<nav::gps::GpsFix>(&m.data) {
-                Ok(fix) => {
-                    fixes_in += 1;
-                    p.on_fix(fix, &mut out);
-                }
-                Err(_) => bad += 1,
+                Ok(fix) => Input::Fix(Box::new(fix)),
+                Err(_) => Input::Bad,
             },
-            _ => {}
-        }
-        replayed.extend(out.drain(..).filter_map(|o| match o {
-            Output::Command(f) | Output::Solution(f) => Some(f),
-            _ => None,
-        }));
+            _ => continue,
+        };
+        r.feed(input);
     }
-    p.flush(&mut out);
-    replayed.extend(out.drain(..).filter_map(|o| match o {
-        Output::Command(f) | Output::Solution(f) => Some(f),
-        _ => None,
-    }));
-    let n = recorded.len().max(replayed.len());
-    let first_difference = (0..n)
-        .find(|&i| recorded.get(i) != replayed.get(i))
-        .map(|i| {
-            (
-                i as u64,
-                recorded.get(i).map(show),
-                replayed.get(i).map(show),
-            )
-        });
-    let mut summary = p.summary();
-    summary.interface = format!("replay of {}", mcap_path.display());
-    Ok(Playback {
-        frames_in,
-        fixes_in,
-        recorded_tx: recorded.len() as u64,
-        replayed_tx: replayed.len() as u64,
-        first_difference,
-        bad_records: bad,
-        summary,
-    })
+    Ok(r.finish(&mcap_path.display().to_string()))
+}
+
+/// Replay a `candump -l` log of the bus (made by can-utils' `candump`, or exported with
+/// `hil candump`) through the pipeline of config `cfg`: the frames nav sends (by the DBC's
+/// sender) are what nav sent, every other frame is what it received. A CAN log has no GPS fixes
+/// and no watchdog events: a drill replays bit for bit, a GPS-aided drive does not. Lines that
+/// are not frames of our bus (extended ids, remote, FD, error frames) are counted as unreadable
+/// records; a line not in the format is an error naming its number.
+pub fn replay_candump(log: &Path, cfg: &NavConfig) -> Result<Playback> {
+    use std::io::BufRead;
+    let file = std::fs::File::open(log).with_context(|| format!("opening {}", log.display()))?;
+    let nav_sends: Vec<u16> = wire::ALL_MESSAGES
+        .iter()
+        .filter(|m| m.sender == "NAV")
+        .map(|m| m.id)
+        .collect();
+    let mut r = Replayer::new(cfg)?;
+    let mut skipped: std::collections::BTreeMap<&str, u64> = Default::default();
+    for (i, line) in std::io::BufReader::new(file).lines().enumerate() {
+        let line = line.with_context(|| format!("reading {} line {}", log.display(), i + 1))?;
+        let entry = wire::candump::parse_line(&line, i + 1)
+            .with_context(|| format!("{} is not a candump -l log", log.display()))?;
+        match entry {
+            None => {}
+            Some(wire::candump::LogEntry::Frame { frame, .. }) if nav_sends.contains(&frame.id) => {
+                r.feed(Input::Sent(frame))
+            }
+            Some(wire::candump::LogEntry::Frame { frame, .. }) => r.feed(Input::Frame(frame)),
+            Some(wire::candump::LogEntry::Other { kind, .. }) => {
+                *skipped.entry(kind).or_default() += 1;
+                r.feed(Input::Bad);
+            }
+        }
+    }
+    if !skipped.is_empty() {
+        tracing::warn!(
+            "{}: frames not of this bus, skipped: {skipped:?}",
+            log.display()
+        );
+    }
+    Ok(r.finish(&log.display().to_string()))
+}
+
+/// Write the frames of nav's recording `mcap` (received and sent, in the order nav met them)
+/// to `out` as a `candump -l` log of interface `iface`, time-stamped with nav's receive and send
+/// times. Returns the lines written.
+pub fn export_candump(mcap_path: &Path, iface: &str, out: &mut impl std::io::Write) -> Result<u64> {
+    let buf =
+        std::fs::read(mcap_path).with_context(|| format!("reading {}", mcap_path.display()))?;
+    let stream = mcap::MessageStream::new(&buf)
+        .with_context(|| format!("{} is not an MCAP file", mcap_path.display()))?;
+    let mut n = 0u64;
+    for m in stream {
+        let m = match m {
+            Ok(m) => m,
+            Err(e) => {
+                tracing::warn!("{}: {e}; exporting what came before", mcap_path.display());
+                break;
+            }
+        };
+        if !matches!(m.channel.topic.as_str(), "/can/raw" | "/can/tx")
+            || m.channel.message_encoding != RAW_FRAME_ENCODING
+        {
+            continue;
+        }
+        let Some(f) = nav::record::decode_frame(&m.data) else {
+            continue;
+        };
+        writeln!(
+            out,
+            "{}",
+            wire::candump::format_line(m.log_time / 1000, iface, &f)
+        )?;
+        n += 1;
+    }
+    Ok(n)
 }
 
 /// The replay for people.
@@ -157,4 +282,55 @@ pub fn text(r: &Playback) -> String {
     );
     s += &r.summary.text();
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nav::record::{Record, Recorder};
+
+    fn frame(id: u16, b: u8) -> RawFrame {
+        RawFrame {
+            id,
+            len: 2,
+            data: [b, 0xA5, 0, 0, 0, 0, 0, 0],
+        }
+    }
+
+    /// A recording's frames, received and sent, come out as `candump -l` lines in the order
+    /// nav met them, stamped with nav's times to the microsecond; the log parses back to them.
+    #[test]
+    fn a_recording_exports_as_a_candump_log_in_the_order_nav_met_its_frames() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("r.mcap");
+        let rec = Recorder::start(&p).unwrap();
+        let frames = [
+            (1_795_435_864_120_951_789, frame(0x080, 1), false),
+            (1_795_435_864_121_000_000, frame(0x200, 2), true),
+            (1_795_435_865_000_001_999, frame(0x081, 3), false),
+        ];
+        for (t_ns, frame, sent) in frames {
+            rec.send(if sent {
+                Record::Sent { t_ns, frame }
+            } else {
+                Record::Frame { t_ns, frame }
+            });
+        }
+        rec.finish().unwrap();
+        let mut out = Vec::new();
+        assert_eq!(export_candump(&p, "vcan0", &mut out).unwrap(), 3);
+        let text = String::from_utf8(out).unwrap();
+        assert_eq!(
+            text,
+            "(1795435864.120951) vcan0 080#01A5\n(1795435864.121000) vcan0 200#02A5\n(1795435865.000001) vcan0 081#03A5\n"
+        );
+        for (i, l) in text.lines().enumerate() {
+            match wire::candump::parse_line(l, i + 1) {
+                Ok(Some(wire::candump::LogEntry::Frame { frame, .. })) => {
+                    assert_eq!(frame, frames[i].1)
+                }
+                r => panic!("{r:?}"),
+            }
+        }
+    }
 }

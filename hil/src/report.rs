@@ -490,8 +490,9 @@ fn memory_line(m: &crate::run::NavMemory) -> String {
         m.warm_s,
         m.end_kib,
         m.peak_kib,
-        m.growth_kib_per_hour
-            .map_or(String::new(), |g| format!(", trend {g:+.0} KiB per simulated hour"))
+        m.growth_kib_per_hour.map_or(String::new(), |g| format!(
+            ", trend {g:+.0} KiB per simulated hour"
+        ))
     )
 }
 

@@ -438,6 +438,13 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
             script.push_str(&format!("export {k}={}\n", sh_quote(&v)));
         }
     }
+    if std::env::var_os("NO_COLOR").is_none()
+        && !std::io::IsTerminal::is_terminal(&std::io::stderr())
+    {
+        // the guest's console is a terminal, the host's log is not (a file, a pipe, CI): no
+        // colour codes in it
+        script.push_str("export NO_COLOR=1\n");
+    }
     for (k, v) in &opts.env {
         script.push_str(&format!("export {k}={}\n", sh_quote(v)));
     }

@@ -166,6 +166,8 @@ pub struct MessageSpec {
     pub signals: &'static [&'static SignalSpec],
     /// Nominal frames per second on the bus (cycle rate times instances, or the event budget).
     pub frames_per_second: f64,
+    /// The node that sends it (the DBC's transmitter: `IMU`, `TT` or `NAV`).
+    pub sender: &'static str,
 }
 
 /// A classic CAN data frame with an 11-bit identifier, independent of any I/O library.

@@ -9,6 +9,7 @@
 //! feature converts it to and from `socketcan::CanFrame`.
 
 pub mod busload;
+pub mod candump;
 mod codec;
 mod messages;
 #[cfg(feature = "socketcan")]

@@ -32,6 +32,12 @@ fn every_codec_layout_agrees_with_the_dbc() {
         assert_eq!(m.name, spec.name, "name of 0x{:03X}", spec.id);
         assert_eq!(m.size, u64::from(spec.dlc), "DLC of {}", spec.name);
         assert_eq!(
+            format!("{:?}", m.transmitter),
+            format!("NodeName({:?})", spec.sender),
+            "sender of {}",
+            spec.name
+        );
+        assert_eq!(
             m.signals.len(),
             spec.signals.len(),
             "signal count of {}",

@@ -16,6 +16,7 @@ pub mod imu_gyro {
         dlc: 8,
         signals: &[&GYRO_X, &GYRO_Y, &GYRO_Z, &SAMPLE_COUNTER],
         frames_per_second: IMU_RATE_HZ,
+        sender: "IMU",
     };
 }
 
@@ -46,6 +47,7 @@ pub mod imu_accel {
             &PPS_OFFSET,
         ],
         frames_per_second: IMU_RATE_HZ,
+        sender: "IMU",
     };
 }
 
@@ -87,6 +89,7 @@ pub mod imu_hk {
             &BITS[8],
         ],
         frames_per_second: 10.0,
+        sender: "IMU",
     };
 }
 

@@ -34,6 +34,7 @@ pub mod nav_time {
             &HEALTH[5],
         ],
         frames_per_second: 50.0,
+        sender: "NAV",
     };
 }
 
@@ -51,6 +52,7 @@ pub mod nav_att {
         dlc: 8,
         signals: &[&SEQ, &HEADING, &PITCH, &ROLL],
         frames_per_second: 50.0,
+        sender: "NAV",
     };
 }
 
@@ -68,6 +70,7 @@ pub mod nav_vel {
         dlc: 8,
         signals: &[&SEQ, &EAST, &NORTH, &UP],
         frames_per_second: 50.0,
+        sender: "NAV",
     };
 }
 
@@ -83,6 +86,7 @@ pub mod nav_pos {
         dlc: 8,
         signals: &[&LAT, &LON],
         frames_per_second: 50.0,
+        sender: "NAV",
     };
 }
 
@@ -100,6 +104,7 @@ pub mod nav_hgt {
         dlc: 8,
         signals: &[&SEQ, &HEIGHT, &POS_SIGMA, &HEADING_SIGMA],
         frames_per_second: 50.0,
+        sender: "NAV",
     };
 }
 

@@ -16,6 +16,7 @@ pub mod tt_cmd {
         dlc: 8,
         signals: &[&SEQ, &COMMAND, &AXIS, &ARG],
         frames_per_second: 20.0,
+        sender: "NAV",
     };
 }
 
@@ -33,6 +34,7 @@ pub mod tt_ack {
         dlc: 4,
         signals: &[&SEQ, &COMMAND, &AXIS, &RESULT],
         frames_per_second: 20.0,
+        sender: "TT",
     };
 }
 
@@ -65,6 +67,7 @@ pub mod tt_status {
             &FAULTS[4], &FAULTS[5], &FAULTS[6], &ACK_SEQ, &COUNTER,
         ],
         frames_per_second: 300.0,
+        sender: "TT",
     };
 }
 
