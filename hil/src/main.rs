@@ -411,6 +411,11 @@ struct RunArgs {
     /// The nav binary (default: next to hil).
     #[arg(long)]
     nav: Option<PathBuf>,
+    /// Skip the checks that re-run the scenario in process and read nav's recording back (the
+    /// reference run, the replay, the navigation scoring): for soaks, whose recording is too
+    /// large to read back in the guest. Frame accounting, nav's exit and memory stay.
+    #[arg(long)]
+    no_reference: bool,
     #[command(flatten)]
     bus: BusArgs,
 }

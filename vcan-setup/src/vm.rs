@@ -21,7 +21,16 @@ const MODULES: &[&str] = &[
 ];
 
 /// Debian packages the guest needs.
-pub const APT_PACKAGES: &[&str] = &["qemu-system-x86", "linux-image-amd64", "busybox-static"];
+pub const APT_PACKAGES: &[&str] = &[
+    "qemu-system-x86",
+    "linux-image-amd64",
+    "busybox-static",
+    "can-utils",
+];
+
+/// can-utils programs the guest carries (at their host paths), so that tests and people can
+/// watch and play the bus with the field's own tools.
+pub const CAN_UTILS: &[&str] = &["candump", "canplayer", "cansend", "cangen"];
 
 /// Environment variables passed from the host into the guest when set.
 const PASS_ENV: &[&str] = &["RUST_LOG", "RUST_BACKTRACE", "NO_COLOR", "TERM"];
@@ -76,6 +85,8 @@ pub struct VmPrereqs {
     pub kernel_version: String,
     /// Busybox binary.
     pub busybox: PathBuf,
+    /// The can-utils programs ([`CAN_UTILS`]).
+    pub can_utils: Vec<PathBuf>,
 }
 
 fn which(name: &str) -> Option<PathBuf> {
@@ -140,6 +151,15 @@ pub fn prereqs() -> Result<VmPrereqs> {
             .into(),
         hint: hint(),
     })?;
+    let can_utils = CAN_UTILS
+        .iter()
+        .map(|t| {
+            which(t).ok_or_else(|| Error::MissingPrereq {
+                what: format!("{t} (can-utils)"),
+                hint: hint(),
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
     let kernel = PathBuf::from(format!("/boot/vmlinuz-{kernel_version}"));
     if let Err(e) = std::fs::File::open(&kernel) {
         return Err(Error::MissingPrereq {
@@ -152,6 +172,7 @@ pub fn prereqs() -> Result<VmPrereqs> {
         kernel,
         kernel_version,
         busybox,
+        can_utils,
     })
 }
 
@@ -334,8 +355,20 @@ fn build_initramfs(
     a.file("bin/busybox", 0o755, &read(&pre.busybox)?);
     // glibc and friends, so ordinary dynamically linked binaries run unchanged
     let mut libs: BTreeSet<PathBuf> = BTreeSet::new();
-    for e in execs.iter().chain(std::iter::once(&pre.busybox)) {
+    for e in execs
+        .iter()
+        .chain(std::iter::once(&pre.busybox))
+        .chain(&pre.can_utils)
+    {
         libs.extend(shared_libs(e));
+    }
+    for t in &pre.can_utils {
+        // at its host path (PATH in the guest has /usr/bin and /bin)
+        a.file(
+            t.to_string_lossy().trim_start_matches('/'),
+            0o755,
+            &read(t)?,
+        );
     }
     for l in &libs {
         let data = read(l)?; // follows symlinks

@@ -49,6 +49,7 @@ pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> 
         duration: None,
         speed: None,
         nav: None,
+        no_reference: false,
         bus: BusArgs::to(out.join("drive")),
     })?;
     let verdict = |c: i32| if c == 0 { "PASS" } else { "FAIL" };

@@ -66,6 +66,7 @@ pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
         duration: None,
         speed: None,
         nav: None,
+        no_reference: false,
         bus: BusArgs {
             out: Some(out),
             ..a.bus

@@ -26,7 +26,7 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
         };
         let opts = RunOptions {
             progress: true,
-            reference_checks: true,
+            reference_checks: !a.no_reference,
             ..RunOptions::new(&a.bus.iface, out.clone(), nav_bin)
         };
         let backend = if in_guest { "vm" } else { "native" };
@@ -66,6 +66,9 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
     args.extend(["--nav".into(), nav.to_string_lossy().into_owned()]);
     if a.bus.json {
         args.push("--json".into());
+    }
+    if a.no_reference {
+        args.push("--no-reference".into());
     }
     run_in_guest(
         args,
