@@ -196,7 +196,8 @@ pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
 /// Replay a `candump -l` log of the bus (made by can-utils' `candump`, or exported with
 /// `hil candump`) through the pipeline of config `cfg`: the frames nav sends (by the DBC's
 /// sender) are what nav sent, every other frame is what it received. A CAN log has no GPS fixes
-/// and no watchdog events: a drill replays bit for bit, a GPS-aided drive does not. Lines that
+/// (a drill replays bit for bit, a GPS-aided drive does not) and no watchdog events: they are
+/// read from nav's NAV_TIME frames (the imu_timeout bit). Lines that
 /// are not frames of our bus (extended ids, remote, FD, error frames) are counted as unreadable
 /// records; a line not in the format is an error naming its number.
 pub fn replay_candump(log: &Path, cfg: &NavConfig) -> Result<Playback> {
@@ -209,21 +210,48 @@ pub fn replay_candump(log: &Path, cfg: &NavConfig) -> Result<Playback> {
         .collect();
     let mut r = Replayer::new(cfg)?;
     let mut skipped: std::collections::BTreeMap<&str, u64> = Default::default();
+    // (nav sent it, frame), in log order
+    let mut frames: Vec<(bool, RawFrame)> = Vec::new();
     for (i, line) in std::io::BufReader::new(file).lines().enumerate() {
         let line = line.with_context(|| format!("reading {} line {}", log.display(), i + 1))?;
         let entry = wire::candump::parse_line(&line, i + 1)
             .with_context(|| format!("{} is not a candump -l log", log.display()))?;
         match entry {
             None => {}
-            Some(wire::candump::LogEntry::Frame { frame, .. }) if nav_sends.contains(&frame.id) => {
-                r.feed(Input::Sent(frame))
+            Some(wire::candump::LogEntry::Frame { frame, .. }) => {
+                frames.push((nav_sends.contains(&frame.id), frame))
             }
-            Some(wire::candump::LogEntry::Frame { frame, .. }) => r.feed(Input::Frame(frame)),
             Some(wire::candump::LogEntry::Other { kind, .. }) => {
                 *skipped.entry(kind).or_default() += 1;
                 r.feed(Input::Bad);
             }
         }
+    }
+    // the watchdog's changes are not in a CAN log: nav's own NAV_TIME frames tell them. nav sends
+    // an epoch with the imu_timeout bit when its watchdog fires (the replay's fires where that
+    // epoch is in the log, after the frames nav had read), and clears the bit once data is back
+    // (after the whole batch it read: the replay's clears before the frame that makes the first
+    // epoch nav sent without the bit)
+    let nav_time = |f: &RawFrame| match wire::Message::decode(f) {
+        Ok(wire::Message::NavTime(t)) => Some(t.health.imu_timeout),
+        _ => None,
+    };
+    let sent: Vec<RawFrame> = frames.iter().filter(|f| f.0).map(|f| f.1).collect();
+    let mut timed_out = false;
+    for (by_nav, f) in frames {
+        if by_nav {
+            if nav_time(&f) == Some(true) && !timed_out {
+                timed_out = true;
+                r.feed(Input::Timeout(true, 0));
+            }
+            r.feed(Input::Sent(f));
+            continue;
+        }
+        if timed_out && sent.get(r.replayed.len()).and_then(nav_time) == Some(false) {
+            timed_out = false;
+            r.feed(Input::Timeout(false, 0));
+        }
+        r.feed(Input::Frame(f));
     }
     if !skipped.is_empty() {
         tracing::warn!(
