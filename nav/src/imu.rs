@@ -58,7 +58,8 @@ impl ImuCalibration {
     }
 }
 
-/// One IMU sample (or the span of samples since the previous one, after a gap).
+/// One IMU sample (or the span of samples since the previous one, after a gap). Recorded as JSON
+/// on `/imu/sample`, its flags and PPS offset only when present.
 #[derive(Debug, Clone, Copy, Serialize, PartialEq)]
 pub struct ImuSample {
     /// Extended (64-bit) sample number; the navigation clock.
@@ -70,15 +71,25 @@ pub struct ImuSample {
     /// Velocity increments x, y, z, m/s.
     pub dv: [f64; 3],
     /// PPS edge: time from the edge to the end of this sample, in samples.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub pps_offset: Option<f64>,
     /// The accelerometer frame of this sample was lost (its dv arrives with the next one).
+    #[serde(skip_serializing_if = "is_false")]
     pub accel_missing: bool,
     /// The span was too long to difference the counters unambiguously: increments unreliable.
+    #[serde(skip_serializing_if = "is_false")]
     pub ambiguous: bool,
     /// Built-in test failure reported.
+    #[serde(skip_serializing_if = "is_false")]
     pub bit_fail: bool,
     /// A channel saturated.
+    #[serde(skip_serializing_if = "is_false")]
     pub saturated: bool,
+}
+
+/// Flags are recorded only when set (most samples have none).
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 /// Something irregular in the IMU stream.

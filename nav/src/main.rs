@@ -192,6 +192,9 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                     warn!(interface = iface, "read error: {e}");
                 }
                 take_frames(&mut batch, &mut pipeline, &mut shell, &mut out).await?;
+                if let Some(r) = shell.recorder {
+                    r.ship();
+                }
                 if pipeline.gyro_frames() > gyro_frames {
                     gyro_frames = pipeline.gyro_frames();
                     last_imu = Instant::now();
@@ -282,14 +285,13 @@ async fn take_frames(
     shell: &mut Shell<'_>,
     out: &mut Vec<Output>,
 ) -> Result<()> {
+    // one receive time for the batch: its frames came out of the socket in one system call
+    let t_ns = wall_ns();
     for conv in batch.drain(..) {
         match conv {
             Ok(raw) => {
                 if let Some(r) = shell.recorder {
-                    r.send(Record::Frame {
-                        t_ns: wall_ns(),
-                        frame: raw,
-                    });
+                    r.send(Record::Frame { t_ns, frame: raw });
                 }
                 pipeline.on_frame(&raw, out);
             }

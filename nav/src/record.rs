@@ -150,9 +150,12 @@ pub enum RecordError {
     Thread(PathBuf),
 }
 
-/// Handle to the recorder thread.
+/// Handle to the recorder thread. Records queue up on the caller's side and go to the writer
+/// thread in batches ([`Recorder::ship`]): one hand-over (and at most one wake-up of the
+/// writer) per batch of received frames rather than per record.
 pub struct Recorder {
-    tx: Option<mpsc::Sender<Record>>,
+    tx: Option<mpsc::Sender<Vec<Record>>>,
+    pending: std::sync::Mutex<Vec<Record>>,
     handle: Option<JoinHandle<Result<u64, RecordError>>>,
     path: PathBuf,
 }
@@ -197,7 +200,7 @@ impl Recorder {
                     .map_err(mcap_err.clone())?,
             );
         }
-        let (tx, rx) = mpsc::channel::<Record>();
+        let (tx, rx) = mpsc::channel::<Vec<Record>>();
         let handle = std::thread::Builder::new()
             .name("mcap-writer".into())
             .spawn(move || -> Result<u64, RecordError> {
@@ -207,13 +210,13 @@ impl Recorder {
                 let mut text: String;
                 let mut last_flush = Instant::now();
                 loop {
-                    let r = match rx.recv_timeout(FLUSH_EVERY.saturating_sub(last_flush.elapsed()))
-                    {
-                        Ok(r) => Some(r),
-                        Err(mpsc::RecvTimeoutError::Timeout) => None,
-                        Err(mpsc::RecvTimeoutError::Disconnected) => break,
-                    };
-                    if let Some(r) = r {
+                    let batch =
+                        match rx.recv_timeout(FLUSH_EVERY.saturating_sub(last_flush.elapsed())) {
+                            Ok(b) => b,
+                            Err(mpsc::RecvTimeoutError::Timeout) => Vec::new(),
+                            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+                        };
+                    for r in batch {
                         let (ch, log, publish, data): (u16, u64, u64, &[u8]) = match &r {
                             Record::Frame { t_ns, frame } | Record::Sent { t_ns, frame } => {
                                 buf = encode_frame(frame);
@@ -271,20 +274,37 @@ impl Recorder {
             })?;
         Ok(Self {
             tx: Some(tx),
+            pending: std::sync::Mutex::new(Vec::with_capacity(SHIP_EVERY)),
             handle: Some(handle),
             path: path.into(),
         })
     }
 
-    /// Queue a record (never blocks the caller).
+    /// Queue a record (never blocks the caller); it goes to the writer with the next
+    /// [`Recorder::ship`], or when [`SHIP_EVERY`] records are waiting.
     pub fn send(&self, r: Record) {
-        if let Some(tx) = &self.tx {
-            let _ = tx.send(r);
+        let full = {
+            let mut p = self.pending.lock().unwrap_or_else(|e| e.into_inner());
+            p.push(r);
+            p.len() >= SHIP_EVERY
+        };
+        if full {
+            self.ship();
+        }
+    }
+
+    /// Hand the queued records to the writer thread (the caller does this once per batch of
+    /// work; never blocks).
+    pub fn ship(&self) {
+        let batch = std::mem::take(&mut *self.pending.lock().unwrap_or_else(|e| e.into_inner()));
+        if let (false, Some(tx)) = (batch.is_empty(), &self.tx) {
+            let _ = tx.send(batch);
         }
     }
 
     /// Close the file (writes the MCAP summary and footer); returns the message count.
     pub fn finish(mut self) -> Result<u64, RecordError> {
+        self.ship();
         self.tx.take();
         match self.handle.take().map(|h| h.join()) {
             Some(Ok(r)) => r,
@@ -293,6 +313,10 @@ impl Recorder {
         }
     }
 }
+
+/// Records queued on the caller's side before they go to the writer without waiting for
+/// [`Recorder::ship`].
+pub const SHIP_EVERY: usize = 1024;
 
 /// How often the writer closes its chunk and writes it out (wall time): what a nav killed
 /// outright (SIGKILL, power loss) loses from its recording.
