@@ -365,6 +365,10 @@ pub fn run(
                 ls.waits += 1;
                 Instant::now()
             });
+            if stop.load(Ordering::Relaxed) {
+                // told to stop (nav killed, a drill over, a signal): no more waiting for nav
+                break;
+            }
             if since.elapsed() > l.stall {
                 ls.stalls += 1;
                 follow = None;

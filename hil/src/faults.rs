@@ -916,7 +916,11 @@ pub fn run_matrix(o: &FaultOptions, backend: &str) -> Result<FaultMatrix> {
         let mut s = base_scenario(c.base, c.name)?;
         s.speed = o.speed;
         let dir = o.out.join(c.name);
-        let mut opts = RunOptions::new(&o.iface, dir.clone(), o.nav_bin.clone());
+        let mut opts = RunOptions {
+            // the matrix's own table (faults.md) is the report of its runs
+            html: false,
+            ..RunOptions::new(&o.iface, dir.clone(), o.nav_bin.clone())
+        };
         (c.inject)(&mut s, &mut opts);
         s.check()
             .with_context(|| format!("the scenario of fault {}", c.name))?;
@@ -948,11 +952,12 @@ pub fn run_matrix(o: &FaultOptions, backend: &str) -> Result<FaultMatrix> {
         };
         if o.progress {
             eprintln!(
-                "hil faults: {}/{} {} {}: {}",
+                "hil faults: {}/{} {} {} ({:.1} s): {}",
                 i + 1,
                 cases.len(),
                 if row.verdict.pass { "PASS" } else { "FAIL" },
                 row.fault,
+                t0.elapsed().as_secs_f64(),
                 row.verdict.observed
             );
         }

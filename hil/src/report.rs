@@ -493,7 +493,9 @@ fn memory_line(m: &crate::run::NavMemory) -> String {
         m.growth_kib_per_hour.map_or(String::new(), |g| format!(
             ", trend {g:+.0} KiB per simulated hour"
         ))
-    )
+    ) + &m
+        .cpu_s
+        .map_or(String::new(), |c| format!("; CPU time {c:.1} s"))
 }
 
 /// Markdown version of the report.
