@@ -6,6 +6,7 @@ pub mod drill;
 pub mod experiment;
 pub mod faults;
 pub mod fuzz;
+pub mod html;
 pub mod inproc;
 pub mod montecarlo;
 pub mod navexp;

@@ -43,6 +43,12 @@ pub struct NavScore {
     pub velocity_error_mps: f64,
     /// Heading error, deg.
     pub heading_error_deg: f64,
+    /// nav's own horizontal position sigma at that output (from its recording), m.
+    #[serde(default)]
+    pub position_sigma_m: Option<f64>,
+    /// nav's own heading sigma at that output, deg.
+    #[serde(default)]
+    pub heading_sigma_deg: Option<f64>,
 }
 
 /// Score the navigation output in a nav summary against the drive (none when nav did not
@@ -98,6 +104,8 @@ pub fn score_output(drive: &Drive, t: f64, o: &NavOutput) -> NavScore {
         position_error_m: p,
         velocity_error_mps: Vector3::from(dv).norm(),
         heading_error_deg: dh,
+        position_sigma_m: None,
+        heading_sigma_deg: None,
     }
 }
 
@@ -127,7 +135,15 @@ pub fn score_recording(
             Some((j["t_s"].as_f64()?, o))
         });
         match parsed {
-            Some((t, o)) => out.push(score_output(drive, t + t_first, &o)),
+            Some((t, o)) => {
+                // the sigmas nav sent with the solution (zero: not yet known)
+                let sigma = |k: &str| j.as_ref().and_then(|j| j[k].as_f64()).filter(|v| *v > 0.0);
+                out.push(NavScore {
+                    position_sigma_m: sigma("pos_sigma_m"),
+                    heading_sigma_deg: sigma("heading_sigma_deg"),
+                    ..score_output(drive, t + t_first, &o)
+                })
+            }
             None => bad += 1,
         }
     }

@@ -15,7 +15,8 @@ pub struct Series {
     pub markers: bool,
 }
 
-/// A chart with a linear x axis and a logarithmic y axis.
+/// A line chart with a linear x axis and a logarithmic ([`LogChart::svg`]) or linear
+/// ([`LogChart::svg_linear`]) y axis.
 pub struct LogChart {
     /// Title.
     pub title: String,
@@ -35,29 +36,63 @@ const T: f64 = 50.0;
 const B: f64 = 60.0;
 
 impl LogChart {
-    /// Render as SVG text.
+    /// Render as SVG text, the y axis logarithmic (points with y <= 0 are left out).
     pub fn svg(&self) -> String {
-        let pts = || {
-            self.series
-                .iter()
-                .flat_map(|s| s.points.iter())
-                .filter(|(_, y)| y.is_finite() && *y > 0.0)
-        };
+        self.render(true)
+    }
+
+    /// Render as SVG text, the y axis linear (from zero when every y is positive).
+    pub fn svg_linear(&self) -> String {
+        self.render(false)
+    }
+
+    fn render(&self, log: bool) -> String {
+        let fy = |y: f64| if log { y.log10() } else { y };
+        let usable = |y: f64| y.is_finite() && (!log || y > 0.0);
         let (mut x0, mut x1) = (f64::INFINITY, f64::NEG_INFINITY);
         let (mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY);
-        for &(x, y) in pts() {
-            x0 = x0.min(x);
-            x1 = x1.max(x);
-            y0 = y0.min(y.log10());
-            y1 = y1.max(y.log10());
+        for &(x, y) in self.series.iter().flat_map(|s| s.points.iter()) {
+            if usable(y) && x.is_finite() {
+                x0 = x0.min(x);
+                x1 = x1.max(x);
+                y0 = y0.min(fy(y));
+                y1 = y1.max(fy(y));
+            }
         }
         if !x0.is_finite() {
             (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
         }
-        let (y0, y1) = (y0.floor(), y1.ceil().max(y0.floor() + 1.0));
+        // log: whole decades; linear: from zero (or the lowest value below it), 5 even steps
+        let (y0, y1, ticks): (f64, f64, Vec<(f64, String)>) = if log {
+            let (a, b) = (y0.floor(), y1.ceil().max(y0.floor() + 1.0));
+            let n = (b - a).round() as i32;
+            (
+                a,
+                b,
+                (0..=n)
+                    .map(|i| (a + f64::from(i), format!("1e{}", a as i32 + i)))
+                    .collect(),
+            )
+        } else {
+            let a = y0.min(0.0);
+            let step = nice_step((y1 - a).max(1e-12) / 5.0);
+            let (a, b) = (
+                (a / step).floor() * step,
+                (y1 / step).ceil().max(1.0) * step,
+            );
+            let n = ((b - a) / step).round() as i32;
+            let digits = (-step.log10().floor()).max(0.0) as usize;
+            let ticks = (0..=n)
+                .map(|i| {
+                    let v = a + step * f64::from(i);
+                    (v, format!("{v:.digits$}"))
+                })
+                .collect();
+            (a, b, ticks)
+        };
         let x1 = if x1 > x0 { x1 } else { x0 + 1.0 };
         let px = |x: f64| L + (x - x0) / (x1 - x0) * (W - L - R);
-        let py = |y: f64| T + (y1 - y.log10()) / (y1 - y0) * (H - T - B);
+        let py = |y: f64| T + (y1 - fy(y)) / (y1 - y0) * (H - T - B);
         let mut s = String::new();
         let _ = writeln!(
             s,
@@ -70,21 +105,24 @@ impl LogChart {
             (L + W - R) / 2.0,
             esc(&self.title)
         );
-        // grid: decades
-        let mut d = y0;
-        while d <= y1 + 1e-9 {
-            let y = py(10f64.powf(d));
+        // grid: decades or even steps
+        for (v, label) in &ticks {
+            let y = T + (y1 - v) / (y1 - y0) * (H - T - B);
             let _ = writeln!(
                 s,
-                r##"<line x1="{L}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end">1e{d}</text>"##,
+                r##"<line x1="{L}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"##,
                 W - R,
                 L - 6.0,
-                y + 4.0
+                y + 4.0,
+                esc(label)
             );
-            d += 1.0;
         }
-        for i in 0..=5 {
-            let x = x0 + (x1 - x0) * f64::from(i) / 5.0;
+        // x ticks at round steps inside the range
+        let xs = nice_step((x1 - x0) / 5.0);
+        let first = (x0 / xs).ceil() as i64;
+        let last = (x1 / xs + 1e-9).floor() as i64;
+        for i in first..=last.min(first + 20) {
+            let x = i as f64 * xs;
             let _ = writeln!(
                 s,
                 r##"<line x1="{:.1}" y1="{T}" x2="{:.1}" y2="{:.1}" stroke="#eee"/><text x="{:.1}" y="{:.1}" text-anchor="middle">{x:.0}</text>"##,
@@ -119,7 +157,7 @@ impl LogChart {
             let good: Vec<(f64, f64)> = ser
                 .points
                 .iter()
-                .filter(|(_, y)| y.is_finite() && *y > 0.0)
+                .filter(|(x, y)| x.is_finite() && usable(*y))
                 .map(|&(x, y)| (px(x), py(y)))
                 .collect();
             if ser.markers {
@@ -170,6 +208,16 @@ impl LogChart {
     }
 }
 
+/// A round step (1, 2 or 5 times a power of ten) at least `raw`.
+fn nice_step(raw: f64) -> f64 {
+    let p = 10f64.powf(raw.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * p)
+        .find(|s| *s >= raw * (1.0 - 1e-9))
+        .unwrap_or(10.0 * p)
+}
+
 fn esc(t: &str) -> String {
     t.replace('&', "&amp;")
         .replace('<', "&lt;")
@@ -206,5 +254,20 @@ mod tests {
         assert!(s.contains("a &lt; b") && s.contains("one") && s.contains("two"));
         assert_eq!(s.matches("<polyline").count(), 1);
         assert!(!s.contains("NaN"));
+        // linear: negative values kept, ticks at round steps through zero
+        let mut c = c;
+        c.series[1].points = vec![(1.0, -2.5), (3.0, 7.0)];
+        let s = c.svg_linear();
+        assert!(
+            !s.contains("NaN") && s.contains(">0<") && s.contains(">-4<"),
+            "{s}"
+        );
+        assert_eq!(s.matches("<polyline").count(), 1);
+        assert_eq!(nice_step(0.13), 0.2);
+        c.series[1].points = vec![(1.0, 0.0), (3.0, 0.95)];
+        let s = c.svg_linear();
+        assert!(s.contains(">0.6<") && !s.contains("0000"), "{s}");
+        assert_eq!(nice_step(3.0), 5.0);
+        assert_eq!(nice_step(1.0), 1.0);
     }
 }

@@ -31,6 +31,8 @@ pub struct RunOptions {
     /// recording through the pipeline and score navigation from it (off for benchmarks, which
     /// want the pace only).
     pub reference_checks: bool,
+    /// Write `report.html` (plots read from nav's recording) beside `report.md`.
+    pub html: bool,
     /// Take the interface down during the run: [simulated time s, wall time down ms] (the
     /// fault matrix's "CAN interface down and up").
     pub link_downs: Vec<[f64; 2]>,
@@ -162,6 +164,7 @@ impl RunOptions {
             nav_bin,
             progress: false,
             reference_checks: false,
+            html: true,
             link_downs: Vec::new(),
             kill_nav_at_s: None,
             nav_account: nav_account(),
@@ -200,6 +203,10 @@ pub struct NavMemory {
     pub growth_kib_per_hour: Option<f64>,
     /// Readings: [simulated time s, resident set KiB].
     pub readings: Vec<[f64; 2]>,
+    /// CPU time nav had used (user and system) at the last reading, s: what a vehicle's
+    /// computer must spare for it at the run's pace.
+    #[serde(default)]
+    pub cpu_s: Option<f64>,
 }
 
 impl NavMemory {
@@ -228,6 +235,9 @@ impl NavMemory {
         }
         if let Some(hwm) = field("VmHWM:") {
             self.peak_kib = hwm;
+        }
+        if let Some(c) = cpu_seconds(&format!("/proc/{pid}/stat")) {
+            self.cpu_s = Some(c);
         }
     }
 
@@ -371,7 +381,9 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         crate::inproc::nav_config(s, Some(&opts.iface), gps.as_ref().map(|g| g.1.as_path()));
     std::fs::write(&cfg_path, nav_cfg.to_toml())?;
     info!(interface = %opts.iface, account = ?opts.nav_account, "starting nav");
+    let mut phases = Phases::starting_now();
     let nav = start_nav(&opts.nav_bin, &cfg_path, opts.nav_account)?;
+    phases.end("nav start");
 
     let watch_stop = Arc::new(AtomicBool::new(false));
     let watch = {
@@ -409,6 +421,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             // SAFETY: kill(2) on our own child's pid.
             unsafe { libc::kill(nav.child.id() as libc::pid_t, libc::SIGKILL) };
             killed_at = Some(t);
+            // nothing more can reach a dead nav: the devices stop rather than wait for it
+            devices.stop();
         }
         if let Some(i) = link_downs.iter().position(|d| devices.sim_time() >= d[0]) {
             let [at, ms] = link_downs.swap_remove(i);
@@ -446,6 +460,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
     }
     let wall = t0.elapsed().as_secs_f64();
+    phases.end("devices");
     let sim_reached = devices.sim_time();
     let bus = devices.join();
     // a moment for nav to take the last frames (it also drains its socket when told to stop)
@@ -461,6 +476,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
     };
     memory.finish();
+    phases.end("nav stop");
     let (nav_exit, nav_lines) = nav_out;
     nav_folder.finish()?;
     let (tx, tt_stats, lockstep_stats) = (bus.imu, bus.turntable, bus.lockstep);
@@ -506,12 +522,41 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
         Err(e) => return Err(e.into()),
     };
-    let reference = match s.turntable {
-        None if opts.reference_checks => {
-            Some(crate::replay::run_in_process(s).context("in-process reference run")?)
-        }
+    phases.end("summary");
+    // the checks that recompute things (the in-process reference run, the replay of nav's
+    // recording through its pipeline, the scoring of its recording against truth) are
+    // independent: they run side by side
+    let drive = match (&s.navigation, &s.drive) {
+        (Some(_), Some(d)) if opts.reference_checks => Some(Drive::plan(d)?),
         _ => None,
     };
+    let t_first = 1.0 / s.imu.rate_hz;
+    let mcap_path = opts.out.join("nav.mcap");
+    let (reference, replayed, scored) = std::thread::scope(|sc| {
+        let reference = sc.spawn(|| match s.turntable {
+            None if opts.reference_checks => {
+                Some(crate::replay::run_in_process(s).context("in-process reference run"))
+            }
+            _ => None,
+        });
+        let replayed = sc.spawn(|| {
+            opts.reference_checks
+                .then(|| crate::playback::replay(&mcap_path, &nav_cfg))
+        });
+        let scored = drive
+            .as_ref()
+            .map(|d| crate::navrun::score_recording(d, &mcap_path, t_first));
+        let join = |what: &str| anyhow::anyhow!("the {what} panicked");
+        Ok::<_, anyhow::Error>((
+            reference
+                .join()
+                .map_err(|_| join("in-process reference run"))?,
+            replayed.join().map_err(|_| join("replay check"))?,
+            scored,
+        ))
+    })?;
+    let reference = reference.transpose()?;
+    phases.end("reference, replay and scoring");
     let (mut checks, lost) = report::checks(
         s,
         &tx,
@@ -538,18 +583,15 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     report::solution_checks(&mut checks, &solution, &nav_json);
     // nav's binary is a shell around its pipeline: from its own recording, the pipeline in
     // process must send exactly what nav sent
-    if opts.reference_checks {
-        let replayed = crate::playback::replay(&opts.out.join("nav.mcap"), &nav_cfg);
+    if let Some(replayed) = replayed {
         checks.push(report::replay_check(replayed.as_ref()));
     }
     let mut navigation_series = None;
-    let navigation = match (&s.navigation, &s.drive) {
-        (Some(_), Some(d)) if opts.reference_checks => {
-            let drive = Drive::plan(d)?;
-            let t_first = 1.0 / s.imu.rate_hz;
+    let navigation = match (drive, scored) {
+        (Some(drive), Some(scored)) => {
             let o = crate::navrun::score_summary(&drive, &nav_json, t_first);
             // second by second from nav's recording: statistics, CSV and a plot
-            match crate::navrun::score_recording(&drive, &opts.out.join("nav.mcap"), t_first) {
+            match scored {
                 Ok((scores, bad)) if !scores.is_empty() => {
                     navigation_series = Some(crate::navrun::SeriesStats::of(&scores, bad));
                     write_navigation_series(&opts.out, &s.name, &scores)?;
@@ -562,6 +604,12 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
         _ => None,
     };
+    phases.end("checks");
+    info!(
+        "run phases: {phases} CPU: nav {:.1} s, bench {:.1} s",
+        memory.cpu_s.unwrap_or(f64::NAN),
+        cpu_seconds("/proc/self/stat").unwrap_or(f64::NAN)
+    );
     let pass = checks.iter().all(|c| c.pass);
     let r = RunReport {
         scenario: s.clone(),
@@ -592,6 +640,12 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         serde_json::to_string_pretty(&r)?,
     )?;
     std::fs::write(opts.out.join("report.md"), report::markdown(&r))?;
+    if opts.html {
+        std::fs::write(
+            opts.out.join("report.html"),
+            crate::html::run_report(&r, &opts.out),
+        )?;
+    }
     Ok(r)
 }
 
@@ -601,11 +655,19 @@ fn write_navigation_series(
     name: &str,
     scores: &[crate::navrun::NavScore],
 ) -> Result<()> {
-    let mut csv = String::from("t_s,position_error_m,velocity_error_mps,heading_error_deg\n");
+    let mut csv = String::from(
+        "t_s,position_error_m,velocity_error_mps,heading_error_deg,position_sigma_m,heading_sigma_deg\n",
+    );
+    let opt = |v: Option<f64>, p: usize| v.map_or(String::new(), |v| format!("{v:.p$}"));
     for x in scores {
         csv += &format!(
-            "{:.3},{:.3},{:.4},{:.5}\n",
-            x.t_s, x.position_error_m, x.velocity_error_mps, x.heading_error_deg
+            "{:.3},{:.3},{:.4},{:.5},{},{}\n",
+            x.t_s,
+            x.position_error_m,
+            x.velocity_error_mps,
+            x.heading_error_deg,
+            opt(x.position_sigma_m, 3),
+            opt(x.heading_sigma_deg, 5)
         );
     }
     std::fs::write(out.join("navigation.csv"), csv)?;
@@ -622,6 +684,54 @@ fn write_navigation_series(
     };
     std::fs::write(out.join("navigation-error.svg"), chart.svg())?;
     Ok(())
+}
+
+/// User and system CPU time of the process whose `/proc/PID/stat` is `path`, s.
+pub fn cpu_seconds(path: &str) -> Option<f64> {
+    let text = std::fs::read_to_string(path).ok()?;
+    // the command name (field 2) may hold spaces: count fields after its closing parenthesis
+    let rest = &text[text.rfind(')')? + 1..];
+    let mut f = rest.split_whitespace().skip(11);
+    let user: u64 = f.next()?.parse().ok()?;
+    let system: u64 = f.next()?.parse().ok()?;
+    // SAFETY: sysconf has no preconditions.
+    let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
+    (tick > 0).then(|| (user + system) as f64 / tick as f64)
+}
+
+/// Where a run's wall time went, phase by phase (logged at the end of every run: the e2e tests
+/// have a time budget).
+struct Phases {
+    since: Instant,
+    done: Vec<(&'static str, f64)>,
+}
+
+impl Phases {
+    /// The first phase begins now.
+    fn starting_now() -> Self {
+        Self {
+            since: Instant::now(),
+            done: Vec::new(),
+        }
+    }
+
+    /// The phase `name` ends now (it began when the previous one ended).
+    fn end(&mut self, name: &'static str) {
+        let now = Instant::now();
+        self.done.push((name, (now - self.since).as_secs_f64()));
+        self.since = now;
+    }
+}
+
+impl std::fmt::Display for Phases {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let total: f64 = self.done.iter().map(|p| p.1).sum();
+        write!(f, "{total:.1} s:")?;
+        for (n, s) in self.done.iter().filter(|p| p.1 >= 0.05) {
+            write!(f, " {n} {s:.1} s,")?;
+        }
+        Ok(())
+    }
 }
 
 /// Removes a file when dropped.

@@ -27,3 +27,23 @@ pub fn mcap_topic_counts(path: &Path) -> anyhow::Result<BTreeMap<String, u64>> {
     }
     Ok(counts)
 }
+
+/// Where the end-to-end tests leave the HTML reports of their runs (`target/e2e-reports/`,
+/// beside the profile folders): `./run-tests` then opens each in a headless browser on the
+/// host (`tests/tests/browser.rs`).
+pub fn reports_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    // target/<profile>/deps/<test> -> target/e2e-reports
+    exe.ancestors()
+        .nth(3)
+        .expect("target folder")
+        .join("e2e-reports")
+}
+
+/// Keep the HTML report of the run in `run_dir` as `reports_dir()/name/report.html`.
+pub fn keep_report(run_dir: &Path, name: &str) {
+    let to = reports_dir().join(name);
+    std::fs::create_dir_all(&to).expect("creating the reports folder");
+    std::fs::copy(run_dir.join("report.html"), to.join("report.html"))
+        .unwrap_or_else(|e| panic!("{}: no report.html: {e}", run_dir.display()));
+}

@@ -2,7 +2,7 @@
 //! plain `cargo test`; `./run-tests` runs them natively where the kernel has vcan, otherwise
 //! inside the QEMU guest (one boot for all of them).
 
-use e2e::{bin, mcap_topic_counts};
+use e2e::{bin, keep_report, mcap_topic_counts};
 use serde_json::Value;
 use std::process::Command;
 
@@ -74,16 +74,16 @@ fn checks(r: &Value) -> Vec<(String, bool, String)> {
         .collect()
 }
 
-/// 60 s of static data at 2 kHz, speed factor 10, nav run as an unprivileged user (nobody).
+/// 30 s of static data at 2 kHz, speed factor 10, nav run as an unprivileged user (nobody).
 /// Tolerated loss: none is expected (nav's socket
 /// has an 8 MiB receive buffer); the run fails above 0.1 % (the scenario's max_bus_loss), and
 /// every lost frame must show up in nav's gap count, sample for sample.
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
-fn static_60s_at_x10_every_frame_arrives_and_the_recording_reads_back() {
+fn static_30s_at_x10_every_frame_arrives_and_the_recording_reads_back() {
     let dir = tempfile::tempdir().unwrap();
     let (r, code) = hil_run(
-        &["--duration", "60", "--speed", "10", "--iface", "vcan-e2e0"],
+        &["--duration", "30", "--speed", "10", "--iface", "vcan-e2e0"],
         dir.path(),
     );
     for (name, pass, detail) in checks(&r) {
@@ -96,17 +96,17 @@ fn static_60s_at_x10_every_frame_arrives_and_the_recording_reads_back() {
     // the bench is root in the guest; nav needs no privilege and runs as nobody
     assert_eq!(nav["process_uid"], 65534, "nav ran unprivileged");
     let tx = &r["tx"];
-    assert_eq!(tx["samples"], 120_000, "60 s at 2 kHz");
+    assert_eq!(tx["samples"], 60_000, "30 s at 2 kHz");
     let lost = r["bus_lost_frames"].as_i64().unwrap();
     assert_eq!(
         nav["imu"]["missing_samples"].as_i64().unwrap(),
         lost,
         "every lost frame is a counted gap"
     );
-    assert!(lost as f64 <= 0.001 * 120_000.0, "lost {lost} frames");
+    assert!(lost as f64 <= 0.001 * 60_000.0, "lost {lost} frames");
     assert_eq!(
         nav["imu"]["samples"].as_i64().unwrap() + lost,
-        119_999,
+        59_999,
         "all samples but the baseline one"
     );
     eprintln!(
@@ -252,12 +252,12 @@ fn nav_names_a_missing_interface_and_exits_nonzero() {
     assert!(!err.contains("panicked"), "{err}");
 }
 
-/// One north-finding drill (10 s dwells, truth 287.5 deg, seed 7) through vcan at `speed`, or in
+/// One north-finding drill (6 s dwells, truth 287.5 deg, seed 7) through vcan at `speed`, or in
 /// process when `speed` is `None`.
 fn drill_at(speed: Option<&str>, iface: &str) -> Value {
     let dir = tempfile::tempdir().unwrap();
     let mut cmd = Command::new(bin("hil"));
-    cmd.args(["drill", "north-finding", "--dwell", "10"])
+    cmd.args(["drill", "north-finding", "--dwell", "6"])
         .args(["--heading", "287.5", "--seed", "7", "--tolerance", "0.5"])
         .args(["--iface", iface, "--json", "--out"])
         .arg(dir.path());
@@ -276,6 +276,7 @@ fn drill_at(speed: Option<&str>, iface: &str) -> Value {
         assert!(pass, "check failed: {name}: {detail}");
     }
     assert!(dir.path().join("report.md").is_file());
+    keep_report(dir.path(), &format!("drill-x{}", speed.unwrap_or("")));
     // nav's binary and its pipeline in process, from the same recorded input: the same frames
     assert!(
         checks(&r)
@@ -288,14 +289,15 @@ fn drill_at(speed: Option<&str>, iface: &str) -> Value {
 
 /// A north-finding drill through vcan: nav drives the turntable emulator over CAN (enable,
 /// index, lock, dwell, return to zero), finds the heading and lands within 3 sigma of the truth
-/// (sigma: nav's own estimate, about 0.07 deg for 10 s dwells). Run twice, at x10 and at x25:
+/// (sigma: nav's own estimate, about 0.1 deg for 6 s dwells). Run twice, at x3 and at x25 (what
+/// the guest reaches: about x6):
 /// the emulators follow nav in lockstep, so the result is the same bit for bit (heading, sigma,
 /// every dwell's rates and durations) whatever pace the machine reaches; and the same drill in
 /// process (no bus, the Monte Carlo's path) gives that result too.
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
-    let r = drill_at(Some("10"), "vcan-e2e3");
+    let r = drill_at(Some("3"), "vcan-e2e3");
     let d = &r["drill"];
     let (e, sig) = (
         d["error_deg"].as_f64().unwrap(),
@@ -312,6 +314,11 @@ fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
     assert!(r["turntable"]["status_frames"].as_u64().unwrap() > 1000);
     assert!(r["lockstep"]["placed_commands"].as_u64().unwrap() > 20);
     let fast = drill_at(Some("25"), "vcan-e2e3");
+    eprintln!(
+        "paces reached: x{:.1} and x{:.1}",
+        r["pace_reached"].as_f64().unwrap_or(0.0),
+        fast["pace_reached"].as_f64().unwrap_or(0.0)
+    );
     let (a, b) = (&nf["result"], &fast["nav"]["north_finding"]["result"]);
     assert!(
         a["positions"].as_array().is_some_and(|p| p.len() == 4),
@@ -319,7 +326,7 @@ fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
     );
     assert_eq!(
         a, b,
-        "the same drill at x10 and x25 must give the same result"
+        "the same drill at x3 and x25 must give the same result"
     );
     assert_eq!(r["drill"]["duration_s"], fast["drill"]["duration_s"]);
     // in process (no bus, the Monte Carlo's path): the very same result
@@ -330,69 +337,35 @@ fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
     );
 }
 
-/// A GPS-aided drive through vcan and a pty at speed factor 10 (one 1 km lap of
-/// scenarios/drive-gps.toml, paper-grade IMU, 25 m class receiver), with the receiver misbehaving:
-/// its device vanishes for 4 s and comes back (nav re-opens it), a 10 s outage sends void fixes,
-/// and a multipath jump puts three fixes 2 km off (the innovation gate rejects them). nav's end
-/// position must be within the same 25 m as the in-process filter runs
-/// (`hil::navrun::tests::the_filter_holds_a_paper_grade_imu_to_the_gps_class`).
-#[test]
-#[ignore = "needs vcan: run ./run-tests"]
-fn gps_aided_drive_through_vcan_and_a_pty_survives_a_bad_receiver() {
-    let (r, dir) = run_variant(
-        "drive-gps.toml",
-        &[(
-            "talker = \"GP\"\n",
-            "talker = \"GP\"\nport_drops = [[40.0, 44.0]]\noutages = [[85.0, 95.0]]\nmultipath = [[70.0, 3.0, 2000.0]]\n",
-        )],
-        "vcan-e2e5",
-    );
-    let out = dir.path().join("run");
-    let g = &r["nav"]["gps"];
-    assert_eq!(r["gps"]["port_drops"], 1);
-    assert!(
-        g["opens"].as_u64().unwrap() >= 2,
-        "nav re-opened the port: {g}"
-    );
-    assert!(g["port_errors"].as_u64().unwrap() >= 1, "{g}");
-    assert!(
-        g["stats"]["no_fix"].as_u64().unwrap() >= 10,
-        "the outage's void fixes are counted: {g}"
-    );
-    assert_eq!(g["stats"]["bad_checksum"], 0);
-    assert_eq!(g["stats"]["unparsed"], 0);
-    let f = &r["nav"]["navigation"]["filter"];
-    assert!(
-        f["rejected"].as_u64().unwrap() >= 2,
-        "the 2 km jumps were gated out: {f}"
-    );
-    let n = &r["navigation"];
-    eprintln!("navigation against truth: {n}");
-    assert!(n["t_s"].as_f64().unwrap() > 125.0, "{n}");
-    assert!(out.join("gps-fixes.jsonl").is_file());
-}
-
-/// The campus loop shortened (6 s dwells, one lap of about 1 km at 6 m/s, 240 s) through vcan and the pty
+/// The campus loop shortened (6 s dwells, one lap of about 1 km at 8 m/s, 200 s) through vcan and the pty
 /// at speed factor 10: nav finds north with the turntable over CAN, hands the heading to the
 /// navigator, levels while still parked, and navigates with the fading filter on the receiver's
 /// NMEA. Limits as in process (`hil::navrun::tests::north_finding_hands_its_heading_to_the_filter`):
-/// heading within 0.5 deg, end position within 25 m.
+/// heading within 0.5 deg, end position within 25 m. And the receiver misbehaves while the
+/// vehicle drives: its device vanishes for 4 s and comes back (nav re-opens it), a multipath
+/// burst puts three fixes 2 km off (the innovation gate rejects them) and a 10 s outage sends
+/// void fixes (nav coasts on the INS); the 25 m hold all the same.
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn campus_loop_shortened_finds_north_then_navigates() {
-    let (r, _dir) = run_variant(
+    let (r, dir) = run_variant(
         "campus-loop.toml",
         &[
-            ("duration_s = 1510.0", "duration_s = 240.0"),
+            ("duration_s = 1510.0", "duration_s = 200.0"),
             ("laps = 6", "laps = 1"),
-            ("speed_mps = 4.3", "speed_mps = 6.0"),
+            ("speed_mps = 4.3", "speed_mps = 8.0"),
             ("start_wait_s = 165.0", "start_wait_s = 60.0"),
             ("dwell_s = 30.0", "dwell_s = 6.0"),
             ("heading_tolerance_deg = 0.2", "heading_tolerance_deg = 0.5"),
             ("position_tolerance_m = 20.7", "position_tolerance_m = 25.0"),
+            (
+                "talker = \"GP\"\n",
+                "talker = \"GP\"\nport_drops = [[100.0, 104.0]]\nmultipath = [[120.0, 3.0, 2000.0]]\noutages = [[140.0, 150.0]]\n",
+            ),
         ],
         "vcan-e2e6",
     );
+    keep_report(&dir.path().join("run"), "campus-loop");
     let names: Vec<String> = checks(&r).into_iter().map(|c| c.0).collect();
     for n in [
         "north-finding finished",
@@ -413,10 +386,30 @@ fn campus_loop_shortened_finds_north_then_navigates() {
         "navigation started at {started} s, north-finding took {nf_s} s"
     );
     assert_eq!(nav["solution"]["last_mode"], "GpsAided");
+    // the receiver's misbehaviour, each seen and counted
+    let g = &nav["gps"];
+    assert_eq!(r["gps"]["port_drops"], 1);
+    assert!(
+        g["opens"].as_u64().unwrap() >= 2,
+        "nav re-opened the port: {g}"
+    );
+    assert!(g["port_errors"].as_u64().unwrap() >= 1, "{g}");
+    assert!(
+        g["stats"]["no_fix"].as_u64().unwrap() >= 10,
+        "the outage's void fixes are counted: {g}"
+    );
+    assert_eq!(g["stats"]["bad_checksum"], 0);
+    assert_eq!(g["stats"]["unparsed"], 0);
+    let f = &nav["navigation"]["filter"];
+    assert!(
+        f["rejected"].as_u64().unwrap() >= 2,
+        "the 2 km jumps were gated out: {f}"
+    );
+    assert!(dir.path().join("run/gps-fixes.jsonl").is_file());
     // second by second from nav's recording: every second of navigation, within the same 25 m
     let series = &r["navigation_series"];
     eprintln!("over the run: {series}");
-    assert!(series["samples"].as_u64().unwrap() > 170, "{series}");
+    assert!(series["samples"].as_u64().unwrap() > 130, "{series}");
     assert_eq!(series["bad_records"], 0);
     assert!(
         series["rms_position_error_m"].as_f64().unwrap() < 25.0,

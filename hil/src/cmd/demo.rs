@@ -59,6 +59,24 @@ pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> 
         verdict(drive)
     );
     std::fs::write(out.join("report.md"), &summary)?;
+    let row = |part: &str, code: i32, dir: &str| {
+        format!(
+            "<tr><td>{part}</td><td class=\"{}\">{}</td><td><a href=\"{dir}/report.html\">{dir}/report.html</a></td></tr>\n",
+            if code == 0 { "pass" } else { "fail" },
+            verdict(code)
+        )
+    };
+    std::fs::write(
+        out.join("report.html"),
+        hil::html::page(
+            "Bench demo",
+            &format!(
+                "<table>\n<tr><th>part</th><th>result</th><th>report</th></tr>\n{}{}</table>\n",
+                row("north-finding drill", drill, "drill"),
+                row("GPS-aided drive", drive, "drive")
+            ),
+        ),
+    )?;
     println!("==============================================================================");
     println!(
         " DEMO  north-finding drill: {}   GPS-aided drive: {}",
@@ -66,8 +84,7 @@ pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> 
         verdict(drive)
     );
     println!(
-        " reports: {}/drill/report.md, {}/drive/report.md",
-        out.display(),
+        " report: {}/report.html (open it in a browser; drill/ and drive/ have one each)",
         out.display()
     );
     println!("==============================================================================");

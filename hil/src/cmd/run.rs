@@ -35,7 +35,10 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
             println!("{}", serde_json::to_string_pretty(&r)?);
         } else {
             print!("{}", report::card(&r));
-            println!(" report: {}", out.join("report.md").display());
+            println!(
+                " report: {} (and report.md beside it)",
+                out.join("report.html").display()
+            );
         }
         return Ok(if r.pass { 0 } else { 1 });
     }

@@ -1,0 +1,391 @@
+//! One self-contained HTML report per bench run (`report.html`): the result, the checks, the
+//! frame accounting, the drill's dwells and SVG plots (navigation error against nav's own
+//! sigma bounds, the turntable's angle against what nav commanded), with links to the CSV and
+//! JSON files beside it. No scripts and no external resources: any browser opens it offline.
+
+use crate::plot::{LogChart, Series};
+use crate::report::RunReport;
+use std::fmt::Write;
+use std::path::Path;
+
+/// Escape text for HTML.
+pub fn esc(t: &str) -> String {
+    t.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+const STYLE: &str = "body{font-family:sans-serif;max-width:1000px;margin:2em auto;padding:0 1em;color:#222}\
+table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}\
+th{background:#f3f3f3}.pass{color:#176b2c;font-weight:bold}.fail{color:#b00020;font-weight:bold}\
+figure{margin:1.5em 0}figcaption{color:#555;font-size:90%}svg{max-width:100%;height:auto}";
+
+/// A whole page: `title` and the body's HTML.
+pub fn page(title: &str, body: &str) -> String {
+    format!(
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\n<style>{STYLE}</style></head>\n<body>\n<h1>{}</h1>\n{body}</body></html>\n",
+        esc(title),
+        esc(title)
+    )
+}
+
+/// A two-column table of (name, value) rows.
+fn kv_table(rows: &[(&str, String)]) -> String {
+    let mut s = String::from("<table>\n");
+    for (k, v) in rows {
+        let _ = writeln!(s, "<tr><th>{}</th><td>{}</td></tr>", esc(k), esc(v));
+    }
+    s + "</table>\n"
+}
+
+/// A table of JSON objects (the keys of the first as columns).
+fn json_table(rows: &[serde_json::Value]) -> String {
+    let Some(first) = rows.first().and_then(|r| r.as_object()) else {
+        return String::new();
+    };
+    let keys: Vec<&String> = first.keys().collect();
+    let mut s = String::from("<table>\n<tr>");
+    for k in &keys {
+        let _ = write!(s, "<th>{}</th>", esc(k));
+    }
+    s += "</tr>\n";
+    for r in rows {
+        s += "<tr>";
+        for k in &keys {
+            let v = match &r[k.as_str()] {
+                serde_json::Value::Number(n) => match n.as_f64() {
+                    Some(x) if n.is_f64() => format!("{x:.6}"),
+                    _ => n.to_string(),
+                },
+                serde_json::Value::String(t) => t.clone(),
+                serde_json::Value::Array(a) => a
+                    .iter()
+                    .map(|x| x.as_f64().map_or(x.to_string(), |f| format!("{f:.4}")))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                other => other.to_string(),
+            };
+            let _ = write!(s, "<td>{}</td>", esc(&v));
+        }
+        s += "</tr>\n";
+    }
+    s + "</table>\n"
+}
+
+fn figure(svg: &str, caption: &str) -> String {
+    format!(
+        "<figure>\n{svg}<figcaption>{}</figcaption></figure>\n",
+        esc(caption)
+    )
+}
+
+/// (x, y) points of a plot.
+pub type Points = Vec<(f64, f64)>;
+
+/// The turntable's axis-0 angle as nav received it (TT_STATUS) and the angles nav commanded
+/// (TT_CMD index moves), against IMU time, from nav's recording. Time is the count of IMU
+/// gyro frames received before each frame (the bus carries a sample's IMU frames first).
+pub fn turntable_series(
+    mcap_path: &Path,
+    rate_hz: f64,
+) -> anyhow::Result<(Points, Points)> {
+    use wire::{Message, TtCommand};
+    let buf = std::fs::read(mcap_path)
+        .map_err(|e| anyhow::anyhow!("reading {}: {e}", mcap_path.display()))?;
+    let (mut angle, mut cmd) = (Vec::new(), Vec::new());
+    let mut gyro = 0u64;
+    for m in mcap::MessageStream::new(&buf)?.map_while(Result::ok) {
+        if m.channel.topic != "/can/raw" && m.channel.topic != "/can/tx" {
+            continue;
+        }
+        let Some(f) = nav::record::decode_frame(&m.data) else {
+            continue;
+        };
+        let t = gyro as f64 / rate_hz;
+        match Message::decode(&f) {
+            Ok(Message::ImuGyro(_)) => gyro += 1,
+            Ok(Message::TtStatus(st)) if st.axis == 0 => {
+                // unwrapped: the axis turns through 360 deg continuously
+                let a = near(st.angle_deg, angle.last().map_or(0.0, |p: &(f64, f64)| p.1));
+                angle.push((t, a));
+            }
+            Ok(Message::TtCmd(c))
+                if c.axis == 0
+                    && TtCommand::from_raw(i64::from(c.command)) == Some(TtCommand::IndexAbs) =>
+            {
+                // held until the next command: drawn as steps, on the unwrapped angle's turn
+                let now = angle.last().map_or(0.0, |p| p.1);
+                if let Some(&(_, last)) = cmd.last() {
+                    cmd.push((t, last));
+                }
+                cmd.push((t, near(c.arg, now)));
+            }
+            _ => {}
+        }
+    }
+    if let (Some(&(_, last)), Some(&(t_end, _))) = (cmd.last(), angle.last()) {
+        cmd.push((t_end, last));
+    }
+    Ok((angle, cmd))
+}
+
+/// `deg` plus the whole turns that bring it within half a turn of `reference`.
+fn near(deg: f64, reference: f64) -> f64 {
+    deg + 360.0 * ((reference - deg) / 360.0).round()
+}
+
+/// The HTML report of a run whose files are in `out`.
+pub fn run_report(r: &RunReport, out: &Path) -> String {
+    let mut b = String::new();
+    let verdict = if r.pass {
+        "<span class=\"pass\">PASS</span>"
+    } else {
+        "<span class=\"fail\">FAIL</span>"
+    };
+    let _ = writeln!(
+        b,
+        "<p>Result: {verdict}. Scenario <code>{}</code> on <code>{}</code> ({}): {:.1} s simulated in {:.1} s of wall time (x{:.1} reached, x{} asked). nav exited with {}.</p>",
+        esc(&r.scenario.name),
+        esc(&r.interface),
+        esc(&r.backend),
+        r.pace_reached * r.wall_seconds,
+        r.wall_seconds,
+        r.pace_reached,
+        r.scenario.speed,
+        r.nav_exit
+            .map_or("no status (killed)".into(), |c| c.to_string())
+    );
+    if let Some(d) = &r.drill {
+        let f = |x: Option<f64>| x.map_or("--".to_string(), |v| format!("{v:.4}"));
+        b += "<h2>North-finding drill</h2>\n";
+        b += &kv_table(&[
+            ("found heading, deg", f(d.heading_deg)),
+            ("truth, deg", format!("{:.4}", d.truth_deg)),
+            ("error, deg", f(d.error_deg)),
+            ("nav's sigma, deg", f(d.sigma_deg)),
+            ("duration, s", format!("{:.1}", d.duration_s)),
+            ("dwells repeated", d.repeats.to_string()),
+            ("aborted", d.abort.clone().unwrap_or_else(|| "no".into())),
+        ]);
+        let nf = serde_json::to_value(&r.nav.north_finding).unwrap_or_default();
+        if let Some(p) = nf["result"]["positions"].as_array() {
+            b += "<p>The dwells (positions) as nav measured them:</p>\n";
+            b += &json_table(p);
+        }
+    }
+    b += "<h2>Checks</h2>\n<table>\n<tr><th>check</th><th>result</th><th>measured and limit</th></tr>\n";
+    for c in &r.checks {
+        let _ = writeln!(
+            b,
+            "<tr><td>{}</td><td class=\"{}\">{}</td><td>{}</td></tr>",
+            esc(&c.name),
+            if c.pass { "pass" } else { "fail" },
+            if c.pass { "PASS" } else { "FAIL" },
+            esc(&c.detail)
+        );
+    }
+    b += "</table>\n";
+    b += "<h2>Frames and sentences</h2>\n";
+    let nav = serde_json::to_value(&r.nav).unwrap_or_default();
+    let n = |path: &[&str]| {
+        let mut v = &nav;
+        for p in path {
+            v = &v[*p];
+        }
+        match v {
+            serde_json::Value::Null => "--".to_string(),
+            x => x.to_string(),
+        }
+    };
+    let mut rows = vec![
+        ("IMU frames sent by the emulator", r.tx.frames.to_string()),
+        (
+            "frames per second of wall time",
+            format!("{:.0}", r.frames_per_wall_second),
+        ),
+        ("IMU frames lost on the bus", r.bus_lost_frames.to_string()),
+        (
+            "IMU samples dropped on purpose (faults)",
+            r.tx.dropped_samples.to_string(),
+        ),
+        ("frames nav received", n(&["frames_total"])),
+        (
+            "frames the kernel dropped at nav's socket",
+            n(&["kernel_dropped_frames"]),
+        ),
+        (
+            "IMU samples nav counted missing",
+            n(&["imu", "missing_samples"]),
+        ),
+        ("solution frames nav sent", n(&["solution", "frames_sent"])),
+        (
+            "solution frames the bench saw",
+            r.solution.frames.to_string(),
+        ),
+    ];
+    if let Some(g) = &r.nav.gps {
+        let s = serde_json::to_value(g.stats).unwrap_or_default();
+        rows.push((
+            "NMEA sentences with a bad checksum",
+            s["bad_checksum"].to_string(),
+        ));
+        rows.push(("NMEA sentences not understood", s["unparsed"].to_string()));
+        rows.push(("GPS fixes nav used", g.fixes.to_string()));
+    }
+    if let Some(m) = &r.nav_memory {
+        rows.push((
+            "nav's memory: after warm-up, end, peak (KiB)",
+            format!("{}, {}, {}", m.start_kib, m.end_kib, m.peak_kib),
+        ));
+        if let Some(c) = m.cpu_s {
+            rows.push(("nav's CPU time, s", format!("{c:.1}")));
+        }
+    }
+    b += &kv_table(&rows);
+
+    // plots
+    let mut plots = String::new();
+    if r.scenario.turntable.is_some() {
+        match turntable_series(&out.join("nav.mcap"), r.scenario.imu.rate_hz) {
+            Ok((angle, cmd)) if !angle.is_empty() => {
+                let c = LogChart {
+                    title: "Turntable: angle received against the angle nav commanded".into(),
+                    x_label: "IMU time, s".into(),
+                    y_label: "deg".into(),
+                    series: vec![
+                        Series {
+                            name: "TT_STATUS angle".into(),
+                            color: "#1f77b4",
+                            points: angle,
+                            markers: false,
+                        },
+                        Series {
+                            name: "TT_CMD index to".into(),
+                            color: "#d62728",
+                            points: cmd,
+                            markers: false,
+                        },
+                    ],
+                };
+                plots += &figure(
+                    &c.svg_linear(),
+                    "From nav's recording: the status frames' axis angle and the index commands nav sent.",
+                );
+            }
+            Ok(_) => {}
+            Err(e) => {
+                let _ = writeln!(
+                    plots,
+                    "<p>No turntable plot: {}</p>",
+                    esc(&format!("{e:#}"))
+                );
+            }
+        }
+    }
+    if let Ok(text) = std::fs::read_to_string(out.join("navigation.csv")) {
+        let rows: Vec<Vec<f64>> = text
+            .lines()
+            .skip(1)
+            .map(|l| {
+                l.split(',')
+                    .map(|v| v.parse().unwrap_or(f64::NAN))
+                    .collect()
+            })
+            .collect();
+        let col = |i: usize| -> Vec<(f64, f64)> {
+            rows.iter()
+                .filter(|r| r.len() > i)
+                .map(|r| (r[0], r[i]))
+                .collect()
+        };
+        let scaled = |v: Vec<(f64, f64)>, k: f64| v.into_iter().map(|(t, y)| (t, k * y)).collect();
+        let chart = |title: &str, y: &str, series: Vec<Series>| {
+            LogChart {
+                title: title.into(),
+                x_label: "IMU time, s".into(),
+                y_label: y.into(),
+                series,
+            }
+            .svg_linear()
+        };
+        let line = |name: &str, color: &'static str, points| Series {
+            name: name.into(),
+            color,
+            points,
+            markers: false,
+        };
+        plots += &figure(
+            &chart(
+                "Horizontal position error against nav's 3-sigma bound",
+                "m",
+                vec![
+                    line("error", "#1f77b4", col(1)),
+                    line("3 sigma (nav's)", "#d62728", scaled(col(4), 3.0)),
+                ],
+            ),
+            "Each second of navigation from nav's recording, scored against the truth; the bound is the horizontal position sigma nav sent with its solution.",
+        );
+        plots += &figure(
+            &chart(
+                "Velocity error",
+                "m/s",
+                vec![line("error", "#1f77b4", col(2))],
+            ),
+            "The norm of the velocity error.",
+        );
+        plots += &figure(
+            &chart(
+                "Heading error against nav's sigma bounds",
+                "deg",
+                vec![
+                    line("error", "#1f77b4", col(3)),
+                    line("+3 sigma", "#d62728", scaled(col(5), 3.0)),
+                    line("-3 sigma", "#d62728", scaled(col(5), -3.0)),
+                ],
+            ),
+            "Heading error and nav's own heading sigma, three times, either side.",
+        );
+    }
+    if !plots.is_empty() {
+        b += "<h2>Plots</h2>\n";
+        b += &plots;
+    }
+    b += "<h2>Files</h2>\n<ul>\n";
+    for (f, what) in [
+        ("report.json", "this report as data"),
+        ("report.md", "this report as text"),
+        ("navigation.csv", "navigation error second by second"),
+        ("nav.mcap", "nav's recording (MCAP)"),
+        ("nav-summary.json", "nav's own summary"),
+        ("scenario.toml", "the scenario as run"),
+        ("nav.toml", "nav's configuration"),
+    ] {
+        if out.join(f).is_file() {
+            let _ = writeln!(b, "<li><a href=\"{f}\">{f}</a>: {what}</li>");
+        }
+    }
+    b += "</ul>\n";
+    page(&format!("Bench run {}", r.scenario.name), &b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_is_escaped_and_tables_follow_the_first_row() {
+        assert_eq!(esc("<a & \"b\">"), "&lt;a &amp; &quot;b&quot;&gt;");
+        let t = json_table(&[
+            serde_json::json!({"angle": 90.0, "n": 3}),
+            serde_json::json!({"angle": 180.5, "n": 4}),
+        ]);
+        assert!(t.contains("<th>angle</th><th>n</th>"), "{t}");
+        assert!(t.contains("<td>180.500000</td><td>4</td>"), "{t}");
+        let p = page("a < b", "<p>x</p>");
+        assert!(p.starts_with("<!DOCTYPE html>") && p.contains("<title>a &lt; b</title>"));
+        assert!((near(359.9, 0.0) + 0.1).abs() < 1e-9);
+        assert!((near(1.0, 358.0) - 361.0).abs() < 1e-9);
+        assert!((near(90.0, 80.0) - 90.0).abs() < 1e-9);
+    }
+}

@@ -1,0 +1,127 @@
+//! The HTML reports of the end-to-end runs in a real browser (headless Chromium, installed by
+//! `./run-tests`): each renders, with no console message, every plot is in the rendered page, and
+//! a screenshot is left beside it to look at. Ignored by a plain `cargo test`: `./run-tests` runs
+//! it after the end-to-end tests have left their reports in `target/e2e-reports/`.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn browser() -> PathBuf {
+    for b in ["chromium-headless-shell", "chromium", "google-chrome"] {
+        if let Ok(o) = Command::new("sh")
+            .args(["-c", &format!("command -v {b}")])
+            .output()
+            && o.status.success()
+        {
+            return PathBuf::from(String::from_utf8_lossy(&o.stdout).trim());
+        }
+    }
+    panic!("no headless browser: ./run-tests installs chromium-headless-shell");
+}
+
+/// Run the browser on `page` with `args`; returns (stdout, stderr).
+fn chromium(page: &Path, args: &[&str]) -> (String, String) {
+    let o = Command::new(browser())
+        .args([
+            "--no-sandbox",
+            "--disable-gpu",
+            "--enable-logging=stderr",
+            "--v=0",
+            "--window-size=1100,2600",
+        ])
+        .args(args)
+        .arg(format!("file://{}", page.display()))
+        .output()
+        .expect("the browser runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    (
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+#[ignore = "needs the end-to-end runs' reports: run ./run-tests"]
+fn every_report_renders_in_a_headless_browser_without_console_messages() {
+    let dir = e2e::reports_dir();
+    let mut pages: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| {
+            panic!(
+                "{}: {e} (the end-to-end tests leave reports there)",
+                dir.display()
+            )
+        })
+        .filter_map(|d| d.ok().map(|d| d.path().join("report.html")))
+        .filter(|p| p.is_file())
+        .collect();
+    pages.sort();
+    let names: Vec<String> = pages
+        .iter()
+        .map(|p| {
+            p.parent()
+                .unwrap()
+                .file_name()
+                .unwrap()
+                .to_string_lossy()
+                .into_owned()
+        })
+        .collect();
+    eprintln!("reports: {names:?}");
+    for want in ["campus-loop", "drill-x3"] {
+        assert!(
+            names.iter().any(|n| n == want),
+            "no {want} report in {}",
+            dir.display()
+        );
+    }
+    for page in &pages {
+        let name = page
+            .parent()
+            .unwrap()
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
+        let (dom, log) = chromium(page, &["--dump-dom"]);
+        let console: Vec<&str> = log.lines().filter(|l| l.contains("CONSOLE")).collect();
+        assert!(console.is_empty(), "{name}: console messages: {console:#?}");
+        assert!(
+            dom.contains("<h2>Checks</h2>"),
+            "{name}: the checks did not render"
+        );
+        // the plots the run must have, each drawn
+        let mut want = Vec::new();
+        if name.starts_with("drill") || name == "campus-loop" {
+            want.push("Turntable: angle received");
+        }
+        if name == "campus-loop" {
+            want.extend([
+                "Horizontal position error",
+                "Velocity error",
+                "Heading error",
+            ]);
+        }
+        for title in want {
+            assert!(dom.contains(title), "{name}: no plot '{title}'");
+        }
+        let svgs = dom.matches("<svg").count();
+        assert_eq!(svgs, dom.matches("</svg>").count(), "{name}: an SVG is cut");
+        assert!(
+            dom.matches("<polyline").count() >= svgs,
+            "{name}: a plot has no line"
+        );
+        let shot = page.with_file_name("report.png");
+        let _ = std::fs::remove_file(&shot);
+        chromium(page, &[&format!("--screenshot={}", shot.display())]);
+        let png = std::fs::read(&shot).expect("the screenshot was written");
+        assert!(
+            png.starts_with(b"\x89PNG") && png.len() > 20_000,
+            "{name}: {} bytes",
+            png.len()
+        );
+        eprintln!(
+            "{name}: rendered, {svgs} plots, screenshot {}",
+            shot.display()
+        );
+    }
+}
