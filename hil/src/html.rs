@@ -86,14 +86,11 @@ pub type Points = Vec<(f64, f64)>;
 /// The turntable's axis-0 angle as nav received it (TT_STATUS) and the angles nav commanded
 /// (TT_CMD index moves), against IMU time, from nav's recording. Time is the count of IMU
 /// gyro frames received before each frame (the bus carries a sample's IMU frames first).
-pub fn turntable_series(
-    mcap_path: &Path,
-    rate_hz: f64,
-) -> anyhow::Result<(Points, Points)> {
+pub fn turntable_series(mcap_path: &Path, rate_hz: f64) -> anyhow::Result<(Points, Points)> {
     use wire::{Message, TtCommand};
     let buf = std::fs::read(mcap_path)
         .map_err(|e| anyhow::anyhow!("reading {}: {e}", mcap_path.display()))?;
-    let (mut angle, mut cmd) = (Vec::new(), Vec::new());
+    let (mut angle, mut targets): (Points, Points) = (Vec::new(), Vec::new());
     let mut gyro = 0u64;
     for m in mcap::MessageStream::new(&buf)?.map_while(Result::ok) {
         if m.channel.topic != "/can/raw" && m.channel.topic != "/can/tx" {
@@ -110,22 +107,32 @@ pub fn turntable_series(
                 let a = near(st.angle_deg, angle.last().map_or(0.0, |p: &(f64, f64)| p.1));
                 angle.push((t, a));
             }
-            Ok(Message::TtCmd(c))
-                if c.axis == 0
-                    && TtCommand::from_raw(i64::from(c.command)) == Some(TtCommand::IndexAbs) =>
-            {
-                // held until the next command: drawn as steps, on the unwrapped angle's turn
-                let now = angle.last().map_or(0.0, |p| p.1);
-                if let Some(&(_, last)) = cmd.last() {
-                    cmd.push((t, last));
-                }
-                cmd.push((t, near(c.arg, now)));
+            Ok(Message::TtCmd(c)) if c.axis == 0 => {
+                // index moves and the return to zero
+                let to = match TtCommand::from_raw(i64::from(c.command)) {
+                    Some(TtCommand::IndexAbs) => c.arg,
+                    Some(TtCommand::Home) => 0.0,
+                    _ => continue,
+                };
+                targets.push((t, to));
             }
             _ => {}
         }
     }
-    if let (Some(&(_, last)), Some(&(t_end, _))) = (cmd.last(), angle.last()) {
-        cmd.push((t_end, last));
+    // each target on the turn the table reached before the next command (a move of half a
+    // turn may go either way), held until then: steps
+    let t_end = angle.last().map_or(0.0, |p| p.0);
+    let mut cmd = Vec::new();
+    for (i, &(t, to)) in targets.iter().enumerate() {
+        let until = targets.get(i + 1).map_or(t_end, |n| n.0);
+        let reached = angle
+            .iter()
+            .take_while(|p| p.0 <= until)
+            .last()
+            .map_or(0.0, |p| p.1);
+        let y = near(to, reached);
+        cmd.push((t, y));
+        cmd.push((until, y));
     }
     Ok((angle, cmd))
 }
@@ -261,7 +268,7 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
                             markers: false,
                         },
                         Series {
-                            name: "TT_CMD index to".into(),
+                            name: "TT_CMD index / home".into(),
                             color: "#d62728",
                             points: cmd,
                             markers: false,
@@ -270,7 +277,7 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
                 };
                 plots += &figure(
                     &c.svg_linear(),
-                    "From nav's recording: the status frames' axis angle and the index commands nav sent.",
+                    "From nav's recording: the status frames' axis angle and the index and home commands nav sent.",
                 );
             }
             Ok(_) => {}
@@ -372,6 +379,66 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A recording (written by nav's own recorder) of an index to 90 deg, then to 270, then
+    /// home through 360: the angle is unwrapped and the commands are steps on the same turn.
+    #[test]
+    fn the_turntable_plot_follows_the_recording() {
+        use nav::record::{Record, Recorder};
+        use wire::{ImuGyro, Message, TtCmd, TtCommand, TtState, TtStatus};
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("nav.mcap");
+        let r = Recorder::start(&path).unwrap();
+        let frame = |m: Message| m.encode().unwrap();
+        let cmd = |c: TtCommand, arg: f64| {
+            frame(Message::TtCmd(TtCmd {
+                seq: 1,
+                command: c as u8,
+                axis: 0,
+                arg,
+            }))
+        };
+        let angles = [0.0, 45.0, 90.0, 180.0, 270.0, 330.0, 359.9, 0.1];
+        for (k, a) in angles.iter().enumerate() {
+            for _ in 0..100 {
+                r.send(Record::Frame {
+                    t_ns: 0,
+                    frame: frame(Message::ImuGyro(ImuGyro {
+                        counts: [0; 3],
+                        sample_counter: k as u16,
+                    })),
+                });
+            }
+            let sent = match k {
+                0 => Some(cmd(TtCommand::IndexAbs, 90.0)),
+                3 => Some(cmd(TtCommand::IndexAbs, 270.0)),
+                5 => Some(cmd(TtCommand::Home, 0.0)),
+                _ => None,
+            };
+            if let Some(f) = sent {
+                r.send(Record::Sent { t_ns: 0, frame: f });
+            }
+            r.send(Record::Frame {
+                t_ns: 0,
+                frame: frame(Message::TtStatus(TtStatus {
+                    angle_deg: *a,
+                    rate_dps: 0.0,
+                    state: TtState::Idle,
+                    axis: 0,
+                    faults: Default::default(),
+                    ack_seq: 0,
+                    counter: k as u8,
+                })),
+            });
+        }
+        r.finish().unwrap();
+        let (angle, cmd) = turntable_series(&path, 100.0).unwrap();
+        let a: Vec<f64> = angle.iter().map(|p| (p.1 * 10.0).round() / 10.0).collect();
+        assert_eq!(a, [0.0, 45.0, 90.0, 180.0, 270.0, 330.0, 359.9, 360.1]);
+        assert_eq!(angle[1].0, 2.0, "time from the gyro frames before it");
+        let c: Vec<f64> = cmd.iter().map(|p| p.1).collect();
+        assert_eq!(c, [90.0, 90.0, 270.0, 270.0, 360.0, 360.0], "{cmd:?}");
+    }
 
     #[test]
     fn text_is_escaped_and_tables_follow_the_first_row() {
