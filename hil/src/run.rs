@@ -128,6 +128,13 @@ impl NavFolder {
                     .with_context(|| format!("moving {} to {}", from.display(), to.display()))?;
                 std::fs::remove_file(&from)?;
             }
+            // the run folder's files are the bench user's, as if nav had never been someone else
+            // SAFETY: getuid(2) and getgid(2) cannot fail.
+            let (uid, gid) = unsafe { (libc::getuid(), libc::getgid()) };
+            if let Err(e) = std::os::unix::fs::chown(&to, Some(uid), Some(gid)) {
+                // the file is there and readable: a warning, not a failed run
+                tracing::warn!("cannot give {} back to uid {uid}: {e}", to.display());
+            }
         }
         std::fs::remove_dir(&self.dir).with_context(|| format!("removing {}", self.dir.display()))
     }
