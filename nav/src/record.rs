@@ -7,6 +7,9 @@
 //! - `/imu/sample` (JSON): every decoded IMU sample; publish time = sample time on the IMU clock.
 //! - `/nav/event` (JSON): irregularities (gaps, duplicates, bad frames, timeouts).
 //! - `/nav/summary` (JSON): the run summary, once at the end.
+//!
+//! Every JSON channel carries its JSON schema (`nav/schemas/*.json`, encoding `jsonschema`), so
+//! viewers such as Foxglove know its fields and a reader can validate every message.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -114,6 +117,33 @@ impl JsonChannel {
         JsonChannel::Solution,
     ];
 
+    /// The channel's JSON schema (`nav/schemas/`): its name and text.
+    pub fn schema(self) -> (&'static str, &'static str) {
+        match self {
+            JsonChannel::ImuSample => (
+                "rlg-hil/nav/imu-sample",
+                include_str!("../schemas/imu-sample.json"),
+            ),
+            JsonChannel::Event => ("rlg-hil/nav/event", include_str!("../schemas/event.json")),
+            JsonChannel::Summary => (
+                "rlg-hil/nav/summary",
+                include_str!("../schemas/summary.json"),
+            ),
+            JsonChannel::Attitude => (
+                "rlg-hil/nav/attitude",
+                include_str!("../schemas/attitude.json"),
+            ),
+            JsonChannel::Gps => (
+                "rlg-hil/nav/gps-fix",
+                include_str!("../schemas/gps-fix.json"),
+            ),
+            JsonChannel::Solution => (
+                "rlg-hil/nav/solution",
+                include_str!("../schemas/solution.json"),
+            ),
+        }
+    }
+
     fn topic(self) -> &'static str {
         match self {
             JsonChannel::ImuSample => "/imu/sample",
@@ -191,8 +221,9 @@ impl Recorder {
             .map_err(mcap_err.clone())?;
         let mut json = BTreeMap::new();
         for c in JsonChannel::ALL {
+            let (name, text) = c.schema();
             let schema = w
-                .add_schema(c.topic(), "jsonschema", br#"{"type":"object"}"#)
+                .add_schema(name, "jsonschema", text.as_bytes())
                 .map_err(mcap_err.clone())?;
             json.insert(
                 c,
@@ -333,6 +364,132 @@ pub fn wall_ns() -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `v` has the schema's type, required keys and no keys it does not list (when it says
+    /// `additionalProperties: false`), recursively: the part of JSON Schema our schemas use.
+    /// (`./run-tests` validates real recordings with Python's `jsonschema` as well.)
+    fn conforms(schema: &serde_json::Value, v: &serde_json::Value, at: &str) {
+        use serde_json::Value;
+        let types: Vec<&str> = match &schema["type"] {
+            Value::String(t) => vec![t.as_str()],
+            Value::Array(a) => a.iter().filter_map(|t| t.as_str()).collect(),
+            _ => vec![],
+        };
+        let kind = match v {
+            Value::Null => "null",
+            Value::Bool(_) => "boolean",
+            Value::Number(n) if n.is_u64() || n.is_i64() => "integer",
+            Value::Number(_) => "number",
+            Value::String(_) => "string",
+            Value::Array(_) => "array",
+            Value::Object(_) => "object",
+        };
+        assert!(
+            types.is_empty()
+                || types.contains(&kind)
+                || (kind == "integer" && types.contains(&"number")),
+            "{at}: {kind} where the schema says {types:?}"
+        );
+        if let Value::Object(o) = v {
+            for r in schema["required"].as_array().into_iter().flatten() {
+                let r = r.as_str().unwrap();
+                assert!(o.contains_key(r), "{at}: required {r} missing");
+            }
+            for (k, x) in o {
+                match schema["properties"].get(k) {
+                    Some(p) => conforms(p, x, &format!("{at}.{k}")),
+                    None => assert!(
+                        schema["additionalProperties"] != false,
+                        "{at}: {k} is not in the schema"
+                    ),
+                }
+            }
+        }
+        if let (Value::Array(a), Some(items)) = (v, schema.get("items")) {
+            for (i, x) in a.iter().enumerate() {
+                conforms(items, x, &format!("{at}[{i}]"));
+            }
+        }
+    }
+
+    #[test]
+    fn every_json_channel_has_a_schema_its_messages_follow() {
+        let parsed = |c: JsonChannel| -> serde_json::Value {
+            let (name, text) = c.schema();
+            let s: serde_json::Value =
+                serde_json::from_str(text).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(s["type"], "object", "{name}");
+            assert!(
+                s["title"]
+                    .as_str()
+                    .is_some_and(|t| t.starts_with(c.topic())),
+                "{name}"
+            );
+            s
+        };
+        for c in JsonChannel::ALL {
+            parsed(c);
+        }
+        let mut sample = crate::imu::ImuSample {
+            sample: 7,
+            span: 1,
+            dtheta: [1e-6, -2e-6, 3e-6],
+            dv: [1e-4, 0.0, 4.9e-3],
+            pps_offset: None,
+            accel_missing: false,
+            ambiguous: false,
+            bit_fail: false,
+            saturated: false,
+        };
+        let s = parsed(JsonChannel::ImuSample);
+        conforms(&s, &serde_json::to_value(sample).unwrap(), "sample");
+        sample.pps_offset = Some(0.25);
+        sample.bit_fail = true;
+        sample.saturated = true;
+        sample.accel_missing = true;
+        sample.ambiguous = true;
+        conforms(&s, &serde_json::to_value(sample).unwrap(), "flagged sample");
+        let fix = crate::gps::GpsFix {
+            sentence: "GGA".into(),
+            date: None,
+            time: Some("12:00:01.000".into()),
+            time_of_day_s: Some(43201.0),
+            lat_deg: -33.9,
+            lon_deg: 18.4,
+            alt_m: Some(12.0),
+            quality: 1,
+            satellites: Some(9),
+            hdop: Some(0.9),
+            speed_mps: None,
+            track_deg: None,
+            valid: true,
+            time_backwards: false,
+            seq: 3,
+        };
+        conforms(
+            &parsed(JsonChannel::Gps),
+            &serde_json::to_value(&fix).unwrap(),
+            "fix",
+        );
+        let o = crate::strapdown::NavOutput {
+            lat_deg: 28.2,
+            lon_deg: 112.9,
+            h_m: 0.0,
+            vel_enu_mps: [1.0, 2.0, 0.0],
+            hpr_deg: [359.0, 0.1, -0.2],
+        };
+        let sol = serde_json::json!({"t_s": 1.0, "mode": "GpsAided", "output": o, "pos_sigma_m": 3.2, "heading_sigma_deg": 0.1});
+        conforms(&parsed(JsonChannel::Solution), &sol, "solution");
+        // and a schema does catch a message that is not its kind
+        let caught = std::panic::catch_unwind(|| {
+            conforms(
+                &parsed(JsonChannel::Solution),
+                &serde_json::json!({"t_s": 1.0}),
+                "bad",
+            )
+        });
+        assert!(caught.is_err());
+    }
 
     #[test]
     fn a_recorded_frame_reads_back_and_a_bad_one_does_not() {

@@ -42,8 +42,13 @@ pub fn reports_dir() -> PathBuf {
 
 /// Keep the HTML report of the run in `run_dir` as `reports_dir()/name/report.html`.
 pub fn keep_report(run_dir: &Path, name: &str) {
+    keep_file(run_dir, name, "report.html");
+}
+
+/// Keep `file` of the run in `run_dir` as `reports_dir()/name/file`.
+pub fn keep_file(run_dir: &Path, name: &str, file: &str) {
     let to = reports_dir().join(name);
     std::fs::create_dir_all(&to).expect("creating the reports folder");
-    std::fs::copy(run_dir.join("report.html"), to.join("report.html"))
-        .unwrap_or_else(|e| panic!("{}: no report.html: {e}", run_dir.display()));
+    std::fs::copy(run_dir.join(file), to.join(file))
+        .unwrap_or_else(|e| panic!("{}: no {file}: {e}", run_dir.display()));
 }

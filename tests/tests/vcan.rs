@@ -366,6 +366,8 @@ fn campus_loop_shortened_finds_north_then_navigates() {
         "vcan-e2e6",
     );
     keep_report(&dir.path().join("run"), "campus-loop");
+    // and its recording, for the schema check with the field's MCAP reader after these tests
+    e2e::keep_file(&dir.path().join("run"), "campus-loop", "nav.mcap");
     let names: Vec<String> = checks(&r).into_iter().map(|c| c.0).collect();
     for n in [
         "north-finding finished",
