@@ -62,8 +62,23 @@ pub struct FuzzReport {
     pub crashes: Vec<PathBuf>,
 }
 
-/// Limit per input beyond which it counts as a hang.
+/// Limit per input beyond which it counts as a hang: CPU time of the fuzzing thread, so that a
+/// stall of the host (another job, a paused VM) is not taken for a hang of the code under test.
 pub const HANG: Duration = Duration::from_millis(500);
+
+/// CPU time consumed so far by the calling thread.
+fn thread_cpu() -> Duration {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes one timespec through a valid pointer.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    if rc != 0 {
+        return Duration::ZERO;
+    }
+    Duration::new(ts.tv_sec as u64, ts.tv_nsec as u32)
+}
 
 /// Run `inputs` inputs against `target` from `seed`; panicking inputs go to `out`.
 pub fn run(
@@ -96,14 +111,14 @@ pub fn run(
     let t0 = Instant::now();
     for i in 0..inputs {
         let input = mutate(&corpus, &mut rng);
-        let t = Instant::now();
+        let t = thread_cpu();
         let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| match target {
             Target::Can => can.feed(&input),
             Target::Nmea => nmea(&input, &mut rng),
             Target::Config => config(&input),
             Target::Scenario => scenario(&input),
         }));
-        let dt = t.elapsed();
+        let dt = thread_cpu().saturating_sub(t);
         r.slowest_ms = r.slowest_ms.max(dt.as_secs_f64() * 1e3);
         if dt > HANG {
             r.hangs += 1;
@@ -140,6 +155,65 @@ pub fn run(
     r.seconds = t0.elapsed().as_secs_f64();
     std::panic::set_hook(hook);
     Ok(r)
+}
+
+/// What one kept input does when run again on its own (`hil fuzz --rerun FILE`).
+#[derive(Debug, Clone, Serialize)]
+pub struct Rerun {
+    /// The input's file.
+    pub file: PathBuf,
+    /// It panicked; the panic's message.
+    pub panic: Option<String>,
+    /// CPU time of the run, ms.
+    pub cpu_ms: f64,
+    /// The input gave a valid message, fix, config or scenario.
+    pub accepted: bool,
+}
+
+/// Run each kept input once more against `target`, from a fresh state (a `can` finding that
+/// depended on earlier frames in the same pipeline may not reproduce this way: the report says
+/// so by showing no panic and a short time).
+pub fn rerun(target: Target, files: &[PathBuf], seed: u64) -> Result<Vec<Rerun>> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let hook = std::panic::take_hook();
+    let message = std::sync::Arc::new(std::sync::Mutex::new(None::<String>));
+    let m = message.clone();
+    std::panic::set_hook(Box::new(move |info| {
+        if let Ok(mut g) = m.lock() {
+            *g = Some(info.to_string());
+        }
+    }));
+    let mut out = Vec::new();
+    for file in files {
+        let input = std::fs::read(file).with_context(|| format!("reading {}", file.display()))?;
+        let mut can = CanTarget::new()?;
+        let t = thread_cpu();
+        let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| match target {
+            Target::Can => can.feed(&input),
+            Target::Nmea => nmea(&input, &mut rng),
+            Target::Config => config(&input),
+            Target::Scenario => scenario(&input),
+        }));
+        let cpu_ms = thread_cpu().saturating_sub(t).as_secs_f64() * 1e3;
+        let panic = match outcome {
+            Ok(_) => None,
+            Err(_) => Some(
+                message
+                    .lock()
+                    .ok()
+                    .and_then(|mut g| g.take())
+                    .unwrap_or_else(|| "panic".into()),
+            ),
+        };
+        out.push(Rerun {
+            file: file.clone(),
+            panic,
+            cpu_ms,
+            accepted: matches!(outcome, Ok(true)),
+        });
+    }
+    std::panic::set_hook(hook);
+    Ok(out)
 }
 
 /// Valid inputs to mutate.

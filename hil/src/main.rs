@@ -94,6 +94,10 @@ enum Cmd {
         /// Output folder (default runs/fuzz-<unix time>).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Run these kept inputs (crash-*.bin, hang-*.bin) once more against the one --target
+        /// instead of fuzzing: prints each one's panic message or CPU time.
+        #[arg(long, value_name = "FILE", num_args = 1..)]
+        rerun: Vec<PathBuf>,
     },
     /// Print the bus-load table of the wire contract.
     Busload {
@@ -459,7 +463,8 @@ fn real_main(cli: Cli) -> Result<i32> {
             inputs,
             seed,
             out,
-        } => fuzz(target, inputs, seed, out),
+            rerun,
+        } => fuzz(target, inputs, seed, out, rerun),
         Cmd::Dbc => {
             print!("{}", wire::DBC);
             Ok(0)

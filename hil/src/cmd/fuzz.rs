@@ -8,7 +8,38 @@ pub(crate) fn fuzz(
     inputs: u64,
     seed: u64,
     out: Option<PathBuf>,
+    rerun: Vec<PathBuf>,
 ) -> Result<i32> {
+    if !rerun.is_empty() {
+        let [t] = targets[..] else {
+            bail!("--rerun needs exactly one --target (the target the inputs were kept from)");
+        };
+        let rs = hil::fuzz::rerun(t, &rerun, seed)?;
+        for r in &rs {
+            match &r.panic {
+                Some(p) => println!(
+                    "{}: PANIC after {:.2} ms CPU: {p}",
+                    r.file.display(),
+                    r.cpu_ms
+                ),
+                None => println!(
+                    "{}: ok, {:.2} ms CPU{}{}",
+                    r.file.display(),
+                    r.cpu_ms,
+                    if r.accepted { ", accepted" } else { "" },
+                    if r.cpu_ms > hil::fuzz::HANG.as_secs_f64() * 1e3 {
+                        " (HANG)"
+                    } else {
+                        ""
+                    }
+                ),
+            }
+        }
+        let bad = rs
+            .iter()
+            .any(|r| r.panic.is_some() || r.cpu_ms > hil::fuzz::HANG.as_secs_f64() * 1e3);
+        return Ok(if bad { 1 } else { 0 });
+    }
     if inputs == 0 {
         bail!("--inputs must be positive");
     }
