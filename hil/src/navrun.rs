@@ -209,6 +209,10 @@ pub struct NavRun {
     pub started_at_s: Option<f64>,
     /// nav's integrity monitor over the run.
     pub integrity: nav::integrity::IntegrityStats,
+    /// Fixes nav could not tie to a PPS edge (applied at their arrival instead): none while
+    /// the receiver's PPS reaches the IMU.
+    #[serde(default)]
+    pub untied_fixes: u64,
     /// The run second by second.
     #[serde(skip)]
     pub series: Vec<NavSample>,
@@ -383,6 +387,7 @@ pub fn navigate(
         north_finding: nf_result,
         started_at_s: navigator.summary().started_at_s,
         integrity: navigator.integrity().stats(),
+        untied_fixes: navigator.summary().untied_fixes,
         series,
     })
 }
@@ -537,6 +542,8 @@ mod tests {
         assert!(started > nf.duration_s && started < 70.0, "{started}");
         assert!(r.end_position_error_m < 25.0, "{r:?}");
         assert!(r.filter.unwrap().updates > 200);
+        // the fixes that came during north-finding were tied to their PPS edges too
+        assert_eq!(r.untied_fixes, 0);
         // too short a wait: the vehicle would drive off during north-finding
         let mut early = s.clone();
         early.drive.as_mut().unwrap().start_wait_s = 20.0;

@@ -45,7 +45,7 @@ pub struct GpsStats {
 }
 
 /// One decoded position fix (one line of the JSON-lines export).
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 pub struct GpsFix {
     /// Sentence it came from (`GGA`, `RMC`, `GLL`, `GNS`).
     pub sentence: String,

@@ -236,6 +236,14 @@ impl Navigator {
         true
     }
 
+    /// IMU time has reached `t` while the navigator does not yet take updates (north-finding
+    /// still runs): fixes are tied to their PPS edges and taken as they fall due, so that the
+    /// position is current at the handover and no fix waits for an edge that already came.
+    pub fn on_time(&mut self, t: f64) {
+        self.last_t = t;
+        self.apply_due_fixes();
+    }
+
     /// A processing-chain update valid at IMU time `t` over `dt` s.
     pub fn on_update(&mut self, t: f64, phi: [f64; 3], dv: [f64; 3], dt: f64) {
         self.last_t = t;
@@ -495,5 +503,44 @@ mod tests {
         let s = n.summary();
         assert_eq!((s.pps_edges, s.pps_rejected), (3, 1));
         assert_eq!(n.last_pps, Some(3.0));
+    }
+
+    /// While north-finding runs the navigator takes no updates, only the time: fixes are still
+    /// tied to their PPS edges and taken when due (the position stays current), none is held
+    /// past its edge and none is counted as lacking one. Until 2026-11-23 every fix of a
+    /// 145 s north-finding piled up and was then counted "untied" (PPS missing) at once.
+    #[test]
+    fn fixes_during_north_finding_are_taken_at_their_edges() {
+        let mut n = Navigator::new(NavigationConfig::default());
+        let fix = |k: u32| GpsFix {
+            sentence: "GGA".into(),
+            lat_deg: -45.0 + f64::from(k) * 1e-6,
+            lon_deg: 170.0,
+            alt_m: Some(5.0),
+            quality: 1,
+            valid: true,
+            ..GpsFix::default()
+        };
+        let mut t = 0.0;
+        for k in 0..150u32 {
+            // the edge at the whole second, the fix 0.1 s later, time moving in 10 ms steps
+            for step in 0..100 {
+                t = f64::from(k) + f64::from(step) * 0.01;
+                n.on_time(t);
+                if step == 0 {
+                    assert!(n.on_pps(t));
+                }
+                if step == 10 {
+                    n.on_fix(&fix(k));
+                }
+            }
+        }
+        assert!(t > 149.0);
+        let s = n.summary();
+        assert_eq!(s.untied_fixes, 0);
+        assert_eq!(s.fixes_seen, 150, "every fix taken once due");
+        assert!(n.held.is_empty());
+        let (lat, _, _) = n.first_fix.expect("a position");
+        assert!((lat.to_degrees() - (-45.0 + 149e-6)).abs() < 1e-9);
     }
 }

@@ -447,15 +447,17 @@ impl Pipeline {
                     nf.finder.on_update(t, u.phi, u.dv);
                 }
                 // navigation takes over once north-finding (when it runs) is finished
-                if let Some(n) = self.navigator.as_mut()
-                    && self.nf.as_ref().is_none_or(|f| f.finder.finished())
-                {
-                    n.on_update(
-                        t,
-                        u.phi,
-                        u.dv,
-                        self.coning_samples as f64 * self.sample_ns * 1e-9,
-                    );
+                if let Some(n) = self.navigator.as_mut() {
+                    if self.nf.as_ref().is_none_or(|f| f.finder.finished()) {
+                        n.on_update(
+                            t,
+                            u.phi,
+                            u.dv,
+                            self.coning_samples as f64 * self.sample_ns * 1e-9,
+                        );
+                    } else {
+                        n.on_time(t);
+                    }
                 }
                 self.sums.add_update(u);
                 if self.record && self.sums.updates.is_multiple_of(50) {
