@@ -8,6 +8,7 @@ pub mod config;
 pub mod coning;
 pub mod earth;
 pub mod fir;
+pub mod foxglove;
 pub mod gps;
 pub mod gpsport;
 pub mod imu;

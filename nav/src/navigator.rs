@@ -200,6 +200,24 @@ impl Navigator {
         Some((pos, p[(2, 2)].sqrt().to_degrees()))
     }
 
+    /// The filter's position covariance in a local East-North-Up plane, m^2, row-major (none
+    /// before the filter runs).
+    pub fn position_covariance_enu(&self) -> Option<[f64; 9]> {
+        let (k, st) = (self.kf.as_ref()?, self.state.as_ref()?);
+        let p = k.covariance();
+        let (rm, rn) = crate::earth::radii(st.lat);
+        // states 6, 7, 8: latitude and longitude (rad), height (m); to east, north, up metres
+        let scale = [(rn + st.h) * st.lat.cos(), rm + st.h, 1.0];
+        let state = [7, 6, 8];
+        let mut c = [0.0; 9];
+        for i in 0..3 {
+            for j in 0..3 {
+                c[3 * i + j] = p[(state[i], state[j])] * scale[i] * scale[j];
+            }
+        }
+        Some(c)
+    }
+
     /// North-finding's heading (deg) becomes available.
     pub fn set_heading(&mut self, deg: f64) {
         self.heading = Some(deg.to_radians());

@@ -615,13 +615,16 @@ impl Pipeline {
             && self.encoder.epochs.is_multiple_of(50)
             && let (Some(o), Some(n)) = (&solution.output, &self.navigator)
         {
-            let j = serde_json::json!({
+            let mut j = serde_json::json!({
                 "t_s": n.time(),
                 "mode": format!("{mode:?}"),
                 "output": o,
                 "pos_sigma_m": solution.pos_sigma_m,
                 "heading_sigma_deg": solution.heading_sigma_deg,
             });
+            if let Some(c) = n.position_covariance_enu() {
+                j["pos_cov_enu_m2"] = serde_json::json!(c);
+            }
             out.push(Output::Json {
                 channel: JsonChannel::Solution,
                 publish_ns: (last as f64 * self.sample_ns) as u64,

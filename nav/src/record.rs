@@ -7,6 +7,9 @@
 //! - `/imu/sample` (JSON): every decoded IMU sample; publish time = sample time on the IMU clock.
 //! - `/nav/event` (JSON): irregularities (gaps, duplicates, bad frames, timeouts).
 //! - `/nav/summary` (JSON): the run summary, once at the end.
+//! - `/nav/attitude`, `/gps/fix`, `/nav/solution` (JSON): see [`JsonChannel`].
+//! - `/nav/location`, `/gps/location`, `/nav/pose`, `/nav/log`: Foxglove's well-known schemas,
+//!   derived from the records above on the writer thread ([`crate::foxglove`]).
 //!
 //! Every JSON channel carries its JSON schema (`nav/schemas/*.json`, encoding `jsonschema`), so
 //! viewers such as Foxglove know its fields and a reader can validate every message.
@@ -104,17 +107,29 @@ pub enum JsonChannel {
     Gps,
     /// `/nav/solution` (1 Hz of IMU time while navigating).
     Solution,
+    /// `/nav/location` (`foxglove.LocationFix`, derived from `/nav/solution`).
+    Location,
+    /// `/gps/location` (`foxglove.LocationFix`, derived from `/gps/fix`).
+    GpsLocation,
+    /// `/nav/pose` (`foxglove.PoseInFrame`, derived from `/nav/solution`).
+    Pose,
+    /// `/nav/log` (`foxglove.Log`, derived from `/nav/event`).
+    Log,
 }
 
 impl JsonChannel {
     /// Every JSON channel (each gets its MCAP channel when the file is created).
-    pub const ALL: [JsonChannel; 6] = [
+    pub const ALL: [JsonChannel; 10] = [
         JsonChannel::ImuSample,
         JsonChannel::Event,
         JsonChannel::Summary,
         JsonChannel::Attitude,
         JsonChannel::Gps,
         JsonChannel::Solution,
+        JsonChannel::Location,
+        JsonChannel::GpsLocation,
+        JsonChannel::Pose,
+        JsonChannel::Log,
     ];
 
     /// The channel's JSON schema (`nav/schemas/`): its name and text.
@@ -141,6 +156,15 @@ impl JsonChannel {
                 "rlg-hil/nav/solution",
                 include_str!("../schemas/solution.json"),
             ),
+            JsonChannel::Location | JsonChannel::GpsLocation => (
+                "foxglove.LocationFix",
+                include_str!("../schemas/foxglove/LocationFix.json"),
+            ),
+            JsonChannel::Pose => (
+                "foxglove.PoseInFrame",
+                include_str!("../schemas/foxglove/PoseInFrame.json"),
+            ),
+            JsonChannel::Log => ("foxglove.Log", include_str!("../schemas/foxglove/Log.json")),
         }
     }
 
@@ -152,6 +176,10 @@ impl JsonChannel {
             JsonChannel::Attitude => "/nav/attitude",
             JsonChannel::Gps => "/gps/fix",
             JsonChannel::Solution => "/nav/solution",
+            JsonChannel::Location => "/nav/location",
+            JsonChannel::GpsLocation => "/gps/location",
+            JsonChannel::Pose => "/nav/pose",
+            JsonChannel::Log => "/nav/log",
         }
     }
 }
@@ -220,11 +248,19 @@ impl Recorder {
             .add_channel(0, "/can/tx", RAW_FRAME_ENCODING, &meta)
             .map_err(mcap_err.clone())?;
         let mut json = BTreeMap::new();
+        let mut schemas = BTreeMap::new();
         for c in JsonChannel::ALL {
             let (name, text) = c.schema();
-            let schema = w
-                .add_schema(name, "jsonschema", text.as_bytes())
-                .map_err(mcap_err.clone())?;
+            let schema = match schemas.get(name) {
+                Some(id) => *id,
+                None => {
+                    let id = w
+                        .add_schema(name, "jsonschema", text.as_bytes())
+                        .map_err(mcap_err.clone())?;
+                    schemas.insert(name, id);
+                    id
+                }
+            };
             json.insert(
                 c,
                 w.add_channel(schema, c.topic(), "json", &meta)
@@ -240,6 +276,8 @@ impl Recorder {
                 let mut buf: [u8; RAW_FRAME_BYTES];
                 let mut text: String;
                 let mut last_flush = Instant::now();
+                let mut views = crate::foxglove::Views::default();
+                let mut derived = Vec::new();
                 loop {
                     let batch =
                         match rx.recv_timeout(FLUSH_EVERY.saturating_sub(last_flush.elapsed())) {
@@ -278,17 +316,29 @@ impl Recorder {
                                 json: j,
                             } => (json[channel], *t_ns, *publish_ns, j.as_bytes()),
                         };
-                        let s = seq.entry(ch).or_insert(0);
-                        *s += 1;
-                        let h = mcap::records::MessageHeader {
-                            channel_id: ch,
-                            sequence: *s,
-                            log_time: log,
-                            publish_time: publish,
+                        let mut put = |ch: u16, data: &[u8]| {
+                            let s = seq.entry(ch).or_insert(0);
+                            *s += 1;
+                            let h = mcap::records::MessageHeader {
+                                channel_id: ch,
+                                sequence: *s,
+                                log_time: log,
+                                publish_time: publish,
+                            };
+                            n += 1;
+                            w.write_to_known_channel(&h, data)
                         };
-                        w.write_to_known_channel(&h, data)
-                            .map_err(mcap_err.clone())?;
-                        n += 1;
+                        put(ch, data).map_err(mcap_err.clone())?;
+                        // the Foxglove views of this record, beside it
+                        if let Record::Json {
+                            channel, json: j, ..
+                        } = &r
+                        {
+                            views.derive(*channel, publish, j, &mut derived);
+                            for (c, m) in derived.drain(..) {
+                                put(json[&c], m.as_bytes()).map_err(mcap_err.clone())?;
+                            }
+                        }
                     }
                     // a chunk on disk at least this often: a nav killed outright loses no more
                     if last_flush.elapsed() >= FLUSH_EVERY {
@@ -422,7 +472,7 @@ mod tests {
             assert!(
                 s["title"]
                     .as_str()
-                    .is_some_and(|t| t.starts_with(c.topic())),
+                    .is_some_and(|t| t.starts_with(c.topic()) || t == name),
                 "{name}"
             );
             s
@@ -480,6 +530,35 @@ mod tests {
         };
         let sol = serde_json::json!({"t_s": 1.0, "mode": "GpsAided", "output": o, "pos_sigma_m": 3.2, "heading_sigma_deg": 0.1});
         conforms(&parsed(JsonChannel::Solution), &sol, "solution");
+        let mut sol = sol;
+        sol["pos_cov_enu_m2"] = serde_json::json!([4.0, 0.1, 0.0, 0.1, 5.0, 0.0, 0.0, 0.0, 9.0]);
+        conforms(
+            &parsed(JsonChannel::Solution),
+            &sol,
+            "solution with covariance",
+        );
+        // the Foxglove views follow Foxglove's schemas
+        let mut views = crate::foxglove::Views::default();
+        let mut derived = Vec::new();
+        views.derive(JsonChannel::Solution, 7, &sol.to_string(), &mut derived);
+        let fix_json = serde_json::to_string(&fix).unwrap();
+        views.derive(JsonChannel::Gps, 7, &fix_json, &mut derived);
+        let event = "{\"kind\":\"imu_timeout\",\"after_ms\":100}";
+        views.derive(JsonChannel::Event, 7, event, &mut derived);
+        let kinds: Vec<JsonChannel> = derived.iter().map(|d| d.0).collect();
+        assert_eq!(
+            kinds,
+            [
+                JsonChannel::Location,
+                JsonChannel::Pose,
+                JsonChannel::GpsLocation,
+                JsonChannel::Log
+            ]
+        );
+        for (c, m) in &derived {
+            let v: serde_json::Value = serde_json::from_str(m).unwrap();
+            conforms(&parsed(*c), &v, c.topic());
+        }
         // and a schema does catch a message that is not its kind
         let caught = std::panic::catch_unwind(|| {
             conforms(

@@ -1,5 +1,6 @@
 //! A recording from an end-to-end run read with the field's own MCAP reader (Python `mcap`):
-//! its summary's counts match what is read, and every JSON message (every 50th of the 2 kHz IMU
+//! its summary's counts match what is read, the Foxglove topics carry Foxglove's schemas by
+//! name, and every JSON message (every 50th of the 2 kHz IMU
 //! samples) is validated against its channel's JSON schema (Python `jsonschema`; both
 //! installed by `./run-tests`). Ignored by a plain `cargo test`: `./run-tests` runs it after the
 //! end-to-end tests have left the campus loop's `nav.mcap` in `target/e2e-reports/`.
@@ -11,7 +12,7 @@ import json, sys
 from collections import Counter
 from jsonschema import Draft202012Validator
 from mcap.reader import make_reader
-counts, bad, schemas, checked = Counter(), [], {}, 0
+counts, bad, schemas, checked, names = Counter(), [], {}, 0, {}
 with open(sys.argv[1], "rb") as f:
     reader = make_reader(f)
     summary = reader.get_summary()
@@ -26,6 +27,7 @@ with open(sys.argv[1], "rb") as f:
         if channel.topic == "/imu/sample" and seen[channel.topic] % 50 != 1:
             continue
         checked += 1
+        names[channel.topic] = schema.name if schema else None
         if schema is None or schema.encoding != "jsonschema":
             bad.append(f"{channel.topic}: no JSON schema")
             continue
@@ -40,6 +42,7 @@ with open(sys.argv[1], "rb") as f:
 if seen != Counter({t: counts[t] for t in json_topics if counts[t]}):
     bad.append(f"read {dict(seen)}, the summary counts {dict(counts)}")
 print(json.dumps({"counts": counts, "bad": bad, "schemas": len(schemas), "checked": checked,
+                  "schema_names": names,
                   "chunks": len(summary.chunk_indexes) if summary else 0}))
 "#;
 
@@ -74,8 +77,21 @@ fn a_run_recording_reads_in_python_mcap_and_every_json_message_follows_its_schem
         "/nav/solution",
         "/gps/fix",
         "/nav/summary",
+        "/nav/location",
+        "/gps/location",
+        "/nav/pose",
+        "/nav/log",
     ] {
         assert!(c[topic].as_u64().unwrap_or(0) > 0, "no {topic}: {c}");
+    }
+    // Foxglove's well-known schemas, by the names its viewers know them by
+    for (topic, name) in [
+        ("/nav/location", "foxglove.LocationFix"),
+        ("/gps/location", "foxglove.LocationFix"),
+        ("/nav/pose", "foxglove.PoseInFrame"),
+        ("/nav/log", "foxglove.Log"),
+    ] {
+        assert_eq!(r["schema_names"][topic], name, "{r}");
     }
     assert!(r["schemas"].as_u64().unwrap() >= 5, "{r}");
     assert!(
