@@ -48,6 +48,7 @@ pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) ->
             port: p.to_path_buf(),
             baud: 9600,
             fixes_jsonl: Some("gps-fixes.jsonl".into()),
+            ..GpsConfig::default()
         }),
         navigation: navigation_config(s).unwrap_or_default(),
         imu: crate::replay::calibration(s),

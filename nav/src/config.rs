@@ -52,14 +52,56 @@ pub struct CanConfig {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GpsConfig {
-    /// Serial device (`/dev/ttyUSB0`, `/dev/ttyS1`; on the bench a pty).
+    /// Where the receiver's sentences come from: its serial port (the default) or gpsd, the
+    /// daemon through which a Linux vehicle shares one receiver.
+    #[serde(default)]
+    pub source: GpsSource,
+    /// Serial device (`/dev/ttyUSB0`, `/dev/ttyS1`; on the bench a pty). Required with
+    /// `source = "serial"`.
+    #[serde(default)]
     pub port: PathBuf,
     /// Baud rate.
     #[serde(default = "default_baud")]
     pub baud: u32,
+    /// gpsd's address (`source = "gpsd"`), `host:port`.
+    #[serde(default = "default_gpsd")]
+    pub gpsd: String,
+    /// With gpsd: the one device to watch (its path as gpsd knows it); all devices when absent.
+    #[serde(default)]
+    pub gpsd_device: Option<String>,
     /// Export of every decoded fix as JSON lines (relative to the config file).
     #[serde(default)]
     pub fixes_jsonl: Option<PathBuf>,
+}
+
+/// Where the GPS sentences come from.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GpsSource {
+    /// The receiver's serial port, read directly.
+    #[default]
+    Serial,
+    /// gpsd over TCP: nav asks for the receiver's NMEA (`?WATCH={"nmea":true}`), which gpsd
+    /// passes on as the device sent it (or generates from the fix for a binary-protocol
+    /// receiver), and decodes it as from a port.
+    Gpsd,
+}
+
+impl Default for GpsConfig {
+    fn default() -> Self {
+        Self {
+            source: GpsSource::Serial,
+            port: PathBuf::new(),
+            baud: default_baud(),
+            gpsd: default_gpsd(),
+            gpsd_device: None,
+            fixes_jsonl: None,
+        }
+    }
+}
+
+fn default_gpsd() -> String {
+    "127.0.0.1:2947".into()
 }
 
 fn default_baud() -> u32 {
@@ -151,6 +193,23 @@ impl NavConfig {
         }
         if cfg.can.is_none() && cfg.gps.is_none() {
             return Err(invalid("names no device: give [can] and/or [gps]".into()));
+        }
+        if let Some(g) = &cfg.gps {
+            match g.source {
+                GpsSource::Serial if g.port.as_os_str().is_empty() => {
+                    return Err(invalid(
+                        "gps.port is missing (the receiver's serial device; or source = \"gpsd\")"
+                            .into(),
+                    ));
+                }
+                GpsSource::Gpsd if !g.gpsd.contains(':') => {
+                    return Err(invalid(format!(
+                        "gps.gpsd ({:?}) must be host:port, e.g. \"127.0.0.1:2947\"",
+                        g.gpsd
+                    )));
+                }
+                _ => {}
+            }
         }
         let c = &cfg.imu;
         if c.gyro_pulse_arcsec
