@@ -301,6 +301,27 @@ mod tests {
         assert_eq!(NavConfig::load(&p).unwrap().can.unwrap().interface, "can0");
     }
 
+    /// A `[gps]` names its source: a serial port, or gpsd at host:port; what is missing is said.
+    #[test]
+    fn the_gps_source_is_a_port_or_gpsd() {
+        let load = |gps: &str| NavConfig::from_text(&format!("[gps]\n{gps}"), Path::new("n.toml"));
+        let c = load("port = \"/dev/ttyUSB0\"\n").unwrap().gps.unwrap();
+        assert_eq!((c.source, c.baud), (GpsSource::Serial, 9600));
+        let e = load("baud = 4800\n").unwrap_err().to_string();
+        assert!(e.contains("gps.port is missing"), "{e}");
+        let c = load("source = \"gpsd\"\n").unwrap().gps.unwrap();
+        assert_eq!(
+            (c.source, c.gpsd.as_str()),
+            (GpsSource::Gpsd, "127.0.0.1:2947")
+        );
+        let e = load("source = \"gpsd\"\ngpsd = \"localhost\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("host:port"), "{e}");
+        let e = full(load("source = \"usb\"\n").unwrap_err());
+        assert!(e.contains("usb") && e.contains("serial"), "{e}");
+    }
+
     /// The message with its causes, as the binaries print it.
     fn full(e: ConfigError) -> String {
         format!("{:#}", anyhow::Error::from(e))
