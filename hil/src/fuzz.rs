@@ -412,7 +412,7 @@ fn scenario(bytes: &[u8]) -> bool {
 /// The figures as a Markdown table.
 pub fn markdown(rs: &[FuzzReport]) -> String {
     let mut m = String::from(
-        "| target | inputs | accepted | panics | hangs (> 500 ms) | slowest ms | seconds | inputs/s | seed |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| target | inputs | accepted | panics | hangs (> 500 ms CPU) | slowest ms | seconds | inputs/s | seed |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rs {
         m += &format!(

@@ -312,10 +312,9 @@ pub fn merge(parts: &[McPart], out: &Path, progress: bool) -> Result<McReport> {
         bias_effect_ratio,
     };
     std::fs::write(out.join("report.json"), serde_json::to_string_pretty(&r)?)?;
-    std::fs::write(
-        out.join("report.md"),
-        format!("# North-finding Monte Carlo\n\n```\n{}```\n", text(&r)),
-    )?;
+    let md = format!("# North-finding Monte Carlo\n\n```\n{}```\n", text(&r));
+    std::fs::write(out.join("report.md"), &md)?;
+    crate::html::folder_page(out, "North-finding Monte Carlo", &md)?;
     Ok(r)
 }
 

@@ -669,3 +669,34 @@ pub fn table(v: &Validation) -> String {
     let _ = writeln!(s, " RESULT: {}", if v.pass { "PASS" } else { "FAIL" });
     s
 }
+
+/// The validation as Markdown (`validation.md`, and the HTML report made from it).
+pub fn markdown(v: &Validation) -> String {
+    use std::fmt::Write;
+    let cell = |t: &str| t.replace('|', "\\|");
+    let mut s = format!(
+        "# Turntable validation\n\nAxis {} on `{}`: {} commands, {} acknowledgements, {} status frames. **Result: {}**\n\n| check | result | measured | limit | reason |\n|---|---|---|---|---|\n",
+        v.axis,
+        v.interface,
+        v.commands,
+        v.acks,
+        v.status_frames,
+        if v.pass { "PASS" } else { "FAIL" }
+    );
+    for c in &v.checks {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} |",
+            cell(&c.name),
+            if c.pass { "PASS" } else { "FAIL" },
+            cell(&c.measured),
+            cell(&c.limit),
+            if c.pass {
+                String::new()
+            } else {
+                cell(&c.reason)
+            }
+        );
+    }
+    s
+}

@@ -189,6 +189,7 @@ fn the_fault_matrix_passes_every_row() {
     let md = std::fs::read_to_string(dir.path().join("faults.md")).unwrap();
     assert!(md.contains("| imu-counter-jump |") && md.contains("| turntable-heartbeat-loss |"));
     assert!(dir.path().join("faults.json").is_file());
+    keep_report(dir.path(), "fault-matrix");
 }
 
 /// Coning through the bus: the full RLG model (dither, noise, quantization) under 1 deg / 10 Hz
@@ -446,6 +447,10 @@ fn turntable_validation_catches_every_injected_fault() {
         let v: Value = serde_json::from_slice(&o.stdout)
             .unwrap_or_else(|e| panic!("no JSON ({e}): {}", String::from_utf8_lossy(&o.stderr)));
         assert!(dir.path().join("validation.json").is_file());
+        if fault.is_none() {
+            // the healthy run's report goes to the browser test
+            keep_report(dir.path(), "turntable-validation");
+        }
         (v, o.status.code().unwrap_or(-1))
     };
     let failed = |v: &Value| -> Vec<(String, String)> {
