@@ -21,4 +21,5 @@ pub mod routes;
 pub mod run;
 pub mod scenario;
 pub mod shard;
+pub mod truthrec;
 pub mod validate;

@@ -49,6 +49,9 @@ pub struct NavScore {
     /// nav's own heading sigma at that output, deg.
     #[serde(default)]
     pub heading_sigma_deg: Option<f64>,
+    /// The wall time nav logged that output at (from its recording), ns since the epoch.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub logged_wall_ns: Option<u64>,
 }
 
 /// Score the navigation output in a nav summary against the drive (none when nav did not
@@ -106,6 +109,7 @@ pub fn score_output(drive: &Drive, t: f64, o: &NavOutput) -> NavScore {
         heading_error_deg: dh,
         position_sigma_m: None,
         heading_sigma_deg: None,
+        logged_wall_ns: None,
     }
 }
 
@@ -141,6 +145,7 @@ pub fn score_recording(
                 out.push(NavScore {
                     position_sigma_m: sigma("pos_sigma_m"),
                     heading_sigma_deg: sigma("heading_sigma_deg"),
+                    logged_wall_ns: Some(m.log_time),
                     ..score_output(drive, t + t_first, &o)
                 })
             }

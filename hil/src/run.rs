@@ -593,6 +593,14 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     if let Some(replayed) = replayed {
         checks.push(report::replay_check(replayed.as_ref()));
     }
+    // sim time -> the wall time nav logged it at, for the truth recording below
+    let clock: Vec<(f64, u64)> = match &scored {
+        Some(Ok((scores, _))) => scores
+            .iter()
+            .filter_map(|x| Some((x.t_s, x.logged_wall_ns?)))
+            .collect(),
+        _ => Vec::new(),
+    };
     let mut navigation_series = None;
     let navigation = match (drive, scored) {
         (Some(drive), Some(scored)) => {
@@ -611,6 +619,22 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
         _ => None,
     };
+    // the bench's own side: the truth beside nav's recording, on nav's logged wall clock
+    if opts.reference_checks {
+        let truth_drive = match &s.drive {
+            Some(d) => Some(Drive::plan(d)?),
+            None => None,
+        };
+        if let Err(e) = crate::truthrec::write(
+            &opts.out,
+            truth_drive.as_ref(),
+            &s.site,
+            s.duration_s,
+            &clock,
+        ) {
+            tracing::warn!("truth.mcap: {e:#}");
+        }
+    }
     phases.end("checks");
     info!(
         "run phases: {phases} CPU: nav {:.1} s, bench {:.1} s",

@@ -12,7 +12,7 @@ import json, sys
 from collections import Counter
 from jsonschema import Draft202012Validator
 from mcap.reader import make_reader
-counts, bad, schemas, checked, names = Counter(), [], {}, 0, {}
+counts, bad, schemas, checked, names, logged = Counter(), [], {}, 0, {}, {}
 with open(sys.argv[1], "rb") as f:
     reader = make_reader(f)
     summary = reader.get_summary()
@@ -28,6 +28,8 @@ with open(sys.argv[1], "rb") as f:
             continue
         checked += 1
         names[channel.topic] = schema.name if schema else None
+        lo, hi = logged.get(channel.topic, (message.log_time, message.log_time))
+        logged[channel.topic] = (min(lo, message.log_time), max(hi, message.log_time))
         if schema is None or schema.encoding != "jsonschema":
             bad.append(f"{channel.topic}: no JSON schema")
             continue
@@ -42,14 +44,13 @@ with open(sys.argv[1], "rb") as f:
 if seen != Counter({t: counts[t] for t in json_topics if counts[t]}):
     bad.append(f"read {dict(seen)}, the summary counts {dict(counts)}")
 print(json.dumps({"counts": counts, "bad": bad, "schemas": len(schemas), "checked": checked,
-                  "schema_names": names,
+                  "schema_names": names, "log_range": logged,
                   "chunks": len(summary.chunk_indexes) if summary else 0}))
 "#;
 
-#[test]
-#[ignore = "needs an end-to-end run's recording: run ./run-tests"]
-fn a_run_recording_reads_in_python_mcap_and_every_json_message_follows_its_schema() {
-    let mcap = e2e::reports_dir().join("campus-loop/nav.mcap");
+/// The checker's findings on one recording; no message off its schema.
+fn check(name: &str) -> serde_json::Value {
+    let mcap = e2e::reports_dir().join("campus-loop").join(name);
     assert!(
         mcap.is_file(),
         "{} is missing (the campus loop e2e test leaves it)",
@@ -62,12 +63,27 @@ fn a_run_recording_reads_in_python_mcap_and_every_json_message_follows_its_schem
         .expect("python3 runs");
     assert!(
         o.status.success(),
-        "the Python reader failed: {}",
+        "the Python reader failed on {name}: {}",
         String::from_utf8_lossy(&o.stderr)
     );
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).expect("the checker's JSON");
-    eprintln!("{r}");
-    assert_eq!(r["bad"], serde_json::json!([]), "messages off their schema");
+    eprintln!("{name}: {r}");
+    assert_eq!(
+        r["bad"],
+        serde_json::json!([]),
+        "{name}: messages off their schema"
+    );
+    assert!(
+        r["chunks"].as_u64().unwrap() > 0,
+        "{name}: the summary section indexes its chunks: {r}"
+    );
+    r
+}
+
+#[test]
+#[ignore = "needs an end-to-end run's recording: run ./run-tests"]
+fn a_run_recording_reads_in_python_mcap_and_every_json_message_follows_its_schema() {
+    let r = check("nav.mcap");
     let c = &r["counts"];
     for topic in [
         "/can/raw",
@@ -94,8 +110,27 @@ fn a_run_recording_reads_in_python_mcap_and_every_json_message_follows_its_schem
         assert_eq!(r["schema_names"][topic], name, "{r}");
     }
     assert!(r["schemas"].as_u64().unwrap() >= 5, "{r}");
+
+    // the bench's truth beside it, on the wall clock nav logged the same instants at
+    let t = check("truth.mcap");
+    assert_eq!(t["schema_names"]["/truth/location"], "foxglove.LocationFix");
     assert!(
-        r["chunks"].as_u64().unwrap() > 0,
-        "the summary section indexes its chunks: {r}"
+        t["counts"]["/truth/state"].as_u64().unwrap_or(0) > 100,
+        "{t}"
+    );
+    let range = |v: &serde_json::Value, topic: &str| -> (f64, f64) {
+        let a = &v["log_range"][topic];
+        (a[0].as_f64().unwrap(), a[1].as_f64().unwrap())
+    };
+    let (n0, n1) = range(&r, "/nav/location");
+    let (t0, t1) = range(&t, "/truth/location");
+    // truth spans the whole run, nav's solution the part it navigated: within it, on one clock
+    assert!(
+        t0 <= n0 + 1e9 && t1 >= n1 - 1e9,
+        "truth's log times {t0}..{t1} do not cover nav's {n0}..{n1}"
+    );
+    assert!(
+        t1 - t0 < 2.0 * (n1 - n0) + 120e9,
+        "truth {t0}..{t1}, nav {n0}..{n1}"
     );
 }

@@ -369,6 +369,7 @@ fn campus_loop_shortened_finds_north_then_navigates() {
     keep_report(&dir.path().join("run"), "campus-loop");
     // and its recording, for the schema check with the field's MCAP reader after these tests
     e2e::keep_file(&dir.path().join("run"), "campus-loop", "nav.mcap");
+    e2e::keep_file(&dir.path().join("run"), "campus-loop", "truth.mcap");
     let names: Vec<String> = checks(&r).into_iter().map(|c| c.0).collect();
     for n in [
         "north-finding finished",
