@@ -21,5 +21,6 @@ pub mod routes;
 pub mod run;
 pub mod scenario;
 pub mod shard;
+pub mod status;
 pub mod truthrec;
 pub mod validate;

@@ -429,11 +429,15 @@ fn main() {
     // nav's pipeline runs in process here (drills, experiments, replays): its progress goes in
     // the results, not in a log line per run; under the fuzzer its warnings about the hostile
     // input are the expected answer, counted by the fuzzer, not logged a million times
-    nav::cli::init_tracing_with(if matches!(cli.cmd, Cmd::Fuzz { .. }) {
-        "info,nav=off"
-    } else {
-        "info,nav=warn"
-    });
+    // log lines clear the status line a terminal may be showing (hil::status)
+    nav::cli::init_tracing_on(
+        if matches!(cli.cmd, Cmd::Fuzz { .. }) {
+            "info,nav=off"
+        } else {
+            "info,nav=warn"
+        },
+        hil::status::LogWriter,
+    );
     // exit 0: pass, 1: a check failed or the run could not go on
     std::process::exit(nav::cli::exit_code("hil", real_main(cli), |code| code));
 }

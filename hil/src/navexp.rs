@@ -222,6 +222,12 @@ pub(crate) struct Tally {
     on: bool,
 }
 
+impl Drop for Tally {
+    fn drop(&mut self) {
+        crate::status::finish();
+    }
+}
+
 impl Tally {
     pub(crate) fn new(total: usize, on: bool) -> Self {
         Self {
@@ -236,14 +242,17 @@ impl Tally {
     pub(crate) fn done(&self, label: &str, r: &Result<PartRun>) {
         let n = self.done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
         if self.on {
-            eprintln!(
-                "hil: {n}/{} done ({:.0} s): {label}{}",
+            crate::status::count(
+                n,
                 self.total,
                 self.t0.elapsed().as_secs_f64(),
-                r.as_ref().map_or(String::new(), |r| format!(
-                    ", end error {:.1} m",
-                    r.run.end_position_error_m
-                ))
+                &format!(
+                    "{label}{}",
+                    r.as_ref().map_or(String::new(), |r| format!(
+                        ", end error {:.1} m",
+                        r.run.end_position_error_m
+                    ))
+                ),
             );
         }
     }

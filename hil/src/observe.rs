@@ -137,14 +137,14 @@ impl DrillWatch {
     pub fn line(&mut self, l: &str, show: bool) -> bool {
         if let Some(j) = l.strip_prefix("nav: north-finding progress ") {
             if show && let Ok(p) = serde_json::from_str::<serde_json::Value>(j) {
-                eprintln!("{}", crate::drill::progress_line(&p));
+                crate::status::show(&crate::drill::progress_line(&p));
             }
             return false;
         }
         if l.starts_with("nav: north-finding result") || l.starts_with("nav: north-finding aborted")
         {
             if show {
-                eprintln!("{l}");
+                crate::status::line(l);
             }
             let first = !self.done;
             self.done = true;

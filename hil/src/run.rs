@@ -322,7 +322,7 @@ fn start_nav(bin: &Path, config: &Path, account: Option<(u32, u32)>) -> Result<N
     loop {
         match rx.recv_timeout(Duration::from_millis(100)) {
             Ok(l) if l.starts_with("nav: receiving") => break,
-            Ok(l) => eprintln!("{l}"),
+            Ok(l) => crate::status::line(&l),
             Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
                 if let Some(st) = child.try_wait()? {
                     bail!("nav exited before it was ready ({st}); see its messages above");
@@ -458,14 +458,26 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
                 next_report += Duration::from_secs(5);
                 continue;
             }
-            eprintln!(
-                "hil: {t:.1} / {:.1} s simulated (x{} asked, x{reached:.1} reached)",
+            let text = format!(
+                "{t:.1} / {:.1} s simulated (x{} asked, x{reached:.1} reached)",
                 s.duration_s, s.speed
             );
+            // a bar redrawn each second on a terminal, a line every 5 s in a log
+            let every = if crate::status::interactive() {
+                crate::status::show(&format!(
+                    "{} {text}",
+                    crate::status::bar_of(t / s.duration_s.max(1e-9), 30)
+                ));
+                1
+            } else {
+                crate::status::show(&format!("hil: {text}"));
+                5
+            };
             last_report = (Instant::now(), t);
-            next_report += Duration::from_secs(5);
+            next_report += Duration::from_secs(every);
         }
     }
+    crate::status::finish();
     let wall = t0.elapsed().as_secs_f64();
     phases.end("devices");
     let sim_reached = devices.sim_time();
@@ -496,7 +508,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     for l in &nav_lines {
         // nav's own words (its summary, warnings), unless the caller wants the figures only
         if !drill.line(l, false) && opts.progress {
-            eprintln!("{l}");
+            crate::status::line(l);
         }
     }
     let summary_path = opts.out.join("nav-summary.json");

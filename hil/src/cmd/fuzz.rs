@@ -55,16 +55,18 @@ pub(crate) fn fuzz(
         let t0 = std::time::Instant::now();
         let r = hil::fuzz::run(t, inputs, seed, &out, |i| {
             if i > 0 {
-                eprintln!(
-                    "hil fuzz: {t:?}: {i} of {inputs} inputs ({:.0} s)",
-                    t0.elapsed().as_secs_f64()
+                hil::status::count(
+                    i as usize,
+                    inputs as usize,
+                    t0.elapsed().as_secs_f64(),
+                    &format!("{t:?} inputs"),
                 );
             }
         })?;
-        eprintln!(
+        hil::status::line(&format!(
             "hil fuzz: {t:?}: {} inputs, {} panics, {} hangs, slowest {:.2} ms",
             r.inputs, r.panics, r.hangs, r.slowest_ms
-        );
+        ));
         reports.push(r);
     }
     let md = hil::fuzz::markdown(&reports);
