@@ -88,16 +88,14 @@ pub type Points = Vec<(f64, f64)>;
 /// gyro frames received before each frame (the bus carries a sample's IMU frames first).
 pub fn turntable_series(mcap_path: &Path, rate_hz: f64) -> anyhow::Result<(Points, Points)> {
     use wire::{Message, TtCommand};
-    let buf = std::fs::read(mcap_path)
-        .map_err(|e| anyhow::anyhow!("reading {}: {e}", mcap_path.display()))?;
     let (mut angle, mut targets): (Points, Points) = (Vec::new(), Vec::new());
     let mut gyro = 0u64;
-    for m in mcap::MessageStream::new(&buf)?.map_while(Result::ok) {
+    crate::playback::each_message(mcap_path, "plotting", |m| {
         if m.channel.topic != "/can/raw" && m.channel.topic != "/can/tx" {
-            continue;
+            return;
         }
         let Some(f) = nav::record::decode_frame(&m.data) else {
-            continue;
+            return;
         };
         let t = gyro as f64 / rate_hz;
         match Message::decode(&f) {
@@ -112,13 +110,13 @@ pub fn turntable_series(mcap_path: &Path, rate_hz: f64) -> anyhow::Result<(Point
                 let to = match TtCommand::from_raw(i64::from(c.command)) {
                     Some(TtCommand::IndexAbs) => c.arg,
                     Some(TtCommand::Home) => 0.0,
-                    _ => continue,
+                    _ => return,
                 };
                 targets.push((t, to));
             }
             _ => {}
         }
-    }
+    })?;
     // each target on the turn the table reached before the next command (a move of half a
     // turn may go either way), held until then: steps
     let t_end = angle.last().map_or(0.0, |p| p.0);

@@ -120,18 +120,11 @@ pub fn score_recording(
     mcap_path: &std::path::Path,
     t_first: f64,
 ) -> Result<(Vec<NavScore>, u64)> {
-    let buf = std::fs::read(mcap_path)
-        .map_err(|e| anyhow::anyhow!("reading {}: {e}", mcap_path.display()))?;
     let mut out = Vec::new();
     let mut bad = 0u64;
-    for m in mcap::MessageStream::new(&buf)? {
-        let Ok(m) = m else {
-            // a recording cut short still gives what it has
-            bad += 1;
-            break;
-        };
+    let cut = crate::playback::each_message(mcap_path, "scoring", |m| {
         if m.channel.topic != "/nav/solution" {
-            continue;
+            return;
         }
         let j: Option<serde_json::Value> = serde_json::from_slice(&m.data).ok();
         let parsed = j.as_ref().and_then(|j| {
@@ -151,7 +144,9 @@ pub fn score_recording(
             }
             None => bad += 1,
         }
-    }
+    })?;
+    // a recording cut short still gives what it has
+    bad += u64::from(cut);
     Ok((out, bad))
 }
 

@@ -147,30 +147,42 @@ impl Replayer {
     }
 }
 
+/// Every message of nav's recording `path`, part after part ([`nav::record::parts`]), in
+/// order, to `f`. A part cut short (nav killed outright) ends the reading there, with a warning
+/// naming what was being done: what came before is kept. Returns whether it was cut short.
+pub fn each_message(path: &Path, doing: &str, mut f: impl FnMut(&mcap::Message)) -> Result<bool> {
+    let mut parts = nav::record::parts(path);
+    if parts.is_empty() {
+        parts.push(path.to_path_buf());
+    }
+    for part in &parts {
+        let buf = std::fs::read(part).with_context(|| format!("reading {}", part.display()))?;
+        let stream = mcap::MessageStream::new(&buf)
+            .with_context(|| format!("{} is not an MCAP file", part.display()))?;
+        for m in stream {
+            match m {
+                Ok(m) => f(&m),
+                Err(e) => {
+                    tracing::warn!("{}: {e}; {doing} what came before", part.display());
+                    return Ok(true);
+                }
+            }
+        }
+    }
+    Ok(false)
+}
+
 /// Replay the recording `mcap` through the pipeline of config `cfg`.
 pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
-    let buf =
-        std::fs::read(mcap_path).with_context(|| format!("reading {}", mcap_path.display()))?;
     let mut r = Replayer::new(cfg)?;
-    let stream = mcap::MessageStream::new(&buf)
-        .with_context(|| format!("{} is not an MCAP file", mcap_path.display()))?;
-    for m in stream {
-        let m = match m {
-            Ok(m) => m,
-            Err(e) => {
-                // a recording cut short still replays what it has
-                tracing::warn!("{}: {e}; replaying what came before", mcap_path.display());
-                r.feed(Input::Bad);
-                break;
-            }
-        };
+    let cut = each_message(mcap_path, "replaying", |m| {
         let frame = |m: &mcap::Message| match nav::record::decode_frame(&m.data) {
             Some(f) if m.channel.message_encoding == RAW_FRAME_ENCODING => Some(f),
             _ => None,
         };
         let input = match m.channel.topic.as_str() {
-            "/can/raw" => frame(&m).map_or(Input::Bad, Input::Frame),
-            "/can/tx" => frame(&m).map_or(Input::Bad, Input::Sent),
+            "/can/raw" => frame(m).map_or(Input::Bad, Input::Frame),
+            "/can/tx" => frame(m).map_or(Input::Bad, Input::Sent),
             // the liveness watchdog's changes, where they happened
             "/nav/event" => match serde_json::from_slice::<serde_json::Value>(&m.data) {
                 Ok(e) => match e["kind"].as_str() {
@@ -178,7 +190,7 @@ pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
                         Input::Timeout(true, e["after_ms"].as_u64().unwrap_or(0))
                     }
                     Some("imu_back") => Input::Timeout(false, 0),
-                    _ => continue,
+                    _ => return,
                 },
                 Err(_) => Input::Bad,
             },
@@ -186,9 +198,13 @@ pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
                 Ok(fix) => Input::Fix(Box::new(fix)),
                 Err(_) => Input::Bad,
             },
-            _ => continue,
+            _ => return,
         };
         r.feed(input);
+    })?;
+    if cut {
+        // a recording cut short still replays what it has
+        r.feed(Input::Bad);
     }
     Ok(r.finish(&mcap_path.display().to_string()))
 }
@@ -266,33 +282,29 @@ pub fn replay_candump(log: &Path, cfg: &NavConfig) -> Result<Playback> {
 /// to `out` as a `candump -l` log of interface `iface`, time-stamped with nav's receive and send
 /// times. Returns the lines written.
 pub fn export_candump(mcap_path: &Path, iface: &str, out: &mut impl std::io::Write) -> Result<u64> {
-    let buf =
-        std::fs::read(mcap_path).with_context(|| format!("reading {}", mcap_path.display()))?;
-    let stream = mcap::MessageStream::new(&buf)
-        .with_context(|| format!("{} is not an MCAP file", mcap_path.display()))?;
     let mut n = 0u64;
-    for m in stream {
-        let m = match m {
-            Ok(m) => m,
-            Err(e) => {
-                tracing::warn!("{}: {e}; exporting what came before", mcap_path.display());
-                break;
-            }
-        };
-        if !matches!(m.channel.topic.as_str(), "/can/raw" | "/can/tx")
+    let mut failed = None;
+    each_message(mcap_path, "exporting", |m| {
+        if failed.is_some()
+            || !matches!(m.channel.topic.as_str(), "/can/raw" | "/can/tx")
             || m.channel.message_encoding != RAW_FRAME_ENCODING
         {
-            continue;
+            return;
         }
         let Some(f) = nav::record::decode_frame(&m.data) else {
-            continue;
+            return;
         };
-        writeln!(
+        match writeln!(
             out,
             "{}",
             wire::candump::format_line(m.log_time / 1000, iface, &f)
-        )?;
-        n += 1;
+        ) {
+            Ok(()) => n += 1,
+            Err(e) => failed = Some(e),
+        }
+    })?;
+    if let Some(e) = failed {
+        return Err(e.into());
     }
     Ok(n)
 }

@@ -221,52 +221,20 @@ pub struct Recorder {
 impl Recorder {
     /// Create the file and start the writer thread.
     pub fn start(path: &Path) -> Result<Self, RecordError> {
-        let file = File::create(path).map_err(|source| RecordError::Create {
-            path: path.into(),
-            source,
-        })?;
+        Self::start_rotating(path, ROTATE_CHUNKS)
+    }
+
+    /// The same, going on in a new part ([`part_path`]) once a part holds about
+    /// `rotate_chunks` chunks: the writer keeps an index entry per chunk in memory until its
+    /// file is finished, so a long recording in one file would grow nav's memory without end.
+    pub fn start_rotating(path: &Path, rotate_chunks: u64) -> Result<Self, RecordError> {
+        let (mut w, mut ch) = open_part(path)?;
         let p = path.to_path_buf();
         let mcap_err = move |source| RecordError::Mcap {
             path: p.clone(),
             source,
         };
-        let mut w = mcap::WriteOptions::new()
-            .compression(Some(mcap::Compression::Zstd))
-            // zstd's fastest level, in this writer thread: no extra compression threads
-            // competing with the front end for the vehicle computer's cores
-            .compression_level(1)
-            .compression_threads(0)
-            .chunk_size(Some(256 * 1024))
-            .profile("")
-            .create(BufWriter::new(file))
-            .map_err(mcap_err.clone())?;
-        let meta = BTreeMap::new();
-        let raw = w
-            .add_channel(0, "/can/raw", RAW_FRAME_ENCODING, &meta)
-            .map_err(mcap_err.clone())?;
-        let sent = w
-            .add_channel(0, "/can/tx", RAW_FRAME_ENCODING, &meta)
-            .map_err(mcap_err.clone())?;
-        let mut json = BTreeMap::new();
-        let mut schemas = BTreeMap::new();
-        for c in JsonChannel::ALL {
-            let (name, text) = c.schema();
-            let schema = match schemas.get(name) {
-                Some(id) => *id,
-                None => {
-                    let id = w
-                        .add_schema(name, "jsonschema", text.as_bytes())
-                        .map_err(mcap_err.clone())?;
-                    schemas.insert(name, id);
-                    id
-                }
-            };
-            json.insert(
-                c,
-                w.add_channel(schema, c.topic(), "json", &meta)
-                    .map_err(mcap_err.clone())?,
-            );
-        }
+        let base = path.to_path_buf();
         let (tx, rx) = mpsc::channel::<Vec<Record>>();
         let handle = std::thread::Builder::new()
             .name("mcap-writer".into())
@@ -277,6 +245,7 @@ impl Recorder {
                 let mut text: String;
                 let mut last_flush = Instant::now();
                 let mut views = crate::foxglove::Views::default();
+                let (mut chunks, mut chunk_bytes, mut part) = (0u64, 0u64, 0u32);
                 let mut derived = Vec::new();
                 loop {
                     let batch =
@@ -286,15 +255,15 @@ impl Recorder {
                             Err(mpsc::RecvTimeoutError::Disconnected) => break,
                         };
                     for r in batch {
-                        let (ch, log, publish, data): (u16, u64, u64, &[u8]) = match &r {
+                        let (ch_id, log, publish, data): (u16, u64, u64, &[u8]) = match &r {
                             Record::Frame { t_ns, frame } | Record::Sent { t_ns, frame } => {
                                 buf = encode_frame(frame);
-                                let ch = if matches!(r, Record::Sent { .. }) {
-                                    sent
+                                let c = if matches!(r, Record::Sent { .. }) {
+                                    ch.sent
                                 } else {
-                                    raw
+                                    ch.raw
                                 };
-                                (ch, *t_ns, *t_ns, &buf)
+                                (c, *t_ns, *t_ns, &buf)
                             }
                             Record::Sample {
                                 t_ns,
@@ -303,7 +272,7 @@ impl Recorder {
                             } => {
                                 text = serde_json::to_string(sample).unwrap_or_default();
                                 (
-                                    json[&JsonChannel::ImuSample],
+                                    ch.json[&JsonChannel::ImuSample],
                                     *t_ns,
                                     *publish_ns,
                                     text.as_bytes(),
@@ -314,21 +283,28 @@ impl Recorder {
                                 t_ns,
                                 publish_ns,
                                 json: j,
-                            } => (json[channel], *t_ns, *publish_ns, j.as_bytes()),
+                            } => (ch.json[channel], *t_ns, *publish_ns, j.as_bytes()),
                         };
-                        let mut put = |ch: u16, data: &[u8]| {
-                            let s = seq.entry(ch).or_insert(0);
+                        let c = ch_id;
+                        let mut put = |id: u16, data: &[u8]| {
+                            let s = seq.entry(id).or_insert(0);
                             *s += 1;
                             let h = mcap::records::MessageHeader {
-                                channel_id: ch,
+                                channel_id: id,
                                 sequence: *s,
                                 log_time: log,
                                 publish_time: publish,
                             };
                             n += 1;
+                            // a chunk closes when its uncompressed size reaches CHUNK_BYTES
+                            chunk_bytes += data.len() as u64 + 31;
+                            if chunk_bytes >= CHUNK_BYTES {
+                                chunks += 1;
+                                chunk_bytes = 0;
+                            }
                             w.write_to_known_channel(&h, data)
                         };
-                        put(ch, data).map_err(mcap_err.clone())?;
+                        put(c, data).map_err(mcap_err.clone())?;
                         // the Foxglove views of this record, beside it
                         if let Record::Json {
                             channel, json: j, ..
@@ -336,7 +312,7 @@ impl Recorder {
                         {
                             views.derive(*channel, publish, j, &mut derived);
                             for (c, m) in derived.drain(..) {
-                                put(json[&c], m.as_bytes()).map_err(mcap_err.clone())?;
+                                put(ch.json[&c], m.as_bytes()).map_err(mcap_err.clone())?;
                             }
                         }
                     }
@@ -344,6 +320,18 @@ impl Recorder {
                     if last_flush.elapsed() >= FLUSH_EVERY {
                         w.flush().map_err(mcap_err.clone())?;
                         last_flush = Instant::now();
+                        chunks += 1;
+                        chunk_bytes = 0;
+                        // the part is full: finish it (its summary and footer) and go on in
+                        // the next, whose index starts empty
+                        if chunks >= rotate_chunks {
+                            w.finish().map_err(mcap_err.clone())?;
+                            part += 1;
+                            let next = part_path(&base, part);
+                            (w, ch) = open_part(&next)?;
+                            tracing::info!("recording goes on in {}", next.display());
+                            chunks = 0;
+                        }
                     }
                 }
                 w.finish().map_err(mcap_err)?;
@@ -394,6 +382,98 @@ impl Recorder {
         }
     }
 }
+
+/// The channel ids of one part of a recording.
+struct Channels {
+    raw: u16,
+    sent: u16,
+    json: BTreeMap<JsonChannel, u16>,
+}
+
+type Writer = mcap::Writer<BufWriter<File>>;
+
+/// Create one part of a recording with its schemas and channels (the same ids in every part).
+fn open_part(path: &Path) -> Result<(Writer, Channels), RecordError> {
+    let file = File::create(path).map_err(|source| RecordError::Create {
+        path: path.into(),
+        source,
+    })?;
+    let p = path.to_path_buf();
+    let mcap_err = move |source| RecordError::Mcap {
+        path: p.clone(),
+        source,
+    };
+    let mut w = mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        // zstd's fastest level, in this writer thread: no extra compression threads
+        // competing with the front end for the vehicle computer's cores
+        .compression_level(1)
+        .compression_threads(0)
+        .chunk_size(Some(CHUNK_BYTES))
+        .profile("")
+        .create(BufWriter::new(file))
+        .map_err(mcap_err.clone())?;
+    let meta = BTreeMap::new();
+    let raw = w
+        .add_channel(0, "/can/raw", RAW_FRAME_ENCODING, &meta)
+        .map_err(mcap_err.clone())?;
+    let sent = w
+        .add_channel(0, "/can/tx", RAW_FRAME_ENCODING, &meta)
+        .map_err(mcap_err.clone())?;
+    let mut json = BTreeMap::new();
+    let mut schemas = BTreeMap::new();
+    for c in JsonChannel::ALL {
+        let (name, text) = c.schema();
+        let schema = match schemas.get(name) {
+            Some(id) => *id,
+            None => {
+                let id = w
+                    .add_schema(name, "jsonschema", text.as_bytes())
+                    .map_err(mcap_err.clone())?;
+                schemas.insert(name, id);
+                id
+            }
+        };
+        json.insert(
+            c,
+            w.add_channel(schema, c.topic(), "json", &meta)
+                .map_err(mcap_err.clone())?,
+        );
+    }
+    Ok((w, Channels { raw, sent, json }))
+}
+
+/// Part `k` of the recording `path`: `path` itself for part 0, then `nav.1.mcap`,
+/// `nav.2.mcap`, ... beside it.
+pub fn part_path(path: &Path, k: u32) -> PathBuf {
+    if k == 0 {
+        return path.to_path_buf();
+    }
+    let stem = path
+        .file_stem()
+        .map_or("recording".into(), |s| s.to_string_lossy());
+    let ext = path
+        .extension()
+        .map_or("mcap".into(), |s| s.to_string_lossy());
+    path.with_file_name(format!("{stem}.{k}.{ext}"))
+}
+
+/// Every part of the recording `path` that exists, in order (a reader takes them one after
+/// the other).
+pub fn parts(path: &Path) -> Vec<PathBuf> {
+    (0..)
+        .map(|k| part_path(path, k))
+        .take_while(|p| p.is_file())
+        .collect()
+}
+
+/// Uncompressed bytes at which the writer closes a chunk.
+pub const CHUNK_BYTES: u64 = 256 * 1024;
+
+/// Chunks per part of a recording before it goes on in the next ([`Recorder::start_rotating`]):
+/// about 3 MB of the writer's chunk index; at 4,000 frames/s in real time a part holds about
+/// 25 minutes.
+pub const ROTATE_CHUNKS: u64 = 4096;
 
 /// Records queued on the caller's side before they go to the writer without waiting for
 /// [`Recorder::ship`].
@@ -568,6 +648,47 @@ mod tests {
             )
         });
         assert!(caught.is_err());
+    }
+
+    /// A long recording goes on in new parts, each a whole MCAP file with its summary, and
+    /// nothing is lost at the seams: the writer's in-memory index stays bounded.
+    #[test]
+    fn a_long_recording_rotates_into_whole_parts_and_loses_nothing() {
+        let d = tempfile::tempdir().unwrap();
+        let path = d.path().join("nav.mcap");
+        let r = Recorder::start_rotating(&path, 2).unwrap();
+        let mut k = 0u32;
+        for _ in 0..3 {
+            for _ in 0..10_000 {
+                k += 1;
+                r.send(Record::Frame {
+                    t_ns: u64::from(k),
+                    frame: RawFrame {
+                        id: 0x100,
+                        len: 4,
+                        data: [k as u8, (k >> 8) as u8, 0, 0, 0, 0, 0, 0],
+                    },
+                });
+            }
+            r.ship();
+            std::thread::sleep(FLUSH_EVERY + std::time::Duration::from_millis(150));
+        }
+        assert_eq!(r.finish().unwrap(), 30_000);
+        let ps = parts(&path);
+        assert!(ps.len() >= 2, "{ps:?}");
+        assert_eq!(ps[1], d.path().join("nav.1.mcap"));
+        let mut times = Vec::new();
+        for p in &ps {
+            let buf = std::fs::read(p).unwrap();
+            let summary = mcap::Summary::read(&buf)
+                .unwrap()
+                .expect("a summary in every part");
+            assert!(!summary.chunk_indexes.is_empty());
+            for m in mcap::MessageStream::new(&buf).unwrap() {
+                times.push(m.unwrap().log_time);
+            }
+        }
+        assert_eq!(times, (1..=30_000).collect::<Vec<u64>>());
     }
 
     #[test]

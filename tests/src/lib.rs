@@ -17,13 +17,19 @@ pub fn bin(name: &str) -> PathBuf {
     p
 }
 
-/// Messages per topic in an MCAP file, reading until the end or the first error.
+/// Messages per topic in a recording (every part of it: `nav::record::parts`), reading until
+/// the end or the first error.
 pub fn mcap_topic_counts(path: &Path) -> anyhow::Result<BTreeMap<String, u64>> {
-    let buf = std::fs::read(path)?;
     let mut counts = BTreeMap::new();
-    for m in mcap::MessageStream::new(&buf)? {
-        let m = m?;
-        *counts.entry(m.channel.topic.clone()).or_insert(0) += 1;
+    for part in nav::record::parts(path) {
+        let buf = std::fs::read(&part)?;
+        for m in mcap::MessageStream::new(&buf)? {
+            let m = m?;
+            *counts.entry(m.channel.topic.clone()).or_insert(0) += 1;
+        }
+    }
+    if counts.is_empty() && !path.is_file() {
+        anyhow::bail!("{}: no such recording", path.display());
     }
     Ok(counts)
 }
