@@ -111,14 +111,7 @@ pub fn run(
     let t0 = Instant::now();
     for i in 0..inputs {
         let input = mutate(&corpus, &mut rng);
-        let t = thread_cpu();
-        let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| match target {
-            Target::Can => can.feed(&input),
-            Target::Nmea => nmea(&input, &mut rng),
-            Target::Config => config(&input),
-            Target::Scenario => scenario(&input),
-        }));
-        let dt = thread_cpu().saturating_sub(t);
+        let (outcome, dt) = run_one(target, &input, &mut can, &mut rng);
         r.slowest_ms = r.slowest_ms.max(dt.as_secs_f64() * 1e3);
         if dt > HANG {
             r.hangs += 1;
@@ -157,6 +150,24 @@ pub fn run(
     Ok(r)
 }
 
+/// One input against `target` under `catch_unwind`: its outcome (accepted, or the panic) and
+/// the CPU time it took.
+fn run_one(
+    target: Target,
+    input: &[u8],
+    can: &mut CanTarget,
+    rng: &mut StdRng,
+) -> (std::thread::Result<bool>, Duration) {
+    let t = thread_cpu();
+    let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| match target {
+        Target::Can => can.feed(input),
+        Target::Nmea => nmea(input, rng),
+        Target::Config => config(input),
+        Target::Scenario => scenario(input),
+    }));
+    (outcome, thread_cpu().saturating_sub(t))
+}
+
 /// What one kept input does when run again on its own (`hil fuzz --rerun FILE`).
 #[derive(Debug, Clone, Serialize)]
 pub struct Rerun {
@@ -187,14 +198,8 @@ pub fn rerun(target: Target, files: &[PathBuf], seed: u64) -> Result<Vec<Rerun>>
     for file in files {
         let input = std::fs::read(file).with_context(|| format!("reading {}", file.display()))?;
         let mut can = CanTarget::new()?;
-        let t = thread_cpu();
-        let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| match target {
-            Target::Can => can.feed(&input),
-            Target::Nmea => nmea(&input, &mut rng),
-            Target::Config => config(&input),
-            Target::Scenario => scenario(&input),
-        }));
-        let cpu_ms = thread_cpu().saturating_sub(t).as_secs_f64() * 1e3;
+        let (outcome, dt) = run_one(target, &input, &mut can, &mut rng);
+        let cpu_ms = dt.as_secs_f64() * 1e3;
         let panic = match outcome {
             Ok(_) => None,
             Err(_) => Some(
