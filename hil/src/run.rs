@@ -400,8 +400,15 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         std::thread::spawn(move || watch_solution(sock, &iface, &stop))
     };
     let gps_device = match (gps, &s.gps) {
-        (Some((pty, link)), Some(rx)) => crate::inproc::gps_run(s, rx)?
-            .map(|run| GpsDevice::new(run, pty, Some(link)).with_owner(opts.nav_account)),
+        (Some((pty, link)), Some(rx)) => match crate::inproc::gps_run(s, rx)? {
+            // what the receiver sent, kept beside nav's recording (gpsd's .log form)
+            Some(run) => Some(
+                GpsDevice::new(run, pty, Some(link))
+                    .with_owner(opts.nav_account)
+                    .with_log(&opts.out.join("gps-sent.log"))?,
+            ),
+            None => None,
+        },
         _ => None,
     };
     let t0 = Instant::now();

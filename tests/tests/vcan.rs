@@ -370,6 +370,17 @@ fn campus_loop_shortened_finds_north_then_navigates() {
     // and its recording, for the schema check with the field's MCAP reader after these tests
     e2e::keep_file(&dir.path().join("run"), "campus-loop", "nav.mcap");
     e2e::keep_file(&dir.path().join("run"), "campus-loop", "truth.mcap");
+    // what the receiver sent, kept by the bench: every fix epoch, and the port drop noted
+    let sent = std::fs::read_to_string(dir.path().join("run/gps-sent.log")).expect("gps-sent.log");
+    let gga = sent.lines().filter(|l| l.contains("GGA,")).count() as u64;
+    let n = |k: &str| r["gps"][k].as_u64().unwrap_or(0);
+    let written = n("fixes") + n("void_epochs") - n("unread_epochs");
+    assert!(
+        gga > 100 && gga == written,
+        "{gga} GGA in gps-sent.log, {written} epochs written: {}",
+        r["gps"]
+    );
+    assert!(sent.contains("device gone (port drop)"));
     let names: Vec<String> = checks(&r).into_iter().map(|c| c.0).collect();
     for n in [
         "north-finding finished",

@@ -24,6 +24,15 @@ pub enum PtyError {
         #[source]
         source: std::io::Error,
     },
+    /// The log of what was sent could not be written.
+    #[error("writing the GPS log {path}")]
+    Log {
+        /// The log file.
+        path: String,
+        /// Cause.
+        #[source]
+        source: std::io::Error,
+    },
     /// The device link could not be made.
     #[error("pointing the GPS device link {link} at {target}")]
     Link {
@@ -201,6 +210,7 @@ pub struct GpsDevice {
     link: Option<std::path::PathBuf>,
     owner: Option<(u32, u32)>,
     dropped: Option<usize>,
+    log: Option<(String, std::io::BufWriter<std::fs::File>)>,
     /// What was written.
     pub stats: GpsTxStats,
 }
@@ -214,8 +224,54 @@ impl GpsDevice {
             link,
             owner: None,
             dropped: None,
+            log: None,
             stats: GpsTxStats::default(),
         }
+    }
+
+    /// Keep what the device sends in `path`, in gpsd's `.log` form (the sentences as written,
+    /// with a `#` comment line before each epoch giving its simulated time, and one for each
+    /// epoch that went nowhere): what the receiver said, for judging a run later and for
+    /// replaying it onto a pty ([`parse_log`], [`replay`]).
+    pub fn with_log(mut self, path: &std::path::Path) -> Result<Self, PtyError> {
+        let name = path.display().to_string();
+        let f = std::fs::File::create(path).map_err(|source| PtyError::Log {
+            path: name.clone(),
+            source,
+        })?;
+        let mut w = std::io::BufWriter::new(f);
+        writeln!(
+            w,
+            "# GPS emulator output (rlg-hil): sentences as sent to the pty"
+        )
+        .map_err(|source| PtyError::Log {
+            path: name.clone(),
+            source,
+        })?;
+        self.log = Some((name, w));
+        Ok(self)
+    }
+
+    fn note(&mut self, text: &str) -> Result<(), PtyError> {
+        if let Some((path, w)) = self.log.as_mut() {
+            w.write_all(text.as_bytes())
+                .map_err(|source| PtyError::Log {
+                    path: path.clone(),
+                    source,
+                })?;
+        }
+        Ok(())
+    }
+
+    /// Write out what the log holds (at the end of a run).
+    pub fn flush_log(&mut self) -> Result<(), PtyError> {
+        if let Some((path, w)) = self.log.as_mut() {
+            w.flush().map_err(|source| PtyError::Log {
+                path: path.clone(),
+                source,
+            })?;
+        }
+        Ok(())
     }
 
     /// A device re-plugged (a port-drop fault) is given to this account, like the first.
@@ -255,6 +311,7 @@ impl GpsDevice {
                 _ => {}
             }
             if self.dropped.is_some() {
+                self.note(&format!("# t={:.3} s: device gone (port drop)\n", e.edge))?;
                 continue;
             }
             match (e.text.is_empty(), e.valid) {
@@ -262,15 +319,21 @@ impl GpsDevice {
                 (false, true) => st.fixes += 1,
                 (false, false) => st.void_epochs += 1,
             }
-            if !e.text.is_empty() {
+            if e.text.is_empty() {
+                self.note(&format!("# t={:.3} s: silent\n", e.edge))?;
+            } else {
                 match self.pty.write(e.text.as_bytes()) {
-                    Ok(()) => st.bytes += e.text.len() as u64,
+                    Ok(()) => {
+                        st.bytes += e.text.len() as u64;
+                        self.note(&format!("# t={:.3} s\n{}", e.edge, e.text))?;
+                    }
                     // nobody reads (nav not started or re-opening): the receiver's output is lost
                     Err(PtyError::Write { source, .. })
                         if source.kind() == std::io::ErrorKind::TimedOut =>
                     {
-                        st.unread_epochs += 1;
+                        self.stats.unread_epochs += 1;
                         self.pty.clear();
+                        self.note(&format!("# t={:.3} s: not read (lost)\n", e.edge))?;
                     }
                     Err(e) => return Err(e),
                 }
@@ -281,7 +344,10 @@ impl GpsDevice {
 
     /// The pty (kept open until nav has stopped: a receiver vanishing at the very end would only
     /// add port errors to nav's summary).
-    pub fn into_pty(self) -> GpsPty {
+    pub fn into_pty(mut self) -> GpsPty {
+        if let Err(e) = self.flush_log() {
+            tracing::warn!("{e}");
+        }
         self.pty
     }
 }
@@ -348,5 +414,62 @@ mod tests {
             !matches!(&r, Err(e) if e.kind() == std::io::ErrorKind::TimedOut),
             "{r:?}"
         );
+    }
+
+    /// The log of what the device sent holds exactly the bytes its reader got, each epoch
+    /// after a comment with its time, and reads back as a gpsd log.
+    #[test]
+    fn the_device_logs_what_it_sent() {
+        let spec = crate::drive::DriveSpec {
+            lat_deg: -33.9,
+            lon_deg: 18.4,
+            height_m: 10.0,
+            waypoints: vec![[0.0, 100.0], [100.0, 100.0], [100.0, 0.0], [0.0, 0.0]],
+            speed_mps: 5.0,
+            accel_mps2: 1.0,
+            turn_rate_dps: 20.0,
+            lateral_accel_mps2: 2.0,
+            laps: 1,
+            start_wait_s: 1.0,
+        };
+        let run = GpsRun {
+            writer: super::super::NmeaWriter::new(super::super::ReceiverParams::default()),
+            drive: crate::drive::Drive::plan(&spec).unwrap(),
+            pps_phase_s: 0.0,
+            latency_s: 0.05,
+            utc0_s: 43_200.0,
+            date: (21, 11, 2026),
+        };
+        let pty = GpsPty::open().unwrap();
+        let mut reader = serialport::new(pty.path(), 9600)
+            .timeout(Duration::from_millis(300))
+            .open()
+            .unwrap();
+        let dir = std::env::temp_dir().join(format!("gps-log-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("gps-sent.log");
+        let mut dev = GpsDevice::new(run, pty, None).with_log(&path).unwrap();
+        let got = std::thread::spawn(move || {
+            let mut all = Vec::new();
+            let mut buf = [0u8; 4096];
+            while let Ok(n) = reader.read(&mut buf) {
+                all.extend_from_slice(&buf[..n]);
+            }
+            all
+        });
+        dev.poll(5.5, 100.0).unwrap();
+        assert_eq!(dev.stats.fixes, 5);
+        let _pty = dev.into_pty();
+        let got = got.join().unwrap();
+        let text = std::fs::read(&path).unwrap();
+        let lines = parse_log(&text);
+        let sent: Vec<u8> = lines.iter().flat_map(|l| l.bytes.clone()).collect();
+        assert_eq!(sent, got);
+        let s = String::from_utf8_lossy(&text);
+        assert!(
+            s.contains("# t=1.000 s\n$GP") && s.contains("# t=5.000 s\n"),
+            "{s}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
