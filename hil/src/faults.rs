@@ -728,10 +728,12 @@ pub fn matrix() -> Vec<FaultCase> {
         FaultCase {
             name: "turntable-late-ack",
             base: Base::Drill,
-            injected: "every command takes effect and is acknowledged 1.5 s late (past nav's 1 s timeout)",
+            injected: "every command takes effect and is acknowledged 1.2 s late (past nav's 0.5 s timeout and its first retry, inside its three tries' 1.5 s)",
             expected: "the late acknowledgements counted and the commands sent again; north-finding aborts with a reason naming the missing acknowledgement once its retries are spent",
             at_s: 0.0,
-            inject: |s, _| tt_faults(s, |f| f.command_delay_s = 1.5),
+            // not 1.5 s: the first acknowledgement would then come exactly as nav gives up
+            // (three tries of 0.5 s), and which comes first was a matter of a millisecond
+            inject: |s, _| tt_faults(s, |f| f.command_delay_s = 1.2),
             judge: |r, at| {
                 let v = nf_abort(r, at, "acknowledgement");
                 let nf = r.nav.north_finding.as_ref();
