@@ -268,7 +268,7 @@ fn account(
 /// backlog of the CPU the writer runs on; a writer that migrates between CPUs can have its
 /// frames delivered out of order (seen in an hour-long soak under load: IMU frames reordered by
 /// up to 41 samples, three times). A real CAN controller receives on one CPU and keeps order.
-fn pin_to_this_cpu(iface: &str) {
+pub(crate) fn pin_to_this_cpu(iface: &str) {
     // SAFETY: sched_getcpu has no preconditions; the cpu_set_t is zeroed plain data, filled
     // with CPU_SET and passed with its size for the calling thread (pid 0).
     let r = unsafe {
@@ -544,7 +544,7 @@ pub fn nav_time_sample(imu: &crate::imu::ImuEmulator, sample_count: u32) -> Opti
 }
 
 /// Wait until `sock` has a frame to read, or `timeout`.
-fn wait_readable(sock: &CanSocket, timeout: Duration) {
+pub(crate) fn wait_readable(sock: &CanSocket, timeout: Duration) {
     use std::os::fd::AsRawFd;
     let mut p = libc::pollfd {
         fd: sock.as_raw_fd(),

@@ -1,6 +1,7 @@
 //! The HIL bench: scenarios, runs on vcan, checks and reports.
 
 pub mod bench;
+pub mod busreplay;
 pub mod devices;
 pub mod drill;
 pub mod experiment;

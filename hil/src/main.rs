@@ -16,7 +16,7 @@ use cmd::experiment::experiment;
 use cmd::faults::faults;
 use cmd::fuzz::fuzz;
 use cmd::guest::{absolute, default_out, rerun_in_guest, run_in_guest};
-use cmd::replay::{candump, replay};
+use cmd::replay::{candump, replay, replay_bus};
 use cmd::run::run;
 use cmd::validate::validate_turntable;
 
@@ -51,18 +51,30 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
-    /// Replay a nav recording through nav's pipeline in process and compare what it sends with
-    /// what nav sent (bit for bit on a bench recording). Exit status 1 when they differ.
+    /// Replay a nav recording and compare what nav sends with what it sent (bit for bit for the
+    /// same build). By default through nav's pipeline in process; with `--bus`, the recorded
+    /// IMU, turntable and GPS traffic goes back onto vcan and a pty at `--speed`, and the nav
+    /// binary runs on it as on a vehicle (a new run folder in `--out`). Exit status 1 when they
+    /// differ.
     Replay {
         /// A run folder (with nav.mcap and nav.toml), an MCAP recording of nav, or a
-        /// `candump -l` log of the bus (the frames nav sends, by the DBC, are what it sent).
+        /// `candump -l` log of the bus (the frames nav sends, by the DBC, are what it sent;
+        /// in process only).
         recording: PathBuf,
         /// nav's config for the recording (default: nav.toml beside it).
         #[arg(long)]
         config: Option<PathBuf>,
-        /// Print the result as JSON.
+        /// Put the traffic back onto vcan and a pty and run the nav binary on it.
         #[arg(long)]
-        json: bool,
+        bus: bool,
+        /// With --bus: speed factor over real time (1 = as the IMU sent it).
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
+        /// With --bus: the nav binary to run (default: the one beside hil), e.g. a newer build.
+        #[arg(long)]
+        nav: Option<PathBuf>,
+        #[command(flatten)]
+        bus_args: BusArgs,
     },
     /// Export a nav recording's CAN frames (received and sent) as a `candump -l` log, which
     /// can-utils' `canplayer` plays back, `cantools` decodes with `hil dbc`, and `hil replay`
@@ -455,8 +467,23 @@ fn real_main(cli: Cli) -> Result<i32> {
         Cmd::Replay {
             recording,
             config,
-            json,
-        } => replay(&recording, config.as_deref(), json),
+            bus,
+            speed,
+            nav,
+            bus_args,
+        } => {
+            if bus {
+                replay_bus(
+                    &recording,
+                    config.as_deref(),
+                    speed,
+                    nav.as_deref(),
+                    &bus_args,
+                )
+            } else {
+                replay(&recording, config.as_deref(), bus_args.json)
+            }
+        }
         Cmd::Candump {
             recording,
             out,

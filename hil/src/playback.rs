@@ -26,7 +26,7 @@ pub struct Playback {
     /// Frames the pipeline sent on replay.
     pub replayed_tx: u64,
     /// The first frame at which the two differ (index, recorded, replayed), if any.
-    pub first_difference: Option<(u64, Option<String>, Option<String>)>,
+    pub first_difference: Difference,
     /// Records that could not be read (counted, skipped).
     pub bad_records: u64,
     /// The pipeline's summary at the end of the replay.
@@ -41,15 +41,37 @@ impl Playback {
 
     /// `identical, bit for bit`, or where the two first part.
     pub fn verdict(&self) -> String {
-        match &self.first_difference {
-            None => "identical, bit for bit".to_string(),
-            Some((i, a, b)) => format!(
-                "DIFFERENT from frame {i}: nav sent {}, the replay {}",
-                a.as_deref().unwrap_or("(none)"),
-                b.as_deref().unwrap_or("(none)")
-            ),
-        }
+        verdict(&self.first_difference)
     }
+}
+
+/// Where two runs' sent frames first part: (index, recorded, replayed).
+pub type Difference = Option<(u64, Option<String>, Option<String>)>;
+
+/// `identical, bit for bit`, or where the two first part.
+pub fn verdict(d: &Difference) -> String {
+    match d {
+        None => "identical, bit for bit".to_string(),
+        Some((i, a, b)) => format!(
+            "DIFFERENT from frame {i}: nav sent {}, the replay {}",
+            a.as_deref().unwrap_or("(none)"),
+            b.as_deref().unwrap_or("(none)")
+        ),
+    }
+}
+
+/// The first frame at which what nav sent (`recorded`) and what a replay sent differ.
+pub fn first_difference(recorded: &[RawFrame], replayed: &[RawFrame]) -> Difference {
+    let n = recorded.len().max(replayed.len());
+    (0..n)
+        .find(|&i| recorded.get(i) != replayed.get(i))
+        .map(|i| {
+            (
+                i as u64,
+                recorded.get(i).map(show),
+                replayed.get(i).map(show),
+            )
+        })
 }
 
 fn show(f: &RawFrame) -> String {
@@ -123,16 +145,7 @@ impl Replayer {
         self.p.flush(&mut self.out);
         self.take_sent();
         let (recorded, replayed) = (&self.recorded, &self.replayed);
-        let n = recorded.len().max(replayed.len());
-        let first_difference = (0..n)
-            .find(|&i| recorded.get(i) != replayed.get(i))
-            .map(|i| {
-                (
-                    i as u64,
-                    recorded.get(i).map(show),
-                    replayed.get(i).map(show),
-                )
-            });
+        let first_difference = first_difference(recorded, replayed);
         let mut summary = self.p.summary();
         summary.interface = format!("replay of {what}");
         Playback {

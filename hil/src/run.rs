@@ -72,14 +72,14 @@ pub const NOBODY: u32 = 65534;
 /// A folder nav (run as another user) may write in: its files are moved into the run folder
 /// when nav is done, or when the run ends however it ends. The run folder (perhaps behind a
 /// private parent) stays the bench user's.
-struct NavFolder {
-    dir: PathBuf,
+pub(crate) struct NavFolder {
+    pub(crate) dir: PathBuf,
     out: PathBuf,
     staged: bool,
 }
 
 impl NavFolder {
-    fn new(out: &Path, account: Option<(u32, u32)>) -> Result<Self> {
+    pub(crate) fn new(out: &Path, account: Option<(u32, u32)>) -> Result<Self> {
         let Some((uid, gid)) = account else {
             return Ok(Self {
                 dir: out.to_path_buf(),
@@ -110,7 +110,7 @@ impl NavFolder {
     }
 
     /// Move nav's files into the run folder.
-    fn finish(&mut self) -> Result<()> {
+    pub(crate) fn finish(&mut self) -> Result<()> {
         if !self.staged {
             return Ok(());
         }
@@ -288,12 +288,16 @@ pub fn sibling_binary(name: &str) -> Result<PathBuf> {
     )
 }
 
-struct NavProcess {
+pub(crate) struct NavProcess {
     child: Child,
     lines: std::sync::mpsc::Receiver<String>,
 }
 
-fn start_nav(bin: &Path, config: &Path, account: Option<(u32, u32)>) -> Result<NavProcess> {
+pub(crate) fn start_nav(
+    bin: &Path,
+    config: &Path,
+    account: Option<(u32, u32)>,
+) -> Result<NavProcess> {
     use std::os::unix::process::CommandExt;
     let mut cmd = Command::new(bin);
     cmd.arg("--config")
@@ -341,7 +345,7 @@ fn start_nav(bin: &Path, config: &Path, account: Option<(u32, u32)>) -> Result<N
     Ok(NavProcess { child, lines: rx })
 }
 
-fn stop_nav(mut nav: NavProcess) -> Result<(Option<i32>, Vec<String>)> {
+pub(crate) fn stop_nav(mut nav: NavProcess) -> Result<(Option<i32>, Vec<String>)> {
     // SAFETY: kill(2) on our own child's pid.
     unsafe { libc::kill(nav.child.id() as libc::pid_t, libc::SIGTERM) };
     let deadline = Instant::now() + Duration::from_secs(30);
@@ -785,7 +789,7 @@ impl std::fmt::Display for Phases {
 }
 
 /// Removes a file when dropped.
-struct RemoveOnDrop(PathBuf);
+pub(crate) struct RemoveOnDrop(pub(crate) PathBuf);
 
 impl Drop for RemoveOnDrop {
     fn drop(&mut self) {

@@ -36,7 +36,24 @@ struct Shared {
     gpsd_messages: u64,
     port_errors: u64,
     opens: u64,
-    tx: Option<tokio::sync::mpsc::UnboundedSender<GpsFix>>,
+    tx: Option<tokio::sync::mpsc::UnboundedSender<GpsInput>>,
+    /// Hand the bytes read on too (nav records them: `/gps/raw`).
+    with_bytes: bool,
+}
+
+/// What the reader hands the navigation loop, in the order it read it.
+#[derive(Debug, Clone)]
+pub enum GpsInput {
+    /// Bytes as read from the source (gpsd's JSON replies taken out), before decoding: what a
+    /// replay puts back on a port. Only when asked for ([`GpsPort::forward`]).
+    Bytes {
+        /// Read wall time, ns since the epoch.
+        t_ns: u64,
+        /// The bytes.
+        bytes: Vec<u8>,
+    },
+    /// A decoded fix (after the bytes it came in).
+    Fix(GpsFix),
 }
 
 /// The running reader.
@@ -236,10 +253,20 @@ impl GpsPort {
                                             &nmea[..]
                                         }
                                     };
+                                    let t_ns = crate::record::wall_ns();
                                     dec.push_bytes(bytes, &mut fixes);
                                     let mut sh = lock(&shared);
                                     sh.stats = dec.stats();
                                     sh.gpsd_messages = lines.json;
+                                    if sh.with_bytes
+                                        && !bytes.is_empty()
+                                        && let Some(tx) = &sh.tx
+                                    {
+                                        let _ = tx.send(GpsInput::Bytes {
+                                            t_ns,
+                                            bytes: bytes.to_vec(),
+                                        });
+                                    }
                                     for f in fixes.drain(..) {
                                         if let Some(w) = export.as_mut()
                                             && let Ok(j) = serde_json::to_string(&f)
@@ -247,7 +274,7 @@ impl GpsPort {
                                             let _ = writeln!(w, "{j}");
                                         }
                                         if let Some(tx) = &sh.tx {
-                                            let _ = tx.send(f);
+                                            let _ = tx.send(GpsInput::Fix(f));
                                         }
                                     }
                                 }
@@ -279,9 +306,12 @@ impl GpsPort {
         })
     }
 
-    /// Send decoded fixes to `tx` from now on.
-    pub fn forward(&self, tx: tokio::sync::mpsc::UnboundedSender<GpsFix>) {
-        lock(&self.shared).tx = Some(tx);
+    /// Send decoded fixes to `tx` from now on, and the bytes they came in too when
+    /// `with_bytes` (each chunk read before the fixes decoded from it).
+    pub fn forward(&self, tx: tokio::sync::mpsc::UnboundedSender<GpsInput>, with_bytes: bool) {
+        let mut sh = lock(&self.shared);
+        sh.tx = Some(tx);
+        sh.with_bytes = with_bytes;
     }
 
     /// gpsd's JSON replies taken out of the stream so far (`source = "gpsd"`).

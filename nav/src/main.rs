@@ -7,6 +7,7 @@
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use nav::config::NavConfig;
+use nav::gpsport::GpsInput;
 use nav::pipeline::{Output, Pipeline};
 use nav::record::{Record, Recorder, wall_ns};
 use nav::summary::{GpsSummary, Summary};
@@ -113,16 +114,17 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         Some(g) => Some(nav::gpsport::GpsPort::start(g)?),
         None => None,
     };
-    let (gps_tx, mut gps_rx) = tokio::sync::mpsc::unbounded_channel::<nav::gps::GpsFix>();
-    if let Some(g) = &gps {
-        g.forward(gps_tx);
-    } else {
-        drop(gps_tx);
-    }
     let recorder = match &cfg.record.mcap {
         Some(p) => Some(Recorder::start(p)?),
         None => None,
     };
+    let (gps_tx, mut gps_rx) = tokio::sync::mpsc::unbounded_channel::<GpsInput>();
+    if let Some(g) = &gps {
+        // the bytes as read go in the recording too, where the loop took them
+        g.forward(gps_tx, recorder.is_some());
+    } else {
+        drop(gps_tx);
+    }
     let mut pipeline = Pipeline::new(cfg, recorder.is_some())?;
     let mut sigint = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;
     let mut sigterm = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
@@ -155,10 +157,17 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
             biased;
             _ = sigint.recv() => { info!("SIGINT: finishing"); break; }
             _ = sigterm.recv() => { info!("SIGTERM: finishing"); break; }
-            Some(fix) = gps_rx.recv() => {
-                pipeline.on_fix(fix, &mut out);
-                shell.act(&mut out).await?;
-            }
+            Some(input) = gps_rx.recv() => match input {
+                GpsInput::Fix(fix) => {
+                    pipeline.on_fix(fix, &mut out);
+                    shell.act(&mut out).await?;
+                }
+                GpsInput::Bytes { t_ns, bytes } => {
+                    if let Some(r) = shell.recorder {
+                        r.send(Record::GpsBytes { t_ns, bytes });
+                    }
+                }
+            },
             r = async {
                 match &shell.sock {
                     Some(s) => s.read_frame().await,

@@ -4,6 +4,10 @@
 //! - `/can/raw` (encoding `rlg-hil.can-frame.v1`): every received frame as
 //!   `[id: u16 LE][len: u8][data: 8 bytes]`; log time = receive wall time.
 //! - `/can/tx` (same encoding): every frame nav sent (turntable commands, the solution).
+//! - `/gps/raw` (encoding `rlg-hil.gps-bytes.v1`): the bytes nav read from its GPS source, as
+//!   read (NMEA-0183 text, any garbage included; gpsd's JSON replies taken out), one message per
+//!   read; log time = read wall time. In the order nav's loop took them among the frames: what
+//!   `hil replay --bus` writes back onto a port.
 //! - `/imu/sample` (JSON): every decoded IMU sample; publish time = sample time on the IMU clock.
 //! - `/nav/event` (JSON): irregularities (gaps, duplicates, bad frames, timeouts).
 //! - `/nav/summary` (JSON): the run summary, once at the end.
@@ -26,6 +30,9 @@ use wire::RawFrame;
 
 /// Message encoding of `/can/raw` and `/can/tx`.
 pub const RAW_FRAME_ENCODING: &str = "rlg-hil.can-frame.v1";
+
+/// Message encoding of `/gps/raw`: the bytes as read, unchanged.
+pub const GPS_BYTES_ENCODING: &str = "rlg-hil.gps-bytes.v1";
 
 /// Bytes of one frame in [`RAW_FRAME_ENCODING`].
 pub const RAW_FRAME_BYTES: usize = 11;
@@ -69,6 +76,13 @@ pub enum Record {
         t_ns: u64,
         /// The frame.
         frame: RawFrame,
+    },
+    /// Bytes read from the GPS source: `/gps/raw`.
+    GpsBytes {
+        /// Read wall time, ns since the epoch.
+        t_ns: u64,
+        /// The bytes.
+        bytes: Vec<u8>,
     },
     /// A decoded IMU sample, serialized to JSON on the writer thread (off the receive path).
     Sample {
@@ -265,6 +279,7 @@ impl Recorder {
                                 };
                                 (c, *t_ns, *t_ns, &buf)
                             }
+                            Record::GpsBytes { t_ns, bytes } => (ch.gps, *t_ns, *t_ns, bytes),
                             Record::Sample {
                                 t_ns,
                                 publish_ns,
@@ -387,6 +402,7 @@ impl Recorder {
 struct Channels {
     raw: u16,
     sent: u16,
+    gps: u16,
     json: BTreeMap<JsonChannel, u16>,
 }
 
@@ -420,6 +436,9 @@ fn open_part(path: &Path) -> Result<(Writer, Channels), RecordError> {
     let sent = w
         .add_channel(0, "/can/tx", RAW_FRAME_ENCODING, &meta)
         .map_err(mcap_err.clone())?;
+    let gps = w
+        .add_channel(0, "/gps/raw", GPS_BYTES_ENCODING, &meta)
+        .map_err(mcap_err.clone())?;
     let mut json = BTreeMap::new();
     let mut schemas = BTreeMap::new();
     for c in JsonChannel::ALL {
@@ -440,7 +459,15 @@ fn open_part(path: &Path) -> Result<(Writer, Channels), RecordError> {
                 .map_err(mcap_err.clone())?,
         );
     }
-    Ok((w, Channels { raw, sent, json }))
+    Ok((
+        w,
+        Channels {
+            raw,
+            sent,
+            gps,
+            json,
+        },
+    ))
 }
 
 /// Part `k` of the recording `path`: `path` itself for part 0, then `nav.1.mcap`,

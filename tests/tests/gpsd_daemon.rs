@@ -118,7 +118,7 @@ fn gpsd_reads_the_emulated_receiver_and_nav_takes_its_fixes_from_gpsd() {
     };
     let reader = nav::gpsport::GpsPort::start(&cfg).expect("nav's GPS reader");
     let (tx, mut fixes_rx) = tokio::sync::mpsc::unbounded_channel();
-    reader.forward(tx);
+    reader.forward(tx, true);
     std::thread::sleep(Duration::from_millis(500));
 
     // 40 epochs of the lap, at five a second
@@ -192,10 +192,19 @@ fn gpsd_reads_the_emulated_receiver_and_nav_takes_its_fixes_from_gpsd() {
     assert!(matched >= 35);
 
     // nav through gpsd: every fix, checksums good, at the positions gpsd reported
-    let mut nav_fixes = Vec::new();
-    while let Ok(f) = fixes_rx.try_recv() {
-        nav_fixes.push(f);
+    let (mut nav_fixes, mut bytes) = (Vec::new(), Vec::new());
+    while let Ok(input) = fixes_rx.try_recv() {
+        match input {
+            nav::gpsport::GpsInput::Fix(f) => nav_fixes.push(f),
+            nav::gpsport::GpsInput::Bytes { bytes: b, .. } => bytes.extend(b),
+        }
     }
+    // the bytes handed on (what nav records) are gpsd's NMEA alone: no JSON line among them
+    let text = String::from_utf8_lossy(&bytes);
+    assert!(
+        text.lines().count() >= 38 && text.lines().all(|l| l.starts_with('$')),
+        "{text}"
+    );
     let gga: Vec<_> = nav_fixes.iter().filter(|f| f.sentence == "GGA").collect();
     assert!(gga.len() >= 38, "nav decoded {} GGA of 40", gga.len());
     // no gpsd JSON reached the NMEA decoder, and no sentence was damaged on the way

@@ -255,8 +255,49 @@ fn nav_names_a_missing_interface_and_exits_nonzero() {
 
 /// One north-finding drill (6 s dwells, truth 287.5 deg, seed 7) through vcan at `speed`, or in
 /// process when `speed` is `None`.
+/// `hil replay --bus` of the run folder `run` at `speed` on `iface` into `out`: its JSON, after
+/// checking that nav sent exactly what it sent in the recording.
+fn replay_on_bus(run: &std::path::Path, speed: &str, iface: &str, out: &std::path::Path) -> Value {
+    let o = Command::new(bin("hil"))
+        .args([
+            "replay", "--bus", "--speed", speed, "--iface", iface, "--json",
+        ])
+        .arg(run)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("hil runs");
+    eprintln!("{}", String::from_utf8_lossy(&o.stderr));
+    let r: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!(
+            "hil replay printed no JSON ({e}): {}",
+            String::from_utf8_lossy(&o.stdout)
+        )
+    });
+    eprintln!(
+        "replay at x{speed}: {} frames, {} GPS bytes, {} silences, lockstep {}, {:.1} s; nav sent {} frames, recorded {}",
+        r["play"]["frames"],
+        r["play"]["gps_bytes"],
+        r["play"]["silences"],
+        r["play"]["lockstep"],
+        r["wall_s"].as_f64().unwrap_or(0.0),
+        r["replayed_tx"],
+        r["recorded_tx"]
+    );
+    assert_eq!(r["first_difference"], Value::Null, "{r:#}");
+    assert!(r["replayed_tx"].as_u64().unwrap() > 1000, "{r:#}");
+    assert_eq!(r["replayed_tx"], r["recorded_tx"]);
+    assert_eq!(o.status.code(), Some(0));
+    assert_eq!(r["play"]["lockstep"]["stalls"], 0);
+    assert!(out.join("nav.mcap").is_file() && out.join("replay.json").is_file());
+    r
+}
+
 fn drill_at(speed: Option<&str>, iface: &str) -> Value {
-    let dir = tempfile::tempdir().unwrap();
+    drill_in(speed, iface, &tempfile::tempdir().unwrap())
+}
+
+fn drill_in(speed: Option<&str>, iface: &str, dir: &tempfile::TempDir) -> Value {
     let mut cmd = Command::new(bin("hil"));
     cmd.args(["drill", "north-finding", "--dwell", "6"])
         .args(["--heading", "287.5", "--seed", "7", "--tolerance", "0.5"])
@@ -298,7 +339,8 @@ fn drill_at(speed: Option<&str>, iface: &str) -> Value {
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
-    let r = drill_at(Some("3"), "vcan-e2e3");
+    let x3 = tempfile::tempdir().unwrap();
+    let r = drill_in(Some("3"), "vcan-e2e3", &x3);
     let d = &r["drill"];
     let (e, sig) = (
         d["error_deg"].as_f64().unwrap(),
@@ -335,6 +377,51 @@ fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
     assert_eq!(
         &ip["drill"]["result"], a,
         "the in-process drill must give the bench's result"
+    );
+    // the x3 drill's recording back onto the bus at x25, the turntable's answers from it: the
+    // nav binary sends every frame it sent, turntable commands included, and finds the same
+    // heading
+    let re = replay_on_bus(x3.path(), "25", "vcan-e2e3", &x3.path().join("replay"));
+    assert_eq!(&re["summary"]["north_finding"]["result"], a);
+}
+
+/// A GPS-aided drive's recording (40 s, its receiver's device gone for 2 s and back) put back
+/// onto vcan and a pty with `hil replay --bus` at four times the recorded pace: the nav binary
+/// sends exactly the frames it sent, and its solutions at the same IMU times are the same to the
+/// bit; the receiver's bytes went to the pty as nav read them.
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn a_recorded_drive_replays_onto_the_bus_bit_for_bit() {
+    let (r, dir) = run_variant(
+        "drive-gps.toml",
+        &[
+            ("duration_s = 130.0", "duration_s = 40.0"),
+            (
+                "lever_arm_m = [0.0, 0.5, 1.2]",
+                "lever_arm_m = [0.0, 0.5, 1.2]\nport_drops = [[20.0, 22.0]]",
+            ),
+        ],
+        "vcan-e2e7",
+    );
+    assert_eq!(r["gps"]["port_drops"], 1, "{}", r["gps"]);
+    let run = dir.path().join("run");
+    let re = replay_on_bus(&run, "40", "vcan-e2e7", &dir.path().join("replay"));
+    let gps_bytes = re["play"]["gps_bytes"].as_u64().unwrap();
+    assert!(gps_bytes > 5000, "{}", re["play"]);
+    assert_eq!(re["play"]["gps_unread"], 0);
+    let d = &re["solutions"];
+    assert!(d["compared"].as_u64().unwrap() >= 30, "{d}");
+    assert_eq!(
+        (
+            d["max_horizontal_m"].as_f64(),
+            d["max_heading_deg"].as_f64()
+        ),
+        (Some(0.0), Some(0.0)),
+        "{d}"
+    );
+    assert_eq!(
+        re["summary"]["gps"]["fixes"], r["nav"]["gps"]["fixes"],
+        "the replayed nav decoded the fixes the recorded one did"
     );
 }
 

@@ -12,6 +12,8 @@ pub mod truth;
 
 pub use errors::{GpsError, GpsErrorParams};
 pub use nmea::NmeaWriter;
-pub use pty::{GpsDevice, GpsPty, GpsTxStats, LogLine, PtyError, parse_log, relink, replay};
+pub use pty::{
+    GpsDevice, GpsPty, GpsTxStats, LogLine, PtyError, TAKE_WAIT, parse_log, relink, replay,
+};
 pub use receiver::{Epoch, GpsReceiver, GpsRun, ReceiverParams};
 pub use truth::{AntennaTruth, antenna_truth};

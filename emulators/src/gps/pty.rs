@@ -115,6 +115,39 @@ impl GpsPty {
             })
     }
 
+    /// Bytes written that the reader has not taken yet (none when the pty cannot say).
+    pub fn unread(&self) -> Option<usize> {
+        let mut n: libc::c_int = 0;
+        // SAFETY: FIONREAD on the slave side, which we hold open, writes one int.
+        let r = unsafe { libc::ioctl(self._slave.as_raw_fd(), libc::FIONREAD, &mut n) };
+        (r == 0).then_some(n.max(0) as usize)
+    }
+
+    /// Wait until the reader has taken everything written, at most `timeout`; whether it did.
+    /// A receiver's fix must reach nav before the IMU stream runs on past the time nav applies
+    /// it: the bus scheduler and the player hold the stream here, as lockstep holds it for the
+    /// frames.
+    ///
+    /// A pty hands what is written to the reader's side a moment later (a kernel work item), so
+    /// the count reads 0 both before the bytes arrive and after they are taken: bytes never
+    /// seen waiting within [`ARRIVAL_S`] are taken as read at once.
+    pub fn wait_taken(&self, timeout: Duration) -> bool {
+        let start = std::time::Instant::now();
+        let mut seen = false;
+        loop {
+            match self.unread() {
+                None => return true,
+                Some(0) if seen || start.elapsed() >= ARRIVAL_S => return true,
+                Some(0) => {}
+                Some(_) => seen = true,
+            }
+            if start.elapsed() >= timeout {
+                return false;
+            }
+            std::thread::sleep(Duration::from_micros(200));
+        }
+    }
+
     /// Discard what no reader has taken yet.
     pub fn clear(&self) {
         let _ = self.master.clear(serialport::ClearBuffer::All);
@@ -201,7 +234,16 @@ pub struct GpsTxStats {
     pub port_drops: u64,
     /// Epochs lost because nobody read the port (its buffer was full).
     pub unread_epochs: u64,
+    /// Epochs the reader had not taken within [`TAKE_WAIT`] of writing (the stream then went
+    /// on: a fix may have reached nav late).
+    pub slow_reads: u64,
 }
+
+/// How long bytes written to a pty may take to reach its reader's side.
+pub const ARRIVAL_S: Duration = Duration::from_millis(15);
+
+/// How long the stream waits for nav's reader to take a receiver's output.
+pub const TAKE_WAIT: Duration = Duration::from_millis(500);
 
 /// A [`GpsReceiver`] on its pty, as the bus scheduler steps it.
 pub struct GpsDevice {
@@ -325,6 +367,9 @@ impl GpsDevice {
                 match self.pty.write(e.text.as_bytes()) {
                     Ok(()) => {
                         st.bytes += e.text.len() as u64;
+                        if !self.pty.wait_taken(TAKE_WAIT) {
+                            self.stats.slow_reads += 1;
+                        }
                         self.note(&format!("# t={:.3} s\n{}", e.edge, e.text))?;
                     }
                     // nobody reads (nav not started or re-opening): the receiver's output is lost
@@ -369,6 +414,32 @@ pub fn relink(link: &std::path::Path, target: &str) -> Result<(), PtyError> {
 mod tests {
     use super::*;
     use std::io::Read;
+
+    /// What is written stays unread until a reader on the device takes it; waiting for it ends
+    /// when it is taken, or at the time limit.
+    #[test]
+    fn the_writer_sees_when_the_reader_has_taken_its_bytes() {
+        let mut pty = GpsPty::open().unwrap();
+        let mut reader = serialport::new(pty.path(), 9600)
+            .timeout(Duration::from_millis(500))
+            .open()
+            .unwrap();
+        assert_eq!(pty.unread(), Some(0));
+        pty.write(b"$GPGGA,1*00\r\n").unwrap();
+        // on the reader's side a moment later
+        let t = std::time::Instant::now();
+        while pty.unread() == Some(0) && t.elapsed() < Duration::from_secs(1) {
+            std::thread::sleep(Duration::from_micros(100));
+        }
+        assert_eq!(pty.unread(), Some(13));
+        let t = std::time::Instant::now();
+        assert!(!pty.wait_taken(Duration::from_millis(30)));
+        assert!(t.elapsed() >= Duration::from_millis(30));
+        let mut buf = [0u8; 64];
+        let n = reader.read(&mut buf).unwrap();
+        assert_eq!(&buf[..n], b"$GPGGA,1*00\r\n");
+        assert!(pty.wait_taken(Duration::from_millis(30)));
+    }
 
     #[test]
     fn log_lines_keep_their_bytes_and_times() {

@@ -2,7 +2,11 @@
 
 use crate::*;
 
-pub(crate) fn replay(recording: &Path, config: Option<&Path>, json: bool) -> Result<i32> {
+/// The recording's MCAP file and nav's config for it (loaded).
+fn recording_and_config(
+    recording: &Path,
+    config: Option<&Path>,
+) -> Result<(PathBuf, nav::config::NavConfig)> {
     let (mcap, cfg) = if recording.is_dir() {
         (recording.join("nav.mcap"), recording.join("nav.toml"))
     } else {
@@ -20,7 +24,11 @@ pub(crate) fn replay(recording: &Path, config: Option<&Path>, json: bool) -> Res
             cfg.display()
         );
     }
-    let cfg = nav::config::NavConfig::load(&cfg)?;
+    Ok((mcap, nav::config::NavConfig::load(&cfg)?))
+}
+
+pub(crate) fn replay(recording: &Path, config: Option<&Path>, json: bool) -> Result<i32> {
+    let (mcap, cfg) = recording_and_config(recording, config)?;
     let r = if is_candump(&mcap) {
         hil::playback::replay_candump(&mcap, &cfg)?
     } else {
@@ -32,6 +40,81 @@ pub(crate) fn replay(recording: &Path, config: Option<&Path>, json: bool) -> Res
         print!("{}", hil::playback::text(&r));
     }
     Ok(i32::from(!r.identical()))
+}
+
+/// `hil replay --bus`: the recording's traffic onto vcan and a pty with the nav binary on it,
+/// here where the kernel has CAN, else in the QEMU guest.
+pub(crate) fn replay_bus(
+    recording: &Path,
+    config: Option<&Path>,
+    speed: f64,
+    nav: Option<&Path>,
+    bus: &BusArgs,
+) -> Result<i32> {
+    if !(speed.is_finite() && speed > 0.0) {
+        bail!("--speed must be a positive number, not {speed}");
+    }
+    let (mcap, cfg) = recording_and_config(recording, config)?;
+    if is_candump(&mcap) {
+        bail!(
+            "{} is a CAN log: it has no GPS bytes nor nav's events; replay it onto the bus with can-utils' canplayer, or in process without --bus",
+            mcap.display()
+        );
+    }
+    let out = absolute(&match &bus.out {
+        Some(o) => o.clone(),
+        None => default_out("replay"),
+    })?;
+    let nav_bin = match nav {
+        Some(n) => absolute(n)?,
+        None => sibling_binary("nav")?,
+    };
+    if bus.here() {
+        let opts = hil::busreplay::BusReplayOptions {
+            iface: bus.iface.clone(),
+            out: out.clone(),
+            nav_bin,
+            speed,
+            progress: !bus.json,
+        };
+        let r = hil::busreplay::replay_on_bus(&mcap, &cfg, &opts)?;
+        let json = serde_json::to_string_pretty(&r)?;
+        std::fs::write(out.join("replay.json"), &json)
+            .with_context(|| format!("writing {}", out.join("replay.json").display()))?;
+        if bus.json {
+            println!("{json}");
+        } else {
+            print!("{}", r.text());
+        }
+        return Ok(i32::from(!r.identical()));
+    }
+    // no CAN here: the same command in the QEMU guest, the recording's folder shared
+    let mcap = absolute(&mcap)?;
+    let mut args: Vec<String> = vec!["replay".into(), "--bus".into()];
+    args.push(mcap.to_string_lossy().into_owned());
+    let cfg_path = match config {
+        Some(c) => absolute(c)?,
+        None => mcap.parent().unwrap_or(Path::new("/")).join("nav.toml"),
+    };
+    args.extend(["--config".into(), cfg_path.to_string_lossy().into_owned()]);
+    args.extend(["--speed".into(), speed.to_string()]);
+    args.extend(["--nav".into(), nav_bin.to_string_lossy().into_owned()]);
+    args.extend(["--iface".into(), bus.iface.clone()]);
+    args.extend(["--out".into(), out.to_string_lossy().into_owned()]);
+    let mut extra: Vec<PathBuf> = [&mcap, &cfg_path]
+        .iter()
+        .filter_map(|p| p.parent().map(Path::to_path_buf))
+        .collect();
+    extra.dedup();
+    run_in_guest(
+        args.into_iter()
+            .chain(bus.json.then(|| "--json".to_string()))
+            .collect(),
+        &out,
+        extra,
+        vec![nav_bin],
+        bus.json.then_some("replay.json"),
+    )
 }
 
 /// The file starts like a `candump -l` log: `(` and a time stamp.

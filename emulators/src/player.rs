@@ -1,0 +1,344 @@
+//! Recorded traffic put back on the bus: a sequence of CAN frames, GPS bytes and silences (as a
+//! recording of the other end saw them) written onto vcan and a pty in their order, paced on the
+//! IMU clock the frames carry, and in lockstep with nav's NAV_TIME frames as the bus scheduler
+//! ([`crate::bus`]) runs the emulators. It knows nothing of where the sequence came from: the
+//! bench reads it out of nav's recording (`hil replay --bus`).
+//!
+//! **Pacing.** Each IMU_GYRO frame is one IMU sample: simulated time advances by one sample
+//! period per IMU_GYRO frame (not by its counter, which a firmware fault may make jump), at the
+//! speed factor asked. Everything between two IMU_GYRO frames goes out with the first.
+//!
+//! **GPS bytes** are written to the pty at their place in the sequence, after the frames before
+//! them have gone out: nav sees them at the same point of the IMU stream as when it was
+//! recorded (nav ties a fix to its PPS edge and applies it at a time set by the IMU stream, so
+//! the exact moment within that window does not change the solution).
+//!
+//! **Silences** mark where nav's liveness watchdog fired in the recording: the player stops
+//! for `silence` of wall time there (longer than nav's watchdog), so that it fires again at the
+//! same place in the stream.
+
+use crate::bus::{Lockstep, LockstepStats};
+use crate::can::{CanTxError, Progress, write_all};
+use crate::clock::SimClock;
+use crate::gps::{GpsPty, PtyError};
+use serde::{Deserialize, Serialize};
+use socketcan::{CanSocket, Socket, SocketOptions};
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use thiserror::Error;
+use wire::{Message, RawFrame};
+
+/// One recorded thing to put back.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Recorded {
+    /// A CAN frame.
+    Frame(RawFrame),
+    /// Bytes from the GPS receiver's port.
+    Gps(Vec<u8>),
+    /// The other end's liveness watchdog fired here: stop for a while.
+    Silence,
+}
+
+/// How to play.
+#[derive(Debug, Clone, Copy)]
+pub struct PlayOptions {
+    /// Speed factor over real time (1.0: as the IMU sent it).
+    pub speed: f64,
+    /// IMU sample rate, Hz.
+    pub imu_rate_hz: f64,
+    /// Wall time the player stops for at a [`Recorded::Silence`].
+    pub silence: Duration,
+    /// Follow nav's NAV_TIME frames (none: paced by the clock alone).
+    pub lockstep: Option<Lockstep>,
+}
+
+/// What the player did.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
+pub struct PlayStats {
+    /// CAN frames written.
+    pub frames: u64,
+    /// IMU samples (IMU_GYRO frames) among them.
+    pub samples: u64,
+    /// Frames lost while the interface was down.
+    pub lost_iface_down: u64,
+    /// Retries while the transmit queue was full.
+    pub enobufs_retries: u64,
+    /// GPS bytes written.
+    pub gps_bytes: u64,
+    /// GPS writes.
+    pub gps_writes: u64,
+    /// GPS writes lost because nobody read the port.
+    pub gps_unread: u64,
+    /// GPS writes the reader had not taken within [`crate::gps::TAKE_WAIT`].
+    pub gps_slow_reads: u64,
+    /// Silences kept.
+    pub silences: u64,
+    /// Largest lag of the stream behind its paced time, ms.
+    pub max_lag_ms: u64,
+    /// Lockstep.
+    pub lockstep: LockstepStats,
+}
+
+/// Player failures.
+#[derive(Debug, Error)]
+pub enum PlayError {
+    /// CAN trouble.
+    #[error(transparent)]
+    Can(#[from] CanTxError),
+    /// pty trouble.
+    #[error("GPS port: {0}")]
+    Gps(#[from] PtyError),
+    /// GPS bytes in the sequence but no port to write them to.
+    #[error("the recording has GPS bytes but no GPS port was given")]
+    NoGpsPort,
+}
+
+/// The frames nav confirmed, as the player follows them.
+struct Follow {
+    /// (sample index, 16-bit counter) of the IMU_GYRO frames sent, newest last.
+    sent: VecDeque<(u64, u16)>,
+    confirmed: Option<u64>,
+}
+
+impl Follow {
+    /// The sample a NAV_TIME names: the newest sent whose counter its count matches.
+    fn on_nav_time(&mut self, sample_count: u32, ls: &mut LockstepStats) {
+        ls.nav_times += 1;
+        let c = sample_count as u16;
+        if let Some(&(k, _)) = self.sent.iter().rev().find(|s| s.1 == c)
+            && self.confirmed.is_none_or(|p| k > p)
+        {
+            self.confirmed = Some(k);
+            ls.last_confirmed = Some(k);
+        }
+    }
+}
+
+/// Put `items` on `iface` (and the GPS bytes on `pty`), paced and followed as `opts` says.
+/// Stops early when `stop` is set; `progress` follows the simulated time reached.
+pub fn play(
+    iface: &str,
+    items: impl IntoIterator<Item = Recorded>,
+    mut pty: Option<&mut GpsPty>,
+    opts: &PlayOptions,
+    stop: &AtomicBool,
+    progress: &Progress,
+) -> Result<PlayStats, PlayError> {
+    let open_err = |source| CanTxError::Open {
+        iface: iface.into(),
+        source,
+    };
+    let sock = CanSocket::open(iface).map_err(open_err)?;
+    crate::bus::pin_to_this_cpu(iface);
+    // what nav says: its solution header (NAV_TIME) only; its turntable commands go unanswered
+    // (the recording holds the turntable's answers)
+    sock.set_filters(&[socketcan::CanFilter::new(
+        u32::from(wire::nav_time::SPEC.id),
+        0x7FF,
+    )])
+    .map_err(open_err)?;
+    sock.set_nonblocking(true).map_err(open_err)?;
+    let mut st = PlayStats {
+        lockstep: LockstepStats {
+            enabled: opts.lockstep.is_some(),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let period = 1.0 / opts.imu_rate_hz.max(1e-9);
+    let mut clock = SimClock::start(opts.speed);
+    let mut follow = Follow {
+        sent: VecDeque::with_capacity(4096),
+        confirmed: None,
+    };
+    let mut lockstep = opts.lockstep;
+    let mut outbox: Vec<RawFrame> = Vec::with_capacity(wire::BATCH);
+    let mut got = Vec::with_capacity(wire::BATCH);
+    let flush = |outbox: &mut Vec<RawFrame>, st: &mut PlayStats| -> Result<(), PlayError> {
+        let w = write_all(&sock, iface, outbox)?;
+        st.enobufs_retries += w.retries;
+        st.lost_iface_down += w.lost_down;
+        st.frames += outbox.len() as u64 - w.lost_down;
+        outbox.clear();
+        Ok(())
+    };
+    // the next sample's index (the count of IMU_GYRO frames met)
+    let mut k = 0u64;
+    for item in items {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+        match item {
+            Recorded::Frame(f) => {
+                if let Ok(Message::ImuGyro(g)) = Message::decode(&f) {
+                    let t = k as f64 * period;
+                    if k.is_multiple_of(16) {
+                        flush(&mut outbox, &mut st)?;
+                        // lockstep: never more than a window ahead of what nav confirmed
+                        if let Some(l) = lockstep {
+                            let ok = wait_for_nav(&sock, iface, &mut follow, k, &l, stop, &mut st)?;
+                            if !ok {
+                                st.lockstep.stalls += 1;
+                                lockstep = None;
+                                tracing::warn!(
+                                    interface = iface,
+                                    "nav confirmed no IMU sample past {:?} for {} s: lockstep off, the replay is no longer reproducible",
+                                    follow.confirmed,
+                                    l.stall.as_secs()
+                                );
+                            }
+                        } else {
+                            read_nav(&sock, iface, &mut got, &mut follow, &mut st.lockstep)?;
+                        }
+                        clock.sleep_until(t);
+                        let lag = Instant::now().saturating_duration_since(clock.wall_at(t));
+                        st.max_lag_ms = st.max_lag_ms.max(lag.as_millis() as u64);
+                        progress.set(t);
+                    }
+                    if follow.sent.len() == follow.sent.capacity() {
+                        follow.sent.pop_front();
+                    }
+                    follow.sent.push_back((k, g.sample_counter));
+                    k += 1;
+                    st.samples += 1;
+                }
+                outbox.push(f);
+                if outbox.len() >= wire::BATCH {
+                    flush(&mut outbox, &mut st)?;
+                }
+            }
+            Recorded::Gps(bytes) => {
+                flush(&mut outbox, &mut st)?;
+                let p = pty.as_deref_mut().ok_or(PlayError::NoGpsPort)?;
+                match p.write(&bytes) {
+                    Ok(()) => {
+                        st.gps_bytes += bytes.len() as u64;
+                        st.gps_writes += 1;
+                        // nav's reader takes them before the IMU stream goes on
+                        if !p.wait_taken(crate::gps::TAKE_WAIT) {
+                            st.gps_slow_reads += 1;
+                        }
+                    }
+                    Err(PtyError::Write { source, .. })
+                        if source.kind() == std::io::ErrorKind::TimedOut =>
+                    {
+                        st.gps_unread += 1;
+                        p.clear();
+                    }
+                    Err(e) => return Err(e.into()),
+                }
+            }
+            Recorded::Silence => {
+                flush(&mut outbox, &mut st)?;
+                st.silences += 1;
+                std::thread::sleep(opts.silence);
+                // what follows is paced from here, not caught up at once
+                clock.catch_up(k as f64 * period);
+            }
+        }
+    }
+    flush(&mut outbox, &mut st)?;
+    read_nav(&sock, iface, &mut got, &mut follow, &mut st.lockstep)?;
+    progress.set(k as f64 * period);
+    Ok(st)
+}
+
+/// Read nav's NAV_TIME frames until it has confirmed within the window of sample `k`; false
+/// when it did not within the stall limit.
+fn wait_for_nav(
+    sock: &CanSocket,
+    iface: &str,
+    follow: &mut Follow,
+    k: u64,
+    l: &Lockstep,
+    stop: &AtomicBool,
+    st: &mut PlayStats,
+) -> Result<bool, PlayError> {
+    let mut got = Vec::with_capacity(wire::BATCH);
+    let mut waited: Option<Instant> = None;
+    loop {
+        read_nav(sock, iface, &mut got, follow, &mut st.lockstep)?;
+        // before nav has named any sample, the first window goes out unconfirmed
+        if follow.confirmed.map_or(l.window, |c| c + l.window) >= k || stop.load(Ordering::Relaxed)
+        {
+            break;
+        }
+        let since = *waited.get_or_insert_with(|| {
+            st.lockstep.waits += 1;
+            Instant::now()
+        });
+        if since.elapsed() > l.stall {
+            st.lockstep.wait_ms += since.elapsed().as_millis() as u64;
+            return Ok(false);
+        }
+        crate::bus::wait_readable(sock, Duration::from_millis(2));
+    }
+    if let Some(w) = waited {
+        st.lockstep.wait_ms += w.elapsed().as_millis() as u64;
+    }
+    Ok(true)
+}
+
+/// Take what nav said so far, without blocking.
+fn read_nav(
+    sock: &CanSocket,
+    iface: &str,
+    got: &mut Vec<Result<RawFrame, wire::FrameConvError>>,
+    follow: &mut Follow,
+    ls: &mut LockstepStats,
+) -> Result<(), PlayError> {
+    use std::os::fd::AsRawFd;
+    loop {
+        got.clear();
+        let n = match wire::recv_batch(sock.as_raw_fd(), got, wire::BATCH) {
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => return Ok(()),
+            Err(source) => {
+                return Err(CanTxError::Read {
+                    iface: iface.into(),
+                    source,
+                }
+                .into());
+            }
+        };
+        for f in got.drain(..) {
+            if let Ok(f) = f
+                && let Ok(Message::NavTime(nt)) = Message::decode(&f)
+            {
+                follow.on_nav_time(nt.sample_count, ls);
+            }
+        }
+        if n < wire::BATCH {
+            return Ok(());
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A NAV_TIME names the newest sample sent with its counter, across the 16-bit wrap; an
+    /// older or unknown count changes nothing.
+    #[test]
+    fn nav_time_confirms_the_newest_sample_with_its_counter() {
+        let mut f = Follow {
+            sent: VecDeque::with_capacity(8),
+            confirmed: None,
+        };
+        let mut ls = LockstepStats::default();
+        for (k, c) in [(0u64, 65534u16), (1, 65535), (2, 0), (3, 1)] {
+            f.sent.push_back((k, c));
+        }
+        f.on_nav_time(0x0001_0000, &mut ls);
+        assert_eq!(f.confirmed, Some(2));
+        f.on_nav_time(65535, &mut ls);
+        assert_eq!(f.confirmed, Some(2), "an older sample does not go back");
+        f.on_nav_time(7, &mut ls);
+        assert_eq!(f.confirmed, Some(2), "a count never sent is ignored");
+        f.on_nav_time(0x0001_0001, &mut ls);
+        assert_eq!((f.confirmed, ls.nav_times), (Some(3), 4));
+    }
+}

@@ -1,0 +1,552 @@
+//! `hil replay --bus`: a recording's traffic back onto vcan and a pty, with the `nav` binary
+//! (this build, or another given with `--nav`) running on it as on a vehicle, and its new
+//! solution compared with the recorded one.
+//!
+//! What goes back is what nav received, in the order its loop took it: the frames of `/can/raw`
+//! (IMU and turntable), the bytes of `/gps/raw` (the receiver's port), and a silence wherever
+//! nav's liveness watchdog fired (`/nav/event` `imu_timeout`), so it fires at the same place.
+//! The player ([`emulators::player`]) paces them on the IMU clock at the speed asked and in
+//! lockstep with nav's NAV_TIME frames, as the bench runs its emulators; the turntable's
+//! answers come from the recording (nav's commands go on the bus and are not answered again).
+//! nav's frames of the new run (`/can/tx`) are compared with the recorded ones: identical bit
+//! for bit for the same build. For another build, the solutions are compared at the same IMU
+//! times.
+
+use crate::run::{NavFolder, RemoveOnDrop, start_nav, stop_nav};
+use anyhow::{Context, Result, bail};
+use emulators::gps::{GpsPty, relink};
+use emulators::player::{PlayOptions, PlayStats, Recorded};
+use nav::config::{GpsSource, NavConfig};
+use nav::record::{GPS_BYTES_ENCODING, RAW_FRAME_ENCODING};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+use wire::RawFrame;
+
+/// Options of a replay onto the bus.
+#[derive(Debug, Clone)]
+pub struct BusReplayOptions {
+    /// CAN interface (created when missing).
+    pub iface: String,
+    /// Output folder of the new run.
+    pub out: PathBuf,
+    /// The `nav` binary.
+    pub nav_bin: PathBuf,
+    /// Speed factor over real time.
+    pub speed: f64,
+    /// Print progress.
+    pub progress: bool,
+}
+
+/// What a recording holds for a replay onto the bus.
+pub struct Recording {
+    /// What nav received, in its order.
+    pub items: Vec<Recorded>,
+    /// What nav sent.
+    pub sent: Vec<RawFrame>,
+    /// nav's solutions (`/nav/solution`): IMU time ns -> the JSON.
+    pub solutions: Vec<(u64, serde_json::Value)>,
+    /// Decoded fixes recorded (`/gps/fix`).
+    pub fixes: u64,
+    /// Records that could not be read.
+    pub bad_records: u64,
+    /// The recording was cut short (nav killed).
+    pub cut: bool,
+}
+
+impl Recording {
+    /// Read nav's recording `mcap` (all its parts) of an IMU at `imu_rate_hz`; the GPS bytes
+    /// are placed after their PPS edges ([`place_after_pps`]).
+    pub fn read(mcap: &Path, imu_rate_hz: f64) -> Result<Self> {
+        let mut r = Self::read_as_recorded(mcap)?;
+        r.items = place_after_pps(std::mem::take(&mut r.items), imu_rate_hz);
+        Ok(r)
+    }
+
+    /// Read nav's recording `mcap` (all its parts), everything where nav's loop took it.
+    pub fn read_as_recorded(mcap: &Path) -> Result<Self> {
+        let mut r = Recording {
+            items: Vec::new(),
+            sent: Vec::new(),
+            solutions: Vec::new(),
+            fixes: 0,
+            bad_records: 0,
+            cut: false,
+        };
+        r.cut = crate::playback::each_message(mcap, "replaying", |m| {
+            let frame = || {
+                (m.channel.message_encoding == RAW_FRAME_ENCODING)
+                    .then(|| nav::record::decode_frame(&m.data))
+                    .flatten()
+            };
+            match m.channel.topic.as_str() {
+                "/can/raw" => match frame() {
+                    Some(f) => r.items.push(Recorded::Frame(f)),
+                    None => r.bad_records += 1,
+                },
+                "/can/tx" => match frame() {
+                    Some(f) => r.sent.push(f),
+                    None => r.bad_records += 1,
+                },
+                "/gps/raw" if m.channel.message_encoding == GPS_BYTES_ENCODING => {
+                    r.items.push(Recorded::Gps(m.data.to_vec()))
+                }
+                "/gps/fix" => r.fixes += 1,
+                "/nav/event" => match serde_json::from_slice::<serde_json::Value>(&m.data) {
+                    Ok(e) if e["kind"] == "imu_timeout" => r.items.push(Recorded::Silence),
+                    Ok(_) => {}
+                    Err(_) => r.bad_records += 1,
+                },
+                "/nav/solution" => match serde_json::from_slice(&m.data) {
+                    Ok(v) => r.solutions.push((m.publish_time, v)),
+                    Err(_) => r.bad_records += 1,
+                },
+                _ => {}
+            }
+        })?;
+        Ok(r)
+    }
+
+    /// GPS bytes in the recording.
+    pub fn has_gps_bytes(&self) -> bool {
+        self.items.iter().any(|i| matches!(i, Recorded::Gps(_)))
+    }
+}
+
+/// Where the player writes a receiver's bytes after their PPS edge: the bench receiver's
+/// latency, s.
+pub const GPS_AFTER_PPS_S: f64 = 0.05;
+
+/// The GPS bytes of `items` moved to [`GPS_AFTER_PPS_S`] after the PPS edge they follow, where
+/// nav took them later than that: a recording has them where nav's loop took them, which is
+/// later than the receiver sent them by however far nav was behind on the bus; replayed there,
+/// a replay of a replay would drift later each time, past the time nav applies a fix. Bytes
+/// taken half a second or more after the last edge (nav ties them to the next edge) and bytes
+/// with no edge in the second before them (no PPS: nav applies them where they arrive) stay
+/// where they are, as does the order of all bytes. `imu_rate_hz`: the IMU's sample rate.
+pub fn place_after_pps(items: Vec<Recorded>, imu_rate_hz: f64) -> Vec<Recorded> {
+    let lead = (GPS_AFTER_PPS_S * imu_rate_hz).ceil() as usize;
+    let half_s = (0.5 * imu_rate_hz) as usize;
+    let mut out = Vec::with_capacity(items.len());
+    // the items since the last PPS edge, and where in them its samples and bytes are
+    let mut tail: Vec<Recorded> = Vec::new();
+    let mut since_edge: Option<usize> = None;
+    let mut lead_at: Option<usize> = None;
+    for item in items {
+        match &item {
+            Recorded::Frame(f) => match wire::Message::decode(f) {
+                Ok(wire::Message::ImuAccel(a)) if a.pps_offset.is_some() => {
+                    out.append(&mut tail);
+                    out.push(item);
+                    since_edge = Some(0);
+                    lead_at = None;
+                    continue;
+                }
+                Ok(wire::Message::ImuGyro(_)) => {
+                    if let Some(n) = since_edge.as_mut() {
+                        *n += 1;
+                        // after the whole sample `lead` (before the next one's first frame)
+                        if *n == lead + 1 {
+                            lead_at = Some(tail.len());
+                        }
+                        if *n > half_s {
+                            // too far from the edge for anything to move before this
+                            out.append(&mut tail);
+                            since_edge = None;
+                        }
+                    }
+                }
+                _ => {}
+            },
+            Recorded::Gps(_) => {
+                if let (Some(_), Some(at)) = (since_edge, lead_at) {
+                    // after the lead, after any bytes already placed there
+                    tail.insert(at.min(tail.len()), item);
+                    lead_at = Some(at + 1);
+                    continue;
+                }
+            }
+            Recorded::Silence => {}
+        }
+        if since_edge.is_some() {
+            tail.push(item);
+        } else {
+            out.push(item);
+        }
+    }
+    out.append(&mut tail);
+    out
+}
+
+/// How far two solutions at the same IMU times lie apart.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+pub struct SolutionDifference {
+    /// Solutions at the same IMU time in both.
+    pub compared: u64,
+    /// Largest horizontal position difference, m.
+    pub max_horizontal_m: f64,
+    /// Largest heading difference, deg.
+    pub max_heading_deg: f64,
+    /// Largest velocity difference (norm), m/s.
+    pub max_velocity_mps: f64,
+}
+
+/// Compare two runs' `/nav/solution` records at the same IMU times.
+pub fn compare_solutions(
+    a: &[(u64, serde_json::Value)],
+    b: &[(u64, serde_json::Value)],
+) -> SolutionDifference {
+    let by_time: std::collections::HashMap<u64, &serde_json::Value> =
+        b.iter().map(|(t, v)| (*t, v)).collect();
+    let mut d = SolutionDifference::default();
+    let num = |v: &serde_json::Value, k: &str| v[k].as_f64();
+    for (t, x) in a {
+        let Some(y) = by_time.get(t) else { continue };
+        d.compared += 1;
+        if let (Some(la), Some(oa), Some(lb), Some(ob)) = (
+            num(x, "lat_deg"),
+            num(x, "lon_deg"),
+            num(y, "lat_deg"),
+            num(y, "lon_deg"),
+        ) {
+            // a local plane is plenty for differences of metres
+            let (rm, rn) = emulators::geodesy::radii(la.to_radians());
+            let dn = (lb - la).to_radians() * rm;
+            let de = (ob - oa).to_radians() * rn * la.to_radians().cos();
+            d.max_horizontal_m = d.max_horizontal_m.max(dn.hypot(de));
+        }
+        let heading = |v: &serde_json::Value| v["hpr_deg"][0].as_f64();
+        if let (Some(ha), Some(hb)) = (heading(x), heading(y)) {
+            let dh = (hb - ha + 540.0).rem_euclid(360.0) - 180.0;
+            d.max_heading_deg = d.max_heading_deg.max(dh.abs());
+        }
+        if let (Some(va), Some(vb)) = (x["vel_enu_mps"].as_array(), y["vel_enu_mps"].as_array()) {
+            let dv: f64 = va
+                .iter()
+                .zip(vb)
+                .filter_map(|(p, q)| Some((q.as_f64()? - p.as_f64()?).powi(2)))
+                .sum();
+            d.max_velocity_mps = d.max_velocity_mps.max(dv.sqrt());
+        }
+    }
+    d
+}
+
+/// The outcome of a replay onto the bus.
+#[derive(Debug, Clone, Serialize)]
+pub struct BusReplay {
+    /// The recording replayed.
+    pub recording: String,
+    /// The new run's folder.
+    pub out: String,
+    /// What the player put on the bus and the port.
+    pub play: PlayStats,
+    /// Frames nav sent in the recording.
+    pub recorded_tx: u64,
+    /// Frames nav sent on the replay.
+    pub replayed_tx: u64,
+    /// The first frame at which the two differ (index, recorded, replayed), if any.
+    pub first_difference: crate::playback::Difference,
+    /// The solutions compared at the same IMU times.
+    pub solutions: SolutionDifference,
+    /// Records of the recording that could not be read.
+    pub bad_records: u64,
+    /// nav's exit status.
+    pub nav_exit: Option<i32>,
+    /// Wall time of the replay, s.
+    pub wall_s: f64,
+    /// The new run's summary.
+    pub summary: nav::summary::Summary,
+}
+
+impl BusReplay {
+    /// nav sent exactly what it sent in the recording.
+    pub fn identical(&self) -> bool {
+        self.first_difference.is_none() && self.recorded_tx == self.replayed_tx
+    }
+
+    /// For people.
+    pub fn text(&self) -> String {
+        let p = &self.play;
+        let mut s = format!(
+            "put back {} frames ({} IMU samples) and {} GPS bytes in {} writes, {} silences, in {:.1} s (lockstep: {} waits, {} stalls)\n",
+            p.frames,
+            p.samples,
+            p.gps_bytes,
+            p.gps_writes,
+            p.silences,
+            self.wall_s,
+            p.lockstep.waits,
+            p.lockstep.stalls
+        );
+        s += &format!(
+            "nav sent {} frames in the recording, {} on the replay: {}\n",
+            self.recorded_tx,
+            self.replayed_tx,
+            crate::playback::verdict(&self.first_difference)
+        );
+        let d = &self.solutions;
+        s += &format!(
+            "solutions at the same IMU time: {} compared; largest differences {:.3} m, {:.4} deg heading, {:.3} m/s\n",
+            d.compared, d.max_horizontal_m, d.max_heading_deg, d.max_velocity_mps
+        );
+        s += &format!("the new run: {}\n", self.out);
+        s
+    }
+}
+
+/// Replay nav's recording `mcap` (made with config `cfg`) onto the bus with the nav binary of
+/// `opts`. The kernel must have CAN.
+pub fn replay_on_bus(mcap: &Path, cfg: &NavConfig, opts: &BusReplayOptions) -> Result<BusReplay> {
+    let start = Instant::now();
+    let rec = Recording::read(mcap, cfg.imu.rate_hz)?;
+    if rec.items.is_empty() {
+        bail!("{}: nothing nav received is recorded", mcap.display());
+    }
+    let gps = cfg.gps.is_some() && rec.has_gps_bytes();
+    if cfg.gps.is_some() && !gps && rec.fixes > 0 {
+        tracing::warn!(
+            "{}: {} fixes but no /gps/raw (recorded before nav kept its GPS bytes): the GPS is not replayed and the solutions will differ",
+            mcap.display(),
+            rec.fixes
+        );
+    }
+    if rec.cut {
+        tracing::warn!(
+            "{}: the recording is cut short (nav killed): replaying what it has",
+            mcap.display()
+        );
+    }
+    std::fs::create_dir_all(&opts.out)
+        .with_context(|| format!("creating {}", opts.out.display()))?;
+    vcan_setup::ensure_vcan(&opts.iface)?;
+    let account = crate::run::nav_account();
+    let mut pty = if gps {
+        let pty = GpsPty::open().context("the GPS port for the replay")?;
+        if let Some((uid, gid)) = account {
+            pty.give_to(uid, gid)?;
+        }
+        Some(pty)
+    } else {
+        None
+    };
+    let link = std::env::temp_dir().join(format!("hil-replay-gps-{}", std::process::id()));
+    if let Some(p) = &pty {
+        relink(&link, p.path())?;
+    }
+    let _link_guard = RemoveOnDrop(link.clone());
+    let mut folder = NavFolder::new(&opts.out, account)?;
+    let mut c = cfg.clone();
+    if let Some(can) = c.can.as_mut() {
+        can.interface = opts.iface.clone();
+    } else {
+        bail!("the recording's config has no [can] table: nav did not listen to a bus");
+    }
+    c.gps = if gps {
+        cfg.gps.clone().map(|mut g| {
+            g.source = GpsSource::Serial;
+            g.port = link.clone();
+            g.fixes_jsonl = g.fixes_jsonl.as_ref().map(|_| "gps-fixes.jsonl".into());
+            g
+        })
+    } else {
+        None
+    };
+    c.record.mcap = Some("nav.mcap".into());
+    c.record.summary = Some("nav-summary.json".into());
+    let cfg_path = folder.dir.join("nav.toml");
+    std::fs::write(&cfg_path, c.to_toml())
+        .with_context(|| format!("writing {}", cfg_path.display()))?;
+    let nav = start_nav(&opts.nav_bin, &cfg_path, account)?;
+    let items = rec.items.len();
+    let play_opts = PlayOptions {
+        speed: opts.speed,
+        imu_rate_hz: cfg.imu.rate_hz,
+        // well past nav's watchdog, so that it fires where it fired
+        silence: Duration::from_millis(cfg.watchdog.imu_timeout_ms * 3 + 100),
+        lockstep: Some(emulators::bus::Lockstep::default()),
+    };
+    let progress = emulators::can::Progress::default();
+    let stop = AtomicBool::new(false);
+    let duration_s = rec
+        .items
+        .iter()
+        .filter(|i| matches!(i, Recorded::Frame(f) if f.id == wire::imu_gyro::SPEC.id))
+        .count() as f64
+        / cfg.imu.rate_hz;
+    let played = std::thread::scope(|sc| {
+        let (done_tx, done) = std::sync::mpsc::channel::<()>();
+        let player = sc.spawn(|| {
+            let r = emulators::player::play(
+                &opts.iface,
+                rec.items.iter().cloned(),
+                pty.as_mut(),
+                &play_opts,
+                &stop,
+                &progress,
+            );
+            drop(done_tx);
+            r
+        });
+        // nav is told to stop as soon as the last frame is out: a pause longer than its
+        // watchdog would add a timeout the recording does not have
+        while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) =
+            done.recv_timeout(Duration::from_millis(200))
+        {
+            if opts.progress {
+                let t = progress.now();
+                crate::status::show(&format!(
+                    "{} replay {t:.1} / {duration_s:.1} s of IMU time",
+                    crate::status::bar_of(t / duration_s.max(1e-9), 30)
+                ));
+            }
+        }
+        player.join()
+    });
+    crate::status::finish();
+    // nav takes what is still in its socket when told to stop
+    let (nav_exit, lines) = stop_nav(nav)?;
+    folder.finish()?;
+    let play = match played {
+        Ok(r) => r.with_context(|| format!("replaying {items} records onto {}", opts.iface))?,
+        Err(_) => bail!("the player panicked"),
+    };
+    for l in &lines {
+        if opts.progress {
+            crate::status::line(l);
+        }
+    }
+    let summary = nav::summary::Summary::read(&opts.out.join("nav-summary.json"))
+        .with_context(|| format!("nav wrote no summary; exit status {nav_exit:?}"))?;
+    let new = Recording::read_as_recorded(&opts.out.join("nav.mcap"))?;
+    Ok(BusReplay {
+        recording: mcap.display().to_string(),
+        out: opts.out.display().to_string(),
+        play,
+        recorded_tx: rec.sent.len() as u64,
+        replayed_tx: new.sent.len() as u64,
+        first_difference: crate::playback::first_difference(&rec.sent, &new.sent),
+        solutions: compare_solutions(&rec.solutions, &new.solutions),
+        bad_records: rec.bad_records,
+        nav_exit,
+        wall_s: start.elapsed().as_secs_f64(),
+        summary,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use wire::{ImuAccel, ImuGyro, Message};
+
+    /// Sample `k`'s two frames, with a PPS edge in it when `pps`.
+    fn sample(k: u16, pps: bool) -> [Recorded; 2] {
+        let g = Message::ImuGyro(ImuGyro {
+            counts: [0; 3],
+            sample_counter: k,
+        });
+        let a = Message::ImuAccel(ImuAccel {
+            counts: [0; 3],
+            sample_counter_low: (k & 0xF) as u8,
+            pps_offset: pps.then_some(10),
+            bit_fail: false,
+            saturated: false,
+        });
+        [
+            Recorded::Frame(g.encode().unwrap()),
+            Recorded::Frame(a.encode().unwrap()),
+        ]
+    }
+
+    /// Where each GPS chunk of `items` comes: the number of samples before it.
+    fn gps_at(items: &[Recorded]) -> Vec<(usize, Vec<u8>)> {
+        let mut k = 0;
+        let mut at = Vec::new();
+        for i in items {
+            match i {
+                Recorded::Frame(f) if f.id == wire::imu_gyro::SPEC.id => k += 1,
+                Recorded::Gps(b) => at.push((k, b.clone())),
+                _ => {}
+            }
+        }
+        at
+    }
+
+    /// 100 Hz IMU (lead 5 samples, half a second 50), an edge in sample 10: bytes taken 30
+    /// samples after it move to 5 after it, in their order; bytes taken 60 after an edge (the
+    /// next edge's) and bytes with no edge before them stay; nothing else moves.
+    #[test]
+    fn gps_bytes_move_to_just_after_their_pps_edge_and_no_further() {
+        let mut items = Vec::new();
+        for k in 0..200u16 {
+            if k == 5 {
+                items.push(Recorded::Gps(b"no edge yet".to_vec()));
+            }
+            if k == 40 {
+                items.push(Recorded::Gps(b"a".to_vec()));
+                items.push(Recorded::Gps(b"b".to_vec()));
+            }
+            if k == 42 {
+                items.push(Recorded::Gps(b"c".to_vec()));
+            }
+            if k == 13 {
+                items.push(Recorded::Gps(b"early".to_vec()));
+            }
+            if k == 170 {
+                items.push(Recorded::Gps(b"next edge's".to_vec()));
+            }
+            items.extend(sample(k, k == 10 || k == 110));
+        }
+        let frames_before: Vec<_> = items
+            .iter()
+            .filter(|i| matches!(i, Recorded::Frame(_)))
+            .cloned()
+            .collect();
+        let placed = place_after_pps(items, 100.0);
+        let at = gps_at(&placed);
+        let named = |s: &str| at.iter().find(|a| a.1 == s.as_bytes()).map(|a| a.0);
+        assert_eq!(named("no edge yet"), Some(5));
+        assert_eq!(named("early"), Some(13), "already before the lead: stays");
+        // the edge is sample 10 (the 11th): five whole samples after it
+        assert_eq!(
+            (named("a"), named("b"), named("c")),
+            (Some(16), Some(16), Some(16))
+        );
+        assert_eq!(
+            at.iter().map(|a| a.1.clone()).collect::<Vec<_>>(),
+            ["no edge yet", "early", "a", "b", "c", "next edge's"]
+                .iter()
+                .map(|s| s.as_bytes().to_vec())
+                .collect::<Vec<_>>(),
+            "the bytes keep their order"
+        );
+        assert_eq!(
+            named("next edge's"),
+            Some(170),
+            "60 samples after its edge: stays"
+        );
+        let frames_after: Vec<_> = placed
+            .iter()
+            .filter(|i| matches!(i, Recorded::Frame(_)))
+            .cloned()
+            .collect();
+        assert_eq!(frames_before, frames_after, "the frames keep their order");
+    }
+
+    /// Two solutions apart by a known amount at one shared IMU time; others unmatched.
+    #[test]
+    fn solutions_compare_at_the_same_imu_time() {
+        let s = |lat: f64, h: f64| {
+            serde_json::json!({"lat_deg": lat, "lon_deg": 10.0, "hpr_deg": [h, 0.0, 0.0],
+                "vel_enu_mps": [1.0, 0.0, 0.0]})
+        };
+        let a = vec![(1, s(45.0, 359.9)), (2, s(45.0, 1.0))];
+        let b = vec![(2, s(45.0 + 1e-5, 0.9)), (3, s(0.0, 0.0))];
+        let d = compare_solutions(&a, &b);
+        assert_eq!(d.compared, 1);
+        assert!((d.max_horizontal_m - 1.111).abs() < 0.01, "{d:?}");
+        assert!((d.max_heading_deg - 0.1).abs() < 1e-9, "{d:?}");
+        assert_eq!(d.max_velocity_mps, 0.0);
+    }
+}
