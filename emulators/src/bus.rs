@@ -120,10 +120,30 @@ impl Latency {
     }
 }
 
+/// The turntable's truth at one instant: what the mechanism really did (never on the wire), for
+/// the bench's recording.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TtTruth {
+    /// Simulated time, s.
+    pub t_s: f64,
+    /// True angle of each axis, deg (unwrapped).
+    pub angle_deg: Vec<f64>,
+    /// True rate of each axis, deg/s.
+    pub rate_dps: Vec<f64>,
+    /// State of each axis (its controller's).
+    pub state: Vec<String>,
+}
+
+/// Rate at which the turntable's truth is kept, Hz.
+pub const TT_TRUTH_HZ: f64 = 10.0;
+
 /// The turntable on the bus, without I/O: commands in, frames out after each IMU sample.
 pub struct TtBus {
     tt: Turntable,
     status_every: u64,
+    truth_every: u64,
+    /// The mechanism's truth at [`TT_TRUTH_HZ`].
+    pub truth: Vec<TtTruth>,
     latency: u64,
     waiting: Vec<TtCmd>,
     scheduled: VecDeque<(u64, TtCmd)>,
@@ -138,6 +158,8 @@ impl TtBus {
     pub fn new(tt: Turntable, imu_rate_hz: f64, latency: u64) -> Self {
         Self {
             status_every: (imu_rate_hz / tt.params().status_hz).round().max(1.0) as u64,
+            truth_every: (imu_rate_hz / TT_TRUTH_HZ).round().max(1.0) as u64,
+            truth: Vec::new(),
             tt,
             latency,
             waiting: Vec::new(),
@@ -191,6 +213,16 @@ impl TtBus {
         }
         self.acks.clear();
         self.tt.advance(t, &mut self.acks);
+        if k.is_multiple_of(self.truth_every) {
+            let n = self.tt.axis_count();
+            let (angle_deg, rate_dps) = (0..n).map(|a| self.tt.true_angle(a, t)).unzip();
+            self.truth.push(TtTruth {
+                t_s: t,
+                angle_deg,
+                rate_dps,
+                state: (0..n).map(|a| format!("{:?}", self.tt.state(a))).collect(),
+            });
+        }
         out.extend(self.acks.drain(..).map(Message::TtAck));
         if (k + 1).is_multiple_of(self.status_every) {
             let status = self.tt.status(t);
@@ -229,6 +261,8 @@ pub struct BusOutcome {
     pub imu: TxStats,
     /// The turntable's frames.
     pub turntable: Option<TurntableTxStats>,
+    /// The turntable's truth ([`TT_TRUTH_HZ`]).
+    pub turntable_truth: Vec<TtTruth>,
     /// The receiver's output, and its pty (kept open until nav has stopped).
     pub gps: Option<(GpsTxStats, crate::gps::GpsPty)>,
     /// Lockstep.
@@ -452,6 +486,11 @@ pub fn run(
             max_lag_ms,
             ..dev.imu.stats
         },
+        turntable_truth: dev
+            .turntable
+            .as_mut()
+            .map(|t| std::mem::take(&mut t.truth))
+            .unwrap_or_default(),
         turntable: dev.turntable.map(|t| t.stats),
         gps: dev.gps.map(|g| (g.stats, g.into_pty())),
         lockstep: ls,
@@ -606,5 +645,31 @@ mod tests {
             b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
         }
         assert_eq!(out.len(), 100);
+    }
+
+    /// The mechanism's truth is kept at 10 Hz of IMU time, each axis's angle, rate and state,
+    /// following what the commands made it do.
+    #[test]
+    fn the_turntables_truth_is_kept_at_ten_hertz() {
+        let mut b = TtBus::new(Turntable::new(TurntableParams::default()), 2000.0, 120);
+        let mut out = Vec::new();
+        b.command_at(0, cmd(1, TtCommand::Enable));
+        for k in 0..2000 {
+            b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
+        }
+        assert_eq!(b.truth.len(), 10);
+        let first = &b.truth[0];
+        assert_eq!((first.t_s, first.angle_deg.len()), (1.0 / 2000.0, 1));
+        assert!(
+            b.truth
+                .windows(2)
+                .all(|w| (w[1].t_s - w[0].t_s - 0.1).abs() < 1e-9)
+        );
+        assert!(
+            b.truth
+                .iter()
+                .all(|t| t.state.len() == 1 && t.rate_dps[0] == 0.0)
+        );
+        assert_ne!(b.truth[9].state[0], "Disabled", "{:?}", b.truth[9]);
     }
 }

@@ -377,6 +377,11 @@ impl Turntable {
         (a / DEG, w / DEG)
     }
 
+    /// Number of axes.
+    pub fn axis_count(&self) -> usize {
+        self.axes.len()
+    }
+
     /// State of `axis`.
     pub fn state(&self, axis: usize) -> TtState {
         self.axes[axis].state

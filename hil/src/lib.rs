@@ -5,6 +5,7 @@ pub mod busreplay;
 pub mod devices;
 pub mod drill;
 pub mod experiment;
+pub mod faultlog;
 pub mod faults;
 pub mod fuzz;
 pub mod html;

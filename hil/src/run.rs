@@ -510,6 +510,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let (nav_exit, nav_lines) = nav_out;
     nav_folder.finish()?;
     let (tx, tt_stats, lockstep_stats) = (bus.imu, bus.turntable, bus.lockstep);
+    let turntable_truth = bus.turntable_truth;
     // the receiver's device stayed until nav had stopped
     let gps_stats = bus.gps.map(|(st, _pty)| st);
     watch_stop.store(true, Ordering::Relaxed);
@@ -642,21 +643,23 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
         _ => None,
     };
-    // the bench's own side: the truth beside nav's recording, on nav's logged wall clock
-    if opts.reference_checks {
-        let truth_drive = match &s.drive {
-            Some(d) => Some(Drive::plan(d)?),
-            None => None,
-        };
-        if let Err(e) = crate::truthrec::write(
-            &opts.out,
-            truth_drive.as_ref(),
-            &s.site,
-            s.duration_s,
-            &clock,
-        ) {
-            tracing::warn!("truth.mcap: {e:#}");
-        }
+    // the bench's own side: the truth (the vehicle's, the turntable's) and the faults injected,
+    // beside nav's recording, on nav's logged wall clock
+    let truth_drive = match &s.drive {
+        Some(d) => Some(Drive::plan(d)?),
+        None => None,
+    };
+    let faults = crate::faultlog::schedule(s, &opts.link_downs, opts.kill_nav_at_s);
+    if let Err(e) = crate::truthrec::write(
+        &opts.out,
+        truth_drive.as_ref(),
+        &s.site,
+        sim_reached.min(s.duration_s),
+        &clock,
+        &turntable_truth,
+        &faults,
+    ) {
+        tracing::warn!("truth.mcap: {e:#}");
     }
     phases.end("checks");
     info!(

@@ -5,7 +5,11 @@
 //! - `/truth/state` (`hil/schemas/truth-state.json`): the vehicle's position, velocity and
 //!   attitude from the scenario's truth models (the drive, or the parked site), 10 Hz;
 //! - `/truth/location` (`foxglove.LocationFix`): the same position for a viewer's map, beside
-//!   nav's `/nav/location` and the receiver's `/gps/location`.
+//!   nav's `/nav/location` and the receiver's `/gps/location`;
+//! - `/truth/turntable` (`hil/schemas/turntable-truth.json`): the turntable's true angle, rate
+//!   and state per axis from its model, 10 Hz, where the run has one;
+//! - `/bench/faults` (`foxglove.Log`): each fault the bench injects, when it starts and ends
+//!   ([`crate::faultlog`]), beside nav's own `/nav/log`.
 //!
 //! Times: the publish time is simulated time, the IMU sample counter's time base, as nav's
 //! publish times are. The log time is the wall time at which nav logged the same instant: read
@@ -80,6 +84,8 @@ pub fn write(
     site: &Static,
     duration_s: f64,
     clock: &[(f64, u64)],
+    turntable: &[emulators::bus::TtTruth],
+    faults: &[crate::faultlog::FaultEvent],
 ) -> Result<u64> {
     let path = out.join("truth.mcap");
     let file =
@@ -103,6 +109,61 @@ pub fn write(
     let state_ch = w.add_channel(state_schema, "/truth/state", "json", &meta)?;
     let fix_ch = w.add_channel(fix_schema, "/truth/location", "json", &meta)?;
     let mut n = 0u64;
+    if !turntable.is_empty() {
+        let schema = w.add_schema(
+            "rlg-hil/bench/turntable-truth",
+            "jsonschema",
+            include_bytes!("../schemas/turntable-truth.json"),
+        )?;
+        let ch = w.add_channel(schema, "/truth/turntable", "json", &meta)?;
+        for (k, tt) in turntable.iter().enumerate() {
+            w.write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: ch,
+                    sequence: k as u32,
+                    log_time: wall_of(clock, tt.t_s),
+                    publish_time: (tt.t_s * 1e9) as u64,
+                },
+                serde_json::to_string(tt)?.as_bytes(),
+            )?;
+            n += 1;
+        }
+    }
+    if !faults.is_empty() {
+        let schema = w.add_schema(
+            "foxglove.Log",
+            "jsonschema",
+            include_bytes!("../../nav/schemas/foxglove/Log.json"),
+        )?;
+        let ch = w.add_channel(schema, "/bench/faults", "json", &meta)?;
+        for (k, f) in faults.iter().enumerate() {
+            let ns = (f.t_s.max(0.0) * 1e9) as u64;
+            let detail = if f.detail.is_empty() {
+                String::new()
+            } else {
+                format!(": {}", f.detail)
+            };
+            // foxglove.Log: level 3 is WARNING
+            let m = serde_json::json!({
+                "timestamp": {"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000},
+                "level": 3,
+                "message": format!("{} {} {}{detail}", f.device, f.fault, f.phase),
+                "name": "bench",
+                "file": "",
+                "line": 0,
+            });
+            w.write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: ch,
+                    sequence: k as u32,
+                    log_time: wall_of(clock, f.t_s),
+                    publish_time: ns,
+                },
+                m.to_string().as_bytes(),
+            )?;
+            n += 1;
+        }
+    }
     let steps = (duration_s.max(0.0) * TRUTH_HZ).floor() as u64;
     for k in 0..=steps {
         let t = k as f64 / TRUTH_HZ;
@@ -165,7 +226,7 @@ mod tests {
             pitch_deg: 0.5,
             roll_deg: -0.2,
         };
-        let n = write(d.path(), None, &site, 2.0, &[]).unwrap();
+        let n = write(d.path(), None, &site, 2.0, &[], &[], &[]).unwrap();
         assert_eq!(n, 2 * 21);
         let buf = std::fs::read(d.path().join("truth.mcap")).unwrap();
         let msgs: Vec<_> = mcap::MessageStream::new(&buf)

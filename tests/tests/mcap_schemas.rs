@@ -118,6 +118,19 @@ fn a_run_recording_reads_in_python_mcap_and_every_json_message_follows_its_schem
         t["counts"]["/truth/state"].as_u64().unwrap_or(0) > 100,
         "{t}"
     );
+    // the turntable's truth through the drill, and the faults injected while driving (the
+    // receiver's port drop, multipath burst and outage: a start and an end each), under their
+    // schemas
+    assert_eq!(
+        t["schema_names"]["/truth/turntable"],
+        "rlg-hil/bench/turntable-truth"
+    );
+    assert!(
+        t["counts"]["/truth/turntable"].as_u64().unwrap_or(0) > 100,
+        "{t}"
+    );
+    assert_eq!(t["schema_names"]["/bench/faults"], "foxglove.Log");
+    assert_eq!(t["counts"]["/bench/faults"], 6, "{t}");
     let range = |v: &serde_json::Value, topic: &str| -> (f64, f64) {
         let a = &v["log_range"][topic];
         (a[0].as_f64().unwrap(), a[1].as_f64().unwrap())
