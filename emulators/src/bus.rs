@@ -269,7 +269,7 @@ pub struct BusOutcome {
     pub lockstep: LockstepStats,
 }
 
-/// Scheduler failures.
+/// Scheduler (and player) failures.
 #[derive(Debug, Error)]
 pub enum BusError {
     /// CAN trouble.
@@ -278,6 +278,59 @@ pub enum BusError {
     /// pty trouble.
     #[error("GPS receiver: {0}")]
     Gps(#[from] PtyError),
+    /// GPS bytes to put back but no port to write them to (the player).
+    #[error("the recording has GPS bytes but no GPS port was given")]
+    NoGpsPort,
+}
+
+/// The bench's socket on `iface`: receiving only the ids in `ids` (what nav sends that the
+/// writer follows), non-blocking, and its thread kept on one CPU ([`pin_to_this_cpu`]).
+pub(crate) fn bench_socket(iface: &str, ids: &[u16]) -> Result<CanSocket, CanTxError> {
+    let open_err = |source| CanTxError::Open {
+        iface: iface.into(),
+        source,
+    };
+    let sock = CanSocket::open(iface).map_err(open_err)?;
+    pin_to_this_cpu(iface);
+    let filters: Vec<_> = ids
+        .iter()
+        .map(|&id| socketcan::CanFilter::new(u32::from(id), 0x7FF))
+        .collect();
+    sock.set_filters(&filters).map_err(open_err)?;
+    sock.set_nonblocking(true).map_err(open_err)?;
+    Ok(sock)
+}
+
+/// Everything nav has sent so far on `sock`, without blocking, each frame to `f` (none: not a
+/// data frame). A downed interface has nothing to read.
+pub(crate) fn drain(
+    sock: &CanSocket,
+    iface: &str,
+    mut f: impl FnMut(Option<RawFrame>),
+) -> Result<(), CanTxError> {
+    use std::os::fd::AsRawFd;
+    let mut got = Vec::with_capacity(wire::BATCH);
+    loop {
+        got.clear();
+        let n = match wire::recv_batch(sock.as_raw_fd(), &mut got, wire::BATCH) {
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            // the interface went down: the socket reports it once; nothing to read meanwhile
+            Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => return Ok(()),
+            Err(source) => {
+                return Err(CanTxError::Read {
+                    iface: iface.into(),
+                    source,
+                });
+            }
+        };
+        for r in got.drain(..) {
+            f(r.ok());
+        }
+        if n < wire::BATCH {
+            return Ok(());
+        }
+    }
 }
 
 /// Count a write; frames lost to a downed interface never reach nav, so the lockstep takes
@@ -334,19 +387,8 @@ pub fn run(
     stop: &AtomicBool,
     progress: &Progress,
 ) -> Result<BusOutcome, BusError> {
-    let open_err = |source| CanTxError::Open {
-        iface: iface.into(),
-        source,
-    };
-    let sock = CanSocket::open(iface).map_err(open_err)?;
-    pin_to_this_cpu(iface);
     // what nav sends us: turntable commands and its solution header (NAV_TIME)
-    sock.set_filters(&[
-        socketcan::CanFilter::new(0x100, 0x7FF),
-        socketcan::CanFilter::new(0x200, 0x7FF),
-    ])
-    .map_err(open_err)?;
-    sock.set_nonblocking(true).map_err(open_err)?;
+    let sock = bench_socket(iface, &[wire::tt_cmd::SPEC.id, wire::nav_time::SPEC.id])?;
     let mut ls = LockstepStats {
         enabled: lockstep.is_some(),
         ..Default::default()
@@ -510,29 +552,9 @@ fn read_nav(
     bad: &mut u64,
     latency: &mut Latency,
 ) -> Result<(), CanTxError> {
-    use std::os::fd::AsRawFd;
-    let mut got = Vec::with_capacity(wire::BATCH);
-    loop {
-        got.clear();
-        let n = match wire::recv_batch(sock.as_raw_fd(), &mut got, wire::BATCH) {
-            Ok(n) => n,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-            // the interface went down: the socket reports it once; nothing to read meanwhile
-            Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => return Ok(()),
-            Err(source) => {
-                return Err(CanTxError::Read {
-                    iface: iface.into(),
-                    source,
-                });
-            }
-        };
-        for f in got.drain(..) {
-            on_nav_frame(f.ok(), dev, confirmed, lockstep, ls, bad, latency);
-        }
-        if n < wire::BATCH {
-            return Ok(());
-        }
-    }
+    drain(sock, iface, |f| {
+        on_nav_frame(f, dev, confirmed, lockstep, ls, bad, latency)
+    })
 }
 
 /// One frame from nav (none: not a data frame).

@@ -17,16 +17,15 @@
 //! for `silence` of wall time there (longer than nav's watchdog), so that it fires again at the
 //! same place in the stream.
 
-use crate::bus::{Lockstep, LockstepStats};
-use crate::can::{CanTxError, Progress, write_all};
+use crate::bus::{BusError, Lockstep, LockstepStats};
+use crate::can::{Progress, write_all};
 use crate::clock::SimClock;
 use crate::gps::{GpsPty, PtyError};
 use serde::{Deserialize, Serialize};
-use socketcan::{CanSocket, Socket, SocketOptions};
+use socketcan::CanSocket;
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-use thiserror::Error;
 use wire::{Message, RawFrame};
 
 /// One recorded thing to put back.
@@ -80,20 +79,6 @@ pub struct PlayStats {
     pub lockstep: LockstepStats,
 }
 
-/// Player failures.
-#[derive(Debug, Error)]
-pub enum PlayError {
-    /// CAN trouble.
-    #[error(transparent)]
-    Can(#[from] CanTxError),
-    /// pty trouble.
-    #[error("GPS port: {0}")]
-    Gps(#[from] PtyError),
-    /// GPS bytes in the sequence but no port to write them to.
-    #[error("the recording has GPS bytes but no GPS port was given")]
-    NoGpsPort,
-}
-
 /// The frames nav confirmed, as the player follows them.
 struct Follow {
     /// (sample index, 16-bit counter) of the IMU_GYRO frames sent, newest last.
@@ -124,21 +109,10 @@ pub fn play(
     opts: &PlayOptions,
     stop: &AtomicBool,
     progress: &Progress,
-) -> Result<PlayStats, PlayError> {
-    let open_err = |source| CanTxError::Open {
-        iface: iface.into(),
-        source,
-    };
-    let sock = CanSocket::open(iface).map_err(open_err)?;
-    crate::bus::pin_to_this_cpu(iface);
+) -> Result<PlayStats, BusError> {
     // what nav says: its solution header (NAV_TIME) only; its turntable commands go unanswered
     // (the recording holds the turntable's answers)
-    sock.set_filters(&[socketcan::CanFilter::new(
-        u32::from(wire::nav_time::SPEC.id),
-        0x7FF,
-    )])
-    .map_err(open_err)?;
-    sock.set_nonblocking(true).map_err(open_err)?;
+    let sock = crate::bus::bench_socket(iface, &[wire::nav_time::SPEC.id])?;
     let mut st = PlayStats {
         lockstep: LockstepStats {
             enabled: opts.lockstep.is_some(),
@@ -154,8 +128,7 @@ pub fn play(
     };
     let mut lockstep = opts.lockstep;
     let mut outbox: Vec<RawFrame> = Vec::with_capacity(wire::BATCH);
-    let mut got = Vec::with_capacity(wire::BATCH);
-    let flush = |outbox: &mut Vec<RawFrame>, st: &mut PlayStats| -> Result<(), PlayError> {
+    let flush = |outbox: &mut Vec<RawFrame>, st: &mut PlayStats| -> Result<(), BusError> {
         let w = write_all(&sock, iface, outbox)?;
         st.enobufs_retries += w.retries;
         st.lost_iface_down += w.lost_down;
@@ -189,7 +162,7 @@ pub fn play(
                                 );
                             }
                         } else {
-                            read_nav(&sock, iface, &mut got, &mut follow, &mut st.lockstep)?;
+                            read_nav(&sock, iface, &mut follow, &mut st.lockstep)?;
                         }
                         clock.sleep_until(t);
                         let lag = Instant::now().saturating_duration_since(clock.wall_at(t));
@@ -210,7 +183,7 @@ pub fn play(
             }
             Recorded::Gps(bytes) => {
                 flush(&mut outbox, &mut st)?;
-                let p = pty.as_deref_mut().ok_or(PlayError::NoGpsPort)?;
+                let p = pty.as_deref_mut().ok_or(BusError::NoGpsPort)?;
                 match p.write(&bytes) {
                     Ok(()) => {
                         st.gps_bytes += bytes.len() as u64;
@@ -239,7 +212,7 @@ pub fn play(
         }
     }
     flush(&mut outbox, &mut st)?;
-    read_nav(&sock, iface, &mut got, &mut follow, &mut st.lockstep)?;
+    read_nav(&sock, iface, &mut follow, &mut st.lockstep)?;
     progress.set(k as f64 * period);
     Ok(st)
 }
@@ -254,11 +227,10 @@ fn wait_for_nav(
     l: &Lockstep,
     stop: &AtomicBool,
     st: &mut PlayStats,
-) -> Result<bool, PlayError> {
-    let mut got = Vec::with_capacity(wire::BATCH);
+) -> Result<bool, BusError> {
     let mut waited: Option<Instant> = None;
     loop {
-        read_nav(sock, iface, &mut got, follow, &mut st.lockstep)?;
+        read_nav(sock, iface, follow, &mut st.lockstep)?;
         // before nav has named any sample, the first window goes out unconfirmed
         if follow.confirmed.map_or(l.window, |c| c + l.window) >= k || stop.load(Ordering::Relaxed)
         {
@@ -284,36 +256,15 @@ fn wait_for_nav(
 fn read_nav(
     sock: &CanSocket,
     iface: &str,
-    got: &mut Vec<Result<RawFrame, wire::FrameConvError>>,
     follow: &mut Follow,
     ls: &mut LockstepStats,
-) -> Result<(), PlayError> {
-    use std::os::fd::AsRawFd;
-    loop {
-        got.clear();
-        let n = match wire::recv_batch(sock.as_raw_fd(), got, wire::BATCH) {
-            Ok(n) => n,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-            Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => return Ok(()),
-            Err(source) => {
-                return Err(CanTxError::Read {
-                    iface: iface.into(),
-                    source,
-                }
-                .into());
-            }
-        };
-        for f in got.drain(..) {
-            if let Ok(f) = f
-                && let Ok(Message::NavTime(nt)) = Message::decode(&f)
-            {
-                follow.on_nav_time(nt.sample_count, ls);
-            }
+) -> Result<(), BusError> {
+    crate::bus::drain(sock, iface, |f| {
+        if let Some(Ok(Message::NavTime(nt))) = f.map(|f| Message::decode(&f)) {
+            follow.on_nav_time(nt.sample_count, ls);
         }
-        if n < wire::BATCH {
-            return Ok(());
-        }
-    }
+    })?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -109,6 +109,18 @@ pub fn write(
     let state_ch = w.add_channel(state_schema, "/truth/state", "json", &meta)?;
     let fix_ch = w.add_channel(fix_schema, "/truth/location", "json", &meta)?;
     let mut n = 0u64;
+    // one message at simulated time `t`, logged at the wall time nav logged it
+    let put = |w: &mut mcap::Writer<_>, ch: u16, k: usize, t: f64, data: &[u8]| {
+        w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: ch,
+                sequence: k as u32,
+                log_time: wall_of(clock, t),
+                publish_time: (t.max(0.0) * 1e9) as u64,
+            },
+            data,
+        )
+    };
     if !turntable.is_empty() {
         let schema = w.add_schema(
             "rlg-hil/bench/turntable-truth",
@@ -117,15 +129,8 @@ pub fn write(
         )?;
         let ch = w.add_channel(schema, "/truth/turntable", "json", &meta)?;
         for (k, tt) in turntable.iter().enumerate() {
-            w.write_to_known_channel(
-                &mcap::records::MessageHeader {
-                    channel_id: ch,
-                    sequence: k as u32,
-                    log_time: wall_of(clock, tt.t_s),
-                    publish_time: (tt.t_s * 1e9) as u64,
-                },
-                serde_json::to_string(tt)?.as_bytes(),
-            )?;
+            let json = serde_json::to_string(tt)?;
+            put(&mut w, ch, k, tt.t_s, json.as_bytes())?;
             n += 1;
         }
     }
@@ -152,15 +157,7 @@ pub fn write(
                 "file": "",
                 "line": 0,
             });
-            w.write_to_known_channel(
-                &mcap::records::MessageHeader {
-                    channel_id: ch,
-                    sequence: k as u32,
-                    log_time: wall_of(clock, f.t_s),
-                    publish_time: ns,
-                },
-                m.to_string().as_bytes(),
-            )?;
+            put(&mut w, ch, k, f.t_s, m.to_string().as_bytes())?;
             n += 1;
         }
     }
@@ -169,7 +166,6 @@ pub fn write(
         let t = k as f64 / TRUTH_HZ;
         let (lat, lon, h, v, hpr) = state(drive, site, t);
         let publish = (t * 1e9) as u64;
-        let log = wall_of(clock, t);
         let s = serde_json::json!({
             "t_s": t, "lat_deg": lat, "lon_deg": lon, "h_m": h,
             "vel_enu_mps": v, "hpr_deg": hpr,
@@ -184,15 +180,7 @@ pub fn write(
             "velocity": {"x": v[0], "y": v[1], "z": v[2]},
         });
         for (ch, m) in [(state_ch, s), (fix_ch, f)] {
-            w.write_to_known_channel(
-                &mcap::records::MessageHeader {
-                    channel_id: ch,
-                    sequence: k as u32,
-                    log_time: log,
-                    publish_time: publish,
-                },
-                m.to_string().as_bytes(),
-            )?;
+            put(&mut w, ch, k as usize, t, m.to_string().as_bytes())?;
             n += 1;
         }
     }

@@ -89,6 +89,13 @@ fn open_can(c: &nav::config::CanConfig) -> Result<socketcan::tokio::CanSocket> {
     let iface = c.interface.as_str();
     let sock = socketcan::tokio::CanSocket::open(iface)
         .map_err(|e| anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e)))?;
+    // the kernel's receive time of every frame, for the recording (candump's time stamps)
+    if let Err(e) = socketcan::SocketOptions::set_recv_timestamp(&sock, true) {
+        warn!(
+            interface = iface,
+            "no kernel receive times (SO_TIMESTAMPNS: {e}): frames are recorded at read time"
+        );
+    }
     match wire::set_rcvbuf(sock.as_raw_fd(), c.rcvbuf_bytes) {
         Ok(got) if got < c.rcvbuf_bytes => warn!(
             interface = iface,
@@ -170,11 +177,11 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
             },
             r = async {
                 match &shell.sock {
-                    Some(s) => s.read_frame().await,
+                    Some(s) => s.read_frame_with_timestamps().await,
                     None => std::future::pending().await,
                 }
             } => {
-                let f = match r {
+                let (f, stamps) = match r {
                     Ok(f) => f,
                     Err(e) => {
                         read_errors += 1;
@@ -192,9 +199,10 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                     }
                 };
                 // every frame already waiting comes in the same system call (recvmmsg)
-                batch.push(wire::from_can_frame(&f));
+                batch.push((wire::from_can_frame(&f), stamps.socket.and_then(epoch_ns)));
                 if let Some(s) = &shell.sock
-                    && let Err(e) = wire::recv_batch(s.as_raw_fd(), &mut batch, wire::BATCH - 1)
+                    && let Err(e) =
+                        wire::recv_batch_stamped(s.as_raw_fd(), &mut batch, wire::BATCH - 1)
                 {
                     // the frame already read still goes through; the error is counted
                     read_errors += 1;
@@ -224,7 +232,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     if let Some(fd) = shell.sock.as_ref().map(|s| s.as_raw_fd()) {
         loop {
             batch.clear();
-            match wire::recv_batch(fd, &mut batch, wire::BATCH) {
+            match wire::recv_batch_stamped(fd, &mut batch, wire::BATCH) {
                 Ok(0) => break,
                 Ok(_) => {}
                 Err(e) => {
@@ -286,20 +294,32 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     Ok(summary)
 }
 
+/// A received frame (or why it is not a data frame) and its kernel receive time, ns.
+type Received = (Result<wire::RawFrame, wire::FrameConvError>, Option<u64>);
+
+/// A time as ns since the epoch.
+fn epoch_ns(t: std::time::SystemTime) -> Option<u64> {
+    t.duration_since(std::time::UNIX_EPOCH)
+        .ok()
+        .map(|d| d.as_nanos() as u64)
+}
+
 /// Received frames (or why they are not data frames) through the pipeline, each recorded as it
 /// came, and what the pipeline asks done.
 async fn take_frames(
-    batch: &mut Vec<Result<wire::RawFrame, wire::FrameConvError>>,
+    batch: &mut Vec<Received>,
     pipeline: &mut Pipeline,
     shell: &mut Shell<'_>,
     out: &mut Vec<Output>,
 ) -> Result<()> {
-    // one receive time for the batch: its frames came out of the socket in one system call
-    let t_ns = wall_ns();
-    for conv in batch.drain(..) {
+    // a frame's kernel receive time where the socket gives it (SO_TIMESTAMPNS), else the time
+    // the batch came out of the socket
+    let read_ns = wall_ns();
+    for (conv, stamp) in batch.drain(..) {
         match conv {
             Ok(raw) => {
                 if let Some(r) = shell.recorder {
+                    let t_ns = stamp.unwrap_or(read_ns);
                     r.send(Record::Frame { t_ns, frame: raw });
                 }
                 pipeline.on_frame(&raw, out);

@@ -219,6 +219,11 @@ impl Pipeline {
     /// One data frame from the bus.
     pub fn on_frame(&mut self, raw: &RawFrame, out: &mut Vec<Output>) {
         self.frames.total += 1;
+        // the IMU is back with its first gyro frame, before that frame is processed: whatever
+        // the shell read in one go with it, every epoch it makes is without the timeout bit
+        if self.imu_timeout && raw.id == wire::imu_gyro::SPEC.id {
+            self.set_imu_timeout(false, 0, out);
+        }
         // 1. decode
         let m = match Message::decode(raw) {
             Ok(m) => m,
@@ -356,7 +361,9 @@ impl Pipeline {
     /// The shell's liveness watchdog (wall time): IMU frames stopped (`true`) or came back. It
     /// sets the solution's `imu_timeout` health bit; both changes are recorded as events
     /// (`imu_timeout`, `imu_back`) so that a replay of the recording applies them where they
-    /// happened.
+    /// happened. The pipeline itself clears it at the first IMU_GYRO frame after a timeout
+    /// ([`Pipeline::on_frame`]), so where the shell's reads happen to split the stream does not
+    /// change the solution frames.
     pub fn set_imu_timeout(&mut self, active: bool, after_ms: u64, out: &mut Vec<Output>) {
         if active == self.imu_timeout {
             return;
@@ -893,16 +900,21 @@ mod tests {
         }
         p.set_imu_timeout(true, 100, &mut out);
         p.set_imu_timeout(true, 100, &mut out);
+        // the timeout sends one more epoch, with the bit
+        let t = nav_times(&out);
+        assert!(t.last().is_some_and(|t| t.health.imu_timeout), "{t:?}");
         out.clear();
+        // the first gyro frame brings the IMU back before it is processed: the epochs it
+        // makes have no timeout bit, however the shell's reads split the frames; the shell's
+        // own clearing afterwards changes nothing
         for k in 2..=41 {
             for f in sample(k) {
                 p.on_frame(&f, &mut out);
             }
         }
-        let t = nav_times(&out);
-        assert!(t.len() == 1 && t[0].health.imu_timeout, "{t:?}");
-        out.clear();
         p.set_imu_timeout(false, 100, &mut out);
+        let t = nav_times(&out);
+        assert!(t.len() == 1 && !t[0].health.imu_timeout, "{t:?}");
         let events: Vec<&str> = out
             .iter()
             .filter_map(|o| match o {

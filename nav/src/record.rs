@@ -2,7 +2,8 @@
 //!
 //! Channels:
 //! - `/can/raw` (encoding `rlg-hil.can-frame.v1`): every received frame as
-//!   `[id: u16 LE][len: u8][data: 8 bytes]`; log time = receive wall time.
+//!   `[id: u16 LE][len: u8][data: 8 bytes]`; log time = the kernel's receive time of the frame
+//!   (`SO_TIMESTAMPNS`, what `candump` stamps), or nav's read time where the socket gives none.
 //! - `/can/tx` (same encoding): every frame nav sent (turntable commands, the solution).
 //! - `/gps/raw` (encoding `rlg-hil.gps-bytes.v1`): the bytes nav read from its GPS source, as
 //!   read (NMEA-0183 text, any garbage included; gpsd's JSON replies taken out), one message per

@@ -127,6 +127,27 @@ fn static_30s_at_x10_every_frame_arrives_and_the_recording_reads_back() {
         "{counts:?}"
     );
     assert_eq!(counts.get("/nav/summary").copied(), Some(1));
+    // each received frame carries the kernel's receive time (SO_TIMESTAMPNS), not the time its
+    // batch was read: the frames of one read have times of their own, in order
+    let buf = std::fs::read(dir.path().join("nav.mcap")).unwrap();
+    let times: Vec<u64> = mcap::MessageStream::new(&buf)
+        .unwrap()
+        .map(|m| m.unwrap())
+        .filter(|m| m.channel.topic == "/can/raw")
+        .map(|m| m.log_time)
+        .collect();
+    let distinct = times.windows(2).filter(|w| w[1] != w[0]).count() + 1;
+    let backwards = times.windows(2).filter(|w| w[1] < w[0]).count();
+    eprintln!(
+        "/can/raw: {} frames, {distinct} distinct receive times, {backwards} out of order",
+        times.len()
+    );
+    assert!(
+        distinct as f64 >= 0.99 * times.len() as f64,
+        "{distinct} of {}",
+        times.len()
+    );
+    assert_eq!(backwards, 0);
     // the bus as a candump -l log, replayed through nav's pipeline: what nav sent, bit for bit
     let log = dir.path().join("bus.log");
     let o = Command::new(bin("hil"))
@@ -385,32 +406,45 @@ fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
     assert_eq!(&re["summary"]["north_finding"]["result"], a);
 }
 
-/// A GPS-aided drive's recording (40 s, its receiver's device gone for 2 s and back) put back
+/// A GPS-aided drive's recording (20 s, its receiver's device gone for 2 s and back) put back
 /// onto vcan and a pty with `hil replay --bus` at four times the recorded pace: the nav binary
 /// sends exactly the frames it sent, and its solutions at the same IMU times are the same to the
 /// bit; the receiver's bytes went to the pty as nav read them.
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn a_recorded_drive_replays_onto_the_bus_bit_for_bit() {
-    let (r, dir) = run_variant(
-        "drive-gps.toml",
+    let dir = tempfile::tempdir().unwrap();
+    let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
+    let text = std::fs::read_to_string(base)
+        .unwrap()
+        .replace("duration_s = 130.0", "duration_s = 20.0")
+        .replace(
+            "lever_arm_m = [0.0, 0.5, 1.2]",
+            "lever_arm_m = [0.0, 0.5, 1.2]\nport_drops = [[10.0, 12.0]]",
+        );
+    assert!(text.contains("port_drops") && text.contains("duration_s = 20.0"));
+    let scen = dir.path().join("drive.toml");
+    std::fs::write(&scen, text).unwrap();
+    // the recording is what matters here: the run's own checks are the other tests'
+    let (r, code) = hil_run(
         &[
-            ("duration_s = 130.0", "duration_s = 40.0"),
-            (
-                "lever_arm_m = [0.0, 0.5, 1.2]",
-                "lever_arm_m = [0.0, 0.5, 1.2]\nport_drops = [[20.0, 22.0]]",
-            ),
+            "--scenario",
+            scen.to_str().unwrap(),
+            "--iface",
+            "vcan-e2e7",
+            "--no-reference",
         ],
-        "vcan-e2e7",
+        &dir.path().join("run"),
     );
+    assert_eq!(code, 0, "{}", r["checks"]);
     assert_eq!(r["gps"]["port_drops"], 1, "{}", r["gps"]);
     let run = dir.path().join("run");
     let re = replay_on_bus(&run, "40", "vcan-e2e7", &dir.path().join("replay"));
     let gps_bytes = re["play"]["gps_bytes"].as_u64().unwrap();
-    assert!(gps_bytes > 5000, "{}", re["play"]);
+    assert!(gps_bytes > 2000, "{}", re["play"]);
     assert_eq!(re["play"]["gps_unread"], 0);
     let d = &re["solutions"];
-    assert!(d["compared"].as_u64().unwrap() >= 30, "{d}");
+    assert!(d["compared"].as_u64().unwrap() >= 10, "{d}");
     assert_eq!(
         (
             d["max_horizontal_m"].as_f64(),

@@ -70,10 +70,22 @@ const CAN_ERR_FLAG: u32 = 0x2000_0000;
 /// Most frames moved by one system call.
 pub const BATCH: usize = 64;
 
+/// Control-message room per received frame: one `SCM_TIMESTAMPNS` (a timespec) with its
+/// header, aligned (`CMSG_SPACE(16)` is 32 on 64-bit Linux), with margin.
+const CONTROL_BYTES: usize = 64;
+
+/// A control buffer, aligned for `cmsghdr`.
+#[repr(C, align(8))]
+#[derive(Clone, Copy)]
+struct Control([u8; CONTROL_BYTES]);
+
+/// Run `call` over one message header per frame (and per control buffer, when given); returns
+/// how many messages it moved, and each one's control length.
 fn mmsg_call(
     frames: &mut [KernelFrame],
+    mut control: Option<&mut [Control]>,
     call: impl FnOnce(*mut libc::mmsghdr, u32) -> libc::c_int,
-) -> std::io::Result<usize> {
+) -> std::io::Result<(usize, Vec<usize>)> {
     let mut iov: Vec<libc::iovec> = frames
         .iter_mut()
         .map(|f| libc::iovec {
@@ -83,11 +95,16 @@ fn mmsg_call(
         .collect();
     let mut hdrs: Vec<libc::mmsghdr> = iov
         .iter_mut()
-        .map(|v| {
+        .enumerate()
+        .map(|(i, v)| {
             // SAFETY: an all-zero msghdr is valid (no name, no control data).
             let mut h: libc::mmsghdr = unsafe { std::mem::zeroed() };
             h.msg_hdr.msg_iov = v;
             h.msg_hdr.msg_iovlen = 1;
+            if let Some(c) = control.as_deref_mut().and_then(|c| c.get_mut(i)) {
+                h.msg_hdr.msg_control = c.0.as_mut_ptr().cast();
+                h.msg_hdr.msg_controllen = CONTROL_BYTES as _;
+            }
             h
         })
         .collect();
@@ -95,8 +112,35 @@ fn mmsg_call(
     if n < 0 {
         Err(std::io::Error::last_os_error())
     } else {
-        Ok(n as usize)
+        // msg_controllen is a size_t on glibc, a socklen_t on musl
+        #[allow(clippy::unnecessary_cast)]
+        let lens = hdrs
+            .iter()
+            .map(|h| h.msg_hdr.msg_controllen as usize)
+            .collect();
+        Ok((n as usize, lens))
     }
+}
+
+/// The `SCM_TIMESTAMPNS` time in a received message's control data, ns since the epoch.
+fn timestamp_ns(c: &Control, len: usize) -> Option<u64> {
+    // SAFETY: a msghdr over the buffer as the kernel filled it (`len` bytes of control data);
+    // the CMSG_* functions only walk within msg_control..msg_control + msg_controllen, and the
+    // timespec is read unaligned.
+    unsafe {
+        let mut h: libc::msghdr = std::mem::zeroed();
+        h.msg_control = c.0.as_ptr() as *mut libc::c_void;
+        h.msg_controllen = len.min(CONTROL_BYTES) as _;
+        let mut m = libc::CMSG_FIRSTHDR(&h);
+        while !m.is_null() {
+            if (*m).cmsg_level == libc::SOL_SOCKET && (*m).cmsg_type == libc::SCM_TIMESTAMPNS {
+                let ts: libc::timespec = std::ptr::read_unaligned(libc::CMSG_DATA(m).cast());
+                return Some((ts.tv_sec as u64) * 1_000_000_000 + ts.tv_nsec as u64);
+            }
+            m = libc::CMSG_NXTHDR(&h, m);
+        }
+    }
+    None
 }
 
 /// Send `frames` on the CAN raw socket `fd`, up to [`BATCH`] per system call (`sendmmsg`).
@@ -114,7 +158,7 @@ pub fn send_batch(fd: std::os::fd::RawFd, frames: &[RawFrame]) -> std::io::Resul
         })
         .collect();
     // SAFETY: every header points at one live iovec over one live KernelFrame.
-    mmsg_call(&mut k, |h, n| unsafe { libc::sendmmsg(fd, h, n, 0) })
+    mmsg_call(&mut k, None, |h, n| unsafe { libc::sendmmsg(fd, h, n, 0) }).map(|r| r.0)
 }
 
 /// Receive up to `max` (at most [`BATCH`]) waiting frames from the CAN raw socket `fd` without
@@ -127,14 +171,48 @@ pub fn recv_batch(
 ) -> std::io::Result<usize> {
     let mut k = vec![KernelFrame::default(); max.clamp(1, BATCH)];
     // SAFETY: every header points at one live iovec over one live KernelFrame.
-    let n = match mmsg_call(&mut k, |h, n| unsafe {
+    let n = match mmsg_call(&mut k, None, |h, n| unsafe {
         libc::recvmmsg(fd, h, n, libc::MSG_DONTWAIT, std::ptr::null_mut())
     }) {
-        Ok(n) => n,
+        Ok((n, _)) => n,
         Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => 0,
         Err(e) => return Err(e),
     };
-    out.extend(k[..n].iter().map(|f| {
+    out.extend(k[..n].iter().map(convert));
+    Ok(n)
+}
+
+/// As [`recv_batch`], with each frame's kernel receive time (ns since the epoch) where the
+/// socket has `SO_TIMESTAMPNS` on (none otherwise): `candump`'s time stamps.
+pub fn recv_batch_stamped(
+    fd: std::os::fd::RawFd,
+    out: &mut Vec<(Result<RawFrame, FrameConvError>, Option<u64>)>,
+    max: usize,
+) -> std::io::Result<usize> {
+    let m = max.clamp(1, BATCH);
+    let mut k = vec![KernelFrame::default(); m];
+    let mut control = vec![Control([0; CONTROL_BYTES]); m];
+    // SAFETY: every header points at one live iovec over one live KernelFrame and one live
+    // control buffer of CONTROL_BYTES.
+    let (n, lens) = match mmsg_call(&mut k, Some(&mut control), |h, n| unsafe {
+        libc::recvmmsg(fd, h, n, libc::MSG_DONTWAIT, std::ptr::null_mut())
+    }) {
+        Ok(r) => r,
+        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => (0, Vec::new()),
+        Err(e) => return Err(e),
+    };
+    out.extend(
+        k[..n]
+            .iter()
+            .zip(control.iter().zip(lens))
+            .map(|(f, (c, len))| (convert(f), timestamp_ns(c, len))),
+    );
+    Ok(n)
+}
+
+/// A frame as the kernel gave it: a data frame, or why it is not one.
+fn convert(f: &KernelFrame) -> Result<RawFrame, FrameConvError> {
+    {
         let id = f.can_id;
         if id & CAN_ERR_FLAG != 0 {
             Err(FrameConvError::Error(id & 0x1FFF_FFFF))
@@ -149,8 +227,7 @@ pub fn recv_batch(
                 data: f.data,
             })
         }
-    }));
-    Ok(n)
+    }
 }
 
 /// Sets the receive buffer of socket `fd` to `bytes`: past the system's cap where allowed

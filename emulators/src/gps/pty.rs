@@ -242,8 +242,10 @@ pub struct GpsTxStats {
 /// How long bytes written to a pty may take to reach its reader's side.
 pub const ARRIVAL_S: Duration = Duration::from_millis(15);
 
-/// How long the stream waits for nav's reader to take a receiver's output.
-pub const TAKE_WAIT: Duration = Duration::from_millis(500);
+/// How long the stream waits for nav's reader to take a receiver's output: a reader that is
+/// there takes it within milliseconds; one that is not (a re-plugged port nav has not opened
+/// yet) must not stop the IMU stream long enough for nav's watchdog (100 ms at least) to fire.
+pub const TAKE_WAIT: Duration = Duration::from_millis(50);
 
 /// A [`GpsReceiver`] on its pty, as the bus scheduler steps it.
 pub struct GpsDevice {
