@@ -1,0 +1,44 @@
+//! The north-finding drill in process (no bus: the path of the Monte Carlo runs and the
+//! experiments) gives exactly the result the same drill gave through vcan. The vcan run is the
+//! end-to-end test `north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace`,
+//! which keeps its report; this runs on the host after it (`./run-tests`), where the in-process
+//! drill takes a second. The guest computes what the host computes (`-cpu max`, docs/pace.md),
+//! so the two agree to the last bit.
+
+use e2e::{bin, reports_dir};
+use serde_json::Value;
+use std::process::Command;
+
+#[test]
+#[ignore = "needs the e2e tests' reports: run ./run-tests"]
+fn the_in_process_drill_gives_the_result_of_the_drill_through_vcan() {
+    let kept = reports_dir().join("drill-x3/report.json");
+    let bench: Value = serde_json::from_slice(
+        &std::fs::read(&kept).unwrap_or_else(|e| panic!("{}: {e}", kept.display())),
+    )
+    .expect("the kept report is JSON");
+    let dir = tempfile::tempdir().unwrap();
+    // the drill of tests/tests/vcan.rs (`drill_in`), in process
+    let o = Command::new(bin("hil"))
+        .args(["drill", "north-finding", "--dwell", "6"])
+        .args(["--heading", "287.5", "--seed", "7", "--tolerance", "0.5"])
+        .args(["--in-process", "--json", "--out"])
+        .arg(dir.path())
+        .output()
+        .expect("hil runs");
+    let ip: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!(
+            "hil drill --in-process printed no JSON ({e}): {}",
+            String::from_utf8_lossy(&o.stderr)
+        )
+    });
+    let a = &bench["nav"]["north_finding"]["result"];
+    assert!(
+        a["positions"].as_array().is_some_and(|p| p.len() == 4),
+        "{a}"
+    );
+    assert_eq!(
+        &ip["drill"]["result"], a,
+        "the in-process drill must give the bench's result"
+    );
+}
