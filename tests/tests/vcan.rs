@@ -709,7 +709,7 @@ fn nav_sends(id: u16) -> bool {
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn can_utils_watch_the_bus_and_play_our_logs() {
-    use std::io::{BufRead, Read};
+    use std::io::BufRead;
     use std::process::Stdio;
     let (iface, other) = ("vcan-e2e5", "vcan-e2e6");
     vcan_setup::ensure_vcan(iface).unwrap();
@@ -721,13 +721,38 @@ fn can_utils_watch_the_bus_and_play_our_logs() {
         .stdout(Stdio::piped())
         .spawn()
         .expect("candump (can-utils) runs: ./run-tests installs it");
-    let mut captured = String::new();
-    let mut out = dump.stdout.take().unwrap();
+    let out = dump.stdout.take().unwrap();
+    // candump is listening once it shows a marker frame sent after it started (a fixed wait
+    // lost the run's first 0.16 s on a slow host); the marker stays out of the capture
+    const MARKER: &str = "7EE#A5";
+    let (listening_tx, listening) = std::sync::mpsc::channel();
     let reader = std::thread::spawn(move || {
-        let _ = out.read_to_string(&mut captured);
+        let mut captured = String::new();
+        for l in std::io::BufReader::new(out).lines().map_while(Result::ok) {
+            if l.ends_with(MARKER) {
+                let _ = listening_tx.send(());
+            } else {
+                captured.push_str(&l);
+                captured.push('\n');
+            }
+        }
         captured
     });
-    std::thread::sleep(std::time::Duration::from_millis(300));
+    let t0 = std::time::Instant::now();
+    loop {
+        let sent = Command::new("cansend").args([iface, MARKER]).status();
+        assert!(sent.is_ok_and(|s| s.success()), "cansend (can-utils) runs");
+        if listening
+            .recv_timeout(std::time::Duration::from_millis(200))
+            .is_ok()
+        {
+            break;
+        }
+        assert!(
+            t0.elapsed() < std::time::Duration::from_secs(20),
+            "candump shows nothing"
+        );
+    }
     let (r, code) = hil_run(&["--duration", "4", "--speed", "5", "--iface", iface], &run);
     assert_eq!(code, 0, "the run passes");
     // SAFETY: kill(2) on our own child.
