@@ -56,16 +56,18 @@ pub struct Recording {
 }
 
 impl Recording {
-    /// Read nav's recording `mcap` (all its parts) of an IMU at `imu_rate_hz`; the GPS bytes
-    /// are placed after their PPS edges ([`place_after_pps`]).
-    pub fn read(mcap: &Path, imu_rate_hz: f64) -> Result<Self> {
-        let mut r = Self::read_as_recorded(mcap)?;
-        r.items = place_after_pps(std::mem::take(&mut r.items), imu_rate_hz);
+    /// Read nav's recording `mcap` (all its parts), what nav received in the order it arrived
+    /// ([`in_arrival_order`]).
+    pub fn read(mcap: &Path) -> Result<Self> {
+        let (mut r, times) = Self::read_timed(mcap)?;
+        r.items = in_arrival_order(std::mem::take(&mut r.items), &times);
         Ok(r)
     }
 
-    /// Read nav's recording `mcap` (all its parts), everything where nav's loop took it.
-    pub fn read_as_recorded(mcap: &Path) -> Result<Self> {
+    /// Read nav's recording `mcap` (all its parts), everything where nav's loop took it, with
+    /// each item's log time (none for a silence).
+    fn read_timed(mcap: &Path) -> Result<(Self, Vec<Option<u64>>)> {
+        let mut times = Vec::new();
         let mut r = Recording {
             items: Vec::new(),
             sent: Vec::new(),
@@ -82,7 +84,10 @@ impl Recording {
             };
             match m.channel.topic.as_str() {
                 "/can/raw" => match frame() {
-                    Some(f) => r.items.push(Recorded::Frame(f)),
+                    Some(f) => {
+                        r.items.push(Recorded::Frame(f));
+                        times.push(Some(m.log_time));
+                    }
                     None => r.bad_records += 1,
                 },
                 "/can/tx" => match frame() {
@@ -90,11 +95,15 @@ impl Recording {
                     None => r.bad_records += 1,
                 },
                 "/gps/raw" if m.channel.message_encoding == GPS_BYTES_ENCODING => {
-                    r.items.push(Recorded::Gps(m.data.to_vec()))
+                    r.items.push(Recorded::Gps(m.data.to_vec()));
+                    times.push(Some(m.log_time));
                 }
                 "/gps/fix" => r.fixes += 1,
                 "/nav/event" => match serde_json::from_slice::<serde_json::Value>(&m.data) {
-                    Ok(e) if e["kind"] == "imu_timeout" => r.items.push(Recorded::Silence),
+                    Ok(e) if e["kind"] == "imu_timeout" => {
+                        r.items.push(Recorded::Silence);
+                        times.push(None);
+                    }
                     Ok(_) => {}
                     Err(_) => r.bad_records += 1,
                 },
@@ -105,7 +114,7 @@ impl Recording {
                 _ => {}
             }
         })?;
-        Ok(r)
+        Ok((r, times))
     }
 
     /// GPS bytes in the recording.
@@ -114,68 +123,34 @@ impl Recording {
     }
 }
 
-/// Where the player writes a receiver's bytes after their PPS edge: the bench receiver's
-/// latency, s.
-pub const GPS_AFTER_PPS_S: f64 = 0.05;
-
-/// The GPS bytes of `items` moved to [`GPS_AFTER_PPS_S`] after the PPS edge they follow, where
-/// nav took them later than that: a recording has them where nav's loop took them, which is
-/// later than the receiver sent them by however far nav was behind on the bus; replayed there,
-/// a replay of a replay would drift later each time, past the time nav applies a fix. Bytes
-/// taken half a second or more after the last edge (nav ties them to the next edge) and bytes
-/// with no edge in the second before them (no PPS: nav applies them where they arrive) stay
-/// where they are, as does the order of all bytes. `imu_rate_hz`: the IMU's sample rate.
-pub fn place_after_pps(items: Vec<Recorded>, imu_rate_hz: f64) -> Vec<Recorded> {
-    let lead = (GPS_AFTER_PPS_S * imu_rate_hz).ceil() as usize;
-    let half_s = (0.5 * imu_rate_hz) as usize;
-    let mut out = Vec::with_capacity(items.len());
-    // the items since the last PPS edge, and where in them its samples and bytes are
-    let mut tail: Vec<Recorded> = Vec::new();
-    let mut since_edge: Option<usize> = None;
-    let mut lead_at: Option<usize> = None;
-    for item in items {
-        match &item {
-            Recorded::Frame(f) => match wire::Message::decode(f) {
-                Ok(wire::Message::ImuAccel(a)) if a.pps_offset.is_some() => {
-                    out.append(&mut tail);
-                    out.push(item);
-                    since_edge = Some(0);
-                    lead_at = None;
-                    continue;
-                }
-                Ok(wire::Message::ImuGyro(_)) => {
-                    if let Some(n) = since_edge.as_mut() {
-                        *n += 1;
-                        // after the whole sample `lead` (before the next one's first frame)
-                        if *n == lead + 1 {
-                            lead_at = Some(tail.len());
-                        }
-                        if *n > half_s {
-                            // too far from the edge for anything to move before this
-                            out.append(&mut tail);
-                            since_edge = None;
-                        }
-                    }
-                }
-                _ => {}
-            },
-            Recorded::Gps(_) => {
-                if let (Some(_), Some(at)) = (since_edge, lead_at) {
-                    // after the lead, after any bytes already placed there
-                    tail.insert(at.min(tail.len()), item);
-                    lead_at = Some(at + 1);
-                    continue;
-                }
-            }
-            Recorded::Silence => {}
-        }
-        if since_edge.is_some() {
-            tail.push(item);
+/// `items` (as nav's loop took them, with their log times: a frame's kernel receive time, the
+/// time nav's reader read the GPS bytes, none for a silence) in the order they arrived. nav's
+/// loop takes GPS bytes when it gets to them, later than they came by however far it was behind
+/// on the bus; replayed where the loop took them, a fix came later on every replay of a replay,
+/// until past the time nav applies it. So each GPS read goes back among the frames by its time:
+/// after every frame that arrived before it, ties included. The frames keep their order, a
+/// silence stays after the frame it followed, and the GPS reads keep theirs.
+pub fn in_arrival_order(items: Vec<Recorded>, times: &[Option<u64>]) -> Vec<Recorded> {
+    let (mut gps, mut rest) = (Vec::new(), Vec::with_capacity(items.len()));
+    let (mut last_gps, mut last) = (0u64, 0u64);
+    for (item, t) in items.into_iter().zip(times.iter().copied()) {
+        if matches!(item, Recorded::Gps(_)) {
+            last_gps = last_gps.max(t.unwrap_or(last_gps));
+            gps.push((last_gps, item));
         } else {
-            out.push(item);
+            last = t.unwrap_or(last);
+            rest.push((last, item));
         }
     }
-    out.append(&mut tail);
+    let mut out = Vec::with_capacity(rest.len() + gps.len());
+    let mut gps = gps.into_iter().peekable();
+    for (t, item) in rest {
+        while let Some(g) = gps.next_if(|g| g.0 < t) {
+            out.push(g.1);
+        }
+        out.push(item);
+    }
+    out.extend(gps.map(|g| g.1));
     out
 }
 
@@ -300,7 +275,7 @@ impl BusReplay {
 /// `opts`. The kernel must have CAN.
 pub fn replay_on_bus(mcap: &Path, cfg: &NavConfig, opts: &BusReplayOptions) -> Result<BusReplay> {
     let start = Instant::now();
-    let rec = Recording::read(mcap, cfg.imu.rate_hz)?;
+    let rec = Recording::read(mcap)?;
     if rec.items.is_empty() {
         bail!("{}: nothing nav received is recorded", mcap.display());
     }
@@ -419,7 +394,7 @@ pub fn replay_on_bus(mcap: &Path, cfg: &NavConfig, opts: &BusReplayOptions) -> R
     }
     let summary = nav::summary::Summary::read(&opts.out.join("nav-summary.json"))
         .with_context(|| format!("nav wrote no summary; exit status {nav_exit:?}"))?;
-    let new = Recording::read_as_recorded(&opts.out.join("nav.mcap"))?;
+    let (new, _) = Recording::read_timed(&opts.out.join("nav.mcap"))?;
     Ok(BusReplay {
         recording: mcap.display().to_string(),
         out: opts.out.display().to_string(),
@@ -438,100 +413,67 @@ pub fn replay_on_bus(mcap: &Path, cfg: &NavConfig, opts: &BusReplayOptions) -> R
 #[cfg(test)]
 mod tests {
     use super::*;
-    use wire::{ImuAccel, ImuGyro, Message};
 
-    /// Sample `k`'s two frames, with a PPS edge in it when `pps`.
-    fn sample(k: u16, pps: bool) -> [Recorded; 2] {
-        let g = Message::ImuGyro(ImuGyro {
-            counts: [0; 3],
-            sample_counter: k,
-        });
-        let a = Message::ImuAccel(ImuAccel {
-            counts: [0; 3],
-            sample_counter_low: (k & 0xF) as u8,
-            pps_offset: pps.then_some(10),
-            bit_fail: false,
-            saturated: false,
-        });
-        [
-            Recorded::Frame(g.encode().unwrap()),
-            Recorded::Frame(a.encode().unwrap()),
-        ]
+    fn frame(id: u16) -> Recorded {
+        Recorded::Frame(RawFrame {
+            id,
+            len: 1,
+            data: [0; 8],
+        })
     }
 
-    /// Where each GPS chunk of `items` comes: the number of samples before it.
-    fn gps_at(items: &[Recorded]) -> Vec<(usize, Vec<u8>)> {
-        let mut k = 0;
-        let mut at = Vec::new();
-        for i in items {
-            match i {
-                Recorded::Frame(f) if f.id == wire::imu_gyro::SPEC.id => k += 1,
-                Recorded::Gps(b) => at.push((k, b.clone())),
-                _ => {}
-            }
-        }
-        at
+    fn gps(b: &str) -> Recorded {
+        Recorded::Gps(b.as_bytes().to_vec())
     }
 
-    /// 100 Hz IMU (lead 5 samples, half a second 50), an edge in sample 10: bytes taken 30
-    /// samples after it move to 5 after it, in their order; bytes taken 60 after an edge (the
-    /// next edge's) and bytes with no edge before them stay; nothing else moves.
+    /// GPS reads that nav's loop took late go back among the frames by their read time (after
+    /// frames that arrived at the same time); one taken early stays behind frames that arrived
+    /// before it; frames keep their order and a silence stays after the frame it followed.
     #[test]
-    fn gps_bytes_move_to_just_after_their_pps_edge_and_no_further() {
-        let mut items = Vec::new();
-        for k in 0..200u16 {
-            if k == 5 {
-                items.push(Recorded::Gps(b"no edge yet".to_vec()));
-            }
-            if k == 40 {
-                items.push(Recorded::Gps(b"a".to_vec()));
-                items.push(Recorded::Gps(b"b".to_vec()));
-            }
-            if k == 42 {
-                items.push(Recorded::Gps(b"c".to_vec()));
-            }
-            if k == 13 {
-                items.push(Recorded::Gps(b"early".to_vec()));
-            }
-            if k == 170 {
-                items.push(Recorded::Gps(b"next edge's".to_vec()));
-            }
-            items.extend(sample(k, k == 10 || k == 110));
-        }
-        let frames_before: Vec<_> = items
-            .iter()
-            .filter(|i| matches!(i, Recorded::Frame(_)))
-            .cloned()
-            .collect();
-        let placed = place_after_pps(items, 100.0);
-        let at = gps_at(&placed);
-        let named = |s: &str| at.iter().find(|a| a.1 == s.as_bytes()).map(|a| a.0);
-        assert_eq!(named("no edge yet"), Some(5));
-        assert_eq!(named("early"), Some(13), "already before the lead: stays");
-        // the edge is sample 10 (the 11th): five whole samples after it
+    fn gps_reads_go_back_among_the_frames_by_their_arrival() {
+        let items = vec![
+            frame(1),
+            frame(2),
+            frame(3),
+            gps("a"),
+            Recorded::Silence,
+            frame(4),
+            gps("b"),
+            frame(5),
+            frame(6),
+        ];
+        let times = [
+            Some(10),
+            Some(20),
+            Some(30),
+            Some(15),
+            None,
+            Some(40),
+            Some(40),
+            Some(50),
+            Some(60),
+        ];
+        let out = in_arrival_order(items, &times);
         assert_eq!(
-            (named("a"), named("b"), named("c")),
-            (Some(16), Some(16), Some(16))
+            out,
+            vec![
+                frame(1),
+                gps("a"),
+                frame(2),
+                frame(3),
+                Recorded::Silence,
+                frame(4),
+                gps("b"),
+                frame(5),
+                frame(6),
+            ]
         );
-        assert_eq!(
-            at.iter().map(|a| a.1.clone()).collect::<Vec<_>>(),
-            ["no edge yet", "early", "a", "b", "c", "next edge's"]
-                .iter()
-                .map(|s| s.as_bytes().to_vec())
-                .collect::<Vec<_>>(),
-            "the bytes keep their order"
+        // read after everything: at the end, in their order
+        let late = in_arrival_order(
+            vec![gps("x"), frame(1), gps("y")],
+            &[Some(99), Some(1), Some(99)],
         );
-        assert_eq!(
-            named("next edge's"),
-            Some(170),
-            "60 samples after its edge: stays"
-        );
-        let frames_after: Vec<_> = placed
-            .iter()
-            .filter(|i| matches!(i, Recorded::Frame(_)))
-            .cloned()
-            .collect();
-        assert_eq!(frames_before, frames_after, "the frames keep their order");
+        assert_eq!(late, vec![frame(1), gps("x"), gps("y")]);
     }
 
     /// Two solutions apart by a known amount at one shared IMU time; others unmatched.
