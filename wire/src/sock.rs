@@ -79,47 +79,49 @@ const CONTROL_BYTES: usize = 64;
 #[derive(Clone, Copy)]
 struct Control([u8; CONTROL_BYTES]);
 
-/// Run `call` over one message header per frame (and per control buffer, when given); returns
-/// how many messages it moved, and each one's control length.
+/// Run `call` over one message header per frame (at most [`BATCH`]), each with its control
+/// buffer when `control` is given (whose lengths, as the kernel set them, go to its second
+/// slice); returns how many messages it moved. Everything stays on the stack: this is on nav's
+/// receive path, once per wake-up.
 fn mmsg_call(
     frames: &mut [KernelFrame],
-    mut control: Option<&mut [Control]>,
+    mut control: Option<(&mut [Control], &mut [usize])>,
     call: impl FnOnce(*mut libc::mmsghdr, u32) -> libc::c_int,
-) -> std::io::Result<(usize, Vec<usize>)> {
-    let mut iov: Vec<libc::iovec> = frames
+) -> std::io::Result<usize> {
+    let n = frames.len().min(BATCH);
+    // SAFETY: all-zero iovecs and message headers are valid (no buffers, no name, no control).
+    let mut iov: [libc::iovec; BATCH] = unsafe { std::mem::zeroed() };
+    // SAFETY: as above.
+    let mut hdrs: [libc::mmsghdr; BATCH] = unsafe { std::mem::zeroed() };
+    for (i, ((f, v), h)) in frames
         .iter_mut()
-        .map(|f| libc::iovec {
-            iov_base: (f as *mut KernelFrame).cast(),
-            iov_len: std::mem::size_of::<KernelFrame>(),
-        })
-        .collect();
-    let mut hdrs: Vec<libc::mmsghdr> = iov
-        .iter_mut()
+        .zip(&mut iov)
+        .zip(&mut hdrs)
         .enumerate()
-        .map(|(i, v)| {
-            // SAFETY: an all-zero msghdr is valid (no name, no control data).
-            let mut h: libc::mmsghdr = unsafe { std::mem::zeroed() };
-            h.msg_hdr.msg_iov = v;
-            h.msg_hdr.msg_iovlen = 1;
-            if let Some(c) = control.as_deref_mut().and_then(|c| c.get_mut(i)) {
-                h.msg_hdr.msg_control = c.0.as_mut_ptr().cast();
-                h.msg_hdr.msg_controllen = CONTROL_BYTES as _;
-            }
-            h
-        })
-        .collect();
-    let n = call(hdrs.as_mut_ptr(), hdrs.len() as u32);
-    if n < 0 {
-        Err(std::io::Error::last_os_error())
-    } else {
-        // msg_controllen is a size_t on glibc, a socklen_t on musl
-        #[allow(clippy::unnecessary_cast)]
-        let lens = hdrs
-            .iter()
-            .map(|h| h.msg_hdr.msg_controllen as usize)
-            .collect();
-        Ok((n as usize, lens))
+        .take(n)
+    {
+        v.iov_base = (f as *mut KernelFrame).cast();
+        v.iov_len = std::mem::size_of::<KernelFrame>();
+        h.msg_hdr.msg_iov = v;
+        h.msg_hdr.msg_iovlen = 1;
+        if let Some(c) = control.as_mut().and_then(|(c, _)| c.get_mut(i)) {
+            h.msg_hdr.msg_control = c.0.as_mut_ptr().cast();
+            h.msg_hdr.msg_controllen = CONTROL_BYTES as _;
+        }
     }
+    let r = call(hdrs.as_mut_ptr(), n as u32);
+    if r < 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    if let Some((_, lens)) = control {
+        for (len, h) in lens.iter_mut().zip(&hdrs).take(r as usize) {
+            // msg_controllen is a size_t on glibc, a socklen_t on musl
+            #[allow(clippy::unnecessary_cast)]
+            let l = h.msg_hdr.msg_controllen as usize;
+            *len = l;
+        }
+    }
+    Ok(r as usize)
 }
 
 /// The `SCM_TIMESTAMPNS` time in a received message's control data, ns since the epoch.
@@ -147,18 +149,18 @@ fn timestamp_ns(c: &Control, len: usize) -> Option<u64> {
 /// Returns how many went out: fewer than given when the socket would block or the transmit queue
 /// is full after the first ones (the caller retries the rest); an error only when none did.
 pub fn send_batch(fd: std::os::fd::RawFd, frames: &[RawFrame]) -> std::io::Result<usize> {
-    let mut k: Vec<KernelFrame> = frames
-        .iter()
-        .take(BATCH)
-        .map(|f| KernelFrame {
+    let mut k = [KernelFrame::default(); BATCH];
+    for (d, f) in k.iter_mut().zip(frames) {
+        *d = KernelFrame {
             can_id: u32::from(f.id),
             len: f.len.min(8),
             data: f.data,
             ..Default::default()
-        })
-        .collect();
+        };
+    }
+    let k = &mut k[..frames.len().min(BATCH)];
     // SAFETY: every header points at one live iovec over one live KernelFrame.
-    mmsg_call(&mut k, None, |h, n| unsafe { libc::sendmmsg(fd, h, n, 0) }).map(|r| r.0)
+    mmsg_call(k, None, |h, n| unsafe { libc::sendmmsg(fd, h, n, 0) })
 }
 
 /// Receive up to `max` (at most [`BATCH`]) waiting frames from the CAN raw socket `fd` without
@@ -169,12 +171,13 @@ pub fn recv_batch(
     out: &mut Vec<Result<RawFrame, FrameConvError>>,
     max: usize,
 ) -> std::io::Result<usize> {
-    let mut k = vec![KernelFrame::default(); max.clamp(1, BATCH)];
+    let mut k = [KernelFrame::default(); BATCH];
+    let k = &mut k[..max.clamp(1, BATCH)];
     // SAFETY: every header points at one live iovec over one live KernelFrame.
-    let n = match mmsg_call(&mut k, None, |h, n| unsafe {
+    let n = match mmsg_call(k, None, |h, n| unsafe {
         libc::recvmmsg(fd, h, n, libc::MSG_DONTWAIT, std::ptr::null_mut())
     }) {
-        Ok((n, _)) => n,
+        Ok(n) => n,
         Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => 0,
         Err(e) => return Err(e),
     };
@@ -189,16 +192,17 @@ pub fn recv_batch_stamped(
     out: &mut Vec<(Result<RawFrame, FrameConvError>, Option<u64>)>,
     max: usize,
 ) -> std::io::Result<usize> {
-    let m = max.clamp(1, BATCH);
-    let mut k = vec![KernelFrame::default(); m];
-    let mut control = vec![Control([0; CONTROL_BYTES]); m];
+    let mut k = [KernelFrame::default(); BATCH];
+    let k = &mut k[..max.clamp(1, BATCH)];
+    let mut control = [Control([0; CONTROL_BYTES]); BATCH];
+    let mut lens = [0usize; BATCH];
     // SAFETY: every header points at one live iovec over one live KernelFrame and one live
     // control buffer of CONTROL_BYTES.
-    let (n, lens) = match mmsg_call(&mut k, Some(&mut control), |h, n| unsafe {
+    let n = match mmsg_call(k, Some((&mut control, &mut lens)), |h, n| unsafe {
         libc::recvmmsg(fd, h, n, libc::MSG_DONTWAIT, std::ptr::null_mut())
     }) {
-        Ok(r) => r,
-        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => (0, Vec::new()),
+        Ok(n) => n,
+        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => 0,
         Err(e) => return Err(e),
     };
     out.extend(
