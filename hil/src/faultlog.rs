@@ -23,79 +23,96 @@ pub struct FaultEvent {
     pub detail: String,
 }
 
+/// The events of one device as they are gathered.
+struct Device<'a> {
+    name: &'static str,
+    ev: &'a mut Vec<FaultEvent>,
+}
+
+impl Device<'_> {
+    fn push(&mut self, t_s: f64, fault: &'static str, phase: &'static str, detail: String) {
+        self.ev.push(FaultEvent {
+            t_s,
+            device: self.name,
+            fault,
+            phase,
+            detail,
+        });
+    }
+
+    /// One event at each of `times`.
+    fn at(&mut self, fault: &'static str, times: &[f64], detail: &str) {
+        for &t in times {
+            self.push(t, fault, "at", detail.into());
+        }
+    }
+
+    /// A start and an end for each of `windows` ([start, end, ...] s); `extra` follows the span.
+    fn windows<const N: usize>(&mut self, fault: &'static str, windows: &[[f64; N]], extra: &str) {
+        for w in windows {
+            self.push(
+                w[0],
+                fault,
+                "starts",
+                format!("{:.3}-{:.3} s{extra}", w[0], w[1]),
+            );
+            self.push(w[1], fault, "ends", String::new());
+        }
+    }
+
+    /// A fault on from `t` (to the end of the run).
+    fn from(&mut self, fault: &'static str, t: Option<f64>, detail: &str) {
+        if let Some(t) = t {
+            self.push(t, fault, "starts", detail.into());
+        }
+    }
+
+    /// A fault on for the whole run, when `on`.
+    fn throughout(&mut self, fault: &'static str, on: bool, detail: String) {
+        if on {
+            self.push(0.0, fault, "throughout", detail);
+        }
+    }
+}
+
 /// Every fault event of scenario `s` run with `link_downs` ([simulated time, wall ms]) and a
 /// SIGKILL of nav at `kill_at_s`, in time order.
 pub fn schedule(s: &Scenario, link_downs: &[[f64; 2]], kill_at_s: Option<f64>) -> Vec<FaultEvent> {
     let mut ev = Vec::new();
     let rate = s.imu.rate_hz.max(1e-9);
-    let mut at = |t: f64, device, fault, phase, detail: String| {
-        ev.push(FaultEvent {
-            t_s: t,
-            device,
-            fault,
-            phase,
-            detail,
-        })
-    };
-    let window = |at: &mut dyn FnMut(f64, &'static str, &'static str, &'static str, String),
-                  device,
-                  fault,
-                  w: &[f64],
-                  extra: String| {
-        at(
-            w[0],
-            device,
-            fault,
-            "starts",
-            format!("{:.3}-{:.3} s{extra}", w[0], w[1]),
-        );
-        at(w[1], device, fault, "ends", String::new());
-    };
+    let at_sample = |k: u64| k as f64 / rate;
     // the IMU and its frames on the bus
     let i = &s.imu;
-    if let Some(t) = i.bit_fail_from_s {
-        at(
-            t,
-            "imu",
-            "bit_fail_from_s",
-            "starts",
-            "built-in test fails from here".into(),
-        );
-    }
-    for w in &i.saturated_s {
-        window(&mut at, "imu", "saturated_s", w, String::new());
-    }
-    for w in &i.pps_missing_s {
-        window(&mut at, "imu", "pps_missing_s", w, String::new());
-    }
-    for &t in &i.pps_spurious_at_s {
-        at(
-            t,
-            "imu",
-            "pps_spurious_at_s",
-            "at",
-            "a spurious PPS edge".into(),
-        );
-    }
-    if i.pps_jitter_s > 0.0 {
-        at(
-            0.0,
-            "imu",
-            "pps_jitter_s",
-            "throughout",
-            format!("{} s", i.pps_jitter_s),
-        );
-    }
+    let mut imu = Device {
+        name: "imu",
+        ev: &mut ev,
+    };
+    imu.from(
+        "bit_fail_from_s",
+        i.bit_fail_from_s,
+        "built-in test fails from here",
+    );
+    imu.windows("saturated_s", &i.saturated_s, "");
+    imu.windows("pps_missing_s", &i.pps_missing_s, "");
+    imu.at(
+        "pps_spurious_at_s",
+        &i.pps_spurious_at_s,
+        "a spurious PPS edge",
+    );
+    imu.throughout(
+        "pps_jitter_s",
+        i.pps_jitter_s > 0.0,
+        format!("{} s", i.pps_jitter_s),
+    );
     for [k, jump] in &i.counter_jumps {
-        at(
-            *k as f64 / rate,
-            "imu",
-            "counter_jumps",
-            "at",
-            format!("sample {k}: counter +{jump}"),
-        );
+        let detail = format!("sample {k}: counter +{jump}");
+        imu.push(at_sample(*k), "counter_jumps", "at", detail);
     }
     let f = &s.faults;
+    let mut bus = Device {
+        name: "bus",
+        ev: &mut ev,
+    };
     for (samples, fault, what) in [
         (&f.drop_samples, "drop_samples", "frames not sent"),
         (
@@ -110,184 +127,97 @@ pub fn schedule(s: &Scenario, link_downs: &[[f64; 2]], kill_at_s: Option<f64>) -
         ),
     ] {
         for k in samples {
-            at(
-                *k as f64 / rate,
-                "bus",
-                fault,
-                "at",
-                format!("sample {k}: {what}"),
-            );
+            bus.push(at_sample(*k), fault, "at", format!("sample {k}: {what}"));
         }
     }
-    for &t in &f.unknown_id_at_s {
-        at(
-            t,
-            "bus",
-            "unknown_id_at_s",
-            "at",
-            "a frame outside the contract".into(),
-        );
-    }
-    for &t in &f.bad_length_at_s {
-        at(
-            t,
-            "bus",
-            "bad_length_at_s",
-            "at",
-            "an IMU_GYRO of wrong length".into(),
-        );
-    }
-    for w in &f.stop_s {
-        window(
-            &mut at,
-            "bus",
-            "stop_s",
-            w,
-            ": the IMU sends nothing".into(),
-        );
-    }
+    bus.at(
+        "unknown_id_at_s",
+        &f.unknown_id_at_s,
+        "a frame outside the contract",
+    );
+    bus.at(
+        "bad_length_at_s",
+        &f.bad_length_at_s,
+        "an IMU_GYRO of wrong length",
+    );
+    bus.windows("stop_s", &f.stop_s, ": the IMU sends nothing");
     for [k, n] in &f.delay_samples {
-        at(
-            *k as f64 / rate,
-            "bus",
-            "delay_samples",
-            "at",
-            format!("sample {k} held back {n} samples"),
-        );
+        let detail = format!("sample {k} held back {n} samples");
+        bus.push(at_sample(*k), "delay_samples", "at", detail);
     }
     for w in &f.flood_s {
-        window(
-            &mut at,
-            "bus",
-            "flood_s",
-            w,
-            format!(", {} foreign frames per sample", w[2]),
-        );
+        let extra = format!(", {} foreign frames per sample", w[2]);
+        bus.windows("flood_s", &[*w], &extra);
     }
     // the receiver
     if let Some(g) = &s.gps {
-        for w in &g.outages {
-            let kind = if g.outage_void {
-                "void fixes"
-            } else {
-                "silent"
-            };
-            window(&mut at, "gps", "outages", w, format!(", {kind}"));
-        }
+        let mut gps = Device {
+            name: "gps",
+            ev: &mut ev,
+        };
+        let kind = if g.outage_void {
+            ", void fixes"
+        } else {
+            ", silent"
+        };
+        gps.windows("outages", &g.outages, kind);
         for m in &g.multipath {
-            window(
-                &mut at,
-                "gps",
+            gps.windows(
                 "multipath",
-                &[m[0], m[0] + m[1]],
-                format!(", {} m north", m[2]),
+                &[[m[0], m[0] + m[1]]],
+                &format!(", {} m north", m[2]),
             );
         }
-        for w in &g.port_drops {
-            window(
-                &mut at,
-                "gps",
-                "port_drops",
-                w,
-                ": the device is gone".into(),
-            );
-        }
-        for &t in &g.time_backwards_at_s {
-            at(
-                t,
-                "gps",
-                "time_backwards_at_s",
-                "at",
-                "UTC 10 s back".into(),
-            );
-        }
-        for &t in &g.garbage_at_s {
-            at(
-                t,
-                "gps",
-                "garbage_at_s",
-                "at",
-                "line noise and binary bytes".into(),
-            );
-        }
+        gps.windows("port_drops", &g.port_drops, ": the device is gone");
+        gps.at(
+            "time_backwards_at_s",
+            &g.time_backwards_at_s,
+            "UTC 10 s back",
+        );
+        gps.at(
+            "garbage_at_s",
+            &g.garbage_at_s,
+            "line noise and binary bytes",
+        );
     }
     // the turntable
     if let Some(tt) = &s.turntable {
         let f = &tt.faults;
-        if let Some(t) = f.stall_from_s {
-            at(
-                t,
-                "turntable",
-                "stall_from_s",
-                "starts",
-                "the axis stalls".into(),
-            );
-        }
-        if f.lock_fails {
-            at(
-                0.0,
-                "turntable",
-                "lock_fails",
-                "throughout",
-                "the lock never engages".into(),
-            );
-        }
-        for &t in &f.encoder_glitch_at_s {
-            at(
-                t,
-                "turntable",
-                "encoder_glitch_at_s",
-                "at",
-                "an encoder glitch".into(),
-            );
-        }
-        if !f.lost_command_seqs.is_empty() {
-            at(
-                0.0,
-                "turntable",
-                "lost_command_seqs",
-                "throughout",
-                format!("commands {:?} lost", f.lost_command_seqs),
-            );
-        }
-        if f.command_delay_s > 0.0 {
-            at(
-                0.0,
-                "turntable",
-                "command_delay_s",
-                "throughout",
-                format!("acknowledgements {} s late", f.command_delay_s),
-            );
-        }
-        for w in &f.status_silent_s {
-            window(
-                &mut at,
-                "turntable",
-                "status_silent_s",
-                w,
-                ": no heartbeat".into(),
-            );
-        }
+        let mut table = Device {
+            name: "turntable",
+            ev: &mut ev,
+        };
+        table.from("stall_from_s", f.stall_from_s, "the axis stalls");
+        table.throughout("lock_fails", f.lock_fails, "the lock never engages".into());
+        table.at(
+            "encoder_glitch_at_s",
+            &f.encoder_glitch_at_s,
+            "an encoder glitch",
+        );
+        let lost = format!("commands {:?} lost", f.lost_command_seqs);
+        table.throughout("lost_command_seqs", !f.lost_command_seqs.is_empty(), lost);
+        let late = format!("acknowledgements {} s late", f.command_delay_s);
+        table.throughout("command_delay_s", f.command_delay_s > 0.0, late);
+        table.windows("status_silent_s", &f.status_silent_s, ": no heartbeat");
     }
     // the bench's own actions
+    let mut bench = Device {
+        name: "bench",
+        ev: &mut ev,
+    };
     for [t, ms] in link_downs {
-        at(
+        bench.push(
             *t,
-            "bench",
             "link_downs",
             "at",
             format!("CAN interface down for {ms} ms"),
         );
     }
-    if let Some(t) = kill_at_s {
-        at(
-            t,
-            "bench",
-            "kill_nav_at_s",
-            "at",
-            "nav killed (SIGKILL)".into(),
-        );
-    }
+    bench.at(
+        "kill_nav_at_s",
+        kill_at_s.as_slice(),
+        "nav killed (SIGKILL)",
+    );
     ev.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     ev
 }

@@ -95,19 +95,23 @@ pub fn write(
         .profile("")
         .create(std::io::BufWriter::new(file))
         .with_context(|| format!("{}", path.display()))?;
-    let meta = BTreeMap::new();
-    let state_schema = w.add_schema(
+    // a JSON channel with its JSON schema
+    let channel = |w: &mut mcap::Writer<_>, schema: &str, text: &[u8], topic: &str| {
+        let id = w.add_schema(schema, "jsonschema", text)?;
+        w.add_channel(id, topic, "json", &BTreeMap::new())
+    };
+    let state_ch = channel(
+        &mut w,
         "rlg-hil/bench/truth-state",
-        "jsonschema",
         include_bytes!("../schemas/truth-state.json"),
+        "/truth/state",
     )?;
-    let fix_schema = w.add_schema(
+    let fix_ch = channel(
+        &mut w,
         "foxglove.LocationFix",
-        "jsonschema",
         include_bytes!("../../nav/schemas/foxglove/LocationFix.json"),
+        "/truth/location",
     )?;
-    let state_ch = w.add_channel(state_schema, "/truth/state", "json", &meta)?;
-    let fix_ch = w.add_channel(fix_schema, "/truth/location", "json", &meta)?;
     let mut n = 0u64;
     // one message at simulated time `t`, logged at the wall time nav logged it
     let put = |w: &mut mcap::Writer<_>, ch: u16, k: usize, t: f64, data: &[u8]| {
@@ -122,12 +126,12 @@ pub fn write(
         )
     };
     if !turntable.is_empty() {
-        let schema = w.add_schema(
+        let ch = channel(
+            &mut w,
             "rlg-hil/bench/turntable-truth",
-            "jsonschema",
             include_bytes!("../schemas/turntable-truth.json"),
+            "/truth/turntable",
         )?;
-        let ch = w.add_channel(schema, "/truth/turntable", "json", &meta)?;
         for (k, tt) in turntable.iter().enumerate() {
             let json = serde_json::to_string(tt)?;
             put(&mut w, ch, k, tt.t_s, json.as_bytes())?;
@@ -135,28 +139,21 @@ pub fn write(
         }
     }
     if !faults.is_empty() {
-        let schema = w.add_schema(
+        let ch = channel(
+            &mut w,
             "foxglove.Log",
-            "jsonschema",
             include_bytes!("../../nav/schemas/foxglove/Log.json"),
+            "/bench/faults",
         )?;
-        let ch = w.add_channel(schema, "/bench/faults", "json", &meta)?;
         for (k, f) in faults.iter().enumerate() {
-            let ns = (f.t_s.max(0.0) * 1e9) as u64;
             let detail = if f.detail.is_empty() {
                 String::new()
             } else {
                 format!(": {}", f.detail)
             };
-            // foxglove.Log: level 3 is WARNING
-            let m = serde_json::json!({
-                "timestamp": {"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000},
-                "level": 3,
-                "message": format!("{} {} {}{detail}", f.device, f.fault, f.phase),
-                "name": "bench",
-                "file": "",
-                "line": 0,
-            });
+            let message = format!("{} {} {}{detail}", f.device, f.fault, f.phase);
+            let ns = (f.t_s.max(0.0) * 1e9) as u64;
+            let m = nav::foxglove::log(ns, nav::foxglove::LOG_WARNING, "bench", message);
             put(&mut w, ch, k, f.t_s, m.to_string().as_bytes())?;
             n += 1;
         }
@@ -171,7 +168,7 @@ pub fn write(
             "vel_enu_mps": v, "hpr_deg": hpr,
         });
         let f = serde_json::json!({
-            "timestamp": {"sec": publish / 1_000_000_000, "nsec": publish % 1_000_000_000},
+            "timestamp": nav::foxglove::time(publish),
             "frame_id": "truth",
             "latitude": lat, "longitude": lon, "altitude": h,
             "position_covariance": vec![0.0; 9],

@@ -25,8 +25,26 @@ use serde_json::{Value, json};
 pub const POSE_FRAME: &str = "nav_start_enu";
 
 /// `foxglove.Time` of a time in ns.
-fn time(ns: u64) -> Value {
+/// A Foxglove `time` of `ns` nanoseconds.
+pub fn time(ns: u64) -> Value {
     json!({"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000})
+}
+
+/// Foxglove `Log` levels.
+pub const LOG_INFO: u8 = 2;
+/// Warning.
+pub const LOG_WARNING: u8 = 3;
+
+/// A `foxglove.Log` message at `ns` from `name`.
+pub fn log(ns: u64, level: u8, name: &str, message: String) -> Value {
+    json!({
+        "timestamp": time(ns),
+        "level": level,
+        "message": message,
+        "name": name,
+        "file": "",
+        "line": 0,
+    })
 }
 
 /// Body (x forward, y left, z up) to ENU for a heading clockwise from north, pitch nose-up
@@ -80,14 +98,8 @@ impl Views {
                 let kind = v["kind"].as_str().unwrap_or("event");
                 let info = matches!(kind, "north_finding_progress" | "imu_back")
                     || (kind == "integrity" && v["alarm"] == false);
-                let m = json!({
-                    "timestamp": time(publish_ns),
-                    "level": if info { 2 } else { 3 },
-                    "message": format!("{kind}: {text}"),
-                    "name": "nav",
-                    "file": "",
-                    "line": 0,
-                });
+                let level = if info { LOG_INFO } else { LOG_WARNING };
+                let m = log(publish_ns, level, "nav", format!("{kind}: {text}"));
                 out.push((JsonChannel::Log, m.to_string()));
             }
             _ => {}

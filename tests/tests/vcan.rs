@@ -6,24 +6,31 @@ use e2e::{bin, keep_file, keep_report, mcap_topic_counts};
 use serde_json::Value;
 use std::process::Command;
 
-fn hil_run(args: &[&str], out: &std::path::Path) -> (Value, i32) {
+/// Run `hil` with `args` and then `paths` (its log shown); its JSON on stdout (which it must
+/// print) and its exit status.
+fn hil_json(args: &[&str], paths: &[&std::path::Path]) -> (Value, i32) {
     let o = Command::new(bin("hil"))
-        .arg("run")
         .args(args)
-        .arg("--out")
-        .arg(out)
-        .arg("--json")
+        .args(paths)
         .output()
         .expect("hil runs");
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    eprintln!("{stderr}");
-    let report: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+    eprintln!("{}", String::from_utf8_lossy(&o.stderr));
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
         panic!(
-            "hil printed no JSON report ({e}); stdout: {}",
+            "hil {args:?} printed no JSON ({e}); stdout: {}",
             String::from_utf8_lossy(&o.stdout)
         )
     });
-    (report, o.status.code().unwrap_or(-1))
+    (v, o.status.code().unwrap_or(-1))
+}
+
+fn hil_run(args: &[&str], out: &std::path::Path) -> (Value, i32) {
+    let all: Vec<&str> = ["run", "--json"]
+        .into_iter()
+        .chain(args.iter().copied())
+        .chain(["--out"])
+        .collect();
+    hil_json(&all, &[out])
 }
 
 /// Run a shipped scenario with some of its lines replaced (each replacement must apply) on
@@ -186,18 +193,10 @@ fn static_30s_at_x10_every_frame_arrives_and_the_recording_reads_back() {
 #[ignore = "needs vcan: run ./run-tests"]
 fn the_fault_matrix_passes_every_row() {
     let dir = tempfile::tempdir().unwrap();
-    let o = Command::new(bin("hil"))
-        .args(["faults", "--iface", "vcan-e2e1", "--json", "--out"])
-        .arg(dir.path())
-        .output()
-        .expect("hil runs");
-    eprintln!("{}", String::from_utf8_lossy(&o.stderr));
-    let m: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
-        panic!(
-            "hil faults printed no JSON ({e}): {}",
-            String::from_utf8_lossy(&o.stdout)
-        )
-    });
+    let (m, code) = hil_json(
+        &["faults", "--iface", "vcan-e2e1", "--json", "--out"],
+        &[dir.path()],
+    );
     let rows = m["rows"].as_array().expect("rows");
     assert!(rows.len() >= 16, "{} faults", rows.len());
     let failed: Vec<String> = rows
@@ -206,7 +205,7 @@ fn the_fault_matrix_passes_every_row() {
         .map(|r| format!("{}: {}", r["fault"], r["verdict"]["observed"]))
         .collect();
     assert!(failed.is_empty(), "failed rows: {failed:#?}");
-    assert_eq!(o.status.code(), Some(0));
+    assert_eq!(code, 0);
     let md = std::fs::read_to_string(dir.path().join("faults.md")).unwrap();
     assert!(md.contains("| imu-counter-jump |") && md.contains("| turntable-heartbeat-loss |"));
     assert!(dir.path().join("faults.json").is_file());
@@ -274,27 +273,13 @@ fn nav_names_a_missing_interface_and_exits_nonzero() {
     assert!(!err.contains("panicked"), "{err}");
 }
 
-/// One north-finding drill (6 s dwells, truth 287.5 deg, seed 7) through vcan at `speed`, or in
-/// process when `speed` is `None`.
 /// `hil replay --bus` of the run folder `run` at `speed` on `iface` into `out`: its JSON, after
 /// checking that nav sent exactly what it sent in the recording.
 fn replay_on_bus(run: &std::path::Path, speed: &str, iface: &str, out: &std::path::Path) -> Value {
-    let o = Command::new(bin("hil"))
-        .args([
-            "replay", "--bus", "--speed", speed, "--iface", iface, "--json",
-        ])
-        .arg(run)
-        .arg("--out")
-        .arg(out)
-        .output()
-        .expect("hil runs");
-    eprintln!("{}", String::from_utf8_lossy(&o.stderr));
-    let r: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
-        panic!(
-            "hil replay printed no JSON ({e}): {}",
-            String::from_utf8_lossy(&o.stdout)
-        )
-    });
+    let args = [
+        "replay", "--bus", "--speed", speed, "--iface", iface, "--json", "--out",
+    ];
+    let (r, code) = hil_json(&args, &[out, run]);
     eprintln!(
         "replay at x{speed}: {} frames, {} GPS bytes, {} silences, lockstep {}, {:.1} s; nav sent {} frames, recorded {}",
         r["play"]["frames"],
@@ -308,7 +293,7 @@ fn replay_on_bus(run: &std::path::Path, speed: &str, iface: &str, out: &std::pat
     assert_eq!(r["first_difference"], Value::Null, "{r:#}");
     assert!(r["replayed_tx"].as_u64().unwrap() > 1000, "{r:#}");
     assert_eq!(r["replayed_tx"], r["recorded_tx"]);
-    assert_eq!(o.status.code(), Some(0));
+    assert_eq!(code, 0);
     assert_eq!(r["play"]["lockstep"]["stalls"], 0);
     assert!(out.join("nav.mcap").is_file() && out.join("replay.json").is_file());
     r
@@ -318,17 +303,28 @@ fn drill_at(speed: &str, iface: &str) -> Value {
     drill_in(speed, iface, &tempfile::tempdir().unwrap())
 }
 
-/// The drill of `tests/tests/in_process.rs` (keep the two alike) through vcan at `speed`.
+/// One north-finding drill (6 s dwells, truth 287.5 deg, seed 7) through vcan at `speed`: the
+/// drill of `tests/tests/in_process.rs` (keep the two alike).
 fn drill_in(speed: &str, iface: &str, dir: &tempfile::TempDir) -> Value {
-    let o = Command::new(bin("hil"))
-        .args(["drill", "north-finding", "--dwell", "6"])
-        .args(["--heading", "287.5", "--seed", "7", "--tolerance", "0.5"])
-        .args(["--iface", iface, "--speed", speed, "--json", "--out"])
-        .arg(dir.path())
-        .output()
-        .expect("hil runs");
-    eprintln!("{}", String::from_utf8_lossy(&o.stderr));
-    let r: Value = serde_json::from_slice(&o.stdout).expect("JSON report");
+    let args = [
+        "drill",
+        "north-finding",
+        "--dwell",
+        "6",
+        "--heading",
+        "287.5",
+        "--seed",
+        "7",
+        "--tolerance",
+        "0.5",
+        "--iface",
+        iface,
+        "--speed",
+        speed,
+        "--json",
+        "--out",
+    ];
+    let (r, _) = hil_json(&args, &[dir.path()]);
     for (name, pass, detail) in checks(&r) {
         eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
         assert!(pass, "check failed: {name}: {detail}");
