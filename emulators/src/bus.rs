@@ -20,7 +20,7 @@
 //! scheduler waits [`Lockstep::stall`] of wall time, then counts a stall and runs on at its
 //! pace: the run goes on, and its report says it was not reproducible.
 
-use crate::can::{CanTxError, Progress, TurntableTxStats, TxStats, write_all};
+use crate::can::{CanTxError, Progress, SentLog, TurntableTxStats, TxStats, write_all};
 use crate::clock::SimClock;
 use crate::gps::{GpsDevice, GpsTxStats, PtyError};
 use crate::turntable::Turntable;
@@ -253,6 +253,8 @@ pub struct Devices {
     pub turntable: Option<TtBus>,
     /// The GPS receiver on its pty, when the scenario has one.
     pub gps: Option<GpsDevice>,
+    /// Where every frame put on the bus is logged, when given.
+    pub sent_log: Option<SentLog>,
 }
 
 /// What the scheduler did.
@@ -267,6 +269,8 @@ pub struct BusOutcome {
     pub gps: Option<(GpsTxStats, crate::gps::GpsPty)>,
     /// Lockstep.
     pub lockstep: LockstepStats,
+    /// Lines in the log of sent frames ([`Devices::sent_log`]).
+    pub sent_logged: Option<u64>,
 }
 
 /// Scheduler (and player) failures.
@@ -333,21 +337,44 @@ pub(crate) fn drain(
     }
 }
 
-/// Count a write; frames lost to a downed interface never reach nav, so the lockstep takes
-/// their samples as confirmed (nav cannot confirm what it never received).
-fn account(
-    w: crate::can::Written,
-    retries: &mut u64,
-    lost_down: &mut u64,
-    confirmed: &mut Option<u64>,
+/// Frames waiting to go on the bus, and what their writes did.
+struct Outbox {
+    frames: Vec<RawFrame>,
+    /// The last sample whose frames are waiting.
     last: Option<u64>,
-) {
-    *retries += w.retries;
-    if w.lost_down > 0 {
-        *lost_down += w.lost_down;
-        if let Some(k) = last {
-            *confirmed = Some(confirmed.map_or(k, |c| c.max(k)));
+    written: u64,
+    retries: u64,
+    lost_down: u64,
+    log: Option<SentLog>,
+}
+
+impl Outbox {
+    /// Write the waiting frames (to the log of sent frames too). Frames lost to a downed
+    /// interface never reach nav, so the lockstep takes their samples as confirmed (nav cannot
+    /// confirm what it never received).
+    fn flush(
+        &mut self,
+        sock: &CanSocket,
+        iface: &str,
+        confirmed: &mut Option<u64>,
+        latency: &mut Latency,
+    ) -> Result<(), CanTxError> {
+        let w = write_all(sock, iface, &self.frames)?;
+        self.retries += w.retries;
+        let went = self.frames.len() - w.lost_down as usize;
+        if w.lost_down > 0 {
+            self.lost_down += w.lost_down;
+            if let Some(k) = self.last {
+                *confirmed = Some(confirmed.map_or(k, |c| c.max(k)));
+            }
         }
+        if let Some(log) = self.log.as_mut() {
+            log.frames(&self.frames[..went])?;
+        }
+        self.written += went as u64;
+        self.frames.clear();
+        latency.flushed(self.last.take());
+        Ok(())
     }
 }
 
@@ -397,11 +424,17 @@ pub fn run(
     let mut confirmed: Option<u64> = None;
     let (mut frames, mut msgs) = (Vec::with_capacity(8), Vec::with_capacity(8));
     // frames go out in batches of a few samples: one system call instead of one per frame
-    let mut outbox: Vec<RawFrame> = Vec::with_capacity(wire::BATCH);
+    let mut outbox = Outbox {
+        frames: Vec::with_capacity(wire::BATCH),
+        last: None,
+        written: 0,
+        retries: 0,
+        lost_down: 0,
+        log: dev.sent_log.take(),
+    };
     let batch_samples = 16u64;
-    let (mut written, mut max_lag_ms, mut retries, mut lost_down) = (0u64, 0u64, 0u64, 0u64);
+    let mut max_lag_ms = 0u64;
     let mut latency = Latency::default();
-    let mut outbox_last: Option<u64> = None;
     let mut tt_bad = 0u64;
     let mut silent = false;
     while dev.imu.next_time() <= duration_s + 1e-9 && !stop.load(Ordering::Relaxed) {
@@ -429,12 +462,8 @@ pub fn run(
                 break;
             }
             // nav cannot confirm what it has not received
-            if !outbox.is_empty() {
-                let w = write_all(&sock, iface, &outbox)?;
-                account(w, &mut retries, &mut lost_down, &mut confirmed, outbox_last);
-                written += outbox.len() as u64 - w.lost_down;
-                outbox.clear();
-                latency.flushed(outbox_last.take());
+            if !outbox.frames.is_empty() {
+                outbox.flush(&sock, iface, &mut confirmed, &mut latency)?;
                 continue;
             }
             let since = *waited.get_or_insert_with(|| {
@@ -492,30 +521,25 @@ pub fn run(
                 }
             }
         }
-        outbox.extend_from_slice(&frames);
-        outbox_last = Some(k);
+        outbox.frames.extend_from_slice(&frames);
+        outbox.last = Some(k);
         let gps_due = dev.gps.as_ref().is_some_and(|g| g.next_write_time() <= t);
-        if gps_due || (k + 1).is_multiple_of(batch_samples) || outbox.len() + 8 > wire::BATCH {
-            let w = write_all(&sock, iface, &outbox)?;
-            account(w, &mut retries, &mut lost_down, &mut confirmed, outbox_last);
-            written += outbox.len() as u64 - w.lost_down;
-            outbox.clear();
-            latency.flushed(outbox_last.take());
+        if gps_due || (k + 1).is_multiple_of(batch_samples) || outbox.frames.len() + 8 > wire::BATCH
+        {
+            outbox.flush(&sock, iface, &mut confirmed, &mut latency)?;
         }
         if let Some(g) = dev.gps.as_mut() {
             g.poll(t, duration_s)?;
         }
         progress.set(t);
     }
-    let w = write_all(&sock, iface, &outbox)?;
-    account(w, &mut retries, &mut lost_down, &mut confirmed, outbox_last);
-    written += outbox.len() as u64 - w.lost_down;
+    outbox.flush(&sock, iface, &mut confirmed, &mut latency)?;
     progress.set(dev.imu.next_time());
     (ls.latency_p50_ms, ls.latency_p99_ms, ls.latency_samples) = latency.percentiles();
     if let Some(tt) = dev.turntable.as_mut() {
         tt.stats.bad_frames += tt_bad;
     }
-    let imu_frames = written
+    let imu_frames = outbox.written
         - dev
             .turntable
             .as_ref()
@@ -523,8 +547,8 @@ pub fn run(
     Ok(BusOutcome {
         imu: TxStats {
             frames: imu_frames,
-            enobufs_retries: retries,
-            lost_iface_down: lost_down,
+            enobufs_retries: outbox.retries,
+            lost_iface_down: outbox.lost_down,
             max_lag_ms,
             ..dev.imu.stats
         },
@@ -536,6 +560,7 @@ pub fn run(
         turntable: dev.turntable.map(|t| t.stats),
         gps: dev.gps.map(|g| (g.stats, g.into_pty())),
         lockstep: ls,
+        sent_logged: outbox.log.map(SentLog::finish).transpose()?,
     })
 }
 

@@ -86,6 +86,14 @@ pub enum CanTxError {
         /// Cause.
         source: std::io::Error,
     },
+    /// The log of sent frames could not be written.
+    #[error("log of the frames sent, {path}")]
+    Log {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
     /// A read failed (the turntable reading its commands).
     #[error("CAN interface {iface}: reading turntable commands failed")]
     Read {
@@ -94,6 +102,64 @@ pub enum CanTxError {
         /// Cause.
         source: std::io::Error,
     },
+}
+
+/// A `candump -l` log of the frames the bench put on the bus: what its emulators sent, each
+/// line stamped with the wall time of its write (µs, as `candump` stamps the time it received a
+/// frame), so that the real tools (`canplayer`, `cantools`) and `hil replay` read it. Frames
+/// lost to a downed interface are not in it: they never reached the bus.
+pub struct SentLog {
+    out: std::io::BufWriter<std::fs::File>,
+    path: String,
+    iface: String,
+    lines: u64,
+}
+
+impl SentLog {
+    /// Create the log file `path` for frames written on `iface`.
+    pub fn create(path: &std::path::Path, iface: &str) -> Result<Self, CanTxError> {
+        let file = std::fs::File::create(path).map_err(|source| CanTxError::Log {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Ok(Self {
+            out: std::io::BufWriter::with_capacity(1 << 16, file),
+            path: path.display().to_string(),
+            iface: iface.into(),
+            lines: 0,
+        })
+    }
+
+    /// Frames just written to the bus.
+    pub(crate) fn frames(&mut self, frames: &[RawFrame]) -> Result<(), CanTxError> {
+        use std::io::Write;
+        let t_us = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_micros() as u64);
+        for f in frames {
+            writeln!(
+                self.out,
+                "{}",
+                wire::candump::format_line(t_us, &self.iface, f)
+            )
+            .map_err(|source| CanTxError::Log {
+                path: self.path.clone(),
+                source,
+            })?;
+        }
+        self.lines += frames.len() as u64;
+        Ok(())
+    }
+
+    /// Flush the file; the lines written.
+    pub fn finish(mut self) -> Result<u64, CanTxError> {
+        use std::io::Write;
+        self.out.flush().map_err(|source| CanTxError::Log {
+            path: self.path.clone(),
+            source,
+        })?;
+        Ok(self.lines)
+    }
 }
 
 /// Write one frame, retrying while the transmit queue is full; returns the retries.

@@ -17,7 +17,6 @@ use anyhow::{Context, Result, bail};
 use emulators::gps::{GpsPty, relink};
 use emulators::player::{PlayOptions, PlayStats, Recorded};
 use nav::config::{GpsSource, NavConfig};
-use nav::record::{GPS_BYTES_ENCODING, RAW_FRAME_ENCODING};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -77,11 +76,7 @@ impl Recording {
             cut: false,
         };
         r.cut = crate::playback::each_message(mcap, "replaying", |m| {
-            let frame = || {
-                (m.channel.message_encoding == RAW_FRAME_ENCODING)
-                    .then(|| nav::record::decode_frame(&m.data))
-                    .flatten()
-            };
+            let frame = || nav::rawmsg::frame_of(m);
             match m.channel.topic.as_str() {
                 "/can/raw" => match frame() {
                     Some(f) => {
@@ -94,10 +89,13 @@ impl Recording {
                     Some(f) => r.sent.push(f),
                     None => r.bad_records += 1,
                 },
-                "/gps/raw" if m.channel.message_encoding == GPS_BYTES_ENCODING => {
-                    r.items.push(Recorded::Gps(m.data.to_vec()));
-                    times.push(Some(m.log_time));
-                }
+                "/gps/raw" => match nav::rawmsg::serial_of(m) {
+                    Some(b) => {
+                        r.items.push(Recorded::Gps(b.to_vec()));
+                        times.push(Some(m.log_time));
+                    }
+                    None => r.bad_records += 1,
+                },
                 "/gps/fix" => r.fixes += 1,
                 "/nav/event" => match serde_json::from_slice::<serde_json::Value>(&m.data) {
                     Ok(e) if e["kind"] == "imu_timeout" => {

@@ -53,11 +53,13 @@ impl<T> Running<T> {
 
 /// Starts a scenario's devices on `iface` behind the bus scheduler, at the scenario's speed
 /// factor and in lockstep with nav (unless the scenario's `[bus]` says otherwise): the IMU (with the scenario's stream faults), the turntable
-/// when the scenario has one, and `gps` (the receiver on its pty) when given.
+/// when the scenario has one, and `gps` (the receiver on its pty) when given. Every frame put on
+/// the bus goes to the `candump -l` log `sent_log` when given.
 pub fn start_scenario(
     s: &Scenario,
     iface: &str,
     gps: Option<GpsDevice>,
+    sent_log: Option<&std::path::Path>,
 ) -> Result<Running<BusOutcome>> {
     let lockstep = Lockstep::default();
     let follow = s.bus.lockstep.then_some(lockstep);
@@ -67,6 +69,9 @@ pub fn start_scenario(
         turntable: turntable
             .map(|tt| emulators::bus::TtBus::new(tt, s.imu.rate_hz, lockstep.latency)),
         gps,
+        sent_log: sent_log
+            .map(|p| emulators::can::SentLog::create(p, iface))
+            .transpose()?,
     };
     let stop = Arc::new(AtomicBool::new(false));
     let progress = Arc::new(Progress::default());

@@ -94,7 +94,7 @@ pub fn turntable_series(mcap_path: &Path, rate_hz: f64) -> anyhow::Result<(Point
         if m.channel.topic != "/can/raw" && m.channel.topic != "/can/tx" {
             return;
         }
-        let Some(f) = nav::record::decode_frame(&m.data) else {
+        let Some(f) = nav::rawmsg::frame_of(m) else {
             return;
         };
         let t = gyro as f64 / rate_hz;
@@ -362,6 +362,18 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
         ("report.md", "this report as text"),
         ("navigation.csv", "navigation error second by second"),
         ("nav.mcap", "nav's recording (MCAP)"),
+        (
+            "truth.mcap",
+            "the bench's truth, turntable and injected faults (MCAP)",
+        ),
+        (
+            "bench-can.log",
+            "every CAN frame the emulators put on the bus (candump -l)",
+        ),
+        (
+            "gps-sent.log",
+            "every byte the GPS emulator wrote to its port",
+        ),
         ("nav-summary.json", "nav's own summary"),
         ("scenario.toml", "the scenario as run"),
         ("nav.toml", "nav's configuration"),

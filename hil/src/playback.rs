@@ -9,7 +9,6 @@
 use anyhow::{Context, Result};
 use nav::config::NavConfig;
 use nav::pipeline::{Output, Pipeline};
-use nav::record::RAW_FRAME_ENCODING;
 use serde::Serialize;
 use std::path::Path;
 use wire::RawFrame;
@@ -189,10 +188,7 @@ pub fn each_message(path: &Path, doing: &str, mut f: impl FnMut(&mcap::Message))
 pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
     let mut r = Replayer::new(cfg)?;
     let cut = each_message(mcap_path, "replaying", |m| {
-        let frame = |m: &mcap::Message| match nav::record::decode_frame(&m.data) {
-            Some(f) if m.channel.message_encoding == RAW_FRAME_ENCODING => Some(f),
-            _ => None,
-        };
+        let frame = nav::rawmsg::frame_of;
         let input = match m.channel.topic.as_str() {
             "/can/raw" => frame(m).map_or(Input::Bad, Input::Frame),
             "/can/tx" => frame(m).map_or(Input::Bad, Input::Sent),
@@ -298,13 +294,10 @@ pub fn export_candump(mcap_path: &Path, iface: &str, out: &mut impl std::io::Wri
     let mut n = 0u64;
     let mut failed = None;
     each_message(mcap_path, "exporting", |m| {
-        if failed.is_some()
-            || !matches!(m.channel.topic.as_str(), "/can/raw" | "/can/tx")
-            || m.channel.message_encoding != RAW_FRAME_ENCODING
-        {
+        if failed.is_some() || !matches!(m.channel.topic.as_str(), "/can/raw" | "/can/tx") {
             return;
         }
-        let Some(f) = nav::record::decode_frame(&m.data) else {
+        let Some(f) = nav::rawmsg::frame_of(m) else {
             return;
         };
         match writeln!(

@@ -416,7 +416,12 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         _ => None,
     };
     let t0 = Instant::now();
-    let devices = crate::devices::start_scenario(s, &opts.iface, gps_device)?;
+    let devices = crate::devices::start_scenario(
+        s,
+        &opts.iface,
+        gps_device,
+        Some(&opts.out.join("bench-can.log")),
+    )?;
     let mut drill = DrillWatch::default();
     let mut next_report = Instant::now() + Duration::from_secs(5);
     let mut last_report = (Instant::now(), 0.0);

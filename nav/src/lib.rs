@@ -18,6 +18,7 @@ pub mod navigator;
 pub mod northfind;
 pub mod output;
 pub mod pipeline;
+pub mod rawmsg;
 pub mod record;
 pub mod strapdown;
 pub mod summary;

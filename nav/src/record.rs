@@ -1,11 +1,11 @@
 //! MCAP recording on its own thread, so the receive path never waits for the disk.
 //!
 //! Channels:
-//! - `/can/raw` (encoding `rlg-hil.can-frame.v1`): every received frame as
-//!   `[id: u16 LE][len: u8][data: 8 bytes]`; log time = the kernel's receive time of the frame
-//!   (`SO_TIMESTAMPNS`, what `candump` stamps), or nav's read time where the socket gives none.
-//! - `/can/tx` (same encoding): every frame nav sent (turntable commands, the solution).
-//! - `/gps/raw` (encoding `rlg-hil.gps-bytes.v1`): the bytes nav read from its GPS source, as
+//! - `/can/raw` (CDR, schema `rlg_hil/msg/CanFrame`, [`crate::rawmsg`]): every received frame;
+//!   stamp and log time = the kernel's receive time of the frame (`SO_TIMESTAMPNS`, what
+//!   `candump` stamps), or nav's read time where the socket gives none.
+//! - `/can/tx` (the same): every frame nav sent (turntable commands, the solution).
+//! - `/gps/raw` (CDR, schema `rlg_hil/msg/SerialBytes`): the bytes nav read from its GPS source, as
 //!   read (NMEA-0183 text, any garbage included; gpsd's JSON replies taken out), one message per
 //!   read; log time = read wall time. In the order nav's loop took them among the frames: what
 //!   `hil replay --bus` writes back onto a port.
@@ -19,6 +19,7 @@
 //! Every JSON channel carries its JSON schema (`nav/schemas/*.json`, encoding `jsonschema`), so
 //! viewers such as Foxglove know its fields and a reader can validate every message.
 
+use crate::rawmsg;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
@@ -28,38 +29,6 @@ use std::thread::JoinHandle;
 use std::time::Instant;
 use thiserror::Error;
 use wire::RawFrame;
-
-/// Message encoding of `/can/raw` and `/can/tx`.
-pub const RAW_FRAME_ENCODING: &str = "rlg-hil.can-frame.v1";
-
-/// Message encoding of `/gps/raw`: the bytes as read, unchanged.
-pub const GPS_BYTES_ENCODING: &str = "rlg-hil.gps-bytes.v1";
-
-/// Bytes of one frame in [`RAW_FRAME_ENCODING`].
-pub const RAW_FRAME_BYTES: usize = 11;
-
-/// A frame in [`RAW_FRAME_ENCODING`]: `[id: u16 LE][len: u8][data: 8 bytes]`.
-pub fn encode_frame(frame: &RawFrame) -> [u8; RAW_FRAME_BYTES] {
-    let mut buf = [0u8; RAW_FRAME_BYTES];
-    buf[..2].copy_from_slice(&frame.id.to_le_bytes());
-    buf[2] = frame.len;
-    buf[3..].copy_from_slice(&frame.data);
-    buf
-}
-
-/// The frame of a [`RAW_FRAME_ENCODING`] message (none when it is not one).
-pub fn decode_frame(data: &[u8]) -> Option<RawFrame> {
-    if data.len() != RAW_FRAME_BYTES || data[2] > 8 {
-        return None;
-    }
-    let mut d = [0u8; 8];
-    d.copy_from_slice(&data[3..]);
-    Some(RawFrame {
-        id: u16::from_le_bytes([data[0], data[1]]),
-        len: data[2],
-        data: d,
-    })
-}
 
 /// One thing to record.
 #[derive(Debug)]
@@ -256,7 +225,8 @@ impl Recorder {
             .spawn(move || -> Result<u64, RecordError> {
                 let mut seq: BTreeMap<u16, u32> = BTreeMap::new();
                 let mut n = 0u64;
-                let mut buf: [u8; RAW_FRAME_BYTES];
+                let mut buf: [u8; rawmsg::CAN_FRAME_BYTES];
+                let mut bytes_msg = Vec::new();
                 let mut text: String;
                 let mut last_flush = Instant::now();
                 let mut views = crate::foxglove::Views::default();
@@ -272,7 +242,7 @@ impl Recorder {
                     for r in batch {
                         let (ch_id, log, publish, data): (u16, u64, u64, &[u8]) = match &r {
                             Record::Frame { t_ns, frame } | Record::Sent { t_ns, frame } => {
-                                buf = encode_frame(frame);
+                                buf = rawmsg::encode_frame(frame, *t_ns);
                                 let c = if matches!(r, Record::Sent { .. }) {
                                     ch.sent
                                 } else {
@@ -280,7 +250,10 @@ impl Recorder {
                                 };
                                 (c, *t_ns, *t_ns, &buf)
                             }
-                            Record::GpsBytes { t_ns, bytes } => (ch.gps, *t_ns, *t_ns, bytes),
+                            Record::GpsBytes { t_ns, bytes } => {
+                                rawmsg::encode_serial(*t_ns, bytes, &mut bytes_msg);
+                                (ch.gps, *t_ns, *t_ns, &bytes_msg)
+                            }
                             Record::Sample {
                                 t_ns,
                                 publish_ns,
@@ -431,14 +404,22 @@ fn open_part(path: &Path) -> Result<(Writer, Channels), RecordError> {
         .create(BufWriter::new(file))
         .map_err(mcap_err.clone())?;
     let meta = BTreeMap::new();
+    let (name, text) = rawmsg::CAN_FRAME_SCHEMA;
+    let frames = w
+        .add_schema(name, rawmsg::ROS2MSG, text.as_bytes())
+        .map_err(mcap_err.clone())?;
+    let (name, text) = rawmsg::SERIAL_BYTES_SCHEMA;
+    let serial = w
+        .add_schema(name, rawmsg::ROS2MSG, text.as_bytes())
+        .map_err(mcap_err.clone())?;
     let raw = w
-        .add_channel(0, "/can/raw", RAW_FRAME_ENCODING, &meta)
+        .add_channel(frames, "/can/raw", rawmsg::CDR, &meta)
         .map_err(mcap_err.clone())?;
     let sent = w
-        .add_channel(0, "/can/tx", RAW_FRAME_ENCODING, &meta)
+        .add_channel(frames, "/can/tx", rawmsg::CDR, &meta)
         .map_err(mcap_err.clone())?;
     let gps = w
-        .add_channel(0, "/gps/raw", GPS_BYTES_ENCODING, &meta)
+        .add_channel(serial, "/gps/raw", rawmsg::CDR, &meta)
         .map_err(mcap_err.clone())?;
     let mut json = BTreeMap::new();
     let mut schemas = BTreeMap::new();
@@ -719,17 +700,61 @@ mod tests {
         assert_eq!(times, (1..=30_000).collect::<Vec<u64>>());
     }
 
+    /// The raw channels carry their `ros2msg` schemas and CDR messages whose stamps are their
+    /// log times; what went in reads back.
     #[test]
-    fn a_recorded_frame_reads_back_and_a_bad_one_does_not() {
+    fn raw_traffic_is_recorded_under_its_ros2msg_schemas() {
+        let d = tempfile::tempdir().unwrap();
+        let path = d.path().join("nav.mcap");
+        let r = Recorder::start(&path).unwrap();
         let f = RawFrame {
-            id: 0x203,
-            len: 6,
-            data: [1, 2, 3, 4, 5, 6, 0, 0],
+            id: 0x081,
+            len: 8,
+            data: [1, 2, 3, 4, 5, 6, 7, 8],
         };
-        assert_eq!(decode_frame(&encode_frame(&f)), Some(f));
-        assert_eq!(decode_frame(&encode_frame(&f)[..10]), None);
-        let mut b = encode_frame(&f);
-        b[2] = 9;
-        assert_eq!(decode_frame(&b), None);
+        r.send(Record::Frame {
+            t_ns: 1_700_000_000_000_000_001,
+            frame: f,
+        });
+        r.send(Record::Sent {
+            t_ns: 1_700_000_000_000_000_002,
+            frame: f,
+        });
+        r.send(Record::GpsBytes {
+            t_ns: 1_700_000_000_000_000_003,
+            bytes: b"$GPGGA,,*56\r\n".to_vec(),
+        });
+        r.finish().unwrap();
+        let buf = std::fs::read(&path).unwrap();
+        let mut seen = Vec::new();
+        for m in mcap::MessageStream::new(&buf).unwrap() {
+            let m = m.unwrap();
+            let s = m.channel.schema.as_ref().expect("a schema");
+            assert_eq!(
+                (s.encoding.as_str(), m.channel.message_encoding.as_str()),
+                ("ros2msg", "cdr")
+            );
+            let sec = i32::from_le_bytes(m.data[4..8].try_into().unwrap()) as u64;
+            let nsec = u32::from_le_bytes(m.data[8..12].try_into().unwrap()) as u64;
+            assert_eq!(
+                sec * 1_000_000_000 + nsec,
+                m.log_time,
+                "{}",
+                m.channel.topic
+            );
+            match m.channel.topic.as_str() {
+                "/can/raw" | "/can/tx" => {
+                    assert_eq!(s.name, "rlg_hil/msg/CanFrame");
+                    assert_eq!(rawmsg::frame_of(&m), Some(f));
+                }
+                "/gps/raw" => {
+                    assert_eq!(s.name, "rlg_hil/msg/SerialBytes");
+                    assert_eq!(rawmsg::serial_of(&m), Some(&b"$GPGGA,,*56\r\n"[..]));
+                }
+                t => panic!("{t}"),
+            }
+            seen.push(m.channel.topic.clone());
+        }
+        assert_eq!(seen, ["/can/raw", "/can/tx", "/gps/raw"]);
     }
 }

@@ -5,7 +5,8 @@
 //! time and then kills itself with SIGKILL (no destructor, no flush runs), then reads what the
 //! child left on disk.
 
-use nav::record::{FLUSH_EVERY, Record, Recorder, decode_frame, wall_ns};
+use nav::rawmsg::frame_of;
+use nav::record::{FLUSH_EVERY, Record, Recorder, wall_ns};
 use std::time::{Duration, Instant};
 use wire::RawFrame;
 
@@ -71,7 +72,7 @@ fn a_killed_recorder_loses_at_most_about_one_flush() {
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let Ok(m) = m else { break };
         if m.channel.topic == "/can/raw" {
-            let f = decode_frame(&m.data).expect("a recorded frame");
+            let f = frame_of(&m).expect("a recorded frame");
             let k = u64::from_le_bytes(f.data);
             // nothing before the cut is missing or out of order
             assert_eq!(k, last_k.map_or(0, |l: u64| l + 1));

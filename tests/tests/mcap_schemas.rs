@@ -1,8 +1,9 @@
 //! A recording from an end-to-end run read with the field's own MCAP reader (Python `mcap`):
 //! its summary's counts match what is read, the Foxglove topics carry Foxglove's schemas by
-//! name, and every JSON message (every 50th of the 2 kHz IMU
-//! samples) is validated against its channel's JSON schema (Python `jsonschema`; both
-//! installed by `./run-tests`). Ignored by a plain `cargo test`: `./run-tests` runs it after the
+//! name, every JSON message (every 50th of the 2 kHz IMU samples) is validated against its
+//! channel's JSON schema (Python `jsonschema`), and the raw channels (CAN frames, GPS bytes)
+//! decode by their `ros2msg` schemas (`mcap-ros2-support`; the received frames of the first 2 s), each
+//! stamp equal to its log time; all installed by `./run-tests`. Ignored by a plain `cargo test`: `./run-tests` runs it after the
 //! end-to-end tests have left the campus loop's `nav.mcap` in `target/e2e-reports/`.
 
 use std::process::Command;
@@ -12,7 +13,34 @@ import json, sys
 from collections import Counter
 from jsonschema import Draft202012Validator
 from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
 counts, bad, schemas, checked, names, logged = Counter(), [], {}, 0, {}, {}
+decoders, cdr_checked, serial = {}, Counter(), bytearray()
+
+def cdr(schema, channel, message, k):
+    """A CDR message decoded by its ros2msg schema (mcap-ros2-support) and checked."""
+    at = f"{channel.topic} #{k}"
+    if schema is None or schema.encoding != "ros2msg":
+        bad.append(f"{at}: no ros2msg schema")
+        return
+    dec = decoders.get(schema.id)
+    if dec is None:
+        dec = decoders[schema.id] = DecoderFactory().decoder_for("cdr", schema)
+    m = dec(message.data)
+    cdr_checked[channel.topic] += 1
+    names[channel.topic] = schema.name
+    if m.stamp.sec * 10**9 + m.stamp.nanosec != message.log_time:
+        bad.append(f"{at}: stamp {m.stamp} is not its log time {message.log_time}")
+    if schema.name == "rlg_hil/msg/CanFrame":
+        data = bytes(m.data)
+        if not (0 <= m.id <= 0x7FF and not m.extended and not m.remote and m.dlc <= 8
+                and len(data) == 8 and not any(data[m.dlc:])):
+            bad.append(f"{at}: not a classic frame of the bus: {m}")
+    elif schema.name == "rlg_hil/msg/SerialBytes":
+        serial.extend(bytes(m.data))
+    else:
+        bad.append(f"{at}: unknown schema {schema.name}")
+
 with open(sys.argv[1], "rb") as f:
     reader = make_reader(f)
     summary = reader.get_summary()
@@ -21,9 +49,18 @@ with open(sys.argv[1], "rb") as f:
     for cid, n in summary.statistics.channel_message_counts.items():
         counts[summary.channels[cid].topic] += n
     json_topics = [c.topic for c in summary.channels.values() if c.message_encoding == "json"]
+    # the CDR channels (raw CAN frames, serial bytes) decoded by their ros2msg schemas: every
+    # message but the 4 kHz received frames, of which the first 2 s of log time are (a pass over all of
+    # them alone takes 7 s)
+    cdr_topics = [c.topic for c in summary.channels.values() if c.message_encoding == "cdr"]
+    busy = [t for t in cdr_topics if t in ("/can/raw", "/bench/can/tx")]
+    read = json_topics + [t for t in cdr_topics if t not in busy]
     seen = Counter()
-    for schema, channel, message in reader.iter_messages(topics=json_topics):
+    for schema, channel, message in reader.iter_messages(topics=read):
         seen[channel.topic] += 1
+        if channel.message_encoding == "cdr":
+            cdr(schema, channel, message, seen[channel.topic])
+            continue
         if channel.topic == "/imu/sample" and seen[channel.topic] % 50 != 1:
             continue
         checked += 1
@@ -41,10 +78,16 @@ with open(sys.argv[1], "rb") as f:
         for e in v.iter_errors(json.loads(message.data)):
             if len(bad) < 20:
                 bad.append(f"{channel.topic} #{seen[channel.topic]}: {e.message}")
-if seen != Counter({t: counts[t] for t in json_topics if counts[t]}):
+    if busy:
+        t0 = summary.statistics.message_start_time
+        for k, (schema, channel, message) in enumerate(
+                reader.iter_messages(topics=busy, end_time=t0 + 2 * 10**9)):
+            cdr(schema, channel, message, k + 1)
+if seen != Counter({t: counts[t] for t in read if counts[t]}):
     bad.append(f"read {dict(seen)}, the summary counts {dict(counts)}")
-print(json.dumps({"counts": counts, "bad": bad, "schemas": len(schemas), "checked": checked,
-                  "schema_names": names, "log_range": logged,
+print(json.dumps({"counts": counts, "bad": bad[:20], "schemas": len(schemas), "checked": checked,
+                  "schema_names": names, "log_range": logged, "cdr_checked": cdr_checked,
+                  "nmea_sentences": serial.count(b"$G"),
                   "chunks": len(summary.chunk_indexes) if summary else 0}))
 "#;
 
@@ -110,6 +153,17 @@ fn a_run_recording_reads_in_python_mcap_and_every_json_message_follows_its_schem
         assert_eq!(r["schema_names"][topic], name, "{r}");
     }
     assert!(r["schemas"].as_u64().unwrap() >= 5, "{r}");
+    // the raw traffic under its published ros2msg schemas
+    for (topic, name) in [
+        ("/can/raw", "rlg_hil/msg/CanFrame"),
+        ("/can/tx", "rlg_hil/msg/CanFrame"),
+        ("/gps/raw", "rlg_hil/msg/SerialBytes"),
+    ] {
+        assert_eq!(r["schema_names"][topic], name, "{r}");
+        assert!(r["cdr_checked"][topic].as_u64().unwrap_or(0) > 0, "{r}");
+    }
+    // the campus loop's GPS: at 1 Hz, several sentences an epoch, for minutes
+    assert!(r["nmea_sentences"].as_u64().unwrap() > 100, "{r}");
 
     // the bench's truth beside it, on the wall clock nav logged the same instants at
     let t = check("truth.mcap");

@@ -699,6 +699,8 @@ fn nav_sends(id: u16) -> bool {
 /// guest's packages):
 /// - `candump -L` watching a bench run sees every frame the emulators wrote and every frame nav
 ///   sent, and its log replays through nav's pipeline (`hil replay`) bit for bit;
+/// - the bench's own log of the frames its emulators sent (`bench-can.log`) is what candump saw
+///   of them;
 /// - a log exported from nav's recording (`hil candump`) plays back with `canplayer` onto
 ///   another interface, where a second nav, started by hand as on a vehicle, receives every
 ///   frame and sends the same solution, frame for frame.
@@ -766,6 +768,15 @@ fn can_utils_watch_the_bus_and_play_our_logs() {
     );
     assert_eq!(imu.len() as u64, r["tx"]["frames"].as_u64().unwrap());
     assert!(!sent.is_empty());
+    // the bench's own log of what its emulators sent is what candump saw of them, frame for
+    // frame and in order
+    let bench = std::fs::read_to_string(run.join("bench-can.log")).expect("bench-can.log");
+    let bench_sent = log_frames(&bench, |id| !nav_sends(id));
+    assert_eq!(bench_sent.len(), imu.len(), "the IMU alone on this bus");
+    assert!(
+        bench_sent == log_frames(&captured, |id| !nav_sends(id)),
+        "bench-can.log differs from candump's capture"
+    );
 
     // the real tool's log replays through nav's pipeline: what nav sent, bit for bit
     let o = Command::new(bin("hil"))
