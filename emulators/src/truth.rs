@@ -341,6 +341,75 @@ impl AxisAngle for ConstantRate {
     }
 }
 
+/// Continuous rotation that reverses after every revolution (the rotating INS of paper 004:
+/// each axis turns one way for a full turn, then back), starting from rest at `t = 0`. Each
+/// reversal is a linear change of rate from `+rate` to `-rate` (or back) at `accel`, centred on
+/// its midpoint; the angle swings through exactly one turn between reversals, with a period of
+/// `2 (360 deg / rate + rate / accel)`. Rate and angle are continuous (quadrature over a sample
+/// interval stays exact to rounding away from the reversals' corners).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reversing {
+    /// Rate between reversals, rad/s (positive: the first turn is positive).
+    pub rate: f64,
+    /// Angular acceleration of each reversal, rad/s^2 (positive).
+    pub accel: f64,
+}
+
+impl Reversing {
+    /// Half the duration of a reversal, s.
+    fn half_ramp(&self) -> f64 {
+        self.rate.abs() / self.accel
+    }
+
+    /// Angle and rate at `t`.
+    fn eval(&self, t: f64) -> (f64, f64) {
+        let w = self.rate.abs();
+        let sign = self.rate.signum();
+        if w == 0.0 || t <= 0.0 {
+            return (0.0, 0.0);
+        }
+        let r = self.half_ramp();
+        // between reversals: one whole turn from one reversal's stop to the next
+        let half = 2.0 * PI / w + r;
+        // the first start from rest takes the second half of a reversal: time shifted by r so
+        // that the turn's constant-rate part starts at t = r
+        let u = t.rem_euclid(2.0 * half);
+        let (a, rate) = if t < r {
+            (0.5 * w * t * t / r, w * t / r)
+        } else if u < r {
+            // end of the reversal from -w to +w
+            (w * r / 2.0 + w * u * u / (2.0 * r), w * u / r)
+        } else if u <= half - r {
+            (w * u, w)
+        } else if u < half + r {
+            let d = u - half;
+            (w * (half - r) + w / (2.0 * r) * (r * r - d * d), -w * d / r)
+        } else if u <= 2.0 * half - r {
+            (w * (2.0 * half - u), -w)
+        } else {
+            let d = u - 2.0 * half;
+            (w * r + w / (2.0 * r) * (d * d - r * r), w * d / r)
+        };
+        // the start from rest ends at angle w r / 2 where a centred reversal would be at w r:
+        // every later angle is w r / 2 lower than the triangle wave's
+        let offset = if t < r { 0.0 } else { -w * r / 2.0 };
+        let a = if t < r { a } else { a + offset };
+        (sign * a, sign * rate)
+    }
+}
+
+impl AxisAngle for Reversing {
+    fn angle(&self, t: f64) -> f64 {
+        self.eval(t).0
+    }
+    fn rate(&self, t: f64) -> f64 {
+        self.eval(t).1
+    }
+    fn angle_and_rate(&self, t: f64) -> (f64, f64) {
+        self.eval(t)
+    }
+}
+
 /// One axis of the indexing mechanism: the IMU turns about a fixed axis of its base by the axis
 /// angle, right-handed (the vehicle's azimuth indexer turns about z, up: positive is
 /// counter-clockwise seen from above).
@@ -769,6 +838,37 @@ mod tests {
         let f = site(0.0, 10.0, 0.0).force();
         let g = earth::gravity(0.0, 0.0);
         assert!((f.y - g * 10f64.to_radians().sin()).abs() < 1e-9, "{f}");
+    }
+
+    /// Rate is the angle's derivative everywhere (reversals and the start from rest included),
+    /// the angle is continuous, and each turn is a whole revolution.
+    #[test]
+    fn a_reversing_axis_turns_one_revolution_each_way() {
+        let a = Reversing {
+            rate: 5f64.to_radians(),
+            accel: 5f64.to_radians(),
+        };
+        let h = 1e-5;
+        let mut t = 0.0005;
+        while t < 400.0 {
+            let num = (a.angle(t + h) - a.angle(t - h)) / (2.0 * h);
+            assert!(
+                (num - a.rate(t)).abs() < 1e-6,
+                "t {t}: {num} vs {}",
+                a.rate(t)
+            );
+            assert!((a.angle(t + 1e-9) - a.angle(t)).abs() < 1e-9, "t {t}");
+            t += 0.0137;
+        }
+        // the constant-rate parts: +5 deg/s, then -5 deg/s after the first reversal (72 s of
+        // turn and the 1 s ramp's half, centred at 73 s)
+        assert!((a.rate(30.0) - a.rate).abs() < 1e-15);
+        assert!((a.rate(100.0) + a.rate).abs() < 1e-15);
+        assert!(a.rate(73.0).abs() < 1e-12);
+        // from one reversal (where the axis stops) to the next: one whole turn
+        let turn = a.angle(73.0) - a.angle(146.0);
+        assert!((turn - 2.0 * PI).abs() < 1e-12, "{turn}");
+        assert!((a.angle(219.0) - a.angle(73.0)).abs() < 1e-12);
     }
 
     /// Rate from attitude by central differences (independent check of the analytic rates).

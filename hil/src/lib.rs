@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod busreplay;
+pub mod calibexp;
 pub mod devices;
 pub mod drill;
 pub mod experiment;

@@ -390,6 +390,34 @@ enum Experiment {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Paper 004 in process: online self-calibration of the gyros of a dual-axis rotating IMU
+    /// (fibre-optic gyros, 100 Hz, both axes at 5 deg/s reversing every turn) by the paper's
+    /// decoupled recursive least squares against a 14-state alignment Kalman filter: mean
+    /// absolute bias and scale-factor errors over the second half, the ratio of the two methods
+    /// beside the paper's, median over the runs. Writes report.md/json/html. Use a release build.
+    Calibration {
+        /// Runs (seeds).
+        #[arg(long, default_value_t = 20)]
+        runs: usize,
+        /// First seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Run length, s (errors are averaged over its second half).
+        #[arg(long, default_value_t = 900.0)]
+        duration: f64,
+        /// Latitude, deg.
+        #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+        lat: f64,
+        /// True heading, deg (the estimators are given it less 0.06 deg).
+        #[arg(long, default_value_t = 30.06, allow_negative_numbers = true)]
+        heading: f64,
+        /// Start the inner axis this long after the outer, s (0: in step, as in the paper).
+        #[arg(long, default_value_t = 0.0)]
+        inner_delay: f64,
+        /// Output folder (default runs/experiment-calibration-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Paper 000, Tables 1-3: coning drift of the classical, Taylor-tuned and fitted
     /// algorithms on filtered data; writes CSV, JSON, Markdown and an SVG plot.
     Coning {

@@ -3,6 +3,7 @@
 //! config file and knows nothing of emulators.
 
 pub mod attitude;
+pub mod calib;
 pub mod cli;
 pub mod config;
 pub mod coning;

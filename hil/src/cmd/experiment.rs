@@ -149,6 +149,43 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
             println!(" files: {}", out.display());
             Ok(routes_status(&r))
         }
+        Experiment::Calibration {
+            runs,
+            seed,
+            duration,
+            lat,
+            heading,
+            inner_delay,
+            out,
+        } => {
+            let ok = |x: f64, lo: f64, hi: f64| (lo..=hi).contains(&x);
+            if runs == 0
+                || !ok(duration, 20.0, 1e6)
+                || !ok(lat, -89.0, 89.0)
+                || !ok(inner_delay, 0.0, 1e6)
+            {
+                bail!(
+                    "--runs must be positive, --duration at least 20 s, |--lat| at most 89 deg and --inner-delay not negative"
+                );
+            }
+            let out = out.unwrap_or_else(|| default_out("experiment-calibration"));
+            let defaults = hil::calibexp::CalibOptions::default();
+            let o = hil::calibexp::CalibOptions {
+                runs,
+                seed,
+                duration_s: duration,
+                score_from_s: duration / 2.0,
+                lat_deg: lat,
+                heading_deg: heading,
+                inner_delay_s: inner_delay,
+                coarse_heading_deg: heading - (defaults.heading_deg - defaults.coarse_heading_deg),
+                ..defaults
+            };
+            let r = hil::calibexp::calibration(&o, Some(&out), true)?;
+            print!("{}", hil::calibexp::markdown(&r));
+            println!(" files: {}", out.display());
+            Ok(if r.meets_paper { 0 } else { 1 })
+        }
         Experiment::Coning {
             out,
             duration,
