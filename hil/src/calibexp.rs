@@ -122,6 +122,10 @@ pub struct CalibRun {
     pub kf: MethodErrors,
     /// Heading error the east drift causes without calibration, deg.
     pub heading_uncalibrated_deg: f64,
+    /// The RLS's estimates at the end: the gyros' biases, deg/h.
+    pub rls_bias_dph: [f64; 3],
+    /// And their scale-factor errors, ppm.
+    pub rls_sf_ppm: [f64; 3],
 }
 
 /// The experiment's result.
@@ -204,6 +208,7 @@ pub fn run_one(o: &CalibOptions, seed: u64) -> Result<CalibRun> {
         gyro_range_dps: p.gyro_range_dps,
         accel_range_mps2: p.accel_range_g * G0,
         rate_hz: p.rate_hz,
+        ..Default::default()
     });
     let dt = 1.0 / o.rate_hz;
     let noise = o.gyro_noise_dph * DEG_H;
@@ -286,6 +291,8 @@ pub fn run_one(o: &CalibOptions, seed: u64) -> Result<CalibRun> {
         rls: method(rls_err, rls.bias()),
         kf: method(kf_err, kf.bias()),
         heading_uncalibrated_deg: heading(true_bias),
+        rls_bias_dph: (rls.bias() / DEG_H).into(),
+        rls_sf_ppm: (rls.scale_factor() * 1e6).into(),
     })
 }
 
@@ -302,6 +309,27 @@ impl emulators::truth::AxisAngle for Delayed {
     }
     fn rate(&self, t: f64) -> f64 {
         self.axis.rate(t - self.delay_s)
+    }
+}
+
+/// The parameter file the first run's RLS estimates make, in the run folder.
+pub const PARAMETER_FILE: &str = "gyro-parameters.toml";
+
+/// The IMU parameter file of a run's RLS estimates (what nav loads at start with
+/// `[calibration]`), for the emulated IMU of its seed.
+pub fn parameters(o: &CalibOptions, r: &CalibRun) -> nav::params::ImuParameters {
+    nav::params::ImuParameters {
+        format: nav::params::FORMAT.into(),
+        imu: format!("emulated-fog-seed-{}", r.seed),
+        procedure: format!(
+            "paper 004 decoupled RLS, dual-axis rotation at {} deg/s reversing every turn, {} s, static base at {} deg",
+            o.axis_rate_dps, o.duration_s, o.lat_deg
+        ),
+        date: nav::params::now_rfc3339(),
+        gyro: nav::params::GyroParameters {
+            bias_dph: r.rls_bias_dph,
+            scale_factor_ppm: r.rls_sf_ppm,
+        },
     }
 }
 
@@ -355,6 +383,11 @@ pub fn calibration(o: &CalibOptions, out: Option<&Path>, progress: bool) -> Resu
             serde_json::to_string_pretty(&report)?,
         )?;
         std::fs::write(out.join("report.md"), markdown(&report))?;
+        if let Some(first) = report.runs.first() {
+            let f = out.join(PARAMETER_FILE);
+            std::fs::write(&f, parameters(o, first).to_toml())
+                .with_context(|| format!("writing {}", f.display()))?;
+        }
         crate::html::folder_page(
             out,
             "Experiment: calibration (paper 004)",
@@ -463,5 +496,21 @@ mod tests {
         eprintln!("{p:?}");
         assert!(p.rls.bias_dph > r.rls.bias_dph, "{p:?}");
         assert!(p.rls.sf_ppm < 0.5 && p.kf.sf_ppm > 3.0, "{p:?}");
+        // with the inner axis a quarter turn behind, the attitude errors average out better;
+        // the parameter file of its estimates is one nav loads, for this unit only
+        let delayed = CalibOptions {
+            inner_delay_s: 18.0,
+            ..paper
+        };
+        let d = run_one(&delayed, 3).unwrap();
+        eprintln!("{d:?}");
+        assert!(d.rls.bias_dph < p.rls.bias_dph, "{d:?}");
+        let f = parameters(&delayed, &d);
+        assert_eq!(f.check("emulated-fog-seed-3"), Ok(()));
+        assert!(f.check("emulated-fog-seed-4").is_err());
+        for j in 0..3 {
+            assert!((f.gyro.scale_factor_ppm[j] - 10.0).abs() < 1.0, "{f:?}");
+            assert!((f.gyro.bias_dph[j].abs() - 0.01).abs() < 0.004, "{f:?}");
+        }
     }
 }

@@ -40,6 +40,7 @@ pub fn navigation_config(s: &Scenario) -> Option<NavigationConfig> {
 /// receiver's port when the scenario has one (in process a name only: nothing opens it).
 pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) -> NavConfig {
     NavConfig {
+        calibration: None,
         can: iface.map(|i| CanConfig {
             interface: i.into(),
             rcvbuf_bytes: s.bus.nav_rcvbuf_bytes,

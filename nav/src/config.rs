@@ -20,6 +20,10 @@ pub struct NavConfig {
     /// IMU calibration bound to the unit.
     #[serde(default)]
     pub imu: ImuCalibration,
+    /// The unit's calibration parameters from a file a calibration procedure wrote
+    /// ([`crate::params`]): its gyro biases and scale factors replace `[imu]`'s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<CalibrationConfig>,
     /// Dither filter, coning and sculling compensation.
     #[serde(default)]
     pub processing: ProcessingConfig,
@@ -35,6 +39,16 @@ pub struct NavConfig {
     /// Recording and reports.
     #[serde(default)]
     pub record: RecordConfig,
+}
+
+/// Where the IMU unit's calibration parameters come from.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrationConfig {
+    /// The IMU unit's serial number: the parameter file must name the same.
+    pub imu: String,
+    /// The parameter file (relative to the config file's folder).
+    pub parameters: PathBuf,
 }
 
 /// CAN bus settings.
@@ -157,6 +171,9 @@ pub enum ConfigError {
         /// Cause.
         source: toml::de::Error,
     },
+    /// The IMU parameter file named in `[calibration]` is refused.
+    #[error(transparent)]
+    Parameters(#[from] crate::params::ParamsError),
     /// A value makes no sense.
     #[error("config file {path}: {what}")]
     Invalid {
@@ -246,6 +263,30 @@ impl NavConfig {
             return Err(invalid(format!("processing: {e}")));
         }
         let base = path.parent().unwrap_or(Path::new("."));
+        if let Some(c) = cfg.calibration.as_mut() {
+            if c.parameters.is_relative() {
+                c.parameters = base.join(&c.parameters);
+            }
+            let p = crate::params::ImuParameters::load(&c.parameters, &c.imu)?;
+            let imu = &mut cfg.imu;
+            let zero = [0.0; 3];
+            for (inline, from_file, name) in [
+                (&mut imu.gyro_bias_dph, p.gyro.bias_dph, "gyro_bias_dph"),
+                (
+                    &mut imu.gyro_scale_factor_ppm,
+                    p.gyro.scale_factor_ppm,
+                    "gyro_scale_factor_ppm",
+                ),
+            ] {
+                if *inline != zero && *inline != from_file {
+                    return Err(invalid(format!(
+                        "imu.{name} is given here and, differently, in the parameter file {}: keep one",
+                        c.parameters.display()
+                    )));
+                }
+                *inline = from_file;
+            }
+        }
         let gps_export = cfg.gps.as_mut().and_then(|g| g.fixes_jsonl.as_mut());
         for p in [&mut cfg.record.mcap, &mut cfg.record.summary]
             .into_iter()
@@ -299,6 +340,49 @@ mod tests {
         // and it round-trips through the writer
         std::fs::write(&p, c.to_toml()).unwrap();
         assert_eq!(NavConfig::load(&p).unwrap().can.unwrap().interface, "can0");
+    }
+
+    /// `[calibration]` names the unit and its parameter file: the file's gyro parameters go to
+    /// the IMU front end; a file of another unit, or one that contradicts `[imu]`, stops nav.
+    #[test]
+    fn the_calibration_file_is_loaded_for_its_unit_only() {
+        let dir = tempfile::tempdir().unwrap();
+        let params = crate::params::ImuParameters {
+            format: crate::params::FORMAT.into(),
+            imu: "FOG-7".into(),
+            procedure: "test".into(),
+            date: crate::params::now_rfc3339(),
+            gyro: crate::params::GyroParameters {
+                bias_dph: [0.01, -0.02, 0.03],
+                scale_factor_ppm: [10.0, 11.0, 12.0],
+            },
+        };
+        std::fs::write(dir.path().join("gyro.toml"), params.to_toml()).unwrap();
+        let p = dir.path().join("nav.toml");
+        let write = |text: &str| {
+            std::fs::write(&p, format!("[can]\ninterface = \"can0\"\n{text}")).unwrap()
+        };
+        write("[calibration]\nimu = \"FOG-7\"\nparameters = \"gyro.toml\"\n");
+        let c = NavConfig::load(&p).unwrap();
+        assert_eq!(c.imu.gyro_bias_dph, [0.01, -0.02, 0.03]);
+        assert_eq!(c.imu.gyro_scale_factor_ppm, [10.0, 11.0, 12.0]);
+        // what the bench writes back loads again
+        std::fs::write(&p, c.to_toml()).unwrap();
+        assert_eq!(NavConfig::load(&p).unwrap().imu, c.imu);
+        write("[calibration]\nimu = \"FOG-8\"\nparameters = \"gyro.toml\"\n");
+        let e = NavConfig::load(&p).unwrap_err().to_string();
+        assert!(e.contains("field `imu`") && e.contains("FOG-8"), "{e}");
+        let mut other = c.clone();
+        other.imu.gyro_bias_dph = [1.0, 0.0, 0.0];
+        std::fs::write(&p, other.to_toml()).unwrap();
+        let e = NavConfig::load(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("imu.gyro_bias_dph") && e.contains("keep one"),
+            "{e}"
+        );
+        write("[calibration]\nimu = \"FOG-7\"\nparameters = \"missing.toml\"\n");
+        let e = NavConfig::load(&p).unwrap_err().to_string();
+        assert!(e.contains("missing.toml"), "{e}");
     }
 
     /// A `[gps]` names its source: a serial port, or gpsd at host:port; what is missing is said.

@@ -22,6 +22,13 @@ pub struct ImuCalibration {
     pub accel_range_mps2: f64,
     /// Sample rate, Hz.
     pub rate_hz: f64,
+    /// Gyro biases, deg/h, taken off each gyro's rate (from a calibration: the parameter file
+    /// of `[calibration]`).
+    #[serde(default)]
+    pub gyro_bias_dph: [f64; 3],
+    /// Gyro scale-factor errors, ppm: rate = (output - bias) / (1 + sf).
+    #[serde(default)]
+    pub gyro_scale_factor_ppm: [f64; 3],
 }
 
 impl Default for ImuCalibration {
@@ -32,6 +39,8 @@ impl Default for ImuCalibration {
             gyro_range_dps: 650.0, // 400 deg/s body rate plus the dither's peak rate
             accel_range_mps2: 10.0 * 9.80665,
             rate_hz: wire::IMU_RATE_HZ,
+            gyro_bias_dph: [0.0; 3],
+            gyro_scale_factor_ppm: [0.0; 3],
         }
     }
 }
@@ -211,6 +220,8 @@ pub struct Housekeeping {
 pub struct ImuFrontEnd {
     cal: ImuCalibration,
     gyro_scale: [f64; 3],
+    /// Each gyro's bias per sample, rad (the calibration's).
+    gyro_bias: [f64; 3],
     max_span: u32,
     last_counter: Option<u16>,
     last_gyro: [u16; 3],
@@ -236,7 +247,15 @@ impl ImuFrontEnd {
         let arcsec = std::f64::consts::PI / 180.0 / 3600.0;
         Self {
             cal,
-            gyro_scale: cal.gyro_pulse_arcsec.map(|w| w * arcsec),
+            // the scale-factor error folded into the pulse weight: (c w - b) / (1 + sf)
+            gyro_scale: std::array::from_fn(|i| {
+                cal.gyro_pulse_arcsec[i] * arcsec / (1.0 + cal.gyro_scale_factor_ppm[i] * 1e-6)
+            }),
+            gyro_bias: std::array::from_fn(|i| {
+                cal.gyro_bias_dph[i] * arcsec
+                    / cal.rate_hz
+                    / (1.0 + cal.gyro_scale_factor_ppm[i] * 1e-6)
+            }),
             max_span: cal.max_safe_span(),
             last_counter: None,
             last_gyro: [0; 3],
@@ -352,7 +371,9 @@ impl ImuFrontEnd {
         self.pending = Some(ImuSample {
             sample: self.ext,
             span,
-            dtheta: std::array::from_fn(|i| dc[i] as f64 * self.gyro_scale[i]),
+            dtheta: std::array::from_fn(|i| {
+                dc[i] as f64 * self.gyro_scale[i] - self.gyro_bias[i] * f64::from(span)
+            }),
             dv: [0.0; 3],
             pps_offset: None,
             accel_missing: false,
@@ -512,6 +533,33 @@ mod tests {
                 .all(|s| s.span == 1 && (s.dtheta[1] + 700.0 * pulse).abs() < 1e-12)
         );
         assert_eq!(out.last().map(|s| s.sample), Some(65999));
+    }
+
+    /// A calibration's bias comes off each sample's angle (across a gap too: by its span) and
+    /// its scale-factor error off the rest.
+    #[test]
+    fn the_calibration_takes_off_bias_and_scale_factor() {
+        let cal = ImuCalibration {
+            gyro_bias_dph: [3600.0, 0.0, 0.0],
+            gyro_scale_factor_ppm: [0.0, 1000.0, 0.0],
+            ..ImuCalibration::default()
+        };
+        let mut fe = ImuFrontEnd::new(cal);
+        let (out, _) = run(&mut fe, 0..50, 500, |k| k == 20);
+        let arcsec = std::f64::consts::PI / 180.0 / 3600.0;
+        // 3600 deg/h is 1 deg/s: 1.8 arcsec a sample at 2 kHz
+        for s in &out {
+            let n = f64::from(s.span);
+            assert!(
+                (s.dtheta[0] - n * (500.0 - 1.8) * arcsec).abs() < 1e-15,
+                "{s:?}"
+            );
+            assert!(
+                (s.dtheta[1] + n * 500.0 * arcsec / 1.001).abs() < 1e-15,
+                "{s:?}"
+            );
+        }
+        assert!(out.iter().any(|s| s.span == 2));
     }
 
     #[test]

@@ -18,6 +18,7 @@ pub mod kf;
 pub mod navigator;
 pub mod northfind;
 pub mod output;
+pub mod params;
 pub mod pipeline;
 pub mod rawmsg;
 pub mod record;

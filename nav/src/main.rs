@@ -71,6 +71,15 @@ fn main() {
 fn real_main() -> Result<()> {
     let cli = Cli::parse();
     let cfg = NavConfig::load(&cli.config)?;
+    if let Some(c) = &cfg.calibration {
+        tracing::info!(
+            imu = %c.imu,
+            file = %c.parameters.display(),
+            "gyro calibration: bias {:?} deg/h, scale factor {:?} ppm",
+            cfg.imu.gyro_bias_dph,
+            cfg.imu.gyro_scale_factor_ppm
+        );
+    }
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()

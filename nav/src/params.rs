@@ -1,0 +1,218 @@
+//! The calibration parameters bound to one IMU unit (paper 004's "binding of calibration
+//! parameters"): a TOML file a calibration procedure writes and nav loads at start, named by the
+//! `[calibration]` table of nav's config.
+//!
+//! ```toml
+//! format = "rlg-hil.imu-parameters.v1"
+//! imu = "FOG-0001"                       # the unit's serial number
+//! procedure = "paper 004 decoupled RLS, dual-axis rotation, 900 s, static base"
+//! date = "2026-11-24T01:00:00Z"          # RFC 3339
+//! [gyro]
+//! bias_dph = [0.0100, 0.0101, -0.0099]   # deg/h, taken off each gyro's rate
+//! scale_factor_ppm = [10.0, 9.97, 9.97]  # ppm: rate = (output - bias) / (1 + sf)
+//! ```
+//!
+//! The whole file is read and checked before anything is used: a missing, corrupt or
+//! mismatched file is an error naming the file and the field, and nav does not start.
+
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// The file format this nav reads.
+pub const FORMAT: &str = "rlg-hil.imu-parameters.v1";
+
+/// Largest gyro bias accepted, deg/h (beyond it the file is not for a navigation-grade IMU).
+pub const MAX_BIAS_DPH: f64 = 100.0;
+/// Largest gyro scale-factor error accepted, ppm.
+pub const MAX_SF_PPM: f64 = 10_000.0;
+
+/// The parameter file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuParameters {
+    /// [`FORMAT`].
+    pub format: String,
+    /// Serial number of the IMU unit the parameters belong to.
+    pub imu: String,
+    /// How they were found.
+    pub procedure: String,
+    /// When, RFC 3339.
+    pub date: String,
+    /// The gyros' parameters.
+    pub gyro: GyroParameters,
+}
+
+/// Per-gyro parameters (x, y, z).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GyroParameters {
+    /// Bias, deg/h.
+    pub bias_dph: [f64; 3],
+    /// Scale-factor error, ppm.
+    pub scale_factor_ppm: [f64; 3],
+}
+
+/// Why a parameter file is refused.
+#[derive(Debug, Error)]
+pub enum ParamsError {
+    /// Not readable.
+    #[error("IMU parameter file {path}: cannot read it")]
+    Read {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Not TOML of this form (toml names the field, line and column).
+    #[error("IMU parameter file {path}: {source}")]
+    Parse {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: toml::de::Error,
+    },
+    /// A field's value is wrong.
+    #[error("IMU parameter file {path}: field `{field}`: {what}")]
+    Field {
+        /// File.
+        path: PathBuf,
+        /// The field.
+        field: &'static str,
+        /// What is wrong.
+        what: String,
+    },
+}
+
+impl ImuParameters {
+    /// Read and check the file `path` for the IMU with serial number `imu`.
+    pub fn load(path: &Path, imu: &str) -> Result<Self, ParamsError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ParamsError::Read {
+            path: path.into(),
+            source,
+        })?;
+        let p: ImuParameters = toml::from_str(&text).map_err(|source| ParamsError::Parse {
+            path: path.into(),
+            source,
+        })?;
+        p.check(imu).map_err(|(field, what)| ParamsError::Field {
+            path: path.into(),
+            field,
+            what,
+        })?;
+        Ok(p)
+    }
+
+    /// The checks: format, unit, date, values in range. `Err((field, what))`.
+    pub fn check(&self, imu: &str) -> Result<(), (&'static str, String)> {
+        if self.format != FORMAT {
+            return Err((
+                "format",
+                format!("{:?}, this nav reads {FORMAT:?}", self.format),
+            ));
+        }
+        if self.imu != imu {
+            return Err((
+                "imu",
+                format!(
+                    "the parameters belong to IMU {:?}, nav's config names IMU {imu:?}",
+                    self.imu
+                ),
+            ));
+        }
+        if chrono::DateTime::parse_from_rfc3339(&self.date).is_err() {
+            return Err(("date", format!("{:?} is not an RFC 3339 time", self.date)));
+        }
+        let bad = |v: &[f64; 3], max: f64| v.iter().any(|x| !(x.is_finite() && x.abs() <= max));
+        if bad(&self.gyro.bias_dph, MAX_BIAS_DPH) {
+            return Err((
+                "gyro.bias_dph",
+                format!(
+                    "{:?}: each must be a number within +-{MAX_BIAS_DPH} deg/h",
+                    self.gyro.bias_dph
+                ),
+            ));
+        }
+        if bad(&self.gyro.scale_factor_ppm, MAX_SF_PPM) {
+            return Err((
+                "gyro.scale_factor_ppm",
+                format!(
+                    "{:?}: each must be a number within +-{MAX_SF_PPM} ppm",
+                    self.gyro.scale_factor_ppm
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The file's text.
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).unwrap_or_default()
+    }
+}
+
+/// The time now, RFC 3339 in UTC, to the second (a parameter file's `date`).
+pub fn now_rfc3339() -> String {
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs() as i64);
+    chrono::DateTime::from_timestamp(now, 0)
+        .map(|d| d.to_rfc3339_opts(chrono::SecondsFormat::Secs, true))
+        .unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+format = "rlg-hil.imu-parameters.v1"
+imu = "FOG-0001"
+procedure = "test"
+date = "2026-11-24T01:00:00Z"
+[gyro]
+bias_dph = [0.01, 0.0101, -0.0099]
+scale_factor_ppm = [10.0, 9.97, 9.97]
+"#;
+
+    fn load(text: &str, imu: &str) -> Result<ImuParameters, ParamsError> {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("gyro.toml");
+        std::fs::write(&p, text).unwrap();
+        ImuParameters::load(&p, imu)
+    }
+
+    #[test]
+    fn a_good_file_loads_and_writes_back_the_same() {
+        let p = load(GOOD, "FOG-0001").unwrap();
+        assert_eq!(p.gyro.bias_dph[2], -0.0099);
+        let again: ImuParameters = toml::from_str(&p.to_toml()).unwrap();
+        assert_eq!(again, p);
+    }
+
+    /// Each way a file can be wrong is refused with the field named.
+    #[test]
+    fn a_bad_file_is_refused_naming_the_field() {
+        let msg = |text: &str, imu: &str| load(text, imu).unwrap_err().to_string();
+        assert!(msg(GOOD, "FOG-0002").contains("field `imu`"));
+        let m = msg(&GOOD.replace("v1\"", "v9\""), "FOG-0001");
+        assert!(m.contains("field `format`"), "{m}");
+        let m = msg(
+            &GOOD.replace("2026-11-24T01:00:00Z", "yesterday"),
+            "FOG-0001",
+        );
+        assert!(m.contains("field `date`"), "{m}");
+        let m = msg(&GOOD.replace("0.0101", "1e9"), "FOG-0001");
+        assert!(m.contains("gyro.bias_dph"), "{m}");
+        let m = msg(&GOOD.replace("9.97, 9.97]", "9.97]"), "FOG-0001");
+        assert!(m.contains("scale_factor_ppm"), "{m}");
+        let m = msg(&GOOD.replace("procedure = \"test\"\n", ""), "FOG-0001");
+        assert!(m.contains("procedure"), "{m}");
+        let m = msg(&format!("{GOOD}\nextra = 1\n"), "FOG-0001");
+        assert!(m.contains("extra"), "{m}");
+        let m = msg("format = \"rlg-hil.imu-param", "FOG-0001");
+        assert!(m.contains("IMU parameter file"), "{m}");
+        let e = ImuParameters::load(Path::new("/nonexistent/gyro.toml"), "x").unwrap_err();
+        assert!(e.to_string().contains("/nonexistent/gyro.toml"));
+    }
+}
