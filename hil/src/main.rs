@@ -460,6 +460,10 @@ struct RunArgs {
     /// large to read back in the guest. Frame accounting, nav's exit and memory stay.
     #[arg(long)]
     no_reference: bool,
+    /// Put gpsd between the GPS emulator's port and nav (nav's `[gps] source = "gpsd"`), as a
+    /// vehicle shares one receiver; needs gpsd (./run-tests installs it).
+    #[arg(long)]
+    gpsd: bool,
     #[command(flatten)]
     bus: BusArgs,
 }

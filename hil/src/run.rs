@@ -41,6 +41,9 @@ pub struct RunOptions {
     pub kill_nav_at_s: Option<f64>,
     /// Run nav as this user and group id (see [`nav_account`]); none: as the bench's user.
     pub nav_account: Option<(u32, u32)>,
+    /// Put gpsd between the GPS emulator's pty and nav (nav's `[gps] source = "gpsd"`), as a
+    /// vehicle shares one receiver; gpsd's own log goes to `gpsd.log` in the run folder.
+    pub gps_via_gpsd: bool,
 }
 
 /// The account nav runs as. nav needs no privilege (a raw CAN socket, and the serial port it
@@ -175,6 +178,7 @@ impl RunOptions {
             link_downs: Vec::new(),
             kill_nav_at_s: None,
             nav_account: nav_account(),
+            gps_via_gpsd: false,
         }
     }
 }
@@ -388,8 +392,20 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         pty.give_to(uid, gid)?;
     }
     let cfg_path = nav_folder.dir.join("nav.toml");
-    let nav_cfg =
+    let mut nav_cfg =
         crate::inproc::nav_config(s, Some(&opts.iface), gps.as_ref().map(|g| g.1.as_path()));
+    // gpsd between the receiver and nav: started on the port before nav, stopped after the run
+    let _gpsd = match (&gps, opts.gps_via_gpsd, nav_cfg.gps.as_mut()) {
+        (Some((_, link)), true, Some(g)) => {
+            let d = Gpsd::start(link, &opts.out.join("gpsd.log"))?;
+            g.source = nav::config::GpsSource::Gpsd;
+            g.gpsd = d.addr.clone();
+            g.gpsd_device = Some(link.to_string_lossy().into_owned());
+            Some(d)
+        }
+        (_, true, _) => bail!("--gpsd: the scenario has no GPS receiver"),
+        _ => None,
+    };
     std::fs::write(&cfg_path, nav_cfg.to_toml())?;
     info!(interface = %opts.iface, account = ?opts.nav_account, "starting nav");
     let mut phases = Phases::starting_now();
@@ -797,6 +813,66 @@ impl std::fmt::Display for Phases {
 }
 
 /// Removes a file when dropped.
+/// gpsd on the GPS emulator's port, stopped when dropped.
+struct Gpsd {
+    child: Child,
+    /// Where it listens, `host:port`.
+    addr: String,
+}
+
+impl Gpsd {
+    /// Start gpsd in the foreground on `device`, read-only (`-b`: it must not write probes to the
+    /// receiver's port), opening it at once (`-n`), on a free local port; its output to `log`.
+    /// Returns once it accepts connections.
+    fn start(device: &Path, log: &Path) -> Result<Self> {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .context("finding a free port for gpsd")?
+            .port();
+        let out =
+            std::fs::File::create(log).with_context(|| format!("creating {}", log.display()))?;
+        let err = out.try_clone().context("gpsd's log")?;
+        let child = Command::new("gpsd")
+            .args(["-N", "-n", "-b", "-S", &port.to_string()])
+            .arg(device)
+            .stdin(Stdio::null())
+            .stdout(out)
+            .stderr(err)
+            .spawn()
+            .context(
+                "starting gpsd (./run-tests installs it; in the guest it comes from the host)",
+            )?;
+        let mut d = Self {
+            child,
+            addr: format!("127.0.0.1:{port}"),
+        };
+        let t0 = Instant::now();
+        while std::net::TcpStream::connect(&d.addr).is_err() {
+            if let Ok(Some(st)) = d.child.try_wait() {
+                bail!("gpsd exited ({st}) before listening: see {}", log.display());
+            }
+            if t0.elapsed() > Duration::from_secs(10) {
+                bail!(
+                    "gpsd did not listen on {} within 10 s: see {}",
+                    d.addr,
+                    log.display()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        info!(address = %d.addr, device = %device.display(), "gpsd started");
+        Ok(d)
+    }
+}
+
+impl Drop for Gpsd {
+    fn drop(&mut self) {
+        // SAFETY: kill(2) on our own child.
+        unsafe { libc::kill(self.child.id() as libc::pid_t, libc::SIGTERM) };
+        let _ = self.child.wait();
+    }
+}
+
 pub(crate) struct RemoveOnDrop(pub(crate) PathBuf);
 
 impl Drop for RemoveOnDrop {

@@ -688,6 +688,48 @@ fn log_frames(text: &str, keep: impl Fn(u16) -> bool) -> Vec<(u16, Vec<u8>)> {
         .collect()
 }
 
+/// gpsd between the GPS emulator's port and nav on the bench, as a vehicle shares one receiver
+/// (`hil run --gpsd`): gpsd reads the pty, nav takes the receiver's NMEA from gpsd and uses it.
+/// gpsd needs a moment to identify the device, so the first epochs may go by.
+#[test]
+#[ignore = "needs vcan and gpsd: run ./run-tests"]
+fn a_bench_drive_takes_its_fixes_through_gpsd() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
+    let run = dir.path().join("run");
+    let (r, code) = hil_run(
+        &[
+            "--scenario",
+            base.to_str().unwrap(),
+            "--duration",
+            "20",
+            "--speed",
+            "5",
+            "--iface",
+            "vcan-e2e8",
+            "--no-reference",
+            "--gpsd",
+        ],
+        &run,
+    );
+    assert_eq!(code, 0, "{}", r["checks"]);
+    let cfg = std::fs::read_to_string(run.join("nav.toml")).unwrap();
+    assert!(cfg.contains("source = \"gpsd\""), "{cfg}");
+    assert!(run.join("gpsd.log").is_file());
+    let written = r["gps"]["fixes"].as_u64().unwrap();
+    let s: Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("nav-summary.json")).unwrap())
+            .unwrap();
+    let g = &s["gps"]["stats"];
+    // two sentences with a position (GGA, RMC) per epoch
+    let fixes = g["fixes"].as_u64().unwrap();
+    eprintln!("emulator wrote {written} fix epochs; nav decoded {fixes} fixes through gpsd: {g}");
+    assert!(written >= 15, "{}", r["gps"]);
+    assert!(fixes <= 2 * written && fixes + 2 * 4 >= 2 * written, "{g}");
+    assert_eq!(g["bad_checksum"], 0, "{g}");
+    assert_eq!(g["garbage_bytes"], 0, "{g}");
+}
+
 /// The ids nav sends, by the DBC.
 fn nav_sends(id: u16) -> bool {
     wire::ALL_MESSAGES

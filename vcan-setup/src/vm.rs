@@ -32,6 +32,11 @@ pub const APT_PACKAGES: &[&str] = &[
 /// watch and play the bus with the field's own tools.
 pub const CAN_UTILS: &[&str] = &["candump", "canplayer", "cansend", "cangen"];
 
+/// Programs the guest carries when the host has them (at their host paths): gpsd, so that a
+/// bench run in the guest can put gpsd between the GPS emulator's pty and nav, as a vehicle
+/// shares one receiver (`./run-tests` installs it on the host).
+pub const OPTIONAL_TOOLS: &[&str] = &["gpsd"];
+
 /// Environment variables passed from the host into the guest when set.
 const PASS_ENV: &[&str] = &["RUST_LOG", "RUST_BACKTRACE", "NO_COLOR", "TERM"];
 
@@ -87,6 +92,8 @@ pub struct VmPrereqs {
     pub busybox: PathBuf,
     /// The can-utils programs ([`CAN_UTILS`]).
     pub can_utils: Vec<PathBuf>,
+    /// The [`OPTIONAL_TOOLS`] the host has.
+    pub optional: Vec<PathBuf>,
 }
 
 fn which(name: &str) -> Option<PathBuf> {
@@ -173,6 +180,7 @@ pub fn prereqs() -> Result<VmPrereqs> {
         kernel_version,
         busybox,
         can_utils,
+        optional: OPTIONAL_TOOLS.iter().filter_map(|t| which(t)).collect(),
     })
 }
 
@@ -359,10 +367,11 @@ fn build_initramfs(
         .iter()
         .chain(std::iter::once(&pre.busybox))
         .chain(&pre.can_utils)
+        .chain(&pre.optional)
     {
         libs.extend(shared_libs(e));
     }
-    for t in &pre.can_utils {
+    for t in pre.can_utils.iter().chain(&pre.optional) {
         // at its host path (PATH in the guest has /usr/bin and /bin)
         a.file(
             t.to_string_lossy().trim_start_matches('/'),

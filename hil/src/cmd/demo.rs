@@ -50,6 +50,7 @@ pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> 
         speed: None,
         nav: None,
         no_reference: false,
+        gpsd: false,
         bus: BusArgs::to(out.join("drive")),
     })?;
     let verdict = |c: i32| if c == 0 { "PASS" } else { "FAIL" };

@@ -67,6 +67,7 @@ pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
         speed: None,
         nav: None,
         no_reference: false,
+        gpsd: false,
         bus: BusArgs {
             out: Some(out),
             ..a.bus

@@ -27,6 +27,7 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
         let opts = RunOptions {
             progress: true,
             reference_checks: !a.no_reference,
+            gps_via_gpsd: a.gpsd,
             ..RunOptions::new(&a.bus.iface, out.clone(), nav_bin)
         };
         let backend = if in_guest { "vm" } else { "native" };
@@ -72,6 +73,9 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
     }
     if a.no_reference {
         args.push("--no-reference".into());
+    }
+    if a.gpsd {
+        args.push("--gpsd".into());
     }
     run_in_guest(
         args,
