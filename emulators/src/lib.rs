@@ -12,6 +12,7 @@ pub mod drive;
 pub mod geodesy;
 pub mod gps;
 pub mod imu;
+pub mod mems;
 pub mod player;
 pub mod truth;
 pub mod turntable;

@@ -410,6 +410,65 @@ impl AxisAngle for Reversing {
     }
 }
 
+/// An axis turned at set rates in set windows of time and still in between (a lab table in rate
+/// mode running a profile): each window `[from s, to s, rate rad/s]` ramps up at `accel` from
+/// `from`, holds, and ramps down to rest at `to`. Windows do not overlap.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RateWindows {
+    /// The windows, `[from, to, rate]`.
+    pub windows: Vec<[f64; 3]>,
+    /// Angular acceleration of the ramps, rad/s^2.
+    pub accel: f64,
+}
+
+impl RateWindows {
+    fn eval(&self, t: f64) -> (f64, f64) {
+        let (mut a, mut w) = (0.0, 0.0);
+        for &[from, to, rate] in &self.windows {
+            if t <= from {
+                continue;
+            }
+            let r = (rate.abs() / self.accel).min(0.5 * (to - from));
+            let peak = rate.signum() * self.accel * r;
+            // angle through the window up to min(t, to): ramp up, hold, ramp down
+            let up = |u: f64| 0.5 * rate.signum() * self.accel * u * u;
+            let u = (t - from).min(to - from);
+            let hold = (to - from) - 2.0 * r;
+            let (da, dw) = if u < r {
+                (up(u), rate.signum() * self.accel * u)
+            } else if u < r + hold {
+                (up(r) + peak * (u - r), peak)
+            } else {
+                let v = u - r - hold; // into the ramp down
+                (
+                    up(r) + peak * hold + peak * v - 0.5 * rate.signum() * self.accel * v * v,
+                    peak - rate.signum() * self.accel * v,
+                )
+            };
+            a += da;
+            if t < to {
+                w += dw;
+            }
+        }
+        (a, w)
+    }
+}
+
+impl AxisAngle for RateWindows {
+    fn angle(&self, t: f64) -> f64 {
+        self.eval(t).0
+    }
+    fn rate(&self, t: f64) -> f64 {
+        self.eval(t).1
+    }
+    fn angle_and_rate(&self, t: f64) -> (f64, f64) {
+        self.eval(t)
+    }
+    fn still(&self, t0: f64, t1: f64) -> bool {
+        self.windows.iter().all(|w| t1 <= w[0] || t0 >= w[1])
+    }
+}
+
 /// One axis of the indexing mechanism: the IMU turns about a fixed axis of its base by the axis
 /// angle, right-handed (the vehicle's azimuth indexer turns about z, up: positive is
 /// counter-clockwise seen from above).
@@ -869,6 +928,31 @@ mod tests {
         let turn = a.angle(73.0) - a.angle(146.0);
         assert!((turn - 2.0 * PI).abs() < 1e-12, "{turn}");
         assert!((a.angle(219.0) - a.angle(73.0)).abs() < 1e-12);
+    }
+
+    /// A rate window's rate is its angle's derivative, holds its rate, and ends at rest.
+    #[test]
+    fn a_rate_window_ramps_holds_and_stops() {
+        let a = RateWindows {
+            windows: vec![[10.0, 85.0, 20f64.to_radians()], [90.0, 100.0, -0.1]],
+            accel: 20f64.to_radians(),
+        };
+        let h = 1e-5;
+        let mut t = 0.0;
+        while t < 110.0 {
+            let num = (a.angle(t + h) - a.angle(t - h)) / (2.0 * h);
+            assert!(
+                (num - a.rate(t)).abs() < 1e-5,
+                "t {t}: {num} vs {}",
+                a.rate(t)
+            );
+            t += 0.0731;
+        }
+        assert!((a.rate(50.0) - 20f64.to_radians()).abs() < 1e-15);
+        assert_eq!(a.rate(87.0), 0.0);
+        // the turn: 75 s at 20 deg/s less the ramps' lost second
+        assert!((a.angle(87.0).to_degrees() - 20.0 * 74.0).abs() < 1e-9);
+        assert!(a.still(86.0, 89.0) && !a.still(80.0, 86.0));
     }
 
     /// Rate from attitude by central differences (independent check of the analytic rates).

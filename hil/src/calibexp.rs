@@ -145,6 +145,8 @@ pub struct CalibReport {
     pub heading_ratio_kf: f64,
     /// Both ratios at or below the paper's.
     pub meets_paper: bool,
+    /// Paper 001 at the paper's noise and at realistic MEMS noise.
+    pub tetra: Vec<crate::tetraexp::TetraSummary>,
 }
 
 /// The paper's fibre-optic IMU.
@@ -367,7 +369,9 @@ pub fn calibration(o: &CalibOptions, out: Option<&Path>, progress: bool) -> Resu
     let sf_ratio = ratio(&|r| r.rls.sf_ppm / r.kf.sf_ppm);
     let heading_ratio_rls = ratio(&|r| (r.rls.heading_deg / r.heading_uncalibrated_deg).abs());
     let heading_ratio_kf = ratio(&|r| (r.kf.heading_deg / r.heading_uncalibrated_deg).abs());
+    let tetra = crate::tetraexp::experiment(&crate::tetraexp::NOISES, o.runs, o.seed)?;
     let report = CalibReport {
+        tetra,
         options: o.clone(),
         meets_paper: bias_ratio <= PAPER_BIAS_RATIO && sf_ratio <= PAPER_SF_RATIO,
         runs,
@@ -457,6 +461,7 @@ pub fn markdown(r: &CalibReport) -> String {
         "Target (ratios at or below the paper's): {}\n",
         if r.meets_paper { "met" } else { "NOT met" }
     );
+    s += &crate::tetraexp::markdown(&r.tetra);
     s
 }
 

@@ -25,5 +25,6 @@ pub mod run;
 pub mod scenario;
 pub mod shard;
 pub mod status;
+pub mod tetraexp;
 pub mod truthrec;
 pub mod validate;

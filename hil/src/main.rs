@@ -394,7 +394,11 @@ enum Experiment {
     /// (fibre-optic gyros, 100 Hz, both axes at 5 deg/s reversing every turn) by the paper's
     /// decoupled recursive least squares against a 14-state alignment Kalman filter: mean
     /// absolute bias and scale-factor errors over the second half, the ratio of the two methods
-    /// beside the paper's, median over the runs. Writes report.md/json/html. Use a release build.
+    /// beside the paper's, median over the runs. Then paper 001: a redundant MEMS IMU (four gyros,
+    /// tetrahedral) on a three-axis table, its 16-state Kalman calibration against the
+    /// six-position method, at the paper's and at realistic noise. Writes report.md/json/html
+    /// and gyro-parameters.toml. Exit status 0 when both papers' targets are met. Use a release
+    /// build.
     Calibration {
         /// Runs (seeds).
         #[arg(long, default_value_t = 20)]

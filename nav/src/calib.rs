@@ -36,12 +36,149 @@ pub fn expected_rate(
     angles: [f64; 2],
     rates: [f64; 2],
 ) -> Vector3<f64> {
-    let w_ie_n = Vector3::from(earth::earth_rate_enu(lat));
-    let q_bp = c_p_b(angles[0], angles[1]);
-    let q_x = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), angles[0]);
-    (q_nb * q_bp).inverse() * w_ie_n
-        + q_x.inverse() * Vector3::new(0.0, 0.0, rates[1])
-        + Vector3::new(rates[0], 0.0, 0.0)
+    table_rate(
+        lat,
+        q_nb,
+        &[
+            (Vector3::z_axis(), angles[1], rates[1]),
+            (Vector3::x_axis(), angles[0], rates[0]),
+        ],
+    )
+}
+
+/// The rate relative to inertial space, in its own axes, of what a mechanism's axes carry on a
+/// static base at latitude `lat` whose attitude is `q_nb` (base to ENU): `axes` from the
+/// outermost in, each `(axis, angle rad, rate rad/s)`, the axis fixed in the frame that carries
+/// it. Each axis adds its rate to the earth's rate turned into the next frame.
+pub fn table_rate(
+    lat: f64,
+    q_nb: &UnitQuaternion<f64>,
+    axes: &[(nalgebra::Unit<Vector3<f64>>, f64, f64)],
+) -> Vector3<f64> {
+    let mut w = q_nb.inverse() * Vector3::from(earth::earth_rate_enu(lat));
+    for (axis, angle, rate) in axes {
+        w = UnitQuaternion::from_axis_angle(axis, *angle).inverse() * w + axis.into_inner() * *rate;
+    }
+    w
+}
+
+/// Gyros of paper 001's redundant IMU.
+pub const TETRA_GYROS: usize = 4;
+
+/// The nominal triad of gyro `i` (0-based) of paper 001's tetrahedral layout: sensitive axis
+/// `P` (gyro 1 along `-z`; gyros 2-4 at 70.53 deg from `z`, azimuths 0, 120, 240 deg) and the
+/// two axes `R_j` (horizontal; `x` for gyro 1) and `R_k = P x R_j` of its mounting angles.
+pub fn tetra_triad(i: usize) -> [Vector3<f64>; 3] {
+    let p = match i {
+        0 => -Vector3::z(),
+        _ => {
+            let cos_t = 1.0 / 3.0;
+            let sin_t = (1.0f64 - cos_t * cos_t).sqrt();
+            let az = (120.0 * (i - 1) as f64).to_radians();
+            Vector3::new(sin_t * az.cos(), sin_t * az.sin(), cos_t)
+        }
+    };
+    let rj = match i {
+        0 => Vector3::x(),
+        _ => Vector3::z().cross(&p).normalize(),
+    };
+    [p, rj, p.cross(&rj)]
+}
+
+/// Coefficients of one gyro of the redundant IMU: bias `B` (deg/s), scale-factor error `K`,
+/// mounting angles `sigma_j`, `sigma_k` (rad), in paper 001's model
+/// `w_m = P^T w + R_k^T w sigma_j - R_j^T w sigma_k - K P^T w - B`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct GyroCoefficients {
+    /// Bias, deg/s.
+    pub bias_dps: f64,
+    /// Scale-factor error.
+    pub scale_factor: f64,
+    /// Mounting angle about `R_j`, rad.
+    pub sigma_j: f64,
+    /// Mounting angle about `R_k`, rad.
+    pub sigma_k: f64,
+}
+
+/// Paper 001's 16-state Kalman calibration: the four gyros' coefficients as constant states,
+/// each gyro's output error against the turntable's known rate as the measurement.
+#[derive(Debug, Clone)]
+pub struct TetraKf {
+    x: SVector<f64, 16>,
+    p: SMatrix<f64, 16, 16>,
+    r: f64,
+}
+
+impl TetraKf {
+    /// `P0 = p0 I`, `R = r I` (the paper: 1 and 1e-3; rates in deg/s, angles in rad).
+    pub fn new(p0: f64, r: f64) -> Self {
+        Self {
+            x: SVector::zeros(),
+            p: SMatrix::identity() * p0,
+            r,
+        }
+    }
+
+    /// One sample: the gyros' outputs (deg/s) and the body rate the table says (deg/s).
+    pub fn update(&mut self, outputs: &[f64; TETRA_GYROS], w: &Vector3<f64>) {
+        let mut h = SMatrix::<f64, TETRA_GYROS, 16>::zeros();
+        let mut z = SVector::<f64, TETRA_GYROS>::zeros();
+        for i in 0..TETRA_GYROS {
+            let [p, rj, rk] = tetra_triad(i);
+            let pw = p.dot(w);
+            z[i] = outputs[i] - pw;
+            h[(i, 4 * i)] = -1.0;
+            h[(i, 4 * i + 1)] = -pw;
+            h[(i, 4 * i + 2)] = rk.dot(w);
+            h[(i, 4 * i + 3)] = -rj.dot(w);
+        }
+        let r = SMatrix::<f64, TETRA_GYROS, TETRA_GYROS>::identity() * self.r;
+        let s = h * self.p * h.transpose() + r;
+        let Some(si) = s.try_inverse() else {
+            return;
+        };
+        let k = self.p * h.transpose() * si;
+        self.x += k * (z - h * self.x);
+        let ikh = SMatrix::<f64, 16, 16>::identity() - k * h;
+        self.p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
+    }
+
+    /// The estimates, per gyro.
+    pub fn coefficients(&self) -> [GyroCoefficients; TETRA_GYROS] {
+        std::array::from_fn(|i| GyroCoefficients {
+            bias_dps: self.x[4 * i],
+            scale_factor: self.x[4 * i + 1],
+            sigma_j: self.x[4 * i + 2],
+            sigma_k: self.x[4 * i + 3],
+        })
+    }
+}
+
+/// The six-position (rate-reversal) method: each gyro's mean output over a turn at `+rate` and
+/// at `-rate` (deg/s) about body x, y and z (`means[axis][0]` for plus, `[1]` for minus). The sum
+/// of a pair gives the bias, their difference the sensitivity to that axis; the three
+/// sensitivities give the scale factor and the two mounting angles. The earth's rate is
+/// neglected, as the method does.
+pub fn six_position(
+    means: &[[[f64; TETRA_GYROS]; 2]; 3],
+    rate_dps: f64,
+) -> Option<[GyroCoefficients; TETRA_GYROS]> {
+    let mut out = [GyroCoefficients::default(); TETRA_GYROS];
+    for (i, c) in out.iter_mut().enumerate() {
+        let [p, rj, rk] = tetra_triad(i);
+        let b = -(0..3).map(|a| means[a][0][i] + means[a][1][i]).sum::<f64>() / 6.0;
+        let d = Vector3::from_fn(|a, _| (means[a][0][i] - means[a][1][i]) / (2.0 * rate_dps));
+        // d = A u, A = [P, R_k, -R_j], u = [1 - K, sigma_j, sigma_k]
+        let a = Matrix3::from_columns(&[p, rk, -rj]);
+        let u = a.try_inverse()? * d;
+        *c = GyroCoefficients {
+            bias_dps: b,
+            scale_factor: 1.0 - u[0],
+            sigma_j: u[1],
+            sigma_k: u[2],
+        };
+    }
+    Some(out)
 }
 
 /// One gyro's recursive least squares on `X = [eps, dK]`.

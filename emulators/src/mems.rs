@@ -1,0 +1,153 @@
+//! A redundant MEMS IMU: four gyros in paper 001's tetrahedral layout, with per-gyro bias,
+//! scale-factor error, two mounting angles and noise (the paper's eq. 7), as a pure function of
+//! the body rate.
+//!
+//! Layout: gyro 1 along `-z`; gyros 2, 3, 4 at 70.53 deg from `z` (cos = 1/3), at azimuths 0
+//! (in the x-z plane), 120 and 240 deg. Each gyro `i` has its sensitive axis `P_i` and two axes
+//! `R_j`, `R_k` completing a right-handed triad; its small mounting angles `sigma_j`, `sigma_k`
+//! are rotations about those, so that it reads
+//! `w_m = P^T w + R_k^T w sigma_j - R_j^T w sigma_k - K P^T w - B - eta`.
+
+use nalgebra::Vector3;
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+
+/// Number of gyros.
+pub const GYROS: usize = 4;
+
+/// The nominal triad of gyro `i` (0-based): `(P, R_j, R_k)`, unit vectors in body axes.
+pub fn triad(i: usize) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+    let p = if i == 0 {
+        Vector3::new(0.0, 0.0, -1.0)
+    } else {
+        let theta = (1.0f64 / 3.0).acos();
+        let az = (120.0 * (i - 1) as f64).to_radians();
+        Vector3::new(theta.sin() * az.cos(), theta.sin() * az.sin(), theta.cos())
+    };
+    // R_j: horizontal, at right angles to P (x for the vertical gyro)
+    let rj = if i == 0 {
+        Vector3::x()
+    } else {
+        Vector3::z().cross(&p).normalize()
+    };
+    let rk = p.cross(&rj);
+    (p, rj, rk)
+}
+
+/// The four gyros' errors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TetraParams {
+    /// Bias `B`, deg/s, per gyro.
+    pub bias_dps: [f64; GYROS],
+    /// Scale-factor error `K`, per gyro (fraction).
+    pub scale_factor: [f64; GYROS],
+    /// Mounting angle `sigma_j`, deg, per gyro.
+    pub sigma_j_deg: [f64; GYROS],
+    /// Mounting angle `sigma_k`, deg, per gyro.
+    pub sigma_k_deg: [f64; GYROS],
+    /// White noise, deg/s, 1 sigma per sample.
+    pub noise_dps: f64,
+    /// Random seed of the noise.
+    pub seed: u64,
+}
+
+impl Default for TetraParams {
+    /// A MEMS unit of the paper's class (its table of coefficients did not survive in our
+    /// copy): biases of a few hundredths of a deg/s, scale factors of 1e-3, mounting angles of
+    /// a tenth of a degree; the paper's noise (1e-3 deg/h, next to nothing).
+    fn default() -> Self {
+        Self {
+            bias_dps: [0.05, -0.04, 0.06, -0.03],
+            scale_factor: [2e-3, -1.5e-3, 1e-3, 2.5e-3],
+            sigma_j_deg: [0.1, -0.08, 0.12, 0.05],
+            sigma_k_deg: [-0.1, 0.06, -0.09, 0.07],
+            noise_dps: 1e-3 / 3600.0,
+            seed: 1,
+        }
+    }
+}
+
+/// The four gyros, sampled.
+pub struct TetraGyros {
+    p: TetraParams,
+    rng: StdRng,
+    noise: Normal<f64>,
+}
+
+impl TetraGyros {
+    /// Gyros with these errors.
+    pub fn new(p: TetraParams) -> Self {
+        let noise = Normal::new(0.0, p.noise_dps.max(0.0)).unwrap_or_else(|_| {
+            Normal::new(0.0, 0.0).expect("a zero-width normal distribution is valid")
+        });
+        Self {
+            rng: StdRng::seed_from_u64(p.seed),
+            noise,
+            p,
+        }
+    }
+
+    /// The errors.
+    pub fn params(&self) -> &TetraParams {
+        &self.p
+    }
+
+    /// One sample of the four gyros (deg/s) at body rate `w` (deg/s).
+    pub fn sample(&mut self, w: &Vector3<f64>) -> [f64; GYROS] {
+        std::array::from_fn(|i| {
+            let (p, rj, rk) = triad(i);
+            let pw = p.dot(w);
+            pw + rk.dot(w) * self.p.sigma_j_deg[i].to_radians()
+                - rj.dot(w) * self.p.sigma_k_deg[i].to_radians()
+                - self.p.scale_factor[i] * pw
+                - self.p.bias_dps[i]
+                - self.noise.sample(&mut self.rng)
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The four axes are the tetrahedron's: unit, 109.47 deg apart, summing to zero; each triad
+    /// is right-handed and orthonormal.
+    #[test]
+    fn the_layout_is_a_regular_tetrahedron() {
+        let mut sum = Vector3::zeros();
+        for i in 0..GYROS {
+            let (p, rj, rk) = triad(i);
+            sum += p;
+            assert!((p.norm() - 1.0).abs() < 1e-15);
+            assert!(p.dot(&rj).abs() < 1e-15 && p.dot(&rk).abs() < 1e-15);
+            assert!((p.cross(&rj) - rk).norm() < 1e-15);
+            for j in 0..i {
+                let c = p.dot(&triad(j).0);
+                assert!((c + 1.0 / 3.0).abs() < 1e-12, "{i} {j}: {c}");
+            }
+        }
+        assert!(sum.norm() < 1e-12);
+        // gyro 2 lies in the x-z plane
+        assert!(triad(1).0.y.abs() < 1e-15);
+    }
+
+    #[test]
+    fn an_error_free_gyro_reads_its_axis_rate() {
+        let mut g = TetraGyros::new(TetraParams {
+            bias_dps: [0.0; 4],
+            scale_factor: [0.0; 4],
+            sigma_j_deg: [0.0; 4],
+            sigma_k_deg: [0.0; 4],
+            noise_dps: 0.0,
+            seed: 1,
+        });
+        let w = Vector3::new(1.0, 2.0, 3.0);
+        let o = g.sample(&w);
+        for (i, v) in o.iter().enumerate() {
+            assert!((v - triad(i).0.dot(&w)).abs() < 1e-15);
+        }
+    }
+}
