@@ -41,7 +41,11 @@ fn truth_and_nav_agree_on_the_redundant_imus_layout() {
         let (p, rj, rk) = emulators::mems::triad(i);
         let [q, sj, sk] = nav::calib::tetra_triad(i);
         for (a, b, what) in [(p, q, "P"), (rj, sj, "R_j"), (rk, sk, "R_k")] {
-            assert!((a - b).norm() < 1e-15, "gyro {}: {what} {a} against {b}", i + 1);
+            assert!(
+                (a - b).norm() < 1e-15,
+                "gyro {}: {what} {a} against {b}",
+                i + 1
+            );
         }
     }
 }
