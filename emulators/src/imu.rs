@@ -593,14 +593,7 @@ mod tests {
 
     #[test]
     fn frames_carry_wrapping_counters_pps_and_housekeeping() {
-        let s = Static {
-            lat_deg: 45.0,
-            lon_deg: 0.0,
-            height_m: 0.0,
-            heading_deg: 0.0,
-            pitch_deg: 0.0,
-            roll_deg: 0.0,
-        };
+        let s = Static::level(45.0);
         let mut imu = ImuEmulator::new(Box::new(s), ImuParams::default());
         let (mut pps, mut hk, mut last_sc) = (0, 0, None::<u16>);
         for _ in 0..4000 {
@@ -686,14 +679,7 @@ mod tests {
 
     #[test]
     fn the_same_seed_gives_the_same_frames() {
-        let s = Static {
-            lat_deg: 10.0,
-            lon_deg: 0.0,
-            height_m: 0.0,
-            heading_deg: 0.0,
-            pitch_deg: 0.0,
-            roll_deg: 0.0,
-        };
+        let s = Static::level(10.0);
         let mut a = ImuEmulator::new(Box::new(s), ImuParams::default());
         let mut b = ImuEmulator::new(Box::new(s), ImuParams::default());
         for _ in 0..100 {
@@ -712,14 +698,7 @@ mod tests {
     }
 
     fn level(lat_deg: f64) -> Static {
-        Static {
-            lat_deg,
-            lon_deg: 0.0,
-            height_m: 0.0,
-            heading_deg: 0.0,
-            pitch_deg: 0.0,
-            roll_deg: 0.0,
-        }
+        Static::level(lat_deg)
     }
 
     #[test]

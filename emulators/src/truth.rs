@@ -138,6 +138,19 @@ pub struct Static {
 }
 
 impl Static {
+    /// A level site at latitude `lat_deg`, facing north, at sea level on the prime meridian (a
+    /// lab's table).
+    pub fn level(lat_deg: f64) -> Self {
+        Self {
+            lat_deg,
+            lon_deg: 0.0,
+            height_m: 0.0,
+            heading_deg: 0.0,
+            pitch_deg: 0.0,
+            roll_deg: 0.0,
+        }
+    }
+
     fn cbn(&self) -> Rotation3<f64> {
         c_b_n(
             self.heading_deg.to_radians(),
@@ -899,6 +912,23 @@ mod tests {
         assert!((f.y - g * 10f64.to_radians().sin()).abs() < 1e-9, "{f}");
     }
 
+    /// `a`'s rate is its angle's central difference, and its angle has no jump, every `step` s
+    /// over `[t0, t1)`, to `tol` rad/s.
+    fn rate_is_the_angles_derivative(a: &dyn AxisAngle, t0: f64, t1: f64, step: f64, tol: f64) {
+        let h = 1e-5;
+        let mut t = t0;
+        while t < t1 {
+            let num = (a.angle(t + h) - a.angle(t - h)) / (2.0 * h);
+            assert!(
+                (num - a.rate(t)).abs() < tol,
+                "t {t}: {num} vs {}",
+                a.rate(t)
+            );
+            assert!((a.angle(t + 1e-9) - a.angle(t)).abs() < 1e-9, "t {t}");
+            t += step;
+        }
+    }
+
     /// Rate is the angle's derivative everywhere (reversals and the start from rest included),
     /// the angle is continuous, and each turn is a whole revolution.
     #[test]
@@ -907,18 +937,7 @@ mod tests {
             rate: 5f64.to_radians(),
             accel: 5f64.to_radians(),
         };
-        let h = 1e-5;
-        let mut t = 0.0005;
-        while t < 400.0 {
-            let num = (a.angle(t + h) - a.angle(t - h)) / (2.0 * h);
-            assert!(
-                (num - a.rate(t)).abs() < 1e-6,
-                "t {t}: {num} vs {}",
-                a.rate(t)
-            );
-            assert!((a.angle(t + 1e-9) - a.angle(t)).abs() < 1e-9, "t {t}");
-            t += 0.0137;
-        }
+        rate_is_the_angles_derivative(&a, 0.0005, 400.0, 0.0137, 1e-6);
         // the constant-rate parts: +5 deg/s, then -5 deg/s after the first reversal (72 s of
         // turn and the 1 s ramp's half, centred at 73 s)
         assert!((a.rate(30.0) - a.rate).abs() < 1e-15);
@@ -937,17 +956,7 @@ mod tests {
             windows: vec![[10.0, 85.0, 20f64.to_radians()], [90.0, 100.0, -0.1]],
             accel: 20f64.to_radians(),
         };
-        let h = 1e-5;
-        let mut t = 0.0;
-        while t < 110.0 {
-            let num = (a.angle(t + h) - a.angle(t - h)) / (2.0 * h);
-            assert!(
-                (num - a.rate(t)).abs() < 1e-5,
-                "t {t}: {num} vs {}",
-                a.rate(t)
-            );
-            t += 0.0731;
-        }
+        rate_is_the_angles_derivative(&a, 0.0, 110.0, 0.0731, 1e-5);
         assert!((a.rate(50.0) - 20f64.to_radians()).abs() < 1e-15);
         assert_eq!(a.rate(87.0), 0.0);
         // the turn: 75 s at 20 deg/s less the ramps' lost second

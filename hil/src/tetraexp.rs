@@ -83,16 +83,8 @@ fn errors(est: &[GyroCoefficients; TETRA_GYROS], t: &TetraParams) -> TetraErrors
 
 /// The table: outer z, then x, then y, each axis's rate schedule; the base level at `lat_deg`.
 fn table(lat_deg: f64, z: RateWindows, x: RateWindows, y: RateWindows) -> Composed {
-    let site = Static {
-        lat_deg,
-        lon_deg: 0.0,
-        height_m: 0.0,
-        heading_deg: 0.0,
-        pitch_deg: 0.0,
-        roll_deg: 0.0,
-    };
     Composed {
-        base: Box::new(site.site()),
+        base: Box::new(Static::level(lat_deg).site()),
         relative: vec![
             Box::new(Indexer::azimuth(z)),
             Box::new(Indexer {
