@@ -109,6 +109,83 @@ impl TetraGyros {
     }
 }
 
+/// A failure of one gyro, from a time on.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum GyroFailure {
+    /// The output freezes at its last value.
+    Stuck {
+        /// The gyro (0-based).
+        gyro: usize,
+        /// From, s.
+        at_s: f64,
+    },
+    /// The bias jumps.
+    BiasJump {
+        /// The gyro (0-based).
+        gyro: usize,
+        /// From, s.
+        at_s: f64,
+        /// The jump, deg/s.
+        jump_dps: f64,
+    },
+    /// The noise grows.
+    NoiseBurst {
+        /// The gyro (0-based).
+        gyro: usize,
+        /// From, s.
+        at_s: f64,
+        /// Noise added, deg/s (1 sigma per sample).
+        sigma_dps: f64,
+    },
+}
+
+/// Applies a [`GyroFailure`] to the outputs, sample by sample.
+pub struct FailureInjector {
+    failure: GyroFailure,
+    held: Option<f64>,
+    rng: StdRng,
+}
+
+impl FailureInjector {
+    /// The failure, with its own random stream (`seed`).
+    pub fn new(failure: GyroFailure, seed: u64) -> Self {
+        Self {
+            failure,
+            held: None,
+            rng: StdRng::seed_from_u64(seed ^ 0xFA11),
+        }
+    }
+
+    /// The outputs at `t` s, failed where due.
+    pub fn apply(&mut self, t: f64, out: &mut [f64; GYROS]) {
+        match self.failure {
+            GyroFailure::Stuck { gyro, at_s } => {
+                if t < at_s {
+                    self.held = Some(out[gyro]);
+                } else if let Some(h) = self.held {
+                    out[gyro] = h;
+                }
+            }
+            GyroFailure::BiasJump {
+                gyro,
+                at_s,
+                jump_dps,
+            } if t >= at_s => out[gyro] += jump_dps,
+            GyroFailure::NoiseBurst {
+                gyro,
+                at_s,
+                sigma_dps,
+            } if t >= at_s => {
+                if let Ok(n) = Normal::new(0.0, sigma_dps) {
+                    out[gyro] += n.sample(&mut self.rng);
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -147,6 +147,8 @@ pub struct CalibReport {
     pub meets_paper: bool,
     /// Paper 001 at the paper's noise and at realistic MEMS noise.
     pub tetra: Vec<crate::tetraexp::TetraSummary>,
+    /// One failed gyro of the four, each kind, with and without a reference rate.
+    pub failures: Vec<crate::tetraexp::FailureRow>,
 }
 
 /// The paper's fibre-optic IMU.
@@ -378,6 +380,7 @@ pub fn calibration(o: &CalibOptions, out: Option<&Path>, progress: bool) -> Resu
     let tetra = crate::tetraexp::experiment(&crate::tetraexp::NOISES, o.runs, o.seed)?;
     let report = CalibReport {
         tetra,
+        failures: crate::tetraexp::failures(o.seed),
         options: o.clone(),
         meets_paper: bias_ratio <= PAPER_BIAS_RATIO && sf_ratio <= PAPER_SF_RATIO,
         runs,
@@ -473,6 +476,7 @@ pub fn markdown(r: &CalibReport) -> String {
         if r.meets_paper { "met" } else { "NOT met" }
     );
     s += &crate::tetraexp::markdown(&r.tetra);
+    s += &crate::tetraexp::failures_markdown(&r.failures);
     s
 }
 

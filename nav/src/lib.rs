@@ -22,5 +22,6 @@ pub mod params;
 pub mod pipeline;
 pub mod rawmsg;
 pub mod record;
+pub mod redundant;
 pub mod strapdown;
 pub mod summary;
