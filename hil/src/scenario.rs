@@ -221,10 +221,19 @@ impl Scenario {
         }
         nav::attitude::ImuProcessor::new(&self.processing)
             .map_err(|e| anyhow::anyhow!("processing: {e}"))?;
-        if self.imu.rate_hz != wire::IMU_RATE_HZ {
+        // the contract's IMU frames carry any rate up to the RLG unit's 2 kHz; nav's solution
+        // goes out at 50 Hz of IMU time, so a whole number of samples per epoch
+        let r = self.imu.rate_hz;
+        if !((50.0..=wire::IMU_RATE_HZ).contains(&r) && (r / 50.0).fract() == 0.0) {
             bail!(
-                "imu.rate_hz must be {} (the wire contract's rate)",
+                "imu.rate_hz ({r}) must be a multiple of 50 Hz from 50 to {} Hz (nav's solution goes out at 50 Hz of IMU time)",
                 wire::IMU_RATE_HZ
+            );
+        }
+        if (self.processing.fir.fs_hz - r).abs() > 1e-9 {
+            bail!(
+                "processing.fir.fs_hz ({}) must equal imu.rate_hz ({r}) (for a 100 Hz IMU, e.g. fs_hz = 100, passband_hz = 20, stopband_hz = 45, order = 16)",
+                self.processing.fir.fs_hz
             );
         }
         Ok(())
@@ -351,6 +360,31 @@ mod tests {
             n += 1;
         }
         assert!(n >= 7, "{n} scenarios");
+    }
+
+    /// An IMU may run at a multiple of 50 Hz up to 2 kHz, with its processing chain at the
+    /// same rate; anything else is refused with the reason.
+    #[test]
+    fn the_imu_rate_is_a_multiple_of_the_solution_rate() {
+        let mut s = Scenario::builtin_static();
+        s.imu.rate_hz = 100.0;
+        s.imu.dither_arcsec = [0.0; 3]; // a fibre-optic gyro's
+        let e = s.check().unwrap_err().to_string();
+        assert!(e.contains("processing.fir.fs_hz"), "{e}");
+        s.processing.fir.fs_hz = 100.0;
+        s.processing.fir.passband_hz = 20.0;
+        s.processing.fir.stopband_hz = 45.0;
+        s.processing.fir.order = 16;
+        s.check().unwrap();
+        for bad in [75.0, 30.0, 4000.0] {
+            s.imu.rate_hz = bad;
+            s.processing.fir.fs_hz = bad;
+            let e = s.check().unwrap_err().to_string();
+            assert!(
+                e.contains("multiple of 50 Hz") || e.contains("processing"),
+                "{bad}: {e}"
+            );
+        }
     }
 
     #[test]
