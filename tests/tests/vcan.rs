@@ -408,7 +408,11 @@ fn a_recorded_drive_replays_onto_the_bus_bit_for_bit() {
         .replace("duration_s = 130.0", "duration_s = 20.0")
         .replace(
             "lever_arm_m = [0.0, 0.5, 1.2]",
-            "lever_arm_m = [0.0, 0.5, 1.2]\nport_drops = [[10.0, 12.0]]",
+            // the first fix after 3 s: a fix that comes before nav has taken the first PPS edge
+            // is tied by a race between nav's two readers (seen in fresh-clone runs, one run in
+            // two, the original or the replay tying it a second late; docs/recordings.md), which
+            // is nav's to fix, not this test's to hide: here every fix comes after edges are known
+            "lever_arm_m = [0.0, 0.5, 1.2]\nport_drops = [[10.0, 12.0]]\nttff_s = 3.0",
         );
     assert!(text.contains("port_drops") && text.contains("duration_s = 20.0"));
     let scen = dir.path().join("drive.toml");
@@ -421,13 +425,6 @@ fn a_recorded_drive_replays_onto_the_bus_bit_for_bit() {
             "--iface",
             "vcan-e2e7",
             "--no-reference",
-            // x4, not the scenario's x10: at x10 the 0.45 s between a fix's arrival and the
-            // point where nav ties it to the next PPS edge is 45 ms of wall time, and a reader
-            // thread descheduled that long on a loaded 2-core guest made one run of the original
-            // tie its first fix a second late (a race of the original run that its replay, rightly,
-            // does not reproduce; docs/recordings.md)
-            "--speed",
-            "4",
         ],
         &dir.path().join("run"),
     );
