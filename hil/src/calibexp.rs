@@ -337,7 +337,8 @@ pub fn parameters(o: &CalibOptions, r: &CalibRun) -> nav::params::ImuParameters 
     }
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
+/// The median (the mean of the middle two for an even count; NaN for none).
+pub(crate) fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     match v.len() {
         0 => f64::NAN,

@@ -11,6 +11,7 @@
 //! six-position method ([`nav::calib::six_position`]) gets its own 360 s: plus and minus 20 deg/s
 //! about x, y and z, 60 s each.
 
+use crate::calibexp::median;
 use anyhow::{Result, bail};
 use emulators::mems::{TetraGyros, TetraParams};
 use emulators::truth::{AxisAngle, Composed, Indexer, Motion, RateWindows, Static};
@@ -30,6 +31,14 @@ pub const PAPER_RELATIVE: f64 = 0.009;
 pub const PAPER_GAIN: f64 = 0.1137;
 
 const RATE_DPS: f64 = 20.0;
+
+/// The paper's profile, `[from s, to s, deg/s]` per axis (z, x, y): 60 s at rest, x, y and z at
+/// 20 deg/s for 75 s each, 75 s at rest.
+const PAPER_PROFILE: [[f64; 3]; 3] = [
+    [210.0, 285.0, RATE_DPS],
+    [60.0, 135.0, RATE_DPS],
+    [135.0, 210.0, RATE_DPS],
+];
 const HZ: f64 = 100.0;
 
 /// Largest errors over the four gyros, per coefficient.
@@ -115,12 +124,7 @@ pub fn run(noise_dps: f64, seed: u64) -> Result<TetraRun> {
         seed,
         ..TetraParams::default()
     };
-    // the paper's profile: 60 s at rest, x, y, z for 75 s each, 75 s at rest
-    let (zs, xs, ys) = (
-        [[210.0, 285.0, RATE_DPS]],
-        [[60.0, 135.0, RATE_DPS]],
-        [[135.0, 210.0, RATE_DPS]],
-    );
+    let [zs, xs, ys] = PAPER_PROFILE.map(|w| [w]);
     let (az, ax, ay) = (windows(&zs), windows(&xs), windows(&ys));
     let m = table(lat, az.clone(), ax.clone(), ay.clone());
     let mut gyros = TetraGyros::new(truth.clone());
@@ -287,11 +291,7 @@ pub fn failures(seed: u64) -> Vec<FailureRow> {
                 noise_dps: noise,
                 seed,
             };
-            let (az, ax, ay) = (
-                windows(&[[210.0, 285.0, RATE_DPS]]),
-                windows(&[[60.0, 135.0, RATE_DPS]]),
-                windows(&[[135.0, 210.0, RATE_DPS]]),
-            );
+            let [az, ax, ay] = PAPER_PROFILE.map(|w| windows(&[w]));
             let m = table(45.0, az, ax, ay);
             let mut gyros = TetraGyros::new(truth);
             let mut inject = FailureInjector::new(failure, seed);
@@ -394,11 +394,6 @@ pub struct TetraSummary {
     pub gain: f64,
     /// Every bound of the paper met by the medians.
     pub meets_paper: bool,
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 /// The experiment at each noise level in `noises` over seeds `seed..seed + runs`.

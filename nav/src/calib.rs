@@ -412,11 +412,6 @@ impl AlignKf {
         Vector3::new(self.x[DK], self.x[DK + 1], self.x[DK + 2])
     }
 
-    /// The computed velocity, ENU, m/s.
-    pub fn velocity(&self) -> Vector3<f64> {
-        self.nav.v
-    }
-
     /// The computed IMU attitude (IMU to ENU).
     pub fn attitude(&self) -> UnitQuaternion<f64> {
         self.nav.q_nb
