@@ -25,3 +25,4 @@ pub mod record;
 pub mod redundant;
 pub mod strapdown;
 pub mod summary;
+pub mod ttlink;

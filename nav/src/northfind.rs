@@ -25,9 +25,10 @@
 //! reason naming the position and the command.
 
 use crate::earth;
+use crate::ttlink::{LinkPoll, LinkTiming, TtLink};
 use nalgebra::{Matrix4, Rotation3, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
-use wire::{TtAck, TtCmd, TtCommand, TtResult, TtState, TtStatus};
+use wire::{TtAck, TtCmd, TtCommand, TtState, TtStatus};
 
 /// North-finding settings (the `[north_finding]` table of nav's config).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -109,6 +110,16 @@ pub struct NorthFindingConfigError {
 }
 
 impl NorthFindingConfig {
+    /// The turntable link's timing.
+    pub fn timing(&self) -> LinkTiming {
+        LinkTiming {
+            heartbeat_s: self.heartbeat_s,
+            ack_timeout_s: self.ack_timeout_s,
+            ack_retries: self.ack_retries,
+            status_timeout_s: self.status_timeout_s,
+        }
+    }
+
     /// Check the settings; the error names the setting.
     pub fn check(&self) -> Result<(), NorthFindingConfigError> {
         let bad = |setting, requirement| {
@@ -254,14 +265,6 @@ pub struct NorthResult {
     pub positions: Vec<PositionResult>,
 }
 
-/// What waits for an acknowledgement.
-#[derive(Debug, Clone, Copy)]
-struct Outstanding {
-    cmd: TtCmd,
-    sent_at: f64,
-    tries: u32,
-}
-
 /// Accumulation of one dwell.
 #[derive(Debug, Clone, Default)]
 struct Dwell {
@@ -289,12 +292,8 @@ pub struct NorthFinder {
     t: f64,
     t_start: Option<f64>,
     phase_since: f64,
-    seq: u8,
-    outstanding: Option<Outstanding>,
-    queue: Vec<(TtCommand, f64)>,
+    link: TtLink,
     returning: bool,
-    last_sent: f64,
-    status: Option<TtStatus>,
     seen_moving: bool,
     dwell: Dwell,
     quiet_since: f64,
@@ -303,12 +302,6 @@ pub struct NorthFinder {
     results: Vec<PositionResult>,
     result: Option<NorthResult>,
     abort: Option<String>,
-    /// IMU time of the last status frame.
-    last_status_t: Option<f64>,
-    /// Commands sent again after no acknowledgement within `ack_timeout_s`.
-    retries: u64,
-    /// Acknowledgements that matched no outstanding command (late or unknown).
-    stale_acks: u64,
 }
 
 const DPH: f64 = earth::DEG_PER_HOUR_PER_RAD_S;
@@ -322,6 +315,8 @@ impl NorthFinder {
     /// A sequence with these settings (checked).
     pub fn new(cfg: NorthFindingConfig) -> Result<Self, NorthFindingConfigError> {
         cfg.check()?;
+        let mut link = TtLink::new(cfg.timing(), &[cfg.axis]);
+        link.push(TtCommand::Enable, cfg.axis, 0.0);
         Ok(Self {
             cfg,
             phase: Phase::Enabling,
@@ -329,12 +324,8 @@ impl NorthFinder {
             t: 0.0,
             t_start: None,
             phase_since: 0.0,
-            seq: 0,
-            outstanding: None,
-            queue: vec![(TtCommand::Enable, 0.0)],
+            link,
             returning: false,
-            last_sent: f64::NEG_INFINITY,
-            status: None,
             seen_moving: false,
             dwell: Dwell::default(),
             quiet_since: 0.0,
@@ -343,9 +334,6 @@ impl NorthFinder {
             results: Vec::new(),
             result: None,
             abort: None,
-            last_status_t: None,
-            retries: 0,
-            stale_acks: 0,
         })
     }
 
@@ -367,7 +355,7 @@ impl NorthFinder {
     /// Commands sent again for want of an acknowledgement, and acknowledgements that came too
     /// late (or matched nothing).
     pub fn ack_counters(&self) -> (u64, u64) {
-        (self.retries, self.stale_acks)
+        self.link.ack_counters()
     }
 
     /// Why it gave up, if it did.
@@ -379,8 +367,7 @@ impl NorthFinder {
         if self.abort.is_none() {
             self.abort = Some(why);
             self.phase = Phase::Aborted;
-            self.outstanding = None;
-            self.queue.clear();
+            self.link.clear();
         }
     }
 
@@ -428,46 +415,15 @@ impl NorthFinder {
             self.dwell.enc_sum += if d > 180.0 { d - 360.0 } else { d };
             self.dwell.enc_n += 1;
         }
-        self.status = Some(*st);
-        self.last_status_t = Some(self.t);
+        self.link.on_status(self.t, st);
     }
 
     /// An acknowledgement arrived.
     pub fn on_ack(&mut self, a: &TtAck) {
-        if a.axis != self.cfg.axis {
-            return;
-        }
-        let Some(o) = self.outstanding.filter(|o| o.cmd.seq == a.seq) else {
-            // an acknowledgement of a command already given up on (it came late) or never sent
-            self.stale_acks += 1;
-            return;
-        };
-        self.outstanding = None;
-        if a.result != TtResult::Accepted {
-            let name = TtCommand::from_raw(i64::from(o.cmd.command)).map_or_else(
-                || format!("command {}", o.cmd.command),
-                |c| format!("{c:?}"),
-            );
+        if let Err(f) = self.link.on_ack(a) {
             let w = self.where_();
-            self.fail(format!("turntable rejected {name} at {w}: {:?}", a.result));
+            self.fail(f.describe(&w));
         }
-    }
-
-    fn send(&mut self, c: TtCommand, arg: f64) -> TtCmd {
-        self.seq = self.seq.wrapping_add(1);
-        let cmd = TtCmd {
-            seq: self.seq,
-            command: c as u8,
-            axis: self.cfg.axis,
-            arg,
-        };
-        self.outstanding = Some(Outstanding {
-            cmd,
-            sent_at: self.t,
-            tries: 0,
-        });
-        self.last_sent = self.t;
-        cmd
     }
 
     /// The next command to send at IMU time `t` (s), if any. Call after feeding the inputs.
@@ -477,64 +433,27 @@ impl NorthFinder {
         if self.finished() {
             return None;
         }
-        if let Some(ls) = self.last_status_t
-            && t - ls > self.cfg.status_timeout_s
-        {
-            let w = self.where_();
-            self.fail(format!(
-                "no turntable status for {:.2} s at {w}: the mechanism's heartbeat is lost",
-                t - ls
-            ));
-            return None;
-        }
-        if let Some(o) = self.outstanding {
-            if t - o.sent_at > self.cfg.ack_timeout_s {
-                if o.tries >= self.cfg.ack_retries {
-                    let name = TtCommand::from_raw(i64::from(o.cmd.command))
-                        .map_or_else(|| "command".to_string(), |c| format!("{c:?}"));
-                    let w = self.where_();
-                    self.fail(format!(
-                        "no acknowledgement of {name} (seq {}) at {w} after {} tries",
-                        o.cmd.seq,
-                        o.tries + 1
-                    ));
-                    return None;
-                }
-                // resend under a new sequence number
-                self.retries += 1;
-                self.seq = self.seq.wrapping_add(1);
-                let cmd = TtCmd {
-                    seq: self.seq,
-                    ..o.cmd
-                };
-                self.outstanding = Some(Outstanding {
-                    cmd,
-                    sent_at: t,
-                    tries: o.tries + 1,
-                });
-                self.last_sent = t;
-                return Some(cmd);
+        match self.link.poll(t) {
+            LinkPoll::Failed(f) => {
+                let w = self.where_();
+                self.fail(f.describe(&w));
+                return None;
             }
-            return None;
+            LinkPoll::Send(c) => return Some(c),
+            LinkPoll::Waiting => return None,
+            LinkPoll::Idle => {}
         }
-        if self.queue.is_empty() {
+        if !self.link.queued() {
             self.step();
             if self.finished() {
                 return None;
             }
         }
-        if !self.queue.is_empty() {
-            let (c, arg) = self.queue.remove(0);
-            return Some(self.send(c, arg));
-        }
-        if t - self.last_sent >= self.cfg.heartbeat_s {
-            return Some(self.send(TtCommand::Heartbeat, 0.0));
-        }
-        None
+        self.link.next(t)
     }
 
     fn state(&self) -> Option<TtState> {
-        self.status.map(|s| s.state)
+        self.link.state(self.cfg.axis)
     }
 
     /// Advance the sequence on the turntable's state (no command outstanding).
@@ -560,11 +479,11 @@ impl NorthFinder {
                 Some(TtState::Idle) => {
                     if self.returning {
                         self.enter(Phase::Returning);
-                        self.queue.push((TtCommand::Home, 0.0));
+                        self.link.push(TtCommand::Home, self.cfg.axis, 0.0);
                     } else {
                         let target = self.target();
                         self.enter(Phase::Indexing);
-                        self.queue.push((TtCommand::IndexAbs, target));
+                        self.link.push(TtCommand::IndexAbs, self.cfg.axis, target);
                     }
                 }
                 _ if since > self.cfg.lock_timeout_s => {
@@ -580,7 +499,7 @@ impl NorthFinder {
                     } else {
                         self.target()
                     };
-                    if let Some(st) = self.status {
+                    if let Some(st) = self.link.status(self.cfg.axis).copied() {
                         let d = (st.angle_deg - want).rem_euclid(360.0);
                         if d.min(360.0 - d) > 0.05 {
                             self.fail(format!(
@@ -596,7 +515,7 @@ impl NorthFinder {
                         Phase::Locking
                     };
                     self.enter(next);
-                    self.queue.push((TtCommand::Lock, 0.0));
+                    self.link.push(TtCommand::Lock, self.cfg.axis, 0.0);
                 } else if since > self.cfg.move_timeout_s {
                     self.fail(format!(
                         "move did not finish within {} s at {w}",
@@ -636,7 +555,7 @@ impl NorthFinder {
         self.repeats_here = 0;
         self.enter(Phase::Unlocking);
         if self.state() == Some(TtState::Locked) {
-            self.queue.push((TtCommand::Unlock, 0.0));
+            self.link.push(TtCommand::Unlock, self.cfg.axis, 0.0);
         }
     }
 
@@ -919,7 +838,7 @@ impl NorthFinder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use wire::TtFaults;
+    use wire::{TtFaults, TtResult};
 
     const G: f64 = 9.80665;
 
