@@ -46,10 +46,19 @@ pub struct Lockstep {
 
 impl Default for Lockstep {
     fn default() -> Self {
-        // 60 ms of IMU time at 2 kHz: three of nav's 50 Hz output periods in flight
+        Self::at_rate(2000.0)
+    }
+}
+
+impl Lockstep {
+    /// The lockstep of an IMU at `imu_rate_hz`: 60 ms of IMU time (three of nav's 50 Hz output
+    /// periods in flight; 120 samples at 2 kHz, 6 at 100 Hz), a command taking effect that long
+    /// after its NAV_TIME whatever the IMU's rate.
+    pub fn at_rate(imu_rate_hz: f64) -> Self {
+        let n = (0.06 * imu_rate_hz).round().max(4.0) as u64;
         Self {
-            window: 120,
-            latency: 120,
+            window: n,
+            latency: n,
             stall: Duration::from_secs(20),
         }
     }

@@ -190,6 +190,33 @@ impl ImuParams {
         if !(positive(self.gyro_range_dps) && positive(self.accel_range_g)) {
             return Err(crate::ParamError::new("imu", "ranges must be positive"));
         }
+        // a receiver differences consecutive 16-bit counters: a sample's pulses at full range
+        // must stay below half the counter's span to be unambiguous
+        let per_sample = |range: f64, pulse: f64| range / self.rate_hz / pulse;
+        for (i, w) in self.gyro_pulse_arcsec.iter().enumerate() {
+            let n = per_sample(self.gyro_range_dps * 3600.0, *w);
+            if n > 32767.0 {
+                return Err(crate::ParamError::new(
+                    "imu",
+                    format!(
+                        "gyro_range_dps = {} at rate_hz = {} is {n:.0} pulses of {w} arcsec (axis {i}) a sample: more than the 16-bit counters carry unambiguously (32767); lower the range or coarsen the pulse",
+                        self.gyro_range_dps, self.rate_hz
+                    ),
+                ));
+            }
+        }
+        for (i, w) in self.accel_pulse_mps.iter().enumerate() {
+            let n = per_sample(self.accel_range_g * G0, *w);
+            if n > 32767.0 {
+                return Err(crate::ParamError::new(
+                    "imu",
+                    format!(
+                        "accel_range_g = {} at rate_hz = {} is {n:.0} pulses of {w} m/s (axis {i}) a sample: more than the 16-bit counters carry unambiguously (32767); lower the range or coarsen the pulse",
+                        self.accel_range_g, self.rate_hz
+                    ),
+                ));
+            }
+        }
         if !(self.pps_jitter_s.is_finite() && (0.0..=0.1).contains(&self.pps_jitter_s)) {
             return Err(crate::ParamError::new(
                 "imu",

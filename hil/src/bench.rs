@@ -113,7 +113,7 @@ pub fn emulators(s: &Scenario, seconds: f64) -> EmulatorBench {
 pub fn each_sample(s: &Scenario, seconds: f64, mut f: impl FnMut(&[RawFrame])) {
     let (motion, tt) = s.build();
     let mut bus = BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults);
-    let latency = emulators::bus::Lockstep::default().latency;
+    let latency = emulators::bus::Lockstep::at_rate(s.imu.rate_hz).latency;
     let mut tt = tt.map(|t| emulators::bus::TtBus::new(t, s.imu.rate_hz, latency));
     let (mut frames, mut msgs) = (Vec::new(), Vec::new());
     while bus.next_time() <= seconds {

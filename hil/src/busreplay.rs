@@ -338,7 +338,7 @@ pub fn replay_on_bus(mcap: &Path, cfg: &NavConfig, opts: &BusReplayOptions) -> R
         imu_rate_hz: cfg.imu.rate_hz,
         // well past nav's watchdog, so that it fires where it fired
         silence: Duration::from_millis(cfg.watchdog.imu_timeout_ms * 3 + 100),
-        lockstep: Some(emulators::bus::Lockstep::default()),
+        lockstep: Some(emulators::bus::Lockstep::at_rate(cfg.imu.rate_hz)),
     };
     let progress = emulators::can::Progress::default();
     let stop = AtomicBool::new(false);

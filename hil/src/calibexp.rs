@@ -159,6 +159,9 @@ pub fn fog_params(o: &CalibOptions, seed: u64) -> ImuParams {
         // fine enough that the output's quantization stays far below the noise studied
         gyro_pulse_arcsec: [0.01; 3],
         accel_pulse_mps: [1e-5; 3],
+        // what 16-bit counters of those quanta carry at 100 Hz (9.1 deg/s, 3.3 g)
+        gyro_range_dps: 9.0,
+        accel_range_g: 3.0,
         gyro_bias_dph: [o.gyro_bias_dph; 3],
         gyro_bias_instability_dph: 0.0,
         // a white rate noise of sigma per sample is an angle random walk of sigma sqrt(dt)

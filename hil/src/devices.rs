@@ -61,7 +61,7 @@ pub fn start_scenario(
     gps: Option<GpsDevice>,
     sent_log: Option<&std::path::Path>,
 ) -> Result<Running<BusOutcome>> {
-    let lockstep = Lockstep::default();
+    let lockstep = Lockstep::at_rate(s.imu.rate_hz);
     let follow = s.bus.lockstep.then_some(lockstep);
     let (motion, turntable) = s.build();
     let devices = Devices {

@@ -36,6 +36,24 @@ pub fn navigation_config(s: &Scenario) -> Option<NavigationConfig> {
     Some(n)
 }
 
+/// nav's `[self_calibration]` for a scenario: enabled, at the site's latitude, the unit named
+/// by the IMU's seed, the parameter file written in the run folder.
+pub fn self_calibration_config(
+    s: &Scenario,
+    c: &nav::selfcal::SelfCalibrationConfig,
+) -> nav::selfcal::SelfCalibrationConfig {
+    nav::selfcal::SelfCalibrationConfig {
+        enabled: true,
+        latitude_deg: s.site.lat_deg,
+        imu: format!("emulated-imu-seed-{}", s.imu.seed),
+        parameters_out: Some(PARAMETER_FILE.into()),
+        ..c.clone()
+    }
+}
+
+/// The parameter file nav's self-calibration writes, in the run folder.
+pub const PARAMETER_FILE: &str = "gyro-parameters.toml";
+
 /// nav's config for a scenario. `iface`: the CAN interface (none in process); `gps_port`: the
 /// receiver's port when the scenario has one (in process a name only: nothing opens it).
 pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) -> NavConfig {
@@ -58,6 +76,11 @@ pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) ->
             .north_finding
             .as_ref()
             .map(|nf| crate::drill::nf_config(s, nf))
+            .unwrap_or_default(),
+        self_calibration: s
+            .self_calibration
+            .as_ref()
+            .map(|c| self_calibration_config(s, c))
             .unwrap_or_default(),
         watchdog: WatchdogConfig {
             imu_timeout_ms: (500.0 / s.speed.max(1.0)).max(100.0) as u64,
@@ -113,7 +136,7 @@ impl InProcessBench {
     ) -> Result<Self> {
         Ok(Self {
             imu: BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
-            tt: tt.map(|t| TtBus::new(t, s.imu.rate_hz, Lockstep::default().latency)),
+            tt: tt.map(|t| TtBus::new(t, s.imu.rate_hz, Lockstep::at_rate(s.imu.rate_hz).latency)),
             gps: gps.map(GpsReceiver::new),
             decoder: nav::gps::GpsDecoder::default(),
             pipeline: Pipeline::new(cfg, false).context("nav's pipeline")?,

@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod busreplay;
 pub mod calibexp;
+pub mod calibrate;
 pub mod devices;
 pub mod drill;
 pub mod experiment;

@@ -10,6 +10,7 @@ use vcan_setup::{CanSupport, GUEST_ENV, VmOptions};
 
 mod cmd;
 use cmd::bench::bench;
+use cmd::calibrate::calibrate_rotating_imu;
 use cmd::demo::demo;
 use cmd::drill::drill_north_finding;
 use cmd::experiment::experiment;
@@ -125,6 +126,10 @@ enum Cmd {
     /// Operator drills on vcan (emulators + the production nav binary).
     #[command(subcommand)]
     Drill(Drill),
+    /// Calibration procedures on vcan (emulators + the production nav binary in its calibration
+    /// mode).
+    #[command(subcommand)]
+    Calibrate(Calibrate),
     /// Reproduce a paper's tables in process (same emulator and nav code as the bench).
     #[command(subcommand)]
     Experiment(Experiment),
@@ -257,6 +262,54 @@ struct ValidateArgs {
     /// Speed factor of the emulated mechanism.
     #[arg(long, default_value_t = 1.0)]
     speed: f64,
+    #[command(flatten)]
+    bus: BusArgs,
+}
+
+#[derive(Subcommand)]
+enum Calibrate {
+    /// Self-calibration of a dual-axis rotating IMU on a static base (paper 004): nav levels
+    /// and finds a coarse heading at rest, turns both axes of the mechanism at the set rate,
+    /// reversing each after every turn, estimates the gyro biases and scale-factor errors by the
+    /// paper's decoupled RLS (and a 14-state Kalman filter beside it), returns the axes to zero,
+    /// locks them and writes the IMU parameter file (gyro-parameters.toml in the run folder).
+    /// Live progress, then a result card scored against the emulated unit's true errors.
+    RotatingImu(CalibrateArgs),
+}
+
+#[derive(clap::Args, Clone)]
+struct CalibrateArgs {
+    /// Latitude of the site, deg.
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+    lat: f64,
+    /// True heading of the base, deg.
+    #[arg(long, default_value_t = 30.06, allow_negative_numbers = true)]
+    heading: f64,
+    /// True pitch and roll of the base, deg.
+    #[arg(long, default_value_t = 0.06, allow_negative_numbers = true)]
+    tilt: f64,
+    /// Coarse alignment at rest, s.
+    #[arg(long, default_value_t = 60.0)]
+    level: f64,
+    /// Rotation, s (the paper: 900).
+    #[arg(long, default_value_t = 900.0)]
+    rotate: f64,
+    /// Rotation rate of both axes, deg/s (the paper: 5).
+    #[arg(long, default_value_t = 5.0)]
+    rate: f64,
+    /// The inner axis starts this long after the outer one, s (0: in step, as in the paper).
+    #[arg(long, default_value_t = 18.0)]
+    inner_delay: f64,
+    /// Speed factor (1 = real time).
+    #[arg(long, default_value_t = 20.0)]
+    speed: f64,
+    /// Seed of the emulated unit and mechanism.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Run the same procedure in process (no bus, no nav process: the same emulators and nav
+    /// code, stepped in the order the bench delivers the frames).
+    #[arg(long)]
+    in_process: bool,
     #[command(flatten)]
     bus: BusArgs,
 }
@@ -495,6 +548,7 @@ fn real_main(cli: Cli) -> Result<i32> {
         Cmd::Run(a) => run(a),
         Cmd::Demo { speed, dwell, out } => demo(speed, dwell, out),
         Cmd::Drill(Drill::NorthFinding(a)) => drill_north_finding(a),
+        Cmd::Calibrate(Calibrate::RotatingImu(a)) => calibrate_rotating_imu(a),
         Cmd::Validate(Validate::Turntable(a)) => validate_turntable(a),
         Cmd::Busload { bitrate } => {
             print!("{}", wire::busload::report(bitrate));

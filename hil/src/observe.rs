@@ -125,23 +125,44 @@ pub fn watch_solution(
     Ok(w)
 }
 
-/// Follows nav's north-finding lines during a run.
+/// Follows the lines of nav's start-up procedure (north-finding, self-calibration) during a
+/// run.
 #[derive(Default)]
 pub struct DrillWatch {
-    /// North-finding's final word has come.
+    /// The procedure's final word has come.
     pub done: bool,
 }
 
 impl DrillWatch {
-    /// Handle one nav stdout line; true when it is north-finding's final word.
+    /// Handle one nav stdout line; true when it is the procedure's final word.
     pub fn line(&mut self, l: &str, show: bool) -> bool {
-        if let Some(j) = l.strip_prefix("nav: north-finding progress ") {
-            if show && let Ok(p) = serde_json::from_str::<serde_json::Value>(j) {
-                crate::status::show(&crate::drill::progress_line(&p));
+        type Render = fn(&serde_json::Value) -> String;
+        let progress: [(&str, Render); 2] = [
+            (
+                "nav: north-finding progress ",
+                crate::drill::progress_line as Render,
+            ),
+            (
+                "nav: self-calibration progress ",
+                crate::calibrate::progress_line as Render,
+            ),
+        ];
+        for (prefix, render) in progress {
+            if let Some(j) = l.strip_prefix(prefix) {
+                if show && let Ok(p) = serde_json::from_str::<serde_json::Value>(j) {
+                    crate::status::show(&render(&p));
+                }
+                return false;
             }
-            return false;
         }
-        if l.starts_with("nav: north-finding result") || l.starts_with("nav: north-finding aborted")
+        if [
+            "nav: north-finding result",
+            "nav: north-finding aborted",
+            "nav: self-calibration result",
+            "nav: self-calibration aborted",
+        ]
+        .iter()
+        .any(|p| l.starts_with(p))
         {
             if show {
                 crate::status::line(l);

@@ -44,6 +44,9 @@ pub struct RunReport {
     pub turntable: Option<emulators::can::TurntableTxStats>,
     /// The north-finding drill's outcome (drills).
     pub drill: Option<crate::drill::DrillOutcome>,
+    /// The self-calibration's outcome, scored against the unit's truth (calibration runs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<crate::calibrate::CalibrateOutcome>,
     /// What the GPS emulator wrote (runs with a receiver).
     pub gps: Option<emulators::gps::GpsTxStats>,
     /// nav's solution frames as the bench received them.
@@ -212,6 +215,76 @@ pub fn drill_checks(out: &mut Vec<Check>, s: &Scenario, o: &crate::drill::DrillO
                 s.heading_tolerance_deg,
                 e.abs() / sig.max(1e-12)
             ),
+        });
+    }
+}
+
+/// The self-calibration's verdict: finished, each RLS estimate within three of its sigmas of
+/// the unit's truth (the sigma a promise kept), and the parameter file written and loadable
+/// for the unit.
+pub fn calibration_checks(
+    out: &mut Vec<Check>,
+    o: &crate::calibrate::CalibrateOutcome,
+    nav: &Summary,
+) {
+    out.push(Check {
+        name: "self-calibration finished".into(),
+        pass: o.result.is_some(),
+        detail: match (&o.result, &o.abort) {
+            (Some(r), _) => format!(
+                "{:.0} s of rotation, reversals {:?}, locked at zero after {:.1} s",
+                r.rotation_s, r.reversals, r.duration_s
+            ),
+            (None, Some(why)) => format!("aborted: {why}"),
+            (None, None) => "no result reported".into(),
+        },
+    });
+    if let (Some(r), Some(sc)) = (&o.result, &o.rls) {
+        let ratios: Vec<f64> = (0..3)
+            .flat_map(|j| {
+                [
+                    sc.bias_error_dph[j].abs() / r.rls.bias_sigma_dph[j].max(1e-300),
+                    sc.sf_error_ppm[j].abs() / r.rls.scale_factor_sigma_ppm[j].max(1e-300),
+                ]
+            })
+            .collect();
+        out.push(Check {
+            name: "RLS estimates within 3 sigma of the truth".into(),
+            pass: ratios.iter().all(|x| *x <= 3.0),
+            detail: format!(
+                "bias errors {:.5?} deg/h (sigma {:.5?}), scale-factor errors {:.3?} ppm (sigma {:.3?}); worst {:.2} sigma",
+                sc.bias_error_dph,
+                r.rls.bias_sigma_dph,
+                sc.sf_error_ppm,
+                r.rls.scale_factor_sigma_ppm,
+                sc.worst_sigma_ratio
+            ),
+        });
+    }
+    if o.result.is_some() {
+        let sc = nav.self_calibration.as_ref();
+        let file = sc.and_then(|c| c.parameters_file.clone());
+        let imu = sc
+            .and_then(|c| c.parameters.as_ref())
+            .map(|p| p.imu.clone())
+            .unwrap_or_default();
+        let loaded = file
+            .as_ref()
+            .map(|f| nav::params::ImuParameters::load(f, &imu));
+        out.push(Check {
+            name: "parameter file written, and loadable for the unit".into(),
+            pass: matches!(loaded, Some(Ok(_))),
+            detail: match (&file, loaded) {
+                (Some(f), Some(Ok(p))) => format!(
+                    "{}: unit {}, gyro bias {:.5?} deg/h, scale factor {:.3?} ppm",
+                    f.display(),
+                    p.imu,
+                    p.gyro.bias_dph,
+                    p.gyro.scale_factor_ppm
+                ),
+                (Some(f), Some(Err(e))) => format!("{}: {e}", f.display()),
+                _ => "nav wrote no parameter file".into(),
+            },
         });
     }
 }
@@ -468,6 +541,12 @@ pub fn card(r: &RunReport) -> String {
         }
         let _ = writeln!(s, "{line}");
     }
+    if let Some(c) = &r.calibration {
+        for l in crate::calibrate::card(c).lines() {
+            let _ = writeln!(s, " {l}");
+        }
+        let _ = writeln!(s, "{line}");
+    }
     for c in &r.checks {
         let _ = writeln!(
             s,
@@ -514,6 +593,13 @@ pub fn markdown(r: &RunReport) -> String {
         r.frames_per_wall_second,
         if r.pass { "PASS" } else { "FAIL" }
     );
+    if let Some(c) = &r.calibration {
+        let _ = writeln!(
+            s,
+            "## Self-calibration\n\n```\n{}```\n",
+            crate::calibrate::card(c)
+        );
+    }
     if let Some(d) = &r.drill {
         let f = |x: Option<f64>| x.map_or("--".to_string(), |v| format!("{v:.4}"));
         let _ = writeln!(

@@ -480,7 +480,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             }
         }
         if opts.progress
-            && (s.north_finding.is_none() || drill.done)
+            && ((s.north_finding.is_none() && s.self_calibration.is_none()) || drill.done)
             && Instant::now() >= next_report
         {
             let t = devices.sim_time();
@@ -632,6 +632,20 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     if let Some(o) = &drill_outcome {
         report::drill_checks(&mut checks, s, o);
     }
+    let calibration = s.self_calibration.as_ref().map(|_| {
+        let c = nav_json.self_calibration.as_ref();
+        crate::calibrate::outcome(
+            s,
+            c.and_then(|c| c.result.as_ref()),
+            c.map_or(Some("self-calibration was not enabled in nav"), |c| {
+                c.abort.as_deref()
+            }),
+            sim_reached,
+        )
+    });
+    if let Some(o) = &calibration {
+        report::calibration_checks(&mut checks, o, &nav_json);
+    }
     report::solution_checks(&mut checks, &solution, &nav_json);
     // nav's binary is a shell around its pipeline: from its own recording, the pipeline in
     // process must send exactly what nav sent
@@ -701,6 +715,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         in_process: reference,
         turntable: tt_stats,
         drill: drill_outcome,
+        calibration,
         gps: gps_stats,
         navigation,
         navigation_series,

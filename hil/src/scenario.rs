@@ -44,6 +44,10 @@ pub struct Scenario {
     /// nav runs four-position north-finding (needs a turntable); the run ends when it reports.
     #[serde(default)]
     pub north_finding: Option<nav::northfind::NorthFindingConfig>,
+    /// nav runs its self-calibration of a dual-axis rotating IMU (needs a turntable of two or
+    /// more axes); the run ends when it reports.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub self_calibration: Option<nav::selfcal::SelfCalibrationConfig>,
     /// A drill passes when the heading error is within this, deg.
     #[serde(default = "default_tolerance")]
     pub heading_tolerance_deg: f64,
@@ -179,6 +183,26 @@ impl Scenario {
             nf.check()?;
             if self.turntable.is_none() {
                 bail!("north_finding needs a [turntable]");
+            }
+        }
+        if let Some(c) = &self.self_calibration {
+            c.check()?;
+            if self.turntable.as_ref().is_none_or(|t| t.axes < 2) {
+                bail!("self_calibration needs a [turntable] of two or more axes");
+            }
+            if self.north_finding.is_some() {
+                bail!("a scenario has either [north_finding] or [self_calibration], not both");
+            }
+            if self.drive.is_some() {
+                bail!("self_calibration is on a static base: no [drive]");
+            }
+            // the mechanism's rate plus the earth's, with a margin for the reversals
+            if c.rate_dps * 1.1 >= self.imu.gyro_range_dps {
+                bail!(
+                    "self_calibration.rate_dps ({}) is too close to the gyros' range, imu.gyro_range_dps ({})",
+                    c.rate_dps,
+                    self.imu.gyro_range_dps
+                );
             }
         }
         if let Some(d) = &self.drive {

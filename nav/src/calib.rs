@@ -201,17 +201,29 @@ impl Rls2 {
 
     /// One observation `z = eps + dK w_exp + v`.
     pub fn update(&mut self, w_exp: f64, z: f64) {
-        let h = Vector2::new(1.0, w_exp);
+        self.observe([1.0, w_exp], z);
+    }
+
+    /// One observation `z = h . X + noise` with any `h` (the integrated form: `h = [T, E]`
+    /// for the time since the start and the expected angle since then).
+    pub fn observe(&mut self, h: [f64; 2], z: f64) {
+        let h = Vector2::from(h);
         let ph = self.p * h;
         let s = h.dot(&ph) + self.r;
         let k = ph / s;
         self.x += k * (z - h.dot(&self.x));
         self.p -= k * ph.transpose();
-        // keep P symmetric against rounding over hundreds of thousands of updates
         self.p = (self.p + self.p.transpose()) * 0.5;
     }
 
-    /// `[eps, dK]`.
+    /// The estimate's standard deviations `[eps, dK]` (of the filter's own model).
+    pub fn sigma(&self) -> [f64; 2] {
+        [
+            self.p[(0, 0)].max(0.0).sqrt(),
+            self.p[(1, 1)].max(0.0).sqrt(),
+        ]
+    }
+
     pub fn estimate(&self) -> [f64; 2] {
         [self.x[0], self.x[1]]
     }
@@ -242,6 +254,23 @@ impl GyroRls {
     /// Gyro biases, rad/s.
     pub fn bias(&self) -> Vector3<f64> {
         Vector3::from_fn(|j, _| self.ch[j].x[0])
+    }
+
+    /// The integrated form, per gyro: `residual = eps T + dK expected`, with `T` the time
+    /// since the start and `expected`, `residual` the expected angle since then and what the
+    /// gyro measured beyond it (rad).
+    pub fn observe_integrated(&mut self, t: f64, expected: &Vector3<f64>, residual: &Vector3<f64>) {
+        for (j, c) in self.ch.iter_mut().enumerate() {
+            c.observe([t, expected[j]], residual[j]);
+        }
+    }
+
+    /// Standard deviations of the biases (rad/s) and scale-factor errors.
+    pub fn sigmas(&self) -> (Vector3<f64>, Vector3<f64>) {
+        (
+            Vector3::from_fn(|j, _| self.ch[j].sigma()[0]),
+            Vector3::from_fn(|j, _| self.ch[j].sigma()[1]),
+        )
     }
 
     /// Gyro scale-factor errors (fractions).
@@ -410,6 +439,15 @@ impl AlignKf {
     /// Gyro scale-factor errors (fractions).
     pub fn scale_factor(&self) -> Vector3<f64> {
         Vector3::new(self.x[DK], self.x[DK + 1], self.x[DK + 2])
+    }
+
+    /// Standard deviations of the gyro biases (rad/s) and scale-factor errors.
+    pub fn sigmas(&self) -> (Vector3<f64>, Vector3<f64>) {
+        let sd = |i: usize| self.p[(i, i)].max(0.0).sqrt();
+        (
+            Vector3::new(sd(EPS), sd(EPS + 1), sd(EPS + 2)),
+            Vector3::new(sd(DK), sd(DK + 1), sd(DK + 2)),
+        )
     }
 
     /// The computed IMU attitude (IMU to ENU).

@@ -30,6 +30,9 @@ pub struct NavConfig {
     /// Four-position north-finding on the indexing mechanism at start-up.
     #[serde(default)]
     pub north_finding: crate::northfind::NorthFindingConfig,
+    /// Self-calibration of a dual-axis rotating IMU at start-up (calibration mode).
+    #[serde(default, skip_serializing_if = "is_off")]
+    pub self_calibration: crate::selfcal::SelfCalibrationConfig,
     /// Navigation after start-up (levelling, hand-over, strapdown, SINS/GPS filter).
     #[serde(default)]
     pub navigation: crate::navigator::NavigationConfig,
@@ -39,6 +42,10 @@ pub struct NavConfig {
     /// Recording and reports.
     #[serde(default)]
     pub record: RecordConfig,
+}
+
+fn is_off(c: &crate::selfcal::SelfCalibrationConfig) -> bool {
+    !c.enabled
 }
 
 /// Where the IMU unit's calibration parameters come from.
@@ -250,6 +257,22 @@ impl NavConfig {
         if let Err(e) = cfg.north_finding.check() {
             return Err(invalid(e.to_string()));
         }
+        if cfg.self_calibration.enabled {
+            if let Err(e) = cfg.self_calibration.check() {
+                return Err(invalid(e.to_string()));
+            }
+            if cfg.north_finding.enabled {
+                return Err(invalid(
+                    "self_calibration and north_finding both command the mechanism at start: enable one".into(),
+                ));
+            }
+            if cfg.self_calibration.rate_dps >= cfg.imu.gyro_range_dps {
+                return Err(invalid(format!(
+                    "self_calibration.rate_dps ({}) must stay below the gyros' range, imu.gyro_range_dps ({})",
+                    cfg.self_calibration.rate_dps, cfg.imu.gyro_range_dps
+                )));
+            }
+        }
         if let Err(e) = cfg.navigation.filter.check() {
             return Err(invalid(format!("navigation.{e}")));
         }
@@ -288,10 +311,14 @@ impl NavConfig {
             }
         }
         let gps_export = cfg.gps.as_mut().and_then(|g| g.fixes_jsonl.as_mut());
-        for p in [&mut cfg.record.mcap, &mut cfg.record.summary]
-            .into_iter()
-            .flatten()
-            .chain(gps_export)
+        for p in [
+            &mut cfg.record.mcap,
+            &mut cfg.record.summary,
+            &mut cfg.self_calibration.parameters_out,
+        ]
+        .into_iter()
+        .flatten()
+        .chain(gps_export)
         {
             if p.is_relative() {
                 *p = base.join(&*p);

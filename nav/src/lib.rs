@@ -23,6 +23,7 @@ pub mod pipeline;
 pub mod rawmsg;
 pub mod record;
 pub mod redundant;
+pub mod selfcal;
 pub mod strapdown;
 pub mod summary;
 pub mod ttlink;

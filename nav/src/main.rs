@@ -151,6 +151,8 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         recorder: recorder.as_ref(),
         frames_sent: 0,
         send_errors: 0,
+        parameters_out: cfg.self_calibration.parameters_out.clone(),
+        parameters: None,
     };
     let mut out = Vec::new();
     let mut batch = Vec::with_capacity(wire::BATCH);
@@ -259,6 +261,12 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     summary.interface = iface.to_string();
     summary.read_errors = read_errors;
     summary.command_send_errors = shell.command_errors;
+    if let (Some(sc), Some((file, p))) =
+        (summary.self_calibration.as_mut(), shell.parameters.take())
+    {
+        sc.parameters = Some(p);
+        sc.parameters_file = file;
+    }
     // SAFETY: getuid(2) cannot fail.
     summary.process_uid = Some(unsafe { libc::getuid() });
     if let Some(s) = &shell.sock {
@@ -301,6 +309,17 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
             .with_context(|| format!("writing summary {}", p.display()))?;
     }
     Ok(summary)
+}
+
+/// Write `text` to `path` through a temporary file beside it and a rename: whoever reads the
+/// file (nav at its next start) sees the old one or the new one whole, never half of one.
+fn write_atomically(path: &std::path::Path, text: &str) -> Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".part");
+    let tmp = std::path::PathBuf::from(tmp);
+    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path)
+        .with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
 }
 
 /// A received frame (or why it is not a data frame) and its kernel receive time, ns.
@@ -350,6 +369,10 @@ struct Shell<'a> {
     /// Solution frames written.
     frames_sent: u64,
     send_errors: u64,
+    /// Where self-calibration's parameter file goes.
+    parameters_out: Option<std::path::PathBuf>,
+    /// The parameter file as stamped, and where it was written (none: not written).
+    parameters: Option<(Option<std::path::PathBuf>, nav::params::ImuParameters)>,
 }
 
 impl Shell<'_> {
@@ -418,6 +441,27 @@ impl Shell<'_> {
                     }
                 }
                 Output::Line(l) => println!("{l}"),
+                Output::Parameters(p) => {
+                    let mut p = *p;
+                    p.date = nav::params::now_rfc3339();
+                    let written = self.parameters_out.as_ref().and_then(|path| {
+                        match write_atomically(path, &p.to_toml()) {
+                            Ok(()) => {
+                                info!("self-calibration parameters written to {}", path.display());
+                                println!("nav: parameter file {}", path.display());
+                                Some(path.clone())
+                            }
+                            Err(e) => {
+                                tracing::error!(
+                                    "self-calibration parameters not written to {}: {e:#}",
+                                    path.display()
+                                );
+                                None
+                            }
+                        }
+                    });
+                    self.parameters = Some((written, p));
+                }
             }
         }
         Ok(())

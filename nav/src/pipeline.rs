@@ -27,7 +27,8 @@ use crate::navigator::Navigator;
 use crate::northfind::{NorthFinder, Phase};
 use crate::output::{Solution, SolutionEncoder};
 use crate::record::JsonChannel;
-use crate::summary::{AttitudeSummary, NorthFindingSummary, Summary};
+use crate::selfcal::{CalPhase, SelfCalibrationResult, SelfCalibrator};
+use crate::summary::{AttitudeSummary, NorthFindingSummary, SelfCalibrationSummary, Summary};
 use std::collections::BTreeMap;
 use thiserror::Error;
 use tracing::{info, warn};
@@ -58,6 +59,9 @@ pub enum Output {
     },
     /// A line for the operator (stdout).
     Line(String),
+    /// Self-calibration finished: the shell writes this parameter file (stamping its date) to
+    /// the config's `self_calibration.parameters_out`.
+    Parameters(Box<crate::params::ImuParameters>),
 }
 
 /// Setting the pipeline up failed.
@@ -69,6 +73,9 @@ pub enum PipelineError {
     /// North-finding's settings.
     #[error(transparent)]
     NorthFinding(#[from] crate::northfind::NorthFindingConfigError),
+    /// Self-calibration's settings.
+    #[error(transparent)]
+    SelfCalibration(#[from] crate::selfcal::SelfCalibrationConfigError),
 }
 
 /// Frames received, by outcome.
@@ -130,6 +137,47 @@ struct NorthFinding {
     handed_over: bool,
 }
 
+/// Self-calibration with its reporting.
+#[derive(Debug)]
+struct Calibrating {
+    cal: SelfCalibrator,
+    /// The gyro parameters nav started with (the estimates are residuals on top of them).
+    start: crate::params::GyroParameters,
+    commands_sent: u64,
+    frames: u64,
+    last_print: f64,
+    last_stage: Option<CalPhase>,
+    reported: bool,
+    parameters: Option<crate::params::ImuParameters>,
+}
+
+impl Calibrating {
+    /// The parameter file of a result: the RLS's residual estimates composed with the
+    /// parameters the front end applied (`(raw - b0) / (1 + k0)` read `(1 + k') w + b'`).
+    fn parameters(&self, r: &SelfCalibrationResult) -> crate::params::ImuParameters {
+        let c = self.cal.config();
+        let (b0, k0) = (self.start.bias_dph, self.start.scale_factor_ppm);
+        let mut g = self.start;
+        for j in 0..3 {
+            let k0f = k0[j] * 1e-6;
+            g.bias_dph[j] = b0[j] + r.rls.gyro_bias_dph[j] * (1.0 + k0f);
+            g.scale_factor_ppm[j] =
+                ((1.0 + r.rls.gyro_scale_factor_ppm[j] * 1e-6) * (1.0 + k0f) - 1.0) * 1e6;
+        }
+        crate::params::ImuParameters {
+            format: crate::params::FORMAT.into(),
+            imu: c.imu.clone(),
+            procedure: format!(
+                "nav self-calibration (paper 004 decoupled RLS, integrated): dual-axis rotation at {} deg/s reversing every {} deg, inner axis {} s behind, {:.0} s, static base at latitude {} deg",
+                c.rate_dps, c.turn_deg, c.inner_delay_s, r.rotation_s, c.latitude_deg
+            ),
+            // the shell stamps the date: the pipeline's output depends on its input only
+            date: String::new(),
+            gyro: g,
+        }
+    }
+}
+
 /// The navigation computer's logic.
 pub struct Pipeline {
     rate_hz: f64,
@@ -142,6 +190,7 @@ pub struct Pipeline {
     fir: Option<crate::fir::FirResponse>,
     coning_method: crate::coning::ConingMethod,
     nf: Option<NorthFinding>,
+    cal: Option<Calibrating>,
     navigator: Option<Navigator>,
     out_every: u64,
     next_out: Option<u64>,
@@ -181,6 +230,23 @@ impl Pipeline {
         } else {
             None
         };
+        let cal = if cfg.self_calibration.enabled {
+            Some(Calibrating {
+                cal: SelfCalibrator::new(cfg.self_calibration.clone())?,
+                start: crate::params::GyroParameters {
+                    bias_dph: cfg.imu.gyro_bias_dph,
+                    scale_factor_ppm: cfg.imu.gyro_scale_factor_ppm,
+                },
+                commands_sent: 0,
+                frames: 0,
+                last_print: f64::NEG_INFINITY,
+                last_stage: None,
+                reported: false,
+                parameters: None,
+            })
+        } else {
+            None
+        };
         Ok(Self {
             rate_hz: cfg.imu.rate_hz,
             sample_ns: 1e9 / cfg.imu.rate_hz,
@@ -192,6 +258,7 @@ impl Pipeline {
             proc,
             coning_method: cfg.processing.coning,
             nf,
+            cal,
             navigator: cfg
                 .navigation
                 .enabled
@@ -247,13 +314,34 @@ impl Pipeline {
                 _ => {}
             }
         }
+        if let Some(c) = self.cal.as_mut() {
+            // stamped with the end of the last sample nav has: on the bench a status frame
+            // follows the sample it was taken at
+            let base = self.proc.baseline().map_or(0, |b| b as i64);
+            let t = self
+                .sums
+                .last
+                .map_or(0.0, |k| (k as i64 - base) as f64 * self.sample_ns * 1e-9);
+            match &m {
+                Message::TtStatus(st) => {
+                    c.frames += 1;
+                    c.cal.on_status(t, st);
+                }
+                Message::TtAck(a) => {
+                    c.frames += 1;
+                    c.cal.on_ack(a);
+                }
+                _ => {}
+            }
+        }
         // 3. the IMU front end
         self.fe.on_message(&m, &mut self.samples, &mut self.events);
         // 4, 5. processing, north-finding and navigation
         self.process(out);
         self.hand_over();
-        // 6. north-finding's commands and progress
+        // 6. north-finding's and self-calibration's commands and progress
         self.north_finding(out);
+        self.calibration(out);
         // 7. the solution at 50 Hz of IMU time
         self.solution(out);
         self.integrity_changes(out);
@@ -429,6 +517,13 @@ impl Pipeline {
         let samples = std::mem::take(&mut self.samples);
         for s in &samples {
             self.sums.add_sample(s);
+            if let (Some(c), Some(b)) = (self.cal.as_mut(), self.proc.baseline())
+                && !s.ambiguous
+            {
+                let t1 = (s.sample as i64 - b as i64) as f64 * self.sample_ns * 1e-9;
+                let dt = f64::from(s.span) * self.sample_ns * 1e-9;
+                c.cal.on_sample(t1, dt, s.dtheta, s.dv, s.saturated);
+            }
             let invalid_before = self.proc.stats().invalid_since.is_some();
             self.proc.push_sample(s, &mut self.updates);
             // the PPS edge came `o` samples before the end of this sample
@@ -455,7 +550,8 @@ impl Pipeline {
                 }
                 // navigation takes over once north-finding (when it runs) is finished
                 if let Some(n) = self.navigator.as_mut() {
-                    if self.nf.as_ref().is_none_or(|f| f.finder.finished()) {
+                    let cal_running = self.cal.as_ref().is_some_and(|c| !c.cal.finished());
+                    if self.nf.as_ref().is_none_or(|f| f.finder.finished()) && !cal_running {
                         n.on_update(
                             t,
                             u.phi,
@@ -560,8 +656,83 @@ impl Pipeline {
         }
     }
 
-    /// The solution's mode: north-finding while it runs, then the navigator's.
+    /// Step 6 for self-calibration: its commands, progress lines (as north-finding's) and, once,
+    /// its result and parameter file.
+    fn calibration(&mut self, out: &mut Vec<Output>) {
+        let Some(c) = self.cal.as_mut() else { return };
+        let base = self.proc.baseline().map_or(0, |b| b as i64);
+        let t = self.sums.last.map_or(0, |k| k as i64 - base) as f64 / self.rate_hz;
+        while let Some(cmd) = c.cal.poll(t.max(0.0)) {
+            match Message::TtCmd(cmd).encode() {
+                Ok(f) => {
+                    out.push(Output::Command(f));
+                    c.commands_sent += 1;
+                }
+                Err(e) => {
+                    self.encode_errors += 1;
+                    warn!("TT_CMD {cmd:?} cannot be encoded: {e}");
+                }
+            }
+            if c.cal.finished() {
+                break;
+            }
+        }
+        let stage = c.cal.stage();
+        if c.last_stage != Some(stage) || (t - c.last_print >= 1.0 && !c.cal.finished()) {
+            c.last_print = t;
+            c.last_stage = Some(stage);
+            if let Ok(j) = serde_json::to_string(&c.cal.progress()) {
+                out.push(Output::Line(format!("nav: self-calibration progress {j}")));
+                if self.record {
+                    out.push(Output::Json {
+                        channel: JsonChannel::Event,
+                        publish_ns: (t.max(0.0) * 1e9) as u64,
+                        json: format!(
+                            "{{\"kind\":\"self_calibration_progress\",\"progress\":{j}}}"
+                        ),
+                    });
+                }
+            }
+        }
+        if c.cal.finished() && !c.reported {
+            c.reported = true;
+            c.cal.close();
+            if let Some(r) = c.cal.result().cloned() {
+                info!(
+                    rls_bias_dph = ?r.rls.gyro_bias_dph,
+                    rls_scale_factor_ppm = ?r.rls.gyro_scale_factor_ppm,
+                    "self-calibration done"
+                );
+                let p = c.parameters(&r);
+                if let Ok(j) = serde_json::to_string(&r) {
+                    out.push(Output::Line(format!("nav: self-calibration result {j}")));
+                }
+                c.parameters = Some(p.clone());
+                out.push(Output::Parameters(Box::new(p)));
+            } else {
+                let why = c.cal.abort_reason().unwrap_or("unknown");
+                warn!("self-calibration aborted: {why}");
+                out.push(Output::Line(format!(
+                    "nav: self-calibration aborted: {why}"
+                )));
+            }
+        }
+    }
+
+    /// The self-calibration procedure (when enabled).
+    pub fn calibrator(&self) -> Option<&SelfCalibrator> {
+        self.cal.as_ref().map(|c| &c.cal)
+    }
+
+    /// The solution's mode: self-calibration or north-finding while it runs, then the
+    /// navigator's.
     pub fn mode(&self) -> wire::NavMode {
+        if let Some(c) = self.cal.as_ref().filter(|c| !c.cal.finished()) {
+            return match c.cal.phase() {
+                CalPhase::Enabling | CalPhase::Levelling => wire::NavMode::Levelling,
+                _ => wire::NavMode::Calibrating,
+            };
+        }
         let nf_running = self.nf.as_ref().is_some_and(|f| !f.finder.finished());
         match (&self.navigator, nf_running) {
             (_, true) => wire::NavMode::NorthFinding,
@@ -582,7 +753,11 @@ impl Pipeline {
             turntable: self
                 .nf
                 .as_ref()
-                .is_some_and(|f| f.finder.abort_reason().is_some()),
+                .is_some_and(|f| f.finder.abort_reason().is_some())
+                || self
+                    .cal
+                    .as_ref()
+                    .is_some_and(|c| c.cal.abort_reason().is_some()),
             filter: self.proc.stats().invalid_since.is_some()
                 || nav.is_some_and(|n| {
                     n.filter().is_some_and(|k| k.stats().reanchors > 0)
@@ -792,6 +967,17 @@ impl Pipeline {
                 turntable_frames: f.frames,
                 command_retries: f.finder.ack_counters().0,
                 stale_acks: f.finder.ack_counters().1,
+            }),
+            self_calibration: self.cal.as_ref().map(|c| SelfCalibrationSummary {
+                phase: c.cal.phase(),
+                result: c.cal.result().cloned(),
+                abort: c.cal.abort_reason().map(str::to_string),
+                parameters: c.parameters.clone(),
+                parameters_file: None,
+                commands_sent: c.commands_sent,
+                turntable_frames: c.frames,
+                command_retries: c.cal.ack_counters().0,
+                stale_acks: c.cal.ack_counters().1,
             }),
             gps: None,
             navigation: self.navigator.as_ref().map(|n| n.summary()),

@@ -73,6 +73,9 @@ pub struct Summary {
     pub attitude: AttitudeSummary,
     /// North-finding, when it ran.
     pub north_finding: Option<NorthFindingSummary>,
+    /// Self-calibration (calibration mode), when it ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub self_calibration: Option<SelfCalibrationSummary>,
     /// The GPS receiver, when there is one.
     pub gps: Option<GpsSummary>,
     /// Navigation, when enabled.
@@ -142,6 +145,32 @@ pub struct NorthFindingSummary {
     pub command_retries: u64,
     /// Acknowledgements that came too late (or matched no command).
     #[serde(default)]
+    pub stale_acks: u64,
+}
+
+/// Self-calibration at exit.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SelfCalibrationSummary {
+    /// Last phase.
+    pub phase: crate::selfcal::CalPhase,
+    /// The result, when it finished.
+    pub result: Option<crate::selfcal::SelfCalibrationResult>,
+    /// Why it gave up, when it did.
+    pub abort: Option<String>,
+    /// The parameter file's content (the RLS's estimates on top of the parameters nav started
+    /// with), when it finished.
+    pub parameters: Option<crate::params::ImuParameters>,
+    /// Where the parameter file was written, when it was.
+    #[serde(default)]
+    pub parameters_file: Option<PathBuf>,
+    /// Turntable commands sent.
+    pub commands_sent: u64,
+    /// Turntable frames received (status, acks).
+    pub turntable_frames: u64,
+    /// Commands sent again for want of an acknowledgement.
+    pub command_retries: u64,
+    /// Acknowledgements that came too late (or matched no command).
     pub stale_acks: u64,
 }
 

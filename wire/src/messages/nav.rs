@@ -125,6 +125,8 @@ u8_enum!(
         Coasting = 5,
         /// Fault.
         Fault = 6,
+        /// Self-calibration: the mechanism turns the IMU to make its errors observable.
+        Calibrating = 7,
     }
 );
 
