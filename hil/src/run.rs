@@ -546,7 +546,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     }
     let summary_path = opts.out.join("nav-summary.json");
     let mut killed = None;
-    let nav_json = match nav::summary::Summary::read(&summary_path) {
+    let mut nav_json = match nav::summary::Summary::read(&summary_path) {
         Ok(s) => s,
         Err(nav::summary::SummaryError::Read { .. }) if killed_at.is_some() => {
             // killed outright: what it recorded is all there is; nav's pipeline rebuilds the
@@ -574,6 +574,12 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
         Err(e) => return Err(e.into()),
     };
+    // nav wrote its files in its own folder, now moved into the run folder
+    if let Some(sc) = nav_json.self_calibration.as_mut()
+        && let Some(name) = sc.parameters_file.as_ref().and_then(|f| f.file_name())
+    {
+        sc.parameters_file = Some(opts.out.join(name));
+    }
     phases.end("summary");
     // the checks that recompute things (the in-process reference run, the replay of nav's
     // recording through its pipeline, the scoring of its recording against truth) are

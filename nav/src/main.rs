@@ -34,6 +34,10 @@ struct Cli {
     /// Print the summary as JSON on stdout instead of text.
     #[arg(long)]
     json: bool,
+    /// Check the config (and the IMU parameter file its `[calibration]` names), say what nav
+    /// would use, and exit without opening any device.
+    #[arg(long)]
+    check: bool,
 }
 
 /// Whether this kernel can open CAN sockets at all.
@@ -79,6 +83,20 @@ fn real_main() -> Result<()> {
             cfg.imu.gyro_bias_dph,
             cfg.imu.gyro_scale_factor_ppm
         );
+    }
+    if cli.check {
+        println!(
+            "nav: config {} is valid: gyro bias {:?} deg/h, scale factor {:?} ppm{}",
+            cli.config.display(),
+            cfg.imu.gyro_bias_dph,
+            cfg.imu.gyro_scale_factor_ppm,
+            cfg.calibration.as_ref().map_or(String::new(), |c| format!(
+                " (from {} for unit {})",
+                c.parameters.display(),
+                c.imu
+            ))
+        );
+        return Ok(());
     }
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()

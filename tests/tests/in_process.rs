@@ -1,4 +1,4 @@
-//! The north-finding drill in process (no bus: the path of the Monte Carlo runs and the
+//! The north-finding drill and the self-calibration in process (no bus: the path of the Monte Carlo runs and the
 //! experiments) gives exactly the result the same drill gave through vcan. The vcan run is the
 //! end-to-end test `north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace`,
 //! which keeps its report; this runs on the host after it (`./run-tests`), where the in-process
@@ -40,5 +40,44 @@ fn the_in_process_drill_gives_the_result_of_the_drill_through_vcan() {
     assert_eq!(
         &ip["drill"]["result"], a,
         "the in-process drill must give the bench's result"
+    );
+}
+
+/// The self-calibration in process gives exactly the result nav gave through vcan in
+/// `the_rotating_imu_calibrates_itself_through_vcan` (its report kept).
+#[test]
+#[ignore = "needs the e2e tests' reports: run ./run-tests"]
+fn the_in_process_calibration_gives_the_result_of_the_one_through_vcan() {
+    let kept = reports_dir().join("calibrate/report.json");
+    let bench: Value = serde_json::from_slice(
+        &std::fs::read(&kept).unwrap_or_else(|e| panic!("{}: {e}", kept.display())),
+    )
+    .expect("the kept report is JSON");
+    let dir = tempfile::tempdir().unwrap();
+    // the procedure of tests/tests/vcan.rs (`CALIBRATE_ARGS`), in process
+    let o = Command::new(bin("hil"))
+        .args([
+            "calibrate",
+            "rotating-imu",
+            "--level",
+            "10",
+            "--rotate",
+            "150",
+        ])
+        .args(["--seed", "3", "--json", "--in-process", "--out"])
+        .arg(dir.path())
+        .output()
+        .expect("hil runs");
+    let ip: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!(
+            "hil calibrate --in-process printed no JSON ({e}): {}",
+            String::from_utf8_lossy(&o.stderr)
+        )
+    });
+    let a = &bench["nav"]["self_calibration"]["result"];
+    assert!(a["rls"]["gyro_bias_dph"].is_array(), "{a}");
+    assert_eq!(
+        &ip["calibration"]["result"], a,
+        "the in-process calibration must give the bench's result"
     );
 }

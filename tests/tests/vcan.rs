@@ -925,3 +925,83 @@ fn can_utils_watch_the_bus_and_play_our_logs() {
     );
     assert_eq!(original_sent[..n], replayed_sent[..n]);
 }
+
+/// The arguments of the shortened self-calibration both this test and
+/// `tests/tests/in_process.rs` run (keep the two alike): paper 004's unit at its site, 10 s at
+/// rest, 150 s of rotation at the paper's 5 deg/s (two turns of each axis), seed 3.
+const CALIBRATE_ARGS: [&str; 9] = [
+    "calibrate",
+    "rotating-imu",
+    "--level",
+    "10",
+    "--rotate",
+    "150",
+    "--seed",
+    "3",
+    "--json",
+];
+
+/// Paper 004's procedure through vcan, shortened: nav in its calibration mode levels at rest,
+/// then commands both axes of the two-axis mechanism over CAN in rate mode, reversing each after
+/// every turn, estimates the gyro biases and scale-factor errors from the IMU frames and the
+/// status frames' angles, returns the axes to zero and locks them, and writes the parameter
+/// file. Every check of the run passes: finished, each RLS estimate within 3 of its sigmas of
+/// the emulated unit's truth, the parameter file loadable for the unit; and nav's output
+/// replays bit for bit from its recording.
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn the_rotating_imu_calibrates_itself_through_vcan() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args: Vec<&str> = CALIBRATE_ARGS.to_vec();
+    args.extend(["--speed", "20", "--iface", "vcan-e2e7", "--out"]);
+    let (r, code) = hil_json(&args, &[dir.path()]);
+    for (name, pass, detail) in checks(&r) {
+        eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
+        assert!(pass, "check failed: {name}: {detail}");
+    }
+    assert_eq!(code, 0);
+    let c = &r["nav"]["self_calibration"];
+    assert_eq!(c["phase"], "done", "{c}");
+    let res = &c["result"];
+    for axis in 0..2 {
+        assert!(res["reversals"][axis].as_u64().unwrap() >= 1, "{res}");
+    }
+    assert_eq!(res["samples_without_status"], 0, "{res}");
+    assert!(
+        c["commands_sent"].as_u64().unwrap() > 100,
+        "heartbeats, rates and reversals went over CAN: {c}"
+    );
+    // the file nav wrote is the one nav loads: [calibration] of a nav config reads it back
+    let file = dir.path().join("gyro-parameters.toml");
+    let text = std::fs::read_to_string(&file).expect("nav wrote the parameter file");
+    assert!(
+        text.contains("format = \"rlg-hil.imu-parameters.v1\""),
+        "{text}"
+    );
+    let unit = c["parameters"]["imu"].as_str().unwrap();
+    let cfg = dir.path().join("check.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[can]\ninterface = \"vcan-e2e7\"\n[calibration]\nimu = \"{unit}\"\nparameters = \"gyro-parameters.toml\"\n"
+        ),
+    )
+    .unwrap();
+    let o = Command::new(bin("nav"))
+        .args(["--check", "--config", cfg.to_str().unwrap()])
+        .output()
+        .expect("nav runs");
+    assert!(
+        o.status.success(),
+        "nav refuses its own parameter file: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        checks(&r)
+            .iter()
+            .any(|c| c.0 == "nav's output replays bit for bit from its recording" && c.1),
+        "the replay check ran and passed"
+    );
+    keep_report(dir.path(), "calibrate");
+    keep_file(dir.path(), "calibrate", "report.json");
+}
