@@ -157,7 +157,9 @@ pub fn outcome(
     );
     let heading = |b: [f64; 3]| {
         let e = (c_nb * nalgebra::Vector3::from(b)).x;
-        (e / (15.041_067 * lat.cos())).to_degrees()
+        // deg/h over the horizontal earth rate in deg/h: rad
+        let w_h = emulators::geodesy::OMEGA.to_degrees() * 3600.0 * lat.cos();
+        (e / w_h).to_degrees()
     };
     let score = |g: &nav::selfcal::GyroEstimate| {
         let be: [f64; 3] = std::array::from_fn(|j| g.gyro_bias_dph[j] - tb[j]);
@@ -214,11 +216,11 @@ pub fn run_in_process(
             .is_none_or(nav::selfcal::SelfCalibrator::finished)
     {
         t = bench.step();
-        if let Some(c) = bench.pipeline().calibrator() {
-            if last != Some(c.phase()) || k.is_multiple_of(every) {
-                last = Some(c.phase());
-                progress(&c.progress());
-            }
+        if let Some(c) = bench.pipeline().calibrator()
+            && (last != Some(c.phase()) || k.is_multiple_of(every))
+        {
+            last = Some(c.phase());
+            progress(&c.progress());
         }
         k += 1;
     }
@@ -362,7 +364,7 @@ mod tests {
         let r = out
             .result
             .as_ref()
-            .expect(out.abort.as_deref().unwrap_or("no result"));
+            .unwrap_or_else(|| panic!("{}", out.abort.as_deref().unwrap_or("no result")));
         assert!(
             r.reversals[0] >= 3 && r.reversals[1] >= 3,
             "{:?}",

@@ -175,6 +175,15 @@ impl Scenario {
         if !(0.0..1.0).contains(&self.max_bus_loss) {
             bail!("max_bus_loss must be in [0, 1)");
         }
+        // the contract's IMU frames carry any rate up to the RLG unit's 2 kHz; nav's solution
+        // goes out at 50 Hz of IMU time, so a whole number of samples per epoch
+        let r = self.imu.rate_hz;
+        if !((50.0..=wire::IMU_RATE_HZ).contains(&r) && (r / 50.0).fract() == 0.0) {
+            bail!(
+                "imu.rate_hz ({r}) must be a multiple of 50 Hz from 50 to {} Hz (nav's solution goes out at 50 Hz of IMU time)",
+                wire::IMU_RATE_HZ
+            );
+        }
         self.imu.check()?;
         if let Some(t) = &self.turntable {
             t.check()?;
@@ -245,15 +254,7 @@ impl Scenario {
         }
         nav::attitude::ImuProcessor::new(&self.processing)
             .map_err(|e| anyhow::anyhow!("processing: {e}"))?;
-        // the contract's IMU frames carry any rate up to the RLG unit's 2 kHz; nav's solution
-        // goes out at 50 Hz of IMU time, so a whole number of samples per epoch
         let r = self.imu.rate_hz;
-        if !((50.0..=wire::IMU_RATE_HZ).contains(&r) && (r / 50.0).fract() == 0.0) {
-            bail!(
-                "imu.rate_hz ({r}) must be a multiple of 50 Hz from 50 to {} Hz (nav's solution goes out at 50 Hz of IMU time)",
-                wire::IMU_RATE_HZ
-            );
-        }
         if (self.processing.fir.fs_hz - r).abs() > 1e-9 {
             bail!(
                 "processing.fir.fs_hz ({}) must equal imu.rate_hz ({r}) (for a 100 Hz IMU, e.g. fs_hz = 100, passband_hz = 20, stopband_hz = 45, order = 16)",

@@ -958,3 +958,48 @@ impl SelfCalibrator {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The encoder's angle unwraps across 360 deg, interpolates between frames, refuses a
+    /// sample across a gap in the status stream, and a sample starts where the last one ended.
+    #[test]
+    fn axis_angles_unwrap_interpolate_and_chain() {
+        let mut a = AxisTrack::default();
+        for (i, ang) in [359.8, 359.9, 0.0, 0.1].into_iter().enumerate() {
+            a.push(i as f64 * 0.01, ang);
+        }
+        let at = |t: f64| a.at(t, 0.05).expect("covered");
+        assert!((at(0.025) - 360.05).abs() < 1e-9, "{}", at(0.025));
+        assert!((at(0.03) - 360.1).abs() < 1e-9);
+        assert_eq!(a.at(0.031, 0.05), None, "not yet covered");
+        a.push(0.2, 2.0);
+        assert_eq!(a.at(0.1, 0.05), None, "across a 0.17 s gap");
+        a.chain = Some((0.02, 123.0));
+        assert_eq!(a.start(0.02, 0.05), Some(123.0));
+        assert!((a.start(0.015, 0.05).expect("interpolated") - 359.95).abs() < 1e-9);
+    }
+
+    /// Settings out of range are refused with their name.
+    #[test]
+    fn bad_settings_name_themselves() {
+        let ok = SelfCalibrationConfig::default();
+        ok.check().expect("defaults");
+        let e = SelfCalibrationConfig {
+            inner_axis: 0,
+            ..ok.clone()
+        }
+        .check()
+        .unwrap_err();
+        assert_eq!(e.setting, "outer_axis/inner_axis");
+        let e = SelfCalibrationConfig {
+            rotate_s: 10.0,
+            ..ok
+        }
+        .check()
+        .unwrap_err();
+        assert_eq!(e.setting, "level_s/rotate_s");
+    }
+}
