@@ -101,6 +101,9 @@ pub struct ImuParams {
     /// Firmware counter jumps: [sample index, jump]: from that sample on, the sample counter
     /// on the wire runs `jump` ahead (the samples themselves are not lost).
     pub counter_jumps: Vec<[u64; 2]>,
+    /// A redundant MEMS gyro unit riding with this IMU (paper 001), sampled on its strobe.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tetra: Option<crate::mems::TetraUnit>,
 }
 
 impl Default for ImuParams {
@@ -135,6 +138,7 @@ impl Default for ImuParams {
             pps_jitter_s: 0.0,
             pps_spurious_at_s: Vec::new(),
             counter_jumps: Vec::new(),
+            tetra: None,
         }
     }
 }
@@ -215,6 +219,27 @@ impl ImuParams {
                         self.accel_range_g, self.rate_hz
                     ),
                 ));
+            }
+        }
+        if let Some(t) = &self.tetra {
+            if !positive(t.pulse_deg) {
+                return Err(crate::ParamError::new(
+                    "imu.tetra",
+                    "pulse_deg must be positive",
+                ));
+            }
+            if let Some(f) = &t.failure {
+                let g = match *f {
+                    crate::mems::GyroFailure::Stuck { gyro, .. }
+                    | crate::mems::GyroFailure::BiasJump { gyro, .. }
+                    | crate::mems::GyroFailure::NoiseBurst { gyro, .. } => gyro,
+                };
+                if g >= crate::mems::GYROS {
+                    return Err(crate::ParamError::new(
+                        "imu.tetra.failure",
+                        format!("gyro {g} does not exist: gyros are 0 to 3"),
+                    ));
+                }
             }
         }
         if !(self.pps_jitter_s.is_finite() && (0.0..=0.1).contains(&self.pps_jitter_s)) {
@@ -315,6 +340,7 @@ pub struct ImuEmulator {
     rng: StdRng,
     arw_sigma: f64,
     vrw_sigma: f64,
+    tetra: Option<crate::mems::TetraStream>,
 }
 
 /// Frames of one sample.
@@ -362,6 +388,7 @@ impl ImuEmulator {
         };
         Self {
             motion,
+            tetra: p.tetra.clone().map(crate::mems::TetraStream::new),
             arw_sigma: p.gyro_arw_dpsh.to_radians() / 60.0 * dt.sqrt(),
             vrw_sigma: p.accel_vrw_mpss * dt.sqrt(),
             drift_drive: sigma * (1.0 - drift_phi * drift_phi).sqrt(),
@@ -550,10 +577,14 @@ impl ImuEmulator {
             bit_fail,
             saturated,
         };
-        let mut frames = Vec::with_capacity(3);
+        let mut frames = Vec::with_capacity(4);
         for m in [Message::ImuGyro(gf), Message::ImuAccel(af)] {
             frames.push(m.encode().expect("IMU frames always encode"));
         }
+        let tetra = self
+            .tetra
+            .as_mut()
+            .map(|u| u.frame(t1, self.dt, &inc.dtheta, sample_counter));
         if self
             .k
             .is_multiple_of((self.p.rate_hz / 10.0).round().max(1.0) as u64)
@@ -570,6 +601,11 @@ impl ImuEmulator {
             if let Ok(f) = Message::ImuHk(hk).encode() {
                 frames.push(f);
             }
+        }
+        if let Some(m) = tetra
+            && let Ok(f) = Message::MemsGyro(m).encode()
+        {
+            frames.push(f);
         }
         let k = self.k;
         self.k += 1;

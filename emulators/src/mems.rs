@@ -228,3 +228,77 @@ mod tests {
         }
     }
 }
+
+/// The redundant unit on the bus: its gyros, their pulse weight and an optional failure (the
+/// `[imu.tetra]` table of a scenario). It rides on the bench's IMU and is sampled on its strobe:
+/// one MEMS_GYRO frame after each IMU sample's frames.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TetraUnit {
+    /// The gyros' errors.
+    pub gyros: TetraParams,
+    /// Pulse weight, deg per pulse (the 14-bit counters then carry up to
+    /// `8191 pulse_deg rate_hz` deg/s).
+    pub pulse_deg: f64,
+    /// A failure of one gyro.
+    pub failure: Option<GyroFailure>,
+}
+
+impl Default for TetraUnit {
+    fn default() -> Self {
+        Self {
+            gyros: TetraParams::default(),
+            pulse_deg: 1e-4,
+            failure: None,
+        }
+    }
+}
+
+/// The redundant unit's state: gyros, failure and pulse counters.
+pub struct TetraStream {
+    unit: TetraUnit,
+    gyros: TetraGyros,
+    failure: Option<FailureInjector>,
+    counters: [crate::imu::PulseCounter; GYROS],
+}
+
+impl TetraStream {
+    /// The unit's stream.
+    pub fn new(unit: TetraUnit) -> Self {
+        let seed = unit.gyros.seed;
+        Self {
+            gyros: TetraGyros::new(unit.gyros.clone()),
+            failure: unit.failure.map(|f| FailureInjector::new(f, seed)),
+            counters: Default::default(),
+            unit,
+        }
+    }
+
+    /// The unit.
+    pub fn unit(&self) -> &TetraUnit {
+        &self.unit
+    }
+
+    /// The frame of the sample ending at `t1` (s), `dt` long, with true body angle increment
+    /// `dtheta` (rad), for IMU sample counter `sample_counter`.
+    pub fn frame(
+        &mut self,
+        t1: f64,
+        dt: f64,
+        dtheta: &Vector3<f64>,
+        sample_counter: u16,
+    ) -> wire::MemsGyro {
+        let w = dtheta.map(f64::to_degrees) / dt;
+        let mut out = self.gyros.sample(&w);
+        if let Some(f) = self.failure.as_mut() {
+            f.apply(t1, &mut out);
+        }
+        for (c, o) in self.counters.iter_mut().zip(out) {
+            c.add(o * dt / self.unit.pulse_deg);
+        }
+        wire::MemsGyro {
+            counts: std::array::from_fn(|i| self.counters[i].total.rem_euclid(1 << 14) as u16),
+            sample_counter_low: (sample_counter & 0xFF) as u8,
+        }
+    }
+}

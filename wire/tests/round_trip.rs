@@ -32,6 +32,13 @@ fn imu_frames_round_trip_exactly() {
             assert_eq!(rt(Message::ImuAccel(a)), Message::ImuAccel(a));
         }
     }
+    for (i, low) in [0u8, 17, 255].into_iter().enumerate() {
+        let m = MemsGyro {
+            counts: [0, 0x3FFF, 12345, i as u16],
+            sample_counter_low: low,
+        };
+        assert_eq!(rt(Message::MemsGyro(m)), Message::MemsGyro(m));
+    }
     let hk = ImuHk {
         sample_counter: 999,
         temp_gyro_c: 41.25,

@@ -93,6 +93,44 @@ pub mod imu_hk {
     };
 }
 
+/// Signal specs of MEMS_GYRO.
+pub mod mems_gyro {
+    use super::*;
+    /// The four gyros' counters, in gyro order.
+    pub const GYROS: [SignalSpec; 4] = [
+        SignalSpec::uint("Gyro1_Count", 0, 14),
+        SignalSpec::uint("Gyro2_Count", 14, 14),
+        SignalSpec::uint("Gyro3_Count", 28, 14),
+        SignalSpec::uint("Gyro4_Count", 42, 14),
+    ];
+    sig!(SAMPLE_COUNTER_LOW = SignalSpec::uint("SampleCounterLow", 56, 8));
+    /// The message.
+    pub const SPEC: MessageSpec = MessageSpec {
+        name: "MEMS_GYRO",
+        id: 0x090,
+        dlc: 8,
+        signals: &[
+            &GYROS[0],
+            &GYROS[1],
+            &GYROS[2],
+            &GYROS[3],
+            &SAMPLE_COUNTER_LOW,
+        ],
+        // the paper's unit at 100 Hz (the frame rides on the IMU's strobe when present)
+        frames_per_second: 100.0,
+        sender: "MEMS",
+    };
+}
+
+/// MEMS_GYRO: the redundant unit's four accumulated gyro pulse counters of one sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MemsGyro {
+    /// Free-running 14-bit pulse counters, gyros 1-4.
+    pub counts: [u16; 4],
+    /// Low 8 bits of the IMU sample counter.
+    pub sample_counter_low: u8,
+}
+
 /// IMU_GYRO: accumulated gyro pulse counters of one sample.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ImuGyro {

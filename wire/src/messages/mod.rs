@@ -47,6 +47,7 @@ pub const ALL_MESSAGES: &[&MessageSpec] = &[
     &imu_gyro::SPEC,
     &imu_accel::SPEC,
     &imu_hk::SPEC,
+    &mems_gyro::SPEC,
     &tt_cmd::SPEC,
     &tt_ack::SPEC,
     &tt_status::SPEC,
@@ -71,6 +72,8 @@ pub enum Message {
     ImuAccel(ImuAccel),
     /// IMU_HK.
     ImuHk(ImuHk),
+    /// MEMS_GYRO.
+    MemsGyro(MemsGyro),
     /// TT_CMD.
     TtCmd(TtCmd),
     /// TT_ACK.
@@ -128,6 +131,7 @@ impl Message {
             Message::ImuGyro(_) => &imu_gyro::SPEC,
             Message::ImuAccel(_) => &imu_accel::SPEC,
             Message::ImuHk(_) => &imu_hk::SPEC,
+            Message::MemsGyro(_) => &mems_gyro::SPEC,
             Message::TtCmd(_) => &tt_cmd::SPEC,
             Message::TtAck(_) => &tt_ack::SPEC,
             Message::TtStatus(_) => &tt_status::SPEC,
@@ -167,6 +171,13 @@ impl Message {
                 TEMP_GYRO.put_phys(&mut d, m.temp_gyro_c)?;
                 TEMP_ACCEL.put_phys(&mut d, m.temp_accel_c)?;
                 put_flags(&BITS, &mut d, m.bit.to_array());
+            }
+            Message::MemsGyro(m) => {
+                use mems_gyro::*;
+                for (s, c) in GYROS.iter().zip(m.counts) {
+                    s.put_wrapping(&mut d, i64::from(c));
+                }
+                SAMPLE_COUNTER_LOW.put_wrapping(&mut d, i64::from(m.sample_counter_low));
             }
             Message::TtCmd(m) => {
                 use tt_cmd::*;
@@ -261,6 +272,13 @@ impl Message {
                     temp_gyro_c: TEMP_GYRO.phys(&d),
                     temp_accel_c: TEMP_ACCEL.phys(&d),
                     bit: BitFlags::from_array(flags(&BITS, &d)),
+                })
+            }
+            0x090 => {
+                use mems_gyro::*;
+                Message::MemsGyro(MemsGyro {
+                    counts: std::array::from_fn(|i| u16_of(&GYROS[i])),
+                    sample_counter_low: u8_of(&SAMPLE_COUNTER_LOW),
                 })
             }
             0x100 => {
