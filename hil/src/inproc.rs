@@ -82,6 +82,16 @@ pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) ->
             .as_ref()
             .map(|c| self_calibration_config(s, c))
             .unwrap_or_default(),
+        tetra_calibration: s
+            .tetra_calibration
+            .as_ref()
+            .map(|c| nav::tetracal::TetraCalibrationConfig {
+                enabled: true,
+                latitude_deg: s.site.lat_deg,
+                base_heading_deg: s.site.heading_deg,
+                ..c.clone()
+            })
+            .unwrap_or_default(),
         watchdog: WatchdogConfig {
             imu_timeout_ms: (500.0 / s.speed.max(1.0)).max(100.0) as u64,
         },

@@ -48,6 +48,10 @@ pub struct Scenario {
     /// more axes); the run ends when it reports.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub self_calibration: Option<nav::selfcal::SelfCalibrationConfig>,
+    /// nav calibrates the redundant MEMS unit (`[imu.tetra]`) on a three-axis table; the run
+    /// ends when it reports.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tetra_calibration: Option<nav::tetracal::TetraCalibrationConfig>,
     /// A drill passes when the heading error is within this, deg.
     #[serde(default = "default_tolerance")]
     pub heading_tolerance_deg: f64,
@@ -211,6 +215,38 @@ impl Scenario {
                     "self_calibration.rate_dps ({}) is too close to the gyros' range, imu.gyro_range_dps ({})",
                     c.rate_dps,
                     self.imu.gyro_range_dps
+                );
+            }
+        }
+        if let Some(c) = &self.tetra_calibration {
+            c.check()?;
+            if self.turntable.as_ref().is_none_or(|t| t.axes != 3) {
+                bail!("tetra_calibration needs a [turntable] of three axes");
+            }
+            let Some(u) = &self.imu.tetra else {
+                bail!("tetra_calibration needs the redundant unit on the bus: [imu.tetra]");
+            };
+            if (u.pulse_deg - c.pulse_deg).abs() > 1e-15 {
+                bail!(
+                    "tetra_calibration.pulse_deg ({}) is not the unit's imu.tetra.pulse_deg ({})",
+                    c.pulse_deg,
+                    u.pulse_deg
+                );
+            }
+            let most = 8191.0 * u.pulse_deg * self.imu.rate_hz;
+            if c.rate_dps * 1.2 >= most {
+                bail!(
+                    "tetra_calibration.rate_dps ({}) is too close to what the unit's 14-bit counters carry at {} Hz ({most:.1} deg/s)",
+                    c.rate_dps,
+                    self.imu.rate_hz
+                );
+            }
+            if self.north_finding.is_some()
+                || self.self_calibration.is_some()
+                || self.drive.is_some()
+            {
+                bail!(
+                    "tetra_calibration is a lab procedure: no [north_finding], [self_calibration] or [drive]"
                 );
             }
         }

@@ -17,7 +17,7 @@ use emulators::mems::{TetraGyros, TetraParams};
 use emulators::truth::{AxisAngle, Composed, Indexer, Motion, RateWindows, Static};
 use nalgebra::{UnitQuaternion, Vector3};
 use nav::calib::{GyroCoefficients, TETRA_GYROS, TetraKf, six_position, table_rate};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The paper's bias error bound, deg/s.
 pub const PAPER_BIAS_DPS: f64 = 0.0025;
@@ -42,7 +42,7 @@ const PAPER_PROFILE: [[f64; 3]; 3] = [
 const HZ: f64 = 100.0;
 
 /// Largest errors over the four gyros, per coefficient.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
 pub struct TetraErrors {
     /// Bias, deg/s.
     pub bias_dps: f64,
@@ -69,7 +69,9 @@ pub struct TetraRun {
     pub gain: f64,
 }
 
-fn errors(est: &[GyroCoefficients; TETRA_GYROS], t: &TetraParams) -> TetraErrors {
+/// The largest errors over the four gyros of the estimates `est` against the truth `t`, and
+/// the mean relative error over the 16 coefficients.
+pub fn errors(est: &[GyroCoefficients; TETRA_GYROS], t: &TetraParams) -> TetraErrors {
     let mut e = TetraErrors::default();
     let mut rel = 0.0;
     for (i, c) in est.iter().enumerate() {

@@ -88,7 +88,7 @@ pub fn tetra_triad(i: usize) -> [Vector3<f64>; 3] {
 /// Coefficients of one gyro of the redundant IMU: bias `B` (deg/s), scale-factor error `K`,
 /// mounting angles `sigma_j`, `sigma_k` (rad), in paper 001's model
 /// `w_m = P^T w + R_k^T w sigma_j - R_j^T w sigma_k - K P^T w - B`.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GyroCoefficients {
     /// Bias, deg/s.
     pub bias_dps: f64,
@@ -141,6 +141,18 @@ impl TetraKf {
         self.x += k * (z - h * self.x);
         let ikh = SMatrix::<f64, 16, 16>::identity() - k * h;
         self.p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
+    }
+
+    /// The estimates' standard deviations (the filter's own), per gyro, in the units of
+    /// [`GyroCoefficients`].
+    pub fn sigmas(&self) -> [GyroCoefficients; TETRA_GYROS] {
+        let sd = |j: usize| self.p[(j, j)].max(0.0).sqrt();
+        std::array::from_fn(|i| GyroCoefficients {
+            bias_dps: sd(4 * i),
+            scale_factor: sd(4 * i + 1),
+            sigma_j: sd(4 * i + 2),
+            sigma_k: sd(4 * i + 3),
+        })
     }
 
     /// The estimates, per gyro.

@@ -33,6 +33,9 @@ pub struct NavConfig {
     /// Self-calibration of a dual-axis rotating IMU at start-up (calibration mode).
     #[serde(default, skip_serializing_if = "is_off")]
     pub self_calibration: crate::selfcal::SelfCalibrationConfig,
+    /// Calibration of a redundant MEMS gyro unit on a three-axis table at start-up.
+    #[serde(default, skip_serializing_if = "is_tetra_off")]
+    pub tetra_calibration: crate::tetracal::TetraCalibrationConfig,
     /// Navigation after start-up (levelling, hand-over, strapdown, SINS/GPS filter).
     #[serde(default)]
     pub navigation: crate::navigator::NavigationConfig,
@@ -45,6 +48,10 @@ pub struct NavConfig {
 }
 
 fn is_off(c: &crate::selfcal::SelfCalibrationConfig) -> bool {
+    !c.enabled
+}
+
+fn is_tetra_off(c: &crate::tetracal::TetraCalibrationConfig) -> bool {
     !c.enabled
 }
 
@@ -271,6 +278,16 @@ impl NavConfig {
                     "self_calibration.rate_dps ({}) must stay below the gyros' range, imu.gyro_range_dps ({})",
                     cfg.self_calibration.rate_dps, cfg.imu.gyro_range_dps
                 )));
+            }
+        }
+        if cfg.tetra_calibration.enabled {
+            if let Err(e) = cfg.tetra_calibration.check() {
+                return Err(invalid(e.to_string()));
+            }
+            if cfg.north_finding.enabled || cfg.self_calibration.enabled {
+                return Err(invalid(
+                    "tetra_calibration commands the table at start: north_finding and self_calibration must be off".into(),
+                ));
             }
         }
         if let Err(e) = cfg.navigation.filter.check() {

@@ -24,11 +24,15 @@ use crate::earth;
 use crate::gps::GpsFix;
 use crate::imu::{ImuEvent, ImuFrontEnd, ImuSample};
 use crate::navigator::Navigator;
-use crate::northfind::{NorthFinder, Phase};
+use crate::northfind::NorthFinder;
 use crate::output::{Solution, SolutionEncoder};
+use crate::procedure::{Procedure, Reporting};
 use crate::record::JsonChannel;
 use crate::selfcal::{CalPhase, SelfCalibrationResult, SelfCalibrator};
-use crate::summary::{AttitudeSummary, NorthFindingSummary, SelfCalibrationSummary, Summary};
+use crate::summary::{
+    AttitudeSummary, NorthFindingSummary, SelfCalibrationSummary, Summary, TetraCalibrationSummary,
+};
+use crate::tetracal::{TetraCalibrator, TetraPhase};
 use std::collections::BTreeMap;
 use thiserror::Error;
 use tracing::{info, warn};
@@ -76,6 +80,9 @@ pub enum PipelineError {
     /// Self-calibration's settings.
     #[error(transparent)]
     SelfCalibration(#[from] crate::selfcal::SelfCalibrationConfigError),
+    /// The redundant unit's calibration settings.
+    #[error(transparent)]
+    TetraCalibration(#[from] crate::tetracal::TetraCalibrationConfigError),
 }
 
 /// Frames received, by outcome.
@@ -125,15 +132,11 @@ impl Sums {
     }
 }
 
-/// North-finding with its link to the indexing mechanism and its reporting.
+/// North-finding with its reporting.
 #[derive(Debug)]
 struct NorthFinding {
     finder: NorthFinder,
-    commands_sent: u64,
-    frames: u64,
-    last_print: f64,
-    last_stage: Option<(Phase, usize)>,
-    reported: bool,
+    rep: Reporting,
     handed_over: bool,
 }
 
@@ -143,12 +146,15 @@ struct Calibrating {
     cal: SelfCalibrator,
     /// The gyro parameters nav started with (the estimates are residuals on top of them).
     start: crate::params::GyroParameters,
-    commands_sent: u64,
-    frames: u64,
-    last_print: f64,
-    last_stage: Option<CalPhase>,
-    reported: bool,
+    rep: Reporting,
     parameters: Option<crate::params::ImuParameters>,
+}
+
+/// The redundant unit's calibration with its reporting.
+#[derive(Debug)]
+struct TetraCalibrating {
+    cal: TetraCalibrator,
+    rep: Reporting,
 }
 
 impl Calibrating {
@@ -191,6 +197,7 @@ pub struct Pipeline {
     coning_method: crate::coning::ConingMethod,
     nf: Option<NorthFinding>,
     cal: Option<Calibrating>,
+    tcal: Option<TetraCalibrating>,
     navigator: Option<Navigator>,
     out_every: u64,
     next_out: Option<u64>,
@@ -220,11 +227,7 @@ impl Pipeline {
         let nf = if cfg.north_finding.enabled {
             Some(NorthFinding {
                 finder: NorthFinder::new(cfg.north_finding.clone())?,
-                commands_sent: 0,
-                frames: 0,
-                last_print: f64::NEG_INFINITY,
-                last_stage: None,
-                reported: false,
+                rep: Reporting::default(),
                 handed_over: false,
             })
         } else {
@@ -237,12 +240,16 @@ impl Pipeline {
                     bias_dph: cfg.imu.gyro_bias_dph,
                     scale_factor_ppm: cfg.imu.gyro_scale_factor_ppm,
                 },
-                commands_sent: 0,
-                frames: 0,
-                last_print: f64::NEG_INFINITY,
-                last_stage: None,
-                reported: false,
+                rep: Reporting::default(),
                 parameters: None,
+            })
+        } else {
+            None
+        };
+        let tcal = if cfg.tetra_calibration.enabled {
+            Some(TetraCalibrating {
+                cal: TetraCalibrator::new(cfg.tetra_calibration.clone())?,
+                rep: Reporting::default(),
             })
         } else {
             None
@@ -259,6 +266,7 @@ impl Pipeline {
             coning_method: cfg.processing.coning,
             nf,
             cal,
+            tcal,
             navigator: cfg
                 .navigation
                 .enabled
@@ -300,48 +308,34 @@ impl Pipeline {
             }
         };
         *self.frames.by_message.entry(m.spec().name).or_insert(0) += 1;
-        // 2. the indexing mechanism's frames
-        if let Some(nf) = self.nf.as_mut() {
-            match &m {
-                Message::TtStatus(st) => {
-                    nf.frames += 1;
-                    nf.finder.on_status(st);
+        // 2. the indexing mechanism's frames, to the procedure commanding it; a status frame
+        // is stamped with the end of the last sample nav has (on the bench it follows the
+        // sample it was taken at)
+        let t_last = self.last_sample_time();
+        if let Message::TtStatus(_) | Message::TtAck(_) = &m {
+            for (p, rep) in self.procedures() {
+                rep.frames += 1;
+                match &m {
+                    Message::TtStatus(st) => p.status(t_last, st),
+                    Message::TtAck(a) => p.ack(a),
+                    _ => {}
                 }
-                Message::TtAck(a) => {
-                    nf.frames += 1;
-                    nf.finder.on_ack(a);
-                }
-                _ => {}
             }
         }
-        if let Some(c) = self.cal.as_mut() {
-            // stamped with the end of the last sample nav has: on the bench a status frame
-            // follows the sample it was taken at
-            let base = self.proc.baseline().map_or(0, |b| b as i64);
-            let t = self
-                .sums
-                .last
-                .map_or(0.0, |k| (k as i64 - base) as f64 * self.sample_ns * 1e-9);
-            match &m {
-                Message::TtStatus(st) => {
-                    c.frames += 1;
-                    c.cal.on_status(t, st);
-                }
-                Message::TtAck(a) => {
-                    c.frames += 1;
-                    c.cal.on_ack(a);
-                }
-                _ => {}
-            }
+        if let (Message::MemsGyro(g), Some(t), Some(k)) = (&m, self.tcal.as_mut(), self.sums.last) {
+            let dt = self.sample_ns * 1e-9;
+            t.rep.frames += 1;
+            t.cal.on_mems(k, t_last, dt, g);
         }
         // 3. the IMU front end
         self.fe.on_message(&m, &mut self.samples, &mut self.events);
         // 4, 5. processing, north-finding and navigation
         self.process(out);
         self.hand_over();
-        // 6. north-finding's and self-calibration's commands and progress
+        // 6. the procedures' commands and progress
         self.north_finding(out);
         self.calibration(out);
+        self.tetra_calibration(out);
         // 7. the solution at 50 Hz of IMU time
         self.solution(out);
         self.integrity_changes(out);
@@ -550,7 +544,8 @@ impl Pipeline {
                 }
                 // navigation takes over once north-finding (when it runs) is finished
                 if let Some(n) = self.navigator.as_mut() {
-                    let cal_running = self.cal.as_ref().is_some_and(|c| !c.cal.finished());
+                    let cal_running = self.cal.as_ref().is_some_and(|c| !c.cal.finished())
+                        || self.tcal.as_ref().is_some_and(|c| !c.cal.finished());
                     if self.nf.as_ref().is_none_or(|f| f.finder.finished()) && !cal_running {
                         n.on_update(
                             t,
@@ -600,123 +595,146 @@ impl Pipeline {
         }
     }
 
-    /// Step 6: north-finding's commands at the current IMU time, and its progress lines (at
-    /// most once a second of IMU time and at every stage change; the result or the reason it
-    /// gave up once).
+    /// The procedures present, each with its reporting state.
+    fn procedures(&mut self) -> Vec<(&mut dyn Procedure, &mut Reporting)> {
+        let mut v: Vec<(&mut dyn Procedure, &mut Reporting)> = Vec::new();
+        if let Some(n) = self.nf.as_mut() {
+            v.push((&mut n.finder, &mut n.rep));
+        }
+        if let Some(c) = self.cal.as_mut() {
+            v.push((&mut c.cal, &mut c.rep));
+        }
+        if let Some(c) = self.tcal.as_mut() {
+            v.push((&mut c.cal, &mut c.rep));
+        }
+        v
+    }
+
+    /// IMU time of the end of the last sample, s.
+    fn last_sample_time(&self) -> f64 {
+        let base = self.proc.baseline().map_or(0, |b| b as i64);
+        self.sums
+            .last
+            .map_or(0.0, |k| (k as i64 - base) as f64 * self.sample_ns * 1e-9)
+    }
+
+    /// Step 6 for one procedure at IMU time `t`: its commands, its progress lines (at most once
+    /// a second of IMU time and at every stage change), and once its result or the reason it
+    /// gave up. True when it has just finished.
+    fn drive(
+        p: &mut dyn Procedure,
+        rep: &mut Reporting,
+        t: f64,
+        record: bool,
+        encode_errors: &mut u64,
+        out: &mut Vec<Output>,
+    ) -> bool {
+        while let Some(c) = p.next_command(t.max(0.0)) {
+            match Message::TtCmd(c).encode() {
+                Ok(f) => {
+                    out.push(Output::Command(f));
+                    rep.commands_sent += 1;
+                }
+                Err(e) => {
+                    *encode_errors += 1;
+                    warn!("TT_CMD {c:?} cannot be encoded: {e}");
+                }
+            }
+            if p.is_finished() {
+                break;
+            }
+        }
+        let name = p.name();
+        let stage = p.stage_key();
+        let due = rep.last_print.is_none_or(|l| t - l >= 1.0) && !p.is_finished();
+        if rep.last_stage.as_ref() != Some(&stage) || due {
+            rep.last_print = Some(t);
+            rep.last_stage = Some(stage);
+            if let Some(j) = p.progress_json() {
+                out.push(Output::Line(format!("nav: {name} progress {j}")));
+                if record {
+                    let kind = name.replace('-', "_");
+                    out.push(Output::Json {
+                        channel: JsonChannel::Event,
+                        publish_ns: (t.max(0.0) * 1e9) as u64,
+                        json: format!("{{\"kind\":\"{kind}_progress\",\"progress\":{j}}}"),
+                    });
+                }
+            }
+        }
+        if !p.is_finished() || rep.reported {
+            return false;
+        }
+        rep.reported = true;
+        if let Some(j) = p.result_json() {
+            info!("{name} finished: {j}");
+            out.push(Output::Line(format!("nav: {name} result {j}")));
+        } else {
+            let why = p.abort().unwrap_or("unknown");
+            warn!("{name} aborted: {why}");
+            out.push(Output::Line(format!("nav: {name} aborted: {why}")));
+        }
+        true
+    }
+
+    /// Step 6 for north-finding, on the processing chain's valid sample.
     fn north_finding(&mut self, out: &mut Vec<Output>) {
         let Some(nf) = self.nf.as_mut() else { return };
         let base = self.proc.baseline().map_or(0, |b| b as i64);
         let t = self.proc.valid_sample().saturating_sub(base) as f64 / self.rate_hz;
-        while let Some(c) = nf.finder.poll(t.max(0.0)) {
-            match Message::TtCmd(c).encode() {
-                Ok(f) => {
-                    out.push(Output::Command(f));
-                    nf.commands_sent += 1;
-                }
-                Err(e) => {
-                    self.encode_errors += 1;
-                    warn!("TT_CMD {c:?} cannot be encoded: {e}");
-                }
-            }
-            if nf.finder.finished() {
-                break;
-            }
+        let record = self.record;
+        Self::drive(
+            &mut nf.finder,
+            &mut nf.rep,
+            t,
+            record,
+            &mut self.encode_errors,
+            out,
+        );
+    }
+
+    /// Step 6 for self-calibration; once done, its parameter file.
+    fn calibration(&mut self, out: &mut Vec<Output>) {
+        let t = self.last_sample_time();
+        let record = self.record;
+        let Some(c) = self.cal.as_mut() else { return };
+        // the duration is set before the result is said
+        if c.cal.finished() && !c.rep.reported {
+            c.cal.close();
         }
-        let stage = nf.finder.stage();
-        if nf.last_stage != Some(stage) || (t - nf.last_print >= 1.0 && !nf.finder.finished()) {
-            nf.last_print = t;
-            nf.last_stage = Some(stage);
-            if let Ok(j) = serde_json::to_string(&nf.finder.progress()) {
-                out.push(Output::Line(format!("nav: north-finding progress {j}")));
-                if self.record {
-                    out.push(Output::Json {
-                        channel: JsonChannel::Event,
-                        publish_ns: (t * 1e9) as u64,
-                        json: format!("{{\"kind\":\"north_finding_progress\",\"progress\":{j}}}"),
-                    });
-                }
-            }
-        }
-        if nf.finder.finished() && !nf.reported {
-            nf.reported = true;
-            if let Some(r) = nf.finder.result() {
-                info!(
-                    heading_deg = r.heading_deg,
-                    sigma_deg = r.sigma_deg,
-                    "north found"
-                );
-                if let Ok(j) = serde_json::to_string(r) {
-                    out.push(Output::Line(format!("nav: north-finding result {j}")));
-                }
-            } else {
-                let why = nf.finder.abort_reason().unwrap_or("unknown");
-                warn!("north-finding aborted: {why}");
-                out.push(Output::Line(format!("nav: north-finding aborted: {why}")));
-            }
+        if Self::drive(
+            &mut c.cal,
+            &mut c.rep,
+            t,
+            record,
+            &mut self.encode_errors,
+            out,
+        ) && let Some(r) = c.cal.result().cloned()
+        {
+            let p = c.parameters(&r);
+            c.parameters = Some(p.clone());
+            out.push(Output::Parameters(Box::new(p)));
         }
     }
 
-    /// Step 6 for self-calibration: its commands, progress lines (as north-finding's) and, once,
-    /// its result and parameter file.
-    fn calibration(&mut self, out: &mut Vec<Output>) {
-        let Some(c) = self.cal.as_mut() else { return };
-        let base = self.proc.baseline().map_or(0, |b| b as i64);
-        let t = self.sums.last.map_or(0, |k| k as i64 - base) as f64 / self.rate_hz;
-        while let Some(cmd) = c.cal.poll(t.max(0.0)) {
-            match Message::TtCmd(cmd).encode() {
-                Ok(f) => {
-                    out.push(Output::Command(f));
-                    c.commands_sent += 1;
-                }
-                Err(e) => {
-                    self.encode_errors += 1;
-                    warn!("TT_CMD {cmd:?} cannot be encoded: {e}");
-                }
-            }
-            if c.cal.finished() {
-                break;
-            }
-        }
-        let stage = c.cal.stage();
-        if c.last_stage != Some(stage) || (t - c.last_print >= 1.0 && !c.cal.finished()) {
-            c.last_print = t;
-            c.last_stage = Some(stage);
-            if let Ok(j) = serde_json::to_string(&c.cal.progress()) {
-                out.push(Output::Line(format!("nav: self-calibration progress {j}")));
-                if self.record {
-                    out.push(Output::Json {
-                        channel: JsonChannel::Event,
-                        publish_ns: (t.max(0.0) * 1e9) as u64,
-                        json: format!(
-                            "{{\"kind\":\"self_calibration_progress\",\"progress\":{j}}}"
-                        ),
-                    });
-                }
-            }
-        }
-        if c.cal.finished() && !c.reported {
-            c.reported = true;
-            c.cal.close();
-            if let Some(r) = c.cal.result().cloned() {
-                info!(
-                    rls_bias_dph = ?r.rls.gyro_bias_dph,
-                    rls_scale_factor_ppm = ?r.rls.gyro_scale_factor_ppm,
-                    "self-calibration done"
-                );
-                let p = c.parameters(&r);
-                if let Ok(j) = serde_json::to_string(&r) {
-                    out.push(Output::Line(format!("nav: self-calibration result {j}")));
-                }
-                c.parameters = Some(p.clone());
-                out.push(Output::Parameters(Box::new(p)));
-            } else {
-                let why = c.cal.abort_reason().unwrap_or("unknown");
-                warn!("self-calibration aborted: {why}");
-                out.push(Output::Line(format!(
-                    "nav: self-calibration aborted: {why}"
-                )));
-            }
-        }
+    /// Step 6 for the redundant unit's calibration.
+    fn tetra_calibration(&mut self, out: &mut Vec<Output>) {
+        let t = self.last_sample_time();
+        let record = self.record;
+        let Some(c) = self.tcal.as_mut() else { return };
+        Self::drive(
+            &mut c.cal,
+            &mut c.rep,
+            t,
+            record,
+            &mut self.encode_errors,
+            out,
+        );
+    }
+
+    /// The redundant unit's calibration (when enabled).
+    pub fn tetra_calibrator(&self) -> Option<&TetraCalibrator> {
+        self.tcal.as_ref().map(|c| &c.cal)
     }
 
     /// The self-calibration procedure (when enabled).
@@ -730,6 +748,12 @@ impl Pipeline {
         if let Some(c) = self.cal.as_ref().filter(|c| !c.cal.finished()) {
             return match c.cal.phase() {
                 CalPhase::Enabling | CalPhase::Levelling => wire::NavMode::Levelling,
+                _ => wire::NavMode::Calibrating,
+            };
+        }
+        if let Some(c) = self.tcal.as_ref().filter(|c| !c.cal.finished()) {
+            return match c.cal.phase() {
+                TetraPhase::Enabling => wire::NavMode::Init,
                 _ => wire::NavMode::Calibrating,
             };
         }
@@ -756,6 +780,10 @@ impl Pipeline {
                 .is_some_and(|f| f.finder.abort_reason().is_some())
                 || self
                     .cal
+                    .as_ref()
+                    .is_some_and(|c| c.cal.abort_reason().is_some())
+                || self
+                    .tcal
                     .as_ref()
                     .is_some_and(|c| c.cal.abort_reason().is_some()),
             filter: self.proc.stats().invalid_since.is_some()
@@ -963,8 +991,8 @@ impl Pipeline {
                 phase: f.finder.phase(),
                 result: f.finder.result().cloned(),
                 abort: f.finder.abort_reason().map(str::to_string),
-                commands_sent: f.commands_sent,
-                turntable_frames: f.frames,
+                commands_sent: f.rep.commands_sent,
+                turntable_frames: f.rep.frames,
                 command_retries: f.finder.ack_counters().0,
                 stale_acks: f.finder.ack_counters().1,
             }),
@@ -974,8 +1002,17 @@ impl Pipeline {
                 abort: c.cal.abort_reason().map(str::to_string),
                 parameters: c.parameters.clone(),
                 parameters_file: None,
-                commands_sent: c.commands_sent,
-                turntable_frames: c.frames,
+                commands_sent: c.rep.commands_sent,
+                turntable_frames: c.rep.frames,
+                command_retries: c.cal.ack_counters().0,
+                stale_acks: c.cal.ack_counters().1,
+            }),
+            tetra_calibration: self.tcal.as_ref().map(|c| TetraCalibrationSummary {
+                phase: c.cal.phase(),
+                result: c.cal.result().cloned(),
+                abort: c.cal.abort_reason().map(str::to_string),
+                commands_sent: c.rep.commands_sent,
+                frames: c.rep.frames,
                 command_retries: c.cal.ack_counters().0,
                 stale_acks: c.cal.ack_counters().1,
             }),

@@ -44,7 +44,7 @@ pub fn rate(outputs: &[f64; TETRA_GYROS], use_: [bool; TETRA_GYROS]) -> Option<V
 }
 
 /// How a failure was told apart.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Isolation {
     /// Against a reference rate.
@@ -56,7 +56,7 @@ pub enum Isolation {
 }
 
 /// The monitor's state.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 #[serde(tag = "state", rename_all = "snake_case")]
 pub enum Status {
     /// All four agree.

@@ -30,7 +30,7 @@
 
 use crate::calib::{AlignKf, AlignKfConfig, GyroRls, c_p_b, expected_rate};
 use crate::earth;
-use crate::ttlink::{LinkPoll, LinkTiming, TtLink};
+use crate::ttlink::{AxisTrack, LinkPoll, LinkTiming, TtLink};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
@@ -291,67 +291,6 @@ struct Pending {
     t1: f64,
     dtheta: Vector3<f64>,
     dv: Vector3<f64>,
-}
-
-/// One axis's angle history and rotation.
-#[derive(Debug, Clone, Default)]
-struct AxisTrack {
-    /// (IMU time, unwrapped angle deg) of recent status frames.
-    hist: VecDeque<(f64, f64)>,
-    /// Direction of the current turn (+1, -1), 0 before it starts.
-    dir: f64,
-    /// Angle where the current turn started, deg (unwrapped).
-    turn_from: f64,
-    reversals: u32,
-    /// Mean of the encoder at rest before the rotation: (sum, count).
-    rest: (f64, u32),
-    /// The angle at the end of the last sample used (deg): the next sample starts there, so
-    /// that the encoder's increments telescope and its noise enters at the ends only.
-    chain: Option<(f64, f64)>,
-}
-
-impl AxisTrack {
-    fn push(&mut self, t: f64, angle_deg: f64) {
-        let a = match self.hist.back() {
-            Some(&(_, prev)) => {
-                let d = (angle_deg - prev).rem_euclid(360.0);
-                prev + if d > 180.0 { d - 360.0 } else { d }
-            }
-            None => angle_deg,
-        };
-        self.hist.push_back((t, a));
-        while self.hist.len() > 2 && self.hist.back().map_or(0.0, |b| b.0) - self.hist[1].0 > 2.0 {
-            self.hist.pop_front();
-        }
-    }
-
-    /// The angle at the start of a sample beginning at `t0`: where the previous one ended when
-    /// it ended there, else interpolated.
-    fn start(&self, t0: f64, gap: f64) -> Option<f64> {
-        match self.chain {
-            Some((t, a)) if (t - t0).abs() < 1e-9 => Some(a),
-            _ => self.at(t0, gap),
-        }
-    }
-
-    fn latest(&self) -> Option<(f64, f64)> {
-        self.hist.back().copied()
-    }
-
-    /// The angle at `t` (deg), interpolated between the status frames around it, when both are
-    /// within `gap` s.
-    fn at(&self, t: f64, gap: f64) -> Option<f64> {
-        let i = self.hist.iter().position(|&(ti, _)| ti >= t)?;
-        let (t1, a1) = self.hist[i];
-        if t1 == t {
-            return Some(a1);
-        }
-        let (t0, a0) = *self.hist.get(i.checked_sub(1)?)?;
-        if t - t0 > gap || t1 - t > gap || t1 <= t0 {
-            return None;
-        }
-        Some(a0 + (a1 - a0) * (t - t0) / (t1 - t0))
-    }
 }
 
 /// Running sums of the rotation (the integrated measurement).

@@ -76,6 +76,9 @@ pub struct Summary {
     /// Self-calibration (calibration mode), when it ran.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub self_calibration: Option<SelfCalibrationSummary>,
+    /// The redundant unit's calibration, when it ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tetra_calibration: Option<TetraCalibrationSummary>,
     /// The GPS receiver, when there is one.
     pub gps: Option<GpsSummary>,
     /// Navigation, when enabled.
@@ -168,6 +171,26 @@ pub struct SelfCalibrationSummary {
     pub commands_sent: u64,
     /// Turntable frames received (status, acks).
     pub turntable_frames: u64,
+    /// Commands sent again for want of an acknowledgement.
+    pub command_retries: u64,
+    /// Acknowledgements that came too late (or matched no command).
+    pub stale_acks: u64,
+}
+
+/// The redundant unit's calibration at exit.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TetraCalibrationSummary {
+    /// Last phase.
+    pub phase: crate::tetracal::TetraPhase,
+    /// The result, when it finished.
+    pub result: Option<crate::tetracal::TetraCalibrationResult>,
+    /// Why it gave up, when it did.
+    pub abort: Option<String>,
+    /// Table commands sent.
+    pub commands_sent: u64,
+    /// Frames taken (table status and acks, the unit's MEMS_GYRO).
+    pub frames: u64,
     /// Commands sent again for want of an acknowledgement.
     pub command_retries: u64,
     /// Acknowledgements that came too late (or matched no command).

@@ -282,6 +282,68 @@ impl TtLink {
     }
 }
 
+/// One axis's encoder angles on the IMU clock (status frames stamped with the IMU time they
+/// arrived at), unwrapped, with what a procedure keeps of its rotation.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct AxisTrack {
+    /// (IMU time, unwrapped angle deg) of recent status frames.
+    pub(crate) hist: VecDeque<(f64, f64)>,
+    /// Direction of the current turn (+1, -1), 0 before it starts.
+    pub(crate) dir: f64,
+    /// Angle where the current turn started, deg (unwrapped).
+    pub(crate) turn_from: f64,
+    pub(crate) reversals: u32,
+    /// Mean of the encoder at rest before the rotation: (sum, count).
+    pub(crate) rest: (f64, u32),
+    /// The angle at the end of the last sample used (deg): the next sample starts there, so
+    /// that the encoder's increments telescope and its noise enters at the ends only.
+    pub(crate) chain: Option<(f64, f64)>,
+}
+
+impl AxisTrack {
+    pub(crate) fn push(&mut self, t: f64, angle_deg: f64) {
+        let a = match self.hist.back() {
+            Some(&(_, prev)) => {
+                let d = (angle_deg - prev).rem_euclid(360.0);
+                prev + if d > 180.0 { d - 360.0 } else { d }
+            }
+            None => angle_deg,
+        };
+        self.hist.push_back((t, a));
+        while self.hist.len() > 2 && self.hist.back().map_or(0.0, |b| b.0) - self.hist[1].0 > 2.0 {
+            self.hist.pop_front();
+        }
+    }
+
+    /// The angle at the start of a sample beginning at `t0`: where the previous one ended when
+    /// it ended there, else interpolated.
+    pub(crate) fn start(&self, t0: f64, gap: f64) -> Option<f64> {
+        match self.chain {
+            Some((t, a)) if (t - t0).abs() < 1e-9 => Some(a),
+            _ => self.at(t0, gap),
+        }
+    }
+
+    pub(crate) fn latest(&self) -> Option<(f64, f64)> {
+        self.hist.back().copied()
+    }
+
+    /// The angle at `t` (deg), interpolated between the status frames around it, when both are
+    /// within `gap` s.
+    pub(crate) fn at(&self, t: f64, gap: f64) -> Option<f64> {
+        let i = self.hist.iter().position(|&(ti, _)| ti >= t)?;
+        let (t1, a1) = self.hist[i];
+        if t1 == t {
+            return Some(a1);
+        }
+        let (t0, a0) = *self.hist.get(i.checked_sub(1)?)?;
+        if t - t0 > gap || t1 - t > gap || t1 <= t0 {
+            return None;
+        }
+        Some(a0 + (a1 - a0) * (t - t0) / (t1 - t0))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

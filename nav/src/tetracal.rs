@@ -1,0 +1,768 @@
+//! Kalman calibration of a redundant MEMS gyro unit on a three-axis table (paper 001),
+//! commanded over the bus, and its parity monitor on the calibrated outputs.
+//!
+//! Sequence: enable the table's three axes (unlock any that are locked); run the paper's
+//! profile (rest; the body's x, y and z axes in turn at the set rate; rest) in rate mode, the
+//! 16-state filter ([`TetraKf`]) taking every sample of the four gyros against the rate the
+//! table's encoders say the body turns at ([`table_rate`]); when asked, run the profile again
+//! with the parity monitor ([`ParityMonitor`]) on the outputs corrected by the estimates, the
+//! table's rate as its reference; then return the axes to zero and lock them.
+//!
+//! **The table did what was commanded.** Every second of the profile in which a rate is held
+//! (a second's margin at each change), each axis's encoder rate over that second must be the
+//! commanded one within [`TetraCalibrationConfig::rate_tolerance_dps`]; the first second that
+//! is not aborts the procedure, and its data are never taken as a result.
+//!
+//! The unit's frames (MEMS_GYRO) ride on the IMU's strobe: each one is tied to the IMU sample
+//! whose counter's low byte it carries (the last one nav has), and a frame that does not match
+//! is counted and not used. Angles and rates of the axes come from the status frames as in
+//! [`crate::selfcal`] (each frame stamped with the IMU time it arrived at, interpolated to the
+//! samples' ends, each sample starting where the last ended).
+
+use crate::calib::{GyroCoefficients, TETRA_GYROS, TetraKf, table_rate, tetra_triad};
+use crate::redundant::{ParityMonitor, Status};
+use crate::ttlink::{AxisTrack, LinkPoll, LinkTiming, TtLink};
+use nalgebra::{UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
+use wire::{MemsGyro, TtAck, TtCmd, TtCommand, TtState, TtStatus};
+
+/// Calibration settings (the `[tetra_calibration]` table of nav's config).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct TetraCalibrationConfig {
+    /// Run the procedure at start.
+    pub enabled: bool,
+    /// Latitude of the table, deg.
+    pub latitude_deg: f64,
+    /// Heading of the table's base (its x axis at zero, clockwise from north), deg; the base
+    /// is level.
+    pub base_heading_deg: f64,
+    /// What the table's axes 0, 1 and 2 turn about, outermost first: a permutation of "xyz".
+    pub gimbal: String,
+    /// Rate of each turn, deg/s (the paper: 20).
+    pub rate_dps: f64,
+    /// Rest before the turns, s.
+    pub rest_s: f64,
+    /// Each turn, s (the paper: 75).
+    pub turn_s: f64,
+    /// Rest after the turns, s.
+    pub end_rest_s: f64,
+    /// The unit's pulse weight, deg.
+    pub pulse_deg: f64,
+    /// The filter's initial covariance `P0 = p0 I`.
+    pub p0: f64,
+    /// The filter's measurement noise `R = r I`, (deg/s)^2.
+    pub r: f64,
+    /// The table's rate must be the commanded one within this, deg/s.
+    pub rate_tolerance_dps: f64,
+    /// Run the profile again with the parity monitor on the calibrated outputs.
+    pub monitor: bool,
+    /// The gyros' white noise per sample, deg/s (the monitor's threshold; the output's
+    /// quantization is added).
+    pub gyro_noise_dps: f64,
+    /// The monitor alarms at this many sigmas of the parity's mean...
+    pub monitor_k: f64,
+    /// ... over this many samples.
+    pub monitor_window: usize,
+    /// Heartbeat period, s.
+    pub heartbeat_s: f64,
+    /// Acknowledgement timeout, s.
+    pub ack_timeout_s: f64,
+    /// Resends before giving up.
+    pub ack_retries: u32,
+    /// A stop, return or lock must finish within this, s.
+    pub move_timeout_s: f64,
+    /// Status silence that aborts, s.
+    pub status_timeout_s: f64,
+}
+
+impl Default for TetraCalibrationConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            latitude_deg: 45.0,
+            base_heading_deg: 0.0,
+            gimbal: "zxy".into(),
+            rate_dps: 20.0,
+            rest_s: 60.0,
+            turn_s: 75.0,
+            end_rest_s: 75.0,
+            pulse_deg: 1e-4,
+            p0: 1.0,
+            r: 1e-3,
+            rate_tolerance_dps: 0.01,
+            monitor: false,
+            gyro_noise_dps: 0.005,
+            monitor_k: 5.0,
+            monitor_window: 50,
+            heartbeat_s: 0.1,
+            ack_timeout_s: 0.25,
+            ack_retries: 3,
+            move_timeout_s: 60.0,
+            status_timeout_s: 0.5,
+        }
+    }
+}
+
+/// A setting out of its range.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("tetra_calibration.{setting}: {requirement}")]
+pub struct TetraCalibrationConfigError {
+    /// The setting.
+    pub setting: &'static str,
+    /// What it must be.
+    pub requirement: &'static str,
+}
+
+impl TetraCalibrationConfig {
+    /// Check the settings; the error names the setting.
+    pub fn check(&self) -> Result<(), TetraCalibrationConfigError> {
+        let bad = |setting, requirement| {
+            Err(TetraCalibrationConfigError {
+                setting,
+                requirement,
+            })
+        };
+        let pos = |x: f64| x.is_finite() && x > 0.0;
+        if !(-89.0..=89.0).contains(&self.latitude_deg) {
+            return bad("latitude_deg", "must be within 89 deg of the equator");
+        }
+        let mut g: Vec<char> = self.gimbal.chars().collect();
+        g.sort_unstable();
+        if g != ['x', 'y', 'z'] {
+            return bad("gimbal", "must be a permutation of \"xyz\" (axes 0, 1, 2)");
+        }
+        if ![
+            self.rate_dps,
+            self.turn_s,
+            self.pulse_deg,
+            self.p0,
+            self.r,
+            self.rate_tolerance_dps,
+            self.gyro_noise_dps,
+            self.monitor_k,
+        ]
+        .into_iter()
+        .all(pos)
+        {
+            return bad(
+                "rate_dps/turn_s/pulse_deg/p0/r/rate_tolerance_dps/gyro_noise_dps/monitor_k",
+                "must be positive",
+            );
+        }
+        if !(self.rest_s >= 2.0 && self.end_rest_s >= 2.0 && self.turn_s >= 4.0) {
+            return bad(
+                "rest_s/end_rest_s/turn_s",
+                "rests of 2 s or more, turns of 4 s or more",
+            );
+        }
+        if self.monitor_window < 3 {
+            return bad("monitor_window", "must be 3 or more");
+        }
+        if !(pos(self.heartbeat_s)
+            && pos(self.ack_timeout_s)
+            && pos(self.move_timeout_s)
+            && pos(self.status_timeout_s))
+        {
+            return bad(
+                "heartbeat_s/ack_timeout_s/move_timeout_s/status_timeout_s",
+                "timeouts must be positive",
+            );
+        }
+        Ok(())
+    }
+
+    fn timing(&self) -> LinkTiming {
+        LinkTiming {
+            heartbeat_s: self.heartbeat_s,
+            ack_timeout_s: self.ack_timeout_s,
+            ack_retries: self.ack_retries,
+            status_timeout_s: self.status_timeout_s,
+        }
+    }
+
+    /// The profile's length, s.
+    pub fn profile_s(&self) -> f64 {
+        self.rest_s + 3.0 * self.turn_s + self.end_rest_s
+    }
+
+    /// The table axis (0, 1, 2) that turns about body axis `body` (0 x, 1 y, 2 z).
+    fn table_axis(&self, body: usize) -> u8 {
+        let c = ['x', 'y', 'z'][body];
+        self.gimbal.chars().position(|g| g == c).unwrap_or(body) as u8
+    }
+
+    /// The turn under way at profile time `t`: (body axis, table axis, from, to).
+    fn turn_at(&self, t: f64) -> Option<(usize, u8, f64, f64)> {
+        (0..3).find_map(|b| {
+            let from = self.rest_s + b as f64 * self.turn_s;
+            (t >= from && t < from + self.turn_s)
+                .then(|| (b, self.table_axis(b), from, from + self.turn_s))
+        })
+    }
+}
+
+/// Where the procedure is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TetraPhase {
+    /// Enabling the three axes.
+    Enabling,
+    /// Withdrawing lock pins.
+    Unlocking,
+    /// The profile, calibrating.
+    Calibrating,
+    /// The profile again, the parity monitor watching.
+    Monitoring,
+    /// Stopping the axes.
+    Stopping,
+    /// Returning the axes to zero.
+    Returning,
+    /// Locking at zero.
+    Locking,
+    /// Finished.
+    Done,
+    /// Gave up.
+    Aborted,
+}
+
+/// What the parity monitor saw.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MonitorOutcome {
+    /// The monitor's final state.
+    pub status: Status,
+    /// Profile time of the alarm, s.
+    pub detected_at_s: Option<f64>,
+    /// Profile time of the isolation, s.
+    pub isolated_at_s: Option<f64>,
+    /// Largest error of the rate from the gyros in use against the table's, after the
+    /// isolation (or over the whole pass without one), deg/s.
+    pub worst_rate_error_dps: f64,
+}
+
+/// The procedure's result.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TetraCalibrationResult {
+    /// Per gyro: bias (deg/s), scale-factor error, mounting angles (rad).
+    pub coefficients: [GyroCoefficients; TETRA_GYROS],
+    /// Their sigmas (the filter's own).
+    pub sigmas: [GyroCoefficients; TETRA_GYROS],
+    /// Samples the filter took.
+    pub samples: u64,
+    /// Seconds of the profile checked against the commanded rates (all passed).
+    pub checked_s: u64,
+    /// MEMS frames that matched no IMU sample.
+    pub unmatched_frames: u64,
+    /// Samples not used for want of a status frame near them.
+    pub samples_without_status: u64,
+    /// The monitor's pass, when run.
+    pub monitor: Option<MonitorOutcome>,
+    /// Start to locked at zero, s.
+    pub duration_s: f64,
+}
+
+/// Progress, for the operator.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TetraProgress {
+    /// Phase.
+    pub phase: TetraPhase,
+    /// Time since the start, s.
+    pub elapsed_s: f64,
+    /// Time left in this phase's profile, s.
+    pub phase_left_s: f64,
+    /// The body axis turning now (x, y, z), if any.
+    pub turning: Option<char>,
+    /// The filter's biases so far, deg/s.
+    pub bias_dps: [f64; TETRA_GYROS],
+}
+
+/// A sample of the unit waiting for the table's angles at its end.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    t0: f64,
+    t1: f64,
+    out: [f64; TETRA_GYROS],
+}
+
+/// The procedure.
+#[derive(Debug)]
+pub struct TetraCalibrator {
+    cfg: TetraCalibrationConfig,
+    lat: f64,
+    q_nb: UnitQuaternion<f64>,
+    phase: TetraPhase,
+    t: f64,
+    t_start: Option<f64>,
+    phase_since: f64,
+    link: TtLink,
+    axes: [AxisTrack; 3],
+    last_counts: Option<[u16; TETRA_GYROS]>,
+    pending: VecDeque<Pending>,
+    kf: TetraKf,
+    monitor: Option<ParityMonitor>,
+    outcome: Option<MonitorOutcome>,
+    /// The turn commanded last (body axis), so that each is commanded once.
+    commanded: Option<usize>,
+    /// The current second of the rate check: its start (profile time) and each axis's
+    /// (stamp, angle) then.
+    block: Option<(f64, [(f64, f64); 3])>,
+    checked_s: u64,
+    samples: u64,
+    unmatched: u64,
+    skipped: u64,
+    result: Option<TetraCalibrationResult>,
+    abort: Option<String>,
+}
+
+impl TetraCalibrator {
+    /// The procedure with these settings (checked).
+    pub fn new(cfg: TetraCalibrationConfig) -> Result<Self, TetraCalibrationConfigError> {
+        cfg.check()?;
+        let mut link = TtLink::new(cfg.timing(), &[0, 1, 2]);
+        for a in 0..3 {
+            link.push(TtCommand::Enable, a, 0.0);
+        }
+        Ok(Self {
+            lat: cfg.latitude_deg.to_radians(),
+            // the base level, its x axis at the heading: body to ENU
+            q_nb: UnitQuaternion::from_axis_angle(
+                &Vector3::z_axis(),
+                -cfg.base_heading_deg.to_radians(),
+            ),
+            kf: TetraKf::new(cfg.p0, cfg.r),
+            cfg,
+            phase: TetraPhase::Enabling,
+            t: 0.0,
+            t_start: None,
+            phase_since: 0.0,
+            link,
+            axes: Default::default(),
+            last_counts: None,
+            pending: VecDeque::new(),
+            monitor: None,
+            outcome: None,
+            commanded: None,
+            block: None,
+            checked_s: 0,
+            samples: 0,
+            unmatched: 0,
+            skipped: 0,
+            result: None,
+            abort: None,
+        })
+    }
+
+    /// Phase.
+    pub fn phase(&self) -> TetraPhase {
+        self.phase
+    }
+
+    /// Finished (done or aborted)?
+    pub fn finished(&self) -> bool {
+        matches!(self.phase, TetraPhase::Done | TetraPhase::Aborted)
+    }
+
+    /// The result, once done.
+    pub fn result(&self) -> Option<&TetraCalibrationResult> {
+        self.result.as_ref()
+    }
+
+    /// Why it gave up, if it did.
+    pub fn abort_reason(&self) -> Option<&str> {
+        self.abort.as_deref()
+    }
+
+    /// Resends and stale acknowledgements of the table's link.
+    pub fn ack_counters(&self) -> (u64, u64) {
+        self.link.ack_counters()
+    }
+
+    fn fail(&mut self, why: String) {
+        if self.abort.is_none() {
+            self.abort = Some(why);
+            self.phase = TetraPhase::Aborted;
+            self.link.clear();
+        }
+    }
+
+    fn enter(&mut self, p: TetraPhase) {
+        self.phase = p;
+        self.phase_since = self.t;
+        self.commanded = None;
+        self.block = None;
+    }
+
+    fn where_(&self) -> String {
+        format!("{:?}", self.phase).to_lowercase()
+    }
+
+    fn profiling(&self) -> bool {
+        matches!(self.phase, TetraPhase::Calibrating | TetraPhase::Monitoring)
+    }
+
+    /// A status frame arrived; `t` is the end time of the last IMU sample nav had then.
+    pub fn on_status(&mut self, t: f64, st: &TtStatus) {
+        if st.axis > 2 || self.finished() {
+            return;
+        }
+        if st.faults.any() || st.state == TtState::Fault {
+            let names = if st.faults.any() {
+                st.faults.names()
+            } else {
+                "fault state".to_string()
+            };
+            let w = self.where_();
+            self.fail(format!(
+                "table fault on axis {} while {w}: {names}",
+                st.axis
+            ));
+            return;
+        }
+        self.link.on_status(t, st);
+        self.axes[usize::from(st.axis)].push(t, st.angle_deg);
+        self.drain();
+    }
+
+    /// An acknowledgement arrived.
+    pub fn on_ack(&mut self, a: &TtAck) {
+        if let Err(f) = self.link.on_ack(a) {
+            let w = self.where_();
+            self.fail(f.describe(&w));
+        }
+    }
+
+    /// A MEMS_GYRO frame arrived after the IMU sample `sample` (its extended counter), which
+    /// ends at `t1` and lasts `dt` (s).
+    pub fn on_mems(&mut self, sample: u64, t1: f64, dt: f64, m: &MemsGyro) {
+        self.t = self.t.max(t1);
+        if u64::from(m.sample_counter_low) != sample & 0xFF {
+            self.unmatched += 1;
+            self.last_counts = None;
+            return;
+        }
+        let prev = self.last_counts.replace(m.counts);
+        let Some(prev) = prev else { return };
+        if !self.profiling() {
+            return;
+        }
+        let out: [f64; TETRA_GYROS] = std::array::from_fn(|i| {
+            let d = (i32::from(m.counts[i]) - i32::from(prev[i])).rem_euclid(1 << 14);
+            let d = if d >= 1 << 13 { d - (1 << 14) } else { d };
+            f64::from(d) * self.cfg.pulse_deg / dt
+        });
+        self.pending.push_back(Pending {
+            t0: t1 - dt,
+            t1,
+            out,
+        });
+        self.drain();
+    }
+
+    fn drain(&mut self) {
+        let gap = 0.05;
+        while let Some(p) = self.pending.front().copied() {
+            if !self
+                .axes
+                .iter()
+                .all(|a| a.latest().is_some_and(|l| l.0 >= p.t1))
+            {
+                return;
+            }
+            self.pending.pop_front();
+            let mut gimbal = Vec::with_capacity(3);
+            let mut ok = true;
+            for (i, c) in self.cfg.gimbal.chars().enumerate() {
+                let a = &mut self.axes[i];
+                let (Some(a0), Some(a1)) = (a.start(p.t0, gap), a.at(p.t1, gap)) else {
+                    ok = false;
+                    break;
+                };
+                a.chain = Some((p.t1, a1));
+                let axis = match c {
+                    'x' => Vector3::x_axis(),
+                    'y' => Vector3::y_axis(),
+                    _ => Vector3::z_axis(),
+                };
+                let (r0, r1) = (a0.to_radians(), a1.to_radians());
+                gimbal.push((axis, 0.5 * (r0 + r1), (r1 - r0) / (p.t1 - p.t0)));
+            }
+            if !ok {
+                self.skipped += 1;
+                continue;
+            }
+            let known = table_rate(self.lat, &self.q_nb, &gimbal).map(f64::to_degrees);
+            self.samples += 1;
+            match self.phase {
+                TetraPhase::Calibrating => self.kf.update(&p.out, &known),
+                TetraPhase::Monitoring => self.watch(p.t1, p.t1 - p.t0, &p.out, &known),
+                _ => {}
+            }
+        }
+    }
+
+    /// One sample for the parity monitor: the outputs corrected by the estimates.
+    fn watch(&mut self, t: f64, dt: f64, out: &[f64; TETRA_GYROS], known: &Vector3<f64>) {
+        let est = self.kf.coefficients();
+        // the rate from the calibrated model first (least squares over the four), for the
+        // mounting angles' small cross terms
+        let h: Vec<Vector3<f64>> = (0..TETRA_GYROS)
+            .map(|i| {
+                let [p, rj, rk] = tetra_triad(i);
+                p * (1.0 - est[i].scale_factor) + rk * est[i].sigma_j - rj * est[i].sigma_k
+            })
+            .collect();
+        let mut hth = nalgebra::Matrix3::zeros();
+        let mut htm = Vector3::zeros();
+        for i in 0..TETRA_GYROS {
+            hth += h[i] * h[i].transpose();
+            htm += h[i] * (out[i] + est[i].bias_dps);
+        }
+        let w = hth.try_inverse().map_or(*known, |m| m * htm);
+        let corrected: [f64; TETRA_GYROS] = std::array::from_fn(|i| {
+            let [_, rj, rk] = tetra_triad(i);
+            (out[i] + est[i].bias_dps - rk.dot(&w) * est[i].sigma_j + rj.dot(&w) * est[i].sigma_k)
+                / (1.0 - est[i].scale_factor)
+        });
+        let t_rel = t - self.phase_since;
+        let (window, k) = (self.cfg.monitor_window, self.cfg.monitor_k);
+        // the output's quantization adds to the noise: the difference of two uniform errors of
+        // one pulse over the sample
+        let q = self.cfg.pulse_deg / dt;
+        let sigma = (self.cfg.gyro_noise_dps.powi(2) + q * q / 6.0).sqrt();
+        let mon = self
+            .monitor
+            .get_or_insert_with(|| ParityMonitor::new(sigma, k, window));
+        let rate = mon.update(&corrected, Some(known));
+        let st = mon.status();
+        let o = self.outcome.get_or_insert(MonitorOutcome {
+            status: Status::Healthy,
+            detected_at_s: None,
+            isolated_at_s: None,
+            worst_rate_error_dps: 0.0,
+        });
+        if st != Status::Healthy && o.detected_at_s.is_none() {
+            o.detected_at_s = Some(t_rel);
+        }
+        if matches!(st, Status::Isolated { .. }) && o.isolated_at_s.is_none() {
+            o.isolated_at_s = Some(t_rel);
+            // from the isolation on: the error of the rate from the other three
+            o.worst_rate_error_dps = 0.0;
+        }
+        o.status = st;
+        if let Some(r) = rate {
+            o.worst_rate_error_dps = o.worst_rate_error_dps.max((r - known).norm());
+        }
+    }
+
+    /// The next command to send at IMU time `t` (s), if any. Call after feeding the inputs.
+    pub fn poll(&mut self, t: f64) -> Option<TtCmd> {
+        self.t = self.t.max(t);
+        self.t_start.get_or_insert(t);
+        if self.finished() {
+            return None;
+        }
+        match self.link.poll(t) {
+            LinkPoll::Failed(f) => {
+                let w = self.where_();
+                self.fail(f.describe(&w));
+                return None;
+            }
+            LinkPoll::Send(c) => return Some(c),
+            LinkPoll::Waiting => return None,
+            LinkPoll::Idle => {}
+        }
+        if !self.link.queued() {
+            self.step();
+            if self.finished() {
+                return None;
+            }
+        }
+        self.link.next(t)
+    }
+
+    fn all(&self, f: impl Fn(TtState) -> bool) -> bool {
+        (0..3).all(|a| self.link.state(a).is_some_and(&f))
+    }
+
+    fn step(&mut self) {
+        let since = self.t - self.phase_since;
+        let timeout = self.cfg.move_timeout_s;
+        match self.phase {
+            TetraPhase::Enabling => {
+                if self.all(|s| s != TtState::Disabled) {
+                    self.enter(TetraPhase::Unlocking);
+                    for a in 0..3 {
+                        if self.link.state(a) == Some(TtState::Locked) {
+                            self.link.push(TtCommand::Unlock, a, 0.0);
+                        }
+                    }
+                } else if since > timeout {
+                    self.fail("the table's three axes did not come up after Enable".into());
+                }
+            }
+            TetraPhase::Unlocking => {
+                if self.all(|s| s == TtState::Idle) {
+                    self.enter(TetraPhase::Calibrating);
+                } else if since > timeout {
+                    self.fail("the lock pins did not withdraw".into());
+                }
+            }
+            TetraPhase::Calibrating | TetraPhase::Monitoring => self.profile(since),
+            TetraPhase::Stopping => {
+                if self.all(|s| s == TtState::Idle) {
+                    self.enter(TetraPhase::Returning);
+                    for a in 0..3 {
+                        self.link.push(TtCommand::Home, a, 0.0);
+                    }
+                } else if since > timeout {
+                    self.fail(format!("the axes did not stop within {timeout} s"));
+                }
+            }
+            TetraPhase::Returning => {
+                if since > 1.0 && self.all(|s| s == TtState::Idle) {
+                    self.enter(TetraPhase::Locking);
+                    for a in 0..3 {
+                        self.link.push(TtCommand::Lock, a, 0.0);
+                    }
+                } else if since > timeout {
+                    self.fail(format!(
+                        "the axes did not return to zero within {timeout} s"
+                    ));
+                }
+            }
+            TetraPhase::Locking => {
+                if self.all(|s| s == TtState::Locked) {
+                    self.phase = TetraPhase::Done;
+                    let d = self.t - self.t_start.unwrap_or(self.t);
+                    if let Some(r) = self.result.as_mut() {
+                        r.duration_s = d;
+                    }
+                } else if since > timeout {
+                    self.fail(format!("the lock pins did not engage within {timeout} s"));
+                }
+            }
+            TetraPhase::Done | TetraPhase::Aborted => {}
+        }
+    }
+
+    /// The profile at profile time `since`: each turn commanded once, stopped at its end; the
+    /// table's rates checked second by second.
+    fn profile(&mut self, since: f64) {
+        let c = self.cfg.clone();
+        if since >= c.profile_s() {
+            if self.phase == TetraPhase::Calibrating && c.monitor {
+                self.enter(TetraPhase::Monitoring);
+                return;
+            }
+            self.finish_result();
+            self.enter(TetraPhase::Stopping);
+            for a in 0..3 {
+                self.link.push(TtCommand::Stop, a, 0.0);
+            }
+            return;
+        }
+        let turn = c.turn_at(since);
+        if let Some((body, axis, ..)) = turn
+            && self.commanded != Some(body)
+        {
+            if let Some(prev) = self.commanded {
+                self.link.push(TtCommand::Stop, c.table_axis(prev), 0.0);
+            }
+            self.commanded = Some(body);
+            self.link.push(TtCommand::Rate, axis, c.rate_dps);
+            return;
+        }
+        if turn.is_none()
+            && let Some(prev) = self.commanded.take()
+        {
+            self.link.push(TtCommand::Stop, c.table_axis(prev), 0.0);
+            return;
+        }
+        self.check_rates(since, turn);
+    }
+
+    /// The rate check, one second at a time away from the profile's changes.
+    fn check_rates(&mut self, since: f64, turn: Option<(usize, u8, f64, f64)>) {
+        let c = &self.cfg;
+        // the changes: the turns' starts and ends
+        let near_change = (0..=3).any(|b| {
+            let edge = c.rest_s + b as f64 * c.turn_s;
+            (since - edge).abs() < 1.0
+        });
+        // each axis's latest angle, and the time it was stamped with
+        let latest: Option<Vec<(f64, f64)>> = self.axes.iter().map(AxisTrack::latest).collect();
+        let Some(latest) = latest else { return };
+        let now = [latest[0], latest[1], latest[2]];
+        match self.block {
+            Some((from, a0)) if since - from >= 1.0 => {
+                self.block = None;
+                if near_change {
+                    return;
+                }
+                for axis in 0..3u8 {
+                    let want = match turn {
+                        Some((_, ax, ..)) if ax == axis => c.rate_dps,
+                        _ => 0.0,
+                    };
+                    // each axis on its own stamps (their frames come one after another)
+                    let (n, b) = (now[usize::from(axis)], a0[usize::from(axis)]);
+                    let got = (n.1 - b.1) / (n.0 - b.0).max(1e-9);
+                    if (got - want).abs() > c.rate_tolerance_dps {
+                        let w = self.where_();
+                        self.fail(format!(
+                            "the table's axis {axis} turned at {got:.4} deg/s at {since:.1} s of the profile while {w}, commanded {want}: calibration data refused"
+                        ));
+                        return;
+                    }
+                }
+                self.checked_s += 1;
+            }
+            Some(_) => {}
+            // a block starts at the time of the angles it starts from
+            None if !near_change => self.block = Some((since, now)),
+            None => {}
+        }
+    }
+
+    fn finish_result(&mut self) {
+        if self.result.is_some() {
+            return;
+        }
+        self.result = Some(TetraCalibrationResult {
+            coefficients: self.kf.coefficients(),
+            sigmas: self.kf.sigmas(),
+            samples: self.samples,
+            checked_s: self.checked_s,
+            unmatched_frames: self.unmatched,
+            samples_without_status: self.skipped,
+            monitor: self.outcome,
+            duration_s: 0.0,
+        });
+    }
+
+    /// The phase (a progress line at each change).
+    pub fn stage(&self) -> TetraPhase {
+        self.phase
+    }
+
+    /// Progress, for the operator.
+    pub fn progress(&self) -> TetraProgress {
+        let since = self.t - self.phase_since;
+        let profiling = self.profiling();
+        TetraProgress {
+            phase: self.phase,
+            elapsed_s: self.t - self.t_start.unwrap_or(self.t),
+            phase_left_s: if profiling {
+                (self.cfg.profile_s() - since).max(0.0)
+            } else {
+                0.0
+            },
+            turning: profiling
+                .then(|| self.cfg.turn_at(since))
+                .flatten()
+                .map(|(b, ..)| ['x', 'y', 'z'][b]),
+            bias_dps: self.kf.coefficients().map(|c| c.bias_dps),
+        }
+    }
+}
