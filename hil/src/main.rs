@@ -10,7 +10,7 @@ use vcan_setup::{CanSupport, GUEST_ENV, VmOptions};
 
 mod cmd;
 use cmd::bench::bench;
-use cmd::calibrate::calibrate_rotating_imu;
+use cmd::calibrate::{calibrate_rotating_imu, calibrate_tetrahedral};
 use cmd::demo::demo;
 use cmd::drill::drill_north_finding;
 use cmd::experiment::experiment;
@@ -275,6 +275,57 @@ enum Calibrate {
     /// locks them and writes the IMU parameter file (gyro-parameters.toml in the run folder).
     /// Live progress, then a result card scored against the emulated unit's true errors.
     RotatingImu(CalibrateArgs),
+    /// Kalman calibration of a redundant MEMS gyro unit (four gyros in a tetrahedron) on a
+    /// three-axis table (paper 001): nav turns the table about x, y and z in turn at the set
+    /// rate, checks every held second that the table did what was commanded, and estimates
+    /// each gyro's bias, scale factor and two mounting angles with the paper's 16-state filter.
+    /// With --monitor (or --fail) the profile runs again with the parity monitor on the
+    /// calibrated outputs; --fail injects one gyro's failure over the bus. Live progress, then
+    /// a result card scored against the emulated unit's truth.
+    Tetrahedral(TetraArgs),
+}
+
+#[derive(clap::Args, Clone)]
+struct TetraArgs {
+    /// Latitude of the table, deg.
+    #[arg(long, default_value_t = 45.0, allow_negative_numbers = true)]
+    lat: f64,
+    /// Heading of the table's base, deg.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    heading: f64,
+    /// Rate of each turn, deg/s (the paper: 20).
+    #[arg(long, default_value_t = 20.0)]
+    rate: f64,
+    /// Rest before the turns, s.
+    #[arg(long, default_value_t = 60.0)]
+    rest: f64,
+    /// Each turn, s (the paper: 75).
+    #[arg(long, default_value_t = 75.0)]
+    turn: f64,
+    /// Rest after the turns, s.
+    #[arg(long, default_value_t = 75.0)]
+    end_rest: f64,
+    /// The unit's gyro noise, deg/s per sample (the paper's is 2.8e-7; MEMS: 0.005 to 0.05).
+    #[arg(long, default_value_t = 0.005)]
+    noise: f64,
+    /// Run the profile again with the parity monitor on the calibrated outputs.
+    #[arg(long)]
+    monitor: bool,
+    /// Fail one gyro (1-4) in the second pass, halfway through it: stuck:G, bias-jump:G:DPS
+    /// or noise:G:DPS (implies --monitor).
+    #[arg(long)]
+    fail: Option<String>,
+    /// Speed factor (1 = real time).
+    #[arg(long, default_value_t = 20.0)]
+    speed: f64,
+    /// Seed of the unit and the table.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Run the same procedure in process (no bus, no nav process).
+    #[arg(long)]
+    in_process: bool,
+    #[command(flatten)]
+    bus: BusArgs,
 }
 
 #[derive(clap::Args, Clone)]
@@ -549,6 +600,7 @@ fn real_main(cli: Cli) -> Result<i32> {
         Cmd::Demo { speed, dwell, out } => demo(speed, dwell, out),
         Cmd::Drill(Drill::NorthFinding(a)) => drill_north_finding(a),
         Cmd::Calibrate(Calibrate::RotatingImu(a)) => calibrate_rotating_imu(a),
+        Cmd::Calibrate(Calibrate::Tetrahedral(a)) => calibrate_tetrahedral(a),
         Cmd::Validate(Validate::Turntable(a)) => validate_turntable(a),
         Cmd::Busload { bitrate } => {
             print!("{}", wire::busload::report(bitrate));

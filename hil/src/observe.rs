@@ -137,7 +137,7 @@ impl DrillWatch {
     /// Handle one nav stdout line; true when it is the procedure's final word.
     pub fn line(&mut self, l: &str, show: bool) -> bool {
         type Render = fn(&serde_json::Value) -> String;
-        let progress: [(&str, Render); 2] = [
+        let progress: [(&str, Render); 3] = [
             (
                 "nav: north-finding progress ",
                 crate::drill::progress_line as Render,
@@ -145,6 +145,10 @@ impl DrillWatch {
             (
                 "nav: self-calibration progress ",
                 crate::calibrate::progress_line as Render,
+            ),
+            (
+                "nav: tetra-calibration progress ",
+                crate::calibrate::tetra_progress_line as Render,
             ),
         ];
         for (prefix, render) in progress {
@@ -160,6 +164,8 @@ impl DrillWatch {
             "nav: north-finding aborted",
             "nav: self-calibration result",
             "nav: self-calibration aborted",
+            "nav: tetra-calibration result",
+            "nav: tetra-calibration aborted",
         ]
         .iter()
         .any(|p| l.starts_with(p))

@@ -47,6 +47,9 @@ pub struct RunReport {
     /// The self-calibration's outcome, scored against the unit's truth (calibration runs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<crate::calibrate::CalibrateOutcome>,
+    /// The redundant unit's calibration, scored against its truth (paper 001 runs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tetra_calibration: Option<crate::calibrate::TetraOutcome>,
     /// What the GPS emulator wrote (runs with a receiver).
     pub gps: Option<emulators::gps::GpsTxStats>,
     /// nav's solution frames as the bench received them.
@@ -285,6 +288,57 @@ pub fn calibration_checks(
                 (Some(f), Some(Err(e))) => format!("{}: {e}", f.display()),
                 _ => "nav wrote no parameter file".into(),
             },
+        });
+    }
+}
+
+/// The redundant unit's calibration: finished (the table having done what was commanded
+/// throughout), every estimate within 3 of its sigmas of the truth, and with a failure
+/// injected, the monitor isolating that gyro.
+pub fn tetra_checks(out: &mut Vec<Check>, o: &crate::calibrate::TetraOutcome) {
+    out.push(Check {
+        name: "tetra-calibration finished, the table's rates checked".into(),
+        pass: o.result.as_ref().is_some_and(|r| r.checked_s > 0),
+        detail: match (&o.result, &o.abort) {
+            (Some(r), _) => format!(
+                "{} samples, {} s of the profile checked against the commanded rates, locked at zero after {:.1} s",
+                r.samples, r.checked_s, r.duration_s
+            ),
+            (None, Some(why)) => format!("aborted: {why}"),
+            (None, None) => "no result reported".into(),
+        },
+    });
+    if let (Some(e), Some(q)) = (&o.errors, o.worst_sigma_ratio) {
+        out.push(Check {
+            name: "estimates within 3 sigma of the unit's truth".into(),
+            pass: q <= 3.0,
+            detail: format!(
+                "largest errors: bias {:.2e} deg/s, angle {:.2e} deg, scale factor {:.2e}; mean relative error {:.3} %; worst {q:.2} sigma",
+                e.bias_dps,
+                e.angle_deg,
+                e.scale_factor,
+                100.0 * e.relative
+            ),
+        });
+    }
+    if let (Some(f), Some(r)) = (&o.failure, &o.result) {
+        let gyro = match *f {
+            emulators::mems::GyroFailure::Stuck { gyro, .. }
+            | emulators::mems::GyroFailure::BiasJump { gyro, .. }
+            | emulators::mems::GyroFailure::NoiseBurst { gyro, .. } => gyro,
+        };
+        let m = r.monitor;
+        out.push(Check {
+            name: "the failed gyro isolated by the parity monitor".into(),
+            pass: m.is_some_and(|m| {
+                matches!(m.status, nav::redundant::Status::Isolated { gyro: g, .. } if g == gyro)
+            }),
+            detail: format!(
+                "injected {}; monitor {}",
+                serde_json::to_string(f).unwrap_or_default(),
+                m.map_or("did not run".to_string(), |m| serde_json::to_string(&m)
+                    .unwrap_or_default())
+            ),
         });
     }
 }
@@ -547,6 +601,12 @@ pub fn card(r: &RunReport) -> String {
         }
         let _ = writeln!(s, "{line}");
     }
+    if let Some(c) = &r.tetra_calibration {
+        for l in crate::calibrate::tetra_card(c).lines() {
+            let _ = writeln!(s, " {l}");
+        }
+        let _ = writeln!(s, "{line}");
+    }
     for c in &r.checks {
         let _ = writeln!(
             s,
@@ -598,6 +658,13 @@ pub fn markdown(r: &RunReport) -> String {
             s,
             "## Self-calibration\n\n```\n{}```\n",
             crate::calibrate::card(c)
+        );
+    }
+    if let Some(c) = &r.tetra_calibration {
+        let _ = writeln!(
+            s,
+            "## Redundant unit's calibration\n\n```\n{}```\n",
+            crate::calibrate::tetra_card(c)
         );
     }
     if let Some(d) = &r.drill {

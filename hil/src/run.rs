@@ -480,7 +480,10 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             }
         }
         if opts.progress
-            && ((s.north_finding.is_none() && s.self_calibration.is_none()) || drill.done)
+            && ((s.north_finding.is_none()
+                && s.self_calibration.is_none()
+                && s.tetra_calibration.is_none())
+                || drill.done)
             && Instant::now() >= next_report
         {
             let t = devices.sim_time();
@@ -652,6 +655,20 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     if let Some(o) = &calibration {
         report::calibration_checks(&mut checks, o, &nav_json);
     }
+    let tetra_calibration = s.tetra_calibration.as_ref().map(|_| {
+        let c = nav_json.tetra_calibration.as_ref();
+        crate::calibrate::tetra_outcome(
+            s,
+            c.and_then(|c| c.result.as_ref()),
+            c.map_or(Some("tetra-calibration was not enabled in nav"), |c| {
+                c.abort.as_deref()
+            }),
+            sim_reached,
+        )
+    });
+    if let Some(o) = &tetra_calibration {
+        report::tetra_checks(&mut checks, o);
+    }
     report::solution_checks(&mut checks, &solution, &nav_json);
     // nav's binary is a shell around its pipeline: from its own recording, the pipeline in
     // process must send exactly what nav sent
@@ -722,6 +739,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         turntable: tt_stats,
         drill: drill_outcome,
         calibration,
+        tetra_calibration,
         gps: gps_stats,
         navigation,
         navigation_series,

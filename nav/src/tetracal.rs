@@ -17,7 +17,11 @@
 //! whose counter's low byte it carries (the last one nav has), and a frame that does not match
 //! is counted and not used. Angles and rates of the axes come from the status frames as in
 //! [`crate::selfcal`] (each frame stamped with the IMU time it arrived at, interpolated to the
-//! samples' ends, each sample starting where the last ended).
+//! samples' ends). A sample's reference rate is the encoders' angle change over the sample
+//! widened by [`TetraCalibrationConfig::reference_half_window_s`] on each side where the rate
+//! holds (the sample's own where it changes): the encoder's 0.5 arcsec of noise over 0.11 s instead of 0.01 s
+//! (0.002 deg/s instead of 0.02: with the plain per-sample difference, the filter's scale
+//! factors came out 1e-4 off at the paper's profile, against 9e-6 without encoder noise).
 
 use crate::calib::{GyroCoefficients, TETRA_GYROS, TetraKf, table_rate, tetra_triad};
 use crate::redundant::{ParityMonitor, Status};
@@ -56,6 +60,9 @@ pub struct TetraCalibrationConfig {
     pub r: f64,
     /// The table's rate must be the commanded one within this, deg/s.
     pub rate_tolerance_dps: f64,
+    /// The reference rate of a sample is the encoders' over the sample widened by this on both
+    /// sides, s (exact for constant accelerations; the encoder's noise divided by the span).
+    pub reference_half_window_s: f64,
     /// Run the profile again with the parity monitor on the calibrated outputs.
     pub monitor: bool,
     /// The gyros' white noise per sample, deg/s (the monitor's threshold; the output's
@@ -92,6 +99,7 @@ impl Default for TetraCalibrationConfig {
             p0: 1.0,
             r: 1e-3,
             rate_tolerance_dps: 0.01,
+            reference_half_window_s: 0.05,
             monitor: false,
             gyro_noise_dps: 0.005,
             monitor_k: 5.0,
@@ -156,6 +164,9 @@ impl TetraCalibrationConfig {
                 "rest_s/end_rest_s/turn_s",
                 "rests of 2 s or more, turns of 4 s or more",
             );
+        }
+        if !(0.0..=0.5).contains(&self.reference_half_window_s) {
+            return bad("reference_half_window_s", "must lie in [0, 0.5] s");
         }
         if self.monitor_window < 3 {
             return bad("monitor_window", "must be 3 or more");
@@ -461,11 +472,12 @@ impl TetraCalibrator {
 
     fn drain(&mut self) {
         let gap = 0.05;
+        let h = self.cfg.reference_half_window_s;
         while let Some(p) = self.pending.front().copied() {
             if !self
                 .axes
                 .iter()
-                .all(|a| a.latest().is_some_and(|l| l.0 >= p.t1))
+                .all(|a| a.latest().is_some_and(|l| l.0 >= p.t1 + h - 1e-9))
             {
                 return;
             }
@@ -473,19 +485,32 @@ impl TetraCalibrator {
             let mut gimbal = Vec::with_capacity(3);
             let mut ok = true;
             for (i, c) in self.cfg.gimbal.chars().enumerate() {
-                let a = &mut self.axes[i];
-                let (Some(a0), Some(a1)) = (a.start(p.t0, gap), a.at(p.t1, gap)) else {
+                let a = &self.axes[i];
+                // the rate over the sample widened by h on both sides: exact for a constant
+                // acceleration, the encoder's noise divided by the span
+                let (Some(w0), Some(w1), Some(a0), Some(a1)) = (
+                    a.at(p.t0 - h, gap),
+                    a.at(p.t1 + h, gap),
+                    a.at(p.t0, gap),
+                    a.at(p.t1, gap),
+                ) else {
                     ok = false;
                     break;
                 };
-                a.chain = Some((p.t1, a1));
                 let axis = match c {
                     'x' => Vector3::x_axis(),
                     'y' => Vector3::y_axis(),
                     _ => Vector3::z_axis(),
                 };
-                let (r0, r1) = (a0.to_radians(), a1.to_radians());
-                gimbal.push((axis, 0.5 * (r0 + r1), (r1 - r0) / (p.t1 - p.t0)));
+                // where the rate changes (the corners of an acceleration) the widened
+                // difference smears: there the sample's own difference
+                let steady = h > 0.0 && ((a0 - w0) / h - (w1 - a1) / h).abs() < 0.05;
+                let rate = if steady {
+                    (w1 - w0).to_radians() / (p.t1 - p.t0 + 2.0 * h)
+                } else {
+                    (a1 - a0).to_radians() / (p.t1 - p.t0)
+                };
+                gimbal.push((axis, (0.5 * (a0 + a1)).to_radians(), rate));
             }
             if !ok {
                 self.skipped += 1;

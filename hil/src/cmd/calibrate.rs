@@ -58,3 +58,115 @@ pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
         },
     })
 }
+
+/// `--fail` of `hil calibrate tetrahedral`: `stuck:G`, `bias-jump:G:DPS` or `noise:G:DPS`
+/// (gyro 1-4) at `at_s`.
+fn parse_failure(text: &str, at_s: f64) -> Result<emulators::mems::GyroFailure> {
+    use emulators::mems::GyroFailure;
+    let parts: Vec<&str> = text.split(':').collect();
+    let gyro = |p: &str| -> Result<usize> {
+        match p.parse::<usize>() {
+            Ok(g @ 1..=4) => Ok(g - 1),
+            _ => bail!("--fail {text}: the gyro is 1, 2, 3 or 4, not {p:?}"),
+        }
+    };
+    let value = |p: &str| -> Result<f64> {
+        p.parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .with_context(|| format!("--fail {text}: {p:?} is not a positive rate in deg/s"))
+    };
+    Ok(match parts.as_slice() {
+        ["stuck", g] => GyroFailure::Stuck {
+            gyro: gyro(g)?,
+            at_s,
+        },
+        ["bias-jump", g, v] => GyroFailure::BiasJump {
+            gyro: gyro(g)?,
+            at_s,
+            jump_dps: value(v)?,
+        },
+        ["noise", g, v] => GyroFailure::NoiseBurst {
+            gyro: gyro(g)?,
+            at_s,
+            sigma_dps: value(v)?,
+        },
+        _ => bail!("--fail {text}: give stuck:G, bias-jump:G:DPS or noise:G:DPS (G 1-4)"),
+    })
+}
+
+pub(crate) fn calibrate_tetrahedral(a: TetraArgs) -> Result<i32> {
+    let mut o = hil::calibrate::TetraOptions {
+        lat_deg: a.lat,
+        heading_deg: a.heading.rem_euclid(360.0),
+        rate_dps: a.rate,
+        rest_s: a.rest,
+        turn_s: a.turn,
+        end_rest_s: a.end_rest,
+        noise_dps: a.noise,
+        monitor: a.monitor || a.fail.is_some(),
+        failure: None,
+        seed: a.seed,
+    };
+    if let Some(f) = &a.fail {
+        // halfway through the second pass
+        let pass = hil::calibrate::tetra_scenario(&o)
+            .tetra_calibration
+            .map_or(0.0, |c| c.profile_s());
+        o.failure = Some(parse_failure(f, 1.5 * pass)?);
+    }
+    let mut s = hil::calibrate::tetra_scenario(&o);
+    s.speed = a.speed;
+    s.check()?;
+    let out = absolute(
+        &a.bus
+            .out
+            .clone()
+            .unwrap_or_else(|| default_out("calibrate-tetrahedral")),
+    )?;
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let scen = out.join("calibrate.toml");
+    std::fs::write(&scen, toml::to_string_pretty(&s)?)?;
+    eprintln!(
+        "hil: calibration of the redundant MEMS unit on the three-axis table at latitude {} deg: {} s at rest, x y z at {} deg/s for {} s each, {} s at rest{}, x{}",
+        o.lat_deg,
+        o.rest_s,
+        o.rate_dps,
+        o.turn_s,
+        o.end_rest_s,
+        if o.monitor {
+            ", then again with the parity monitor"
+        } else {
+            ""
+        },
+        a.speed
+    );
+    if a.in_process {
+        let o = hil::calibrate::tetra_in_process(&s, |p| {
+            if let Ok(j) = serde_json::to_value(p) {
+                hil::status::show(&hil::calibrate::tetra_progress_line(&j));
+            }
+        })?;
+        hil::status::finish();
+        let j = serde_json::json!({ "in_process": true, "tetra_calibration": o });
+        std::fs::write(out.join("report.json"), serde_json::to_string_pretty(&j)?)?;
+        if a.bus.json {
+            println!("{}", serde_json::to_string_pretty(&j)?);
+        } else {
+            print!("{}", hil::calibrate::tetra_card(&o));
+        }
+        return Ok(i32::from(o.result.is_none()));
+    }
+    run(RunArgs {
+        scenario: Some(scen),
+        duration: None,
+        speed: None,
+        nav: None,
+        no_reference: false,
+        gpsd: false,
+        bus: BusArgs {
+            out: Some(out),
+            ..a.bus
+        },
+    })
+}
