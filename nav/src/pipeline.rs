@@ -698,10 +698,6 @@ impl Pipeline {
         let t = self.last_sample_time();
         let record = self.record;
         let Some(c) = self.cal.as_mut() else { return };
-        // the duration is set before the result is said
-        if c.cal.finished() && !c.rep.reported {
-            c.cal.close();
-        }
         if Self::drive(
             &mut c.cal,
             &mut c.rep,

@@ -663,6 +663,10 @@ impl SelfCalibrator {
             CalPhase::Locking => {
                 if self.both(|s| s == TtState::Locked) {
                     self.phase = CalPhase::Done;
+                    let d = self.t - self.t_start.unwrap_or(self.t);
+                    if let Some(r) = self.result.as_mut() {
+                        r.duration_s = d;
+                    }
                 } else if since > timeout {
                     self.fail(format!("the lock pins did not engage within {timeout} s"));
                 }
@@ -887,14 +891,6 @@ impl SelfCalibrator {
     /// The phase, and a coarse stage number within it, for reporting changes.
     pub fn stage(&self) -> CalPhase {
         self.phase
-    }
-
-    /// Record the time the procedure ended (when done).
-    pub fn close(&mut self) {
-        let d = self.t - self.t_start.unwrap_or(self.t);
-        if let (CalPhase::Done, Some(r)) = (self.phase, self.result.as_mut()) {
-            r.duration_s = d;
-        }
     }
 }
 

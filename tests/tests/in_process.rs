@@ -81,3 +81,45 @@ fn the_in_process_calibration_gives_the_result_of_the_one_through_vcan() {
         "the in-process calibration must give the bench's result"
     );
 }
+
+/// The redundant unit's calibration in process gives exactly what nav gave through vcan in
+/// `the_redundant_unit_calibrates_and_each_failed_gyro_is_isolated_through_vcan` (its bias-jump
+/// run's report kept).
+#[test]
+#[ignore = "needs the e2e tests' reports: run ./run-tests"]
+fn the_in_process_tetra_calibration_gives_the_result_of_the_one_through_vcan() {
+    let kept = reports_dir().join("calibrate-tetrahedral/report.json");
+    let bench: Value = serde_json::from_slice(
+        &std::fs::read(&kept).unwrap_or_else(|e| panic!("{}: {e}", kept.display())),
+    )
+    .expect("the kept report is JSON");
+    let dir = tempfile::tempdir().unwrap();
+    // the procedure of tests/tests/vcan.rs (`TETRA_ARGS`, bias-jump), in process
+    let o = Command::new(bin("hil"))
+        .args(["calibrate", "tetrahedral", "--rest", "5", "--turn", "20"])
+        .args([
+            "--end-rest",
+            "5",
+            "--seed",
+            "2",
+            "--json",
+            "--fail",
+            "bias-jump:3:0.5",
+        ])
+        .args(["--in-process", "--out"])
+        .arg(dir.path())
+        .output()
+        .expect("hil runs");
+    let ip: Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!(
+            "hil calibrate tetrahedral --in-process printed no JSON ({e}): {}",
+            String::from_utf8_lossy(&o.stderr)
+        )
+    });
+    let a = &bench["nav"]["tetra_calibration"]["result"];
+    assert!(a["coefficients"].is_array(), "{a}");
+    assert_eq!(
+        &ip["tetra_calibration"]["result"], a,
+        "the in-process calibration must give the bench's result"
+    );
+}
