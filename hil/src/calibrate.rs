@@ -122,7 +122,15 @@ pub struct CalibrateOutcome {
     pub true_heading_deg: f64,
     /// The heading error the true biases' east drift would cause uncalibrated, deg.
     pub heading_uncalibrated_deg: f64,
-    /// nav's result (none when aborted or unfinished).
+    /// The parameters nav started with (a file loaded with `[calibration]`), when any.
+    #[serde(default)]
+    pub loaded: Option<nav::params::GyroParameters>,
+    /// The coarse alignment's heading error, deg: the east gyro bias over the horizontal
+    /// earth rate, what a calibrated unit's static alignment gains.
+    #[serde(default)]
+    pub coarse_heading_error_deg: Option<f64>,
+    /// nav's result (none when aborted or unfinished); its estimates are residuals on top of
+    /// `loaded`, and the errors below are of the two composed (what nav's parameter file says).
     pub result: Option<SelfCalibrationResult>,
     /// The RLS's errors.
     pub rls: Option<MethodScore>,
@@ -132,6 +140,9 @@ pub struct CalibrateOutcome {
     pub abort: Option<String>,
     /// Simulated time at the end, s.
     pub duration_s: f64,
+    /// The parameter file nav made of its result (undated in process).
+    #[serde(default)]
+    pub parameters: Option<nav::params::ImuParameters>,
 }
 
 /// The unit's true biases (deg/h) and scale factors (ppm) of scenario `s`.
@@ -161,9 +172,20 @@ pub fn outcome(
         let w_h = emulators::geodesy::OMEGA.to_degrees() * 3600.0 * lat.cos();
         (e / w_h).to_degrees()
     };
+    // what nav started with; its estimates are residuals on top (composed as nav's front end
+    // applies them: `(raw - b0) / (1 + k0)` reads `(1 + k') w + b'`)
+    let loaded = s.nav_parameters.as_ref().and_then(|p| {
+        nav::params::ImuParameters::load(p, &crate::inproc::unit_id(s))
+            .ok()
+            .map(|p| p.gyro)
+    });
+    let (b0, k0) = loaded.map_or(([0.0; 3], [0.0; 3]), |g| (g.bias_dph, g.scale_factor_ppm));
     let score = |g: &nav::selfcal::GyroEstimate| {
-        let be: [f64; 3] = std::array::from_fn(|j| g.gyro_bias_dph[j] - tb[j]);
-        let ke: [f64; 3] = std::array::from_fn(|j| g.gyro_scale_factor_ppm[j] - tk[j]);
+        let be: [f64; 3] =
+            std::array::from_fn(|j| b0[j] + g.gyro_bias_dph[j] * (1.0 + k0[j] * 1e-6) - tb[j]);
+        let ke: [f64; 3] = std::array::from_fn(|j| {
+            ((1.0 + g.gyro_scale_factor_ppm[j] * 1e-6) * (1.0 + k0[j] * 1e-6) - 1.0) * 1e6 - tk[j]
+        });
         let ratio = (0..3)
             .flat_map(|j| {
                 [
@@ -182,6 +204,9 @@ pub fn outcome(
         }
     };
     CalibrateOutcome {
+        loaded,
+        coarse_heading_error_deg: result
+            .map(|r| crate::drill::wrap180(r.base_heading_deg - s.site.heading_deg)),
         true_bias_dph: tb,
         true_sf_ppm: tk,
         true_heading_deg: s.site.heading_deg,
@@ -191,6 +216,7 @@ pub fn outcome(
         kf: result.map(|r| score(&r.kf)),
         abort: abort.map(str::to_string),
         duration_s,
+        parameters: None,
     }
 }
 
@@ -238,12 +264,13 @@ pub fn run_in_process(
             c.phase()
         )
     });
-    Ok(outcome(
-        s,
-        c.result(),
-        unfinished.as_deref().or(c.abort_reason()),
-        t,
-    ))
+    let mut o = outcome(s, c.result(), unfinished.as_deref().or(c.abort_reason()), t);
+    o.parameters = bench
+        .pipeline()
+        .summary()
+        .self_calibration
+        .and_then(|c| c.parameters);
+    Ok(o)
 }
 
 /// One live progress line from nav's progress JSON.
@@ -288,10 +315,22 @@ pub fn card(o: &CalibrateOutcome) -> String {
             .collect::<Vec<_>>()
             .join("  ")
     };
+    if let Some(g) = &o.loaded {
+        let _ = writeln!(
+            s,
+            "started with      gyro bias {} deg/h, scale factor {} ppm (a parameter file; estimates below are on top of it)",
+            v3(g.bias_dph, 5),
+            v3(g.scale_factor_ppm, 2)
+        );
+    }
     let _ = writeln!(
         s,
-        "coarse alignment  heading {:.4} deg (true {:.4}), pitch {:+.4}, roll {:+.4} deg",
-        r.base_heading_deg, o.true_heading_deg, r.base_tilt_deg[0], r.base_tilt_deg[1]
+        "coarse alignment  heading {:.4} deg (true {:.4}, error {:+.4}), pitch {:+.4}, roll {:+.4} deg",
+        r.base_heading_deg,
+        o.true_heading_deg,
+        o.coarse_heading_error_deg.unwrap_or(f64::NAN),
+        r.base_tilt_deg[0],
+        r.base_tilt_deg[1]
     );
     let _ = writeln!(
         s,
@@ -318,7 +357,12 @@ pub fn card(o: &CalibrateOutcome) -> String {
         if let Some(sc) = sc {
             let _ = writeln!(
                 s,
-                "  error           {}    {}   (mean |e| {:.5} deg/h, {:.2} ppm; worst |e|/sigma {:.1})",
+                "  error{}     {}    {}   (mean |e| {:.5} deg/h, {:.2} ppm; worst |e|/sigma {:.1})",
+                if o.loaded.is_some() {
+                    " (file)"
+                } else {
+                    "       "
+                },
                 v3(sc.bias_error_dph, 5),
                 v3(sc.sf_error_ppm, 2),
                 sc.bias_mae_dph,

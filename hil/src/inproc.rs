@@ -45,10 +45,29 @@ pub fn self_calibration_config(
     nav::selfcal::SelfCalibrationConfig {
         enabled: true,
         latitude_deg: s.site.lat_deg,
-        imu: format!("emulated-imu-seed-{}", s.imu.seed),
+        imu: unit_id(s),
         parameters_out: Some(PARAMETER_FILE.into()),
         ..c.clone()
     }
+}
+
+/// The emulated IMU unit's serial number (what a parameter file for it names).
+pub fn unit_id(s: &Scenario) -> String {
+    format!("emulated-imu-seed-{}", s.imu.seed)
+}
+
+/// nav's `[imu]` for a scenario, with the parameter file it names loaded (as nav loads it).
+pub fn imu_calibration(s: &Scenario) -> nav::imu::ImuCalibration {
+    let mut c = crate::replay::calibration(s);
+    if let Some(p) = s
+        .nav_parameters
+        .as_ref()
+        .and_then(|p| nav::params::ImuParameters::load(p, &unit_id(s)).ok())
+    {
+        c.gyro_bias_dph = p.gyro.bias_dph;
+        c.gyro_scale_factor_ppm = p.gyro.scale_factor_ppm;
+    }
+    c
 }
 
 /// The parameter file nav's self-calibration writes, in the run folder.
@@ -58,7 +77,13 @@ pub const PARAMETER_FILE: &str = "gyro-parameters.toml";
 /// receiver's port when the scenario has one (in process a name only: nothing opens it).
 pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) -> NavConfig {
     NavConfig {
-        calibration: None,
+        calibration: s
+            .nav_parameters
+            .as_ref()
+            .map(|p| nav::config::CalibrationConfig {
+                imu: unit_id(s),
+                parameters: p.clone(),
+            }),
         can: iface.map(|i| CanConfig {
             interface: i.into(),
             rcvbuf_bytes: s.bus.nav_rcvbuf_bytes,
@@ -70,7 +95,7 @@ pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) ->
             ..GpsConfig::default()
         }),
         navigation: navigation_config(s).unwrap_or_default(),
-        imu: crate::replay::calibration(s),
+        imu: imu_calibration(s),
         processing: s.processing,
         north_finding: s
             .north_finding

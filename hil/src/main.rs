@@ -357,6 +357,11 @@ struct CalibrateArgs {
     /// Seed of the emulated unit and mechanism.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// An IMU parameter file for nav to load at start (e.g. an earlier run's
+    /// gyro-parameters.toml): the procedure then refines it, and its static alignment starts
+    /// from calibrated gyros.
+    #[arg(long)]
+    parameters: Option<PathBuf>,
     /// Run the same procedure in process (no bus, no nav process: the same emulators and nav
     /// code, stepped in the order the bench delivers the frames).
     #[arg(long)]

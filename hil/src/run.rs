@@ -406,6 +406,14 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         (_, true, _) => bail!("--gpsd: the scenario has no GPS receiver"),
         _ => None,
     };
+    // the parameter file nav loads goes beside its config, where nav (perhaps another user)
+    // can read it, and into the run's record
+    if let Some(c) = nav_cfg.calibration.as_mut() {
+        let local = nav_folder.dir.join("nav-parameters.toml");
+        std::fs::copy(&c.parameters, &local)
+            .with_context(|| format!("copying {} for nav", c.parameters.display()))?;
+        c.parameters = "nav-parameters.toml".into();
+    }
     std::fs::write(&cfg_path, nav_cfg.to_toml())?;
     info!(interface = %opts.iface, account = ?opts.nav_account, "starting nav");
     let mut phases = Phases::starting_now();
@@ -641,17 +649,27 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     if let Some(o) = &drill_outcome {
         report::drill_checks(&mut checks, s, o);
     }
-    let calibration = s.self_calibration.as_ref().map(|_| {
-        let c = nav_json.self_calibration.as_ref();
-        crate::calibrate::outcome(
-            s,
-            c.and_then(|c| c.result.as_ref()),
-            c.map_or(Some("self-calibration was not enabled in nav"), |c| {
-                c.abort.as_deref()
-            }),
-            sim_reached,
-        )
-    });
+    let calibration = s
+        .self_calibration
+        .as_ref()
+        .map(|_| {
+            let c = nav_json.self_calibration.as_ref();
+            crate::calibrate::outcome(
+                s,
+                c.and_then(|c| c.result.as_ref()),
+                c.map_or(Some("self-calibration was not enabled in nav"), |c| {
+                    c.abort.as_deref()
+                }),
+                sim_reached,
+            )
+        })
+        .map(|mut o| {
+            o.parameters = nav_json
+                .self_calibration
+                .as_ref()
+                .and_then(|c| c.parameters.clone());
+            o
+        });
     if let Some(o) = &calibration {
         report::calibration_checks(&mut checks, o, &nav_json);
     }

@@ -52,6 +52,10 @@ pub struct Scenario {
     /// ends when it reports.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tetra_calibration: Option<nav::tetracal::TetraCalibrationConfig>,
+    /// An IMU parameter file nav loads at start (`[calibration]`), for the emulated unit
+    /// ([`crate::inproc::unit_id`]); e.g. what an earlier self-calibration wrote.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nav_parameters: Option<std::path::PathBuf>,
     /// A drill passes when the heading error is within this, deg.
     #[serde(default = "default_tolerance")]
     pub heading_tolerance_deg: f64,
@@ -217,6 +221,9 @@ impl Scenario {
                     self.imu.gyro_range_dps
                 );
             }
+        }
+        if let Some(p) = &self.nav_parameters {
+            nav::params::ImuParameters::load(p, &crate::inproc::unit_id(self))?;
         }
         if let Some(c) = &self.tetra_calibration {
             c.check()?;

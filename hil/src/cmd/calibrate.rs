@@ -15,6 +15,7 @@ pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
     };
     let mut s = hil::calibrate::scenario(&o);
     s.speed = a.speed;
+    s.nav_parameters = a.parameters.as_deref().map(absolute).transpose()?;
     s.check()?;
     let out = absolute(
         &a.bus
@@ -36,6 +37,13 @@ pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
             }
         })?;
         hil::status::finish();
+        if let Some(p) = &o.parameters {
+            let mut p = p.clone();
+            p.date = nav::params::now_rfc3339();
+            let f = out.join(hil::inproc::PARAMETER_FILE);
+            std::fs::write(&f, p.to_toml()).with_context(|| format!("writing {}", f.display()))?;
+            eprintln!("hil: parameter file {}", f.display());
+        }
         let j = serde_json::json!({ "in_process": true, "calibration": o });
         std::fs::write(out.join("report.json"), serde_json::to_string_pretty(&j)?)?;
         if a.bus.json {
