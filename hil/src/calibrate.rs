@@ -5,7 +5,8 @@
 use crate::calibexp::{CalibOptions, fog_params};
 use crate::scenario::Scenario;
 use anyhow::{Result, bail};
-use nav::selfcal::{CalProgress, SelfCalibrationConfig, SelfCalibrationResult};
+use nav::procedure::Procedure;
+use nav::selfcal::{SelfCalibrationConfig, SelfCalibrationResult};
 use serde::{Deserialize, Serialize};
 
 /// The procedure's settings an operator chooses.
@@ -220,50 +221,63 @@ pub fn outcome(
     }
 }
 
-/// The procedure in process (no bus): the scenario's devices driving nav's pipeline in the
-/// bench's bus order; the result is the bench's, bit for bit. `progress` gets nav's progress
-/// at every phase change and every 10 s of IMU time.
-pub fn run_in_process(
+/// Step scenario `s` in process (its devices driving nav's pipeline in the bench's bus order)
+/// until the procedure `pick` finds in the pipeline has finished, or the scenario ends.
+/// `progress` gets the procedure's progress at each stage change and every 10 s of IMU time.
+/// Returns the bench, the simulated time reached, and why the procedure did not finish.
+pub fn until_finished(
     s: &Scenario,
-    mut progress: impl FnMut(&CalProgress),
-) -> Result<CalibrateOutcome> {
-    if s.self_calibration.is_none() {
-        bail!("scenario {} has no [self_calibration]", s.name);
-    }
+    pick: fn(&nav::pipeline::Pipeline) -> Option<&dyn Procedure>,
+    mut progress: impl FnMut(&serde_json::Value),
+) -> Result<(crate::inproc::InProcessBench, f64, Option<String>)> {
     let mut bench = crate::inproc::InProcessBench::of(s)?;
-    let mut last = None;
+    let Some(name) = pick(bench.pipeline()).map(|p| p.name()) else {
+        bail!(
+            "scenario {}: the procedure is not enabled in nav's config",
+            s.name
+        );
+    };
     let every = (10.0 * s.imu.rate_hz) as u64;
-    let mut k: u64 = 0;
-    let mut t = 0.0;
-    while bench.running()
-        && !bench
-            .pipeline()
-            .calibrator()
-            .is_none_or(nav::selfcal::SelfCalibrator::finished)
-    {
+    let (mut k, mut t, mut last) = (0u64, 0.0, None);
+    while bench.running() && pick(bench.pipeline()).is_some_and(|p| !p.is_finished()) {
         t = bench.step();
-        if let Some(c) = bench.pipeline().calibrator()
-            && (last != Some(c.phase()) || k.is_multiple_of(every))
-        {
-            last = Some(c.phase());
-            progress(&c.progress());
+        if let Some(p) = pick(bench.pipeline()) {
+            let stage = p.stage_key();
+            if last.as_ref() != Some(&stage) || k.is_multiple_of(every) {
+                if let Some(j) = p
+                    .progress_json()
+                    .and_then(|j| serde_json::from_str(&j).ok())
+                {
+                    progress(&j);
+                }
+                last = Some(stage);
+            }
         }
         k += 1;
     }
-    // one more step: the pipeline reports (and closes) on the sample after it finishes
-    if bench.running() {
-        t = bench.step();
-    }
+    let unfinished = pick(bench.pipeline())
+        .filter(|p| !p.is_finished())
+        .map(|p| {
+            format!(
+                "{name} not finished within the scenario's {} s (stage {})",
+                s.duration_s,
+                p.stage_key()
+            )
+        });
+    Ok((bench, t, unfinished))
+}
+
+/// The procedure in process (no bus): the scenario's devices driving nav's pipeline in the
+/// bench's bus order; the result is the bench's, bit for bit.
+pub fn run_in_process(
+    s: &Scenario,
+    progress: impl FnMut(&serde_json::Value),
+) -> Result<CalibrateOutcome> {
+    let (bench, t, unfinished) =
+        until_finished(s, |p| p.calibrator().map(|c| c as &dyn Procedure), progress)?;
     let Some(c) = bench.pipeline().calibrator() else {
         bail!("self-calibration is not enabled in nav's config");
     };
-    let unfinished = (!c.finished()).then(|| {
-        format!(
-            "not finished within the scenario's {} s (phase {:?})",
-            s.duration_s,
-            c.phase()
-        )
-    });
     let mut o = outcome(s, c.result(), unfinished.as_deref().or(c.abort_reason()), t);
     o.parameters = bench
         .pipeline()
@@ -574,40 +588,16 @@ pub fn tetra_outcome(
 /// Paper 001's procedure in process, as [`run_in_process`].
 pub fn tetra_in_process(
     s: &Scenario,
-    mut progress: impl FnMut(&nav::tetracal::TetraProgress),
+    progress: impl FnMut(&serde_json::Value),
 ) -> Result<TetraOutcome> {
-    if s.tetra_calibration.is_none() {
-        bail!("scenario {} has no [tetra_calibration]", s.name);
-    }
-    let mut bench = crate::inproc::InProcessBench::of(s)?;
-    let mut last = None;
-    let every = (10.0 * s.imu.rate_hz) as u64;
-    let (mut k, mut t) = (0u64, 0.0);
-    while bench.running()
-        && !bench
-            .pipeline()
-            .tetra_calibrator()
-            .is_none_or(nav::tetracal::TetraCalibrator::finished)
-    {
-        t = bench.step();
-        if let Some(c) = bench.pipeline().tetra_calibrator()
-            && (last != Some(c.phase()) || k.is_multiple_of(every))
-        {
-            last = Some(c.phase());
-            progress(&c.progress());
-        }
-        k += 1;
-    }
+    let (bench, t, unfinished) = until_finished(
+        s,
+        |p| p.tetra_calibrator().map(|c| c as &dyn Procedure),
+        progress,
+    )?;
     let Some(c) = bench.pipeline().tetra_calibrator() else {
         bail!("tetra_calibration is not enabled in nav's config");
     };
-    let unfinished = (!c.finished()).then(|| {
-        format!(
-            "not finished within the scenario's {} s (phase {:?})",
-            s.duration_s,
-            c.phase()
-        )
-    });
     Ok(tetra_outcome(
         s,
         c.result(),

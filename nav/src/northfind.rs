@@ -25,7 +25,7 @@
 //! reason naming the position and the command.
 
 use crate::earth;
-use crate::ttlink::{LinkPoll, LinkTiming, TtLink};
+use crate::ttlink::{LinkTiming, TtLink};
 use nalgebra::{Matrix4, Rotation3, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
 use wire::{TtAck, TtCmd, TtCommand, TtState, TtStatus};
@@ -430,26 +430,7 @@ impl NorthFinder {
     pub fn poll(&mut self, t: f64) -> Option<TtCmd> {
         self.t = t;
         self.t_start.get_or_insert(t);
-        if self.finished() {
-            return None;
-        }
-        match self.link.poll(t) {
-            LinkPoll::Failed(f) => {
-                let w = self.where_();
-                self.fail(f.describe(&w));
-                return None;
-            }
-            LinkPoll::Send(c) => return Some(c),
-            LinkPoll::Waiting => return None,
-            LinkPoll::Idle => {}
-        }
-        if !self.link.queued() {
-            self.step();
-            if self.finished() {
-                return None;
-            }
-        }
-        self.link.next(t)
+        crate::ttlink::poll(self, t)
     }
 
     fn state(&self) -> Option<TtState> {
@@ -832,6 +813,24 @@ impl NorthFinder {
             elapsed_s: self.t - self.t_start.unwrap_or(self.t),
             repeats: self.repeats,
         }
+    }
+}
+
+impl crate::ttlink::OnLink for NorthFinder {
+    fn link(&mut self) -> &mut TtLink {
+        &mut self.link
+    }
+    fn done(&self) -> bool {
+        self.finished()
+    }
+    fn give_up(&mut self, why: String) {
+        self.fail(why)
+    }
+    fn at(&self) -> String {
+        self.where_()
+    }
+    fn advance(&mut self) {
+        self.step()
     }
 }
 

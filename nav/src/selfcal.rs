@@ -30,7 +30,7 @@
 
 use crate::calib::{AlignKf, AlignKfConfig, GyroRls, c_p_b, expected_rate};
 use crate::earth;
-use crate::ttlink::{AxisTrack, LinkPoll, LinkTiming, TtLink};
+use crate::ttlink::{AxisTrack, LinkTiming, TtLink};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
@@ -560,26 +560,7 @@ impl SelfCalibrator {
     pub fn poll(&mut self, t: f64) -> Option<TtCmd> {
         self.t = self.t.max(t);
         self.t_start.get_or_insert(t);
-        if self.finished() {
-            return None;
-        }
-        match self.link.poll(t) {
-            LinkPoll::Failed(f) => {
-                let w = self.where_();
-                self.fail(f.describe(&w));
-                return None;
-            }
-            LinkPoll::Send(c) => return Some(c),
-            LinkPoll::Waiting => return None,
-            LinkPoll::Idle => {}
-        }
-        if !self.link.queued() {
-            self.step();
-            if self.finished() {
-                return None;
-            }
-        }
-        self.link.next(t)
+        crate::ttlink::poll(self, t)
     }
 
     fn states(&self) -> [Option<TtState>; 2] {
@@ -891,6 +872,24 @@ impl SelfCalibrator {
     /// The phase, and a coarse stage number within it, for reporting changes.
     pub fn stage(&self) -> CalPhase {
         self.phase
+    }
+}
+
+impl crate::ttlink::OnLink for SelfCalibrator {
+    fn link(&mut self) -> &mut TtLink {
+        &mut self.link
+    }
+    fn done(&self) -> bool {
+        self.finished()
+    }
+    fn give_up(&mut self, why: String) {
+        self.fail(why)
+    }
+    fn at(&self) -> String {
+        self.where_()
+    }
+    fn advance(&mut self) {
+        self.step()
     }
 }
 

@@ -25,7 +25,7 @@
 
 use crate::calib::{GyroCoefficients, TETRA_GYROS, TetraKf, table_rate, tetra_triad};
 use crate::redundant::{ParityMonitor, Status};
-use crate::ttlink::{AxisTrack, LinkPoll, LinkTiming, TtLink};
+use crate::ttlink::{AxisTrack, LinkTiming, TtLink};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
@@ -584,26 +584,7 @@ impl TetraCalibrator {
     pub fn poll(&mut self, t: f64) -> Option<TtCmd> {
         self.t = self.t.max(t);
         self.t_start.get_or_insert(t);
-        if self.finished() {
-            return None;
-        }
-        match self.link.poll(t) {
-            LinkPoll::Failed(f) => {
-                let w = self.where_();
-                self.fail(f.describe(&w));
-                return None;
-            }
-            LinkPoll::Send(c) => return Some(c),
-            LinkPoll::Waiting => return None,
-            LinkPoll::Idle => {}
-        }
-        if !self.link.queued() {
-            self.step();
-            if self.finished() {
-                return None;
-            }
-        }
-        self.link.next(t)
+        crate::ttlink::poll(self, t)
     }
 
     fn all(&self, f: impl Fn(TtState) -> bool) -> bool {
@@ -789,5 +770,23 @@ impl TetraCalibrator {
                 .map(|(b, ..)| ['x', 'y', 'z'][b]),
             bias_dps: self.kf.coefficients().map(|c| c.bias_dps),
         }
+    }
+}
+
+impl crate::ttlink::OnLink for TetraCalibrator {
+    fn link(&mut self) -> &mut TtLink {
+        &mut self.link
+    }
+    fn done(&self) -> bool {
+        self.finished()
+    }
+    fn give_up(&mut self, why: String) {
+        self.fail(why)
+    }
+    fn at(&self) -> String {
+        self.where_()
+    }
+    fn advance(&mut self) {
+        self.step()
     }
 }

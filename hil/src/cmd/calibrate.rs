@@ -1,6 +1,7 @@
 //! `hil calibrate rotating-imu`: the self-calibration procedure, on the bus or in process.
 
 use crate::*;
+use cmd::run::{procedure_folder, report_in_process, run_procedure};
 
 pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
     let o = hil::calibrate::CalibrateOptions {
@@ -17,24 +18,19 @@ pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
     s.speed = a.speed;
     s.nav_parameters = a.parameters.as_deref().map(absolute).transpose()?;
     s.check()?;
-    let out = absolute(
-        &a.bus
-            .out
-            .clone()
-            .unwrap_or_else(|| default_out("calibrate-rotating-imu")),
+    let (out, scen) = procedure_folder(
+        &s,
+        a.bus.out.as_deref(),
+        "calibrate-rotating-imu",
+        "calibrate.toml",
     )?;
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let scen = out.join("calibrate.toml");
-    std::fs::write(&scen, toml::to_string_pretty(&s)?)?;
     eprintln!(
         "hil: self-calibration of the rotating IMU at latitude {} deg, heading {} deg: {} s at rest, {} s of rotation at {} deg/s, x{}",
         o.lat_deg, o.heading_deg, o.level_s, o.rotate_s, o.rate_dps, a.speed
     );
     if a.in_process {
-        let o = hil::calibrate::run_in_process(&s, |p| {
-            if let Ok(j) = serde_json::to_value(p) {
-                hil::status::show(&hil::calibrate::progress_line(&j));
-            }
+        let o = hil::calibrate::run_in_process(&s, |j| {
+            hil::status::show(&hil::calibrate::progress_line(j))
         })?;
         hil::status::finish();
         if let Some(p) = &o.parameters {
@@ -44,27 +40,10 @@ pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
             std::fs::write(&f, p.to_toml()).with_context(|| format!("writing {}", f.display()))?;
             eprintln!("hil: parameter file {}", f.display());
         }
-        let j = serde_json::json!({ "in_process": true, "calibration": o });
-        std::fs::write(out.join("report.json"), serde_json::to_string_pretty(&j)?)?;
-        if a.bus.json {
-            println!("{}", serde_json::to_string_pretty(&j)?);
-        } else {
-            print!("{}", hil::calibrate::card(&o));
-        }
+        report_in_process(&out, "calibration", &o, a.bus.json, hil::calibrate::card)?;
         return Ok(i32::from(o.result.is_none()));
     }
-    run(RunArgs {
-        scenario: Some(scen),
-        duration: None,
-        speed: None,
-        nav: None,
-        no_reference: false,
-        gpsd: false,
-        bus: BusArgs {
-            out: Some(out),
-            ..a.bus
-        },
-    })
+    run_procedure(scen, out, a.bus)
 }
 
 /// `--fail` of `hil calibrate tetrahedral`: `stuck:G`, `bias-jump:G:DPS` or `noise:G:DPS`
@@ -126,15 +105,12 @@ pub(crate) fn calibrate_tetrahedral(a: TetraArgs) -> Result<i32> {
     let mut s = hil::calibrate::tetra_scenario(&o);
     s.speed = a.speed;
     s.check()?;
-    let out = absolute(
-        &a.bus
-            .out
-            .clone()
-            .unwrap_or_else(|| default_out("calibrate-tetrahedral")),
+    let (out, scen) = procedure_folder(
+        &s,
+        a.bus.out.as_deref(),
+        "calibrate-tetrahedral",
+        "calibrate.toml",
     )?;
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let scen = out.join("calibrate.toml");
-    std::fs::write(&scen, toml::to_string_pretty(&s)?)?;
     eprintln!(
         "hil: calibration of the redundant MEMS unit on the three-axis table at latitude {} deg: {} s at rest, x y z at {} deg/s for {} s each, {} s at rest{}, x{}",
         o.lat_deg,
@@ -150,31 +126,18 @@ pub(crate) fn calibrate_tetrahedral(a: TetraArgs) -> Result<i32> {
         a.speed
     );
     if a.in_process {
-        let o = hil::calibrate::tetra_in_process(&s, |p| {
-            if let Ok(j) = serde_json::to_value(p) {
-                hil::status::show(&hil::calibrate::tetra_progress_line(&j));
-            }
+        let o = hil::calibrate::tetra_in_process(&s, |j| {
+            hil::status::show(&hil::calibrate::tetra_progress_line(j))
         })?;
         hil::status::finish();
-        let j = serde_json::json!({ "in_process": true, "tetra_calibration": o });
-        std::fs::write(out.join("report.json"), serde_json::to_string_pretty(&j)?)?;
-        if a.bus.json {
-            println!("{}", serde_json::to_string_pretty(&j)?);
-        } else {
-            print!("{}", hil::calibrate::tetra_card(&o));
-        }
+        report_in_process(
+            &out,
+            "tetra_calibration",
+            &o,
+            a.bus.json,
+            hil::calibrate::tetra_card,
+        )?;
         return Ok(i32::from(o.result.is_none()));
     }
-    run(RunArgs {
-        scenario: Some(scen),
-        duration: None,
-        speed: None,
-        nav: None,
-        no_reference: false,
-        gpsd: false,
-        bus: BusArgs {
-            out: Some(out),
-            ..a.bus
-        },
-    })
+    run_procedure(scen, out, a.bus)
 }

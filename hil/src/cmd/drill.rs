@@ -1,6 +1,7 @@
 //! `hil drill north-finding`: the operator drill, on the bus or in process.
 
 use crate::*;
+use cmd::run::{procedure_folder, run_procedure};
 
 /// Disturbance script file: `[[disturbance]]` entries.
 #[derive(serde::Deserialize)]
@@ -30,15 +31,12 @@ pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
         s.disturbance = d.disturbance;
     }
     s.check()?;
-    let out = absolute(
-        &a.bus
-            .out
-            .clone()
-            .unwrap_or_else(|| default_out("drill-north-finding")),
+    let (out, scen) = procedure_folder(
+        &s,
+        a.bus.out.as_deref(),
+        "drill-north-finding",
+        "drill.toml",
     )?;
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let scen = out.join("drill.toml");
-    std::fs::write(&scen, toml::to_string_pretty(&s)?)?;
     eprintln!(
         "hil: north-finding drill at {:.4} deg heading, latitude {} deg, {} s dwell, x{}",
         heading, a.lat, a.dwell, a.speed
@@ -61,16 +59,5 @@ pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
         }
         return Ok(i32::from(o.error_deg.is_none_or(|e| e.abs() > a.tolerance)));
     }
-    run(RunArgs {
-        scenario: Some(scen),
-        duration: None,
-        speed: None,
-        nav: None,
-        no_reference: false,
-        gpsd: false,
-        bus: BusArgs {
-            out: Some(out),
-            ..a.bus
-        },
-    })
+    run_procedure(scen, out, a.bus)
 }

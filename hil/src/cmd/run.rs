@@ -85,3 +85,53 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
         a.bus.json.then_some("report.json"),
     )
 }
+
+/// An operator procedure's run folder (`out`, or `runs/<name>-<time>`), with the scenario
+/// written in it as `file` (what the run is repeated from).
+pub(crate) fn procedure_folder(
+    s: &Scenario,
+    out: Option<&Path>,
+    name: &str,
+    file: &str,
+) -> Result<(PathBuf, PathBuf)> {
+    let out = absolute(&out.map_or_else(|| default_out(name), Path::to_path_buf))?;
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let scen = out.join(file);
+    std::fs::write(&scen, toml::to_string_pretty(s)?)?;
+    Ok((out, scen))
+}
+
+/// An operator procedure on the bench: the scenario file `scen` through `hil run` into `out`.
+pub(crate) fn run_procedure(scen: PathBuf, out: PathBuf, bus: BusArgs) -> Result<i32> {
+    run(RunArgs {
+        scenario: Some(scen),
+        duration: None,
+        speed: None,
+        nav: None,
+        no_reference: false,
+        gpsd: false,
+        bus: BusArgs {
+            out: Some(out),
+            ..bus
+        },
+    })
+}
+
+/// An operator procedure in process: its outcome under `key` in `out/report.json`, and as JSON
+/// (`json`) or its card on stdout.
+pub(crate) fn report_in_process<T: serde::Serialize>(
+    out: &Path,
+    key: &str,
+    outcome: &T,
+    json: bool,
+    card: impl FnOnce(&T) -> String,
+) -> Result<()> {
+    let j = serde_json::json!({ "in_process": true, key: outcome });
+    std::fs::write(out.join("report.json"), serde_json::to_string_pretty(&j)?)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&j)?);
+    } else {
+        print!("{}", card(outcome));
+    }
+    Ok(())
+}
