@@ -99,15 +99,8 @@ impl Default for NorthFindingConfig {
     }
 }
 
-/// A north-finding setting out of its range.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("north_finding.{setting}: {requirement}")]
-pub struct NorthFindingConfigError {
-    /// The setting (as in the `[north_finding]` table).
-    pub setting: &'static str,
-    /// What it must be.
-    pub requirement: &'static str,
-}
+/// A setting of `[north_finding]` out of its range.
+pub type NorthFindingConfigError = crate::ttlink::SettingError;
 
 impl NorthFindingConfig {
     /// The turntable link's timing.
@@ -123,15 +116,19 @@ impl NorthFindingConfig {
     /// Check the settings; the error names the setting.
     pub fn check(&self) -> Result<(), NorthFindingConfigError> {
         let bad = |setting, requirement| {
-            Err(NorthFindingConfigError {
+            Err(crate::ttlink::SettingError::new(
+                "north_finding",
                 setting,
                 requirement,
-            })
+            ))
         };
+        crate::ttlink::check_site_and_link(
+            "north_finding",
+            self.latitude_deg,
+            &self.timing(),
+            self.move_timeout_s,
+        )?;
         let pos = |x: f64| x.is_finite() && x > 0.0;
-        if !(-89.0..=89.0).contains(&self.latitude_deg) {
-            return bad("latitude_deg", "must be within 89 deg of the equator");
-        }
         if self.positions_deg.len() < 2
             || self.positions_deg.iter().any(|p| !(0.0..360.0).contains(p))
         {
@@ -146,16 +143,6 @@ impl NorthFindingConfig {
         }
         if self.blocks < 2 {
             return bad("blocks", "must be 2 or more");
-        }
-        if !(pos(self.heartbeat_s)
-            && pos(self.ack_timeout_s)
-            && pos(self.move_timeout_s)
-            && pos(self.status_timeout_s))
-        {
-            return bad(
-                "heartbeat_s/ack_timeout_s/move_timeout_s/status_timeout_s",
-                "timeouts must be positive",
-            );
         }
         Ok(())
     }

@@ -74,15 +74,9 @@ pub enum PipelineError {
     /// The processing chain's settings.
     #[error("processing chain: {0}")]
     Processing(#[from] crate::fir::FirError),
-    /// North-finding's settings.
+    /// A procedure's settings (north-finding, self-calibration, the redundant unit's).
     #[error(transparent)]
-    NorthFinding(#[from] crate::northfind::NorthFindingConfigError),
-    /// Self-calibration's settings.
-    #[error(transparent)]
-    SelfCalibration(#[from] crate::selfcal::SelfCalibrationConfigError),
-    /// The redundant unit's calibration settings.
-    #[error(transparent)]
-    TetraCalibration(#[from] crate::tetracal::TetraCalibrationConfigError),
+    Procedure(#[from] crate::ttlink::SettingError),
 }
 
 /// Frames received, by outcome.

@@ -126,29 +126,26 @@ impl Default for SelfCalibrationConfig {
     }
 }
 
-/// A calibration setting out of its range.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("self_calibration.{setting}: {requirement}")]
-pub struct SelfCalibrationConfigError {
-    /// The setting.
-    pub setting: &'static str,
-    /// What it must be.
-    pub requirement: &'static str,
-}
+/// A setting of `[self_calibration]` out of its range.
+pub type SelfCalibrationConfigError = crate::ttlink::SettingError;
 
 impl SelfCalibrationConfig {
     /// Check the settings; the error names the setting.
     pub fn check(&self) -> Result<(), SelfCalibrationConfigError> {
         let bad = |setting, requirement| {
-            Err(SelfCalibrationConfigError {
+            Err(crate::ttlink::SettingError::new(
+                "self_calibration",
                 setting,
                 requirement,
-            })
+            ))
         };
+        crate::ttlink::check_site_and_link(
+            "self_calibration",
+            self.latitude_deg,
+            &self.timing(),
+            self.move_timeout_s,
+        )?;
         let pos = |x: f64| x.is_finite() && x > 0.0;
-        if !(-89.0..=89.0).contains(&self.latitude_deg) {
-            return bad("latitude_deg", "must be within 89 deg of the equator");
-        }
         if self.outer_axis > 2 || self.inner_axis > 2 || self.outer_axis == self.inner_axis {
             return bad("outer_axis/inner_axis", "two different axes of 0, 1 and 2");
         }
@@ -182,16 +179,6 @@ impl SelfCalibrationConfig {
         }
         if !(pos(self.measure_every_s) && pos(self.max_status_gap_s)) {
             return bad("measure_every_s/max_status_gap_s", "must be positive");
-        }
-        if !(pos(self.heartbeat_s)
-            && pos(self.ack_timeout_s)
-            && pos(self.move_timeout_s)
-            && pos(self.status_timeout_s))
-        {
-            return bad(
-                "heartbeat_s/ack_timeout_s/move_timeout_s/status_timeout_s",
-                "timeouts must be positive",
-            );
         }
         Ok(())
     }

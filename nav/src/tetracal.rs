@@ -113,29 +113,26 @@ impl Default for TetraCalibrationConfig {
     }
 }
 
-/// A setting out of its range.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("tetra_calibration.{setting}: {requirement}")]
-pub struct TetraCalibrationConfigError {
-    /// The setting.
-    pub setting: &'static str,
-    /// What it must be.
-    pub requirement: &'static str,
-}
+/// A setting of `[tetra_calibration]` out of its range.
+pub type TetraCalibrationConfigError = crate::ttlink::SettingError;
 
 impl TetraCalibrationConfig {
     /// Check the settings; the error names the setting.
     pub fn check(&self) -> Result<(), TetraCalibrationConfigError> {
         let bad = |setting, requirement| {
-            Err(TetraCalibrationConfigError {
+            Err(crate::ttlink::SettingError::new(
+                "tetra_calibration",
                 setting,
                 requirement,
-            })
+            ))
         };
+        crate::ttlink::check_site_and_link(
+            "tetra_calibration",
+            self.latitude_deg,
+            &self.timing(),
+            self.move_timeout_s,
+        )?;
         let pos = |x: f64| x.is_finite() && x > 0.0;
-        if !(-89.0..=89.0).contains(&self.latitude_deg) {
-            return bad("latitude_deg", "must be within 89 deg of the equator");
-        }
         let mut g: Vec<char> = self.gimbal.chars().collect();
         g.sort_unstable();
         if g != ['x', 'y', 'z'] {
@@ -170,16 +167,6 @@ impl TetraCalibrationConfig {
         }
         if self.monitor_window < 3 {
             return bad("monitor_window", "must be 3 or more");
-        }
-        if !(pos(self.heartbeat_s)
-            && pos(self.ack_timeout_s)
-            && pos(self.move_timeout_s)
-            && pos(self.status_timeout_s))
-        {
-            return bad(
-                "heartbeat_s/ack_timeout_s/move_timeout_s/status_timeout_s",
-                "timeouts must be positive",
-            );
         }
         Ok(())
     }

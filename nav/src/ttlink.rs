@@ -282,6 +282,59 @@ impl TtLink {
     }
 }
 
+/// A procedure's setting out of its range: `<table>.<setting>: <requirement>`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{table}.{setting}: {requirement}")]
+pub struct SettingError {
+    /// The config table (`north_finding`, `self_calibration`, ...).
+    pub table: &'static str,
+    /// The setting (as in the table).
+    pub setting: &'static str,
+    /// What it must be.
+    pub requirement: &'static str,
+}
+
+impl SettingError {
+    /// The setting of `table` must be what `requirement` says.
+    pub fn new(table: &'static str, setting: &'static str, requirement: &'static str) -> Self {
+        Self {
+            table,
+            setting,
+            requirement,
+        }
+    }
+}
+
+/// What every procedure on the link checks: a latitude within 89 deg of the equator, and
+/// positive heartbeat, acknowledgement, move and status timeouts.
+pub(crate) fn check_site_and_link(
+    table: &'static str,
+    latitude_deg: f64,
+    timing: &LinkTiming,
+    move_timeout_s: f64,
+) -> Result<(), SettingError> {
+    let pos = |x: f64| x.is_finite() && x > 0.0;
+    if !(-89.0..=89.0).contains(&latitude_deg) {
+        return Err(SettingError::new(
+            table,
+            "latitude_deg",
+            "must be within 89 deg of the equator",
+        ));
+    }
+    if !(pos(timing.heartbeat_s)
+        && pos(timing.ack_timeout_s)
+        && pos(move_timeout_s)
+        && pos(timing.status_timeout_s))
+    {
+        return Err(SettingError::new(
+            table,
+            "heartbeat_s/ack_timeout_s/move_timeout_s/status_timeout_s",
+            "timeouts must be positive",
+        ));
+    }
+    Ok(())
+}
+
 /// What [`poll`] needs of a procedure on the link.
 pub(crate) trait OnLink {
     /// Its link.
