@@ -70,8 +70,8 @@ pub struct CalibOptions {
     pub accel_noise_g: f64,
     /// Rate of each axis, deg/s.
     pub axis_rate_dps: f64,
-    /// The inner axis starts this long after the outer, s (0: the axes turn in step, as in the
-    /// paper).
+    /// The inner axis starts this long after the outer, s (0: the axes turn in step; the paper
+    /// does not say how its axes are phased).
     pub inner_delay_s: f64,
     /// Sample rate, Hz.
     pub rate_hz: f64,
@@ -94,7 +94,7 @@ impl Default for CalibOptions {
             accel_bias_g: 1e-4,
             accel_noise_g: 0.5e-4,
             axis_rate_dps: 5.0,
-            inner_delay_s: 0.0,
+            inner_delay_s: 18.0,
             rate_hz: 100.0,
         }
     }
@@ -498,6 +498,7 @@ mod tests {
             score_from_s: 150.0,
             tilt_deg: 0.0,
             heading_deg: 30.0,
+            inner_delay_s: 0.0,
             ..Default::default()
         };
         let r = run_one(&exact, 3).unwrap();
@@ -511,9 +512,11 @@ mod tests {
             r.rls.heading_deg.abs() < 0.1 * r.heading_uncalibrated_deg.abs(),
             "{r:?}"
         );
+        // the axes in step
         let paper = CalibOptions {
             duration_s: 300.0,
             score_from_s: 150.0,
+            inner_delay_s: 0.0,
             ..Default::default()
         };
         let p = run_one(&paper, 3).unwrap();

@@ -348,7 +348,8 @@ struct CalibrateArgs {
     /// Rotation rate of both axes, deg/s (the paper: 5).
     #[arg(long, default_value_t = 5.0)]
     rate: f64,
-    /// The inner axis starts this long after the outer one, s (0: in step, as in the paper).
+    /// The inner axis starts this long after the outer one, s (0: in step; the paper does not
+    /// say).
     #[arg(long, default_value_t = 18.0)]
     inner_delay: f64,
     /// Speed factor (1 = real time).
@@ -524,8 +525,10 @@ enum Experiment {
         /// True heading, deg (the estimators are given it less 0.06 deg).
         #[arg(long, default_value_t = 30.06, allow_negative_numbers = true)]
         heading: f64,
-        /// Start the inner axis this long after the outer, s (0: in step, as in the paper).
-        #[arg(long, default_value_t = 0.0)]
+        /// Start the inner axis this long after the outer, s. The paper does not say how its
+        /// axes are phased: a quarter turn (18 s at 5 deg/s, the default) averages the coarse
+        /// tilt out of the z gyro's bias; 0 turns them in step.
+        #[arg(long, default_value_t = 18.0)]
         inner_delay: f64,
         /// Output folder (default runs/experiment-calibration-<unix time>).
         #[arg(long)]
