@@ -455,6 +455,9 @@ pub struct TetraOptions {
     pub monitor: bool,
     /// A failure of one gyro (times from the start of the run).
     pub failure: Option<emulators::mems::GyroFailure>,
+    /// Start from this parameter file of the unit (an earlier run's): no calibration, the
+    /// profile once with the parity monitor.
+    pub parameters: Option<std::path::PathBuf>,
     /// Seed.
     pub seed: u64,
 }
@@ -472,6 +475,7 @@ impl Default for TetraOptions {
             noise_dps: 0.005,
             monitor: false,
             failure: None,
+            parameters: None,
             seed: 1,
         }
     }
@@ -524,9 +528,18 @@ pub fn tetra_scenario(o: &TetraOptions) -> Scenario {
         end_rest_s: o.end_rest_s,
         monitor: o.monitor,
         gyro_noise_dps: o.noise_dps.max(1e-6),
+        // the paper's R, or the unit's noise where that is larger (with the output's
+        // quantization and the reference rate's noise, about 0.004 deg/s): the filter's
+        // sigmas then keep their promise at MEMS noise too
+        r: (o.noise_dps.powi(2) + 0.004f64.powi(2)).max(1e-3),
+        parameters: o.parameters.clone(),
         ..Default::default()
     };
-    let passes = if o.monitor { 2.0 } else { 1.0 };
+    let passes = if o.monitor && o.parameters.is_none() {
+        2.0
+    } else {
+        1.0
+    };
     s.duration_s = passes * c.profile_s() + 90.0;
     s.tetra_calibration = Some(c);
     s
@@ -549,6 +562,9 @@ pub struct TetraOutcome {
     pub abort: Option<String>,
     /// Simulated time at the end, s.
     pub duration_s: f64,
+    /// The unit's parameter file nav made of its estimates (undated in process).
+    #[serde(default)]
+    pub parameters: Option<nav::params::RedundantParameters>,
 }
 
 /// Score nav's result against the unit of scenario `s`.
@@ -582,6 +598,7 @@ pub fn tetra_outcome(
         failure: unit.failure,
         abort: abort.map(str::to_string),
         duration_s,
+        parameters: None,
     }
 }
 
@@ -598,12 +615,9 @@ pub fn tetra_in_process(
     let Some(c) = bench.pipeline().tetra_calibrator() else {
         bail!("tetra_calibration is not enabled in nav's config");
     };
-    Ok(tetra_outcome(
-        s,
-        c.result(),
-        unfinished.as_deref().or(c.abort_reason()),
-        t,
-    ))
+    let mut o = tetra_outcome(s, c.result(), unfinished.as_deref().or(c.abort_reason()), t);
+    o.parameters = c.parameters();
+    Ok(o)
 }
 
 /// One live progress line from nav's tetra-calibration progress JSON.
@@ -679,7 +693,7 @@ pub fn tetra_card(o: &TetraOutcome) -> String {
         let f = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.2} s"));
         let _ = writeln!(
             s,
-            "parity monitor: {} (failure injected: {}); alarm at {}, isolated at {} of the second pass; worst rate error {:.4} deg/s",
+            "parity monitor: {} (failure injected: {}); alarm at {}, isolated at {} into the monitored pass; worst rate error {:.4} deg/s",
             serde_json::to_string(&m.status).unwrap_or_default(),
             o.failure
                 .map_or("none".to_string(), |f| serde_json::to_string(&f)

@@ -70,6 +70,17 @@ pub fn imu_calibration(s: &Scenario) -> nav::imu::ImuCalibration {
     c
 }
 
+/// The emulated redundant unit's serial number.
+pub fn mems_unit_id(s: &Scenario) -> String {
+    format!(
+        "emulated-mems-seed-{}",
+        s.imu.tetra.as_ref().map_or(0, |t| t.gyros.seed)
+    )
+}
+
+/// The parameter file nav's calibration of the redundant unit writes, in the run folder.
+pub const TETRA_PARAMETER_FILE: &str = "tetra-parameters.toml";
+
 /// The parameter file nav's self-calibration writes, in the run folder.
 pub const PARAMETER_FILE: &str = "gyro-parameters.toml";
 
@@ -114,6 +125,14 @@ pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) ->
                 enabled: true,
                 latitude_deg: s.site.lat_deg,
                 base_heading_deg: s.site.heading_deg,
+                imu: mems_unit_id(s),
+                parameters_out: Some(TETRA_PARAMETER_FILE.into()),
+                // what nav's config loader makes of the file it names
+                coefficients: c.parameters.as_ref().and_then(|p| {
+                    nav::params::RedundantParameters::load(p, &mems_unit_id(s))
+                        .ok()
+                        .map(|f| f.coefficients())
+                }),
                 ..c.clone()
             })
             .unwrap_or_default(),

@@ -311,10 +311,14 @@ struct TetraArgs {
     /// Run the profile again with the parity monitor on the calibrated outputs.
     #[arg(long)]
     monitor: bool,
-    /// Fail one gyro (1-4) in the second pass, halfway through it: stuck:G, bias-jump:G:DPS
-    /// or noise:G:DPS (implies --monitor).
+    /// Fail one gyro (1-4) halfway through the monitor's pass: stuck:G, bias-jump:G:DPS or
+    /// noise:G:DPS (implies --monitor).
     #[arg(long)]
     fail: Option<String>,
+    /// Start from the unit's parameter file (an earlier run's tetra-parameters.toml): no
+    /// calibration, the profile once with the parity monitor.
+    #[arg(long)]
+    parameters: Option<PathBuf>,
     /// Speed factor (1 = real time).
     #[arg(long, default_value_t = 20.0)]
     speed: f64,

@@ -295,7 +295,7 @@ pub fn calibration_checks(
 /// The redundant unit's calibration: finished (the table having done what was commanded
 /// throughout), every estimate within 3 of its sigmas of the truth, and with a failure
 /// injected, the monitor isolating that gyro.
-pub fn tetra_checks(out: &mut Vec<Check>, o: &crate::calibrate::TetraOutcome) {
+pub fn tetra_checks(out: &mut Vec<Check>, o: &crate::calibrate::TetraOutcome, nav: &Summary) {
     out.push(Check {
         name: "tetra-calibration finished, the table's rates checked".into(),
         pass: o.result.as_ref().is_some_and(|r| r.checked_s > 0),
@@ -308,7 +308,8 @@ pub fn tetra_checks(out: &mut Vec<Check>, o: &crate::calibrate::TetraOutcome) {
             (None, None) => "no result reported".into(),
         },
     });
-    if let (Some(e), Some(q)) = (&o.errors, o.worst_sigma_ratio) {
+    let from_file = o.result.as_ref().is_some_and(|r| r.from_file);
+    if let (Some(e), Some(q), false) = (&o.errors, o.worst_sigma_ratio, from_file) {
         out.push(Check {
             name: "estimates within 3 sigma of the unit's truth".into(),
             pass: q <= 3.0,
@@ -319,6 +320,28 @@ pub fn tetra_checks(out: &mut Vec<Check>, o: &crate::calibrate::TetraOutcome) {
                 e.scale_factor,
                 100.0 * e.relative
             ),
+        });
+    }
+    if o.result.is_some() && !from_file {
+        let tc = nav.tetra_calibration.as_ref();
+        let file = tc.and_then(|c| c.parameters_file.clone());
+        let unit = tc
+            .and_then(|c| c.parameters.as_ref())
+            .map(|p| p.imu.clone())
+            .unwrap_or_default();
+        let loaded = file
+            .as_ref()
+            .map(|f| nav::params::RedundantParameters::load(f, &unit));
+        out.push(Check {
+            name: "the unit's parameter file written, and loadable for it".into(),
+            pass: matches!(loaded, Some(Ok(_))),
+            detail: match (&file, loaded) {
+                (Some(f), Some(Ok(p))) => {
+                    format!("{}: unit {}, {} gyros", f.display(), p.imu, p.gyro.len())
+                }
+                (Some(f), Some(Err(e))) => format!("{}: {e}", f.display()),
+                _ => "nav wrote no parameter file".into(),
+            },
         });
     }
     if let (Some(f), Some(r)) = (&o.failure, &o.result) {

@@ -408,11 +408,22 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     };
     // the parameter file nav loads goes beside its config, where nav (perhaps another user)
     // can read it, and into the run's record
-    if let Some(c) = nav_cfg.calibration.as_mut() {
-        let local = nav_folder.dir.join("nav-parameters.toml");
-        std::fs::copy(&c.parameters, &local)
-            .with_context(|| format!("copying {} for nav", c.parameters.display()))?;
-        c.parameters = "nav-parameters.toml".into();
+    let files = [
+        (
+            nav_cfg.calibration.as_mut().map(|c| &mut c.parameters),
+            "nav-parameters.toml",
+        ),
+        (
+            nav_cfg.tetra_calibration.parameters.as_mut(),
+            "nav-tetra-parameters.toml",
+        ),
+    ];
+    for (file, name) in files {
+        if let Some(p) = file {
+            std::fs::copy(&*p, nav_folder.dir.join(name))
+                .with_context(|| format!("copying {} for nav", p.display()))?;
+            *p = name.into();
+        }
     }
     std::fs::write(&cfg_path, nav_cfg.to_toml())?;
     info!(interface = %opts.iface, account = ?opts.nav_account, "starting nav");
@@ -591,6 +602,11 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     {
         sc.parameters_file = Some(opts.out.join(name));
     }
+    if let Some(tc) = nav_json.tetra_calibration.as_mut()
+        && let Some(name) = tc.parameters_file.as_ref().and_then(|f| f.file_name())
+    {
+        tc.parameters_file = Some(opts.out.join(name));
+    }
     phases.end("summary");
     // the checks that recompute things (the in-process reference run, the replay of nav's
     // recording through its pipeline, the scoring of its recording against truth) are
@@ -685,7 +701,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         )
     });
     if let Some(o) = &tetra_calibration {
-        report::tetra_checks(&mut checks, o);
+        report::tetra_checks(&mut checks, o, &nav_json);
     }
     report::solution_checks(&mut checks, &solution, &nav_json);
     // nav's binary is a shell around its pipeline: from its own recording, the pipeline in

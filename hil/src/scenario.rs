@@ -248,6 +248,9 @@ impl Scenario {
                     self.imu.rate_hz
                 );
             }
+            if let Some(p) = &c.parameters {
+                nav::params::RedundantParameters::load(p, &crate::inproc::mems_unit_id(self))?;
+            }
             if self.north_finding.is_some()
                 || self.self_calibration.is_some()
                 || self.drive.is_some()

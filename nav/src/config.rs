@@ -327,11 +327,23 @@ impl NavConfig {
                 *inline = from_file;
             }
         }
+        // the redundant unit's parameter file, when the procedure starts from one
+        let t = &mut cfg.tetra_calibration;
+        if t.enabled
+            && let Some(p) = t.parameters.as_mut()
+        {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+            let f = crate::params::RedundantParameters::load(p, &t.imu)?;
+            t.coefficients = Some(f.coefficients());
+        }
         let gps_export = cfg.gps.as_mut().and_then(|g| g.fixes_jsonl.as_mut());
         for p in [
             &mut cfg.record.mcap,
             &mut cfg.record.summary,
             &mut cfg.self_calibration.parameters_out,
+            &mut cfg.tetra_calibration.parameters_out,
         ]
         .into_iter()
         .flatten()

@@ -169,8 +169,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         recorder: recorder.as_ref(),
         frames_sent: 0,
         send_errors: 0,
-        parameters_out: cfg.self_calibration.parameters_out.clone(),
-        parameters: None,
+        parameters: Vec::new(),
     };
     let mut out = Vec::new();
     let mut batch = Vec::with_capacity(wire::BATCH);
@@ -279,11 +278,21 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     summary.interface = iface.to_string();
     summary.read_errors = read_errors;
     summary.command_send_errors = shell.command_errors;
-    if let (Some(sc), Some((file, p))) =
-        (summary.self_calibration.as_mut(), shell.parameters.take())
-    {
-        sc.parameters = Some(p);
-        sc.parameters_file = file;
+    for (file, p) in shell.parameters.drain(..) {
+        match p {
+            nav::params::ParameterFile::Imu(p) => {
+                if let Some(sc) = summary.self_calibration.as_mut() {
+                    sc.parameters = Some(p);
+                    sc.parameters_file = file;
+                }
+            }
+            nav::params::ParameterFile::Redundant(p) => {
+                if let Some(tc) = summary.tetra_calibration.as_mut() {
+                    tc.parameters = Some(p);
+                    tc.parameters_file = file;
+                }
+            }
+        }
     }
     // SAFETY: getuid(2) cannot fail.
     summary.process_uid = Some(unsafe { libc::getuid() });
@@ -387,10 +396,8 @@ struct Shell<'a> {
     /// Solution frames written.
     frames_sent: u64,
     send_errors: u64,
-    /// Where self-calibration's parameter file goes.
-    parameters_out: Option<std::path::PathBuf>,
-    /// The parameter file as stamped, and where it was written (none: not written).
-    parameters: Option<(Option<std::path::PathBuf>, nav::params::ImuParameters)>,
+    /// The parameter files as stamped, and where each was written (none: it could not be).
+    parameters: Vec<(Option<std::path::PathBuf>, nav::params::ParameterFile)>,
 }
 
 impl Shell<'_> {
@@ -459,26 +466,24 @@ impl Shell<'_> {
                     }
                 }
                 Output::Line(l) => println!("{l}"),
-                Output::Parameters(p) => {
-                    let mut p = *p;
-                    p.date = nav::params::now_rfc3339();
-                    let written = self.parameters_out.as_ref().and_then(|path| {
-                        match write_atomically(path, &p.to_toml()) {
-                            Ok(()) => {
-                                info!("self-calibration parameters written to {}", path.display());
-                                println!("nav: parameter file {}", path.display());
-                                Some(path.clone())
-                            }
-                            Err(e) => {
-                                tracing::error!(
-                                    "self-calibration parameters not written to {}: {e:#}",
-                                    path.display()
-                                );
-                                None
-                            }
+                Output::Parameters { path, file } => {
+                    let mut p = *file;
+                    p.set_date(nav::params::now_rfc3339());
+                    let written = match write_atomically(&path, &p.to_toml()) {
+                        Ok(()) => {
+                            info!("calibration parameters written to {}", path.display());
+                            println!("nav: parameter file {}", path.display());
+                            Some(path)
                         }
-                    });
-                    self.parameters = Some((written, p));
+                        Err(e) => {
+                            tracing::error!(
+                                "calibration parameters not written to {}: {e:#}",
+                                path.display()
+                            );
+                            None
+                        }
+                    };
+                    self.parameters.push((written, p));
                 }
             }
         }

@@ -84,45 +84,65 @@ pub enum ParamsError {
     },
 }
 
+/// Read `path`, parse it as `T` and check it with `check` (`Err((field, what))`): the whole
+/// file before any of it is used.
+fn load_checked<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    check: impl FnOnce(&T) -> Result<(), (&'static str, String)>,
+) -> Result<T, ParamsError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ParamsError::Read {
+        path: path.into(),
+        source,
+    })?;
+    let p: T = toml::from_str(&text).map_err(|source| ParamsError::Parse {
+        path: path.into(),
+        source,
+    })?;
+    check(&p).map_err(|(field, what)| ParamsError::Field {
+        path: path.into(),
+        field,
+        what,
+    })?;
+    Ok(p)
+}
+
+/// The checks every parameter file shares: its format, its unit, its date.
+fn check_header(
+    format: &str,
+    want_format: &str,
+    unit: &str,
+    want_unit: &str,
+    date: &str,
+) -> Result<(), (&'static str, String)> {
+    if format != want_format {
+        return Err((
+            "format",
+            format!("{format:?}, this nav reads {want_format:?}"),
+        ));
+    }
+    if unit != want_unit {
+        return Err((
+            "imu",
+            format!(
+                "the parameters belong to unit {unit:?}, nav's config names unit {want_unit:?}"
+            ),
+        ));
+    }
+    if chrono::DateTime::parse_from_rfc3339(date).is_err() {
+        return Err(("date", format!("{date:?} is not an RFC 3339 time")));
+    }
+    Ok(())
+}
+
 impl ImuParameters {
     /// Read and check the file `path` for the IMU with serial number `imu`.
     pub fn load(path: &Path, imu: &str) -> Result<Self, ParamsError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ParamsError::Read {
-            path: path.into(),
-            source,
-        })?;
-        let p: ImuParameters = toml::from_str(&text).map_err(|source| ParamsError::Parse {
-            path: path.into(),
-            source,
-        })?;
-        p.check(imu).map_err(|(field, what)| ParamsError::Field {
-            path: path.into(),
-            field,
-            what,
-        })?;
-        Ok(p)
+        load_checked(path, |p: &Self| p.check(imu))
     }
 
     /// The checks: format, unit, date, values in range. `Err((field, what))`.
     pub fn check(&self, imu: &str) -> Result<(), (&'static str, String)> {
-        if self.format != FORMAT {
-            return Err((
-                "format",
-                format!("{:?}, this nav reads {FORMAT:?}", self.format),
-            ));
-        }
-        if self.imu != imu {
-            return Err((
-                "imu",
-                format!(
-                    "the parameters belong to IMU {:?}, nav's config names IMU {imu:?}",
-                    self.imu
-                ),
-            ));
-        }
-        if chrono::DateTime::parse_from_rfc3339(&self.date).is_err() {
-            return Err(("date", format!("{:?} is not an RFC 3339 time", self.date)));
-        }
+        check_header(&self.format, FORMAT, &self.imu, imu, &self.date)?;
         let bad = |v: &[f64; 3], max: f64| v.iter().any(|x| !(x.is_finite() && x.abs() <= max));
         if bad(&self.gyro.bias_dph, MAX_BIAS_DPH) {
             return Err((
@@ -148,6 +168,161 @@ impl ImuParameters {
     /// The file's text.
     pub fn to_toml(&self) -> String {
         toml::to_string(self).unwrap_or_default()
+    }
+}
+
+/// The file format of a redundant gyro unit's parameters.
+pub const REDUNDANT_FORMAT: &str = "rlg-hil.redundant-gyro-parameters.v1";
+
+/// Largest redundant-unit gyro bias accepted, deg/s.
+pub const MAX_REDUNDANT_BIAS_DPS: f64 = 10.0;
+/// Largest redundant-unit mounting angle accepted, deg.
+pub const MAX_MOUNTING_DEG: f64 = 5.0;
+
+/// A redundant gyro unit's parameters (paper 001's four gyros in a tetrahedron): what its
+/// calibration on the three-axis table found, and what nav's parity monitor corrects the
+/// outputs with when it starts from a file.
+///
+/// ```toml
+/// format = "rlg-hil.redundant-gyro-parameters.v1"
+/// imu = "MEMS-0001"
+/// procedure = "paper 001 16-state Kalman filter, three-axis table, 360 s"
+/// date = "2026-11-24T05:00:00Z"
+/// [[gyro]]                 # gyro 1, then 2, 3, 4
+/// bias_dps = 0.0502        # w_m = P.w + R_k.w sigma_j - R_j.w sigma_k - K P.w - B
+/// scale_factor = 0.00203
+/// sigma_j_deg = 0.0994
+/// sigma_k_deg = -0.1008
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RedundantParameters {
+    /// [`REDUNDANT_FORMAT`].
+    pub format: String,
+    /// Serial number of the unit.
+    pub imu: String,
+    /// How they were found.
+    pub procedure: String,
+    /// When, RFC 3339.
+    pub date: String,
+    /// The four gyros, in order.
+    pub gyro: Vec<RedundantGyro>,
+}
+
+/// One gyro of a redundant unit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RedundantGyro {
+    /// Bias `B`, deg/s.
+    pub bias_dps: f64,
+    /// Scale-factor error `K`.
+    pub scale_factor: f64,
+    /// Mounting angle about `R_j`, deg.
+    pub sigma_j_deg: f64,
+    /// Mounting angle about `R_k`, deg.
+    pub sigma_k_deg: f64,
+}
+
+impl RedundantGyro {
+    /// From the filter's coefficients (angles in rad).
+    pub fn of(c: &crate::calib::GyroCoefficients) -> Self {
+        Self {
+            bias_dps: c.bias_dps,
+            scale_factor: c.scale_factor,
+            sigma_j_deg: c.sigma_j.to_degrees(),
+            sigma_k_deg: c.sigma_k.to_degrees(),
+        }
+    }
+
+    /// As the filter's coefficients (angles in rad).
+    pub fn coefficients(&self) -> crate::calib::GyroCoefficients {
+        crate::calib::GyroCoefficients {
+            bias_dps: self.bias_dps,
+            scale_factor: self.scale_factor,
+            sigma_j: self.sigma_j_deg.to_radians(),
+            sigma_k: self.sigma_k_deg.to_radians(),
+        }
+    }
+}
+
+impl RedundantParameters {
+    /// Read and check the file `path` for the unit with serial number `unit`.
+    pub fn load(path: &Path, unit: &str) -> Result<Self, ParamsError> {
+        load_checked(path, |p: &Self| p.check(unit))
+    }
+
+    /// The checks: format, unit, date, four gyros, values in range. `Err((field, what))`.
+    pub fn check(&self, unit: &str) -> Result<(), (&'static str, String)> {
+        check_header(&self.format, REDUNDANT_FORMAT, &self.imu, unit, &self.date)?;
+        if self.gyro.len() != crate::calib::TETRA_GYROS {
+            return Err((
+                "gyro",
+                format!(
+                    "{} gyros, the unit has {}",
+                    self.gyro.len(),
+                    crate::calib::TETRA_GYROS
+                ),
+            ));
+        }
+        let within = |x: f64, m: f64| x.is_finite() && x.abs() <= m;
+        for g in &self.gyro {
+            if !(within(g.bias_dps, MAX_REDUNDANT_BIAS_DPS)
+                && within(g.scale_factor, 0.1)
+                && within(g.sigma_j_deg, MAX_MOUNTING_DEG)
+                && within(g.sigma_k_deg, MAX_MOUNTING_DEG))
+            {
+                return Err((
+                    "gyro",
+                    format!(
+                        "{g:?}: the bias within +-{MAX_REDUNDANT_BIAS_DPS} deg/s, the scale factor within +-0.1, the angles within +-{MAX_MOUNTING_DEG} deg"
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The coefficients, per gyro.
+    pub fn coefficients(&self) -> [crate::calib::GyroCoefficients; crate::calib::TETRA_GYROS] {
+        std::array::from_fn(|i| {
+            self.gyro
+                .get(i)
+                .map(RedundantGyro::coefficients)
+                .unwrap_or_default()
+        })
+    }
+
+    /// The file's text.
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).unwrap_or_default()
+    }
+}
+
+/// A parameter file a procedure made, for the shell to date and write.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum ParameterFile {
+    /// A three-gyro IMU's.
+    Imu(ImuParameters),
+    /// A redundant unit's.
+    Redundant(RedundantParameters),
+}
+
+impl ParameterFile {
+    /// Stamp its date.
+    pub fn set_date(&mut self, date: String) {
+        match self {
+            Self::Imu(p) => p.date = date,
+            Self::Redundant(p) => p.date = date,
+        }
+    }
+
+    /// The file's text.
+    pub fn to_toml(&self) -> String {
+        match self {
+            Self::Imu(p) => p.to_toml(),
+            Self::Redundant(p) => p.to_toml(),
+        }
     }
 }
 

@@ -63,9 +63,14 @@ pub enum Output {
     },
     /// A line for the operator (stdout).
     Line(String),
-    /// Self-calibration finished: the shell writes this parameter file (stamping its date) to
-    /// the config's `self_calibration.parameters_out`.
-    Parameters(Box<crate::params::ImuParameters>),
+    /// A calibration finished: the shell stamps this parameter file's date and writes it to
+    /// `path` (the procedure's `parameters_out`).
+    Parameters {
+        /// Where.
+        path: std::path::PathBuf,
+        /// The file.
+        file: Box<crate::params::ParameterFile>,
+    },
 }
 
 /// Setting the pipeline up failed.
@@ -149,6 +154,7 @@ struct Calibrating {
 struct TetraCalibrating {
     cal: TetraCalibrator,
     rep: Reporting,
+    parameters: Option<crate::params::RedundantParameters>,
 }
 
 impl Calibrating {
@@ -244,6 +250,7 @@ impl Pipeline {
             Some(TetraCalibrating {
                 cal: TetraCalibrator::new(cfg.tetra_calibration.clone())?,
                 rep: Reporting::default(),
+                parameters: None,
             })
         } else {
             None
@@ -703,7 +710,12 @@ impl Pipeline {
         {
             let p = c.parameters(&r);
             c.parameters = Some(p.clone());
-            out.push(Output::Parameters(Box::new(p)));
+            if let Some(path) = c.cal.config().parameters_out.clone() {
+                out.push(Output::Parameters {
+                    path,
+                    file: Box::new(crate::params::ParameterFile::Imu(p)),
+                });
+            }
         }
     }
 
@@ -712,14 +724,23 @@ impl Pipeline {
         let t = self.last_sample_time();
         let record = self.record;
         let Some(c) = self.tcal.as_mut() else { return };
-        Self::drive(
+        if Self::drive(
             &mut c.cal,
             &mut c.rep,
             t,
             record,
             &mut self.encode_errors,
             out,
-        );
+        ) && let Some(p) = c.cal.parameters()
+        {
+            c.parameters = Some(p.clone());
+            if let Some(path) = c.cal.config().parameters_out.clone() {
+                out.push(Output::Parameters {
+                    path,
+                    file: Box::new(crate::params::ParameterFile::Redundant(p)),
+                });
+            }
+        }
     }
 
     /// The redundant unit's calibration (when enabled).
@@ -998,6 +1019,8 @@ impl Pipeline {
                 stale_acks: c.cal.ack_counters().1,
             }),
             tetra_calibration: self.tcal.as_ref().map(|c| TetraCalibrationSummary {
+                parameters: c.parameters.clone(),
+                parameters_file: None,
                 phase: c.cal.phase(),
                 result: c.cal.result().cloned(),
                 abort: c.cal.abort_reason().map(str::to_string),

@@ -181,6 +181,11 @@ pub struct SelfCalibrationSummary {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct TetraCalibrationSummary {
+    /// The parameter file's content, when it finished calibrating.
+    pub parameters: Option<crate::params::RedundantParameters>,
+    /// Where the parameter file was written, when it was.
+    #[serde(default)]
+    pub parameters_file: Option<PathBuf>,
     /// Last phase.
     pub phase: crate::tetracal::TetraPhase,
     /// The result, when it finished.

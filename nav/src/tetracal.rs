@@ -65,6 +65,16 @@ pub struct TetraCalibrationConfig {
     pub reference_half_window_s: f64,
     /// Run the profile again with the parity monitor on the calibrated outputs.
     pub monitor: bool,
+    /// The unit's serial number (what its parameter files name).
+    pub imu: String,
+    /// Start from this parameter file (relative to the config's folder): no calibration, the
+    /// profile with the parity monitor on the outputs the file corrects.
+    pub parameters: Option<std::path::PathBuf>,
+    /// Where the shell writes the parameter file of the estimates (none: not written).
+    pub parameters_out: Option<std::path::PathBuf>,
+    /// The coefficients of `parameters`, as the config's loader read and checked them.
+    #[serde(skip)]
+    pub coefficients: Option<[GyroCoefficients; TETRA_GYROS]>,
     /// The gyros' white noise per sample, deg/s (the monitor's threshold; the output's
     /// quantization is added).
     pub gyro_noise_dps: f64,
@@ -101,6 +111,10 @@ impl Default for TetraCalibrationConfig {
             rate_tolerance_dps: 0.01,
             reference_half_window_s: 0.05,
             monitor: false,
+            imu: "unnamed".into(),
+            parameters: None,
+            parameters_out: None,
+            coefficients: None,
             gyro_noise_dps: 0.005,
             monitor_k: 5.0,
             monitor_window: 50,
@@ -244,8 +258,12 @@ pub struct MonitorOutcome {
 pub struct TetraCalibrationResult {
     /// Per gyro: bias (deg/s), scale-factor error, mounting angles (rad).
     pub coefficients: [GyroCoefficients; TETRA_GYROS],
-    /// Their sigmas (the filter's own).
+    /// Their sigmas (the filter's own; its initial ones when the coefficients came from a
+    /// file).
     pub sigmas: [GyroCoefficients; TETRA_GYROS],
+    /// The coefficients came from a parameter file (no calibration ran).
+    #[serde(default)]
+    pub from_file: bool,
     /// Samples the filter took.
     pub samples: u64,
     /// Seconds of the profile checked against the commanded rates (all passed).
@@ -298,6 +316,9 @@ pub struct TetraCalibrator {
     last_counts: Option<[u16; TETRA_GYROS]>,
     pending: VecDeque<Pending>,
     kf: TetraKf,
+    /// Coefficients from a parameter file: the monitor corrects with these, and the profile
+    /// runs once, monitoring.
+    loaded: Option<[GyroCoefficients; TETRA_GYROS]>,
     monitor: Option<ParityMonitor>,
     outcome: Option<MonitorOutcome>,
     /// The turn commanded last (body axis), so that each is commanded once.
@@ -316,6 +337,16 @@ pub struct TetraCalibrator {
 impl TetraCalibrator {
     /// The procedure with these settings (checked).
     pub fn new(cfg: TetraCalibrationConfig) -> Result<Self, TetraCalibrationConfigError> {
+        let loaded = cfg.coefficients;
+        Self::with_coefficients(cfg, loaded)
+    }
+
+    /// The procedure starting from a unit's known coefficients (its parameter file, which the
+    /// shell loaded and checked): no calibration, the profile once with the parity monitor.
+    pub fn with_coefficients(
+        cfg: TetraCalibrationConfig,
+        loaded: Option<[GyroCoefficients; TETRA_GYROS]>,
+    ) -> Result<Self, TetraCalibrationConfigError> {
         cfg.check()?;
         let mut link = TtLink::new(cfg.timing(), &[0, 1, 2]);
         for a in 0..3 {
@@ -329,6 +360,7 @@ impl TetraCalibrator {
                 -cfg.base_heading_deg.to_radians(),
             ),
             kf: TetraKf::new(cfg.p0, cfg.r),
+            loaded,
             cfg,
             phase: TetraPhase::Enabling,
             t: 0.0,
@@ -348,6 +380,35 @@ impl TetraCalibrator {
             skipped: 0,
             result: None,
             abort: None,
+        })
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &TetraCalibrationConfig {
+        &self.cfg
+    }
+
+    /// The parameter file of the estimates (undated: the shell stamps it), once a calibration
+    /// finished; none when the coefficients came from a file.
+    pub fn parameters(&self) -> Option<crate::params::RedundantParameters> {
+        let r = self.result.as_ref().filter(|r| !r.from_file)?;
+        let c = &self.cfg;
+        Some(crate::params::RedundantParameters {
+            format: crate::params::REDUNDANT_FORMAT.into(),
+            imu: c.imu.clone(),
+            procedure: format!(
+                "nav tetra-calibration (paper 001 16-state Kalman filter): three-axis table, x y z at {} deg/s for {} s each, {} s of profile, latitude {} deg",
+                c.rate_dps,
+                c.turn_s,
+                c.profile_s(),
+                c.latitude_deg
+            ),
+            date: String::new(),
+            gyro: r
+                .coefficients
+                .iter()
+                .map(crate::params::RedundantGyro::of)
+                .collect(),
         })
     }
 
@@ -515,7 +576,7 @@ impl TetraCalibrator {
 
     /// One sample for the parity monitor: the outputs corrected by the estimates.
     fn watch(&mut self, t: f64, dt: f64, out: &[f64; TETRA_GYROS], known: &Vector3<f64>) {
-        let est = self.kf.coefficients();
+        let est = self.loaded.unwrap_or_else(|| self.kf.coefficients());
         // the rate from the calibrated model first (least squares over the four), for the
         // mounting angles' small cross terms
         let h: Vec<Vector3<f64>> = (0..TETRA_GYROS)
@@ -596,7 +657,11 @@ impl TetraCalibrator {
             }
             TetraPhase::Unlocking => {
                 if self.all(|s| s == TtState::Idle) {
-                    self.enter(TetraPhase::Calibrating);
+                    self.enter(if self.loaded.is_some() {
+                        TetraPhase::Monitoring
+                    } else {
+                        TetraPhase::Calibrating
+                    });
                 } else if since > timeout {
                     self.fail("the lock pins did not withdraw".into());
                 }
@@ -723,8 +788,9 @@ impl TetraCalibrator {
             return;
         }
         self.result = Some(TetraCalibrationResult {
-            coefficients: self.kf.coefficients(),
+            coefficients: self.loaded.unwrap_or_else(|| self.kf.coefficients()),
             sigmas: self.kf.sigmas(),
+            from_file: self.loaded.is_some(),
             samples: self.samples,
             checked_s: self.checked_s,
             unmatched_frames: self.unmatched,

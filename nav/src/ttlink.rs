@@ -401,6 +401,14 @@ impl AxisTrack {
             }
             None => angle_deg,
         };
+        // two frames stamped alike (they came before the next sample did): the later reading
+        // stands for that time, and no interval is of zero length
+        if let Some(last) = self.hist.back_mut()
+            && last.0 == t
+        {
+            last.1 = a;
+            return;
+        }
         self.hist.push_back((t, a));
         while self.hist.len() > 2 && self.hist.back().map_or(0.0, |b| b.0) - self.hist[1].0 > 2.0 {
             self.hist.pop_front();
@@ -423,9 +431,12 @@ impl AxisTrack {
     /// The angle at `t` (deg), interpolated between the status frames around it, when both are
     /// within `gap` s.
     pub(crate) fn at(&self, t: f64, gap: f64) -> Option<f64> {
-        let i = self.hist.iter().position(|&(ti, _)| ti >= t)?;
+        // times computed two ways (a sample's end plus a window, a frame's stamp) differ in
+        // their last bits: within a nanosecond is the same time
+        const SAME: f64 = 1e-9;
+        let i = self.hist.iter().position(|&(ti, _)| ti >= t - SAME)?;
         let (t1, a1) = self.hist[i];
-        if t1 == t {
+        if (t1 - t).abs() <= SAME {
             return Some(a1);
         }
         let (t0, a0) = *self.hist.get(i.checked_sub(1)?)?;

@@ -91,16 +91,19 @@ pub(crate) fn calibrate_tetrahedral(a: TetraArgs) -> Result<i32> {
         turn_s: a.turn,
         end_rest_s: a.end_rest,
         noise_dps: a.noise,
-        monitor: a.monitor || a.fail.is_some(),
+        monitor: a.monitor || a.fail.is_some() || a.parameters.is_some(),
         failure: None,
+        parameters: a.parameters.as_deref().map(absolute).transpose()?,
         seed: a.seed,
     };
     if let Some(f) = &a.fail {
-        // halfway through the second pass
+        // halfway through the monitor's pass: the second, or the only one when the
+        // coefficients come from a file
         let pass = hil::calibrate::tetra_scenario(&o)
             .tetra_calibration
             .map_or(0.0, |c| c.profile_s());
-        o.failure = Some(parse_failure(f, 1.5 * pass)?);
+        let at = if o.parameters.is_some() { 0.5 } else { 1.5 } * pass;
+        o.failure = Some(parse_failure(f, at)?);
     }
     let mut s = hil::calibrate::tetra_scenario(&o);
     s.speed = a.speed;
@@ -130,6 +133,13 @@ pub(crate) fn calibrate_tetrahedral(a: TetraArgs) -> Result<i32> {
             hil::status::show(&hil::calibrate::tetra_progress_line(j))
         })?;
         hil::status::finish();
+        if let Some(p) = &o.parameters {
+            let mut p = p.clone();
+            p.date = nav::params::now_rfc3339();
+            let f = out.join(hil::inproc::TETRA_PARAMETER_FILE);
+            std::fs::write(&f, p.to_toml()).with_context(|| format!("writing {}", f.display()))?;
+            eprintln!("hil: parameter file {}", f.display());
+        }
         report_in_process(
             &out,
             "tetra_calibration",
