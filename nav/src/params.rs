@@ -88,12 +88,24 @@ pub enum ParamsError {
 /// file before any of it is used.
 fn load_checked<T: serde::de::DeserializeOwned>(
     path: &Path,
+    format: &str,
     check: impl FnOnce(&T) -> Result<(), (&'static str, String)>,
 ) -> Result<T, ParamsError> {
     let text = std::fs::read_to_string(path).map_err(|source| ParamsError::Read {
         path: path.into(),
         source,
     })?;
+    // another kind of parameter file is named as such, not as a field that does not fit
+    if let Ok(t) = toml::from_str::<toml::Table>(&text)
+        && let Some(f) = t.get("format").and_then(|f| f.as_str())
+        && f != format
+    {
+        return Err(ParamsError::Field {
+            path: path.into(),
+            field: "format",
+            what: format!("{f:?}, this nav reads {format:?} here"),
+        });
+    }
     let p: T = toml::from_str(&text).map_err(|source| ParamsError::Parse {
         path: path.into(),
         source,
@@ -137,7 +149,7 @@ fn check_header(
 impl ImuParameters {
     /// Read and check the file `path` for the IMU with serial number `imu`.
     pub fn load(path: &Path, imu: &str) -> Result<Self, ParamsError> {
-        load_checked(path, |p: &Self| p.check(imu))
+        load_checked(path, FORMAT, |p: &Self| p.check(imu))
     }
 
     /// The checks: format, unit, date, values in range. `Err((field, what))`.
@@ -248,7 +260,7 @@ impl RedundantGyro {
 impl RedundantParameters {
     /// Read and check the file `path` for the unit with serial number `unit`.
     pub fn load(path: &Path, unit: &str) -> Result<Self, ParamsError> {
-        load_checked(path, |p: &Self| p.check(unit))
+        load_checked(path, REDUNDANT_FORMAT, |p: &Self| p.check(unit))
     }
 
     /// The checks: format, unit, date, four gyros, values in range. `Err((field, what))`.
@@ -389,5 +401,62 @@ scale_factor_ppm = [10.0, 9.97, 9.97]
         assert!(m.contains("IMU parameter file"), "{m}");
         let e = ImuParameters::load(Path::new("/nonexistent/gyro.toml"), "x").unwrap_err();
         assert!(e.to_string().contains("/nonexistent/gyro.toml"));
+    }
+
+    /// The redundant unit's file: four gyros read and written back; not four, an angle out of
+    /// range or the other kind of file are refused naming the field.
+    #[test]
+    fn the_redundant_units_file_round_trips_and_its_errors_name_the_field() {
+        let g = RedundantGyro {
+            bias_dps: 0.05,
+            scale_factor: 2e-3,
+            sigma_j_deg: 0.1,
+            sigma_k_deg: -0.1,
+        };
+        let p = RedundantParameters {
+            format: REDUNDANT_FORMAT.into(),
+            imu: "MEMS-1".into(),
+            procedure: "test".into(),
+            date: "2026-11-24T01:00:00Z".into(),
+            gyro: vec![g; 4],
+        };
+        let d = tempfile::tempdir().unwrap();
+        let f = d.path().join("tetra.toml");
+        std::fs::write(&f, p.to_toml()).unwrap();
+        let back = RedundantParameters::load(&f, "MEMS-1").unwrap();
+        assert_eq!(back, p);
+        assert!((back.coefficients()[3].sigma_k - (-0.1f64).to_radians()).abs() < 1e-15);
+        let field = |e: ParamsError| match e {
+            ParamsError::Field { field, .. } => field,
+            other => panic!("{other}"),
+        };
+        let mut three = p.clone();
+        three.gyro.pop();
+        std::fs::write(&f, three.to_toml()).unwrap();
+        assert_eq!(
+            field(RedundantParameters::load(&f, "MEMS-1").unwrap_err()),
+            "gyro"
+        );
+        let mut tilted = p.clone();
+        tilted.gyro[1].sigma_j_deg = 30.0;
+        std::fs::write(&f, tilted.to_toml()).unwrap();
+        assert_eq!(
+            field(RedundantParameters::load(&f, "MEMS-1").unwrap_err()),
+            "gyro"
+        );
+        std::fs::write(&f, GOOD).unwrap();
+        assert_eq!(
+            field(RedundantParameters::load(&f, "FOG-0001").unwrap_err()),
+            "format"
+        );
+        std::fs::write(&f, p.to_toml()).unwrap();
+        assert_eq!(
+            field(ImuParameters::load(&f, "MEMS-1").unwrap_err()),
+            "format"
+        );
+        assert_eq!(
+            field(RedundantParameters::load(&f, "MEMS-2").unwrap_err()),
+            "imu"
+        );
     }
 }
