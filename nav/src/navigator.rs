@@ -95,6 +95,9 @@ pub struct NavigatorSummary {
     /// PPS edges rejected: not a whole number of seconds after the last edge (a glitch).
     #[serde(default)]
     pub pps_rejected: u64,
+    /// The receiver's latency, fix after its PPS edge, learned from the first fixes (s).
+    #[serde(default)]
+    pub receiver_latency_s: Option<f64>,
     /// The integrity monitor.
     pub integrity: crate::integrity::IntegrityStats,
 }
@@ -130,7 +133,15 @@ pub struct Navigator {
     integrity: crate::integrity::IntegrityMonitor,
     /// The INS's velocity (east, north, up) at the last PPS edge: when the fix was taken.
     v_at_pps: Option<[f64; 3]>,
+    /// The first fixes' arrivals after the last edge, as unit vectors on the circle of one
+    /// second (sums of cos and sin, count): the receiver's latency.
+    arrivals: (f64, f64, u32),
+    /// IMU time the last fix was taken at, and its sentence's index in the stream.
+    last_fix_at: Option<(f64, u64)>,
 }
+
+/// The receiver's latency is learned from this many fixes; until then it is taken for zero.
+pub const LATENCY_FIXES: u32 = 5;
 
 /// A fix waits at most this long (IMU time, s) past `fix_delay_s` for its PPS edge (1 Hz: the
 /// edge comes within a second); then the PPS input is taken for missing and the fix is applied
@@ -168,7 +179,28 @@ impl Navigator {
             late_fixes: 0,
             untied_fixes: 0,
             v_at_pps: None,
+            arrivals: (0.0, 0.0, 0),
+            last_fix_at: None,
         }
+    }
+
+    /// The receiver's latency after its PPS edge (s, in [-0.2, 0.8)), once learned from [`LATENCY_FIXES`] fixes: the circular mean of their
+    /// arrivals after the last edge, so that a few arriving behind the IMU stream (just before
+    /// their edge's frame was processed) do not drag it a second away.
+    pub fn receiver_latency(&self) -> Option<f64> {
+        let (c, s, n) = self.arrivals;
+        // a latency is positive: what comes out of the circle below -0.2 s is a latency of
+        // most of a second (a stream steadily 0.2 s behind the receiver is not one)
+        (n >= LATENCY_FIXES).then(|| {
+            let l = s.atan2(c) / std::f64::consts::TAU;
+            if l < -0.2 { l + 1.0 } else { l }
+        })
+    }
+
+    /// IMU time the last fix was taken at (its PPS edge, or its arrival without PPS), and its
+    /// sentence's index in the stream.
+    pub fn last_fix_time(&self) -> Option<(f64, u64)> {
+        self.last_fix_at
     }
 
     /// The mode for the solution header.
@@ -345,13 +377,24 @@ impl Navigator {
             self.apply_fix(fix, self.last_t - self.cfg.fix_delay_s);
             return;
         };
-        // a fix that comes more than half a second after the last edge the IMU stream has shown
-        // belongs to the next edge (the stream is behind the receiver); otherwise to that edge
-        let edge = if self.last_t - p < 0.5 {
-            self.pps_edges
-        } else {
-            self.pps_edges + 1
-        };
+        // the fix belongs to the edge it came the receiver's latency after: the last edge the
+        // IMU stream has shown, the next one (the stream is behind the receiver), or the one
+        // before (a receiver late by more than half a second). Until the latency is learned it
+        // is taken for zero: a fix more than half a second after the last edge belongs to the
+        // next.
+        let phase = self.last_t - p;
+        if self.arrivals.2 < LATENCY_FIXES {
+            let a = phase * std::f64::consts::TAU;
+            self.arrivals = (
+                self.arrivals.0 + a.cos(),
+                self.arrivals.1 + a.sin(),
+                self.arrivals.2 + 1,
+            );
+        }
+        let j = (phase - self.receiver_latency().unwrap_or(0.0))
+            .round()
+            .clamp(-1.0, 1.0) as i64;
+        let edge = (self.pps_edges as i64 + j).max(1) as u64;
         if edge == self.pps_edges && self.last_t >= p + self.cfg.fix_delay_s {
             self.late_fixes += 1;
             self.apply_fix(fix, p);
@@ -415,6 +458,7 @@ impl Navigator {
     /// Apply a fix taken at IMU time `taken_at`.
     fn apply_fix(&mut self, fix: &GpsFix, taken_at: f64) {
         self.fixes_seen += 1;
+        self.last_fix_at = Some((taken_at, fix.seq));
         if !fix.valid || fix.time_backwards || fix.quality == 0 {
             self.fixes_ignored += 1;
             return;
@@ -489,6 +533,7 @@ impl Navigator {
             late_fixes: self.late_fixes,
             untied_fixes: self.untied_fixes,
             pps_rejected: self.pps_rejected,
+            receiver_latency_s: self.receiver_latency(),
             integrity: self.integrity.stats(),
         }
     }
@@ -560,5 +605,66 @@ mod tests {
         assert!(n.held.is_empty());
         let (lat, _, _) = n.first_fix.expect("a position");
         assert!((lat.to_degrees() - (-45.0 + 149e-6)).abs() < 1e-9);
+    }
+
+    /// A receiver whose fixes come 0.7 s after their pulse: once its latency is learned, each
+    /// fix is taken at its own edge, not the next one (which the half-second rule alone picks:
+    /// a position error of a second's travel); and a bench receiver 0.05 s after the pulse
+    /// whose fix now and then reaches nav before the edge's IMU frame is still tied right.
+    #[test]
+    fn fixes_are_tied_to_their_own_edge_whatever_the_receivers_latency() {
+        for (latency, early_every) in [(0.7, None), (0.05, Some(4))] {
+            let mut n = Navigator::new(NavigationConfig::default());
+            let mut taken = Vec::new();
+            for k in 0..20u32 {
+                let edge = f64::from(k);
+                for step in 0..100 {
+                    let t = edge + f64::from(step) * 0.01;
+                    // the IMU stream behind the receiver now and then: the edge's frame is
+                    // processed after the fix
+                    let early = early_every.is_some_and(|e| k % e == 3);
+                    if step == 0 && !early {
+                        assert!(n.on_pps(edge));
+                    }
+                    n.on_time(t);
+                    let arrive = (latency * 100.0f64).round() as i32;
+                    if k > 0 && step == arrive {
+                        n.on_fix(&GpsFix {
+                            sentence: "GGA".into(),
+                            lat_deg: 60.0,
+                            lon_deg: 25.0,
+                            alt_m: Some(5.0),
+                            quality: 1,
+                            valid: true,
+                            seq: u64::from(k),
+                            ..GpsFix::default()
+                        });
+                    }
+                    if step == 0 && early {
+                        assert!(n.on_pps(edge));
+                    }
+                    if step == 99
+                        && let Some(at) = n.last_fix_time()
+                    {
+                        taken.push((k, at));
+                    }
+                }
+            }
+            // by the end of each second from the seventh on (the latency learned), that
+            // second's fix was taken, at its own edge
+            for &(k, (at, seq)) in taken.iter().filter(|(k, _)| *k >= 7) {
+                assert_eq!(
+                    seq,
+                    u64::from(k),
+                    "latency {latency}: second {k}: fix {seq} last"
+                );
+                assert!(
+                    (at - f64::from(k)).abs() < 1e-9,
+                    "latency {latency}: fix of second {k} taken at {at}"
+                );
+            }
+            let l = n.receiver_latency().expect("learned");
+            assert!((l - latency).abs() < 0.02, "{l}");
+        }
     }
 }
