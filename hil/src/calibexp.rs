@@ -278,15 +278,7 @@ pub fn run_one(o: &CalibOptions, seed: u64) -> Result<CalibRun> {
         }
     }
     let scored = scored.max(1) as f64;
-    // the east drift with the IMU at its reference position, on the true attitude
-    let c_nb = UnitQuaternion::from_rotation_matrix(&emulators::truth::c_b_n(
-        o.heading_deg.to_radians(),
-        o.tilt_deg.to_radians(),
-        o.tilt_deg.to_radians(),
-    ));
-    let heading = |residual: Vector3<f64>| {
-        ((c_nb * residual).x / (emulators::geodesy::OMEGA * lat.cos())).to_degrees()
-    };
+    let heading = |residual: Vector3<f64>| drift_heading_deg(&site, &residual);
     let kf = kf.context("no IMU sample")?;
     let method = |acc: [f64; 2], b: Vector3<f64>| MethodErrors {
         bias_dph: acc[0] / scored / DEG_H,
@@ -301,6 +293,19 @@ pub fn run_one(o: &CalibOptions, seed: u64) -> Result<CalibRun> {
         rls_bias_dph: (rls.bias() / DEG_H).into(),
         rls_sf_ppm: (rls.scale_factor() * 1e6).into(),
     })
+}
+
+/// The heading error (deg) a static alignment makes of gyro biases `b` (rad/s, IMU axes with
+/// the IMU at its reference position) on `site`'s true attitude: their east drift over the
+/// horizontal earth rate.
+pub fn drift_heading_deg(site: &Static, b: &Vector3<f64>) -> f64 {
+    let c_nb = emulators::truth::c_b_n(
+        site.heading_deg.to_radians(),
+        site.pitch_deg.to_radians(),
+        site.roll_deg.to_radians(),
+    );
+    let east = (c_nb * b).x;
+    (east / (emulators::geodesy::OMEGA * site.lat_deg.to_radians().cos())).to_degrees()
 }
 
 /// An axis that starts later.

@@ -47,28 +47,46 @@ impl Default for CalibrateOptions {
     }
 }
 
-/// The procedure as a scenario: paper 004's fibre-optic IMU (the experiment's model,
-/// [`fog_params`]) on a two-axis mechanism, parked at the site, nav in calibration mode; the
-/// scenario lasts long enough for the procedure and its return to zero.
-pub fn scenario(o: &CalibrateOptions) -> Scenario {
+/// A calibration bench: paper 004's fibre-optic IMU (the experiment's model, [`fog_params`],
+/// 100 Hz) parked at the site (its pitch and roll both `tilt_deg`), the processing chain at the
+/// IMU's rate (no dither to strip: it only has to pass the motion, as in
+/// scenarios/rotating-fog.toml).
+fn fog_bench(name: &str, lat_deg: f64, heading_deg: f64, tilt_deg: f64, seed: u64) -> Scenario {
     let mut s = Scenario::builtin_static();
-    s.name = "calibrate-rotating-imu".into();
-    s.site.lat_deg = o.lat_deg;
-    s.site.heading_deg = o.heading_deg;
-    s.site.pitch_deg = o.tilt_deg;
-    s.site.roll_deg = o.tilt_deg;
+    s.name = name.into();
+    s.site.lat_deg = lat_deg;
+    s.site.heading_deg = heading_deg;
+    s.site.pitch_deg = tilt_deg;
+    s.site.roll_deg = tilt_deg;
     let e = CalibOptions {
-        lat_deg: o.lat_deg,
+        lat_deg,
         ..CalibOptions::default()
     };
-    s.imu = fog_params(&e, o.seed);
-    // no dither to strip: the chain only has to pass the motion (scenarios/rotating-fog.toml)
+    s.imu = fog_params(&e, seed);
     s.processing.fir = nav::fir::FirSpec {
         fs_hz: s.imu.rate_hz,
         passband_hz: 20.0,
         stopband_hz: 45.0,
         order: 16,
         ..Default::default()
+    };
+    s
+}
+
+/// The procedure as a scenario: paper 004's fibre-optic IMU (the experiment's model,
+/// [`fog_params`]) on a two-axis mechanism, parked at the site, nav in calibration mode; the
+/// scenario lasts long enough for the procedure and its return to zero.
+pub fn scenario(o: &CalibrateOptions) -> Scenario {
+    let mut s = fog_bench(
+        "calibrate-rotating-imu",
+        o.lat_deg,
+        o.heading_deg,
+        o.tilt_deg,
+        o.seed,
+    );
+    let e = CalibOptions {
+        lat_deg: o.lat_deg,
+        ..CalibOptions::default()
     };
     s.turntable = Some(emulators::turntable::TurntableParams {
         axes: 2,
@@ -160,18 +178,10 @@ pub fn outcome(
     duration_s: f64,
 ) -> CalibrateOutcome {
     let (tb, tk) = truth(s);
-    let lat = s.site.lat_deg.to_radians();
-    // the east drift of a bias vector with the IMU at the mechanism's zero, on the true attitude
-    let c_nb = emulators::truth::c_b_n(
-        s.site.heading_deg.to_radians(),
-        s.site.pitch_deg.to_radians(),
-        s.site.roll_deg.to_radians(),
-    );
+    // the east drift of a bias vector (deg/h) with the IMU at the mechanism's zero
     let heading = |b: [f64; 3]| {
-        let e = (c_nb * nalgebra::Vector3::from(b)).x;
-        // deg/h over the horizontal earth rate in deg/h: rad
-        let w_h = emulators::geodesy::OMEGA.to_degrees() * 3600.0 * lat.cos();
-        (e / w_h).to_degrees()
+        let rad_s = nalgebra::Vector3::from(b).map(|x| (x / 3600.0).to_radians());
+        crate::calibexp::drift_heading_deg(&s.site, &rad_s)
     };
     // what nav started with; its estimates are residuals on top (composed as nav's front end
     // applies them: `(raw - b0) / (1 + k0)` reads `(1 + k') w + b'`)
@@ -243,7 +253,7 @@ pub fn until_finished(
         t = bench.step();
         if let Some(p) = pick(bench.pipeline()) {
             let stage = p.stage_key();
-            if last.as_ref() != Some(&stage) || k.is_multiple_of(every) {
+            if last != Some(stage) || k.is_multiple_of(every) {
                 if let Some(j) = p
                     .progress_json()
                     .and_then(|j| serde_json::from_str(&j).ok())
@@ -261,7 +271,7 @@ pub fn until_finished(
             format!(
                 "{name} not finished within the scenario's {} s (stage {})",
                 s.duration_s,
-                p.stage_key()
+                p.stage_name()
             )
         });
     Ok((bench, t, unfinished))
@@ -485,13 +495,13 @@ impl Default for TetraOptions {
 /// (the bench's clock) on a level three-axis table (axes 0, 1, 2 about z, x, y), nav
 /// calibrating it.
 pub fn tetra_scenario(o: &TetraOptions) -> Scenario {
-    let mut s = Scenario::builtin_static();
-    s.name = "calibrate-tetrahedral".into();
-    s.site.lat_deg = o.lat_deg;
-    s.site.heading_deg = o.heading_deg;
-    s.site.pitch_deg = 0.0;
-    s.site.roll_deg = 0.0;
-    s.imu = fog_params(&CalibOptions::default(), o.seed);
+    let mut s = fog_bench(
+        "calibrate-tetrahedral",
+        o.lat_deg,
+        o.heading_deg,
+        0.0,
+        o.seed,
+    );
     // the rate's range for the table's 20 deg/s: 16-bit counters of 0.1 arcsec at 100 Hz
     s.imu.gyro_pulse_arcsec = [0.1; 3];
     s.imu.gyro_range_dps = 90.0;
@@ -504,13 +514,6 @@ pub fn tetra_scenario(o: &TetraOptions) -> Scenario {
         failure: o.failure,
         ..Default::default()
     });
-    s.processing.fir = nav::fir::FirSpec {
-        fs_hz: s.imu.rate_hz,
-        passband_hz: 20.0,
-        stopband_hz: 45.0,
-        order: 16,
-        ..Default::default()
-    };
     s.turntable = Some(emulators::turntable::TurntableParams {
         axes: 3,
         seed: o.seed,

@@ -100,6 +100,23 @@ pub struct GyroCoefficients {
     pub sigma_k: f64,
 }
 
+impl GyroCoefficients {
+    /// The axis gyro `i` with these coefficients senses (its output plus its bias is this axis
+    /// dotted with the rate): `(1 - K) P + sigma_j R_k - sigma_k R_j`.
+    pub fn sensing_axis(&self, i: usize) -> Vector3<f64> {
+        let [p, rj, rk] = tetra_triad(i);
+        p * (1.0 - self.scale_factor) + rk * self.sigma_j - rj * self.sigma_k
+    }
+
+    /// Gyro `i`'s output corrected to what a perfect gyro on its nominal axis would read, the
+    /// body turning at about `w` (deg/s; its mounting angles' small cross terms only).
+    pub fn correct(&self, i: usize, output: f64, w: &Vector3<f64>) -> f64 {
+        let [_, rj, rk] = tetra_triad(i);
+        (output + self.bias_dps - rk.dot(w) * self.sigma_j + rj.dot(w) * self.sigma_k)
+            / (1.0 - self.scale_factor)
+    }
+}
+
 /// Paper 001's 16-state Kalman calibration: the four gyros' coefficients as constant states,
 /// each gyro's output error against the turntable's known rate as the measurement.
 #[derive(Debug, Clone)]

@@ -149,7 +149,7 @@ impl NorthFindingConfig {
 }
 
 /// Where the sequence is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Phase {
     /// Enabling the mechanism.

@@ -314,14 +314,14 @@ impl Pipeline {
         // sample it was taken at)
         let t_last = self.last_sample_time();
         if let Message::TtStatus(_) | Message::TtAck(_) = &m {
-            for (p, rep) in self.procedures() {
+            self.each_procedure(|p, rep| {
                 rep.frames += 1;
                 match &m {
                     Message::TtStatus(st) => p.status(t_last, st),
                     Message::TtAck(a) => p.ack(a),
                     _ => {}
                 }
-            }
+            });
         }
         if let (Message::MemsGyro(g), Some(t), Some(k)) = (&m, self.tcal.as_mut(), self.sums.last) {
             let dt = self.sample_ns * 1e-9;
@@ -596,19 +596,17 @@ impl Pipeline {
         }
     }
 
-    /// The procedures present, each with its reporting state.
-    fn procedures(&mut self) -> Vec<(&mut dyn Procedure, &mut Reporting)> {
-        let mut v: Vec<(&mut dyn Procedure, &mut Reporting)> = Vec::new();
+    /// `f` on each procedure present, with its reporting state.
+    fn each_procedure(&mut self, mut f: impl FnMut(&mut dyn Procedure, &mut Reporting)) {
         if let Some(n) = self.nf.as_mut() {
-            v.push((&mut n.finder, &mut n.rep));
+            f(&mut n.finder, &mut n.rep);
         }
         if let Some(c) = self.cal.as_mut() {
-            v.push((&mut c.cal, &mut c.rep));
+            f(&mut c.cal, &mut c.rep);
         }
         if let Some(c) = self.tcal.as_mut() {
-            v.push((&mut c.cal, &mut c.rep));
+            f(&mut c.cal, &mut c.rep);
         }
-        v
     }
 
     /// IMU time of the end of the last sample, s.
@@ -648,7 +646,7 @@ impl Pipeline {
         let name = p.name();
         let stage = p.stage_key();
         let due = rep.last_print.is_none_or(|l| t - l >= 1.0) && !p.is_finished();
-        if rep.last_stage.as_ref() != Some(&stage) || due {
+        if rep.last_stage != Some(stage) || due {
             rep.last_print = Some(t);
             rep.last_stage = Some(stage);
             if let Some(j) = p.progress_json() {

@@ -19,8 +19,11 @@ pub trait Procedure {
     fn next_command(&mut self, t: f64) -> Option<TtCmd>;
     /// Done or given up.
     fn is_finished(&self) -> bool;
-    /// The stage, compared for changes (a progress line at each).
-    fn stage_key(&self) -> String;
+    /// The stage, compared for changes (a progress line at each): asked on every frame, so a
+    /// number, not text.
+    fn stage_key(&self) -> u64;
+    /// The stage, for people.
+    fn stage_name(&self) -> String;
     /// Progress as JSON.
     fn progress_json(&self) -> Option<String>;
     /// The result as JSON, once done.
@@ -48,7 +51,10 @@ macro_rules! procedure {
             fn is_finished(&self) -> bool {
                 self.finished()
             }
-            fn stage_key(&self) -> String {
+            fn stage_key(&self) -> u64 {
+                key(&self.stage())
+            }
+            fn stage_name(&self) -> String {
                 format!("{:?}", self.stage())
             }
             fn progress_json(&self) -> Option<String> {
@@ -71,6 +77,15 @@ procedure!(SelfCalibrator, "self-calibration", |s, t, st| s
 procedure!(TetraCalibrator, "tetra-calibration", |s, t, st| s
     .on_status(t, st));
 
+/// A stage as a number (its hash; `DefaultHasher::new` hashes alike within a run, which is
+/// all a comparison with the last stage needs).
+fn key<T: std::hash::Hash>(stage: &T) -> u64 {
+    use std::hash::Hasher;
+    let mut h = std::hash::DefaultHasher::new();
+    stage.hash(&mut h);
+    h.finish()
+}
+
 /// A procedure's reporting state in the pipeline.
 #[derive(Debug, Clone, Default)]
 pub struct Reporting {
@@ -81,7 +96,7 @@ pub struct Reporting {
     /// IMU time of the last progress line.
     pub last_print: Option<f64>,
     /// The stage of the last progress line.
-    pub last_stage: Option<String>,
+    pub last_stage: Option<u64>,
     /// The result (or the reason it gave up) was said.
     pub reported: bool,
 }

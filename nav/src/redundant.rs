@@ -32,11 +32,20 @@ pub fn parity_vector() -> [f64; TETRA_GYROS] {
     [0.5; TETRA_GYROS]
 }
 
-/// Least-squares rate from the gyros in `use_` (at least three), deg/s.
+/// Least-squares rate from the gyros in `use_` (at least three) of the nominal layout, deg/s.
 pub fn rate(outputs: &[f64; TETRA_GYROS], use_: [bool; TETRA_GYROS]) -> Option<Vector3<f64>> {
+    rate_through(&std::array::from_fn(|i| tetra_triad(i)[0]), outputs, use_)
+}
+
+/// Least-squares rate from the gyros in `use_` whose outputs are `axes[i] . w`, deg/s.
+pub fn rate_through(
+    axes: &[Vector3<f64>; TETRA_GYROS],
+    outputs: &[f64; TETRA_GYROS],
+    use_: [bool; TETRA_GYROS],
+) -> Option<Vector3<f64>> {
     let (mut hth, mut htm) = (Matrix3::zeros(), Vector3::zeros());
     for i in (0..TETRA_GYROS).filter(|&i| use_[i]) {
-        let p = tetra_triad(i)[0];
+        let p = axes[i];
         hth += p * p.transpose();
         htm += p * outputs[i];
     }

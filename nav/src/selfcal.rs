@@ -194,7 +194,7 @@ impl SelfCalibrationConfig {
 }
 
 /// Where the procedure is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum CalPhase {
     /// Enabling both axes.

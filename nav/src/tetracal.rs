@@ -23,7 +23,7 @@
 //! (0.002 deg/s instead of 0.02: with the plain per-sample difference, the filter's scale
 //! factors came out 1e-4 off at the paper's profile, against 9e-6 without encoder noise).
 
-use crate::calib::{GyroCoefficients, TETRA_GYROS, TetraKf, table_rate, tetra_triad};
+use crate::calib::{GyroCoefficients, TETRA_GYROS, TetraKf, table_rate};
 use crate::redundant::{ParityMonitor, Status};
 use crate::ttlink::{AxisTrack, LinkTiming, TtLink};
 use nalgebra::{UnitQuaternion, Vector3};
@@ -216,7 +216,7 @@ impl TetraCalibrationConfig {
 }
 
 /// Where the procedure is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TetraPhase {
     /// Enabling the three axes.
@@ -579,24 +579,11 @@ impl TetraCalibrator {
         let est = self.loaded.unwrap_or_else(|| self.kf.coefficients());
         // the rate from the calibrated model first (least squares over the four), for the
         // mounting angles' small cross terms
-        let h: Vec<Vector3<f64>> = (0..TETRA_GYROS)
-            .map(|i| {
-                let [p, rj, rk] = tetra_triad(i);
-                p * (1.0 - est[i].scale_factor) + rk * est[i].sigma_j - rj * est[i].sigma_k
-            })
-            .collect();
-        let mut hth = nalgebra::Matrix3::zeros();
-        let mut htm = Vector3::zeros();
-        for i in 0..TETRA_GYROS {
-            hth += h[i] * h[i].transpose();
-            htm += h[i] * (out[i] + est[i].bias_dps);
-        }
-        let w = hth.try_inverse().map_or(*known, |m| m * htm);
-        let corrected: [f64; TETRA_GYROS] = std::array::from_fn(|i| {
-            let [_, rj, rk] = tetra_triad(i);
-            (out[i] + est[i].bias_dps - rk.dot(&w) * est[i].sigma_j + rj.dot(&w) * est[i].sigma_k)
-                / (1.0 - est[i].scale_factor)
-        });
+        let axes = std::array::from_fn(|i| est[i].sensing_axis(i));
+        let biased: [f64; TETRA_GYROS] = std::array::from_fn(|i| out[i] + est[i].bias_dps);
+        let w =
+            crate::redundant::rate_through(&axes, &biased, [true; TETRA_GYROS]).unwrap_or(*known);
+        let corrected: [f64; TETRA_GYROS] = std::array::from_fn(|i| est[i].correct(i, out[i], &w));
         let t_rel = t - self.phase_since;
         let (window, k) = (self.cfg.monitor_window, self.cfg.monitor_k);
         // the output's quantization adds to the noise: the difference of two uniform errors of

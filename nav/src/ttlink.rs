@@ -434,8 +434,14 @@ impl AxisTrack {
         // times computed two ways (a sample's end plus a window, a frame's stamp) differ in
         // their last bits: within a nanosecond is the same time
         const SAME: f64 = 1e-9;
-        let i = self.hist.iter().position(|&(ti, _)| ti >= t - SAME)?;
-        let (t1, a1) = self.hist[i];
+        // the first frame at or after `t`, looked for from the newest: the times asked are
+        // recent, the history two seconds long
+        let i = self
+            .hist
+            .iter()
+            .rposition(|&(ti, _)| ti < t - SAME)
+            .map_or(0, |j| j + 1);
+        let (t1, a1) = *self.hist.get(i)?;
         if (t1 - t).abs() <= SAME {
             return Some(a1);
         }

@@ -1,6 +1,7 @@
 //! `hil demo`: the main job (a drill, then a GPS-aided drive).
 
 use crate::*;
+use cmd::run::run_procedure;
 
 /// The built-in GPS-aided drive of the demo.
 pub(crate) const DRIVE_GPS: &str = include_str!("../../../scenarios/drive-gps.toml");
@@ -44,15 +45,8 @@ pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> 
     s.speed = speed;
     let scen = out.join("drive-gps.toml");
     std::fs::write(&scen, toml::to_string_pretty(&s)?)?;
-    let drive = run(RunArgs {
-        scenario: Some(scen),
-        duration: None,
-        speed: None,
-        nav: None,
-        no_reference: false,
-        gpsd: false,
-        bus: BusArgs::to(out.join("drive")),
-    })?;
+    let drive_out = out.join("drive");
+    let drive = run_procedure(scen, drive_out.clone(), BusArgs::to(drive_out))?;
     let verdict = |c: i32| if c == 0 { "PASS" } else { "FAIL" };
     let summary = format!(
         "# Demo\n\n| part | result | report |\n|---|---|---|\n| north-finding drill | {} | [drill/report.md](drill/report.md) |\n| GPS-aided drive | {} | [drive/report.md](drive/report.md) |\n",
