@@ -1,11 +1,19 @@
 //! The bench's bus scheduler: every emulated device on one simulated clock, in one thread, so
 //! that what nav receives, and in what order, depends on the scenario and its seed only.
 //!
-//! For each IMU sample the scheduler writes, in this order: the sample's IMU frames; then the
-//! turntable's frames due at that sample (acknowledgements of the commands that take effect
-//! there, then the status frames when due); then the GPS receiver's sentences due by then on
-//! its pty. The frames of one sample therefore always reach nav in the same order, whatever the
-//! machine's speed or the way its processes are scheduled.
+//! For each IMU sample the scheduler writes what [`crate::step::Stepper`] says, in its order:
+//! the sample's IMU frames; then the turntable's frames due at that sample (acknowledgements of
+//! the commands that take effect there, then the status frames when due); then the GPS
+//! receiver's sentences due by then on its pty. The frames of one sample therefore always reach
+//! nav in the same order, whatever the machine's speed or the way its processes are scheduled.
+//!
+//! **The receiver's bytes** go to the pty once the frames before them are on vcan, when nav has
+//! the device open (after a port drop, the scheduler waits for nav to open it again), and the
+//! IMU stream goes on only once nav has read them: nav takes the frames it received before the
+//! bytes first, so they enter nav's pipeline right after the frames of their sample, on any
+//! host and at any pace. nav confirms them on the bus (NAV_TIME's `GpsRxBytes`), and the
+//! scheduler never runs [`Lockstep::window`] samples past an epoch it wrote before it has
+//! that confirmation.
 //!
 //! **Lockstep.** Like a flight simulator that advances its physics only when the autopilot has
 //! consumed the last step, the scheduler reads nav's own NAV_TIME frames (sent at 50 Hz of IMU
@@ -23,6 +31,7 @@
 use crate::can::{CanTxError, Progress, SentLog, TurntableTxStats, TxStats, write_all};
 use crate::clock::SimClock;
 use crate::gps::{GpsDevice, GpsTxStats, PtyError};
+use crate::step::{FromNav, Step, Stepper};
 use crate::turntable::Turntable;
 use serde::{Deserialize, Serialize};
 use socketcan::{CanSocket, Socket, SocketOptions};
@@ -91,6 +100,14 @@ pub struct LockstepStats {
     pub latency_p99_ms: f64,
     /// NAV_TIMEs the latency was measured on.
     pub latency_samples: u64,
+    /// Times the stream waited for nav to open the receiver's device, to read the receiver's
+    /// bytes, or to confirm them on the bus.
+    #[serde(default)]
+    pub receiver_waits: u64,
+    /// Of which nav did none within the stall limit (the run went on: a fix may have been
+    /// late, bytes lost).
+    #[serde(default)]
+    pub receiver_stalls: u64,
 }
 
 /// When each batch of samples went out, and how long nav took to confirm them.
@@ -246,7 +263,7 @@ impl TtBus {
     }
 
     /// Count frames that went out.
-    fn sent(&mut self, m: &Message) {
+    pub(crate) fn sent(&mut self, m: &Message) {
         match m {
             Message::TtAck(_) => self.stats.acks += 1,
             _ => self.stats.status_frames += 1,
@@ -256,11 +273,9 @@ impl TtBus {
 
 /// Everything the scheduler drives in one run.
 pub struct Devices {
-    /// The IMU's frames as they go on the bus.
-    pub imu: crate::can::BusStream,
-    /// The turntable, when the scenario has one.
-    pub turntable: Option<TtBus>,
-    /// The GPS receiver on its pty, when the scenario has one.
+    /// The scenario's devices on the IMU clock (IMU, turntable, the receiver's epochs).
+    pub step: Stepper,
+    /// The receiver's pty, when the scenario has a receiver.
     pub gps: Option<GpsDevice>,
     /// Where every frame put on the bus is logged, when given.
     pub sent_log: Option<SentLog>,
@@ -412,26 +427,89 @@ pub(crate) fn pin_to_this_cpu(iface: &str) {
     }
 }
 
-/// Run every device on `iface` (and the receiver's pty) for `duration_s` of simulated time,
+/// What nav has said, as the scheduler follows it.
+struct NavSide {
+    follow: Option<Lockstep>,
+    confirmed: Option<u64>,
+    /// NAV_TIME's latest `GpsRxBytes`.
+    gps_rx: Option<u16>,
+    ls: LockstepStats,
+    bad: u64,
+    latency: Latency,
+}
+
+impl NavSide {
+    /// Read what nav sent so far, without blocking.
+    fn read(
+        &mut self,
+        sock: &CanSocket,
+        iface: &str,
+        step: &mut Stepper,
+    ) -> Result<(), CanTxError> {
+        let lockstep = self.follow.is_some();
+        drain(sock, iface, |f| {
+            let m = match f {
+                Some(f) => Message::decode(&f),
+                None => {
+                    self.bad += 1;
+                    return;
+                }
+            };
+            let nav_time = matches!(m, Ok(Message::NavTime(_)));
+            match step.from_nav(m, lockstep) {
+                FromNav::Confirmed {
+                    sample,
+                    gps_rx_bytes,
+                    placed,
+                } => {
+                    self.ls.nav_times += 1;
+                    self.gps_rx = Some(gps_rx_bytes);
+                    self.ls.placed_commands += placed;
+                    if self.confirmed.is_none_or(|c| sample > c) {
+                        self.confirmed = Some(sample);
+                        self.ls.last_confirmed = Some(sample);
+                        self.latency.confirmed(sample);
+                    }
+                }
+                FromNav::Unplaced => self.ls.nav_times += u64::from(nav_time),
+                FromNav::Command if !lockstep => self.ls.unplaced_commands += 1,
+                FromNav::Command | FromNav::Other => {}
+                FromNav::Unexpected => self.bad += 1,
+            }
+        })
+    }
+
+    /// nav has confirmed the receiver's bytes up to `written` (12 bits, as NAV_TIME carries
+    /// them).
+    fn has_bytes(&self, written: u64) -> bool {
+        self.gps_rx == Some((written & 0xFFF) as u16)
+    }
+}
+
+/// Run every device on `iface` (and the receiver's pty) for the scenario's simulated time,
 /// paced by `clock`, following nav when `lockstep` is given. Stops early when `stop` is set.
 pub fn run(
     iface: &str,
     mut dev: Devices,
     mut clock: SimClock,
-    duration_s: f64,
     lockstep: Option<Lockstep>,
     stop: &AtomicBool,
     progress: &Progress,
 ) -> Result<BusOutcome, BusError> {
     // what nav sends us: turntable commands and its solution header (NAV_TIME)
     let sock = bench_socket(iface, &[wire::tt_cmd::SPEC.id, wire::nav_time::SPEC.id])?;
-    let mut ls = LockstepStats {
-        enabled: lockstep.is_some(),
-        ..Default::default()
+    let mut nav = NavSide {
+        follow: lockstep,
+        confirmed: None,
+        gps_rx: None,
+        ls: LockstepStats {
+            enabled: lockstep.is_some(),
+            ..Default::default()
+        },
+        bad: 0,
+        latency: Latency::default(),
     };
-    let mut follow = lockstep;
-    let mut confirmed: Option<u64> = None;
-    let (mut frames, mut msgs) = (Vec::with_capacity(8), Vec::with_capacity(8));
+    let mut st = Step::default();
     // frames go out in batches of a few samples: one system call instead of one per frame
     let mut outbox = Outbox {
         frames: Vec::with_capacity(wire::BATCH),
@@ -443,40 +521,44 @@ pub fn run(
     };
     let batch_samples = 16u64;
     let mut max_lag_ms = 0u64;
-    let mut latency = Latency::default();
-    let mut tt_bad = 0u64;
     let mut silent = false;
-    while dev.imu.next_time() <= duration_s + 1e-9 && !stop.load(Ordering::Relaxed) {
-        let k = dev.imu.imu().next_index();
-        let t = dev.imu.next_time();
+    // the receiver's bytes written so far, and the sample of the last epoch nav must confirm
+    let mut owed: Option<(u64, u64)> = None;
+    while dev.step.running() && !stop.load(Ordering::Relaxed) {
+        let k = dev.step.next_index();
+        let t = dev.step.next_time();
         // what nav said so far (and, in lockstep, wait until it is close enough behind)
         let mut waited: Option<Instant> = None;
         loop {
-            // read what nav said once a batch, or when it must have said more
-            let behind = follow.is_some_and(|l| confirmed.map_or(l.window, |c| c + l.window) < k);
-            if behind || k.is_multiple_of(batch_samples) {
-                read_nav(
-                    &sock,
-                    iface,
-                    &mut dev,
-                    &mut confirmed,
-                    follow.is_some(),
-                    &mut ls,
-                    &mut tt_bad,
-                    &mut latency,
-                )?;
+            let window = nav.follow.map(|l| l.window);
+            let behind = window.is_some_and(|w| nav.confirmed.map_or(w, |c| c + w) < k);
+            // an epoch written more than a window ago that nav has not confirmed on the bus
+            let unconfirmed = window.is_some_and(|w| {
+                owed.is_some_and(|(bytes, at)| at + w < k && !nav.has_bytes(bytes))
+            });
+            if behind || unconfirmed || k.is_multiple_of(batch_samples) {
+                nav.read(&sock, iface, &mut dev.step)?;
             }
-            let Some(l) = follow else { break };
-            if confirmed.map_or(l.window, |c| c + l.window) >= k {
+            let Some(l) = nav.follow else { break };
+            let behind = nav.confirmed.map_or(l.window, |c| c + l.window) < k;
+            let unconfirmed =
+                owed.is_some_and(|(bytes, at)| at + l.window < k && !nav.has_bytes(bytes));
+            if !behind && !unconfirmed {
+                if owed.is_some_and(|(bytes, _)| nav.has_bytes(bytes)) {
+                    owed = None;
+                }
                 break;
             }
             // nav cannot confirm what it has not received
             if !outbox.frames.is_empty() {
-                outbox.flush(&sock, iface, &mut confirmed, &mut latency)?;
+                outbox.flush(&sock, iface, &mut nav.confirmed, &mut nav.latency)?;
                 continue;
             }
             let since = *waited.get_or_insert_with(|| {
-                ls.waits += 1;
+                nav.ls.waits += 1;
+                if unconfirmed {
+                    nav.ls.receiver_waits += 1;
+                }
                 Instant::now()
             });
             if stop.load(Ordering::Relaxed) {
@@ -484,11 +566,14 @@ pub fn run(
                 break;
             }
             if since.elapsed() > l.stall {
-                ls.stalls += 1;
-                follow = None;
+                nav.ls.stalls += 1;
+                nav.follow = None;
                 tracing::warn!(
                     interface = iface,
-                    "nav confirmed no IMU sample past {confirmed:?} for {} s: lockstep off, the run is no longer reproducible",
+                    "nav confirmed no IMU sample past {:?} (receiver bytes {:?} of {:?}) for {} s: lockstep off, the run is no longer reproducible",
+                    nav.confirmed,
+                    nav.gps_rx,
+                    owed.map(|o| o.0 & 0xFFF),
                     l.stall.as_secs()
                 );
                 break;
@@ -496,20 +581,18 @@ pub fn run(
             wait_readable(&sock, Duration::from_millis(2));
         }
         if let Some(w) = waited {
-            ls.wait_ms += w.elapsed().as_millis() as u64;
+            nav.ls.wait_ms += w.elapsed().as_millis() as u64;
         }
         if k.is_multiple_of(batch_samples) {
             clock.sleep_until(t);
             let lag = Instant::now().saturating_duration_since(clock.wall_at(t));
             max_lag_ms = max_lag_ms.max(lag.as_millis() as u64);
         }
-        frames.clear();
-        let dropped = dev.imu.stats.dropped_samples;
-        dev.imu.next_frames(&mut frames);
-        if dev.imu.stats.dropped_samples > dropped {
+        dev.step.step(&mut st);
+        if st.dropped {
             // a sample deliberately not sent (a fault): nav cannot confirm it, so the lockstep
             // does not wait for it (an IMU that stops for seconds is then paced by the clock)
-            confirmed = Some(confirmed.map_or(k, |c| c.max(k)));
+            nav.confirmed = Some(nav.confirmed.map_or(k, |c| c.max(k)));
             if !silent {
                 // a silence starts: it lasts its paced wall time even when the stream ran
                 // behind the clock (else a stop of seconds would pass in no time at all and
@@ -520,37 +603,42 @@ pub fn run(
         } else {
             silent = false;
         }
-        if let Some(tt) = dev.turntable.as_mut() {
-            msgs.clear();
-            tt.after_sample(k, t, &mut msgs);
-            for m in &msgs {
-                if let Ok(f) = m.encode() {
-                    frames.push(f);
-                    tt.sent(m);
+        outbox.frames.extend_from_slice(&st.frames);
+        outbox.last = Some(k);
+        if !st.epochs.is_empty()
+            || (k + 1).is_multiple_of(batch_samples)
+            || outbox.frames.len() + 8 > wire::BATCH
+        {
+            outbox.flush(&sock, iface, &mut nav.confirmed, &mut nav.latency)?;
+        }
+        if let Some(g) = dev.gps.as_mut() {
+            for e in st.epochs.drain(..) {
+                let limit = nav.follow.map_or(crate::gps::TAKE_WAIT, |l| l.stall);
+                if let Some(d) = g.deliver(&e, limit, stop)? {
+                    if d.waited {
+                        nav.ls.receiver_waits += 1;
+                    }
+                    if d.stalled {
+                        nav.ls.receiver_stalls += 1;
+                    }
+                    if g.confirms_on_bus() {
+                        owed = Some((g.stats.bytes, k));
+                    }
                 }
             }
         }
-        outbox.frames.extend_from_slice(&frames);
-        outbox.last = Some(k);
-        let gps_due = dev.gps.as_ref().is_some_and(|g| g.next_write_time() <= t);
-        if gps_due || (k + 1).is_multiple_of(batch_samples) || outbox.frames.len() + 8 > wire::BATCH
-        {
-            outbox.flush(&sock, iface, &mut confirmed, &mut latency)?;
-        }
-        if let Some(g) = dev.gps.as_mut() {
-            g.poll(t, duration_s)?;
-        }
         progress.set(t);
     }
-    outbox.flush(&sock, iface, &mut confirmed, &mut latency)?;
-    progress.set(dev.imu.next_time());
-    (ls.latency_p50_ms, ls.latency_p99_ms, ls.latency_samples) = latency.percentiles();
-    if let Some(tt) = dev.turntable.as_mut() {
-        tt.stats.bad_frames += tt_bad;
+    outbox.flush(&sock, iface, &mut nav.confirmed, &mut nav.latency)?;
+    progress.set(dev.step.next_time());
+    let mut ls = nav.ls;
+    (ls.latency_p50_ms, ls.latency_p99_ms, ls.latency_samples) = nav.latency.percentiles();
+    let (imu, mut turntable) = dev.step.into_parts();
+    if let Some(tt) = turntable.as_mut() {
+        tt.stats.bad_frames += nav.bad;
     }
     let imu_frames = outbox.written
-        - dev
-            .turntable
+        - turntable
             .as_ref()
             .map_or(0, |t| t.stats.acks + t.stats.status_frames);
     Ok(BusOutcome {
@@ -559,75 +647,17 @@ pub fn run(
             enobufs_retries: outbox.retries,
             lost_iface_down: outbox.lost_down,
             max_lag_ms,
-            ..dev.imu.stats
+            ..imu.stats
         },
-        turntable_truth: dev
-            .turntable
+        turntable_truth: turntable
             .as_mut()
             .map(|t| std::mem::take(&mut t.truth))
             .unwrap_or_default(),
-        turntable: dev.turntable.map(|t| t.stats),
+        turntable: turntable.map(|t| t.stats),
         gps: dev.gps.map(|g| (g.stats, g.into_pty())),
         lockstep: ls,
         sent_logged: outbox.log.map(SentLog::finish).transpose()?,
     })
-}
-
-/// Read what nav sent (without blocking): NAV_TIME confirms samples, TT_CMD goes to the
-/// turntable, placed in time by the next NAV_TIME (lockstep) or at the next sample.
-#[allow(clippy::too_many_arguments)]
-fn read_nav(
-    sock: &CanSocket,
-    iface: &str,
-    dev: &mut Devices,
-    confirmed: &mut Option<u64>,
-    lockstep: bool,
-    ls: &mut LockstepStats,
-    bad: &mut u64,
-    latency: &mut Latency,
-) -> Result<(), CanTxError> {
-    drain(sock, iface, |f| {
-        on_nav_frame(f, dev, confirmed, lockstep, ls, bad, latency)
-    })
-}
-
-/// One frame from nav (none: not a data frame).
-#[allow(clippy::too_many_arguments)]
-fn on_nav_frame(
-    f: Option<RawFrame>,
-    dev: &mut Devices,
-    confirmed: &mut Option<u64>,
-    lockstep: bool,
-    ls: &mut LockstepStats,
-    bad: &mut u64,
-    latency: &mut Latency,
-) {
-    let next = dev.imu.imu().next_index();
-    match f.and_then(|r| Message::decode(&r).ok()) {
-        Some(Message::NavTime(nt)) => {
-            ls.nav_times += 1;
-            let Some(k) = nav_time_sample(dev.imu.imu(), nt.sample_count) else {
-                return;
-            };
-            if confirmed.is_none_or(|c| k > c) {
-                *confirmed = Some(k);
-                ls.last_confirmed = Some(k);
-                latency.confirmed(k);
-            }
-            if lockstep && let Some(tt) = dev.turntable.as_mut() {
-                ls.placed_commands += tt.confirmed(k);
-            }
-        }
-        Some(Message::TtCmd(c)) => match dev.turntable.as_mut() {
-            Some(tt) if lockstep => tt.command(c),
-            Some(tt) => {
-                ls.unplaced_commands += 1;
-                tt.command_at(next, c)
-            }
-            None => *bad += 1,
-        },
-        _ => *bad += 1,
-    }
 }
 
 /// The IMU sample (0-based index) a NAV_TIME's `sample_count` names: the latest sample already

@@ -189,12 +189,19 @@ pub fn play(
             Recorded::Gps(bytes) => {
                 flush(&mut outbox, &mut st)?;
                 let p = pty.as_deref_mut().ok_or(BusError::NoGpsPort)?;
+                // in lockstep nav's reader has as long as nav has to confirm a sample
+                let limit = lockstep.map_or(crate::gps::TAKE_WAIT, |l| l.stall);
+                // nav re-opening the device after a drop: the bytes wait for it
+                if !p.reader_attached() && !p.wait_reader_until(limit, stop) {
+                    st.gps_slow_reads += 1;
+                }
                 match p.write(&bytes) {
                     Ok(()) => {
                         st.gps_bytes += bytes.len() as u64;
                         st.gps_writes += 1;
-                        // nav's reader takes them before the IMU stream goes on
-                        if !p.wait_taken(crate::gps::TAKE_WAIT) {
+                        // nav reads them (and takes the frames before them first) before the
+                        // IMU stream goes on
+                        if !p.wait_taken_until(limit, stop) {
                             st.gps_slow_reads += 1;
                         }
                     }

@@ -108,24 +108,21 @@ pub fn emulators(s: &Scenario, seconds: f64) -> EmulatorBench {
 }
 
 /// A scenario's bus traffic without nav, sample by sample up to `seconds` of simulated time:
-/// each IMU sample's frames, then the turntable's frames due after it (the scheduler's order;
-/// nothing answers the turntable, so it only reports its status).
+/// each IMU sample's frames, then the turntable's frames due after it (the scheduler's step,
+/// [`emulators::step::Stepper`]; nothing answers the turntable, so it only reports its status).
 pub fn each_sample(s: &Scenario, seconds: f64, mut f: impl FnMut(&[RawFrame])) {
     let (motion, tt) = s.build();
-    let mut bus = BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults);
     let latency = emulators::bus::Lockstep::at_rate(s.imu.rate_hz).latency;
-    let mut tt = tt.map(|t| emulators::bus::TtBus::new(t, s.imu.rate_hz, latency));
-    let (mut frames, mut msgs) = (Vec::new(), Vec::new());
-    while bus.next_time() <= seconds {
-        let (k, t) = (bus.imu().next_index(), bus.next_time());
-        frames.clear();
-        bus.next_frames(&mut frames);
-        if let Some(tt) = tt.as_mut() {
-            msgs.clear();
-            tt.after_sample(k, t, &mut msgs);
-            frames.extend(msgs.iter().filter_map(|m| m.encode().ok()));
-        }
-        f(&frames);
+    let mut step = emulators::step::Stepper::new(
+        BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
+        tt.map(|t| emulators::bus::TtBus::new(t, s.imu.rate_hz, latency)),
+        None,
+        seconds,
+    );
+    let mut st = emulators::step::Step::default();
+    while step.running() {
+        step.step(&mut st);
+        f(&st.frames);
     }
 }
 
@@ -262,7 +259,7 @@ pub fn pipeline_drive(s: &Scenario, seconds: f64) -> Result<PipelineBench> {
     use emulators::gps::GpsReceiver;
     enum Input {
         Frame(RawFrame),
-        Fix(nav::gps::GpsFix),
+        Gps(String),
     }
     let rx = s.gps.as_ref().context("the scenario has no [gps]")?;
     anyhow::ensure!(
@@ -272,27 +269,30 @@ pub fn pipeline_drive(s: &Scenario, seconds: f64) -> Result<PipelineBench> {
     );
     let seconds = seconds.min(s.duration_s);
     let run = crate::inproc::gps_run(s, rx)?.context("the scenario has no [drive]")?;
-    let mut gps = GpsReceiver::new(run);
     let (motion, _) = s.build();
-    let mut bus = BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults);
-    let mut decoder = nav::gps::GpsDecoder::default();
-    let (mut inputs, mut frames, mut fixes) = (Vec::new(), Vec::new(), Vec::new());
-    while bus.next_time() <= seconds {
-        let t = bus.next_time();
-        frames.clear();
-        bus.next_frames(&mut frames);
-        inputs.extend(frames.iter().copied().map(Input::Frame));
-        while let Some(e) = gps.poll(t, seconds) {
-            if e.port_drop.is_none() {
-                decoder.push_bytes(e.text.as_bytes(), &mut fixes);
-            }
-        }
-        inputs.extend(fixes.drain(..).map(Input::Fix));
+    // the devices in the scheduler's order, taken before the clock starts
+    let mut step = emulators::step::Stepper::new(
+        BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
+        None,
+        Some(GpsReceiver::new(run)),
+        seconds,
+    );
+    let mut st = emulators::step::Step::default();
+    let mut inputs = Vec::new();
+    while step.running() {
+        step.step(&mut st);
+        inputs.extend(st.frames.iter().copied().map(Input::Frame));
+        inputs.extend(
+            st.epochs
+                .drain(..)
+                .filter(|e| e.port_drop.is_none())
+                .map(|e| Input::Gps(e.text)),
+        );
     }
     let cfg = crate::inproc::nav_config(s, None, Some(std::path::Path::new("(in process)")));
     let mut p = Pipeline::new(&cfg, false).context("nav's pipeline")?;
     let mut out = Vec::new();
-    let (mut n_frames, mut n_fixes) = (0u64, 0u64);
+    let mut n_frames = 0u64;
     let t0 = Instant::now();
     for i in inputs {
         match i {
@@ -300,15 +300,13 @@ pub fn pipeline_drive(s: &Scenario, seconds: f64) -> Result<PipelineBench> {
                 n_frames += 1;
                 p.on_frame(&f, &mut out);
             }
-            Input::Fix(x) => {
-                n_fixes += 1;
-                p.on_fix(x, &mut out);
-            }
+            Input::Gps(text) => p.on_gps_bytes(text.as_bytes(), &mut out),
         }
         out.clear();
     }
     p.flush(&mut out);
     let dt = t0.elapsed().as_secs_f64().max(1e-9);
+    let n_fixes = p.fixes().0;
     let updates = p
         .summary()
         .navigation

@@ -53,21 +53,25 @@ impl<T> Running<T> {
 
 /// Starts a scenario's devices on `iface` behind the bus scheduler, at the scenario's speed
 /// factor and in lockstep with nav (unless the scenario's `[bus]` says otherwise): the IMU (with the scenario's stream faults), the turntable
-/// when the scenario has one, and `gps` (the receiver on its pty) when given. Every frame put on
+/// when the scenario has one, and `gps` (the receiver, and its pty) when given. Every frame put on
 /// the bus goes to the `candump -l` log `sent_log` when given.
 pub fn start_scenario(
     s: &Scenario,
     iface: &str,
-    gps: Option<GpsDevice>,
+    gps: Option<(emulators::gps::GpsRun, GpsDevice)>,
     sent_log: Option<&std::path::Path>,
 ) -> Result<Running<BusOutcome>> {
     let lockstep = Lockstep::at_rate(s.imu.rate_hz);
     let follow = s.bus.lockstep.then_some(lockstep);
     let (motion, turntable) = s.build();
+    let (receiver, gps) = gps.unzip();
     let devices = Devices {
-        imu: BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
-        turntable: turntable
-            .map(|tt| emulators::bus::TtBus::new(tt, s.imu.rate_hz, lockstep.latency)),
+        step: emulators::step::Stepper::new(
+            BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
+            turntable.map(|tt| emulators::bus::TtBus::new(tt, s.imu.rate_hz, lockstep.latency)),
+            receiver.map(emulators::gps::GpsReceiver::new),
+            s.duration_s,
+        ),
         gps,
         sent_log: sent_log
             .map(|p| emulators::can::SentLog::create(p, iface))
@@ -77,16 +81,11 @@ pub fn start_scenario(
     let progress = Arc::new(Progress::default());
     let clock = SimClock::start(s.speed);
     let thread = {
-        let (iface, stop, progress, duration) = (
-            iface.to_string(),
-            stop.clone(),
-            progress.clone(),
-            s.duration_s,
-        );
+        let (iface, stop, progress) = (iface.to_string(), stop.clone(), progress.clone());
         std::thread::Builder::new()
             .name("bus".into())
             .spawn(move || {
-                emulators::bus::run(&iface, devices, clock, duration, follow, &stop, &progress)
+                emulators::bus::run(&iface, devices, clock, follow, &stop, &progress)
                     .context("emulators")
             })
             .context("starting the emulator thread")?

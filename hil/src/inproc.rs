@@ -1,26 +1,28 @@
-//! The bench without a bus: the scenario's devices stepped on the IMU clock in the order the
-//! bench's scheduler ([`emulators::bus`]) puts them on vcan and the pty, driving nav's own
-//! [`Pipeline`] in process. What the pipeline sends goes back to the devices the way it does on
-//! the bus: a turntable command waits for the next NAV_TIME and takes effect the lockstep's
-//! latency after that NAV_TIME's sample. No glue of nav's is copied here: the result of an
-//! in-process run equals the bench's bit for bit (the end-to-end tests check it).
+//! The bench without a bus: the scenario's devices stepped on the IMU clock by the same step
+//! the bench's scheduler puts on vcan and the pty ([`emulators::step::Stepper`]: its order is
+//! written there once), driving nav's own [`Pipeline`] in process. What the pipeline sends goes
+//! back to the devices through the same step ([`Stepper::from_nav`]): a turntable command
+//! waits for the next NAV_TIME and takes effect the lockstep's latency after that NAV_TIME's
+//! sample. No glue of nav's is copied here: the result of an in-process run equals the bench's
+//! bit for bit (the end-to-end tests check it).
 //!
 //! Also here: what a scenario sets up for both (nav's config, the receiver's model).
 
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
-use emulators::bus::{Lockstep, TtBus, nav_time_sample};
+use emulators::bus::{Lockstep, TtBus};
 use emulators::can::BusStream;
 use emulators::drive::Drive;
 use emulators::gps::{GpsReceiver, GpsRun, NmeaWriter};
 use emulators::imu::ImuEmulator;
+use emulators::step::{FromNav, Step, Stepper};
 use emulators::truth::Motion;
 use emulators::turntable::Turntable;
 use nav::config::{CanConfig, GpsConfig, NavConfig, RecordConfig, WatchdogConfig};
 use nav::navigator::NavigationConfig;
 use nav::pipeline::{Output, Pipeline};
 use std::path::Path;
-use wire::{Message, RawFrame};
+use wire::RawFrame;
 
 /// nav's `[navigation]` for a scenario: enabled, the surveyed heading when north-finding does
 /// not give one, the receiver's lever arm when the filter's is left at zero.
@@ -162,20 +164,15 @@ pub fn gps_run(s: &Scenario, rx: &emulators::gps::ReceiverParams) -> Result<Opti
 
 /// The scenario's devices driving nav's pipeline, one IMU sample at a time.
 pub struct InProcessBench {
-    imu: BusStream,
-    tt: Option<TtBus>,
-    gps: Option<GpsReceiver>,
-    decoder: nav::gps::GpsDecoder,
+    step: Stepper,
     pipeline: Pipeline,
-    duration_s: f64,
     out: Vec<Output>,
-    frames: Vec<RawFrame>,
-    msgs: Vec<Message>,
-    fixes: Vec<nav::gps::GpsFix>,
+    st: Step,
     t_first: Option<f64>,
     sent: Option<Vec<RawFrame>>,
     bad_from_nav: u64,
     receiver_errors: Vec<(f64, [f64; 3])>,
+    port_gone: bool,
 }
 
 impl InProcessBench {
@@ -189,20 +186,20 @@ impl InProcessBench {
         gps: Option<GpsRun>,
     ) -> Result<Self> {
         Ok(Self {
-            imu: BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
-            tt: tt.map(|t| TtBus::new(t, s.imu.rate_hz, Lockstep::at_rate(s.imu.rate_hz).latency)),
-            gps: gps.map(GpsReceiver::new),
-            decoder: nav::gps::GpsDecoder::default(),
+            step: Stepper::new(
+                BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
+                tt.map(|t| TtBus::new(t, s.imu.rate_hz, Lockstep::at_rate(s.imu.rate_hz).latency)),
+                gps.map(GpsReceiver::new),
+                s.duration_s,
+            ),
             pipeline: Pipeline::new(cfg, false).context("nav's pipeline")?,
-            duration_s: s.duration_s,
             out: Vec::new(),
-            frames: Vec::new(),
-            msgs: Vec::new(),
-            fixes: Vec::new(),
+            st: Step::default(),
             t_first: None,
             sent: None,
             bad_from_nav: 0,
             receiver_errors: Vec::new(),
+            port_gone: false,
         })
     }
 
@@ -229,52 +226,53 @@ impl InProcessBench {
 
     /// Simulated time at the end of the next sample, s.
     pub fn next_time(&self) -> f64 {
-        self.imu.next_time()
+        self.step.next_time()
     }
 
     /// Whether the scenario's duration is not over yet.
     pub fn running(&self) -> bool {
-        self.imu.next_time() <= self.duration_s + 1e-9
+        self.step.running()
     }
 
     /// One IMU sample: its frames, then the turntable's due after it, then the receiver's
     /// epochs due by its end, each through the pipeline, whose outputs go back to the devices.
     /// Returns the sample's simulated time.
     pub fn step(&mut self) -> f64 {
-        let k = self.imu.imu().next_index();
-        let t = self.imu.next_time();
-        self.frames.clear();
-        self.imu.next_frames(&mut self.frames);
-        if !self.frames.is_empty() {
+        self.step.step(&mut self.st);
+        let t = self.st.t;
+        if self.st.frames.len() > self.st.turntable_frames {
             self.t_first.get_or_insert(t);
         }
-        if let Some(tt) = self.tt.as_mut() {
-            self.msgs.clear();
-            tt.after_sample(k, t, &mut self.msgs);
-            self.frames
-                .extend(self.msgs.iter().filter_map(|m| m.encode().ok()));
-        }
-        let frames = std::mem::take(&mut self.frames);
+        let frames = std::mem::take(&mut self.st.frames);
         for f in &frames {
             self.pipeline.on_frame(f, &mut self.out);
             self.act();
         }
-        self.frames = frames;
-        if let Some(g) = self.gps.as_mut() {
-            while let Some(e) = g.poll(t, self.duration_s) {
-                // while the receiver's device is gone its output is lost
-                if e.port_drop.is_none() {
-                    self.decoder.push_bytes(e.text.as_bytes(), &mut self.fixes);
-                    if let Some(err) = e.error_enu {
-                        self.receiver_errors.push((e.edge, err));
-                    }
+        self.st.frames = frames;
+        let epochs = std::mem::take(&mut self.st.epochs);
+        for e in &epochs {
+            // while the receiver's device is gone its output is lost; nav's port goes and comes
+            // back (the bus waits for nav to open it again before the receiver writes)
+            match (self.port_gone, e.port_drop.is_some()) {
+                (false, true) => {
+                    self.pipeline.on_gps_port(false, "port drop", &mut self.out);
+                    self.port_gone = true;
                 }
+                (true, false) => {
+                    self.pipeline.on_gps_port(true, "", &mut self.out);
+                    self.port_gone = false;
+                }
+                _ => {}
             }
-            for fix in self.fixes.drain(..) {
-                self.pipeline.on_fix(fix, &mut self.out);
+            if e.port_drop.is_none() && !e.text.is_empty() {
+                self.pipeline.on_gps_bytes(e.text.as_bytes(), &mut self.out);
+                if let Some(err) = e.error_enu {
+                    self.receiver_errors.push((e.edge, err));
+                }
             }
             self.act();
         }
+        self.st.epochs = epochs;
         t
     }
 
@@ -299,21 +297,8 @@ impl InProcessBench {
             if let Some(s) = self.sent.as_mut() {
                 s.push(f);
             }
-            match Message::decode(&f) {
-                Ok(Message::TtCmd(c)) => match self.tt.as_mut() {
-                    Some(tt) => tt.command(c),
-                    None => self.bad_from_nav += 1,
-                },
-                Ok(Message::NavTime(nt)) => {
-                    if let (Some(tt), Some(k)) = (
-                        self.tt.as_mut(),
-                        nav_time_sample(self.imu.imu(), nt.sample_count),
-                    ) {
-                        tt.confirmed(k);
-                    }
-                }
-                Ok(_) => {}
-                Err(_) => self.bad_from_nav += 1,
+            if self.step.from_nav(wire::Message::decode(&f), true) == FromNav::Unexpected {
+                self.bad_from_nav += 1;
             }
         }
     }
@@ -325,7 +310,7 @@ impl InProcessBench {
 
     /// The IMU emulator.
     pub fn imu(&self) -> &ImuEmulator {
-        self.imu.imu()
+        self.step.imu().imu()
     }
 
     /// Simulated time of nav's IMU time `t_nav` (which counts from the first sample).
@@ -340,7 +325,7 @@ impl InProcessBench {
     }
 
     fn rate_hz(&self) -> f64 {
-        self.imu.imu().params().rate_hz
+        self.imu().params().rate_hz
     }
 
     /// Frames nav sent that no device here takes (a TT_CMD without a turntable).

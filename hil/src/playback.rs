@@ -1,6 +1,7 @@
 //! Replay of a nav recording through nav's pipeline in process: the frames nav received
-//! (`/can/raw`), the fixes it decoded (`/gps/fix`) and its watchdog's changes (`/nav/event`),
-//! in the order nav met them, go into a
+//! (`/can/raw`), the bytes it read from the receiver (`/gps/raw`; the fixes it decoded,
+//! `/gps/fix`, in a recording made before nav kept them) and its watchdog's changes
+//! (`/nav/event`), in the order nav met them, go into a
 //! [`Pipeline`] built from the run's config; what it sends is compared with what nav sent on the
 //! bus (`/can/tx`). On a bench recording the two are identical bit for bit (the binary is a thin
 //! shell around the same pipeline); on a vehicle's recording this replays a drive through a new
@@ -85,6 +86,8 @@ enum Input {
     Sent(RawFrame),
     /// A fix nav decoded.
     Fix(Box<nav::gps::GpsFix>),
+    /// Bytes nav read from the receiver.
+    Bytes(Vec<u8>),
     /// The watchdog's change: active, after ms.
     Timeout(bool, u64),
     /// An unreadable record.
@@ -100,6 +103,7 @@ struct Replayer {
     frames_in: u64,
     fixes_in: u64,
     bad: u64,
+    has_bytes: bool,
 }
 
 impl Replayer {
@@ -112,6 +116,7 @@ impl Replayer {
             frames_in: 0,
             fixes_in: 0,
             bad: 0,
+            has_bytes: false,
         })
     }
 
@@ -122,9 +127,17 @@ impl Replayer {
                 self.p.on_frame(&f, &mut self.out);
             }
             Input::Sent(f) => self.recorded.push(f),
+            // the fixes are decoded from the bytes where the recording has them
+            Input::Fix(_) if self.has_bytes => {}
             Input::Fix(fix) => {
                 self.fixes_in += 1;
                 self.p.on_fix(*fix, &mut self.out);
+            }
+            Input::Bytes(b) => {
+                self.has_bytes = true;
+                let before = self.p.fixes().0;
+                self.p.on_gps_bytes(&b, &mut self.out);
+                self.fixes_in += self.p.fixes().0 - before;
             }
             Input::Timeout(active, ms) => self.p.set_imu_timeout(active, ms, &mut self.out),
             Input::Bad => self.bad += 1,
@@ -206,6 +219,10 @@ pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
             "/gps/fix" => match serde_json::from_slice::<nav::gps::GpsFix>(&m.data) {
                 Ok(fix) => Input::Fix(Box::new(fix)),
                 Err(_) => Input::Bad,
+            },
+            "/gps/raw" => match nav::rawmsg::serial_of(m) {
+                Some(b) => Input::Bytes(b.to_vec()),
+                None => Input::Bad,
             },
             _ => return,
         };

@@ -441,11 +441,18 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let gps_device = match (gps, &s.gps) {
         (Some((pty, link)), Some(rx)) => match crate::inproc::gps_run(s, rx)? {
             // what the receiver sent, kept beside nav's recording (gpsd's .log form)
-            Some(run) => Some(
-                GpsDevice::new(run, pty, Some(link))
+            Some(run) => {
+                let dev = GpsDevice::new(pty, Some(link))
                     .with_owner(opts.nav_account)
-                    .with_log(&opts.out.join("gps-sent.log"))?,
-            ),
+                    .with_log(&opts.out.join("gps-sent.log"))?;
+                // gpsd reads the device and passes nav only the sentences it keeps
+                let dev = if opts.gps_via_gpsd {
+                    dev.without_bus_confirmation()
+                } else {
+                    dev
+                };
+                Some((run, dev))
+            }
             None => None,
         },
         _ => None,

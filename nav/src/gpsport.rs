@@ -1,7 +1,13 @@
-//! The GPS serial port: a reader thread that opens the device named in the config, frames and
-//! decodes what arrives, exports every fix as a JSON line, and hands fixes to the navigation
-//! loop. When the device fails or vanishes (a pty closing, a USB receiver unplugged) the error is
-//! counted and the port re-opened every half second until it is back.
+//! The GPS serial port, read in nav's own event loop: a source that opens the device named in
+//! the config and yields what it reads, in the loop's order among the CAN frames (nav's
+//! pipeline decodes the bytes, [`crate::pipeline::Pipeline::on_gps_bytes`]). When the device
+//! fails or vanishes (a pty closing, a USB receiver unplugged) the error is counted and the
+//! port opened again every [`RETRY`] until it is back.
+//!
+//! Reading in the loop (no reader thread) keeps the receiver's bytes in order with the frames:
+//! whatever the loop reads from the port is taken after every frame it has read before, and
+//! before every frame it reads after. On the bench that is what makes a run's result depend on
+//! its data alone (docs/pace.md).
 //!
 //! With `source = "gpsd"` the bytes come from gpsd instead: nav connects to it over TCP, asks
 //! for the receiver's NMEA (`?WATCH={"enable":true,"nmea":true}`) and decodes the sentences
@@ -9,74 +15,28 @@
 //! out of the stream and counted. A connection that closes (gpsd restarting) is made again.
 
 use crate::config::{GpsConfig, GpsSource};
-use crate::gps::{GpsDecoder, GpsFix, GpsStats};
-use std::io::{BufWriter, Read, Write};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::os::fd::AsRawFd;
 use std::time::Duration;
-use thiserror::Error;
 
-/// Port set-up trouble.
-#[derive(Debug, Error)]
-pub enum GpsPortError {
-    /// The export file could not be created.
-    #[error("cannot create the GPS fix export {path}")]
-    Export {
-        /// File.
-        path: std::path::PathBuf,
-        /// Cause.
-        #[source]
-        source: std::io::Error,
-    },
-}
+/// How often a missing or failed port is tried again.
+pub const RETRY: Duration = Duration::from_millis(20);
 
-#[derive(Default)]
-struct Shared {
-    stats: GpsStats,
-    gpsd_messages: u64,
-    port_errors: u64,
-    opens: u64,
-    tx: Option<tokio::sync::mpsc::UnboundedSender<GpsInput>>,
-    /// Hand the bytes read on too (nav records them: `/gps/raw`).
-    with_bytes: bool,
-}
-
-/// What the reader hands the navigation loop, in the order it read it.
-#[derive(Debug, Clone)]
-pub enum GpsInput {
-    /// Bytes as read from the source (gpsd's JSON replies taken out), before decoding: what a
-    /// replay puts back on a port. Only when asked for ([`GpsPort::forward`]).
+/// What the receiver's port gave.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum GpsEvent {
+    /// The port opened (at start, or back after it went away).
+    Opened,
+    /// The port failed or went away (why).
+    Closed(String),
+    /// Bytes as read (gpsd's JSON replies taken out), and the wall time (ns since the epoch)
+    /// just before the read that got them: every CAN frame received before then came before
+    /// them.
     Bytes {
-        /// Read wall time, ns since the epoch.
-        t_ns: u64,
         /// The bytes.
         bytes: Vec<u8>,
+        /// Wall time before the read, ns.
+        t_ns: u64,
     },
-    /// A decoded fix (after the bytes it came in).
-    Fix(GpsFix),
-}
-
-/// The running reader.
-pub struct GpsPort {
-    stop: Arc<AtomicBool>,
-    shared: Arc<Mutex<Shared>>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
-
-/// Run the calling thread at a real-time priority when the system allows it (root, or
-/// CAP_SYS_NICE): a fix must reach the navigator within `fix_delay_s` of IMU time, and a reader
-/// that waits behind busy threads for its turn makes it late. Without the right it stays as it is.
-fn realtime_priority() {
-    let p = libc::sched_param { sched_priority: 10 };
-    // SAFETY: sets the scheduling policy of the calling thread with a valid parameter.
-    let r = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &p) };
-    if r != 0 {
-        tracing::debug!("GPS reader stays at normal priority (pthread_setschedparam: {r})");
-    }
-}
-
-fn lock(s: &Mutex<Shared>) -> std::sync::MutexGuard<'_, Shared> {
-    s.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// Where the bytes come from.
@@ -117,35 +77,58 @@ impl Source {
         }
     }
 
-    fn open(&self) -> Result<Box<dyn Read + Send>, String> {
+    async fn open(&self) -> Result<Conn, String> {
         match self {
-            Source::Serial { path, baud } => serialport::new(path, *baud)
-                .timeout(Duration::from_millis(100))
-                .open()
-                .map(|p| Box::new(p) as Box<dyn Read + Send>)
-                .map_err(|e| e.to_string()),
+            Source::Serial { path, baud } => {
+                let port = serialport::new(path, *baud)
+                    .timeout(Duration::from_millis(100))
+                    .open_native()
+                    .map_err(|e| e.to_string())?;
+                let fd = port.as_raw_fd();
+                // SAFETY: fcntl(2) on the port's own descriptor.
+                let r = unsafe {
+                    let fl = libc::fcntl(fd, libc::F_GETFL);
+                    libc::fcntl(fd, libc::F_SETFL, fl | libc::O_NONBLOCK)
+                };
+                if r != 0 {
+                    return Err(std::io::Error::last_os_error().to_string());
+                }
+                // SAFETY: the port owns its open descriptor, which stays open and the same until
+                // the AsyncFd (its owner now) is dropped.
+                let fd = unsafe {
+                    tokio::io::unix::AsyncFd::register_with_interest(
+                        port,
+                        tokio::io::Interest::READABLE,
+                    )
+                }
+                .map_err(|e| e.to_string())?;
+                Ok(Conn::Serial(fd))
+            }
             Source::Gpsd { addr, device } => {
-                use std::net::ToSocketAddrs;
-                let to = addr
-                    .to_socket_addrs()
-                    .map_err(|e| format!("{addr}: {e}"))?
-                    .next()
-                    .ok_or_else(|| format!("{addr}: no address"))?;
-                let mut s = std::net::TcpStream::connect_timeout(&to, Duration::from_secs(1))
-                    .map_err(|e| format!("{addr}: {e}"))?;
-                s.set_read_timeout(Some(Duration::from_millis(100)))
+                let connect = tokio::net::TcpStream::connect(addr.as_str());
+                let mut s = tokio::time::timeout(Duration::from_secs(1), connect)
+                    .await
+                    .map_err(|_| format!("{addr}: no answer within 1 s"))?
                     .map_err(|e| format!("{addr}: {e}"))?;
                 let _ = s.set_nodelay(true);
                 let watch = match device {
                     Some(d) => serde_json::json!({"enable": true, "nmea": true, "device": d}),
                     None => serde_json::json!({"enable": true, "nmea": true}),
                 };
+                use tokio::io::AsyncWriteExt;
                 s.write_all(format!("?WATCH={watch}\n").as_bytes())
+                    .await
                     .map_err(|e| format!("{addr}: {e}"))?;
-                Ok(Box::new(s))
+                Ok(Conn::Gpsd(s, GpsdLines::default()))
             }
         }
     }
+}
+
+/// An open source.
+enum Conn {
+    Serial(tokio::io::unix::AsyncFd<serialport::TTYPort>),
+    Gpsd(tokio::net::TcpStream, GpsdLines),
 }
 
 /// gpsd's stream split into its JSON replies (taken out, counted, errors logged) and the NMEA
@@ -192,143 +175,179 @@ impl GpsdLines {
     }
 }
 
+/// The receiver's port as nav's loop reads it.
+pub struct GpsPort {
+    source: Source,
+    name: String,
+    conn: Option<Conn>,
+    retry_at: Option<tokio::time::Instant>,
+    warned: bool,
+    buf: Vec<u8>,
+    gpsd_messages: u64,
+    port_errors: u64,
+    opens: u64,
+}
+
 impl GpsPort {
-    /// Start reading the port of `cfg`.
-    pub fn start(cfg: &GpsConfig) -> Result<Self, GpsPortError> {
-        let mut export = match &cfg.fixes_jsonl {
-            Some(p) => Some(BufWriter::new(std::fs::File::create(p).map_err(
-                |source| GpsPortError::Export {
-                    path: p.clone(),
-                    source,
-                },
-            )?)),
-            None => None,
-        };
-        let stop = Arc::new(AtomicBool::new(false));
-        let shared = Arc::new(Mutex::new(Shared::default()));
+    /// The port of `cfg`, not opened yet ([`GpsPort::next`] opens it).
+    pub fn new(cfg: &GpsConfig) -> Self {
         let source = Source::of(cfg);
-        let thread = {
-            let (stop, shared) = (stop.clone(), shared.clone());
-            std::thread::Builder::new()
-                .name("gps".into())
-                .spawn(move || {
-                    realtime_priority();
-                    let mut dec = GpsDecoder::default();
-                    let mut buf = [0u8; 1024];
-                    let mut fixes = Vec::new();
-                    let mut warned = false;
-                    let name = source.name();
-                    while !stop.load(Ordering::Relaxed) {
-                        let mut port = match source.open() {
-                            Ok(p) => p,
-                            Err(e) => {
-                                if !warned {
-                                    tracing::warn!(source = %name, "cannot open the GPS source: {e}; retrying");
-                                    warned = true;
-                                }
-                                lock(&shared).port_errors += 1;
-                                std::thread::sleep(Duration::from_millis(500));
-                                continue;
-                            }
-                        };
-                        warned = false;
-                        lock(&shared).opens += 1;
-                        tracing::info!(source = %name, "GPS source open");
-                        let mut lines = GpsdLines::default();
-                        let mut nmea = Vec::new();
-                        while !stop.load(Ordering::Relaxed) {
-                            match port.read(&mut buf) {
-                                Ok(0) => {
-                                    lock(&shared).port_errors += 1;
-                                    // a closed connection (gpsd restarting) is tried again
-                                    std::thread::sleep(Duration::from_millis(100));
-                                    break;
-                                }
-                                Ok(n) => {
-                                    let bytes = match source {
-                                        Source::Serial { .. } => &buf[..n],
-                                        Source::Gpsd { .. } => {
-                                            nmea.clear();
-                                            lines.push(&buf[..n], &mut nmea);
-                                            &nmea[..]
-                                        }
-                                    };
-                                    let t_ns = crate::record::wall_ns();
-                                    dec.push_bytes(bytes, &mut fixes);
-                                    let mut sh = lock(&shared);
-                                    sh.stats = dec.stats();
-                                    sh.gpsd_messages = lines.json;
-                                    if sh.with_bytes
-                                        && !bytes.is_empty()
-                                        && let Some(tx) = &sh.tx
-                                    {
-                                        let _ = tx.send(GpsInput::Bytes {
-                                            t_ns,
-                                            bytes: bytes.to_vec(),
-                                        });
-                                    }
-                                    for f in fixes.drain(..) {
-                                        if let Some(w) = export.as_mut()
-                                            && let Ok(j) = serde_json::to_string(&f)
-                                        {
-                                            let _ = writeln!(w, "{j}");
-                                        }
-                                        if let Some(tx) = &sh.tx {
-                                            let _ = tx.send(GpsInput::Fix(f));
-                                        }
-                                    }
-                                }
-                                Err(e)
-                                    if matches!(
-                                        e.kind(),
-                                        std::io::ErrorKind::TimedOut
-                                            | std::io::ErrorKind::WouldBlock
-                                    ) => {}
-                                Err(e) => {
-                                    tracing::warn!(source = %name, "GPS source: {e}; re-opening");
-                                    lock(&shared).port_errors += 1;
-                                    std::thread::sleep(Duration::from_millis(500));
-                                    break;
-                                }
-                            }
-                        }
-                    }
-                    if let Some(mut w) = export {
-                        let _ = w.flush();
-                    }
-                })
-                .ok()
-        };
-        Ok(Self {
-            stop,
-            shared,
-            thread,
-        })
+        Self {
+            name: source.name(),
+            source,
+            conn: None,
+            retry_at: None,
+            warned: false,
+            buf: vec![0; 4096],
+            gpsd_messages: 0,
+            port_errors: 0,
+            opens: 0,
+        }
     }
 
-    /// Send decoded fixes to `tx` from now on, and the bytes they came in too when
-    /// `with_bytes` (each chunk read before the fixes decoded from it).
-    pub fn forward(&self, tx: tokio::sync::mpsc::UnboundedSender<GpsInput>, with_bytes: bool) {
-        let mut sh = lock(&self.shared);
-        sh.tx = Some(tx);
-        sh.with_bytes = with_bytes;
+    /// The next thing from the port: it opening, bytes, or it going away. Waits as long as it
+    /// takes; safe to drop while waiting (nothing read is lost), as `tokio::select!` does.
+    pub async fn next(&mut self) -> GpsEvent {
+        loop {
+            let Some(conn) = self.conn.as_mut() else {
+                if let Some(at) = self.retry_at {
+                    tokio::time::sleep_until(at).await;
+                }
+                match self.source.open().await {
+                    Ok(c) => {
+                        self.conn = Some(c);
+                        self.opens += 1;
+                        self.retry_at = None;
+                        self.warned = false;
+                        tracing::info!(source = %self.name, "GPS source open");
+                        return GpsEvent::Opened;
+                    }
+                    Err(e) => {
+                        if !self.warned {
+                            tracing::warn!(source = %self.name, "cannot open the GPS source: {e}; retrying every {} ms", RETRY.as_millis());
+                            self.warned = true;
+                        }
+                        self.port_errors += 1;
+                        self.retry_at = Some(tokio::time::Instant::now() + RETRY);
+                        continue;
+                    }
+                }
+            };
+            let t_ns;
+            let r = match conn {
+                Conn::Serial(fd) => {
+                    let mut guard = match fd.readable().await {
+                        Ok(g) => g,
+                        Err(e) => return self.closed(e.to_string()),
+                    };
+                    let buf = &mut self.buf;
+                    t_ns = crate::record::wall_ns();
+                    match guard.try_io(|inner| {
+                        // SAFETY: read(2) into our buffer, at most its length.
+                        let n = unsafe {
+                            libc::read(
+                                inner.get_ref().as_raw_fd(),
+                                buf.as_mut_ptr().cast(),
+                                buf.len(),
+                            )
+                        };
+                        if n < 0 {
+                            Err(std::io::Error::last_os_error())
+                        } else {
+                            Ok(n as usize)
+                        }
+                    }) {
+                        Ok(r) => r,
+                        Err(_would_block) => continue,
+                    }
+                }
+                Conn::Gpsd(s, _) => {
+                    if let Err(e) = s.readable().await {
+                        return self.closed(e.to_string());
+                    }
+                    t_ns = crate::record::wall_ns();
+                    s.try_read(&mut self.buf)
+                }
+            };
+            match r {
+                // a closed connection (gpsd restarting), a hung-up port
+                Ok(0) => return self.closed("end of stream".into()),
+                Ok(n) => {
+                    let bytes = match self.conn.as_mut() {
+                        Some(Conn::Gpsd(_, lines)) => {
+                            let mut nmea = Vec::new();
+                            lines.push(&self.buf[..n], &mut nmea);
+                            self.gpsd_messages = lines.json;
+                            nmea
+                        }
+                        _ => self.buf[..n].to_vec(),
+                    };
+                    if !bytes.is_empty() {
+                        return GpsEvent::Bytes { bytes, t_ns };
+                    }
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::Interrupted
+                    ) => {}
+                Err(e) => return self.closed(e.to_string()),
+            }
+        }
+    }
+
+    /// The port failed: counted, closed, tried again after [`RETRY`].
+    fn closed(&mut self, why: String) -> GpsEvent {
+        tracing::warn!(source = %self.name, "GPS source: {why}; re-opening");
+        self.port_errors += 1;
+        self.conn = None;
+        self.retry_at = Some(tokio::time::Instant::now() + RETRY);
+        GpsEvent::Closed(why)
+    }
+
+    /// Bytes the port has now, without waiting (at the end: what the device still holds).
+    pub fn try_read(&mut self) -> Option<Vec<u8>> {
+        let n = match self.conn.as_mut()? {
+            Conn::Serial(fd) => {
+                // SAFETY: read(2) into our buffer; the descriptor is non-blocking.
+                let n = unsafe {
+                    libc::read(
+                        fd.get_ref().as_raw_fd(),
+                        self.buf.as_mut_ptr().cast(),
+                        self.buf.len(),
+                    )
+                };
+                usize::try_from(n).ok()?
+            }
+            Conn::Gpsd(s, _) => s.try_read(&mut self.buf).ok()?,
+        };
+        if n == 0 {
+            return None;
+        }
+        match self.conn.as_mut() {
+            Some(Conn::Gpsd(_, lines)) => {
+                let mut nmea = Vec::new();
+                lines.push(&self.buf[..n], &mut nmea);
+                self.gpsd_messages = lines.json;
+                Some(nmea)
+            }
+            _ => Some(self.buf[..n].to_vec()),
+        }
+    }
+
+    /// The source's name (the device path, or gpsd's address).
+    pub fn name(&self) -> &str {
+        &self.name
     }
 
     /// gpsd's JSON replies taken out of the stream so far (`source = "gpsd"`).
     pub fn gpsd_messages(&self) -> u64 {
-        lock(&self.shared).gpsd_messages
+        self.gpsd_messages
     }
 
-    /// Stop the reader (after a last read) and return (counters, port errors, opens).
-    pub fn finish(mut self) -> (GpsStats, u64, u64) {
-        // let the reader take what is still in the device
-        std::thread::sleep(Duration::from_millis(200));
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-        let sh = lock(&self.shared);
-        (sh.stats, sh.port_errors, sh.opens)
+    /// Port errors (failed opens, reads, the device going away) and opens so far.
+    pub fn counters(&self) -> (u64, u64) {
+        (self.port_errors, self.opens)
     }
 }
 

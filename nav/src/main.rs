@@ -7,7 +7,7 @@
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use nav::config::NavConfig;
-use nav::gpsport::GpsInput;
+use nav::gpsport::GpsEvent;
 use nav::pipeline::{Output, Pipeline};
 use nav::record::{Record, Recorder, wall_ns};
 use nav::summary::{GpsSummary, Summary};
@@ -144,21 +144,18 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         Some(c) => Some(open_can(c)?),
         None => None,
     };
-    let gps = match &cfg.gps {
-        Some(g) => Some(nav::gpsport::GpsPort::start(g)?),
+    let mut gps = cfg.gps.as_ref().map(nav::gpsport::GpsPort::new);
+    let export = match cfg.gps.as_ref().and_then(|g| g.fixes_jsonl.as_ref()) {
+        Some(p) => Some(std::io::BufWriter::new(
+            std::fs::File::create(p)
+                .with_context(|| format!("cannot create the GPS fix export {}", p.display()))?,
+        )),
         None => None,
     };
     let recorder = match &cfg.record.mcap {
         Some(p) => Some(Recorder::start(p)?),
         None => None,
     };
-    let (gps_tx, mut gps_rx) = tokio::sync::mpsc::unbounded_channel::<GpsInput>();
-    if let Some(g) = &gps {
-        // the bytes as read go in the recording too, where the loop took them
-        g.forward(gps_tx, recorder.is_some());
-    } else {
-        drop(gps_tx);
-    }
     let mut pipeline = Pipeline::new(cfg, recorder.is_some())?;
     let mut sigint = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;
     let mut sigterm = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
@@ -170,6 +167,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         frames_sent: 0,
         send_errors: 0,
         parameters: Vec::new(),
+        export,
     };
     let mut out = Vec::new();
     let mut batch = Vec::with_capacity(wire::BATCH);
@@ -187,20 +185,36 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     }
     loop {
         tokio::select! {
-            // in this order: a signal, then a waiting GPS fix before more IMU frames (a fix is
-            // applied at an IMU time of its own, so it must not wait behind a burst of frames)
+            // in this order: a signal, then the receiver's port, then more IMU frames
             biased;
             _ = sigint.recv() => { info!("SIGINT: finishing"); break; }
             _ = sigterm.recv() => { info!("SIGTERM: finishing"); break; }
-            Some(input) = gps_rx.recv() => match input {
-                GpsInput::Fix(fix) => {
-                    pipeline.on_fix(fix, &mut out);
+            ev = async {
+                match gps.as_mut() {
+                    Some(g) => g.next().await,
+                    None => std::future::pending().await,
+                }
+            } => match ev {
+                GpsEvent::Bytes { bytes, t_ns } => {
+                    // the frames received before the bytes were read go through first, those
+                    // after them after: the bytes take their place in the order things arrived
+                    let mut later = Vec::new();
+                    read_errors +=
+                        drain_can(&mut batch, Some(t_ns), &mut later, &mut pipeline, &mut shell, &mut out).await?;
+                    if let Some(r) = shell.recorder {
+                        r.send(Record::GpsBytes { t_ns, bytes: bytes.clone() });
+                    }
+                    pipeline.on_gps_bytes(&bytes, &mut out);
+                    shell.act(&mut out).await?;
+                    take_frames(&mut later, &mut pipeline, &mut shell, &mut out).await?;
+                }
+                GpsEvent::Opened => {
+                    pipeline.on_gps_port(true, "", &mut out);
                     shell.act(&mut out).await?;
                 }
-                GpsInput::Bytes { t_ns, bytes } => {
-                    if let Some(r) = shell.recorder {
-                        r.send(Record::GpsBytes { t_ns, bytes });
-                    }
+                GpsEvent::Closed(why) => {
+                    pipeline.on_gps_port(false, &why, &mut out);
+                    shell.act(&mut out).await?;
                 }
             },
             r = async {
@@ -255,21 +269,28 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
             }
         }
     }
-    // what reached the socket before the signal is processed, not left unread: every frame on
-    // the bus is then either received or in the kernel's drop count
-    if let Some(fd) = shell.sock.as_ref().map(|s| s.as_raw_fd()) {
-        loop {
-            batch.clear();
-            match wire::recv_batch_stamped(fd, &mut batch, wire::BATCH) {
-                Ok(0) => break,
-                Ok(_) => {}
-                Err(e) => {
-                    read_errors += 1;
-                    warn!(interface = iface, "read error while draining: {e}");
-                    break;
-                }
+    // what reached the socket and the port before the signal is processed, not left unread:
+    // every frame on the bus is then either received or in the kernel's drop count
+    let mut later = Vec::new();
+    read_errors += drain_can(
+        &mut batch,
+        None,
+        &mut later,
+        &mut pipeline,
+        &mut shell,
+        &mut out,
+    )
+    .await?;
+    if let Some(g) = gps.as_mut() {
+        while let Some(bytes) = g.try_read() {
+            if let Some(r) = shell.recorder {
+                r.send(Record::GpsBytes {
+                    t_ns: wall_ns(),
+                    bytes: bytes.clone(),
+                });
             }
-            take_frames(&mut batch, &mut pipeline, &mut shell, &mut out).await?;
+            pipeline.on_gps_bytes(&bytes, &mut out);
+            shell.act(&mut out).await?;
         }
     }
     pipeline.flush(&mut out);
@@ -309,12 +330,18 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     summary.solution.frames_sent = shell.frames_sent;
     summary.solution.send_errors = shell.send_errors;
     summary.mcap = cfg.record.mcap.clone();
+    if let Some(w) = shell.export.as_mut() {
+        use std::io::Write;
+        if let Err(e) = w.flush() {
+            warn!("the GPS fix export: {e}");
+        }
+    }
     if let (Some(g), Some(c)) = (gps, &cfg.gps) {
-        let (stats, port_errors, opens) = g.finish();
+        let (port_errors, opens) = g.counters();
         let (fixes, last_fix) = pipeline.fixes();
         summary.gps = Some(GpsSummary {
             port: c.port.clone(),
-            stats,
+            stats: pipeline.gps_stats(),
             port_errors,
             opens,
             fixes,
@@ -386,6 +413,45 @@ async fn take_frames(
     Ok(())
 }
 
+/// Every frame already waiting on the CAN socket, without waiting, through the pipeline (the
+/// read errors met); with `before` (ns since the epoch), only the frames received before it,
+/// those after it (in order) to `later`.
+async fn drain_can(
+    batch: &mut Vec<Received>,
+    before: Option<u64>,
+    later: &mut Vec<Received>,
+    pipeline: &mut Pipeline,
+    shell: &mut Shell<'_>,
+    out: &mut Vec<Output>,
+) -> Result<u64> {
+    let Some(fd) = shell.sock.as_ref().map(|s| s.as_raw_fd()) else {
+        return Ok(0);
+    };
+    loop {
+        batch.clear();
+        match wire::recv_batch_stamped(fd, batch, wire::BATCH) {
+            Ok(0) => return Ok(0),
+            Ok(_) => {
+                let cut =
+                    before.and_then(|t| batch.iter().position(|r| r.1.is_some_and(|s| s > t)));
+                if let Some(i) = cut {
+                    later.extend(batch.drain(i..));
+                }
+                take_frames(batch, pipeline, shell, out).await?;
+                if cut.is_some() {
+                    // what is still in the socket came later still
+                    return Ok(0);
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return Ok(0),
+            Err(e) => {
+                warn!(interface = shell.iface, "read error while draining: {e}");
+                return Ok(1);
+            }
+        }
+    }
+}
+
 /// The devices the pipeline's outputs go to.
 struct Shell<'a> {
     iface: &'a str,
@@ -398,6 +464,8 @@ struct Shell<'a> {
     send_errors: u64,
     /// The parameter files as stamped, and where each was written (none: it could not be).
     parameters: Vec<(Option<std::path::PathBuf>, nav::params::ParameterFile)>,
+    /// Where every decoded fix goes as a JSON line, when asked for.
+    export: Option<std::io::BufWriter<std::fs::File>>,
 }
 
 impl Shell<'_> {
@@ -466,6 +534,14 @@ impl Shell<'_> {
                     }
                 }
                 Output::Line(l) => println!("{l}"),
+                Output::Fix(f) => {
+                    if let Some(w) = self.export.as_mut()
+                        && let Ok(j) = serde_json::to_string(&f)
+                    {
+                        use std::io::Write;
+                        let _ = writeln!(w, "{j}");
+                    }
+                }
                 Output::Parameters { path, file } => {
                     let mut p = *file;
                     p.set_date(nav::params::now_rfc3339());

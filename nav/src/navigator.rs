@@ -98,6 +98,16 @@ pub struct NavigatorSummary {
     /// The receiver's latency, fix after its PPS edge, learned from the first fixes (s).
     #[serde(default)]
     pub receiver_latency_s: Option<f64>,
+    /// UTC second less the PPS edge's second number, as the fixes tie them (none before the
+    /// first fix with a time).
+    #[serde(default)]
+    pub utc_edge_offset_s: Option<i64>,
+    /// Times that tie was corrected once the receiver's latency was learned.
+    #[serde(default)]
+    pub utc_reanchors: u64,
+    /// Fixes whose UTC time fitted no PPS edge near (tied by their arrival).
+    #[serde(default)]
+    pub clock_jumps: u64,
     /// The integrity monitor.
     pub integrity: crate::integrity::IntegrityStats,
 }
@@ -125,9 +135,23 @@ pub struct Navigator {
     fixes_ignored: u64,
     pps_edges: u64,
     last_good_fix_t: Option<f64>,
-    /// Fixes waiting for their time, with the count of PPS edges their own edge makes and the
-    /// IMU time they arrived at.
-    held: Vec<(GpsFix, u64, f64)>,
+    /// Fixes waiting for their time.
+    held: Vec<Held>,
+    /// The PPS edges taken, newest last (the last [`EDGES_KEPT`]): (second number, counted
+    /// from the first edge by the whole seconds between edges; IMU time).
+    edges: std::collections::VecDeque<(i64, f64)>,
+    /// UTC second (unwrapped across midnight) less the second number of its edge, once the
+    /// first fix has decided it.
+    anchor: Option<i64>,
+    /// The last UTC time of day seen, and the days added to make times continuous.
+    utc_last: Option<f64>,
+    utc_days: i64,
+    /// The first fixes' ties, checked once the receiver's latency is learned.
+    first_ties: Vec<FirstTie>,
+    /// Times the tie between UTC seconds and edges was corrected.
+    utc_reanchors: u64,
+    /// Fixes whose UTC time fitted no edge near (tied by their arrival instead).
+    clock_jumps: u64,
     late_fixes: u64,
     untied_fixes: u64,
     integrity: crate::integrity::IntegrityMonitor,
@@ -140,8 +164,40 @@ pub struct Navigator {
     last_fix_at: Option<(f64, u64)>,
 }
 
-/// The receiver's latency is learned from this many fixes; until then it is taken for zero.
+/// The receiver's latency is learned from this many fixes; until then a fix belongs to the
+/// latest edge at or before its arrival.
 pub const LATENCY_FIXES: u32 = 5;
+
+/// PPS edges kept for tying fixes that come late.
+pub const EDGES_KEPT: usize = 64;
+
+/// What a held fix is tied to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Tie {
+    /// The edge with this second number, and the fix's fraction of a second after it.
+    Edge(i64, f64),
+    /// Nothing yet: it came before the IMU stream showed any edge.
+    Untied,
+}
+
+/// A fix waiting for its time.
+#[derive(Debug, Clone)]
+struct Held {
+    fix: GpsFix,
+    tie: Tie,
+    /// IMU time it arrived at.
+    arrived: f64,
+}
+
+/// One of the first fixes: its UTC second and fraction, its arrival, and the last edge then.
+#[derive(Debug, Clone, Copy)]
+struct FirstTie {
+    whole: i64,
+    frac: f64,
+    arrived: f64,
+    s_last: i64,
+    t_last: f64,
+}
 
 /// A fix waits at most this long (IMU time, s) past `fix_delay_s` for its PPS edge (1 Hz: the
 /// edge comes within a second); then the PPS input is taken for missing and the fix is applied
@@ -176,6 +232,13 @@ impl Navigator {
             pps_edges: 0,
             last_good_fix_t: None,
             held: Vec::new(),
+            edges: std::collections::VecDeque::new(),
+            anchor: None,
+            utc_last: None,
+            utc_days: 0,
+            first_ties: Vec::new(),
+            utc_reanchors: 0,
+            clock_jumps: 0,
             late_fixes: 0,
             untied_fixes: 0,
             v_at_pps: None,
@@ -281,6 +344,14 @@ impl Navigator {
             return false;
         }
         self.pps_edges += 1;
+        let sec = match (self.edges.back(), self.last_pps) {
+            (Some(&(s, _)), Some(p)) => s + ((t - p).round() as i64).max(1),
+            _ => 0,
+        };
+        self.edges.push_back((sec, t));
+        if self.edges.len() > EDGES_KEPT {
+            self.edges.pop_front();
+        }
         self.last_pps = Some(t);
         self.v_at_pps = self.state().map(|s| [s.v.x, s.v.y, s.v.z]);
         true
@@ -369,88 +440,248 @@ impl Navigator {
         );
     }
 
-    /// A decoded GPS fix arrived (IMU time is that of the latest update). It waits until IMU
-    /// time reaches its PPS edge plus `fix_delay_s` (see [`NavigationConfig::fix_delay_s`]).
+    /// A decoded GPS fix arrived (IMU time is that of the latest update). It is tied to its PPS
+    /// edge and waits until IMU time reaches that edge (plus the fix's fraction of a second at
+    /// receivers faster than 1 Hz) plus `fix_delay_s` (see [`NavigationConfig::fix_delay_s`]).
+    ///
+    /// The tie comes from the data: the fix's UTC time against the count of PPS edges in the
+    /// IMU stream. The first fix decides which UTC second an edge is (the latest edge at or
+    /// before its arrival, less its fraction of a second: a receiver outputs its fix after the
+    /// pulse); from then on every fix's edge is its UTC second, whenever its bytes came, and
+    /// after [`LATENCY_FIXES`] fixes the decision is checked against the receiver's learned
+    /// latency (a receiver later than the IMU stream's lag behind it by most of a second). A
+    /// fix without a time, or before any edge, is tied by its arrival.
     pub fn on_fix(&mut self, fix: &GpsFix) {
-        let Some(p) = self.last_pps else {
-            // no PPS in the IMU stream: nothing to tie the fix to but its arrival
-            self.apply_fix(fix, self.last_t - self.cfg.fix_delay_s);
+        let a = self.last_t;
+        let utc = fix
+            .time_of_day_s
+            .filter(|_| !fix.time_backwards)
+            .map(|u| self.unwrap_utc(u));
+        if !fix.valid || fix.quality == 0 || fix.time_backwards {
+            // nothing to tie: counted and set aside at once
+            self.apply_fix(fix, a);
+            return;
+        }
+        let Some(&(s_last, t_last)) = self.edges.back() else {
+            // no PPS in the IMU stream (yet): wait for an edge, then by arrival
+            self.held.push(Held {
+                fix: fix.clone(),
+                tie: Tie::Untied,
+                arrived: a,
+            });
             return;
         };
-        // the fix belongs to the edge it came the receiver's latency after: the last edge the
-        // IMU stream has shown, the next one (the stream is behind the receiver), or the one
-        // before (a receiver late by more than half a second). Until the latency is learned it
-        // is taken for zero: a fix more than half a second after the last edge belongs to the
-        // next.
-        let phase = self.last_t - p;
-        if self.arrivals.2 < LATENCY_FIXES {
-            let a = phase * std::f64::consts::TAU;
+        let Some(u) = utc else {
+            // no time in the sentence: the edge the fix came the receiver's latency after
+            let sec = self.edge_by_arrival(a, 0.0, s_last, t_last);
+            self.hold_or_apply(fix, sec, 0.0, a);
+            return;
+        };
+        let (whole, frac) = (u.floor(), u - u.floor());
+        let whole = whole as i64;
+        if self.anchor.is_none() {
+            let sec = self.edge_by_arrival(a, frac, s_last, t_last);
+            self.anchor = Some(whole - sec);
+        }
+        if self.first_ties.len() < LATENCY_FIXES as usize {
+            self.first_ties.push(FirstTie {
+                whole,
+                frac,
+                arrived: a,
+                s_last,
+                t_last,
+            });
+            let anchor = self.anchor.unwrap_or(0);
+            let edge_t = t_last + (whole - anchor - s_last) as f64;
+            let ph = (a - edge_t - frac) * std::f64::consts::TAU;
             self.arrivals = (
-                self.arrivals.0 + a.cos(),
-                self.arrivals.1 + a.sin(),
+                self.arrivals.0 + ph.cos(),
+                self.arrivals.1 + ph.sin(),
                 self.arrivals.2 + 1,
             );
+            if self.first_ties.len() == LATENCY_FIXES as usize {
+                self.check_anchor();
+            }
         }
-        let j = (phase - self.receiver_latency().unwrap_or(0.0))
-            .round()
-            .clamp(-1.0, 1.0) as i64;
-        let edge = (self.pps_edges as i64 + j).max(1) as u64;
-        if edge == self.pps_edges && self.last_t >= p + self.cfg.fix_delay_s {
-            self.late_fixes += 1;
-            self.apply_fix(fix, p);
+        let sec = whole - self.anchor.unwrap_or(0);
+        if sec > s_last + 2 || sec < s_last - 30 {
+            // a time that fits no edge near (a receiver whose clock jumped): by arrival
+            self.clock_jumps += 1;
+            let sec = self.edge_by_arrival(a, frac, s_last, t_last);
+            self.hold_or_apply(fix, sec, frac, a);
             return;
         }
-        self.held.push((fix.clone(), edge, self.last_t));
+        self.hold_or_apply(fix, sec, frac, a);
+    }
+
+    /// The edge (its second number) a fix arriving at IMU time `a`, `frac` s after its UTC
+    /// second, belongs to: the latest edge at or before `a - frac` until the receiver's
+    /// latency is learned, then the edge nearest `a - frac - latency`.
+    fn edge_by_arrival(&self, a: f64, frac: f64, s_last: i64, t_last: f64) -> i64 {
+        let x = a - frac - t_last;
+        let n = match self.receiver_latency() {
+            Some(l) => (x - l).round(),
+            None => (x + 1e-9).floor(),
+        };
+        s_last + n as i64
+    }
+
+    /// With the receiver's latency learned, the first fixes' edges by their arrival: when most
+    /// say another UTC second for the edges than the first fix did, the tie moves there.
+    fn check_anchor(&mut self) {
+        let votes: Vec<i64> = self
+            .first_ties
+            .iter()
+            .map(|f| f.whole - self.edge_by_arrival(f.arrived, f.frac, f.s_last, f.t_last))
+            .collect();
+        let best = votes
+            .iter()
+            .copied()
+            .max_by_key(|v| (votes.iter().filter(|w| *w == v).count(), -*v))
+            .unwrap_or(0);
+        if Some(best) != self.anchor
+            && votes.iter().filter(|v| **v == best).count() * 2 > votes.len()
+        {
+            tracing::warn!(
+                "the receiver's fixes belong to the PPS edge a second {} than the first fix said (its latency {:.2} s): tied anew",
+                if best < self.anchor.unwrap_or(0) {
+                    "later"
+                } else {
+                    "earlier"
+                },
+                self.receiver_latency().unwrap_or(0.0)
+            );
+            self.utc_reanchors += 1;
+            self.anchor = Some(best);
+        }
+    }
+
+    /// A UTC time of day (s) made continuous across midnight.
+    fn unwrap_utc(&mut self, u: f64) -> f64 {
+        if let Some(last) = self.utc_last {
+            if u < last - 43_200.0 {
+                self.utc_days += 1;
+            } else if u > last + 43_200.0 {
+                self.utc_days -= 1;
+            }
+        }
+        self.utc_last = Some(u);
+        u + self.utc_days as f64 * 86_400.0
+    }
+
+    /// IMU time of the edge numbered `sec` (extrapolated a whole number of seconds from the
+    /// nearest edge kept when it was missing); none when it has not come yet.
+    fn edge_time(&self, sec: i64) -> Option<f64> {
+        let &(s_last, t_last) = self.edges.back()?;
+        if sec > s_last {
+            return None;
+        }
+        let (s, t) = self
+            .edges
+            .iter()
+            .rev()
+            .find(|e| e.0 <= sec)
+            .or(self.edges.front())
+            .copied()
+            .unwrap_or((s_last, t_last));
+        Some(t + (sec - s) as f64)
+    }
+
+    /// Take the fix now when its time has passed (counted late), else hold it.
+    fn hold_or_apply(&mut self, fix: &GpsFix, sec: i64, frac: f64, a: f64) {
+        if let Some(t) = self.edge_time(sec)
+            && self.last_t >= t + frac + self.cfg.fix_delay_s
+        {
+            self.late_fixes += 1;
+            self.apply_fix(fix, t + frac);
+            return;
+        }
+        self.held.push(Held {
+            fix: fix.clone(),
+            tie: Tie::Edge(sec, frac),
+            arrived: a,
+        });
     }
 
     /// Fixes whose PPS edge has not come within [`PPS_WAIT_S`] plus `fix_delay_s` of their
-    /// arrival: the PPS input is missing. They are applied at their arrival less `fix_delay_s` and counted, rather than
-    /// held until an edge comes back and then applied at the wrong time.
+    /// arrival: the PPS input is missing. They are applied at their arrival less `fix_delay_s`
+    /// and counted, rather than held until an edge comes back and then applied at the wrong
+    /// time.
     fn apply_untied_fixes(&mut self) {
         let wait = PPS_WAIT_S + self.cfg.fix_delay_s;
-        if !self
-            .held
-            .iter()
-            .any(|(_, _, arrived)| self.last_t - arrived > wait)
-        {
+        if !self.held.iter().any(|h| self.last_t - h.arrived > wait) {
             return;
         }
         let held = std::mem::take(&mut self.held);
-        for (fix, edge, arrived) in held {
-            if self.last_t - arrived > wait {
+        for h in held {
+            if self.last_t - h.arrived > wait {
                 self.untied_fixes += 1;
                 if self.untied_fixes == 1 {
                     tracing::warn!(
                         "a GPS fix waited {wait} s for its PPS edge: the PPS input is missing; fixes are applied at their arrival"
                     );
                 }
-                self.apply_fix(&fix, arrived - self.cfg.fix_delay_s);
+                self.apply_fix(&h.fix, h.arrived - self.cfg.fix_delay_s);
             } else {
-                self.held.push((fix, edge, arrived));
+                self.held.push(h);
             }
         }
     }
 
-    /// Apply the held fixes whose time has come (their edge plus the delay, or a later edge).
+    /// When the held fix is due: IMU time of its edge (plus its fraction), once that edge has
+    /// come; a fix that came before any edge is tied by its arrival once there is one.
+    fn due_at(&self, h: &Held) -> Option<f64> {
+        match h.tie {
+            Tie::Edge(sec, frac) => self.edge_time(sec).map(|t| t + frac),
+            Tie::Untied => None,
+        }
+    }
+
+    /// Apply the held fixes whose time has come (their edge, plus their fraction, plus the
+    /// delay), in the order of those times.
     fn apply_due_fixes(&mut self) {
+        // fixes that came before the first edge: tied now that there is one
+        if !self.edges.is_empty() && self.held.iter().any(|h| h.tie == Tie::Untied) {
+            let held = std::mem::take(&mut self.held);
+            for h in held {
+                if h.tie == Tie::Untied
+                    && let Some(&(s_last, t_last)) = self.edges.front()
+                {
+                    let frac = h.fix.time_of_day_s.map_or(0.0, |u| u - u.floor());
+                    let sec = self.edge_by_arrival(h.arrived.max(t_last), frac, s_last, t_last);
+                    if let Some(u) = h.fix.time_of_day_s
+                        && self.anchor.is_none()
+                    {
+                        self.anchor = Some(u.floor() as i64 - sec);
+                    }
+                    self.held.push(Held {
+                        tie: Tie::Edge(sec, frac),
+                        ..h
+                    });
+                } else {
+                    self.held.push(h);
+                }
+            }
+        }
         self.apply_untied_fixes();
-        let Some(p) = self.last_pps else { return };
-        let due = |edge: u64, n: u64, t: f64, d: f64| edge < n || (edge == n && t >= p + d);
+        let d = self.cfg.fix_delay_s;
         if !self
             .held
             .iter()
-            .any(|(_, e, _)| due(*e, self.pps_edges, self.last_t, self.cfg.fix_delay_s))
+            .any(|h| self.due_at(h).is_some_and(|t| self.last_t >= t + d))
         {
             return;
         }
-        let held = std::mem::take(&mut self.held);
-        for (fix, edge, arrived) in held {
-            if due(edge, self.pps_edges, self.last_t, self.cfg.fix_delay_s) {
-                // taken at its own edge: the last one, or an earlier one when it waited long
-                let behind = self.pps_edges.saturating_sub(edge) as f64;
-                self.apply_fix(&fix, p - behind);
-            } else {
-                self.held.push((fix, edge, arrived));
+        let mut held = std::mem::take(&mut self.held);
+        held.sort_by(|a, b| {
+            let (ta, tb) = (self.due_at(a), self.due_at(b));
+            ta.unwrap_or(f64::INFINITY)
+                .total_cmp(&tb.unwrap_or(f64::INFINITY))
+        });
+        for h in held {
+            match self.due_at(&h) {
+                Some(t) if self.last_t >= t + d => self.apply_fix(&h.fix, t),
+                _ => self.held.push(h),
             }
         }
     }
@@ -534,6 +765,9 @@ impl Navigator {
             untied_fixes: self.untied_fixes,
             pps_rejected: self.pps_rejected,
             receiver_latency_s: self.receiver_latency(),
+            utc_edge_offset_s: self.anchor,
+            utc_reanchors: self.utc_reanchors,
+            clock_jumps: self.clock_jumps,
             integrity: self.integrity.stats(),
         }
     }
@@ -637,6 +871,7 @@ mod tests {
                             quality: 1,
                             valid: true,
                             seq: u64::from(k),
+                            time_of_day_s: Some(43_200.0 + f64::from(k)),
                             ..GpsFix::default()
                         });
                     }
@@ -665,6 +900,88 @@ mod tests {
             }
             let l = n.receiver_latency().expect("learned");
             assert!((l - latency).abs() < 0.02, "{l}");
+        }
+    }
+
+    fn timed_fix(utc: f64, seq: u64) -> GpsFix {
+        GpsFix {
+            sentence: "GGA".into(),
+            lat_deg: 60.0,
+            lon_deg: 25.0,
+            alt_m: Some(5.0),
+            quality: 1,
+            valid: true,
+            seq,
+            time_of_day_s: Some(utc),
+            ..GpsFix::default()
+        }
+    }
+
+    /// Each fix is taken at the IMU time its UTC time says (its edge, plus its fraction of a
+    /// second at 5 Hz), however late or early within its second its bytes came: the arrival
+    /// only decides which UTC second the first edge is. A first fix that comes before the IMU
+    /// stream has shown any edge is tied once the edge is there, not applied at its arrival.
+    #[test]
+    fn fixes_are_taken_at_the_time_their_utc_says_whenever_they_arrive() {
+        // arrivals: a fixed offset, or jumping about within the second (a loaded host)
+        for jitter in [false, true] {
+            let mut n = Navigator::new(NavigationConfig::default());
+            let mut taken = Vec::new();
+            let mut seq = 0u64;
+            // the receiver's UTC second of day at IMU time 0.3 (the first edge)
+            let utc0 = 50_000.0;
+            let mut pending: Vec<(f64, GpsFix)> = Vec::new();
+            for i in 0..2000u32 {
+                let t = f64::from(i) * 0.005;
+                n.on_time(t);
+                // edges at 0.3, 1.3, ...; the first one comes after the first fix arrives
+                if ((t - 0.3) / 1.0).fract().abs() < 1e-9 && t >= 0.3 {
+                    assert!(n.on_pps(t));
+                }
+                // epochs at 5 Hz from the first edge on, their bytes 0.06-0.35 s later
+                if t >= 0.3 - 1e-9 && (((t - 0.3) * 5.0).round() - (t - 0.3) * 5.0).abs() < 1e-9 {
+                    let e = ((t - 0.3) * 5.0).round();
+                    let delay = if jitter {
+                        0.06 + 0.29 * ((e * 0.37).sin().abs())
+                    } else {
+                        0.08
+                    };
+                    seq += 1;
+                    pending.push((t + delay, timed_fix(utc0 + e * 0.2, seq)));
+                }
+                // a fix whose bytes came before the first edge was seen
+                if i == 50 {
+                    n.on_fix(&timed_fix(utc0 - 0.2 + 0.0, 0));
+                }
+                pending.retain(|(at, f)| {
+                    if t >= *at - 1e-9 {
+                        n.on_fix(f);
+                        false
+                    } else {
+                        true
+                    }
+                });
+                if let Some(x) = n.last_fix_time()
+                    && taken.last() != Some(&x)
+                {
+                    taken.push(x);
+                }
+            }
+            let s = n.summary();
+            assert_eq!(
+                (s.late_fixes, s.untied_fixes, s.utc_reanchors),
+                (0, 0, 0),
+                "{s:?}"
+            );
+            for &(at, seq) in taken.iter().filter(|x| x.1 > 0) {
+                let want = 0.3 + (seq - 1) as f64 * 0.2;
+                assert!(
+                    (at - want).abs() < 1e-9,
+                    "jitter {jitter}: fix {seq} taken at {at}, not {want}"
+                );
+            }
+            assert!(taken.len() > 40, "{}", taken.len());
+            assert_eq!(s.utc_edge_offset_s, Some(50_000));
         }
     }
 }

@@ -19,6 +19,8 @@ pub struct Solution {
     pub pos_sigma_m: f64,
     /// Heading sigma, deg.
     pub heading_sigma_deg: f64,
+    /// Bytes taken from the GPS receiver so far.
+    pub gps_rx_bytes: u64,
 }
 
 /// Encodes solutions into frames, numbering them.
@@ -43,6 +45,7 @@ impl SolutionEncoder {
             seq,
             mode: s.mode,
             health: s.health,
+            gps_rx_bytes: (s.gps_rx_bytes & 0xFFF) as u16,
         })];
         if let Some(o) = &s.output {
             msgs.push(Message::NavAtt(NavAtt {
@@ -103,6 +106,7 @@ mod tests {
             output: Some(o),
             pos_sigma_m: 8.5,
             heading_sigma_deg: 0.05,
+            gps_rx_bytes: 5000,
         };
         let mut enc = SolutionEncoder::default();
         let mut frames = Vec::new();

@@ -63,6 +63,8 @@ pub enum Output {
     },
     /// A line for the operator (stdout).
     Line(String),
+    /// A GPS fix decoded from the receiver's bytes (the shell exports it as a JSON line).
+    Fix(Box<GpsFix>),
     /// A calibration finished: the shell stamps this parameter file's date and writes it to
     /// `path` (the procedure's `parameters_out`).
     Parameters {
@@ -184,6 +186,9 @@ impl Calibrating {
     }
 }
 
+const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+const FNV_PRIME: u64 = 0x0000_0100_0000_01b3;
+
 /// The navigation computer's logic.
 pub struct Pipeline {
     rate_hz: f64,
@@ -209,6 +214,15 @@ pub struct Pipeline {
     timeouts: u64,
     fixes: u64,
     last_fix: Option<GpsFix>,
+    /// The receiver's bytes, decoded here (in the order they came among the frames).
+    decoder: crate::gps::GpsDecoder,
+    decoded: Vec<GpsFix>,
+    /// Bytes taken from the receiver.
+    gps_rx_bytes: u64,
+    /// The last sample at which the receiver's stream carried bad data.
+    gps_bad_at: Option<u64>,
+    /// FNV-1a over every frame sent and the IMU sample it was sent at.
+    sent_hash: u64,
     encode_errors: u64,
     integrity: Option<crate::integrity::Symptom>,
     /// The filter's re-anchors and relinearisations last reported.
@@ -282,6 +296,11 @@ impl Pipeline {
             timeouts: 0,
             fixes: 0,
             last_fix: None,
+            decoder: crate::gps::GpsDecoder::default(),
+            decoded: Vec::new(),
+            gps_rx_bytes: 0,
+            gps_bad_at: None,
+            sent_hash: FNV_OFFSET,
             encode_errors: 0,
             integrity: None,
             filter_resets: (0, 0),
@@ -294,6 +313,72 @@ impl Pipeline {
 
     /// One data frame from the bus.
     pub fn on_frame(&mut self, raw: &RawFrame, out: &mut Vec<Output>) {
+        let from = out.len();
+        self.on_frame_inner(raw, out);
+        self.seal(out, from);
+    }
+
+    /// Fold what was just asked to go out (`out[from..]`) into the hash of what was sent.
+    fn seal(&mut self, out: &[Output], from: usize) {
+        let k = self.sums.last.unwrap_or(0);
+        for o in out.get(from..).unwrap_or(&[]) {
+            if let Output::Command(f) | Output::Solution(f) = o {
+                let mut h = self.sent_hash;
+                for b in k
+                    .to_le_bytes()
+                    .iter()
+                    .chain(f.id.to_le_bytes().iter())
+                    .chain(std::iter::once(&f.len))
+                    .chain(f.payload())
+                {
+                    h = (h ^ u64::from(*b)).wrapping_mul(FNV_PRIME);
+                }
+                self.sent_hash = h;
+            }
+        }
+    }
+
+    /// A hash (FNV-1a, 64 bits, hex) over every frame the pipeline sent, each with the IMU
+    /// sample it was sent at: two runs that sent the same frames at the same samples have the
+    /// same hash.
+    pub fn sent_hash(&self) -> String {
+        format!("{:016x}", self.sent_hash)
+    }
+
+    /// Bytes from the GPS receiver's port, as read, in their place among the frames: decoded
+    /// here, each fix to navigation ([`Pipeline::on_fix`]) and out for the shell's export.
+    pub fn on_gps_bytes(&mut self, bytes: &[u8], out: &mut Vec<Output>) {
+        let from = out.len();
+        self.gps_rx_bytes += bytes.len() as u64;
+        let bad = |s: &crate::gps::GpsStats| {
+            s.garbage_bytes + s.binary_lines + s.overlong_lines + s.bad_checksum + s.unparsed
+        };
+        let before = bad(&self.decoder.stats());
+        self.decoder.push_bytes(bytes, &mut self.decoded);
+        if bad(&self.decoder.stats()) > before {
+            self.gps_bad_at = Some(self.sums.last.unwrap_or(0));
+        }
+        let fixes = std::mem::take(&mut self.decoded);
+        for f in fixes {
+            out.push(Output::Fix(Box::new(f.clone())));
+            self.on_fix_inner(f, out);
+        }
+        self.seal(out, from);
+    }
+
+    /// The receiver's port opened (`open`) or went away (`why`): recorded as an event
+    /// (`gps_port`), where it happened among the frames.
+    pub fn on_gps_port(&mut self, open: bool, why: &str, out: &mut Vec<Output>) {
+        let json = serde_json::json!({"kind": "gps_port", "open": open, "why": why}).to_string();
+        self.json(JsonChannel::Event, self.sums.last.unwrap_or(0), json, out);
+    }
+
+    /// The receiver's stream counters (bytes, lines, sentences, what was wrong).
+    pub fn gps_stats(&self) -> crate::gps::GpsStats {
+        self.decoder.stats()
+    }
+
+    fn on_frame_inner(&mut self, raw: &RawFrame, out: &mut Vec<Output>) {
         self.frames.total += 1;
         // the IMU is back with its first gyro frame, before that frame is processed: whatever
         // the shell read in one go with it, every epoch it makes is without the timeout bit
@@ -425,8 +510,15 @@ impl Pipeline {
         }
     }
 
-    /// A decoded GPS fix arrived.
+    /// A decoded GPS fix arrived (from a recording made before nav kept the receiver's bytes;
+    /// the shell gives the bytes, [`Pipeline::on_gps_bytes`]).
     pub fn on_fix(&mut self, fix: GpsFix, out: &mut Vec<Output>) {
+        let from = out.len();
+        self.on_fix_inner(fix, out);
+        self.seal(out, from);
+    }
+
+    fn on_fix_inner(&mut self, fix: GpsFix, out: &mut Vec<Output>) {
         self.fixes += 1;
         if self.record
             && let Ok(json) = serde_json::to_string(&fix)
@@ -448,6 +540,12 @@ impl Pipeline {
     /// ([`Pipeline::on_frame`]), so where the shell's reads happen to split the stream does not
     /// change the solution frames.
     pub fn set_imu_timeout(&mut self, active: bool, after_ms: u64, out: &mut Vec<Output>) {
+        let from = out.len();
+        self.set_imu_timeout_inner(active, after_ms, out);
+        self.seal(out, from);
+    }
+
+    fn set_imu_timeout_inner(&mut self, active: bool, after_ms: u64, out: &mut Vec<Output>) {
         if active == self.imu_timeout {
             return;
         }
@@ -479,8 +577,10 @@ impl Pipeline {
 
     /// End of the stream: a sample still waiting for its accelerometer frame is processed.
     pub fn flush(&mut self, out: &mut Vec<Output>) {
+        let from = out.len();
         self.fe.flush(&mut self.samples, &mut self.events);
         self.process(out);
+        self.seal(out, from);
     }
 
     /// IMU time of sample `k`, s (from the front end's first sample).
@@ -800,6 +900,10 @@ impl Pipeline {
                     n.filter().is_some_and(|k| k.stats().reanchors > 0)
                         || n.integrity().symptom().is_some()
                 }),
+            gps_data: self
+                .gps_bad_at
+                .zip(self.sums.last)
+                .is_some_and(|(b, k)| (k.saturating_sub(b) as f64) < self.rate_hz),
         }
     }
 
@@ -828,6 +932,7 @@ impl Pipeline {
                 .map(|x| x.output()),
             pos_sigma_m: sigmas.map_or(0.0, |x| x.0),
             heading_sigma_deg: sigmas.map_or(0.0, |x| x.1),
+            gps_rx_bytes: self.gps_rx_bytes,
         };
         // once a second of IMU time, the solution goes in the recording too
         if self.record
@@ -1035,6 +1140,7 @@ impl Pipeline {
                 frames_sent: 0,
                 send_errors: 0,
                 last_mode: self.last_mode.clone(),
+                sent_hash: self.sent_hash(),
             },
             encode_errors: self.encode_errors + self.encoder.encode_errors,
             mcap: None,

@@ -107,6 +107,11 @@ pub struct SolutionSummary {
     pub send_errors: u64,
     /// The last epoch's mode.
     pub last_mode: Option<String>,
+    /// A hash over every frame sent (solution and turntable commands) with the IMU sample each
+    /// went at ([`crate::pipeline::Pipeline::sent_hash`]): equal for two runs that sent the
+    /// same frames at the same samples.
+    #[serde(default)]
+    pub sent_hash: String,
 }
 
 /// The GPS receiver at exit.

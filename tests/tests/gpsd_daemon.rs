@@ -116,9 +116,29 @@ fn gpsd_reads_the_emulated_receiver_and_nav_takes_its_fixes_from_gpsd() {
         gpsd: format!("127.0.0.1:{port}"),
         ..GpsConfig::default()
     };
-    let reader = nav::gpsport::GpsPort::start(&cfg).expect("nav's GPS reader");
-    let (tx, mut fixes_rx) = tokio::sync::mpsc::unbounded_channel();
-    reader.forward(tx, true);
+    // nav's port reader, as nav's loop runs it, on a runtime of its own until told to stop
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let reader = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .expect("a runtime");
+            rt.block_on(async move {
+                let mut port = nav::gpsport::GpsPort::new(&cfg);
+                let mut bytes = Vec::new();
+                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                    let next = tokio::time::timeout(Duration::from_millis(100), port.next());
+                    if let Ok(nav::gpsport::GpsEvent::Bytes { bytes: b, .. }) = next.await {
+                        bytes.extend(b);
+                    }
+                }
+                let (errors, opens) = port.counters();
+                (bytes, port.gpsd_messages(), errors, opens)
+            })
+        })
+    };
     std::thread::sleep(Duration::from_millis(500));
 
     // 40 epochs of the lap, at five a second
@@ -142,15 +162,17 @@ fn gpsd_reads_the_emulated_receiver_and_nav_takes_its_fixes_from_gpsd() {
         std::thread::sleep(Duration::from_millis(40));
     }
     std::thread::sleep(Duration::from_millis(1500));
-    let (stats, port_errors, opens) = {
-        let gpsd_json = reader.gpsd_messages();
-        let r = reader.finish();
-        assert!(
-            gpsd_json >= 2,
-            "gpsd's VERSION and WATCH replies: {gpsd_json}"
-        );
-        r
-    };
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let (bytes, gpsd_json, port_errors, opens) = reader.join().expect("nav's port reader");
+    assert!(
+        gpsd_json >= 2,
+        "gpsd's VERSION and WATCH replies: {gpsd_json}"
+    );
+    // decoded as nav's pipeline decodes them
+    let mut decoder = nav::gps::GpsDecoder::default();
+    let mut nav_fixes = Vec::new();
+    decoder.push_bytes(&bytes, &mut nav_fixes);
+    let stats = decoder.stats();
     drop(pipe);
     let reports = reports.join().expect("gpspipe's reader");
 
@@ -192,13 +214,6 @@ fn gpsd_reads_the_emulated_receiver_and_nav_takes_its_fixes_from_gpsd() {
     assert!(matched >= 35);
 
     // nav through gpsd: every fix, checksums good, at the positions gpsd reported
-    let (mut nav_fixes, mut bytes) = (Vec::new(), Vec::new());
-    while let Ok(input) = fixes_rx.try_recv() {
-        match input {
-            nav::gpsport::GpsInput::Fix(f) => nav_fixes.push(f),
-            nav::gpsport::GpsInput::Bytes { bytes: b, .. } => bytes.extend(b),
-        }
-    }
     // the bytes handed on (what nav records) are gpsd's NMEA alone: no JSON line among them
     let text = String::from_utf8_lossy(&bytes);
     assert!(

@@ -111,8 +111,10 @@ fn nav_frames_round_trip() {
         health: NavHealth {
             imu_gaps: true,
             filter: true,
+            gps_data: true,
             ..Default::default()
         },
+        gps_rx_bytes: 4095,
     };
     assert_eq!(rt(Message::NavTime(t)), Message::NavTime(t));
     let a = NavAtt {

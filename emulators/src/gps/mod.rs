@@ -13,7 +13,8 @@ pub mod truth;
 pub use errors::{GpsError, GpsErrorParams};
 pub use nmea::NmeaWriter;
 pub use pty::{
-    GpsDevice, GpsPty, GpsTxStats, LogLine, PtyError, TAKE_WAIT, parse_log, relink, replay,
+    Delivered, GpsDevice, GpsPty, GpsTxStats, LogLine, PtyError, TAKE_WAIT, parse_log, relink,
+    replay,
 };
 pub use receiver::{Epoch, GpsReceiver, GpsRun, ReceiverParams};
 pub use truth::{AntennaTruth, antenna_truth};

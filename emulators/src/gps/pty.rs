@@ -1,7 +1,7 @@
 //! The receiver's transports: its serial port as a pty pair, stepped by the bus scheduler
 //! ([`GpsDevice`]) or replaying a recorded receiver log ([`replay`]).
 
-use super::{GpsReceiver, GpsRun};
+use super::Epoch;
 use serialport::{SerialPort, TTYPort};
 use std::io::Write;
 use std::os::fd::AsRawFd;
@@ -58,10 +58,12 @@ pub enum PtyError {
 }
 
 /// The emulated receiver's serial port: a pty pair. nav opens [`GpsPty::path`].
+///
+/// The bench keeps only the master: whether anybody has the device open is then the master's
+/// hang-up state ([`GpsPty::reader_attached`]), and what the reader has not taken yet is read
+/// through a descriptor of the device opened for the question ([`GpsPty::unread`]).
 pub struct GpsPty {
     master: TTYPort,
-    /// Kept open so the master stays usable while no reader is attached.
-    _slave: TTYPort,
     path: String,
 }
 
@@ -80,11 +82,47 @@ impl GpsPty {
             }
         }
         let path = slave.name().unwrap_or_default();
-        Ok(Self {
-            master,
-            _slave: slave,
-            path,
-        })
+        // no reader until one opens the device (written bytes wait in the device meanwhile)
+        drop(slave);
+        Ok(Self { master, path })
+    }
+
+    /// Somebody (nav, gpsd) has the device open.
+    pub fn reader_attached(&self) -> bool {
+        let mut p = libc::pollfd {
+            fd: self.master.as_raw_fd(),
+            events: libc::POLLOUT,
+            revents: 0,
+        };
+        // SAFETY: one valid pollfd for the duration of the call.
+        let r = unsafe { libc::poll(&mut p, 1, 0) };
+        r >= 0 && p.revents & libc::POLLHUP == 0
+    }
+
+    /// Wait until somebody has the device open, at most `timeout` or until `stop` is set;
+    /// whether they do.
+    pub fn wait_reader_until(&self, timeout: Duration, stop: &AtomicBool) -> bool {
+        let start = std::time::Instant::now();
+        loop {
+            if self.reader_attached() {
+                return true;
+            }
+            if start.elapsed() >= timeout || stop.load(Ordering::Relaxed) {
+                return false;
+            }
+            std::thread::sleep(Duration::from_micros(500));
+        }
+    }
+
+    /// A descriptor of the device, for asking what is waiting in it (none when it cannot be
+    /// opened).
+    fn probe(&self) -> Option<std::fs::File> {
+        use std::os::unix::fs::OpenOptionsExt;
+        std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NOCTTY | libc::O_NONBLOCK)
+            .open(&self.path)
+            .ok()
     }
 
     /// The device path nav opens (`/dev/pts/N`).
@@ -117,10 +155,7 @@ impl GpsPty {
 
     /// Bytes written that the reader has not taken yet (none when the pty cannot say).
     pub fn unread(&self) -> Option<usize> {
-        let mut n: libc::c_int = 0;
-        // SAFETY: FIONREAD on the slave side, which we hold open, writes one int.
-        let r = unsafe { libc::ioctl(self._slave.as_raw_fd(), libc::FIONREAD, &mut n) };
-        (r == 0).then_some(n.max(0) as usize)
+        unread_in(&self.probe()?)
     }
 
     /// Wait until the reader has taken everything written, at most `timeout`; whether it did.
@@ -132,16 +167,24 @@ impl GpsPty {
     /// the count reads 0 both before the bytes arrive and after they are taken: bytes never
     /// seen waiting within [`ARRIVAL_S`] are taken as read at once.
     pub fn wait_taken(&self, timeout: Duration) -> bool {
+        self.wait_taken_until(timeout, &AtomicBool::new(false))
+    }
+
+    /// [`GpsPty::wait_taken`], ending early when `stop` is set.
+    pub fn wait_taken_until(&self, timeout: Duration, stop: &AtomicBool) -> bool {
         let start = std::time::Instant::now();
         let mut seen = false;
+        let Some(probe) = self.probe() else {
+            return true;
+        };
         loop {
-            match self.unread() {
+            match unread_in(&probe) {
                 None => return true,
                 Some(0) if seen || start.elapsed() >= ARRIVAL_S => return true,
                 Some(0) => {}
                 Some(_) => seen = true,
             }
-            if start.elapsed() >= timeout {
+            if start.elapsed() >= timeout || stop.load(Ordering::Relaxed) {
                 return false;
             }
             std::thread::sleep(Duration::from_micros(200));
@@ -152,6 +195,14 @@ impl GpsPty {
     pub fn clear(&self) {
         let _ = self.master.clear(serialport::ClearBuffer::All);
     }
+}
+
+/// What is waiting to be read on the device `f` is open on.
+fn unread_in(f: &std::fs::File) -> Option<usize> {
+    let mut n: libc::c_int = 0;
+    // SAFETY: FIONREAD on a descriptor we hold open writes one int.
+    let r = unsafe { libc::ioctl(f.as_raw_fd(), libc::FIONREAD, &mut n) };
+    (r == 0).then_some(n.max(0) as usize)
 }
 
 /// One line of a recorded log, with its sentence time of day (when it has one).
@@ -247,10 +298,10 @@ pub const ARRIVAL_S: Duration = Duration::from_millis(15);
 /// yet) must not stop the IMU stream long enough for nav's watchdog (100 ms at least) to fire.
 pub const TAKE_WAIT: Duration = Duration::from_millis(50);
 
-/// A [`GpsReceiver`] on its pty, as the bus scheduler steps it.
+/// The receiver's epochs on its pty, as the bus scheduler delivers them.
 pub struct GpsDevice {
-    rx: GpsReceiver,
     pty: GpsPty,
+    confirm_on_bus: bool,
     link: Option<std::path::PathBuf>,
     owner: Option<(u32, u32)>,
     dropped: Option<usize>,
@@ -260,11 +311,11 @@ pub struct GpsDevice {
 }
 
 impl GpsDevice {
-    /// The receiver `run` on `pty`, reached by nav through `link` when given.
-    pub fn new(run: GpsRun, pty: GpsPty, link: Option<std::path::PathBuf>) -> Self {
+    /// The receiver's device `pty`, reached by nav through `link` when given.
+    pub fn new(pty: GpsPty, link: Option<std::path::PathBuf>) -> Self {
         Self {
-            rx: GpsReceiver::new(run),
             pty,
+            confirm_on_bus: true,
             link,
             owner: None,
             dropped: None,
@@ -324,69 +375,98 @@ impl GpsDevice {
         self
     }
 
-    /// Simulated time at which the next epoch is written, s.
-    pub fn next_write_time(&self) -> f64 {
-        self.rx.next_write_time()
+    /// Something else than nav reads the device (gpsd): nav's `GpsRxBytes` does not count
+    /// the bytes written, so the scheduler does not wait for it.
+    pub fn without_bus_confirmation(mut self) -> Self {
+        self.confirm_on_bus = false;
+        self
     }
 
-    /// The IMU stream has reached `t` (and ends at `duration_s`): write every epoch due by then.
-    pub fn poll(&mut self, t: f64, duration_s: f64) -> Result<(), PtyError> {
-        while let Some(e) = self.rx.poll(t, duration_s) {
-            let st = &mut self.stats;
-            // the device disappears and comes back
-            match (self.dropped, e.port_drop) {
-                (None, Some(i)) => {
-                    self.pty = GpsPty::open()?; // the old pair closes: the reader sees EIO
-                    if let Some((uid, gid)) = self.owner {
-                        self.pty.give_to(uid, gid)?;
-                    }
-                    if let Some(l) = &self.link {
-                        let _ = std::fs::remove_file(l);
-                    }
-                    self.dropped = Some(i);
-                    st.port_drops += 1;
+    /// nav's NAV_TIME confirms the bytes written ([`GpsDevice::without_bus_confirmation`]).
+    pub fn confirms_on_bus(&self) -> bool {
+        self.confirm_on_bus
+    }
+
+    /// The device.
+    pub fn pty(&self) -> &GpsPty {
+        &self.pty
+    }
+
+    /// Put out epoch `e`: the device going away or coming back (a port drop), nothing in a
+    /// silent outage, otherwise its sentences, once a reader has the device open and until it
+    /// has read them, each wait at most `limit` (or until `stop`). None: nothing was written.
+    pub fn deliver(
+        &mut self,
+        e: &Epoch,
+        limit: Duration,
+        stop: &AtomicBool,
+    ) -> Result<Option<Delivered>, PtyError> {
+        let st = &mut self.stats;
+        // the device disappears and comes back
+        match (self.dropped, e.port_drop) {
+            (None, Some(i)) => {
+                self.pty = GpsPty::open()?; // the old pair closes: the reader sees EIO
+                if let Some((uid, gid)) = self.owner {
+                    self.pty.give_to(uid, gid)?;
                 }
-                (Some(_), None) => {
-                    if let Some(l) = &self.link {
-                        relink(l, self.pty.path())?;
-                    }
-                    self.dropped = None;
+                if let Some(l) = &self.link {
+                    let _ = std::fs::remove_file(l);
                 }
-                _ => {}
+                self.dropped = Some(i);
+                st.port_drops += 1;
             }
-            if self.dropped.is_some() {
-                self.note(&format!("# t={:.3} s: device gone (port drop)\n", e.edge))?;
-                continue;
-            }
-            match (e.text.is_empty(), e.valid) {
-                (true, _) => st.silent_epochs += 1,
-                (false, true) => st.fixes += 1,
-                (false, false) => st.void_epochs += 1,
-            }
-            if e.text.is_empty() {
-                self.note(&format!("# t={:.3} s: silent\n", e.edge))?;
-            } else {
-                match self.pty.write(e.text.as_bytes()) {
-                    Ok(()) => {
-                        st.bytes += e.text.len() as u64;
-                        if !self.pty.wait_taken(TAKE_WAIT) {
-                            self.stats.slow_reads += 1;
-                        }
-                        self.note(&format!("# t={:.3} s\n{}", e.edge, e.text))?;
-                    }
-                    // nobody reads (nav not started or re-opening): the receiver's output is lost
-                    Err(PtyError::Write { source, .. })
-                        if source.kind() == std::io::ErrorKind::TimedOut =>
-                    {
-                        self.stats.unread_epochs += 1;
-                        self.pty.clear();
-                        self.note(&format!("# t={:.3} s: not read (lost)\n", e.edge))?;
-                    }
-                    Err(e) => return Err(e),
+            (Some(_), None) => {
+                if let Some(l) = &self.link {
+                    relink(l, self.pty.path())?;
                 }
+                self.dropped = None;
+            }
+            _ => {}
+        }
+        if self.dropped.is_some() {
+            self.note(&format!("# t={:.3} s: device gone (port drop)\n", e.edge))?;
+            return Ok(None);
+        }
+        let st = &mut self.stats;
+        match (e.text.is_empty(), e.valid) {
+            (true, _) => st.silent_epochs += 1,
+            (false, true) => st.fixes += 1,
+            (false, false) => st.void_epochs += 1,
+        }
+        if e.text.is_empty() {
+            self.note(&format!("# t={:.3} s: silent\n", e.edge))?;
+            return Ok(None);
+        }
+        let mut d = Delivered::default();
+        // nobody has the device open (nav re-opening it after a drop): wait for them, so that
+        // what the receiver loses is what the scenario says, not what the host's pace decides
+        if !self.pty.reader_attached() {
+            d.waited = true;
+            if !self.pty.wait_reader_until(limit, stop) {
+                d.stalled = true;
             }
         }
-        Ok(())
+        match self.pty.write(e.text.as_bytes()) {
+            Ok(()) => {
+                self.stats.bytes += e.text.len() as u64;
+                if !self.pty.wait_taken_until(limit, stop) {
+                    self.stats.slow_reads += 1;
+                    d.stalled = true;
+                }
+                self.note(&format!("# t={:.3} s\n{}", e.edge, e.text))?;
+            }
+            // nobody reads (nav not started or re-opening): the receiver's output is lost
+            Err(PtyError::Write { source, .. })
+                if source.kind() == std::io::ErrorKind::TimedOut =>
+            {
+                self.stats.unread_epochs += 1;
+                self.pty.clear();
+                self.note(&format!("# t={:.3} s: not read (lost)\n", e.edge))?;
+                d.stalled = true;
+            }
+            Err(e) => return Err(e),
+        }
+        Ok(Some(d))
     }
 
     /// The pty (kept open until nav has stopped: a receiver vanishing at the very end would only
@@ -397,6 +477,15 @@ impl GpsDevice {
         }
         self.pty
     }
+}
+
+/// How an epoch's delivery went.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Delivered {
+    /// It waited for a reader to open the device.
+    pub waited: bool,
+    /// A wait ran out (no reader, or the bytes not read, within the limit).
+    pub stalled: bool,
 }
 
 /// Point the symbolic link `link` at `target` (replacing what was there).
@@ -441,6 +530,22 @@ mod tests {
         let n = reader.read(&mut buf).unwrap();
         assert_eq!(&buf[..n], b"$GPGGA,1*00\r\n");
         assert!(pty.wait_taken(Duration::from_millis(30)));
+    }
+
+    /// The device has a reader while somebody has it open, and none before or after: what
+    /// the scheduler waits for after a port drop.
+    #[test]
+    fn the_device_knows_when_somebody_has_it_open() {
+        let pty = GpsPty::open().unwrap();
+        assert!(!pty.reader_attached());
+        assert!(!pty.wait_reader_until(Duration::from_millis(20), &AtomicBool::new(false)));
+        let reader = serialport::new(pty.path(), 9600).open().unwrap();
+        assert!(pty.reader_attached());
+        // asking what is unread does not count as a reader, nor make the reader go
+        assert_eq!(pty.unread(), Some(0));
+        assert!(pty.reader_attached());
+        drop(reader);
+        assert!(!pty.reader_attached());
     }
 
     #[test]
@@ -505,7 +610,7 @@ mod tests {
             laps: 1,
             start_wait_s: 1.0,
         };
-        let run = GpsRun {
+        let run = crate::gps::GpsRun {
             writer: super::super::NmeaWriter::new(super::super::ReceiverParams::default()),
             drive: crate::drive::Drive::plan(&spec).unwrap(),
             pps_phase_s: 0.0,
@@ -521,7 +626,8 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("gps-log-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("gps-sent.log");
-        let mut dev = GpsDevice::new(run, pty, None).with_log(&path).unwrap();
+        let mut rx = crate::gps::GpsReceiver::new(run);
+        let mut dev = GpsDevice::new(pty, None).with_log(&path).unwrap();
         let got = std::thread::spawn(move || {
             let mut all = Vec::new();
             let mut buf = [0u8; 4096];
@@ -530,7 +636,10 @@ mod tests {
             }
             all
         });
-        dev.poll(5.5, 100.0).unwrap();
+        let stop = AtomicBool::new(false);
+        while let Some(e) = rx.poll(5.5, 100.0) {
+            dev.deliver(&e, Duration::from_secs(5), &stop).unwrap();
+        }
         assert_eq!(dev.stats.fixes, 5);
         let _pty = dev.into_pty();
         let got = got.join().unwrap();

@@ -120,6 +120,9 @@ impl GpsReceiver {
         if edge > duration_s || t < edge + self.run.latency_s {
             return None;
         }
+        // the receiver's epoch: whole UTC seconds at its PPS edges, and between them at a
+        // rate above 1 Hz
+        let epoch_t = self.k as f64 * self.period();
         self.k += 1;
         let p = self.run.writer.params();
         let port_drop = p
@@ -130,7 +133,7 @@ impl GpsReceiver {
         let (text, err) = self
             .run
             .writer
-            .fix(edge.floor(), self.run.utc0_s, self.run.date, &truth);
+            .fix(epoch_t, self.run.utc0_s, self.run.date, &truth);
         Some(Epoch {
             edge,
             text,

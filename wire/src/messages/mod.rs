@@ -209,6 +209,7 @@ impl Message {
                 SEQ.put(&mut d, i64::from(m.seq))?;
                 MODE.put(&mut d, m.mode as i64)?;
                 put_flags(&HEALTH, &mut d, m.health.to_array());
+                GPS_RX_BYTES.put_wrapping(&mut d, i64::from(m.gps_rx_bytes));
             }
             Message::NavAtt(m) => {
                 use nav_att::*;
@@ -327,6 +328,7 @@ impl Message {
                     seq: u8_of(&SEQ),
                     mode: enum_value(spec, &MODE, &d, NavMode::from_raw)?,
                     health: NavHealth::from_array(flags(&HEALTH, &d)),
+                    gps_rx_bytes: GPS_RX_BYTES.get(&d) as u16,
                 })
             }
             0x201 => {

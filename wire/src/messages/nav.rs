@@ -8,14 +8,16 @@ pub mod nav_time {
     sig!(SAMPLE_COUNT = SignalSpec::uint("SampleCount", 0, 32));
     sig!(SEQ = SignalSpec::uint("Seq", 32, 8));
     sig!(MODE = SignalSpec::uint("Mode", 40, 4));
+    sig!(GPS_RX_BYTES = SignalSpec::uint("GpsRxBytes", 50, 12));
     /// Health bits, in the order of [`super::NavHealth`]'s fields.
-    pub const HEALTH: [SignalSpec; 6] = [
+    pub const HEALTH: [SignalSpec; 7] = [
         SignalSpec::uint("HealthImuTimeout", 44, 1),
         SignalSpec::uint("HealthImuGaps", 45, 1),
         SignalSpec::uint("HealthImuBit", 46, 1),
         SignalSpec::uint("HealthGpsStale", 47, 1),
         SignalSpec::uint("HealthTurntable", 48, 1),
         SignalSpec::uint("HealthFilter", 49, 1),
+        SignalSpec::uint("HealthGpsData", 62, 1),
     ];
     /// The message.
     pub const SPEC: MessageSpec = MessageSpec {
@@ -32,6 +34,8 @@ pub mod nav_time {
             &HEALTH[3],
             &HEALTH[4],
             &HEALTH[5],
+            &GPS_RX_BYTES,
+            &HEALTH[6],
         ],
         frames_per_second: 50.0,
         sender: "NAV",
@@ -145,10 +149,13 @@ pub struct NavHealth {
     pub turntable: bool,
     /// Filter inconsistency.
     pub filter: bool,
+    /// The receiver's stream carried bad data (a checksum, framing or binary line, garbage
+    /// bytes) in the last second of IMU time.
+    pub gps_data: bool,
 }
 
 impl NavHealth {
-    pub(crate) fn to_array(self) -> [bool; 6] {
+    pub(crate) fn to_array(self) -> [bool; 7] {
         [
             self.imu_timeout,
             self.imu_gaps,
@@ -156,9 +163,10 @@ impl NavHealth {
             self.gps_stale,
             self.turntable,
             self.filter,
+            self.gps_data,
         ]
     }
-    pub(crate) fn from_array(b: [bool; 6]) -> Self {
+    pub(crate) fn from_array(b: [bool; 7]) -> Self {
         Self {
             imu_timeout: b[0],
             imu_gaps: b[1],
@@ -166,6 +174,7 @@ impl NavHealth {
             gps_stale: b[3],
             turntable: b[4],
             filter: b[5],
+            gps_data: b[6],
         }
     }
 }
@@ -181,6 +190,10 @@ pub struct NavTime {
     pub mode: NavMode,
     /// Health.
     pub health: NavHealth,
+    /// Bytes nav has taken from the GPS receiver, wrapping at 12 bits: what it has received, for
+    /// the receiver's health and for a bench that must know its bytes arrived before it lets
+    /// the IMU stream run past them.
+    pub gps_rx_bytes: u16,
 }
 
 /// NAV_ATT: attitude.

@@ -1,0 +1,194 @@
+//! The order in which the bench's devices act, written once: each IMU sample's frames, then the
+//! turntable's frames due after that sample, then the GPS receiver's epochs due by the
+//! sample's end; and what the devices make of nav's frames (NAV_TIME places the turntable
+//! commands that came before it). Pure: no I/O, no wall time.
+//!
+//! The bus scheduler ([`crate::bus::run`]) puts each [`Step`] on vcan and the pty; the
+//! in-process runs feed it to nav's pipeline directly. Both call [`Stepper::step`] and
+//! [`Stepper::from_nav`], so the order nav meets its inputs in is the same on both, by
+//! construction.
+//!
+//! **The receiver's bytes enter after the frames of the sample they are due at, and before
+//! any later frame.** On the bus the scheduler writes them once that sample's frames are on
+//! vcan, and holds the IMU stream until nav has read them; nav takes every frame already
+//! received before bytes it has read (`nav`'s event loop). In process they go into the
+//! pipeline right after the sample's frames.
+
+use crate::bus::{TtBus, nav_time_sample};
+use crate::can::BusStream;
+use crate::gps::{Epoch, GpsReceiver};
+use wire::{Message, RawFrame};
+
+/// What one IMU sample brings, in the order nav meets it.
+#[derive(Debug, Default)]
+pub struct Step {
+    /// The sample's index (0-based).
+    pub k: u64,
+    /// Simulated time at its end, s.
+    pub t: f64,
+    /// Its frames on the bus: the IMU's (with any injected), then the turntable's.
+    pub frames: Vec<RawFrame>,
+    /// How many of `frames` are the turntable's (the last ones).
+    pub turntable_frames: usize,
+    /// The sample was deliberately not sent (a fault): nav cannot confirm it.
+    pub dropped: bool,
+    /// The receiver's epochs due by the sample's end, after its frames.
+    pub epochs: Vec<Epoch>,
+}
+
+/// What a frame from nav meant to the devices.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FromNav {
+    /// A NAV_TIME: nav has processed this sample; it confirms this many bytes from the
+    /// receiver (12 bits), and placed this many turntable commands.
+    Confirmed {
+        /// The sample.
+        sample: u64,
+        /// NAV_TIME's `GpsRxBytes`.
+        gps_rx_bytes: u16,
+        /// Commands placed in time by it.
+        placed: u64,
+    },
+    /// A NAV_TIME that names no sample sent.
+    Unplaced,
+    /// A turntable command (waiting for the next NAV_TIME, or at the next sample).
+    Command,
+    /// A frame no device takes (a TT_CMD without a turntable, an undecodable frame).
+    Unexpected,
+    /// Anything else nav sends (its solution's other frames).
+    Other,
+}
+
+/// The scenario's devices on the IMU clock.
+pub struct Stepper {
+    imu: BusStream,
+    tt: Option<TtBus>,
+    gps: Option<GpsReceiver>,
+    duration_s: f64,
+    msgs: Vec<Message>,
+}
+
+impl Stepper {
+    /// The IMU stream `imu`, the turntable `tt` and the receiver `gps` for `duration_s` of
+    /// simulated time.
+    pub fn new(
+        imu: BusStream,
+        tt: Option<TtBus>,
+        gps: Option<GpsReceiver>,
+        duration_s: f64,
+    ) -> Self {
+        Self {
+            imu,
+            tt,
+            gps,
+            duration_s,
+            msgs: Vec::new(),
+        }
+    }
+
+    /// The scenario's time is not over yet.
+    pub fn running(&self) -> bool {
+        self.imu.next_time() <= self.duration_s + 1e-9
+    }
+
+    /// Simulated time at the end of the next sample, s.
+    pub fn next_time(&self) -> f64 {
+        self.imu.next_time()
+    }
+
+    /// The next sample's index.
+    pub fn next_index(&self) -> u64 {
+        self.imu.imu().next_index()
+    }
+
+    /// The IMU's stream.
+    pub fn imu(&self) -> &BusStream {
+        &self.imu
+    }
+
+    /// The turntable, when there is one.
+    pub fn turntable(&self) -> Option<&TtBus> {
+        self.tt.as_ref()
+    }
+
+    /// The turntable, when there is one.
+    pub fn turntable_mut(&mut self) -> Option<&mut TtBus> {
+        self.tt.as_mut()
+    }
+
+    /// The scenario's duration, s.
+    pub fn duration_s(&self) -> f64 {
+        self.duration_s
+    }
+
+    /// Simulated time the receiver puts out its next epoch (none without a receiver).
+    pub fn next_epoch_time(&self) -> Option<f64> {
+        self.gps.as_ref().map(GpsReceiver::next_write_time)
+    }
+
+    /// One IMU sample: its frames, the turntable's after it, the epochs due by its end.
+    pub fn step(&mut self, out: &mut Step) {
+        out.k = self.imu.imu().next_index();
+        out.t = self.imu.next_time();
+        out.frames.clear();
+        out.epochs.clear();
+        let dropped = self.imu.stats.dropped_samples;
+        self.imu.next_frames(&mut out.frames);
+        out.dropped = self.imu.stats.dropped_samples > dropped;
+        out.turntable_frames = 0;
+        if let Some(tt) = self.tt.as_mut() {
+            self.msgs.clear();
+            tt.after_sample(out.k, out.t, &mut self.msgs);
+            for m in &self.msgs {
+                if let Ok(f) = m.encode() {
+                    out.frames.push(f);
+                    out.turntable_frames += 1;
+                    tt.sent(m);
+                }
+            }
+        }
+        if let Some(g) = self.gps.as_mut() {
+            while let Some(e) = g.poll(out.t, self.duration_s) {
+                out.epochs.push(e);
+            }
+        }
+    }
+
+    /// A frame nav sent, to the devices. `lockstep`: a turntable command waits for the next
+    /// NAV_TIME, which places it the lockstep's latency after its sample; otherwise it takes
+    /// effect at the next sample.
+    pub fn from_nav(&mut self, m: Result<Message, wire::DecodeError>, lockstep: bool) -> FromNav {
+        match m {
+            Ok(Message::NavTime(nt)) => {
+                let Some(k) = nav_time_sample(self.imu.imu(), nt.sample_count) else {
+                    return FromNav::Unplaced;
+                };
+                let placed = match self.tt.as_mut() {
+                    Some(tt) if lockstep => tt.confirmed(k),
+                    _ => 0,
+                };
+                FromNav::Confirmed {
+                    sample: k,
+                    gps_rx_bytes: nt.gps_rx_bytes,
+                    placed,
+                }
+            }
+            Ok(Message::TtCmd(c)) => {
+                let next = self.imu.imu().next_index();
+                match self.tt.as_mut() {
+                    Some(tt) if lockstep => tt.command(c),
+                    Some(tt) => tt.command_at(next, c),
+                    None => return FromNav::Unexpected,
+                }
+                FromNav::Command
+            }
+            Ok(_) => FromNav::Other,
+            Err(_) => FromNav::Unexpected,
+        }
+    }
+
+    /// The devices back, at the end: the IMU stream and the turntable.
+    pub fn into_parts(self) -> (BusStream, Option<TtBus>) {
+        (self.imu, self.tt)
+    }
+}
