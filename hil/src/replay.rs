@@ -42,6 +42,10 @@ pub struct InProcess {
     pub accel_bias_mps2: [f64; 3],
     /// Largest dither-filter gain over the dither band (the residual of the dither angle).
     pub dither_residual_gain: f64,
+    /// The hash over every frame the pipeline sent, with the sample each went at
+    /// (`nav::pipeline::Pipeline::sent_hash`).
+    #[serde(default)]
+    pub sent_hash: String,
 }
 
 /// The calibration nav is given for this scenario's IMU.
@@ -121,6 +125,7 @@ pub fn run_in_process(s: &Scenario) -> Result<InProcess> {
         origin_time_s,
         rotation_vector_deg: sum.attitude.rotation_vector_deg,
         error_deg: err.map(f64::to_degrees),
+        sent_hash: sum.solution.sent_hash,
     })
 }
 

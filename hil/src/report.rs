@@ -109,12 +109,17 @@ pub fn checks(
         let late = nav.navigation.as_ref().map_or(0, |n| n.late_fixes);
         out.push(Check {
             name: "reproducible: the emulators stayed in lockstep with nav".into(),
-            pass: lockstep.stalls == 0 && lockstep.nav_times > 0 && late == 0,
+            pass: lockstep.stalls == 0
+                && lockstep.receiver_stalls == 0
+                && lockstep.nav_times > 0
+                && late == 0,
             detail: format!(
-                "{} NAV_TIME frames followed, {} waits ({} ms), {} stalls, {} turntable commands placed, {late} GPS fixes late; frame-in to NAV_TIME-out {:.1} ms median, {:.1} ms p99",
+                "{} NAV_TIME frames followed, {} waits ({} ms; {} for the receiver's device or bytes, {} of them past the limit), {} stalls, {} turntable commands placed, {late} GPS fixes late; frame-in to NAV_TIME-out {:.1} ms median, {:.1} ms p99",
                 lockstep.nav_times,
                 lockstep.waits,
                 lockstep.wait_ms,
+                lockstep.receiver_waits,
+                lockstep.receiver_stalls,
                 lockstep.stalls,
                 lockstep.placed_commands,
                 lockstep.latency_p50_ms,
@@ -178,6 +183,18 @@ pub fn checks(
         return (out, lost);
     };
     attitude_checks(&mut out, reference, nav, lost == 0);
+    // the watchdog's epochs are wall time's on the bus (never in process): only without them
+    if lost == 0 && nav.imu_timeouts == 0 && s.faults.stop_s.is_empty() {
+        let (a, b) = (&nav.solution.sent_hash, &reference.sent_hash);
+        out.push(Check {
+            name: "nav sent the in-process run's frames at the same samples".into(),
+            pass: a == b && !a.is_empty(),
+            detail: format!(
+                "hash over every frame sent and its IMU sample: nav {a}, in process {b} ({} frames)",
+                nav.solution.frames_sent
+            ),
+        });
+    }
     if let (Some(w_truth), Some(f_truth)) = (
         reference.expected_rate_dph,
         reference.expected_specific_force_mps2,

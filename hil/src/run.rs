@@ -625,8 +625,9 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let t_first = 1.0 / s.imu.rate_hz;
     let mcap_path = opts.out.join("nav.mcap");
     let (reference, replayed, scored) = std::thread::scope(|sc| {
+        // (through gpsd, nav gets only the sentences gpsd keeps: not the receiver's bytes)
         let reference = sc.spawn(|| match s.turntable {
-            None if opts.reference_checks => {
+            None if opts.reference_checks && !opts.gps_via_gpsd => {
                 Some(crate::replay::run_in_process(s).context("in-process reference run"))
             }
             _ => None,

@@ -155,7 +155,12 @@ pub struct GpsDecoder {
     framer: LineFramer,
     date: Option<chrono::NaiveDate>,
     last_tod: Option<f64>,
+    backs_in_row: u32,
 }
+
+/// Fixes in a row whose time is earlier than the latest before the decoder takes the
+/// receiver's clock as reset and follows it.
+pub const BACKWARDS_ACCEPTED: u32 = 6;
 
 impl GpsDecoder {
     /// Counters.
@@ -309,9 +314,16 @@ impl GpsDecoder {
         };
         if back {
             self.stats.time_backwards += 1;
+            self.backs_in_row += 1;
+        } else if t.is_some() {
+            self.backs_in_row = 0;
         }
-        if t.is_some() {
+        // the time to beat stays the latest until the receiver's clock has stayed back for
+        // BACKWARDS_ACCEPTED fixes in a row (every sentence of an epoch that stepped back is
+        // flagged, not only its first; a receiver whose clock was reset is followed again)
+        if t.is_some() && (!back || self.backs_in_row >= BACKWARDS_ACCEPTED) {
             self.last_tod = t;
+            self.backs_in_row = 0;
         }
         self.stats.fixes += 1;
         LineOutcome::Fix(GpsFix {
@@ -420,6 +432,36 @@ mod tests {
         assert_eq!(st.overlong_lines, 1);
         assert_eq!(st.bad_checksum, 1);
         assert!(st.garbage_bytes >= 7);
+    }
+
+    /// Every sentence of an epoch whose time stepped back is flagged, not only the first (the
+    /// RMC after the GGA: a fix tied by its time must not be tied ten seconds back); a clock
+    /// that stays back (a receiver reset) is followed after a few fixes.
+    #[test]
+    fn a_step_back_flags_the_whole_epoch_and_a_reset_clock_is_followed() {
+        let mut d = GpsDecoder::default();
+        let at = |hms: &str| {
+            line(&format!(
+                "GPGGA,{hms},4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,"
+            ))
+        };
+        let back = |d: &mut GpsDecoder, hms: &str| match d.line(&at(hms)) {
+            LineOutcome::Fix(f) => f.time_backwards,
+            other => panic!("{other:?}"),
+        };
+        assert!(!back(&mut d, "120014"));
+        assert!(back(&mut d, "120005"));
+        assert!(back(&mut d, "120005"), "the epoch's second sentence");
+        assert!(!back(&mut d, "120016"));
+        // a reset: the clock stays an hour back
+        let flagged: Vec<bool> = (0..10)
+            .map(|i| back(&mut d, &format!("1100{:02}", 20 + i)))
+            .collect();
+        let n = BACKWARDS_ACCEPTED as usize;
+        assert!(
+            flagged[..n].iter().all(|b| *b) && flagged[n..].iter().all(|b| !b),
+            "{flagged:?}"
+        );
     }
 
     #[test]

@@ -105,7 +105,8 @@ pub struct NavigatorSummary {
     /// Times that tie was corrected once the receiver's latency was learned.
     #[serde(default)]
     pub utc_reanchors: u64,
-    /// Fixes whose UTC time fitted no PPS edge near (tied by their arrival).
+    /// Fixes whose UTC time fitted no PPS edge near (set aside, as the receiver's clock jumped
+    /// or the fix was seconds old).
     #[serde(default)]
     pub clock_jumps: u64,
     /// The integrity monitor.
@@ -150,8 +151,10 @@ pub struct Navigator {
     first_ties: Vec<FirstTie>,
     /// Times the tie between UTC seconds and edges was corrected.
     utc_reanchors: u64,
-    /// Fixes whose UTC time fitted no edge near (tied by their arrival instead).
+    /// Fixes whose UTC time fitted no edge near (set aside).
     clock_jumps: u64,
+    /// The tie the last fixes whose time fitted no edge pointed to, and how many in a row.
+    jump_streak: Option<(i64, u32)>,
     late_fixes: u64,
     untied_fixes: u64,
     integrity: crate::integrity::IntegrityMonitor,
@@ -167,6 +170,10 @@ pub struct Navigator {
 /// The receiver's latency is learned from this many fixes; until then a fix belongs to the
 /// latest edge at or before its arrival.
 pub const LATENCY_FIXES: u32 = 5;
+
+/// Fixes in a row whose UTC time fits no edge near, and that agree on a new tie, before the
+/// receiver's seconds are tied to the edges anew.
+pub const JUMPS_TO_REANCHOR: u32 = 3;
 
 /// PPS edges kept for tying fixes that come late.
 pub const EDGES_KEPT: usize = 64;
@@ -239,6 +246,7 @@ impl Navigator {
             first_ties: Vec::new(),
             utc_reanchors: 0,
             clock_jumps: 0,
+            jump_streak: None,
             late_fixes: 0,
             untied_fixes: 0,
             v_at_pps: None,
@@ -503,14 +511,28 @@ impl Navigator {
                 self.check_anchor();
             }
         }
-        let sec = whole - self.anchor.unwrap_or(0);
-        if sec > s_last + 2 || sec < s_last - 30 {
-            // a time that fits no edge near (a receiver whose clock jumped): by arrival
-            self.clock_jumps += 1;
-            let sec = self.edge_by_arrival(a, frac, s_last, t_last);
-            self.hold_or_apply(fix, sec, frac, a);
-            return;
+        let mut sec = whole - self.anchor.unwrap_or(0);
+        if sec > s_last + 2 || sec < s_last - 2 {
+            // a time that fits no edge near: a receiver whose clock jumped, or a fix seconds
+            // old. Set aside, unless the receiver's clock stays where it jumped to: then the
+            // edges are tied to its seconds anew.
+            let candidate = whole - self.edge_by_arrival(a, frac, s_last, t_last);
+            self.jump_streak = match self.jump_streak {
+                Some((c, n)) if c == candidate => Some((c, n + 1)),
+                _ => Some((candidate, 1)),
+            };
+            if self.jump_streak.is_some_and(|(_, n)| n < JUMPS_TO_REANCHOR) {
+                self.clock_jumps += 1;
+                self.fixes_seen += 1;
+                self.fixes_ignored += 1;
+                return;
+            }
+            tracing::warn!("the receiver's clock moved: its fixes are tied to the PPS edges anew");
+            self.anchor = Some(candidate);
+            self.utc_reanchors += 1;
+            sec = whole - candidate;
         }
+        self.jump_streak = None;
         self.hold_or_apply(fix, sec, frac, a);
     }
 
