@@ -433,6 +433,8 @@ struct NavSide {
     confirmed: Option<u64>,
     /// NAV_TIME's latest `GpsRxBytes`.
     gps_rx: Option<u16>,
+    /// A NAV_TIME with the imu_timeout bit came (since this was last cleared).
+    timeout_seen: bool,
     ls: LockstepStats,
     bad: u64,
     latency: Latency,
@@ -459,10 +461,12 @@ impl NavSide {
             match step.from_nav(m, lockstep) {
                 FromNav::Confirmed {
                     sample,
+                    imu_timeout,
                     gps_rx_bytes,
                     placed,
                 } => {
                     self.ls.nav_times += 1;
+                    self.timeout_seen |= imu_timeout;
                     self.gps_rx = Some(gps_rx_bytes);
                     self.ls.placed_commands += placed;
                     if self.confirmed.is_none_or(|c| sample > c) {
@@ -502,6 +506,7 @@ pub fn run(
         follow: lockstep,
         confirmed: None,
         gps_rx: None,
+        timeout_seen: false,
         ls: LockstepStats {
             enabled: lockstep.is_some(),
             ..Default::default()
@@ -589,6 +594,31 @@ pub fn run(
             max_lag_ms = max_lag_ms.max(lag.as_millis() as u64);
         }
         dev.step.step(&mut st);
+        if st.stop_begins
+            && let Some(l) = nav.follow
+        {
+            // the IMU stops: nothing more goes out until nav's watchdog has said so, so that it
+            // fires once, after the same sample, at any pace
+            outbox.flush(&sock, iface, &mut nav.confirmed, &mut nav.latency)?;
+            clock.catch_up(t);
+            nav.timeout_seen = false;
+            let since = Instant::now();
+            while !nav.timeout_seen && !stop.load(Ordering::Relaxed) {
+                if since.elapsed() > l.stall {
+                    nav.ls.stalls += 1;
+                    tracing::warn!(
+                        interface = iface,
+                        "nav's watchdog did not report the IMU's stop within {} s",
+                        l.stall.as_secs()
+                    );
+                    break;
+                }
+                wait_readable(&sock, Duration::from_millis(2));
+                nav.read(&sock, iface, &mut dev.step)?;
+            }
+            nav.ls.wait_ms += since.elapsed().as_millis() as u64;
+            silent = true;
+        }
         if st.dropped {
             // a sample deliberately not sent (a fault): nav cannot confirm it, so the lockstep
             // does not wait for it (an IMU that stops for seconds is then paced by the clock)

@@ -348,6 +348,11 @@ impl BusStream {
         self.imu.next_time()
     }
 
+    /// The IMU is stopped at simulated time `t` (a `stop_s` fault: it sends nothing).
+    pub fn stopped_at(&self, t: f64) -> bool {
+        self.faults.stop_s.iter().any(|p| t >= p[0] && t < p[1])
+    }
+
     /// Append the next sample's frames (as sent, faults included) to `out`.
     pub fn next_frames(&mut self, out: &mut Vec<RawFrame>) {
         let t = self.imu.next_time();

@@ -14,8 +14,8 @@
 //! the exact moment within that window does not change the solution).
 //!
 //! **Silences** mark where nav's liveness watchdog fired in the recording: the player stops
-//! for `silence` of wall time there (longer than nav's watchdog), so that it fires again at the
-//! same place in the stream.
+//! there until nav's watchdog has fired again (a NAV_TIME with the imu_timeout bit), at most
+//! `silence` of wall time, so that it fires at the same place in the stream.
 
 use crate::bus::{BusError, Lockstep, LockstepStats};
 use crate::can::{Progress, write_all};
@@ -46,7 +46,7 @@ pub struct PlayOptions {
     pub speed: f64,
     /// IMU sample rate, Hz.
     pub imu_rate_hz: f64,
-    /// Wall time the player stops for at a [`Recorded::Silence`].
+    /// Wall time the player waits at most at a [`Recorded::Silence`] for nav's watchdog.
     pub silence: Duration,
     /// Follow nav's NAV_TIME frames (none: paced by the clock alone).
     pub lockstep: Option<Lockstep>,
@@ -84,6 +84,8 @@ struct Follow {
     /// (sample index, 16-bit counter) of the IMU_GYRO frames sent, newest last.
     sent: VecDeque<(u64, u16)>,
     confirmed: Option<u64>,
+    /// A NAV_TIME with the imu_timeout bit came since this was last cleared.
+    timeout_seen: bool,
 }
 
 impl Follow {
@@ -125,6 +127,7 @@ pub fn play(
     let mut follow = Follow {
         sent: VecDeque::with_capacity(4096),
         confirmed: None,
+        timeout_seen: false,
     };
     let mut lockstep = opts.lockstep;
     let mut outbox: Vec<RawFrame> = Vec::with_capacity(wire::BATCH);
@@ -217,7 +220,16 @@ pub fn play(
             Recorded::Silence => {
                 flush(&mut outbox, &mut st)?;
                 st.silences += 1;
-                std::thread::sleep(opts.silence);
+                // nav's watchdog fires again here: nothing more goes out until it has
+                follow.timeout_seen = false;
+                let since = Instant::now();
+                while !follow.timeout_seen
+                    && since.elapsed() < opts.silence
+                    && !stop.load(Ordering::Relaxed)
+                {
+                    crate::bus::wait_readable(&sock, Duration::from_millis(2));
+                    read_nav(&sock, iface, &mut follow, &mut st.lockstep)?;
+                }
                 // what follows is paced from here, not caught up at once
                 clock.catch_up(k as f64 * period);
             }
@@ -273,6 +285,7 @@ fn read_nav(
 ) -> Result<(), BusError> {
     crate::bus::drain(sock, iface, |f| {
         if let Some(Ok(Message::NavTime(nt))) = f.map(|f| Message::decode(&f)) {
+            follow.timeout_seen |= nt.health.imu_timeout;
             follow.on_nav_time(nt.sample_count, ls);
         }
     })?;
@@ -290,6 +303,7 @@ mod tests {
         let mut f = Follow {
             sent: VecDeque::with_capacity(8),
             confirmed: None,
+            timeout_seen: false,
         };
         let mut ls = LockstepStats::default();
         for (k, c) in [(0u64, 65534u16), (1, 65535), (2, 0), (3, 1)] {

@@ -32,6 +32,12 @@ pub struct Step {
     pub turntable_frames: usize,
     /// The sample was deliberately not sent (a fault): nav cannot confirm it.
     pub dropped: bool,
+    /// The IMU stops sending at this sample (a `stop_s` fault begins): before anything more
+    /// reaches nav, its watchdog reports the stop. On the bus the scheduler holds the stream
+    /// until nav's NAV_TIME says so; in process the watchdog's change goes into the pipeline
+    /// here. Either way nav's watchdog fires once per stop, right after the last sample before
+    /// it, whatever the host's pace.
+    pub stop_begins: bool,
     /// The receiver's epochs due by the sample's end, after its frames.
     pub epochs: Vec<Epoch>,
 }
@@ -44,6 +50,8 @@ pub enum FromNav {
     Confirmed {
         /// The sample.
         sample: u64,
+        /// Its imu_timeout health bit (nav's watchdog has fired).
+        imu_timeout: bool,
         /// NAV_TIME's `GpsRxBytes`.
         gps_rx_bytes: u16,
         /// Commands placed in time by it.
@@ -66,6 +74,7 @@ pub struct Stepper {
     gps: Option<GpsReceiver>,
     duration_s: f64,
     msgs: Vec<Message>,
+    in_stop: bool,
 }
 
 impl Stepper {
@@ -83,6 +92,7 @@ impl Stepper {
             gps,
             duration_s,
             msgs: Vec::new(),
+            in_stop: false,
         }
     }
 
@@ -135,6 +145,9 @@ impl Stepper {
         let dropped = self.imu.stats.dropped_samples;
         self.imu.next_frames(&mut out.frames);
         out.dropped = self.imu.stats.dropped_samples > dropped;
+        let stopped = out.dropped && self.imu.stopped_at(out.t);
+        out.stop_begins = stopped && !self.in_stop;
+        self.in_stop = stopped;
         out.turntable_frames = 0;
         if let Some(tt) = self.tt.as_mut() {
             self.msgs.clear();
@@ -169,6 +182,7 @@ impl Stepper {
                 };
                 FromNav::Confirmed {
                     sample: k,
+                    imu_timeout: nt.health.imu_timeout,
                     gps_rx_bytes: nt.gps_rx_bytes,
                     placed,
                 }

@@ -139,7 +139,7 @@ pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) ->
             })
             .unwrap_or_default(),
         watchdog: WatchdogConfig {
-            imu_timeout_ms: imu_timeout_ms(s),
+            imu_timeout_ms: IMU_TIMEOUT_MS,
         },
         record: RecordConfig {
             mcap: Some("nav.mcap".into()),
@@ -149,17 +149,11 @@ pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) ->
 }
 
 /// nav's IMU watchdog on the bench (wall time, ms). It decides liveness, never a result: where
-/// the scenario stops the IMU on purpose it fires within the stop (half a second of IMU time at
-/// the scenario's pace, 100 ms at least); otherwise it is a liveness limit of 2 s, which no
-/// wait of the bench's (lockstep, the receiver's bytes, the end of the run) comes near on an
-/// idle or a loaded host.
-pub fn imu_timeout_ms(s: &Scenario) -> u64 {
-    if s.faults.stop_s.is_empty() {
-        2000
-    } else {
-        (500.0 / s.speed.max(1.0)).max(100.0) as u64
-    }
-}
+/// the scenario stops the IMU the scheduler holds the stream until nav's watchdog has reported
+/// the stop ([`emulators::step::Step::stop_begins`]), so it fires once per stop after the same
+/// sample; anywhere else nothing holds the stream anywhere near this long, on an idle or a
+/// loaded host.
+pub const IMU_TIMEOUT_MS: u64 = 1500;
 
 /// The receiver of a scenario with a drive and a `[gps]` table, with receiver model `rx`.
 pub fn gps_run(s: &Scenario, rx: &emulators::gps::ReceiverParams) -> Result<Option<GpsRun>> {
@@ -186,6 +180,7 @@ pub struct InProcessBench {
     bad_from_nav: u64,
     receiver_errors: Vec<(f64, [f64; 3])>,
     port_gone: bool,
+    imu_timeout_ms: u64,
 }
 
 impl InProcessBench {
@@ -213,6 +208,7 @@ impl InProcessBench {
             bad_from_nav: 0,
             receiver_errors: Vec::new(),
             port_gone: false,
+            imu_timeout_ms: cfg.watchdog.imu_timeout_ms,
         })
     }
 
@@ -253,6 +249,13 @@ impl InProcessBench {
     pub fn step(&mut self) -> f64 {
         self.step.step(&mut self.st);
         let t = self.st.t;
+        if self.st.stop_begins {
+            // the IMU stops: nav's watchdog fires before anything more comes (the bus holds
+            // the stream until it has)
+            self.pipeline
+                .set_imu_timeout(true, self.imu_timeout_ms, &mut self.out);
+            self.act();
+        }
         if self.st.frames.len() > self.st.turntable_frames {
             self.t_first.get_or_insert(t);
         }

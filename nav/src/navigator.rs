@@ -1006,4 +1006,44 @@ mod tests {
             assert_eq!(s.utc_edge_offset_s, Some(50_000));
         }
     }
+
+    /// A receiver whose clock jumps (here 100 s ahead, and stays there): the first fixes with
+    /// the new time fit no edge and are set aside, then the edges are tied to its seconds anew
+    /// and its fixes are taken at their edges again.
+    #[test]
+    fn a_receiver_clock_that_jumps_and_stays_is_followed_after_three_fixes() {
+        let mut n = Navigator::new(NavigationConfig::default());
+        let mut taken = Vec::new();
+        for k in 0..30u32 {
+            for step in 0..100 {
+                let t = f64::from(k) + f64::from(step) * 0.01;
+                n.on_time(t);
+                if step == 0 {
+                    assert!(n.on_pps(t));
+                }
+                if step == 10 {
+                    let jump = if k >= 15 { 100.0 } else { 0.0 };
+                    n.on_fix(&timed_fix(1000.0 + f64::from(k) + jump, u64::from(k)));
+                }
+                if let Some(x) = n.last_fix_time()
+                    && taken.last() != Some(&x)
+                {
+                    taken.push(x);
+                }
+            }
+        }
+        let s = n.summary();
+        assert_eq!(
+            (s.clock_jumps, s.utc_reanchors, s.late_fixes),
+            (2, 1, 0),
+            "{s:?}"
+        );
+        assert_eq!(s.utc_edge_offset_s, Some(1100));
+        let seqs: Vec<u64> = taken.iter().map(|x| x.1).collect();
+        assert!(!seqs.contains(&15) && !seqs.contains(&16), "{seqs:?}");
+        for &(at, seq) in &taken {
+            assert!((at - seq as f64).abs() < 1e-9, "fix {seq} taken at {at}");
+        }
+        assert!(seqs.contains(&17) && seqs.contains(&28), "{seqs:?}");
+    }
 }

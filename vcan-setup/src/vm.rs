@@ -453,6 +453,13 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     };
     execs.extend(sibling_executables(&prog_path));
     execs.push(prog_path);
+    // a wrapper (a shell script) names the programs it runs among its arguments: theirs too
+    for a in cmd.iter().skip(1).map(Path::new).filter(|p| p.is_file()) {
+        execs.extend(sibling_executables(a));
+        execs.push(a.to_path_buf());
+    }
+    execs.sort();
+    execs.dedup();
 
     let ctl = tempfile::Builder::new()
         .prefix("vcan-setup-")
