@@ -925,6 +925,15 @@ mod tests {
         }
     }
 
+    /// The fix last taken, when it is new.
+    fn note_taken(n: &Navigator, taken: &mut Vec<(f64, u64)>) {
+        if let Some(x) = n.last_fix_time()
+            && taken.last() != Some(&x)
+        {
+            taken.push(x);
+        }
+    }
+
     fn timed_fix(utc: f64, seq: u64) -> GpsFix {
         GpsFix {
             sentence: "GGA".into(),
@@ -983,11 +992,7 @@ mod tests {
                         true
                     }
                 });
-                if let Some(x) = n.last_fix_time()
-                    && taken.last() != Some(&x)
-                {
-                    taken.push(x);
-                }
+                note_taken(&n, &mut taken);
             }
             let s = n.summary();
             assert_eq!(
@@ -1025,11 +1030,7 @@ mod tests {
                     let jump = if k >= 15 { 100.0 } else { 0.0 };
                     n.on_fix(&timed_fix(1000.0 + f64::from(k) + jump, u64::from(k)));
                 }
-                if let Some(x) = n.last_fix_time()
-                    && taken.last() != Some(&x)
-                {
-                    taken.push(x);
-                }
+                note_taken(&n, &mut taken);
             }
         }
         let s = n.summary();
