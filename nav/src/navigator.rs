@@ -717,7 +717,9 @@ impl Navigator {
             return;
         }
         self.last_good_fix_t = Some(self.last_t);
-        let alt = fix.alt_m.unwrap_or(0.0);
+        // RMC, GLL carry no height: they keep the one GGA gave (a start at height 0 wherever the
+        // vehicle is had every later fix rejected at 1700 m)
+        let alt = fix.alt_m.or(self.first_fix.map(|f| f.2)).unwrap_or(0.0);
         let p = (fix.lat_deg.to_radians(), fix.lon_deg.to_radians(), alt);
         if self.phase != NavPhase::Navigating {
             self.first_fix = Some(p);
@@ -1046,5 +1048,48 @@ mod tests {
             assert!((at - seq as f64).abs() < 1e-9, "fix {seq} taken at {at}");
         }
         assert!(seqs.contains(&17) && seqs.contains(&28), "{seqs:?}");
+    }
+
+    /// Navigation starts at the height the receiver gives, whatever the sentence that came last
+    /// before the start (RMC has none), at an alpine pass and at the Dead Sea: no fix of the
+    /// first minute is rejected.
+    #[test]
+    fn navigation_starts_at_the_receivers_height_with_no_rejection() {
+        for height in [1700.0, -430.0, 4000.0] {
+            let mut n = Navigator::new(NavigationConfig {
+                enabled: true,
+                initial_heading_deg: Some(0.0),
+                ..NavigationConfig::default()
+            });
+            let dt = 0.01;
+            let g = 9.80665 - height * 3.086e-6;
+            for i in 0..6000u32 {
+                let t = f64::from(i + 1) * dt;
+                n.on_update(t, [0.0; 3], [0.0, 0.0, g * dt], dt);
+                if (i + 1) % 100 == 0 {
+                    assert!(n.on_pps(t));
+                    let k = u64::from((i + 1) / 100);
+                    let utc = 40_000.0 + k as f64;
+                    let gga = GpsFix {
+                        alt_m: Some(height),
+                        ..timed_fix(utc, 2 * k)
+                    };
+                    let rmc = GpsFix {
+                        sentence: "RMC".into(),
+                        alt_m: None,
+                        ..timed_fix(utc, 2 * k + 1)
+                    };
+                    n.on_fix(&gga);
+                    n.on_fix(&rmc);
+                }
+            }
+            let s = n.summary();
+            assert_eq!(s.phase, NavPhase::Navigating, "{height} m");
+            let f = s.filter.expect("the filter runs");
+            assert!(f.updates > 40, "{height} m: {f:?}");
+            assert_eq!(f.rejected, 0, "{height} m: {f:?}");
+            let h = s.output.expect("a solution").h_m;
+            assert!((h - height).abs() < 5.0, "{height} m: at {h} m");
+        }
     }
 }
