@@ -435,6 +435,9 @@ struct NavSide {
     gps_rx: Option<u16>,
     /// A NAV_TIME with the imu_timeout bit came (since this was last cleared).
     timeout_seen: bool,
+    /// The receiver's bytes written so far, and the sample of the last epoch, until nav has
+    /// confirmed them on the bus.
+    owed: Option<(u64, u64)>,
     ls: LockstepStats,
     bad: u64,
     latency: Latency,
@@ -488,6 +491,142 @@ impl NavSide {
     fn has_bytes(&self, written: u64) -> bool {
         self.gps_rx == Some((written & 0xFFF) as u16)
     }
+
+    /// In lockstep, what sample `k` must wait for: nav is more than a window behind; an epoch
+    /// written more than a window ago is not confirmed on the bus.
+    fn must_wait(&self, k: u64) -> Option<(bool, bool)> {
+        let l = self.follow?;
+        let behind = self.confirmed.map_or(l.window, |c| c + l.window) < k;
+        let unconfirmed = self
+            .owed
+            .is_some_and(|(bytes, at)| at + l.window < k && !self.has_bytes(bytes));
+        Some((behind, unconfirmed))
+    }
+}
+
+/// The scheduler's socket and the frames waiting to go out on it.
+struct Port<'a> {
+    sock: &'a CanSocket,
+    iface: &'a str,
+    outbox: Outbox,
+}
+
+impl Port<'_> {
+    fn flush(&mut self, nav: &mut NavSide) -> Result<(), CanTxError> {
+        self.outbox
+            .flush(self.sock, self.iface, &mut nav.confirmed, &mut nav.latency)
+    }
+}
+
+/// Before sample `k`: read what nav said (once a batch, or when it must have said more) and,
+/// in lockstep, wait until nav is close enough behind and has confirmed the receiver's bytes.
+fn wait_for_nav(
+    port: &mut Port,
+    nav: &mut NavSide,
+    step: &mut Stepper,
+    k: u64,
+    read_anyway: bool,
+    stop: &AtomicBool,
+) -> Result<(), CanTxError> {
+    let mut waited: Option<Instant> = None;
+    loop {
+        let wait = nav.must_wait(k);
+        if read_anyway || wait.is_some_and(|(b, u)| b || u) {
+            nav.read(port.sock, port.iface, step)?;
+        }
+        let Some((behind, unconfirmed)) = nav.must_wait(k) else {
+            break;
+        };
+        if !behind && !unconfirmed {
+            if nav.owed.is_some_and(|(bytes, _)| nav.has_bytes(bytes)) {
+                nav.owed = None;
+            }
+            break;
+        }
+        // nav cannot confirm what it has not received
+        if !port.outbox.frames.is_empty() {
+            port.flush(nav)?;
+            continue;
+        }
+        let since = *waited.get_or_insert_with(|| {
+            nav.ls.waits += 1;
+            nav.ls.receiver_waits += u64::from(unconfirmed);
+            Instant::now()
+        });
+        if stop.load(Ordering::Relaxed) {
+            // told to stop (nav killed, a drill over, a signal): no more waiting for nav
+            break;
+        }
+        let stall = nav.follow.map_or(Duration::ZERO, |l| l.stall);
+        if since.elapsed() > stall {
+            nav.ls.stalls += 1;
+            nav.follow = None;
+            tracing::warn!(
+                interface = port.iface,
+                "nav confirmed no IMU sample past {:?} (receiver bytes {:?} of {:?}) for {} s: lockstep off, the run is no longer reproducible",
+                nav.confirmed,
+                nav.gps_rx,
+                nav.owed.map(|o| o.0 & 0xFFF),
+                stall.as_secs()
+            );
+            break;
+        }
+        wait_readable(port.sock, Duration::from_millis(2));
+    }
+    if let Some(w) = waited {
+        nav.ls.wait_ms += w.elapsed().as_millis() as u64;
+    }
+    Ok(())
+}
+
+/// The IMU stops: nothing more goes out until nav's watchdog has said so (a NAV_TIME with the
+/// imu_timeout bit), so that it fires once, after the same sample, at any pace.
+fn hold_for_watchdog(
+    port: &mut Port,
+    nav: &mut NavSide,
+    step: &mut Stepper,
+    stall: Duration,
+    stop: &AtomicBool,
+) -> Result<(), CanTxError> {
+    port.flush(nav)?;
+    nav.timeout_seen = false;
+    let since = Instant::now();
+    while !nav.timeout_seen && !stop.load(Ordering::Relaxed) {
+        if since.elapsed() > stall {
+            nav.ls.stalls += 1;
+            tracing::warn!(
+                interface = port.iface,
+                "nav's watchdog did not report the IMU's stop within {} s",
+                stall.as_secs()
+            );
+            break;
+        }
+        wait_readable(port.sock, Duration::from_millis(2));
+        nav.read(port.sock, port.iface, step)?;
+    }
+    nav.ls.wait_ms += since.elapsed().as_millis() as u64;
+    Ok(())
+}
+
+/// The receiver's epochs due after sample `k` to its device; what nav owes on the bus.
+fn deliver_epochs(
+    g: &mut GpsDevice,
+    epochs: &mut Vec<crate::gps::Epoch>,
+    k: u64,
+    nav: &mut NavSide,
+    stop: &AtomicBool,
+) -> Result<(), PtyError> {
+    let limit = nav.follow.map_or(crate::gps::TAKE_WAIT, |l| l.stall);
+    for e in epochs.drain(..) {
+        if let Some(d) = g.deliver(&e, limit, stop)? {
+            nav.ls.receiver_waits += u64::from(d.waited);
+            nav.ls.receiver_stalls += u64::from(d.stalled);
+            if g.confirms_on_bus() {
+                nav.owed = Some((g.stats.bytes, k));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Run every device on `iface` (and the receiver's pty) for the scenario's simulated time,
@@ -507,6 +646,7 @@ pub fn run(
         confirmed: None,
         gps_rx: None,
         timeout_seen: false,
+        owed: None,
         ls: LockstepStats {
             enabled: lockstep.is_some(),
             ..Default::default()
@@ -516,79 +656,27 @@ pub fn run(
     };
     let mut st = Step::default();
     // frames go out in batches of a few samples: one system call instead of one per frame
-    let mut outbox = Outbox {
-        frames: Vec::with_capacity(wire::BATCH),
-        last: None,
-        written: 0,
-        retries: 0,
-        lost_down: 0,
-        log: dev.sent_log.take(),
+    let mut port = Port {
+        sock: &sock,
+        iface,
+        outbox: Outbox {
+            frames: Vec::with_capacity(wire::BATCH),
+            last: None,
+            written: 0,
+            retries: 0,
+            lost_down: 0,
+            log: dev.sent_log.take(),
+        },
     };
     let batch_samples = 16u64;
     let mut max_lag_ms = 0u64;
     let mut silent = false;
-    // the receiver's bytes written so far, and the sample of the last epoch nav must confirm
-    let mut owed: Option<(u64, u64)> = None;
     while dev.step.running() && !stop.load(Ordering::Relaxed) {
         let k = dev.step.next_index();
         let t = dev.step.next_time();
-        // what nav said so far (and, in lockstep, wait until it is close enough behind)
-        let mut waited: Option<Instant> = None;
-        loop {
-            let window = nav.follow.map(|l| l.window);
-            let behind = window.is_some_and(|w| nav.confirmed.map_or(w, |c| c + w) < k);
-            // an epoch written more than a window ago that nav has not confirmed on the bus
-            let unconfirmed = window.is_some_and(|w| {
-                owed.is_some_and(|(bytes, at)| at + w < k && !nav.has_bytes(bytes))
-            });
-            if behind || unconfirmed || k.is_multiple_of(batch_samples) {
-                nav.read(&sock, iface, &mut dev.step)?;
-            }
-            let Some(l) = nav.follow else { break };
-            let behind = nav.confirmed.map_or(l.window, |c| c + l.window) < k;
-            let unconfirmed =
-                owed.is_some_and(|(bytes, at)| at + l.window < k && !nav.has_bytes(bytes));
-            if !behind && !unconfirmed {
-                if owed.is_some_and(|(bytes, _)| nav.has_bytes(bytes)) {
-                    owed = None;
-                }
-                break;
-            }
-            // nav cannot confirm what it has not received
-            if !outbox.frames.is_empty() {
-                outbox.flush(&sock, iface, &mut nav.confirmed, &mut nav.latency)?;
-                continue;
-            }
-            let since = *waited.get_or_insert_with(|| {
-                nav.ls.waits += 1;
-                if unconfirmed {
-                    nav.ls.receiver_waits += 1;
-                }
-                Instant::now()
-            });
-            if stop.load(Ordering::Relaxed) {
-                // told to stop (nav killed, a drill over, a signal): no more waiting for nav
-                break;
-            }
-            if since.elapsed() > l.stall {
-                nav.ls.stalls += 1;
-                nav.follow = None;
-                tracing::warn!(
-                    interface = iface,
-                    "nav confirmed no IMU sample past {:?} (receiver bytes {:?} of {:?}) for {} s: lockstep off, the run is no longer reproducible",
-                    nav.confirmed,
-                    nav.gps_rx,
-                    owed.map(|o| o.0 & 0xFFF),
-                    l.stall.as_secs()
-                );
-                break;
-            }
-            wait_readable(&sock, Duration::from_millis(2));
-        }
-        if let Some(w) = waited {
-            nav.ls.wait_ms += w.elapsed().as_millis() as u64;
-        }
-        if k.is_multiple_of(batch_samples) {
+        let batch_start = k.is_multiple_of(batch_samples);
+        wait_for_nav(&mut port, &mut nav, &mut dev.step, k, batch_start, stop)?;
+        if batch_start {
             clock.sleep_until(t);
             let lag = Instant::now().saturating_duration_since(clock.wall_at(t));
             max_lag_ms = max_lag_ms.max(lag.as_millis() as u64);
@@ -597,26 +685,8 @@ pub fn run(
         if st.stop_begins
             && let Some(l) = nav.follow
         {
-            // the IMU stops: nothing more goes out until nav's watchdog has said so, so that it
-            // fires once, after the same sample, at any pace
-            outbox.flush(&sock, iface, &mut nav.confirmed, &mut nav.latency)?;
             clock.catch_up(t);
-            nav.timeout_seen = false;
-            let since = Instant::now();
-            while !nav.timeout_seen && !stop.load(Ordering::Relaxed) {
-                if since.elapsed() > l.stall {
-                    nav.ls.stalls += 1;
-                    tracing::warn!(
-                        interface = iface,
-                        "nav's watchdog did not report the IMU's stop within {} s",
-                        l.stall.as_secs()
-                    );
-                    break;
-                }
-                wait_readable(&sock, Duration::from_millis(2));
-                nav.read(&sock, iface, &mut dev.step)?;
-            }
-            nav.ls.wait_ms += since.elapsed().as_millis() as u64;
+            hold_for_watchdog(&mut port, &mut nav, &mut dev.step, l.stall, stop)?;
             silent = true;
         }
         if st.dropped {
@@ -633,34 +703,22 @@ pub fn run(
         } else {
             silent = false;
         }
-        outbox.frames.extend_from_slice(&st.frames);
-        outbox.last = Some(k);
+        port.outbox.frames.extend_from_slice(&st.frames);
+        port.outbox.last = Some(k);
         if !st.epochs.is_empty()
             || (k + 1).is_multiple_of(batch_samples)
-            || outbox.frames.len() + 8 > wire::BATCH
+            || port.outbox.frames.len() + 8 > wire::BATCH
         {
-            outbox.flush(&sock, iface, &mut nav.confirmed, &mut nav.latency)?;
+            port.flush(&mut nav)?;
         }
         if let Some(g) = dev.gps.as_mut() {
-            for e in st.epochs.drain(..) {
-                let limit = nav.follow.map_or(crate::gps::TAKE_WAIT, |l| l.stall);
-                if let Some(d) = g.deliver(&e, limit, stop)? {
-                    if d.waited {
-                        nav.ls.receiver_waits += 1;
-                    }
-                    if d.stalled {
-                        nav.ls.receiver_stalls += 1;
-                    }
-                    if g.confirms_on_bus() {
-                        owed = Some((g.stats.bytes, k));
-                    }
-                }
-            }
+            deliver_epochs(g, &mut st.epochs, k, &mut nav, stop)?;
         }
         progress.set(t);
     }
-    outbox.flush(&sock, iface, &mut nav.confirmed, &mut nav.latency)?;
+    port.flush(&mut nav)?;
     progress.set(dev.step.next_time());
+    let outbox = port.outbox;
     let mut ls = nav.ls;
     (ls.latency_p50_ms, ls.latency_p99_ms, ls.latency_samples) = nav.latency.percentiles();
     let (imu, mut turntable) = dev.step.into_parts();

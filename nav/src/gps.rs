@@ -168,6 +168,29 @@ impl GpsDecoder {
         self.stats
     }
 
+    /// Whether the time of day `t` is earlier than the latest before (not across midnight);
+    /// counted. The time to beat stays the latest until the receiver's clock has stayed back
+    /// for [`BACKWARDS_ACCEPTED`] fixes in a row: every sentence of an epoch that stepped back
+    /// is flagged, not only its first, and a receiver whose clock was reset is followed again.
+    fn stepped_back(&mut self, t: Option<f64>) -> bool {
+        let back = match (t, self.last_tod) {
+            // a day wrap (23:59 -> 00:00) is not backwards
+            (Some(now), Some(prev)) => now < prev && prev - now < 43_200.0,
+            _ => false,
+        };
+        if back {
+            self.stats.time_backwards += 1;
+            self.backs_in_row += 1;
+        } else if t.is_some() {
+            self.backs_in_row = 0;
+        }
+        if t.is_some() && (!back || self.backs_in_row >= BACKWARDS_ACCEPTED) {
+            self.last_tod = t;
+            self.backs_in_row = 0;
+        }
+        back
+    }
+
     /// Feed raw bytes from the serial line; decoded fixes go to `fixes`, every line's outcome
     /// (for logs) to `outcomes` when given.
     pub fn push_bytes(&mut self, bytes: &[u8], fixes: &mut Vec<GpsFix>) {
@@ -307,24 +330,7 @@ impl GpsDecoder {
             self.stats.no_fix += 1;
         }
         let t = tod(time);
-        let back = match (t, self.last_tod) {
-            // a day wrap (23:59 -> 00:00) is not backwards
-            (Some(now), Some(prev)) => now < prev && prev - now < 43_200.0,
-            _ => false,
-        };
-        if back {
-            self.stats.time_backwards += 1;
-            self.backs_in_row += 1;
-        } else if t.is_some() {
-            self.backs_in_row = 0;
-        }
-        // the time to beat stays the latest until the receiver's clock has stayed back for
-        // BACKWARDS_ACCEPTED fixes in a row (every sentence of an epoch that stepped back is
-        // flagged, not only its first; a receiver whose clock was reset is followed again)
-        if t.is_some() && (!back || self.backs_in_row >= BACKWARDS_ACCEPTED) {
-            self.last_tod = t;
-            self.backs_in_row = 0;
-        }
+        let back = self.stepped_back(t);
         self.stats.fixes += 1;
         LineOutcome::Fix(GpsFix {
             sentence: sentence.into(),

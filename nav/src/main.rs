@@ -194,29 +194,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                     Some(g) => g.next().await,
                     None => std::future::pending().await,
                 }
-            } => match ev {
-                GpsEvent::Bytes { bytes, t_ns } => {
-                    // the frames received before the bytes were read go through first, those
-                    // after them after: the bytes take their place in the order things arrived
-                    let mut later = Vec::new();
-                    read_errors +=
-                        drain_can(&mut batch, Some(t_ns), &mut later, &mut pipeline, &mut shell, &mut out).await?;
-                    if let Some(r) = shell.recorder {
-                        r.send(Record::GpsBytes { t_ns, bytes: bytes.clone() });
-                    }
-                    pipeline.on_gps_bytes(&bytes, &mut out);
-                    shell.act(&mut out).await?;
-                    take_frames(&mut later, &mut pipeline, &mut shell, &mut out).await?;
-                }
-                GpsEvent::Opened => {
-                    pipeline.on_gps_port(true, "", &mut out);
-                    shell.act(&mut out).await?;
-                }
-                GpsEvent::Closed(why) => {
-                    pipeline.on_gps_port(false, &why, &mut out);
-                    shell.act(&mut out).await?;
-                }
-            },
+            } => read_errors += on_gps_event(ev, &mut batch, &mut pipeline, &mut shell, &mut out).await?,
             r = async {
                 match &shell.sock {
                     Some(s) => s.read_frame_with_timestamps().await,
@@ -283,14 +261,9 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     .await?;
     if let Some(g) = gps.as_mut() {
         while let Some(bytes) = g.try_read() {
-            if let Some(r) = shell.recorder {
-                r.send(Record::GpsBytes {
-                    t_ns: wall_ns(),
-                    bytes: bytes.clone(),
-                });
-            }
-            pipeline.on_gps_bytes(&bytes, &mut out);
-            shell.act(&mut out).await?;
+            shell
+                .gps_bytes(wall_ns(), bytes, &mut pipeline, &mut out)
+                .await?;
         }
     }
     pipeline.flush(&mut out);
@@ -299,22 +272,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     summary.interface = iface.to_string();
     summary.read_errors = read_errors;
     summary.command_send_errors = shell.command_errors;
-    for (file, p) in shell.parameters.drain(..) {
-        match p {
-            nav::params::ParameterFile::Imu(p) => {
-                if let Some(sc) = summary.self_calibration.as_mut() {
-                    sc.parameters = Some(p);
-                    sc.parameters_file = file;
-                }
-            }
-            nav::params::ParameterFile::Redundant(p) => {
-                if let Some(tc) = summary.tetra_calibration.as_mut() {
-                    tc.parameters = Some(p);
-                    tc.parameters_file = file;
-                }
-            }
-        }
-    }
+    file_parameters(&mut summary, shell.parameters.drain(..));
     // SAFETY: getuid(2) cannot fail.
     summary.process_uid = Some(unsafe { libc::getuid() });
     if let Some(s) = &shell.sock {
@@ -363,6 +321,54 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
             .with_context(|| format!("writing summary {}", p.display()))?;
     }
     Ok(summary)
+}
+
+/// What the receiver's port gave, through the pipeline (the read errors met on the way).
+async fn on_gps_event(
+    ev: GpsEvent,
+    batch: &mut Vec<Received>,
+    pipeline: &mut Pipeline,
+    shell: &mut Shell<'_>,
+    out: &mut Vec<Output>,
+) -> Result<u64> {
+    let mut read_errors = 0;
+    match ev {
+        GpsEvent::Bytes { bytes, t_ns } => {
+            // the frames received before the bytes were read go through first, those after
+            // them after: the bytes take their place in the order things arrived
+            let mut later = Vec::new();
+            read_errors = drain_can(batch, Some(t_ns), &mut later, pipeline, shell, out).await?;
+            shell.gps_bytes(t_ns, bytes, pipeline, out).await?;
+            take_frames(&mut later, pipeline, shell, out).await?;
+        }
+        GpsEvent::Opened => pipeline.on_gps_port(true, "", out),
+        GpsEvent::Closed(why) => pipeline.on_gps_port(false, &why, out),
+    }
+    shell.act(out).await?;
+    Ok(read_errors)
+}
+
+/// The parameter files the calibrations wrote (where, and as stamped), into the summary.
+fn file_parameters(
+    summary: &mut Summary,
+    files: impl Iterator<Item = (Option<PathBuf>, nav::params::ParameterFile)>,
+) {
+    for (file, p) in files {
+        match p {
+            nav::params::ParameterFile::Imu(p) => {
+                if let Some(sc) = summary.self_calibration.as_mut() {
+                    sc.parameters = Some(p);
+                    sc.parameters_file = file;
+                }
+            }
+            nav::params::ParameterFile::Redundant(p) => {
+                if let Some(tc) = summary.tetra_calibration.as_mut() {
+                    tc.parameters = Some(p);
+                    tc.parameters_file = file;
+                }
+            }
+        }
+    }
 }
 
 /// Write `text` to `path` through a temporary file beside it and a rename: whoever reads the
@@ -469,6 +475,21 @@ struct Shell<'a> {
 }
 
 impl Shell<'_> {
+    /// The receiver's bytes, read at `t_ns`: recorded, then through the pipeline.
+    async fn gps_bytes(
+        &mut self,
+        t_ns: u64,
+        bytes: Vec<u8>,
+        pipeline: &mut Pipeline,
+        out: &mut Vec<Output>,
+    ) -> Result<()> {
+        pipeline.on_gps_bytes(&bytes, out);
+        if let Some(r) = self.recorder {
+            r.send(Record::GpsBytes { t_ns, bytes });
+        }
+        self.act(out).await
+    }
+
     /// Do what the pipeline asked, in its order.
     async fn act(&mut self, out: &mut Vec<Output>) -> Result<()> {
         for o in out.drain(..) {

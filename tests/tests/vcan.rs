@@ -394,6 +394,23 @@ fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
     assert_eq!(&re["summary"]["north_finding"]["result"], a);
 }
 
+/// `scenarios/drive-gps.toml` shortened to `duration_s`, its receiver's lever arm line replaced by
+/// `receiver` (the receiver's settings), written into `dir`.
+fn drive_variant(dir: &tempfile::TempDir, duration_s: f64, receiver: &str) -> std::path::PathBuf {
+    let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
+    let text = std::fs::read_to_string(base).unwrap();
+    assert!(text.contains("duration_s = 130.0") && text.contains("lever_arm_m = [0.0, 0.5, 1.2]"));
+    let text = text
+        .replace(
+            "duration_s = 130.0",
+            &format!("duration_s = {duration_s:.1}"),
+        )
+        .replace("lever_arm_m = [0.0, 0.5, 1.2]", receiver);
+    let scen = dir.path().join("drive.toml");
+    std::fs::write(&scen, text).unwrap();
+    scen
+}
+
 /// A GPS-aided drive's recording (20 s, its receiver's device gone for 2 s and back) put back
 /// onto vcan and a pty with `hil replay --bus` at four times the recorded pace: the nav binary
 /// sends exactly the frames it sent, and its solutions at the same IMU times are the same to the
@@ -402,19 +419,13 @@ fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
 #[ignore = "needs vcan: run ./run-tests"]
 fn a_recorded_drive_replays_onto_the_bus_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
-    let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
-    let text = std::fs::read_to_string(base)
-        .unwrap()
-        .replace("duration_s = 130.0", "duration_s = 20.0")
-        .replace(
-            "lever_arm_m = [0.0, 0.5, 1.2]",
-            // the first fix at the first PPS edge: nav takes every input in the order it came
-            // (docs/pace.md), so the first fix is tied the same way in the run and the replay
-            "lever_arm_m = [0.0, 0.5, 1.2]\nport_drops = [[10.0, 12.0]]\nttff_s = 0.0",
-        );
-    assert!(text.contains("port_drops") && text.contains("duration_s = 20.0"));
-    let scen = dir.path().join("drive.toml");
-    std::fs::write(&scen, text).unwrap();
+    // the first fix at the first PPS edge: nav takes every input in the order it came
+    // (docs/pace.md), so the first fix is tied the same way in the run and the replay
+    let scen = drive_variant(
+        &dir,
+        20.0,
+        "lever_arm_m = [0.0, 0.5, 1.2]\nport_drops = [[10.0, 12.0]]\nttff_s = 0.0",
+    );
     // the recording is what matters here: the run's own checks are the other tests'
     let (r, code) = hil_run(
         &[
@@ -491,14 +502,7 @@ impl Drop for CpuHog {
 #[ignore = "needs vcan: run ./run-tests"]
 fn a_drive_with_every_receiver_event_sends_the_same_frames_loaded_or_idle() {
     let dir = tempfile::tempdir().unwrap();
-    let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
-    let text = std::fs::read_to_string(base)
-        .unwrap()
-        .replace("duration_s = 130.0", "duration_s = 22.0")
-        .replace("lever_arm_m = [0.0, 0.5, 1.2]", EVERY_RECEIVER_EVENT);
-    assert!(text.contains("garbage_at_s") && text.contains("duration_s = 22.0"));
-    let scen = dir.path().join("drive.toml");
-    std::fs::write(&scen, text).unwrap();
+    let scen = drive_variant(&dir, 22.0, EVERY_RECEIVER_EVENT);
     let run = |speed: &str, name: &str| {
         let out = dir.path().join(name);
         let t = std::time::Instant::now();
