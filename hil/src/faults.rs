@@ -304,7 +304,7 @@ pub fn matrix() -> Vec<FaultCase> {
         FaultCase {
             name: "imu-stream-stops",
             base: Base::Imu,
-            injected: "the IMU sends nothing from 1.5 s to 5 s (the stream held until nav's watchdog has reported it: the bench's is 1.5 s of wall time)",
+            injected: "the IMU sends nothing from 1.5 s to 5 s (the stream held until nav's watchdog has reported it: the bench's is 5 s of wall time)",
             expected: "the watchdog reports an IMU timeout (an event, the counter, a NAV_TIME with the imu_timeout bit) and the data's return; the stop's samples counted missing",
             at_s: 1.5,
             inject: |s, _| s.faults.stop_s = vec![[1.5, 5.0]],

@@ -153,7 +153,7 @@ pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) ->
 /// the stop ([`emulators::step::Step::stop_begins`]), so it fires once per stop after the same
 /// sample; anywhere else nothing holds the stream anywhere near this long, on an idle or a
 /// loaded host.
-pub const IMU_TIMEOUT_MS: u64 = 1500;
+pub const IMU_TIMEOUT_MS: u64 = 5000;
 
 /// The receiver of a scenario with a drive and a `[gps]` table, with receiver model `rx`.
 pub fn gps_run(s: &Scenario, rx: &emulators::gps::ReceiverParams) -> Result<Option<GpsRun>> {

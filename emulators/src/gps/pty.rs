@@ -285,17 +285,18 @@ pub struct GpsTxStats {
     pub port_drops: u64,
     /// Epochs lost because nobody read the port (its buffer was full).
     pub unread_epochs: u64,
-    /// Epochs the reader had not taken within [`TAKE_WAIT`] of writing (the stream then went
-    /// on: a fix may have reached nav late).
+    /// Epochs the reader had not taken within the wait's limit ([`TAKE_WAIT`] without
+    /// lockstep, the stall limit in it) of writing (the stream then went on: a fix may have
+    /// reached nav late).
     pub slow_reads: u64,
 }
 
 /// How long bytes written to a pty may take to reach its reader's side.
 pub const ARRIVAL_S: Duration = Duration::from_millis(15);
 
-/// How long the stream waits for nav's reader to take a receiver's output: a reader that is
-/// there takes it within milliseconds; one that is not (a re-plugged port nav has not opened
-/// yet) must not stop the IMU stream long enough for nav's watchdog (100 ms at least) to fire.
+/// How long the stream waits for a reader to open the device or take a receiver's output when
+/// nothing follows nav (no lockstep: nav is not ours, or has stopped confirming). In lockstep
+/// the scheduler waits as long as it waits for nav's NAV_TIME (its stall limit).
 pub const TAKE_WAIT: Duration = Duration::from_millis(50);
 
 /// The receiver's epochs on its pty, as the bus scheduler delivers them.
