@@ -717,6 +717,13 @@ pub fn run(
         progress.set(t);
     }
     port.flush(&mut nav)?;
+    if let Some(l) = nav.follow
+        && !stop.load(Ordering::Relaxed)
+        && dev.step.end_awaits_watchdog()
+    {
+        // the end of the stream is a stop: nav's watchdog reports it before nav is told to stop
+        hold_for_watchdog(&mut port, &mut nav, &mut dev.step, l.stall, stop)?;
+    }
     progress.set(dev.step.next_time());
     let outbox = port.outbox;
     let mut ls = nav.ls;

@@ -75,6 +75,18 @@ pub struct Stepper {
     duration_s: f64,
     msgs: Vec<Message>,
     in_stop: bool,
+    procedure_end: Option<ProcedureEnd>,
+}
+
+/// The stream's end when nav's procedure is over ([`Stepper::end_with_procedure`]).
+#[derive(Debug, Clone, Copy)]
+struct ProcedureEnd {
+    /// Samples after the NAV_TIME that says so.
+    margin: u64,
+    /// A NAV_TIME has shown a procedure running.
+    seen: bool,
+    /// The last sample to send.
+    last: Option<u64>,
 }
 
 impl Stepper {
@@ -93,12 +105,37 @@ impl Stepper {
             duration_s,
             msgs: Vec::new(),
             in_stop: false,
+            procedure_end: None,
         }
     }
 
-    /// The scenario's time is not over yet.
+    /// End the stream when nav's procedure on the mechanism (north-finding, a calibration) is
+    /// over, as nav's NAV_TIME says it (its mode leaves north-finding, levelling and
+    /// calibrating after it has shown one), `margin` samples after the sample that NAV_TIME
+    /// names. The end is then a point of the data, not of the moment somebody read nav's
+    /// report: with `margin` at least the lockstep's window the scheduler has never sent past
+    /// it when it learns of it, at any pace, and the in-process run ends at the same sample.
+    pub fn end_with_procedure(mut self, margin: u64) -> Self {
+        self.procedure_end = Some(ProcedureEnd {
+            margin,
+            seen: false,
+            last: None,
+        });
+        self
+    }
+
+    /// The scenario's time is not over yet, nor nav's procedure (when the stream ends with it).
     pub fn running(&self) -> bool {
         self.imu.next_time() <= self.duration_s + 1e-9
+            && self
+                .procedure_end
+                .and_then(|p| p.last)
+                .is_none_or(|last| self.next_index() <= last)
+    }
+
+    /// The sample the stream ends after because nav's procedure is over, once nav has said so.
+    pub fn procedure_ended_at(&self) -> Option<u64> {
+        self.procedure_end.and_then(|p| p.last)
     }
 
     /// Simulated time at the end of the next sample, s.
@@ -180,6 +217,15 @@ impl Stepper {
                     Some(tt) if lockstep => tt.confirmed(k),
                     _ => 0,
                 };
+                if let Some(p) = self.procedure_end.as_mut() {
+                    use wire::NavMode as M;
+                    let running =
+                        matches!(nt.mode, M::NorthFinding | M::Levelling | M::Calibrating);
+                    p.seen |= running;
+                    if p.seen && !running && p.last.is_none() {
+                        p.last = Some(k + p.margin);
+                    }
+                }
                 FromNav::Confirmed {
                     sample: k,
                     imu_timeout: nt.health.imu_timeout,
@@ -199,6 +245,16 @@ impl Stepper {
             Ok(_) => FromNav::Other,
             Err(_) => FromNav::Unexpected,
         }
+    }
+
+    /// The stream is over: whether nav's watchdog is still to report it. The end of the stream
+    /// is an IMU stop like any other, so nav's watchdog fires once after the last sample on the
+    /// bus and in process alike, before nav is stopped, whatever the host's pace (else the time
+    /// from the last sample to nav's SIGTERM, wall time, would decide whether it fires). No:
+    /// when the stream already ends in a stop (reported where it began), or when no gyro frame
+    /// ever went out (nav's watchdog watches a stream that has begun).
+    pub fn end_awaits_watchdog(&self) -> bool {
+        !self.in_stop && self.imu.stats.gyro_frames > 0
     }
 
     /// The devices back, at the end: the IMU stream and the turntable.

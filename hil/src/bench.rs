@@ -112,13 +112,7 @@ pub fn emulators(s: &Scenario, seconds: f64) -> EmulatorBench {
 /// [`emulators::step::Stepper`]; nothing answers the turntable, so it only reports its status).
 pub fn each_sample(s: &Scenario, seconds: f64, mut f: impl FnMut(&[RawFrame])) {
     let (motion, tt) = s.build();
-    let latency = emulators::bus::Lockstep::at_rate(s.imu.rate_hz).latency;
-    let mut step = emulators::step::Stepper::new(
-        BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
-        tt.map(|t| emulators::bus::TtBus::new(t, s.imu.rate_hz, latency)),
-        None,
-        seconds,
-    );
+    let mut step = crate::inproc::stepper(s, motion, tt, None, seconds);
     let mut st = emulators::step::Step::default();
     while step.running() {
         step.step(&mut st);
@@ -256,7 +250,6 @@ pub struct PipelineBench {
 /// Time nav's pipeline on `seconds` of drive scenario `s` (a drive with a receiver and no
 /// turntable: nothing nav sends changes what the devices do).
 pub fn pipeline_drive(s: &Scenario, seconds: f64) -> Result<PipelineBench> {
-    use emulators::gps::GpsReceiver;
     enum Input {
         Frame(RawFrame),
         Gps(String),
@@ -271,12 +264,7 @@ pub fn pipeline_drive(s: &Scenario, seconds: f64) -> Result<PipelineBench> {
     let run = crate::inproc::gps_run(s, rx)?.context("the scenario has no [drive]")?;
     let (motion, _) = s.build();
     // the devices in the scheduler's order, taken before the clock starts
-    let mut step = emulators::step::Stepper::new(
-        BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
-        None,
-        Some(GpsReceiver::new(run)),
-        seconds,
-    );
+    let mut step = crate::inproc::stepper(s, motion, None, Some(run), seconds);
     let mut st = emulators::step::Step::default();
     let mut inputs = Vec::new();
     while step.running() {

@@ -5,10 +5,9 @@
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, anyhow};
 use emulators::bus::{BusOutcome, Devices, Lockstep};
-use emulators::can::{BusStream, Progress, TurntableTxStats};
+use emulators::can::{Progress, TurntableTxStats};
 use emulators::clock::SimClock;
 use emulators::gps::GpsDevice;
-use emulators::imu::ImuEmulator;
 use emulators::turntable::Turntable;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -66,12 +65,7 @@ pub fn start_scenario(
     let (motion, turntable) = s.build();
     let (receiver, gps) = gps.unzip();
     let devices = Devices {
-        step: emulators::step::Stepper::new(
-            BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
-            turntable.map(|tt| emulators::bus::TtBus::new(tt, s.imu.rate_hz, lockstep.latency)),
-            receiver.map(emulators::gps::GpsReceiver::new),
-            s.duration_s,
-        ),
+        step: crate::inproc::stepper(s, motion, turntable, receiver, s.duration_s),
         gps,
         sent_log: sent_log
             .map(|p| emulators::can::SentLog::create(p, iface))

@@ -499,11 +499,10 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
                 .unwrap_or_default();
             info!(interface = %opts.iface, flags = flags.trim(), "the interface is back up");
         }
+        // (a procedure with no drive after it ends the stream itself, when nav's NAV_TIME says
+        // it is over: `inproc::stepper`)
         for l in nav.lines.try_iter() {
-            if drill.line(&l, opts.progress) && s.drive.is_none() {
-                // north-finding reported: the drill is over (a drive goes on to navigate)
-                devices.stop();
-            }
+            drill.line(&l, opts.progress);
         }
         if opts.progress
             && ((s.north_finding.is_none()
@@ -543,8 +542,11 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     phases.end("devices");
     let sim_reached = devices.sim_time();
     let bus = devices.join();
-    // a moment for nav to take the last frames (it also drains its socket when told to stop)
-    std::thread::sleep(Duration::from_millis(100));
+    // in lockstep nav has confirmed the last sample and reported the stream's end; else a
+    // moment for nav to take the last frames (it also drains its socket when told to stop)
+    if !s.bus.lockstep {
+        std::thread::sleep(Duration::from_millis(100));
+    }
     if killed_at.is_none() {
         memory.read(nav.child.id(), sim_reached);
     }

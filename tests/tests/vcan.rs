@@ -384,6 +384,27 @@ fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
         "the same drill at x3 and x25 must give the same result"
     );
     assert_eq!(r["drill"]["duration_s"], fast["drill"]["duration_s"]);
+    // and all nav sent, to its last frame: the drill's end is where nav's NAV_TIME says the
+    // procedure is over, and the stream's end waits for nav's watchdog, so no wall time
+    // decides how many samples nav gets after its result
+    let hash = |r: &Value| {
+        r["nav"]["solution"]["sent_hash"]
+            .as_str()
+            .map(str::to_string)
+    };
+    let frames = |r: &Value| r["nav"]["solution"]["frames_sent"].as_u64();
+    eprintln!(
+        "drill sent hash at x3: {:?}, {:?} frames",
+        hash(&r),
+        frames(&r)
+    );
+    assert!(
+        hash(&r).is_some_and(|h| !h.is_empty()),
+        "{}",
+        r["nav"]["solution"]
+    );
+    assert_eq!(hash(&r), hash(&fast), "what nav sent at x3 and x25");
+    assert_eq!(frames(&r), frames(&fast));
     // in process (no bus, the Monte Carlo's path) the very same result: checked on the host
     // from the report kept here (tests/tests/in_process.rs), where it takes a second, not ten
     keep_file(x3.path(), "drill-x3", "report.json");

@@ -161,11 +161,7 @@ impl GpsPty {
     /// Wait until the reader has taken everything written, at most `timeout`; whether it did.
     /// A receiver's fix must reach nav before the IMU stream runs on past the time nav applies
     /// it: the bus scheduler and the player hold the stream here, as lockstep holds it for the
-    /// frames.
-    ///
-    /// A pty hands what is written to the reader's side a moment later (a kernel work item), so
-    /// the count reads 0 both before the bytes arrive and after they are taken: bytes never
-    /// seen waiting within [`ARRIVAL_S`] are taken as read at once.
+    /// frames. The answer comes from the kernel, not from a guess about time ([`unread_in`]).
     pub fn wait_taken(&self, timeout: Duration) -> bool {
         self.wait_taken_until(timeout, &AtomicBool::new(false))
     }
@@ -173,16 +169,13 @@ impl GpsPty {
     /// [`GpsPty::wait_taken`], ending early when `stop` is set.
     pub fn wait_taken_until(&self, timeout: Duration, stop: &AtomicBool) -> bool {
         let start = std::time::Instant::now();
-        let mut seen = false;
         let Some(probe) = self.probe() else {
             return true;
         };
         loop {
             match unread_in(&probe) {
-                None => return true,
-                Some(0) if seen || start.elapsed() >= ARRIVAL_S => return true,
-                Some(0) => {}
-                Some(_) => seen = true,
+                None | Some(0) => return true,
+                Some(_) => {}
             }
             if start.elapsed() >= timeout || stop.load(Ordering::Relaxed) {
                 return false;
@@ -197,8 +190,24 @@ impl GpsPty {
     }
 }
 
-/// What is waiting to be read on the device `f` is open on.
+/// What is waiting to be read on the device `f` is open on, bytes still on their way to the
+/// reader's side included.
+///
+/// A pty hands what is written to the reader's side in a kernel work item
+/// (`flush_to_ldisc`), so the unread count alone reads 0 both before the bytes arrive and after
+/// they are taken. The line discipline's poll, when it finds nothing to read, first waits for
+/// that work item to finish (`tty_buffer_flush_work` in `n_tty_poll`): after a poll the count
+/// is exact, however late the kernel runs its work.
 fn unread_in(f: &std::fs::File) -> Option<usize> {
+    let mut pfd = libc::pollfd {
+        fd: f.as_raw_fd(),
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    // SAFETY: poll(2) on one descriptor we hold open, not waiting.
+    if unsafe { libc::poll(&mut pfd, 1, 0) } < 0 {
+        return None;
+    }
     let mut n: libc::c_int = 0;
     // SAFETY: FIONREAD on a descriptor we hold open writes one int.
     let r = unsafe { libc::ioctl(f.as_raw_fd(), libc::FIONREAD, &mut n) };
@@ -290,9 +299,6 @@ pub struct GpsTxStats {
     /// reached nav late).
     pub slow_reads: u64,
 }
-
-/// How long bytes written to a pty may take to reach its reader's side.
-pub const ARRIVAL_S: Duration = Duration::from_millis(15);
 
 /// How long the stream waits for a reader to open the device or take a receiver's output when
 /// nothing follows nav (no lockstep: nav is not ours, or has stopped confirming). In lockstep
@@ -518,11 +524,7 @@ mod tests {
             .unwrap();
         assert_eq!(pty.unread(), Some(0));
         pty.write(b"$GPGGA,1*00\r\n").unwrap();
-        // on the reader's side a moment later
-        let t = std::time::Instant::now();
-        while pty.unread() == Some(0) && t.elapsed() < Duration::from_secs(1) {
-            std::thread::sleep(Duration::from_micros(100));
-        }
+        // counted at once, though the kernel hands the bytes over in a work item of its own
         assert_eq!(pty.unread(), Some(13));
         let t = std::time::Instant::now();
         assert!(!pty.wait_taken(Duration::from_millis(30)));
@@ -531,6 +533,29 @@ mod tests {
         let n = reader.read(&mut buf).unwrap();
         assert_eq!(&buf[..n], b"$GPGGA,1*00\r\n");
         assert!(pty.wait_taken(Duration::from_millis(30)));
+    }
+
+    /// Right after each write the count has the bytes, and right after the reader took them it
+    /// has none: never a guess from time (the kernel's work item that moves them is waited for).
+    #[test]
+    fn the_unread_count_is_exact_right_after_each_write_and_each_read() {
+        let mut pty = GpsPty::open().unwrap();
+        let mut reader = serialport::new(pty.path(), 9600)
+            .timeout(Duration::from_millis(500))
+            .open()
+            .unwrap();
+        let line = b"$GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W*6A\r\n";
+        let mut buf = [0u8; 128];
+        for _ in 0..500 {
+            pty.write(line).unwrap();
+            assert_eq!(pty.unread(), Some(line.len()));
+            let mut got = 0;
+            while got < line.len() {
+                got += reader.read(&mut buf[got..]).unwrap();
+            }
+            assert_eq!(&buf[..got], line);
+            assert!(pty.wait_taken(Duration::ZERO));
+        }
     }
 
     /// The device has a reader while somebody has it open, and none before or after: what
