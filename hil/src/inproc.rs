@@ -324,7 +324,7 @@ impl InProcessBench {
     pub fn finish(&mut self) {
         if self.step.end_awaits_watchdog() {
             self.pipeline
-                .set_imu_timeout(true, self.imu_timeout_ms, &mut self.out);
+                .stream_ended(self.imu_timeout_ms, &mut self.out);
             self.act();
         }
         self.pipeline.flush(&mut self.out);

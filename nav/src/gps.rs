@@ -42,6 +42,47 @@ pub struct GpsStats {
     pub out_of_range: u64,
     /// Fixes whose time went backwards against the previous one (flagged).
     pub time_backwards: u64,
+    /// The receiver's statements of its own accuracy (GST) with usable sigmas.
+    #[serde(default)]
+    pub accuracy: u64,
+    /// GST sentences whose sigmas are missing or not plausible (a receiver without a fix
+    /// states hundreds of kilometres): not used.
+    #[serde(default)]
+    pub accuracy_unusable: u64,
+}
+
+/// The largest 1-sigma error a GST may state and still be used, m.
+pub const MAX_GST_SIGMA_M: f64 = 500.0;
+
+/// The receiver's own statement of its accuracy (NMEA GST): 1-sigma errors of latitude,
+/// longitude and altitude, m.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
+pub struct GpsAccuracy {
+    /// Seconds of the UTC day of the fix it describes.
+    pub time_of_day_s: Option<f64>,
+    /// Latitude (north) error, 1 sigma, m.
+    pub lat_sigma_m: f64,
+    /// Longitude (east) error, 1 sigma, m.
+    pub lon_sigma_m: f64,
+    /// Altitude error, 1 sigma, m (none when the receiver leaves it empty).
+    pub alt_sigma_m: Option<f64>,
+}
+
+impl GpsAccuracy {
+    /// From a parsed GST: none when latitude or longitude sigma is missing, not positive or
+    /// over [`MAX_GST_SIGMA_M`] (an altitude sigma like that is dropped alone).
+    fn of(g: &nmea::sentences::GstData, time_of_day_s: Option<f64>) -> Option<Self> {
+        let ok = |v: Option<f32>| {
+            v.map(f64::from)
+                .filter(|v| v.is_finite() && *v > 0.0 && *v <= MAX_GST_SIGMA_M)
+        };
+        Some(Self {
+            time_of_day_s,
+            lat_sigma_m: ok(g.lat_sd)?,
+            lon_sigma_m: ok(g.long_sd)?,
+            alt_sigma_m: ok(g.alt_sd),
+        })
+    }
 }
 
 /// One decoded position fix (one line of the JSON-lines export).
@@ -138,6 +179,8 @@ impl LineFramer {
 pub enum LineOutcome {
     /// A position fix.
     Fix(GpsFix),
+    /// The receiver's accuracy (GST).
+    Accuracy(GpsAccuracy),
     /// Accepted, no position in it (GSA, GSV, VTG, ZDA, ...).
     Other,
     /// Wrong checksum.
@@ -156,6 +199,7 @@ pub struct GpsDecoder {
     date: Option<chrono::NaiveDate>,
     last_tod: Option<f64>,
     backs_in_row: u32,
+    accuracies: Vec<GpsAccuracy>,
 }
 
 /// Fixes in a row whose time is earlier than the latest before the decoder takes the
@@ -199,10 +243,18 @@ impl GpsDecoder {
         self.framer.push(bytes, &mut st, &mut lines);
         self.stats = st;
         for l in lines {
-            if let LineOutcome::Fix(f) = self.line(&l) {
-                fixes.push(f);
+            match self.line(&l) {
+                LineOutcome::Fix(f) => fixes.push(f),
+                LineOutcome::Accuracy(a) => self.accuracies.push(a),
+                _ => {}
             }
         }
+    }
+
+    /// The receiver's accuracy statements decoded by [`GpsDecoder::push_bytes`] since the last
+    /// call.
+    pub fn take_accuracies(&mut self) -> Vec<GpsAccuracy> {
+        std::mem::take(&mut self.accuracies)
     }
 
     /// Decode one framed line.
@@ -299,6 +351,18 @@ impl GpsDecoder {
                 None,
                 true,
             ),
+            ParseResult::GST(g) => {
+                return match GpsAccuracy::of(g, tod(g.time)) {
+                    Some(a) => {
+                        self.stats.accuracy += 1;
+                        LineOutcome::Accuracy(a)
+                    }
+                    None => {
+                        self.stats.accuracy_unusable += 1;
+                        LineOutcome::Other
+                    }
+                };
+            }
             ParseResult::ZDA(z) => {
                 if let Some(d) = z.utc_date() {
                     self.date = Some(d);

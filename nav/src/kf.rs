@@ -49,17 +49,34 @@ type VecN = SVector<f64, N>;
 pub struct FilterConfig {
     /// `standard`, `fading` or `adaptive`.
     pub kind: FilterKind,
-    /// Fading-memory factor (applied at each measurement to the navigation and IMU states).
-    /// Paper 003 uses 1.2 with the receiver's error taken for white noise; with the receiver's
-    /// wander modelled, 1.02 (a memory of about 50 fixes) keeps the sigmas consistent (see
-    /// docs/navigation.md).
+    /// Fading-memory factor per second of fixes (applied at each measurement to the navigation
+    /// and IMU states, as `s^dt` with `dt` the time since the previous fix, at most 1 s: per
+    /// fix at 1 Hz, and the same memory in time at any rate). Paper 003 uses 1.2 at 1 Hz with
+    /// the receiver's error taken for white noise; with the receiver's wander modelled, 1.02
+    /// (a memory of about 50 s) keeps the sigmas consistent (see docs/navigation.md).
     pub fading_factor: f64,
-    /// The adaptive filter's forgetting factor `b` (0-1): its noise estimate remembers about
-    /// `1 / (1 - b)` fixes.
+    /// The adaptive filter's forgetting factor `b` per second of fixes (0-1, as `b^dt` per
+    /// fix): its noise estimate remembers about `1 / (1 - b)` seconds.
     pub adaptive_forgetting: f64,
     /// The HDOP at which `gps_sigma_m` and `gps_sigma_h_m` hold: the white noise assumed for
-    /// each fix is scaled by its HDOP over this (0: the HDOP is not used).
+    /// each fix is scaled by its HDOP over this (0: the HDOP is not used). Used only when
+    /// neither GST nor `gps_uere_m` states the receiver's accuracy.
     pub hdop_ref: f64,
+    /// Take the receiver's own accuracy (NMEA GST) when it states one: the white noise and the
+    /// correlated error the filter assumes are scaled together by GST's sigma over the
+    /// configured total (`hypot(gps_sigma_m, gps_gm_sigma_m)`, and the same for the height).
+    pub use_gst: bool,
+    /// Without GST: the receiver's 1-sigma error per horizontal axis per unit of HDOP (white
+    /// and wander together), m; each fix's error is its HDOP times this, the height's
+    /// `gps_sigma_h_m / gps_sigma_m` times that. 0: HDOP does not set the size (the configured
+    /// noise holds).
+    pub gps_uere_m: f64,
+    /// Where the receiver states no accuracy of its own (no GST), learn the size of its error
+    /// from the innovations: the configured (or HDOP-sized) white noise and wander are scaled
+    /// together by a factor that brings the normalized innovations to their expected size,
+    /// remembering about a minute. A receiver of another class than the configured one then
+    /// gets sigmas that fit it.
+    pub learn_receiver_scale: bool,
     /// `feedback` (closed loop) or `output` (paper 003's output correction).
     pub correction: Correction,
     /// The receiver's white position noise the filter assumes, per horizontal axis (1 sigma), m.
@@ -71,8 +88,13 @@ pub struct FilterConfig {
     pub gps_gm_sigma_m: f64,
     /// Its height part, m.
     pub gps_gm_sigma_h_m: f64,
-    /// Its correlation time, s.
+    /// Its correlation time, s (for a receiver of the configured size: see
+    /// `gps_gm_tau_follows_size`).
     pub gps_gm_tau_s: f64,
+    /// A receiver better than the configured one (by GST, HDOP or what the filter learnt) has
+    /// a faster wander: the correlation time shrinks with the square root of its size over
+    /// the configured, to a fifth at most. false: `gps_gm_tau_s` always.
+    pub gps_gm_tau_follows_size: bool,
     /// Gyro white noise (angle random walk), deg/sqrt(h).
     pub gyro_arw_dpsh: f64,
     /// Accelerometer white noise (velocity random walk), m/s/sqrt(s).
@@ -115,6 +137,7 @@ impl FilterConfig {
             ("gps_gm_sigma_m", self.gps_gm_sigma_m),
             ("gps_gm_sigma_h_m", self.gps_gm_sigma_h_m),
             ("hdop_ref", self.hdop_ref),
+            ("gps_uere_m", self.gps_uere_m),
             ("gyro_arw_dpsh", self.gyro_arw_dpsh),
             ("accel_vrw_mpss", self.accel_vrw_mpss),
             ("init_vel_mps", self.init_vel_mps),
@@ -197,6 +220,9 @@ impl Default for FilterConfig {
             fading_factor: 1.02,
             adaptive_forgetting: 0.95,
             hdop_ref: 0.0,
+            use_gst: true,
+            gps_uere_m: 0.0,
+            learn_receiver_scale: true,
             correction: Correction::Feedback,
             // a 25 m class receiver (paper 003's): 12 m over 300 s plus 6 m white per axis, the
             // height 1.6 times the horizontal
@@ -205,6 +231,7 @@ impl Default for FilterConfig {
             gps_gm_sigma_m: 12.0,
             gps_gm_sigma_h_m: 19.2,
             gps_gm_tau_s: 300.0,
+            gps_gm_tau_follows_size: true,
             gyro_arw_dpsh: 0.1 / 60.0,
             accel_vrw_mpss: 0.001,
             init_att_deg: [0.05, 0.05, 0.1],
@@ -240,7 +267,57 @@ pub struct FilterStats {
     /// The white noise the filter assumes now (north, east, up; 1 sigma at the reference HDOP),
     /// m: the configured one, or the adaptive filter's estimate.
     pub gps_sigma_now_m: [f64; 3],
+    /// Fixes whose size came from the receiver's GST.
+    #[serde(default)]
+    pub sized_by_gst: u64,
+    /// Fixes whose size came from their HDOP (`gps_uere_m`, or `hdop_ref` for the white part).
+    #[serde(default)]
+    pub sized_by_hdop: u64,
+    /// Fixes sized by the configured noise alone.
+    #[serde(default)]
+    pub sized_by_config: u64,
+    /// The receiver's correlated error the filter assumes now, over the configured one
+    /// (north, east, up): follows what the receiver states, smoothed over 10 s.
+    #[serde(default)]
+    pub receiver_scale: [f64; 3],
+    /// The factor learnt from the innovations (horizontal, vertical) where the receiver
+    /// states no accuracy (`learn_receiver_scale`).
+    #[serde(default)]
+    pub learned_scale: [f64; 2],
 }
+
+/// What the receiver says of a fix's accuracy.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StatedAccuracy {
+    /// GST's 1-sigma errors of latitude (north) and longitude (east), and of altitude when it
+    /// gives one, m.
+    pub gst: Option<([f64; 2], Option<f64>)>,
+    /// GGA's HDOP.
+    pub hdop: Option<f64>,
+}
+
+/// Where a fix's assumed error came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum SizedBy {
+    Gst,
+    Hdop,
+    Config,
+}
+
+/// The receiver's correlated error follows what the receiver states with this time constant,
+/// s (its statements jitter from fix to fix; the wander they describe does not).
+const RECEIVER_SCALE_TAU_S: f64 = 10.0;
+
+/// The learnt receiver scale: the normalized innovations are averaged over this long, s of
+/// fixes (over the fixes so far at the start) ...
+const LEARN_MEMORY_S: f64 = 20.0;
+
+/// ... and the scale moves to what their average asks with this time constant, s.
+const LEARN_TAU_S: f64 = 10.0;
+
+/// A fix's normalized innovation counts at most this much in the learnt scale (a multipath
+/// jump that passed the gate must not inflate it).
+const LEARN_RHO_MAX: f64 = 9.0;
 
 /// The filter.
 #[derive(Debug, Clone)]
@@ -262,6 +339,17 @@ pub struct Kf {
     /// The receiver's white noise variance (north, east, up; at the reference HDOP), m^2: the
     /// configured one, or the adaptive filter's estimate.
     r_m2: [f64; 3],
+    /// Time propagated since the last fix was offered, s: the fading and the adaptive
+    /// forgetting are per second, so that their memory is the same at any fix rate.
+    since_update: f64,
+    /// The receiver's correlated error over the configured one (north, east, up), once a fix
+    /// has said.
+    rx_scale: Option<[f64; 3]>,
+    /// The learnt scale (horizontal, vertical), the average normalized innovation it still
+    /// has to answer, and the seconds of fixes it has learnt from.
+    learned: [f64; 2],
+    learn_rho: [f64; 2],
+    learned_s: f64,
 }
 
 fn skew(v: &Vector3<f64>) -> SMatrix<f64, 3, 3> {
@@ -316,6 +404,11 @@ impl Kf {
             last_nis: None,
             rejected_in_a_row: 0,
             r_m2,
+            since_update: 0.0,
+            rx_scale: None,
+            learned: [1.0; 2],
+            learn_rho: [1.0; 2],
+            learned_s: 0.0,
         }
     }
 
@@ -350,15 +443,44 @@ impl Kf {
         }
     }
 
+    /// The INS starts at a fix (its position, at state `s`): its position error is that fix's
+    /// error, the receiver's wander plus a white draw, of the size the receiver stated
+    /// ([`StatedAccuracy`], as a fix is sized in [`Kf::update`]). The position variance is set
+    /// to that and correlated with the receiver-error states: the filter knows that the INS
+    /// and the receiver are off by the same wander at the start. With `init_pos_m` (10 m) and
+    /// no correlation, a start at the fix of a 25 m class receiver (21 m vertical) had a
+    /// position NEES of 2 on a two-minute drive.
+    pub fn started_at_fix(&mut self, acc: &StatedAccuracy, s: &NavState) {
+        let (stated, _) = self.stated_scale(acc);
+        self.follow_receiver_scale(stated, 1.0);
+        let (rm, rn) = earth::radii(s.lat);
+        let m_per = [rm + s.h, (rn + s.h) * s.lat.cos(), 1.0];
+        for i in 0..3 {
+            let white = self.r_m2[i] * stated[i] * stated[i] / (m_per[i] * m_per[i]);
+            let pbb = self.p[(B + i, B + i)];
+            for j in 0..N {
+                self.p[(6 + i, j)] = 0.0;
+                self.p[(j, 6 + i)] = 0.0;
+            }
+            self.p[(6 + i, 6 + i)] = pbb + white;
+            self.p[(6 + i, B + i)] = pbb;
+            self.p[(B + i, 6 + i)] = pbb;
+            self.cap[6 + i] = self.cap[6 + i].max(100.0 * (pbb + white));
+        }
+    }
+
     /// Counters.
     pub fn stats(&self) -> FilterStats {
         let g = (self.gyro_bias + Vector3::new(self.x[9], self.x[10], self.x[11]))
             * (3600.0f64.to_degrees());
         let a = self.accel_bias + Vector3::new(self.x[12], self.x[13], self.x[14]);
+        let k = self.rx_scale.unwrap_or([1.0; 3]);
         FilterStats {
             gyro_bias_dph: g.into(),
             accel_bias_mps2: a.into(),
-            gps_sigma_now_m: self.r_m2.map(f64::sqrt),
+            gps_sigma_now_m: std::array::from_fn(|i| self.r_m2[i].sqrt() * k[i]),
+            receiver_scale: k,
+            learned_scale: self.learned,
             ..self.stats
         }
     }
@@ -438,7 +560,7 @@ impl Kf {
         // the receiver's error: first-order Gauss-Markov (in F before the transition matrix is
         // formed: without its decay the receiver's error became a random walk and the position
         // sigma grew without bound, 14 m to 50 m over the campus loop)
-        let tau = self.cfg.gps_gm_tau_s.max(1e-3);
+        let tau = self.receiver_tau_s();
         for i in 0..3 {
             f[(B + i, B + i)] = -1.0 / tau;
         }
@@ -446,30 +568,123 @@ impl Kf {
         let mut q = MatN::zeros();
         let arw = self.cfg.gyro_arw_dpsh.to_radians() / 60.0;
         let vrw = self.cfg.accel_vrw_mpss;
+        let k = self.rx_scale.unwrap_or([1.0; 3]);
         let gm = [
-            self.cfg.gps_gm_sigma_m / rmh,
-            self.cfg.gps_gm_sigma_m / (rnh * cl),
-            self.cfg.gps_gm_sigma_h_m,
+            k[0] * self.cfg.gps_gm_sigma_m / rmh,
+            k[1] * self.cfg.gps_gm_sigma_m / (rnh * cl),
+            k[2] * self.cfg.gps_gm_sigma_h_m,
         ];
         for i in 0..3 {
             q[(i, i)] = arw * arw * t;
             q[(3 + i, 3 + i)] = vrw * vrw * t;
             q[(B + i, B + i)] = 2.0 * gm[i] * gm[i] / tau * t;
         }
+        self.since_update += t;
         self.x = phi * self.x;
         self.p = phi * self.p * phi.transpose() + q;
         self.p = (self.p + self.p.transpose()) * 0.5;
     }
 
-    /// A GPS position (rad, rad, m) measured at the state's time, with the HDOP the receiver
-    /// reported. Returns whether it was used.
+    /// The size of a fix's error over the configured one (north, east, up), and where it came
+    /// from: GST, else HDOP times `gps_uere_m`, else the configured noise (scale 1).
+    fn stated_scale(&self, acc: &StatedAccuracy) -> ([f64; 3], SizedBy) {
+        let c = &self.cfg;
+        let total_h = c.gps_sigma_m.hypot(c.gps_gm_sigma_m);
+        let total_v = c.gps_sigma_h_m.hypot(c.gps_gm_sigma_h_m);
+        let bound = |v: f64| v.clamp(1e-3, 1e3);
+        if c.use_gst
+            && let Some(([n, e], u)) = acc.gst
+        {
+            let h = (0.5 * (n * n + e * e)).sqrt() / total_h;
+            let v = u.map_or(h, |u| u / total_v);
+            return (
+                [bound(n / total_h), bound(e / total_h), bound(v)],
+                SizedBy::Gst,
+            );
+        }
+        match acc.hdop {
+            Some(d) if c.gps_uere_m > 0.0 && d.is_finite() && d > 0.0 => {
+                let k = bound(d * c.gps_uere_m / total_h);
+                ([k; 3], SizedBy::Hdop)
+            }
+            _ => ([1.0; 3], SizedBy::Config),
+        }
+    }
+
+    /// The correlation time of the receiver's wander the filter assumes, s: the configured one
+    /// for a receiver of the configured size or worse; shorter for a better one, as the square
+    /// root of its size over the configured (down to a fifth). A receiver whose errors are
+    /// corrected (SBAS, DGPS) or dual-frequency has had its slow parts (ionosphere, orbits,
+    /// clocks) taken out: what is left, multipath and noise, changes faster. Assuming the
+    /// 25 m class's 300 s for a sub-metre receiver whose error changes over a minute made the
+    /// filter take the receiver's wander for velocity error: velocity NEES 3.5.
+    fn receiver_tau_s(&self) -> f64 {
+        let tau = self.cfg.gps_gm_tau_s.max(1e-3);
+        if !self.cfg.gps_gm_tau_follows_size {
+            return tau;
+        }
+        let k = self.rx_scale.map_or(1.0, |k| 0.5 * (k[0] + k[1]));
+        tau * k.sqrt().clamp(0.2, 1.0)
+    }
+
+    /// Follow the receiver's stated size with the correlated error's scale (at once at the
+    /// first fix, then over [`RECEIVER_SCALE_TAU_S`]); the receiver-error states' covariance is
+    /// rescaled with it, so that what the filter knew of the wander keeps its correlations.
+    fn follow_receiver_scale(&mut self, target: [f64; 3], per_s: f64) {
+        let old = self.rx_scale.unwrap_or([1.0; 3]);
+        let a = match self.rx_scale {
+            None => 1.0,
+            Some(_) => (per_s / RECEIVER_SCALE_TAU_S).clamp(0.0, 1.0),
+        };
+        let new: [f64; 3] = std::array::from_fn(|i| old[i] + a * (target[i] - old[i]));
+        for i in 0..3 {
+            let r = new[i] / old[i];
+            for j in 0..N {
+                self.p[(B + i, j)] *= r;
+                self.p[(j, B + i)] *= r;
+            }
+        }
+        self.rx_scale = Some(new);
+    }
+
+    /// Move the learnt receiver scale so that the innovations' normalized squares (`innov_i^2 /
+    /// S_ii`, 1 on average when the model fits, at most [`LEARN_RHO_MAX`]) come to their
+    /// expected size. Their average `m` over [`LEARN_MEMORY_S`] says how far off the scale is
+    /// (the innovations' variance goes with the scale squared); the scale takes `m^(dt/tau)` of
+    /// it per fix ([`LEARN_TAU_S`]) and the average is divided by what was taken, so that a
+    /// receiver thirty times better than configured is learnt within a minute or two, and one
+    /// that fits stays put.
+    fn learn_scale(&mut self, innov: &Vector3<f64>, s_diag: &Vector3<f64>, per_s: f64) {
+        let rho = |i: usize| (innov[i] * innov[i] / s_diag[i]).clamp(0.0, LEARN_RHO_MAX);
+        let rhos = [0.5 * (rho(0) + rho(1)), rho(2)];
+        if per_s <= 0.0 || rhos.iter().any(|r| !r.is_finite()) {
+            return;
+        }
+        self.learned_s += per_s;
+        let a = (per_s / self.learned_s.min(LEARN_MEMORY_S)).min(1.0);
+        for ((m, k), r) in self
+            .learn_rho
+            .iter_mut()
+            .zip(self.learned.iter_mut())
+            .zip(rhos)
+        {
+            *m += a * (r - *m);
+            let f = m.max(1e-4).powf(per_s / LEARN_TAU_S);
+            let new = (*k * f.sqrt()).clamp(0.02, 50.0);
+            *m /= (new / *k).powi(2);
+            *k = new;
+        }
+    }
+
+    /// A GPS position (rad, rad, m) measured at the state's time, with what the receiver said
+    /// of its accuracy. Returns whether it was used.
     pub fn update(
         &mut self,
         s: &mut NavState,
         lat: f64,
         lon: f64,
         h: f64,
-        hdop: Option<f64>,
+        acc: &StatedAccuracy,
     ) -> bool {
         let (rm, rn) = earth::radii(s.lat);
         // the antenna's position from the INS: lever arm in the navigation frame
@@ -482,17 +697,43 @@ impl Kf {
         let z = Vector3::new(ant.0 - lat, ant.1 - lon, ant.2 - h);
         // metres per state unit of the position axes (lat, lon, h)
         let m_per = [rm + s.h, (rn + s.h) * s.lat.cos(), 1.0];
-        // the white noise of this fix: the assumed (or estimated) one at the reference HDOP,
-        // scaled by the fix's HDOP
-        let hdop_scale = match hdop {
-            Some(d) if self.cfg.hdop_ref > 0.0 && d.is_finite() && d > 0.0 => {
+        // the share of a second since the last fix (1 at 1 Hz and after an outage): fading and
+        // forgetting per second, not per fix (at 5 Hz a per-fix fading of 1.02 discounted five
+        // times as fast, and the fading filter's RMS error rose sixfold)
+        let per_s = std::mem::take(&mut self.since_update).clamp(0.0, 1.0);
+        // the size of this fix's error: what the receiver states (GST, or HDOP times the
+        // UERE) scales the white noise at once and the correlated error smoothly; else the
+        // legacy HDOP ratio scales the white part
+        let (stated, mut by) = self.stated_scale(acc);
+        let legacy = match acc.hdop {
+            Some(d)
+                if by == SizedBy::Config && self.cfg.hdop_ref > 0.0 && d.is_finite() && d > 0.0 =>
+            {
+                by = SizedBy::Hdop;
                 (d / self.cfg.hdop_ref).clamp(0.2, 20.0)
             }
             _ => 1.0,
         };
+        match by {
+            SizedBy::Gst => self.stats.sized_by_gst += 1,
+            SizedBy::Hdop => self.stats.sized_by_hdop += 1,
+            SizedBy::Config => self.stats.sized_by_config += 1,
+        }
+        // where the receiver states nothing of its own, what the innovations taught
+        let learn = self.cfg.learn_receiver_scale && by != SizedBy::Gst;
+        let stated: [f64; 3] = if learn {
+            let [h, v] = self.learned;
+            [stated[0] * h, stated[1] * h, stated[2] * v]
+        } else {
+            stated
+        };
+        if stated != [1.0; 3] || self.rx_scale.is_some() {
+            self.follow_receiver_scale(stated, per_s);
+        }
+        let white: [f64; 3] = std::array::from_fn(|i| stated[i] * legacy);
         let r_of = |r_m2: &[f64; 3]| {
             SMatrix::<f64, 3, 3>::from_diagonal(&Vector3::from_fn(|i, _| {
-                r_m2[i] * hdop_scale * hdop_scale / (m_per[i] * m_per[i])
+                r_m2[i] * white[i] * white[i] / (m_per[i] * m_per[i])
             }))
         };
         if self.cfg.kind == FilterKind::Fading {
@@ -504,7 +745,7 @@ impl Kf {
             // takes back what the propagation put there (after an outage the position variance
             // is rightly large).
             let before = self.p.diagonal();
-            let f = self.cfg.fading_factor.sqrt();
+            let f = self.cfg.fading_factor.powf(per_s).sqrt();
             let d = VecN::from_fn(|i, _| {
                 if i >= B || i == 5 || i == 8 {
                     return 1.0;
@@ -527,8 +768,12 @@ impl Kf {
         }
         let innov = z - h_mat * self.x;
         let r_before = self.r_m2;
-        if self.cfg.kind == FilterKind::Adaptive {
-            self.adapt_noise(&h_mat, &innov, &m_per, hdop_scale);
+        // the adaptive filter's estimate of the white part, where the receiver states its
+        // accuracy; where it does not, the learnt scale does that job for every kind (both at
+        // once pulled the white part down and the wander up: position NEES 0.4)
+        let adapt = self.cfg.kind == FilterKind::Adaptive && !learn;
+        if adapt {
+            self.adapt_noise(&h_mat, &innov, &m_per, &white, per_s);
         }
         let r = r_of(&self.r_m2);
         let nis_of = |p: &MatN| {
@@ -547,7 +792,7 @@ impl Kf {
             if self.cfg.reanchor_after == 0 || self.rejected_in_a_row < self.cfg.reanchor_after {
                 self.stats.rejected += 1;
                 // a rejected fix teaches the noise estimate nothing
-                if self.cfg.kind == FilterKind::Adaptive {
+                if adapt {
                     self.r_m2 = r_before;
                 }
                 return false;
@@ -567,6 +812,10 @@ impl Kf {
             (nis, s_inv) = again;
         }
         self.rejected_in_a_row = 0;
+        if learn {
+            let s_diag = (h_mat * self.p * h_mat.transpose() + r).diagonal();
+            self.learn_scale(&innov, &s_diag, per_s);
+        }
         let k = self.p * h_mat.transpose() * s_inv;
         self.x += k * innov;
         let ikh = MatN::identity() - k * h_mat;
@@ -613,9 +862,10 @@ impl Kf {
         h_mat: &SMatrix<f64, 3, N>,
         innov: &Vector3<f64>,
         m_per: &[f64; 3],
-        hdop_scale: f64,
+        white: &[f64; 3],
+        per_s: f64,
     ) {
-        let b = self.cfg.adaptive_forgetting.clamp(0.0, 0.999);
+        let b = self.cfg.adaptive_forgetting.clamp(0.0, 0.999).powf(per_s);
         let d = 1.0 - b;
         let hph = h_mat * self.p * h_mat.transpose();
         let base = [
@@ -624,7 +874,7 @@ impl Kf {
             self.cfg.gps_sigma_h_m.powi(2),
         ];
         for i in 0..3 {
-            let k2 = m_per[i] * m_per[i] / (hdop_scale * hdop_scale);
+            let k2 = m_per[i] * m_per[i] / (white[i] * white[i]);
             let sample = (innov[i] * innov[i] - hph[(i, i)]) * k2;
             let r = (1.0 - d) * self.r_m2[i] + d * sample;
             self.r_m2[i] = r.clamp(0.25 * base[i], 400.0 * base[i]);
@@ -751,7 +1001,7 @@ mod tests {
             let lat = st.lat + 600.0 / rm;
             let (lat0, lon0) = (st.lat, st.lon);
             assert!(
-                k.update(&mut st, lat, lon0, 0.0, None),
+                k.update(&mut st, lat, lon0, 0.0, &StatedAccuracy::default()),
                 "{kind:?}: gated out"
             );
             assert!(((st.lat - lat0) * rm - 600.0).abs() < 100.0, "{kind:?}");
@@ -767,7 +1017,7 @@ mod tests {
         let before = st;
         let (rm, _) = earth::radii(st.lat);
         let (lat, lon) = (st.lat + 2000.0 / rm, st.lon);
-        assert!(!k.update(&mut st, lat, lon, 0.0, None));
+        assert!(!k.update(&mut st, lat, lon, 0.0, &StatedAccuracy::default()));
         assert_eq!(st, before);
         assert_eq!(k.stats().rejected, 1);
     }
@@ -789,11 +1039,160 @@ mod tests {
         let taken: Vec<bool> = (0..6)
             .map(|_| {
                 k.propagate(&st, &Vector3::new(0.0, 0.0, 9.79), 1.0);
-                k.update(&mut st, lat, lon, 0.0, None)
+                k.update(&mut st, lat, lon, 0.0, &StatedAccuracy::default())
             })
             .collect();
         assert_eq!(taken, [false, false, false, false, true, true]);
         assert_eq!((k.stats().rejected, k.stats().reanchors), (4, 1));
         assert!(((st.lat - lat) * rm).abs() < 50.0);
+    }
+
+    /// The receiver's own accuracy sizes the fixes: GST's sigmas over the configured total
+    /// scale the white noise at once and the correlated error over the next seconds; HDOP times
+    /// the UERE does the same when there is no GST; with neither the configured noise holds. A
+    /// few-metre receiver's fixes then pull the position sigma down to its size.
+    #[test]
+    fn the_receivers_stated_accuracy_sizes_its_fixes() {
+        let run = |acc: StatedAccuracy, uere: f64| {
+            let mut st = parked();
+            let mut k = Kf::new(
+                FilterConfig {
+                    kind: FilterKind::Standard,
+                    gps_uere_m: uere,
+                    // fixes without noise: nothing to learn from
+                    learn_receiver_scale: false,
+                    ..FilterConfig::default()
+                },
+                st.lat,
+            );
+            let (lat, lon, h) = (st.lat, st.lon, st.h);
+            for _ in 0..120 {
+                for _ in 0..10 {
+                    k.propagate(&st, &Vector3::new(0.0, 0.0, 9.79), 0.1);
+                }
+                assert!(k.update(&mut st, lat, lon, h, &acc));
+            }
+            let (rm, _) = earth::radii(st.lat);
+            (k.stats(), k.covariance()[(6, 6)].sqrt() * rm)
+        };
+        // the default filter: a 25 m class receiver, 13.4 m per horizontal axis in all
+        let total = 6.0f64.hypot(12.0);
+        let few_m = StatedAccuracy {
+            gst: Some(([1.7, 1.7], Some(2.7))),
+            hdop: Some(0.8),
+        };
+        let (gst, sig_gst) = run(few_m, 0.0);
+        assert_eq!((gst.sized_by_gst, gst.sized_by_hdop), (120, 0));
+        assert!(
+            (gst.receiver_scale[0] - 1.7 / total).abs() < 1e-9,
+            "{gst:?}"
+        );
+        assert!((gst.gps_sigma_now_m[0] - 6.0 * 1.7 / total).abs() < 1e-9);
+        let total_v = 9.6f64.hypot(19.2);
+        assert!((gst.receiver_scale[2] - 2.7 / total_v).abs() < 1e-9);
+        let (conf, sig_conf) = run(StatedAccuracy::default(), 0.0);
+        assert_eq!(conf.sized_by_config, 120);
+        assert_eq!(conf.receiver_scale, [1.0; 3]);
+        assert!(
+            sig_gst < 0.2 * sig_conf && sig_gst > 0.3,
+            "north sigma {sig_gst} m with GST, {sig_conf} m without"
+        );
+        // no GST: HDOP 0.8 times a UERE of 2.1 m is the same 1.7 m
+        let hdop_only = StatedAccuracy {
+            gst: None,
+            hdop: Some(0.8),
+        };
+        let (hd, sig_hd) = run(hdop_only, 1.7 / 0.8);
+        assert_eq!(hd.sized_by_hdop, 120);
+        assert!((hd.receiver_scale[0] - 1.7 / total).abs() < 1e-9);
+        assert!(
+            (sig_hd - sig_gst).abs() < 0.2 * sig_gst,
+            "{sig_hd} vs {sig_gst}"
+        );
+        // GST switched off in the config: the HDOP, then the configured noise
+        let mut st = parked();
+        let mut k = Kf::new(
+            FilterConfig {
+                use_gst: false,
+                ..FilterConfig::default()
+            },
+            st.lat,
+        );
+        k.propagate(&st, &Vector3::new(0.0, 0.0, 9.79), 1.0);
+        let (lat, lon, h) = (st.lat, st.lon, st.h);
+        assert!(k.update(&mut st, lat, lon, h, &few_m));
+        assert_eq!(k.stats().sized_by_config, 1);
+    }
+
+    /// The fading filter's memory is in seconds: at 5 Hz it discounts per second what it
+    /// discounts at 1 Hz, not five times as much.
+    #[test]
+    fn fading_is_per_second_at_any_fix_rate() {
+        let sigma_after = |rate: f64| {
+            let mut st = parked();
+            let mut k = Kf::new(FilterConfig::default(), st.lat);
+            let (lat, lon, h) = (st.lat, st.lon, st.h);
+            let n = (rate * 60.0) as usize;
+            for _ in 0..n {
+                k.propagate(&st, &Vector3::new(0.0, 0.0, 9.79), 1.0 / rate);
+                k.update(&mut st, lat, lon, h, &StatedAccuracy::default());
+            }
+            k.covariance()[(0, 0)].sqrt()
+        };
+        let (a, b) = (sigma_after(1.0), sigma_after(5.0));
+        // five times the fixes shrink the tilt's sigma a little, never inflate it
+        assert!(b <= a * 1.05 && b > 0.3 * a, "1 Hz {a}, 5 Hz {b}");
+    }
+
+    /// A receiver that states nothing (no GST, no UERE) but is eight times better than the
+    /// configured one: the filter learns its size from the innovations within a couple of
+    /// minutes, and its mean NIS comes to about 3 (0.05 without learning).
+    #[test]
+    fn the_size_of_a_silent_receiver_is_learnt() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let run = |learn: bool| {
+            let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+            let n = Normal::new(0.0, 1.0).unwrap();
+            let mut st = parked();
+            let mut k = Kf::new(
+                FilterConfig {
+                    kind: FilterKind::Standard,
+                    learn_receiver_scale: learn,
+                    ..FilterConfig::default()
+                },
+                st.lat,
+            );
+            let (rm, rn) = earth::radii(st.lat);
+            let (lat0, lon0, h0) = (st.lat, st.lon, st.h);
+            // the receiver: white 1.2 m per axis, 2 m in height (the configured 13.4 / 21.5)
+            let (mut nis, mut count) = (0.0, 0);
+            for i in 0..600 {
+                k.propagate(&st, &Vector3::new(0.0, 0.0, 9.79), 1.0);
+                let lat = lat0 + 1.2 * n.sample(&mut rng) / rm;
+                let lon = lon0 + 1.2 * n.sample(&mut rng) / (rn * lat0.cos());
+                let h = h0 + 2.0 * n.sample(&mut rng);
+                k.update(&mut st, lat, lon, h, &StatedAccuracy::default());
+                if i >= 300 {
+                    nis += k.last_nis().unwrap_or(f64::NAN);
+                    count += 1;
+                }
+            }
+            (k.stats(), nis / f64::from(count))
+        };
+        let (learnt, nis) = run(true);
+        let (fixed, nis_fixed) = run(false);
+        eprintln!(
+            "learnt scale {:?}, mean NIS {nis:.2}; without learning {nis_fixed:.3}",
+            learnt.learned_scale
+        );
+        assert!((2.0..4.5).contains(&nis), "{nis}");
+        assert!(nis_fixed < 0.3, "{nis_fixed}");
+        assert!(
+            learnt.learned_scale[0] < 0.3 && learnt.learned_scale[0] > 0.03,
+            "{:?}",
+            learnt.learned_scale
+        );
+        assert_eq!(fixed.learned_scale, [1.0; 2]);
     }
 }

@@ -120,6 +120,8 @@ pub struct Navigator {
     phase: NavPhase,
     heading: Option<f64>,
     first_fix: Option<(f64, f64, f64)>,
+    /// What the receiver said of the accuracy of the fix navigation starts at.
+    first_fix_accuracy: crate::kf::StatedAccuracy,
     level_sum: Vector3<f64>,
     level_t: f64,
     state: Option<NavState>,
@@ -149,6 +151,9 @@ pub struct Navigator {
     utc_days: i64,
     /// The first fixes' ties, checked once the receiver's latency is learned.
     first_ties: Vec<FirstTie>,
+    /// The receiver's latest statements of its accuracy (GST), newest last: a fix takes the
+    /// one of its own UTC time when it is applied (GST comes after GGA in an epoch).
+    accuracies: std::collections::VecDeque<crate::gps::GpsAccuracy>,
     /// Times the tie between UTC seconds and edges was corrected.
     utc_reanchors: u64,
     /// Fixes whose UTC time fitted no edge near (set aside).
@@ -177,6 +182,9 @@ pub const JUMPS_TO_REANCHOR: u32 = 3;
 
 /// PPS edges kept for tying fixes that come late.
 pub const EDGES_KEPT: usize = 64;
+
+/// The receiver's accuracy statements kept for the fixes still held (10 Hz over 2 s).
+pub const ACCURACIES_KEPT: usize = 20;
 
 /// What a held fix is tied to.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -223,6 +231,7 @@ impl Navigator {
             cfg,
             phase: NavPhase::Waiting,
             first_fix: None,
+            first_fix_accuracy: crate::kf::StatedAccuracy::default(),
             level_sum: Vector3::zeros(),
             level_t: 0.0,
             state: None,
@@ -244,6 +253,7 @@ impl Navigator {
             utc_last: None,
             utc_days: 0,
             first_ties: Vec::new(),
+            accuracies: std::collections::VecDeque::new(),
             utc_reanchors: 0,
             clock_jumps: 0,
             jump_streak: None,
@@ -435,6 +445,9 @@ impl Navigator {
         self.kf = self.cfg.gps_aiding.then(|| {
             let mut k = Kf::new(self.cfg.filter.clone(), lat);
             k.levelled(&st.q_nb, f.norm());
+            if self.first_fix.is_some() {
+                k.started_at_fix(&self.first_fix_accuracy, &st);
+            }
             k
         });
         self.state = Some(st);
@@ -446,6 +459,28 @@ impl Navigator {
             heading_deg = self.heading.unwrap_or(0.0).to_degrees(),
             "navigation started"
         );
+    }
+
+    /// What the receiver said of a fix's accuracy: its HDOP, and the GST of the same UTC time.
+    fn stated_accuracy(&self, fix: &GpsFix) -> crate::kf::StatedAccuracy {
+        let gst = fix.time_of_day_s.and_then(|t| {
+            self.accuracies
+                .iter()
+                .rev()
+                .find(|a| a.time_of_day_s.is_some_and(|u| (u - t).abs() < 1e-3))
+        });
+        crate::kf::StatedAccuracy {
+            gst: gst.map(|a| ([a.lat_sigma_m, a.lon_sigma_m], a.alt_sigma_m)),
+            hdop: fix.hdop,
+        }
+    }
+
+    /// The receiver's statement of its accuracy (GST): kept for the fix of the same UTC time.
+    pub fn on_accuracy(&mut self, a: &crate::gps::GpsAccuracy) {
+        if self.accuracies.len() >= ACCURACIES_KEPT {
+            self.accuracies.pop_front();
+        }
+        self.accuracies.push_back(*a);
     }
 
     /// A decoded GPS fix arrived (IMU time is that of the latest update). It is tied to its PPS
@@ -723,6 +758,9 @@ impl Navigator {
         let p = (fix.lat_deg.to_radians(), fix.lon_deg.to_radians(), alt);
         if self.phase != NavPhase::Navigating {
             self.first_fix = Some(p);
+            if fix.sentence == "GGA" {
+                self.first_fix_accuracy = self.stated_accuracy(fix);
+            }
             return;
         }
         // RMC's speed and track against the INS's velocity when the fix was taken
@@ -734,6 +772,7 @@ impl Navigator {
         if fix.sentence != "GGA" {
             return;
         }
+        let stated = self.stated_accuracy(fix);
         let (Some(st), Some(k)) = (self.state.as_mut(), self.kf.as_mut()) else {
             self.fixes_ignored += 1;
             return;
@@ -744,7 +783,7 @@ impl Navigator {
         let lat = p.0 + st.v.y * dt / (rm + st.h);
         let lon = p.1 + st.v.x * dt / ((rn + st.h) * st.lat.cos());
         let h = p.2 + st.v.z * dt;
-        let used = k.update(st, lat, lon, h, fix.hdop);
+        let used = k.update(st, lat, lon, h, &stated);
         if !used {
             self.fixes_ignored += 1;
         }

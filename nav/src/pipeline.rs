@@ -363,6 +363,11 @@ impl Pipeline {
             out.push(Output::Fix(Box::new(f.clone())));
             self.on_fix_inner(f, out);
         }
+        for a in self.decoder.take_accuracies() {
+            if let Some(n) = self.navigator.as_mut() {
+                n.on_accuracy(&a);
+            }
+        }
         self.seal(out, from);
     }
 
@@ -541,21 +546,39 @@ impl Pipeline {
     /// change the solution frames.
     pub fn set_imu_timeout(&mut self, active: bool, after_ms: u64, out: &mut Vec<Output>) {
         let from = out.len();
-        self.set_imu_timeout_inner(active, after_ms, out);
+        self.set_imu_timeout_inner(active, after_ms, false, out);
         self.seal(out, from);
     }
 
-    fn set_imu_timeout_inner(&mut self, active: bool, after_ms: u64, out: &mut Vec<Output>) {
+    /// The end of an in-process stream, as nav's watchdog reports it on the bench: what
+    /// [`Pipeline::set_imu_timeout`] does, logged as the end it is rather than as a warning.
+    pub fn stream_ended(&mut self, after_ms: u64, out: &mut Vec<Output>) {
+        let from = out.len();
+        self.set_imu_timeout_inner(true, after_ms, true, out);
+        self.seal(out, from);
+    }
+
+    fn set_imu_timeout_inner(
+        &mut self,
+        active: bool,
+        after_ms: u64,
+        at_end: bool,
+        out: &mut Vec<Output>,
+    ) {
         if active == self.imu_timeout {
             return;
         }
         self.imu_timeout = active;
         if active {
             self.timeouts += 1;
-            warn!(
-                "no IMU frame for {after_ms} ms (last sample {:?})",
-                self.sums.last
-            );
+            if at_end {
+                tracing::debug!("the IMU stream ended (last sample {:?})", self.sums.last);
+            } else {
+                warn!(
+                    "no IMU frame for {after_ms} ms (last sample {:?})",
+                    self.sums.last
+                );
+            }
             let json = format!("{{\"kind\":\"imu_timeout\",\"after_ms\":{after_ms}}}");
             self.json(JsonChannel::Event, self.sums.last.unwrap_or(0), json, out);
             // the solution epochs follow IMU time and stop with it: one more epoch now tells

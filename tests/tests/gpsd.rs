@@ -205,3 +205,86 @@ fn compare(logs: &[PathBuf], decode: impl Fn(&Path) -> (Vec<GpsFix>, nav::gps::G
     assert!(total > 1000, "{total}");
     assert!(share >= 0.99, "only {:.2} % matched", 100.0 * share);
 }
+
+/// The receivers' own accuracy (GST) in the captures that have it: nav reads every statement
+/// gpsd reports with usable sigmas (latitude and longitude up to
+/// [`nav::gps::MAX_GST_SIGMA_M`]) with gpsd's values, and sets aside as unusable exactly those
+/// whose sigmas are missing or implausible (a receiver without a fix states 305 km).
+#[test]
+fn gst_statements_read_as_gpsd_reads_them() {
+    let Some(dir) = testdata() else {
+        eprintln!("skipped: ../shared/testdata/gpsd-nmea is absent");
+        return;
+    };
+    let mut logs = 0;
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let path = e.unwrap().path();
+        if path.extension().is_none_or(|x| x != "log") {
+            continue;
+        }
+        let text = std::fs::read(&path).unwrap();
+        let Ok(chk) = std::fs::read_to_string(path.with_extension("log.chk")) else {
+            continue;
+        };
+        // gpsd's GST reports, each statement once (gpsd repeats a report per cycle)
+        let mut gpsd: Vec<[f64; 3]> = Vec::new();
+        for l in chk.lines().filter(|l| l.contains("\"class\":\"GST\"")) {
+            let Ok(v) = serde_json::from_str::<serde_json::Value>(l) else {
+                continue;
+            };
+            let f = |k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+            let g = [f("lat"), f("lon"), f("alt")];
+            if !gpsd.contains(&g) {
+                gpsd.push(g);
+            }
+        }
+        if gpsd.is_empty() {
+            continue;
+        }
+        logs += 1;
+        let mut d = GpsDecoder::default();
+        let mut fixes = Vec::new();
+        let body: Vec<u8> = text
+            .split_inclusive(|b| *b == b'\n')
+            .filter(|l| l.first() != Some(&b'#'))
+            .flatten()
+            .copied()
+            .collect();
+        d.push_bytes(&body, &mut fixes);
+        let ours = d.take_accuracies();
+        let st = d.stats();
+        let usable = |g: &[f64; 3]| {
+            g[..2]
+                .iter()
+                .all(|v| v.is_finite() && *v > 0.0 && *v <= nav::gps::MAX_GST_SIGMA_M)
+        };
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        eprintln!(
+            "{name}: gpsd {} distinct GST, nav {} usable, {} unusable",
+            gpsd.len(),
+            st.accuracy,
+            st.accuracy_unusable
+        );
+        for g in &gpsd {
+            let found = ours.iter().any(|a| {
+                (a.lat_sigma_m - g[0]).abs() < 1e-3
+                    && (a.lon_sigma_m - g[1]).abs() < 1e-3
+                    && a.alt_sigma_m.is_none_or(|u| (u - g[2]).abs() < 1e-3)
+            });
+            assert_eq!(found, usable(g), "{name}: gpsd's GST {g:?}");
+        }
+        for a in &ours {
+            assert!(
+                gpsd.iter()
+                    .any(|g| (a.lat_sigma_m - g[0]).abs() < 1e-3
+                        && (a.lon_sigma_m - g[1]).abs() < 1e-3),
+                "{name}: nav read {a:?}, which gpsd did not report"
+            );
+        }
+        if gpsd.iter().all(|g| !usable(g)) {
+            assert_eq!(st.accuracy, 0, "{name}");
+            assert!(st.accuracy_unusable > 0, "{name}");
+        }
+    }
+    assert!(logs >= 5, "captures with GST: {logs}");
+}

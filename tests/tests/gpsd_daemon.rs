@@ -143,6 +143,7 @@ fn gpsd_reads_the_emulated_receiver_and_nav_takes_its_fixes_from_gpsd() {
 
     // 40 epochs of the lap, at five a second
     let mut written = Vec::new();
+    let mut gst_written: Vec<(f64, f64, f64, f64)> = Vec::new();
     let mut t = 0.0;
     while written.len() < 40 {
         t += 0.2;
@@ -155,6 +156,16 @@ fn gpsd_reads_the_emulated_receiver_and_nav_takes_its_fixes_from_gpsd() {
                 let lon =
                     truth.lon_deg + (err[0] / (rn * truth.lat_deg.to_radians().cos())).to_degrees();
                 written.push((e.edge, (lat, lon), (truth.lat_deg, truth.lon_deg)));
+            }
+            // the receiver's own accuracy, as its GST states it: (time of day, lat, lon, alt)
+            for l in e.text.lines().filter(|l| l.get(3..6) == Some("GST")) {
+                let f: Vec<&str> = l.split('*').next().unwrap_or("").split(',').collect();
+                let num = |i: usize| f[i].parse::<f64>().expect("a GST field");
+                let hms = f[1];
+                let tod = hms[0..2].parse::<f64>().unwrap() * 3600.0
+                    + hms[2..4].parse::<f64>().unwrap() * 60.0
+                    + hms[4..].parse::<f64>().unwrap();
+                gst_written.push((tod, num(6), num(7), num(8)));
             }
             pty.write(e.text.as_bytes())
                 .expect("the pty takes the sentences");
@@ -172,6 +183,7 @@ fn gpsd_reads_the_emulated_receiver_and_nav_takes_its_fixes_from_gpsd() {
     let mut decoder = nav::gps::GpsDecoder::default();
     let mut nav_fixes = Vec::new();
     decoder.push_bytes(&bytes, &mut nav_fixes);
+    let nav_accuracy = decoder.take_accuracies();
     let stats = decoder.stats();
     drop(pipe);
     let reports = reports.join().expect("gpspipe's reader");
@@ -212,6 +224,47 @@ fn gpsd_reads_the_emulated_receiver_and_nav_takes_its_fixes_from_gpsd() {
         matched += 1;
     }
     assert!(matched >= 35);
+
+    // gpsd reads the receiver's GST: a GST report per statement, with its sigmas
+    let gst: Vec<&Value> = reports.iter().filter(|r| r["class"] == "GST").collect();
+    eprintln!(
+        "GST: {} written, {} reported by gpspipe, {} decoded by nav through gpsd",
+        gst_written.len(),
+        gst.len(),
+        nav_accuracy.len()
+    );
+    assert!(gst_written.len() >= 38, "{} GST written", gst_written.len());
+    assert!(gst.len() >= 35, "gpspipe reported {} GST", gst.len());
+    for r in &gst {
+        let got = (
+            r["lat"].as_f64().unwrap_or(f64::NAN),
+            r["lon"].as_f64().unwrap_or(f64::NAN),
+            r["alt"].as_f64().unwrap_or(f64::NAN),
+        );
+        assert!(
+            gst_written.iter().any(|w| (w.1 - got.0).abs() < 0.006
+                && (w.2 - got.1).abs() < 0.006
+                && (w.3 - got.2).abs() < 0.006),
+            "gpsd's GST {r} is none the receiver wrote"
+        );
+    }
+    // and nav, through gpsd, takes the same statements, each at its fix's time
+    assert!(nav_accuracy.len() >= 38, "{nav_accuracy:?}");
+    for a in &nav_accuracy {
+        let t = a.time_of_day_s.expect("GST carries its time");
+        let w = gst_written
+            .iter()
+            .find(|w| (w.0 - t).abs() < 1e-3)
+            .unwrap_or_else(|| panic!("nav's accuracy {a:?} at no GST written"));
+        // (the NMEA parser reads single precision)
+        let near = |x: f64, y: f64| (x - y).abs() < 1e-5;
+        assert!(
+            near(a.lat_sigma_m, w.1)
+                && near(a.lon_sigma_m, w.2)
+                && a.alt_sigma_m.is_some_and(|u| near(u, w.3)),
+            "nav read {a:?}, the receiver wrote {w:?}"
+        );
+    }
 
     // nav through gpsd: every fix, checksums good, at the positions gpsd reported
     // the bytes handed on (what nav records) are gpsd's NMEA alone: no JSON line among them

@@ -278,6 +278,10 @@ pub struct ErrorSample {
     pub hdop: f64,
     /// A multipath burst is on.
     pub multipath: bool,
+    /// The receiver's own 1-sigma estimate of its error per axis (east, north, up), m, as GST
+    /// states it: the steady model's stationary sigma, its white part scaled with the HDOP,
+    /// and a multipath burst's sigma while one is on (a receiver sees it in its residuals).
+    pub sigma_enu: [f64; 3],
 }
 
 /// The error process (call once per fix, in time order).
@@ -417,7 +421,11 @@ impl GpsError {
             }
         }
         let w = self.p.white_sigma_m * scale;
+        let mp = if multipath { e.multipath_sigma_m } else { 0.0 };
+        let sigma_h = (self.p.gm_sigma_m.powi(2) + w * w + mp * mp).sqrt();
+        let sigma_v = v * (self.p.gm_sigma_m.powi(2) + w * w).sqrt();
         ErrorSample {
+            sigma_enu: [sigma_h, sigma_h, sigma_v],
             enu: [
                 self.gm[0] + extra[0] + w * n.sample(&mut self.rng),
                 self.gm[1] + extra[1] + w * n.sample(&mut self.rng),

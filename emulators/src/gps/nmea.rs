@@ -1,4 +1,4 @@
-//! NMEA-0183 encoding of the receiver's fixes (GGA, RMC, VTG, GSA, GSV, ZDA), with its outages,
+//! NMEA-0183 encoding of the receiver's fixes (GGA, RMC, VTG, GSA, GSV, GST, ZDA), with its outages,
 //! time to first fix and multipath applied.
 
 use super::{AntennaTruth, GpsError, ReceiverParams};
@@ -163,6 +163,18 @@ impl NmeaWriter {
                 }
             }
             out += &with_checksum(&body);
+        }
+        if self.p.gst && valid {
+            // the receiver's own accuracy: range residual RMS, the error ellipse (round: the
+            // model's horizontal errors are alike on both axes), then latitude, longitude and
+            // altitude 1-sigma, m
+            let [se, sn, su] = sample.sigma_enu;
+            out += &with_checksum(&format!(
+                "{tk}GST,{time},{:.2},{:.2},{:.2},0.0,{sn:.2},{se:.2},{su:.2}",
+                self.p.errors.white_sigma_m,
+                se.max(sn),
+                se.min(sn)
+            ));
         }
         out += &with_checksum(&format!("{tk}ZDA,{time},{dd:02},{mo:02},{yy:04},00,00"));
         (out, valid.then_some(e))

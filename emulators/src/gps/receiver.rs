@@ -34,6 +34,9 @@ pub struct ReceiverParams {
     /// Fix times (s) before whose sentences the receiver puts out line noise and a line of
     /// binary bytes (a receiver switching protocols, a noisy cable).
     pub garbage_at_s: Vec<f64>,
+    /// Put out GST with each fix: the receiver's own 1-sigma estimate of its latitude,
+    /// longitude and altitude errors (many receivers have it off by default: `false`).
+    pub gst: bool,
 }
 
 impl Default for ReceiverParams {
@@ -51,6 +54,7 @@ impl Default for ReceiverParams {
             port_drops: Vec::new(),
             time_backwards_at_s: Vec::new(),
             garbage_at_s: Vec::new(),
+            gst: true,
         }
     }
 }
