@@ -351,6 +351,7 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
             ),
             "Heading error and nav's own heading sigma, three times, either side.",
         );
+        plots += &navigation_plots(out, &col);
     }
     if !plots.is_empty() {
         b += "<h2>Plots</h2>\n";
@@ -443,6 +444,143 @@ pub fn folder_page(out: &Path, title: &str, markdown: &str) -> anyhow::Result<st
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(path)
 }
+
+/// The plots a navigation engineer looks at first, from `navigation.csv` (column `i` by
+/// `col`) and `fixes.csv`: the track with the receiver's fixes, the velocity error per axis and
+/// the tilt errors against nav's own 3-sigma bounds, and NEES over time against its chi-square
+/// bounds.
+fn navigation_plots(out: &Path, col: &dyn Fn(usize) -> Vec<(f64, f64)>) -> String {
+    let mut plots = String::new();
+    let finite = |v: Vec<(f64, f64)>| -> Vec<(f64, f64)> {
+        v.into_iter()
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .collect()
+    };
+    let pair = |a: usize, b: usize| -> Vec<(f64, f64)> {
+        finite(
+            col(a)
+                .into_iter()
+                .zip(col(b))
+                .map(|((_, x), (_, y))| (x, y))
+                .collect(),
+        )
+    };
+    let line = |name: &str, color: &'static str, points: Vec<(f64, f64)>, markers: bool| Series {
+        name: name.into(),
+        color,
+        points,
+        markers,
+    };
+    let scaled = |v: Vec<(f64, f64)>, k: f64| -> Vec<(f64, f64)> {
+        finite(v.into_iter().map(|(t, y)| (t, k * y)).collect())
+    };
+    let chart = |title: &str, x: &str, y: &str, series: Vec<Series>| {
+        LogChart {
+            title: title.into(),
+            x_label: x.into(),
+            y_label: y.into(),
+            series,
+        }
+        .svg_linear()
+    };
+    // the track: truth, nav, and the receiver's fixes (an outage is where they stop)
+    let nav_track = pair(6, 7);
+    if !nav_track.is_empty() {
+        let text = std::fs::read_to_string(out.join("fixes.csv")).unwrap_or_default();
+        let fixes = |fate: &str| -> Vec<(f64, f64)> {
+            text.lines()
+                .skip(1)
+                .filter_map(|l| {
+                    let v: Vec<&str> = l.split(',').collect();
+                    (v.len() == 4 && v[3] == fate)
+                        .then(|| Some((v[1].parse().ok()?, v[2].parse().ok()?)))
+                        .flatten()
+                })
+                .collect()
+        };
+        plots += &figure(
+            &chart(
+                "Track: truth, nav and the receiver's fixes",
+                "east of the start, m",
+                "north of the start, m",
+                vec![
+                    line("receiver's fixes", "#2ca02c", fixes("valid"), true),
+                    line("rejected by the filter", "#d62728", fixes("rejected"), true),
+                    line("truth", "#000000", pair(8, 9), false),
+                    line("nav", "#1f77b4", nav_track, false),
+                ],
+            ),
+            "The horizontal track once a second of navigation; the receiver's valid fixes as nav took them (where they stop, the receiver was silent or void: an outage) and those the filter's gate refused.",
+        );
+    }
+    for (name, e, sig) in [("east", 10, 13), ("north", 11, 14), ("up", 12, 15)] {
+        let err = finite(col(e));
+        if err.is_empty() {
+            continue;
+        }
+        plots += &figure(
+            &chart(
+                &format!("Velocity error {name} against nav's 3-sigma bounds"),
+                "IMU time, s",
+                "m/s",
+                vec![
+                    line("error", "#1f77b4", err, false),
+                    line("+3 sigma", "#d62728", scaled(col(sig), 3.0), false),
+                    line("-3 sigma", "#d62728", scaled(col(sig), -3.0), false),
+                ],
+            ),
+            &format!(
+                "The {name} velocity error and nav's own {name} velocity sigma (its filter's covariance, recorded once a second), three times, either side."
+            ),
+        );
+    }
+    let (pitch, roll) = (finite(col(16)), finite(col(17)));
+    if !pitch.is_empty() {
+        plots += &figure(
+            &chart(
+                "Pitch and roll errors against nav's 3-sigma tilt bounds",
+                "IMU time, s",
+                "deg",
+                vec![
+                    line("pitch error", "#1f77b4", pitch, false),
+                    line("roll error", "#ff7f0e", roll, false),
+                    line("+3 sigma", "#d62728", scaled(col(18), 3.0), false),
+                    line("-3 sigma", "#d62728", scaled(col(18), -3.0), false),
+                ],
+            ),
+            "A drive is level: the truth's pitch and roll are 0. The bound is nav's tilt sigma (the mean of its east and north ones), three times, either side.",
+        );
+    }
+    let (np, nv) = (finite(col(19)), finite(col(20)));
+    if !np.is_empty() {
+        let span = (np.first().map(|p| p.0), np.last().map(|p| p.0));
+        let at = |k: f64| -> Vec<(f64, f64)> {
+            match span {
+                (Some(a), Some(b)) => vec![(a, k), (b, k)],
+                _ => Vec::new(),
+            }
+        };
+        plots += &figure(
+            &chart(
+                "NEES over time against its chi-square bounds",
+                "IMU time, s",
+                "NEES (3 degrees of freedom)",
+                vec![
+                    line("position", "#1f77b4", np, false),
+                    line("velocity", "#ff7f0e", nv, false),
+                    line("95 % bounds (0.22, 9.35)", "#d62728", at(CHI2_3_LOW), false),
+                    line("", "#d62728", at(CHI2_3_HIGH), false),
+                ],
+            ),
+            "Each second's error against nav's own covariance: a filter whose sigmas are right stays between the bounds 95 % of the time, and averages 3.",
+        );
+    }
+    plots
+}
+
+/// The two-sided 95 % bounds of a chi-square variable with 3 degrees of freedom.
+const CHI2_3_LOW: f64 = 0.216;
+const CHI2_3_HIGH: f64 = 9.348;
 
 #[cfg(test)]
 mod tests {

@@ -17,6 +17,12 @@ use serde::Serialize;
 /// A navigation output's errors against the drive at simulated time `t`: horizontal position
 /// (m, through ECEF), velocity (east, north, up, m/s), heading (deg).
 fn errors(drive: &Drive, t: f64, o: &NavOutput) -> (f64, [f64; 3], f64) {
+    let (e, dv, dh) = errors_enu(drive, t, o);
+    (e[0].hypot(e[1]), dv, dh)
+}
+
+/// [`errors`] with the position error per axis (east, north, up, m).
+fn errors_enu(drive: &Drive, t: f64, o: &NavOutput) -> ([f64; 3], [f64; 3], f64) {
     let truth = drive.position(t);
     let e = enu_offset(
         truth,
@@ -29,7 +35,7 @@ fn errors(drive: &Drive, t: f64, o: &NavOutput) -> (f64, [f64; 3], f64) {
         o.vel_enu_mps[2] - v.z,
     ];
     let dh = wrap180(o.hpr_deg[0] - drive.heading(t).to_degrees());
-    (e[0].hypot(e[1]), dv, dh)
+    (e, dv, dh)
 }
 
 /// nav's navigation output scored against truth.
@@ -52,6 +58,28 @@ pub struct NavScore {
     /// The wall time nav logged that output at (from its recording), ns since the epoch.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub logged_wall_ns: Option<u64>,
+    /// Where nav and the truth are (east, north of the drive's start; m): the track.
+    #[serde(default)]
+    pub track_en_m: Option<[[f64; 2]; 2]>,
+    /// Position error (east, north, up), m.
+    #[serde(default)]
+    pub position_error_enu_m: Option<[f64; 3]>,
+    /// Velocity error (east, north, up), m/s.
+    #[serde(default)]
+    pub velocity_error_enu_mps: Option<[f64; 3]>,
+    /// Pitch and roll errors, deg (a drive is level: truth 0 and 0).
+    #[serde(default)]
+    pub tilt_error_deg: Option<[f64; 2]>,
+    /// nav's own velocity sigmas (east, north, up), m/s.
+    #[serde(default)]
+    pub velocity_sigma_enu_mps: Option<[f64; 3]>,
+    /// nav's own tilt sigma (the mean of its east and north ones), deg.
+    #[serde(default)]
+    pub tilt_sigma_deg: Option<f64>,
+    /// NEES of the position and of the velocity (3 degrees of freedom each), against nav's own
+    /// covariances.
+    #[serde(default)]
+    pub nees: Option<[f64; 2]>,
 }
 
 /// Score the navigation output in a nav summary against the drive (none when nav did not
@@ -101,16 +129,40 @@ impl SeriesStats {
 
 /// One navigation output at simulated time `t` against the drive's truth.
 pub fn score_output(drive: &Drive, t: f64, o: &NavOutput) -> NavScore {
-    let (p, dv, dh) = errors(drive, t, o);
+    let (e, dv, dh) = errors_enu(drive, t, o);
+    let origin = drive.position(0.0);
+    let truth = drive.position(t);
+    let to_en = |p: (f64, f64, f64)| {
+        let x = enu_offset(origin, p);
+        [x[0], x[1]]
+    };
     NavScore {
         t_s: t,
-        position_error_m: p,
+        position_error_m: e[0].hypot(e[1]),
         velocity_error_mps: Vector3::from(dv).norm(),
         heading_error_deg: dh,
         position_sigma_m: None,
         heading_sigma_deg: None,
         logged_wall_ns: None,
+        track_en_m: Some([
+            to_en((o.lat_deg.to_radians(), o.lon_deg.to_radians(), o.h_m)),
+            to_en(truth),
+        ]),
+        position_error_enu_m: Some(e),
+        velocity_error_enu_mps: Some(dv),
+        tilt_error_deg: Some([o.hpr_deg[1], o.hpr_deg[2]]),
+        velocity_sigma_enu_mps: None,
+        tilt_sigma_deg: None,
+        nees: None,
     }
+}
+
+/// A 3x3 covariance from a row-major JSON array.
+fn cov3(v: &serde_json::Value) -> Option<nalgebra::Matrix3<f64>> {
+    let a = v.as_array()?;
+    (a.len() == 9).then_some(())?;
+    let x: Vec<f64> = a.iter().map(|x| x.as_f64()).collect::<Option<_>>()?;
+    Some(nalgebra::Matrix3::from_row_slice(&x))
 }
 
 /// nav's recorded solution (`/nav/solution` in its MCAP, 1 Hz) against the drive: one score per
@@ -135,11 +187,26 @@ pub fn score_recording(
             Some((t, o)) => {
                 // the sigmas nav sent with the solution (zero: not yet known)
                 let sigma = |k: &str| j.as_ref().and_then(|j| j[k].as_f64()).filter(|v| *v > 0.0);
+                let cov = |k: &str| j.as_ref().and_then(|j| cov3(&j[k]));
+                let sc = score_output(drive, t + t_first, &o);
+                let (pc, vc) = (cov("pos_cov_enu_m2"), cov("vel_cov_enu_m2s2"));
+                let nees = match (pc, vc, sc.position_error_enu_m, sc.velocity_error_enu_mps) {
+                    (Some(pc), Some(vc), Some(e), Some(dv)) => nees(&e, &pc).zip(nees(&dv, &vc)),
+                    _ => None,
+                };
+                let tilt = j.as_ref().and_then(|j| {
+                    let a = j["att_sigma_enu_deg"].as_array()?;
+                    Some(0.5 * (a.first()?.as_f64()? + a.get(1)?.as_f64()?))
+                });
                 out.push(NavScore {
                     position_sigma_m: sigma("pos_sigma_m"),
                     heading_sigma_deg: sigma("heading_sigma_deg"),
                     logged_wall_ns: Some(m.log_time),
-                    ..score_output(drive, t + t_first, &o)
+                    velocity_sigma_enu_mps: vc
+                        .map(|c| std::array::from_fn(|i| c[(i, i)].max(0.0).sqrt())),
+                    tilt_sigma_deg: tilt,
+                    nees: nees.map(|(a, b)| [a, b]),
+                    ..sc
                 })
             }
             None => bad += 1,
@@ -148,6 +215,62 @@ pub fn score_recording(
     // a recording cut short still gives what it has
     bad += u64::from(cut);
     Ok((out, bad))
+}
+
+/// What became of a fix nav took.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FixFate {
+    /// The receiver said it had no fix (quality 0, status V).
+    Void,
+    /// A fix (used, unless a rejection at the same place follows).
+    Valid,
+    /// The filter's gate refused it (`fix_rejected` in nav's events).
+    Rejected,
+}
+
+/// The receiver's fixes nav took (`/gps/fix` in its recording, GGA) and those its filter
+/// refused (`/nav/event` `fix_rejected`): IMU time of the record (s), east and north of the
+/// drive's start (m), and their fate.
+pub fn recorded_fixes(
+    drive: &Drive,
+    mcap_path: &std::path::Path,
+) -> Result<Vec<(f64, [f64; 2], FixFate)>> {
+    let origin = drive.position(0.0);
+    let en = |lat: f64, lon: f64| {
+        let x = enu_offset(origin, (lat.to_radians(), lon.to_radians(), origin.2));
+        [x[0], x[1]]
+    };
+    let mut out = Vec::new();
+    crate::playback::each_message(mcap_path, "fixes", |m| {
+        let t = m.publish_time as f64 * 1e-9;
+        match m.channel.topic.as_str() {
+            "/gps/fix" => {
+                let Ok(f) = serde_json::from_slice::<nav::gps::GpsFix>(&m.data) else {
+                    return;
+                };
+                if f.sentence == "GGA" {
+                    let fate = if f.valid {
+                        FixFate::Valid
+                    } else {
+                        FixFate::Void
+                    };
+                    out.push((t, en(f.lat_deg, f.lon_deg), fate));
+                }
+            }
+            "/nav/event" => {
+                let Ok(e) = serde_json::from_slice::<serde_json::Value>(&m.data) else {
+                    return;
+                };
+                if e["kind"] == "fix_rejected"
+                    && let (Some(lat), Some(lon)) = (e["lat_deg"].as_f64(), e["lon_deg"].as_f64())
+                {
+                    out.push((t, en(lat, lon), FixFate::Rejected));
+                }
+            }
+            _ => {}
+        }
+    })?;
+    Ok(out)
 }
 
 /// One second of a navigation run against truth.

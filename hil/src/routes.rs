@@ -62,6 +62,8 @@ pub struct RouteRow {
     pub mean_nis: f64,
     /// Fixes rejected by the innovation gate, over the runs.
     pub rejected: u64,
+    /// Of those, in the filter's first minute (none may be: a start that fits the receiver).
+    pub rejected_first_minute: u64,
     /// Integrity alarms raised, over the runs.
     pub integrity_alarms: u64,
     /// NEES within [`NEES_BOUNDS`] for position and velocity.
@@ -262,6 +264,10 @@ fn row(s: &Scenario, kind: FilterKind, runs: &[&NavRun]) -> RouteRow {
             .iter()
             .map(|r| r.filter.map_or(0, |f| f.rejected))
             .sum(),
+        rejected_first_minute: runs
+            .iter()
+            .map(|r| r.filter.map_or(0, |f| f.rejected_first_minute))
+            .sum(),
         integrity_alarms: runs.iter().map(|r| r.integrity.alarms).sum(),
         consistent: within(nees[0]) && within(nees[1]),
         unflagged_velocity_errors: runs
@@ -357,12 +363,12 @@ fn sigma_chart(
 /// The table as Markdown.
 pub fn markdown(r: &RoutesReport) -> String {
     let mut m = String::from(
-        "# The filters over the routes\n\n| route | filter | runs | navigated s | end pos m | RMS pos m | end vel m/s | RMS vel m/s | NEES/dof pos | NEES/dof vel | mean NIS | rejected | alarms | consistent |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n",
+        "# The filters over the routes\n\n| route | filter | runs | navigated s | end pos m | RMS pos m | end vel m/s | RMS vel m/s | NEES/dof pos | NEES/dof vel | mean NIS | rejected (first minute) | alarms | consistent |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n",
     );
     for x in &r.rows {
         let _ = writeln!(
             m,
-            "| {} | {:?} | {} | {:.0} | {:.1} | {:.1} | {:.3} | {:.3} | {:.2} | {:.2} | {:.2} | {} | {} | {} |",
+            "| {} | {:?} | {} | {:.0} | {:.1} | {:.1} | {:.3} | {:.3} | {:.2} | {:.2} | {:.2} | {} ({}) | {} | {} |",
             x.route,
             x.filter,
             x.runs,
@@ -375,16 +381,22 @@ pub fn markdown(r: &RoutesReport) -> String {
             x.nees_per_dof[1],
             x.mean_nis,
             x.rejected,
+            x.rejected_first_minute,
             x.integrity_alarms,
             if x.consistent { "yes" } else { "NO" }
         );
     }
     let _ = write!(
         m,
-        "\nNEES per degree of freedom within [{}, {}] everywhere: {}\n\nNo run ends with a velocity error above {} m/s that nav did not flag: {}\n",
+        "\nNEES per degree of freedom within [{}, {}] everywhere: {}\n\nNo fix rejected in any filter's first minute: {}\n\nNo run ends with a velocity error above {} m/s that nav did not flag: {}\n",
         NEES_BOUNDS[0],
         NEES_BOUNDS[1],
         if r.all_consistent { "MET" } else { "NOT MET" },
+        if r.rows.iter().all(|x| x.rejected_first_minute == 0) {
+            "MET"
+        } else {
+            "NOT MET"
+        },
         VELOCITY_FLAG_MPS,
         if r.no_unflagged_velocity_errors {
             "MET"

@@ -736,6 +736,11 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
                 Ok((scores, bad)) if !scores.is_empty() => {
                     navigation_series = Some(crate::navrun::SeriesStats::of(&scores, bad));
                     write_navigation_series(&opts.out, &s.name, &scores)?;
+                    // the receiver's fixes nav took, for the track
+                    match crate::navrun::recorded_fixes(&drive, &mcap_path) {
+                        Ok(f) => write_fixes(&opts.out, &f)?,
+                        Err(e) => tracing::warn!("nav's recording, fixes: {e:#}"),
+                    }
                 }
                 Ok(_) => {}
                 Err(e) => tracing::warn!("nav's recording: {e:#}"),
@@ -810,6 +815,23 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     Ok(r)
 }
 
+/// The receiver's fixes nav took (east, north of the drive's start, m) and what became of them:
+/// `fixes.csv` (fate: valid, void or rejected).
+fn write_fixes(out: &Path, fixes: &[(f64, [f64; 2], crate::navrun::FixFate)]) -> Result<()> {
+    use crate::navrun::FixFate;
+    let mut csv = String::from("t_s,east_m,north_m,fate\n");
+    for (t, [e, n], fate) in fixes {
+        let fate = match fate {
+            FixFate::Valid => "valid",
+            FixFate::Void => "void",
+            FixFate::Rejected => "rejected",
+        };
+        csv += &format!("{t:.3},{e:.3},{n:.3},{fate}\n");
+    }
+    std::fs::write(out.join("fixes.csv"), csv)?;
+    Ok(())
+}
+
 /// nav's navigation error second by second: `navigation.csv` and `navigation-error.svg`.
 fn write_navigation_series(
     out: &Path,
@@ -817,18 +839,41 @@ fn write_navigation_series(
     scores: &[crate::navrun::NavScore],
 ) -> Result<()> {
     let mut csv = String::from(
-        "t_s,position_error_m,velocity_error_mps,heading_error_deg,position_sigma_m,heading_sigma_deg\n",
+        "t_s,position_error_m,velocity_error_mps,heading_error_deg,position_sigma_m,heading_sigma_deg,\
+         nav_east_m,nav_north_m,truth_east_m,truth_north_m,\
+         vel_error_east_mps,vel_error_north_mps,vel_error_up_mps,\
+         vel_sigma_east_mps,vel_sigma_north_mps,vel_sigma_up_mps,\
+         pitch_error_deg,roll_error_deg,tilt_sigma_deg,nees_position,nees_velocity\n",
     );
     let opt = |v: Option<f64>, p: usize| v.map_or(String::new(), |v| format!("{v:.p$}"));
     for x in scores {
+        let tr = x.track_en_m;
+        let ve = x.velocity_error_enu_mps;
+        let vs = x.velocity_sigma_enu_mps;
+        let tilt = x.tilt_error_deg;
         csv += &format!(
-            "{:.3},{:.3},{:.4},{:.5},{},{}\n",
+            "{:.3},{:.3},{:.4},{:.5},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             x.t_s,
             x.position_error_m,
             x.velocity_error_mps,
             x.heading_error_deg,
             opt(x.position_sigma_m, 3),
-            opt(x.heading_sigma_deg, 5)
+            opt(x.heading_sigma_deg, 5),
+            opt(tr.map(|t| t[0][0]), 3),
+            opt(tr.map(|t| t[0][1]), 3),
+            opt(tr.map(|t| t[1][0]), 3),
+            opt(tr.map(|t| t[1][1]), 3),
+            opt(ve.map(|v| v[0]), 4),
+            opt(ve.map(|v| v[1]), 4),
+            opt(ve.map(|v| v[2]), 4),
+            opt(vs.map(|v| v[0]), 4),
+            opt(vs.map(|v| v[1]), 4),
+            opt(vs.map(|v| v[2]), 4),
+            opt(tilt.map(|t| t[0]), 5),
+            opt(tilt.map(|t| t[1]), 5),
+            opt(x.tilt_sigma_deg, 5),
+            opt(x.nees.map(|n| n[0]), 3),
+            opt(x.nees.map(|n| n[1]), 3),
         );
     }
     std::fs::write(out.join("navigation.csv"), csv)?;

@@ -85,7 +85,7 @@ impl Views {
                     "frame_id": "gps_antenna",
                     "latitude": f.lat_deg,
                     "longitude": f.lon_deg,
-                    "altitude": f.alt_m.unwrap_or(0.0),
+                    "altitude": f.ellipsoid_height_m().unwrap_or(0.0),
                     "position_covariance": vec![0.0; 9],
                     "position_covariance_type": 0,
                 });

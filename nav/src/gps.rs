@@ -68,6 +68,15 @@ pub struct GpsAccuracy {
     pub alt_sigma_m: Option<f64>,
 }
 
+impl GpsFix {
+    /// Height above the WGS 84 ellipsoid (what the filter navigates in), m: the altitude plus
+    /// the geoid's separation where the sentence gives one, else the altitude as it is (a
+    /// receiver without a geoid model reports ellipsoid heights with no separation).
+    pub fn ellipsoid_height_m(&self) -> Option<f64> {
+        self.alt_m.map(|a| a + self.geoid_sep_m.unwrap_or(0.0))
+    }
+}
+
 impl GpsAccuracy {
     /// From a parsed GST: none when latitude or longitude sigma is missing, not positive or
     /// over [`MAX_GST_SIGMA_M`] (an altitude sigma like that is dropped alone).
@@ -100,8 +109,11 @@ pub struct GpsFix {
     pub lat_deg: f64,
     /// Longitude, deg.
     pub lon_deg: f64,
-    /// Altitude above mean sea level, m.
+    /// Altitude above mean sea level (the geoid), m, as the sentence gives it.
     pub alt_m: Option<f64>,
+    /// The geoid's height above the WGS 84 ellipsoid at the fix (GGA's separation), m.
+    #[serde(default)]
+    pub geoid_sep_m: Option<f64>,
     /// Fix quality (GGA: 0 none, 1 GPS, 2 DGPS, 4 RTK, ...; others: 1 valid, 0 invalid).
     pub quality: u8,
     /// Satellites used.
@@ -289,6 +301,10 @@ impl GpsDecoder {
             })
         };
         let fmt_t = |t: Option<chrono::NaiveTime>| t.map(|t| t.format("%H:%M:%S%.3f").to_string());
+        let geoid_sep = match &r {
+            ParseResult::GGA(g) => g.geoid_separation.map(f64::from),
+            _ => None,
+        };
         let (sentence, time, lat, lon, alt, quality, sats, hdop, speed, track, valid) = match &r {
             ParseResult::GGA(g) => {
                 let q = g.fix_type.map_or(0, fix_quality);
@@ -404,6 +420,7 @@ impl GpsDecoder {
             lat_deg: lat,
             lon_deg: lon,
             alt_m: alt,
+            geoid_sep_m: geoid_sep,
             quality,
             satellites: sats,
             hdop,
@@ -547,6 +564,28 @@ mod tests {
         assert!(matches!(d.line(&none), LineOutcome::Fix(f) if !f.valid));
         let st = d.stats();
         assert_eq!((st.out_of_range, st.time_backwards, st.no_fix), (1, 1, 1));
+    }
+
+    /// GGA's altitude is above the geoid; the filter navigates in ellipsoid heights: the
+    /// separation is added where the sentence gives one, and the altitude taken as it is where
+    /// it does not.
+    #[test]
+    fn ellipsoid_height_is_the_altitude_plus_the_geoid_separation() {
+        let mut d = GpsDecoder::default();
+        let with = line("GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,");
+        let without = line("GPGGA,123520,4807.038,N,01131.000,E,1,08,0.9,545.4,M,,M,,");
+        let height = |d: &mut GpsDecoder, l: &str| match d.line(l) {
+            LineOutcome::Fix(f) => (f.alt_m, f.geoid_sep_m, f.ellipsoid_height_m()),
+            o => panic!("{o:?}"),
+        };
+        let near = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() < 1e-4);
+        let (alt, sep, h) = height(&mut d, &with);
+        assert!(
+            near(alt, 545.4) && near(sep, 46.9) && near(h, 592.3),
+            "{alt:?} {sep:?} {h:?}"
+        );
+        let (alt, sep, h) = height(&mut d, &without);
+        assert!(near(alt, 545.4) && sep.is_none() && near(h, 545.4), "{h:?}");
     }
 
     #[test]

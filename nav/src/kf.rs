@@ -253,6 +253,10 @@ pub struct FilterStats {
     pub updates: u64,
     /// Fixes rejected by the gate.
     pub rejected: u64,
+    /// Of those, in the filter's first minute (a start that does not fit the receiver: the
+    /// wrong height, the wrong size).
+    #[serde(default)]
+    pub rejected_first_minute: u64,
     /// Mean normalized innovation squared of the used fixes.
     pub mean_nis: f64,
     /// Times the filter re-anchored on the receiver after a run of rejections.
@@ -342,6 +346,8 @@ pub struct Kf {
     /// Time propagated since the last fix was offered, s: the fading and the adaptive
     /// forgetting are per second, so that their memory is the same at any fix rate.
     since_update: f64,
+    /// Time propagated since the filter started, s.
+    age_s: f64,
     /// The receiver's correlated error over the configured one (north, east, up), once a fix
     /// has said.
     rx_scale: Option<[f64; 3]>,
@@ -405,6 +411,7 @@ impl Kf {
             rejected_in_a_row: 0,
             r_m2,
             since_update: 0.0,
+            age_s: 0.0,
             rx_scale: None,
             learned: [1.0; 2],
             learn_rho: [1.0; 2],
@@ -580,6 +587,7 @@ impl Kf {
             q[(B + i, B + i)] = 2.0 * gm[i] * gm[i] / tau * t;
         }
         self.since_update += t;
+        self.age_s += t;
         self.x = phi * self.x;
         self.p = phi * self.p * phi.transpose() + q;
         self.p = (self.p + self.p.transpose()) * 0.5;
@@ -791,6 +799,9 @@ impl Kf {
             self.rejected_in_a_row += 1;
             if self.cfg.reanchor_after == 0 || self.rejected_in_a_row < self.cfg.reanchor_after {
                 self.stats.rejected += 1;
+                if self.age_s < 60.0 {
+                    self.stats.rejected_first_minute += 1;
+                }
                 // a rejected fix teaches the noise estimate nothing
                 if adapt {
                     self.r_m2 = r_before;

@@ -151,6 +151,8 @@ pub struct Navigator {
     utc_days: i64,
     /// The first fixes' ties, checked once the receiver's latency is learned.
     first_ties: Vec<FirstTie>,
+    /// Fixes the filter's gate refused since [`Navigator::take_rejected`] was last called.
+    rejected: Vec<RejectedFix>,
     /// The receiver's latest statements of its accuracy (GST), newest last: a fix takes the
     /// one of its own UTC time when it is applied (GST comes after GGA in an epoch).
     accuracies: std::collections::VecDeque<crate::gps::GpsAccuracy>,
@@ -182,6 +184,22 @@ pub const JUMPS_TO_REANCHOR: u32 = 3;
 
 /// PPS edges kept for tying fixes that come late.
 pub const EDGES_KEPT: usize = 64;
+
+/// A fix the filter's gate refused: where the receiver put it, how far off (NIS), when.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+pub struct RejectedFix {
+    /// Latitude, deg.
+    pub lat_deg: f64,
+    /// Longitude, deg.
+    pub lon_deg: f64,
+    /// Its normalized innovation squared.
+    pub nis: Option<f64>,
+    /// IMU time it was taken at, s.
+    pub t_s: f64,
+}
+
+/// Rejected fixes kept between two calls of [`Navigator::take_rejected`].
+const REJECTED_KEPT: usize = 64;
 
 /// The receiver's accuracy statements kept for the fixes still held (10 Hz over 2 s).
 pub const ACCURACIES_KEPT: usize = 20;
@@ -254,6 +272,7 @@ impl Navigator {
             utc_days: 0,
             first_ties: Vec::new(),
             accuracies: std::collections::VecDeque::new(),
+            rejected: Vec::new(),
             utc_reanchors: 0,
             clock_jumps: 0,
             jump_streak: None,
@@ -329,6 +348,21 @@ impl Navigator {
             }
         }
         Some(c)
+    }
+
+    /// The filter's velocity covariance, East-North-Up, (m/s)^2, row-major (none before the
+    /// filter runs).
+    pub fn velocity_covariance_enu(&self) -> Option<[f64; 9]> {
+        let p = self.kf.as_ref()?.covariance();
+        Some(std::array::from_fn(|k| p[(3 + k / 3, 3 + k % 3)]))
+    }
+
+    /// The filter's attitude sigmas about east, north and up (up: heading), deg.
+    pub fn attitude_sigmas_deg(&self) -> Option<[f64; 3]> {
+        let p = self.kf.as_ref()?.covariance();
+        Some(std::array::from_fn(|i| {
+            p[(i, i)].max(0.0).sqrt().to_degrees()
+        }))
     }
 
     /// North-finding's heading (deg) becomes available.
@@ -473,6 +507,11 @@ impl Navigator {
             gst: gst.map(|a| ([a.lat_sigma_m, a.lon_sigma_m], a.alt_sigma_m)),
             hdop: fix.hdop,
         }
+    }
+
+    /// The fixes the filter's gate refused since the last call.
+    pub fn take_rejected(&mut self) -> Vec<RejectedFix> {
+        std::mem::take(&mut self.rejected)
     }
 
     /// The receiver's statement of its accuracy (GST): kept for the fix of the same UTC time.
@@ -754,7 +793,10 @@ impl Navigator {
         self.last_good_fix_t = Some(self.last_t);
         // RMC, GLL carry no height: they keep the one GGA gave (a start at height 0 wherever the
         // vehicle is had every later fix rejected at 1700 m)
-        let alt = fix.alt_m.or(self.first_fix.map(|f| f.2)).unwrap_or(0.0);
+        let alt = fix
+            .ellipsoid_height_m()
+            .or(self.first_fix.map(|f| f.2))
+            .unwrap_or(0.0);
         let p = (fix.lat_deg.to_radians(), fix.lon_deg.to_radians(), alt);
         if self.phase != NavPhase::Navigating {
             self.first_fix = Some(p);
@@ -786,6 +828,14 @@ impl Navigator {
         let used = k.update(st, lat, lon, h, &stated);
         if !used {
             self.fixes_ignored += 1;
+            if self.rejected.len() < REJECTED_KEPT {
+                self.rejected.push(RejectedFix {
+                    lat_deg: fix.lat_deg,
+                    lon_deg: fix.lon_deg,
+                    nis: k.last_nis(),
+                    t_s: taken_at,
+                });
+            }
         }
         if let Some(nis) = k.last_nis() {
             self.integrity.on_fix(nis, !used);

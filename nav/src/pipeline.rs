@@ -436,6 +436,7 @@ impl Pipeline {
     /// (the solution's `filter` health bit follows it, [`Pipeline::health`]).
     fn integrity_changes(&mut self, out: &mut Vec<Output>) {
         self.filter_resets(out);
+        self.rejected_fixes(out);
         let now = self
             .navigator
             .as_ref()
@@ -465,6 +466,24 @@ impl Pipeline {
 
     /// The filter re-anchored on the receiver or folded an open-loop estimate that left the
     /// linear range: a `filter` event in the recording (the log has the filter's warning).
+    /// Each fix the filter's gate refused, in the recording (`fix_rejected`): where it was,
+    /// for the report's track.
+    fn rejected_fixes(&mut self, out: &mut Vec<Output>) {
+        let Some(n) = self.navigator.as_mut() else {
+            return;
+        };
+        for r in n.take_rejected() {
+            let mut json = serde_json::to_value(r).unwrap_or_default();
+            json["kind"] = "fix_rejected".into();
+            self.json(
+                JsonChannel::Event,
+                self.sums.last.unwrap_or(0),
+                json.to_string(),
+                out,
+            );
+        }
+    }
+
     fn filter_resets(&mut self, out: &mut Vec<Output>) {
         let Some(n) = self.navigator.as_ref() else {
             return;
@@ -971,6 +990,12 @@ impl Pipeline {
             });
             if let Some(c) = n.position_covariance_enu() {
                 j["pos_cov_enu_m2"] = serde_json::json!(c);
+            }
+            if let Some(c) = n.velocity_covariance_enu() {
+                j["vel_cov_enu_m2s2"] = serde_json::json!(c);
+            }
+            if let Some(a) = n.attitude_sigmas_deg() {
+                j["att_sigma_enu_deg"] = serde_json::json!(a);
             }
             out.push(Output::Json {
                 channel: JsonChannel::Solution,

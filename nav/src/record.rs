@@ -596,6 +596,7 @@ mod tests {
             lat_deg: -33.9,
             lon_deg: 18.4,
             alt_m: Some(12.0),
+            geoid_sep_m: Some(32.5),
             quality: 1,
             satellites: Some(9),
             hdop: Some(0.9),

@@ -71,3 +71,49 @@ fn outages_and_time_to_first_fix_give_void_or_no_sentences() {
     });
     assert!(silent.fix(6.0, 0.0, (1, 1, 2026), &truth).0.is_empty());
 }
+
+/// Heights keep their datum: the emulator's GGA gives the altitude above the geoid and the
+/// geoid's separation (EGM2008), nav adds them back to the ellipsoid height it navigates in.
+/// Checked where the geoid is far from the ellipsoid: +50 m in the Alps, -106 m south of India,
+/// +20 m on the Altiplano.
+#[test]
+fn gga_altitude_is_above_the_geoid_and_nav_takes_the_ellipsoid_height() {
+    for (lat, lon, h) in [
+        (46.5, 7.9, 1700.0),
+        (5.0, 78.0, 10.0),
+        (-16.5, -68.2, 4000.0),
+    ] {
+        let mut w = NmeaWriter::new(ReceiverParams {
+            errors: emulators::gps::GpsErrorParams {
+                gm_sigma_m: 0.0,
+                white_sigma_m: 0.0,
+                ..Default::default()
+            },
+            ..ReceiverParams::default()
+        });
+        let truth = AntennaTruth {
+            lat_deg: lat,
+            lon_deg: lon,
+            h_m: h,
+            vel_enu: [0.0; 3],
+        };
+        let (s, _) = w.fix(1.0, 4.0 * 3600.0, (21, 11, 2026), &truth);
+        let mut dec = nav::gps::GpsDecoder::default();
+        let mut fixes = Vec::new();
+        dec.push_bytes(s.as_bytes(), &mut fixes);
+        let f = fixes.iter().find(|f| f.sentence == "GGA").unwrap();
+        let sep = f.geoid_sep_m.unwrap();
+        let n = f64::from(egm2008::geoid_height(lat as f32, lon as f32).unwrap());
+        assert!(
+            (sep - n).abs() < 0.06,
+            "{lat} {lon}: separation {sep} against {n}"
+        );
+        assert!(
+            sep.abs() > 15.0,
+            "{lat} {lon}: a site where the geoid matters ({sep} m)"
+        );
+        assert!((f.alt_m.unwrap() - (h - n)).abs() < 0.06, "{f:?}");
+        let e = f.ellipsoid_height_m().unwrap();
+        assert!((e - h).abs() < 0.1, "{lat} {lon}: {e} against {h}");
+    }
+}

@@ -90,7 +90,10 @@ impl NmeaWriter {
         // the satellites used and the HDOP of the error model's geometry
         let sats: u32 = if valid { sample.satellites } else { 0 };
         let hdop = if valid { sample.hdop } else { 99.9 };
-        let geoid = 0.0;
+        // GGA's altitude is above the geoid, with the geoid's separation from the ellipsoid
+        // beside it (EGM2008, a coarse grid: the receiver's own model is no finer)
+        let geoid = egm2008::geoid_height(truth.lat_deg as f32, truth.lon_deg as f32)
+            .map_or(0.0, f64::from);
         let tk = &self.p.talker;
         let mut out = String::new();
         if at(&self.p.garbage_at_s) {
@@ -112,7 +115,7 @@ impl NmeaWriter {
             "{tk}GGA,{time},{la_s},{ns_s},{lo_s},{ew_s},{},{sats:02},{hdop:.1},{},M,{geoid:.1},M,,",
             u8::from(valid),
             if valid {
-                format!("{h:.1}")
+                format!("{:.1}", h - geoid)
             } else {
                 String::new()
             }

@@ -251,10 +251,11 @@ fn coning_status(r: &hil::experiment::ConingReport) -> i32 {
     }
 }
 
-/// The routes experiment's exit status: 0 when every filter is consistent on every route and no
-/// velocity error went unflagged.
+/// The routes experiment's exit status: 0 when every filter is consistent on every route, no
+/// velocity error went unflagged and no fix was rejected in a filter's first minute.
 fn routes_status(r: &hil::routes::RoutesReport) -> i32 {
-    if r.all_consistent && r.no_unflagged_velocity_errors {
+    let clean_starts = r.rows.iter().all(|x| x.rejected_first_minute == 0);
+    if r.all_consistent && r.no_unflagged_velocity_errors && clean_starts {
         0
     } else {
         1
