@@ -84,6 +84,10 @@ pub struct LockstepStats {
     pub waits: u64,
     /// Wall time spent waiting for nav, ms.
     pub wait_ms: u64,
+    /// Of that, held for nav's watchdog to report an IMU stop or the stream's end (its wall
+    /// time, by design), ms: not the bench's pace.
+    #[serde(default)]
+    pub watchdog_wait_ms: u64,
     /// Times nav did not confirm within the stall limit (the run went on without lockstep).
     pub stalls: u64,
     /// Turntable commands placed in time by a NAV_TIME.
@@ -604,7 +608,9 @@ fn hold_for_watchdog(
         wait_readable(port.sock, Duration::from_millis(2));
         nav.read(port.sock, port.iface, step)?;
     }
-    nav.ls.wait_ms += since.elapsed().as_millis() as u64;
+    let held = since.elapsed().as_millis() as u64;
+    nav.ls.wait_ms += held;
+    nav.ls.watchdog_wait_ms += held;
     Ok(())
 }
 

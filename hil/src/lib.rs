@@ -29,3 +29,4 @@ pub mod status;
 pub mod tetraexp;
 pub mod truthrec;
 pub mod validate;
+pub mod values;

@@ -43,10 +43,10 @@ enum Cmd {
     /// each with its result card and report, and a summary of both.
     Demo {
         /// Speed factor (1 = real time: about 4.5 minutes of drill and 2 of driving).
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, value_parser = hil::values::speed, default_value_t = 1.0)]
         speed: f64,
         /// Dwell per position, s.
-        #[arg(long, default_value_t = 60.0)]
+        #[arg(long, value_parser = hil::values::duration_s, default_value_t = 60.0)]
         dwell: f64,
         /// Output folder (default runs/drill-north-finding-<unix time>).
         #[arg(long)]
@@ -69,7 +69,7 @@ enum Cmd {
         #[arg(long)]
         bus: bool,
         /// With --bus: speed factor over real time (1 = as the IMU sent it).
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, value_parser = hil::values::speed, default_value_t = 1.0)]
         speed: f64,
         /// With --bus: the nav binary to run (default: the one beside hil), e.g. a newer build.
         #[arg(long)]
@@ -115,7 +115,7 @@ enum Cmd {
     /// Print the bus-load table of the wire contract.
     Busload {
         /// Bit rate, bit/s.
-        #[arg(long, default_value_t = 1_000_000.0)]
+        #[arg(long, value_parser = hil::values::bitrate, default_value_t = 1_000_000.0)]
         bitrate: f64,
     },
     /// Print the DBC file of the wire contract.
@@ -156,7 +156,7 @@ struct FaultsArgs {
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// Speed factor of every run.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, value_parser = hil::values::speed, default_value_t = 10.0)]
     speed: f64,
     /// List the faults and exit.
     #[arg(long)]
@@ -168,7 +168,7 @@ struct FaultsArgs {
 #[derive(clap::Args, Clone)]
 struct BenchArgs {
     /// Seconds of 2 kHz IMU data per pass of the in-process figures.
-    #[arg(long, default_value_t = 120.0)]
+    #[arg(long, value_parser = hil::values::duration_s, default_value_t = 120.0)]
     seconds: f64,
     /// Passes of nav's front end (the best is reported).
     #[arg(long, default_value_t = 3)]
@@ -177,7 +177,7 @@ struct BenchArgs {
     #[arg(long)]
     scenario: Vec<PathBuf>,
     /// Simulated seconds of each scenario through the bus (its first seconds).
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, value_parser = hil::values::duration_s, default_value_t = 30.0)]
     bus_seconds: f64,
     /// Frames per raw vcan measurement.
     #[arg(long, default_value_t = 200_000)]
@@ -260,7 +260,7 @@ struct ValidateArgs {
     #[arg(long, value_enum)]
     fault: Option<TtFault>,
     /// Speed factor of the emulated mechanism.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, value_parser = hil::values::speed, default_value_t = 1.0)]
     speed: f64,
     #[command(flatten)]
     bus: BusArgs,
@@ -288,25 +288,25 @@ enum Calibrate {
 #[derive(clap::Args, Clone)]
 struct TetraArgs {
     /// Latitude of the table, deg.
-    #[arg(long, default_value_t = 45.0, allow_negative_numbers = true)]
+    #[arg(long, value_parser = hil::values::latitude_deg, default_value_t = 45.0, allow_negative_numbers = true)]
     lat: f64,
     /// Heading of the table's base, deg.
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, value_parser = hil::values::heading_deg, default_value_t = 0.0, allow_negative_numbers = true)]
     heading: f64,
     /// Rate of each turn, deg/s (the paper: 20).
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, value_parser = hil::values::rate_dps, default_value_t = 20.0)]
     rate: f64,
     /// Rest before the turns, s.
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, value_parser = hil::values::pause_s, default_value_t = 60.0)]
     rest: f64,
     /// Each turn, s (the paper: 75).
-    #[arg(long, default_value_t = 75.0)]
+    #[arg(long, value_parser = hil::values::duration_s, default_value_t = 75.0)]
     turn: f64,
     /// Rest after the turns, s.
-    #[arg(long, default_value_t = 75.0)]
+    #[arg(long, value_parser = hil::values::pause_s, default_value_t = 75.0)]
     end_rest: f64,
     /// The unit's gyro noise, deg/s per sample (the paper's is 2.8e-7; MEMS: 0.005 to 0.05).
-    #[arg(long, default_value_t = 0.005)]
+    #[arg(long, value_parser = hil::values::noise_dps, default_value_t = 0.005)]
     noise: f64,
     /// Run the profile again with the parity monitor on the calibrated outputs.
     #[arg(long)]
@@ -320,7 +320,7 @@ struct TetraArgs {
     #[arg(long)]
     parameters: Option<PathBuf>,
     /// Speed factor (1 = real time).
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, value_parser = hil::values::speed, default_value_t = 20.0)]
     speed: f64,
     /// Seed of the unit and the table.
     #[arg(long, default_value_t = 1)]
@@ -335,29 +335,29 @@ struct TetraArgs {
 #[derive(clap::Args, Clone)]
 struct CalibrateArgs {
     /// Latitude of the site, deg.
-    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+    #[arg(long, value_parser = hil::values::latitude_deg, default_value_t = 30.0, allow_negative_numbers = true)]
     lat: f64,
     /// True heading of the base, deg.
-    #[arg(long, default_value_t = 30.06, allow_negative_numbers = true)]
+    #[arg(long, value_parser = hil::values::heading_deg, default_value_t = 30.06, allow_negative_numbers = true)]
     heading: f64,
     /// True pitch and roll of the base, deg.
-    #[arg(long, default_value_t = 0.06, allow_negative_numbers = true)]
+    #[arg(long, value_parser = hil::values::tilt_deg, default_value_t = 0.06, allow_negative_numbers = true)]
     tilt: f64,
     /// Coarse alignment at rest, s.
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, value_parser = hil::values::duration_s, default_value_t = 60.0)]
     level: f64,
     /// Rotation, s (the paper: 900).
-    #[arg(long, default_value_t = 900.0)]
+    #[arg(long, value_parser = hil::values::duration_s, default_value_t = 900.0)]
     rotate: f64,
     /// Rotation rate of both axes, deg/s (the paper: 5).
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, value_parser = hil::values::rate_dps, default_value_t = 5.0)]
     rate: f64,
     /// The inner axis starts this long after the outer one, s (0: in step; the paper does not
     /// say).
-    #[arg(long, default_value_t = 18.0)]
+    #[arg(long, value_parser = hil::values::pause_s, default_value_t = 18.0)]
     inner_delay: f64,
     /// Speed factor (1 = real time).
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, value_parser = hil::values::speed, default_value_t = 20.0)]
     speed: f64,
     /// Seed of the emulated unit and mechanism.
     #[arg(long, default_value_t = 1)]
@@ -386,22 +386,22 @@ enum Drill {
 #[derive(clap::Args, Clone)]
 struct NorthFindingArgs {
     /// True heading of the vehicle, deg (default: random).
-    #[arg(long)]
+    #[arg(long, value_parser = hil::values::heading_deg, allow_negative_numbers = true)]
     heading: Option<f64>,
     /// Latitude, deg.
-    #[arg(long, default_value_t = 28.218157)]
+    #[arg(long, value_parser = hil::values::latitude_deg, allow_negative_numbers = true, default_value_t = 28.218157)]
     lat: f64,
     /// Dwell per position, s.
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, value_parser = hil::values::duration_s, default_value_t = 60.0)]
     dwell: f64,
     /// Speed factor (1 = real time, as on the vehicle).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, value_parser = hil::values::speed, default_value_t = 1.0)]
     speed: f64,
     /// Disturbance script: TOML file with [[disturbance]] entries (door_slam, climb_in, wind).
     #[arg(long)]
     disturbances: Option<PathBuf>,
     /// Pass when the heading error is within this, deg.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, value_parser = hil::values::tolerance_deg, default_value_t = 0.1)]
     tolerance: f64,
     /// Random seed (sensor errors, random heading).
     #[arg(long, default_value_t = 1)]
@@ -421,13 +421,13 @@ enum Experiment {
     /// accuracy. Writes runs.csv, report.json and report.md.
     NorthFinding {
         /// Runs of the main cases (the other cases run a third as many).
-        #[arg(long, default_value_t = 100)]
+        #[arg(long, value_parser = hil::values::count, default_value_t = 100)]
         runs: usize,
         /// Dwell per position of the main cases, s.
-        #[arg(long, default_value_t = 60.0)]
+        #[arg(long, value_parser = hil::values::duration_s, default_value_t = 60.0)]
         dwell: f64,
         /// Main latitude, deg.
-        #[arg(long, default_value_t = 28.2)]
+        #[arg(long, value_parser = hil::values::latitude_deg, allow_negative_numbers = true, default_value_t = 28.2)]
         lat: f64,
         /// Base seed.
         #[arg(long, default_value_t = 1000)]
@@ -461,10 +461,10 @@ enum Experiment {
         #[arg(long, default_value = "scenarios/campus-loop.toml")]
         scenario: PathBuf,
         /// Runs per case with other IMU and GPS seeds (results are averaged).
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, value_parser = hil::values::count, default_value_t = 1)]
         runs: usize,
         /// GPS noise the mis-specified filters assume, m (comma-separated).
-        #[arg(long, value_delimiter = ',', default_value = "5,100")]
+        #[arg(long, value_parser = hil::values::sigma_m, value_delimiter = ',', default_value = "5,100")]
         misspecified: Vec<f64>,
         /// Surroundings of the mis-modelled receiver: `paper-003` (paper 003's campus: the
         /// satellites used change, multipath bursts), `urban` or `open-sky`.
@@ -488,7 +488,7 @@ enum Experiment {
         #[arg(long)]
         scenario: Vec<PathBuf>,
         /// Runs per route and filter with other IMU and receiver seeds (results are averaged).
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, value_parser = hil::values::count, default_value_t = 1)]
         runs: usize,
         /// Filter kinds (comma-separated).
         #[arg(
@@ -515,24 +515,24 @@ enum Experiment {
     /// build.
     Calibration {
         /// Runs (seeds).
-        #[arg(long, default_value_t = 20)]
+        #[arg(long, value_parser = hil::values::count, default_value_t = 20)]
         runs: usize,
         /// First seed.
         #[arg(long, default_value_t = 1)]
         seed: u64,
         /// Run length, s (errors are averaged over its second half).
-        #[arg(long, default_value_t = 900.0)]
+        #[arg(long, value_parser = hil::values::duration_s, default_value_t = 900.0)]
         duration: f64,
         /// Latitude, deg.
-        #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+        #[arg(long, value_parser = hil::values::latitude_deg, default_value_t = 30.0, allow_negative_numbers = true)]
         lat: f64,
         /// True heading, deg (the estimators are given it less 0.06 deg).
-        #[arg(long, default_value_t = 30.06, allow_negative_numbers = true)]
+        #[arg(long, value_parser = hil::values::heading_deg, default_value_t = 30.06, allow_negative_numbers = true)]
         heading: f64,
         /// Start the inner axis this long after the outer, s. The paper does not say how its
         /// axes are phased: a quarter turn (18 s at 5 deg/s, the default) averages the coarse
         /// tilt out of the z gyro's bias; 0 turns them in step.
-        #[arg(long, default_value_t = 18.0)]
+        #[arg(long, value_parser = hil::values::pause_s, default_value_t = 18.0)]
         inner_delay: f64,
         /// Output folder (default runs/experiment-calibration-<unix time>).
         #[arg(long)]
@@ -545,10 +545,10 @@ enum Experiment {
         #[arg(long)]
         out: Option<PathBuf>,
         /// Run length for the tables, s.
-        #[arg(long, default_value_t = 60.0)]
+        #[arg(long, value_parser = hil::values::duration_s, default_value_t = 60.0)]
         duration: f64,
         /// Step of the simulated frequency sweep, Hz.
-        #[arg(long, default_value_t = 2.0)]
+        #[arg(long, value_parser = hil::values::step_hz, default_value_t = 2.0)]
         sweep_step: f64,
         /// Seed of the emulated IMU (Table 3 analogue).
         #[arg(long, default_value_t = 7)]
@@ -567,10 +567,10 @@ struct RunArgs {
     #[arg(long)]
     scenario: Option<PathBuf>,
     /// Override the simulated duration, s.
-    #[arg(long)]
+    #[arg(long, value_parser = hil::values::duration_s)]
     duration: Option<f64>,
     /// Override the speed factor (1 = real time).
-    #[arg(long)]
+    #[arg(long, value_parser = hil::values::speed)]
     speed: Option<f64>,
     /// The nav binary (default: next to hil).
     #[arg(long)]

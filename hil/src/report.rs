@@ -31,7 +31,8 @@ pub struct RunReport {
     pub wall_seconds: f64,
     /// Frames per second of wall time through the interface.
     pub frames_per_wall_second: f64,
-    /// The speed factor reached (simulated seconds per wall second).
+    /// The speed factor reached (simulated seconds per wall second, the time held for nav's
+    /// watchdog to report an IMU stop or the stream's end left out).
     pub pace_reached: f64,
     /// How the emulators followed nav (lockstep).
     pub lockstep: emulators::bus::LockstepStats,

@@ -781,7 +781,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         interface: opts.iface.clone(),
         wall_seconds: wall,
         frames_per_wall_second: tx.frames as f64 / wall.max(1e-9),
-        pace_reached: sim_reached / wall.max(1e-9),
+        pace_reached: sim_reached
+            / (wall - lockstep_stats.watchdog_wait_ms as f64 * 1e-3).max(1e-9),
         lockstep: lockstep_stats,
         tx,
         in_process: reference,

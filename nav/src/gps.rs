@@ -269,6 +269,20 @@ impl GpsDecoder {
         std::mem::take(&mut self.accuracies)
     }
 
+    /// A GST statement, counted as usable or not.
+    fn accuracy(&mut self, a: Option<GpsAccuracy>) -> LineOutcome {
+        match a {
+            Some(a) => {
+                self.stats.accuracy += 1;
+                LineOutcome::Accuracy(a)
+            }
+            None => {
+                self.stats.accuracy_unusable += 1;
+                LineOutcome::Other
+            }
+        }
+    }
+
     /// Decode one framed line.
     pub fn line(&mut self, l: &str) -> LineOutcome {
         let r = match nmea::parse_str(l) {
@@ -367,18 +381,7 @@ impl GpsDecoder {
                 None,
                 true,
             ),
-            ParseResult::GST(g) => {
-                return match GpsAccuracy::of(g, tod(g.time)) {
-                    Some(a) => {
-                        self.stats.accuracy += 1;
-                        LineOutcome::Accuracy(a)
-                    }
-                    None => {
-                        self.stats.accuracy_unusable += 1;
-                        LineOutcome::Other
-                    }
-                };
-            }
+            ParseResult::GST(g) => return self.accuracy(GpsAccuracy::of(g, tod(g.time))),
             ParseResult::ZDA(z) => {
                 if let Some(d) = z.utc_date() {
                     self.date = Some(d);

@@ -684,34 +684,12 @@ impl Kf {
         }
     }
 
-    /// A GPS position (rad, rad, m) measured at the state's time, with what the receiver said
-    /// of its accuracy. Returns whether it was used.
-    pub fn update(
-        &mut self,
-        s: &mut NavState,
-        lat: f64,
-        lon: f64,
-        h: f64,
-        acc: &StatedAccuracy,
-    ) -> bool {
-        let (rm, rn) = earth::radii(s.lat);
-        // the antenna's position from the INS: lever arm in the navigation frame
-        let l = s.q_nb * Vector3::from(self.cfg.lever_arm_m);
-        let ant = (
-            s.lat + l.y / (rm + s.h),
-            s.lon + l.x / ((rn + s.h) * s.lat.cos()),
-            s.h + l.z,
-        );
-        let z = Vector3::new(ant.0 - lat, ant.1 - lon, ant.2 - h);
-        // metres per state unit of the position axes (lat, lon, h)
-        let m_per = [rm + s.h, (rn + s.h) * s.lat.cos(), 1.0];
-        // the share of a second since the last fix (1 at 1 Hz and after an outage): fading and
-        // forgetting per second, not per fix (at 5 Hz a per-fix fading of 1.02 discounted five
-        // times as fast, and the fading filter's RMS error rose sixfold)
-        let per_s = std::mem::take(&mut self.since_update).clamp(0.0, 1.0);
-        // the size of this fix's error: what the receiver states (GST, or HDOP times the
-        // UERE) scales the white noise at once and the correlated error smoothly; else the
-        // legacy HDOP ratio scales the white part
+    /// The size of this fix's error over the configured one (north, east, up), for its white
+    /// noise, and whether the scale is being learnt: what the receiver states (GST, or HDOP
+    /// times the UERE) scales the white noise at once and the correlated error smoothly
+    /// ([`Kf::follow_receiver_scale`]); where it states nothing the learnt scale does; else the
+    /// legacy HDOP ratio scales the white part. Counted by where the size came from.
+    fn size_fix(&mut self, acc: &StatedAccuracy, per_s: f64) -> ([f64; 3], bool) {
         let (stated, mut by) = self.stated_scale(acc);
         let legacy = match acc.hdop {
             Some(d)
@@ -739,6 +717,35 @@ impl Kf {
             self.follow_receiver_scale(stated, per_s);
         }
         let white: [f64; 3] = std::array::from_fn(|i| stated[i] * legacy);
+        (white, learn)
+    }
+
+    /// A GPS position (rad, rad, m) measured at the state's time, with what the receiver said
+    /// of its accuracy. Returns whether it was used.
+    pub fn update(
+        &mut self,
+        s: &mut NavState,
+        lat: f64,
+        lon: f64,
+        h: f64,
+        acc: &StatedAccuracy,
+    ) -> bool {
+        let (rm, rn) = earth::radii(s.lat);
+        // the antenna's position from the INS: lever arm in the navigation frame
+        let l = s.q_nb * Vector3::from(self.cfg.lever_arm_m);
+        let ant = (
+            s.lat + l.y / (rm + s.h),
+            s.lon + l.x / ((rn + s.h) * s.lat.cos()),
+            s.h + l.z,
+        );
+        let z = Vector3::new(ant.0 - lat, ant.1 - lon, ant.2 - h);
+        // metres per state unit of the position axes (lat, lon, h)
+        let m_per = [rm + s.h, (rn + s.h) * s.lat.cos(), 1.0];
+        // the share of a second since the last fix (1 at 1 Hz and after an outage): fading and
+        // forgetting per second, not per fix (at 5 Hz a per-fix fading of 1.02 discounted five
+        // times as fast, and the fading filter's RMS error rose sixfold)
+        let per_s = std::mem::take(&mut self.since_update).clamp(0.0, 1.0);
+        let (white, learn) = self.size_fix(acc, per_s);
         let r_of = |r_m2: &[f64; 3]| {
             SMatrix::<f64, 3, 3>::from_diagonal(&Vector3::from_fn(|i, _| {
                 r_m2[i] * white[i] * white[i] / (m_per[i] * m_per[i])
