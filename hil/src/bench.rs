@@ -43,7 +43,7 @@ pub fn frontend(seconds: f64, passes: u32) -> Result<BenchResult> {
     while bus.next_time() <= seconds {
         bus.next_frames(&mut frames);
     }
-    let cfg = crate::inproc::nav_config(&s, None, None);
+    let cfg = crate::navconfig::nav_config(&s, None, None);
     let mut best = f64::INFINITY;
     let mut samples = 0;
     for _ in 0..passes.max(1) {
@@ -277,7 +277,7 @@ pub fn pipeline_drive(s: &Scenario, seconds: f64) -> Result<PipelineBench> {
                 .map(|e| Input::Gps(e.text)),
         );
     }
-    let cfg = crate::inproc::nav_config(s, None, Some(std::path::Path::new("(in process)")));
+    let cfg = crate::navconfig::nav_config(s, None, Some(std::path::Path::new("(in process)")));
     let mut p = Pipeline::new(&cfg, false).context("nav's pipeline")?;
     let mut out = Vec::new();
     let mut n_frames = 0u64;

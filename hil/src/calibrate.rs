@@ -186,7 +186,7 @@ pub fn outcome(
     // what nav started with; its estimates are residuals on top (composed as nav's front end
     // applies them: `(raw - b0) / (1 + k0)` reads `(1 + k') w + b'`)
     let loaded = s.nav_parameters.as_ref().and_then(|p| {
-        nav::params::ImuParameters::load(p, &crate::inproc::unit_id(s))
+        nav::params::ImuParameters::load(p, &s.unit_id())
             .ok()
             .map(|p| p.gyro)
     });

@@ -76,15 +76,6 @@ pub fn wrap180(d: f64) -> f64 {
     if w > 180.0 { w - 360.0 } else { w }
 }
 
-/// The drill's north-finding settings for a scenario (latitude from the site).
-pub fn nf_config(s: &Scenario, base: &NorthFindingConfig) -> NorthFindingConfig {
-    NorthFindingConfig {
-        enabled: true,
-        latitude_deg: s.site.lat_deg,
-        ..base.clone()
-    }
-}
-
 /// Score a result against truth.
 pub fn outcome(
     truth_deg: f64,
@@ -119,8 +110,8 @@ pub fn run_in_process(
             s.name
         );
     };
-    let mut cfg = crate::inproc::nav_config(s, None, None);
-    cfg.north_finding = nf_config(s, nf);
+    let mut cfg = crate::navconfig::nav_config(s, None, None);
+    cfg.north_finding = crate::navconfig::nf_config(s, nf);
     let mut bench = crate::inproc::InProcessBench::new(s, &cfg, motion, Some(tt), None)?;
     let mut last_phase = None;
     let dt = 1.0 / s.imu.rate_hz;

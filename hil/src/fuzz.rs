@@ -255,10 +255,10 @@ fn corpus(target: Target) -> Result<Vec<Vec<u8>>> {
                 &Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/campus-loop.toml"),
             )?;
             vec![
-                crate::inproc::nav_config(&s, Some("can0"), Some(Path::new("/dev/ttyS1")))
+                crate::navconfig::nav_config(&s, Some("can0"), Some(Path::new("/dev/ttyS1")))
                     .to_toml()
                     .into_bytes(),
-                crate::inproc::nav_config(&Scenario::builtin_static(), Some("vcan0"), None)
+                crate::navconfig::nav_config(&Scenario::builtin_static(), Some("vcan0"), None)
                     .to_toml()
                     .into_bytes(),
             ]
@@ -343,7 +343,7 @@ struct CanTarget {
 impl CanTarget {
     fn new() -> Result<Self> {
         let s = crate::drill::scenario(37.0, 28.2, 10.0, 1);
-        let mut cfg = crate::inproc::nav_config(&s, None, None);
+        let mut cfg = crate::navconfig::nav_config(&s, None, None);
         cfg.navigation.enabled = true;
         cfg.navigation.initial_heading_deg = Some(37.0);
         Ok(Self {

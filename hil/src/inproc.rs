@@ -6,7 +6,8 @@
 //! sample. No glue of nav's is copied here: the result of an in-process run equals the bench's
 //! bit for bit (the end-to-end tests check it).
 //!
-//! Also here: what a scenario sets up for both (nav's config, the receiver's model).
+//! Also here: the receiver's model a scenario sets up for both (nav's config is
+//! [`crate::navconfig`]'s).
 
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
@@ -18,135 +19,10 @@ use emulators::imu::ImuEmulator;
 use emulators::step::{FromNav, Step, Stepper};
 use emulators::truth::Motion;
 use emulators::turntable::Turntable;
-use nav::config::{CanConfig, GpsConfig, NavConfig, RecordConfig, WatchdogConfig};
-use nav::navigator::NavigationConfig;
+use nav::config::NavConfig;
 use nav::pipeline::{Output, Pipeline};
 use std::path::Path;
 use wire::RawFrame;
-
-/// nav's `[navigation]` for a scenario: enabled, the surveyed heading when north-finding does
-/// not give one, the receiver's lever arm when the filter's is left at zero.
-pub fn navigation_config(s: &Scenario) -> Option<NavigationConfig> {
-    let mut n = s.navigation.clone()?;
-    n.enabled = true;
-    if s.north_finding.is_none() && n.initial_heading_deg.is_none() {
-        n.initial_heading_deg = Some(s.truth_heading_deg());
-    }
-    if let Some(g) = &s.gps {
-        n.filter = crate::navrun::with_lever_arm(&n.filter, g);
-    }
-    Some(n)
-}
-
-/// nav's `[self_calibration]` for a scenario: enabled, at the site's latitude, the unit named
-/// by the IMU's seed, the parameter file written in the run folder.
-pub fn self_calibration_config(
-    s: &Scenario,
-    c: &nav::selfcal::SelfCalibrationConfig,
-) -> nav::selfcal::SelfCalibrationConfig {
-    nav::selfcal::SelfCalibrationConfig {
-        enabled: true,
-        latitude_deg: s.site.lat_deg,
-        imu: unit_id(s),
-        parameters_out: Some(PARAMETER_FILE.into()),
-        ..c.clone()
-    }
-}
-
-/// The emulated IMU unit's serial number (what a parameter file for it names).
-pub fn unit_id(s: &Scenario) -> String {
-    format!("emulated-imu-seed-{}", s.imu.seed)
-}
-
-/// nav's `[imu]` for a scenario, with the parameter file it names loaded (as nav loads it).
-pub fn imu_calibration(s: &Scenario) -> nav::imu::ImuCalibration {
-    let mut c = crate::replay::calibration(s);
-    if let Some(p) = s
-        .nav_parameters
-        .as_ref()
-        .and_then(|p| nav::params::ImuParameters::load(p, &unit_id(s)).ok())
-    {
-        c.gyro_bias_dph = p.gyro.bias_dph;
-        c.gyro_scale_factor_ppm = p.gyro.scale_factor_ppm;
-    }
-    c
-}
-
-/// The emulated redundant unit's serial number.
-pub fn mems_unit_id(s: &Scenario) -> String {
-    format!(
-        "emulated-mems-seed-{}",
-        s.imu.tetra.as_ref().map_or(0, |t| t.gyros.seed)
-    )
-}
-
-/// The parameter file nav's calibration of the redundant unit writes, in the run folder.
-pub const TETRA_PARAMETER_FILE: &str = "tetra-parameters.toml";
-
-/// The parameter file nav's self-calibration writes, in the run folder.
-pub const PARAMETER_FILE: &str = "gyro-parameters.toml";
-
-/// nav's config for a scenario. `iface`: the CAN interface (none in process); `gps_port`: the
-/// receiver's port when the scenario has one (in process a name only: nothing opens it).
-pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) -> NavConfig {
-    NavConfig {
-        calibration: s
-            .nav_parameters
-            .as_ref()
-            .map(|p| nav::config::CalibrationConfig {
-                imu: unit_id(s),
-                parameters: p.clone(),
-            }),
-        can: iface.map(|i| CanConfig {
-            interface: i.into(),
-            rcvbuf_bytes: s.bus.nav_rcvbuf_bytes,
-        }),
-        gps: gps_port.map(|p| GpsConfig {
-            port: p.to_path_buf(),
-            baud: 9600,
-            fixes_jsonl: Some("gps-fixes.jsonl".into()),
-            ..GpsConfig::default()
-        }),
-        navigation: navigation_config(s).unwrap_or_default(),
-        imu: imu_calibration(s),
-        processing: s.processing,
-        north_finding: s
-            .north_finding
-            .as_ref()
-            .map(|nf| crate::drill::nf_config(s, nf))
-            .unwrap_or_default(),
-        self_calibration: s
-            .self_calibration
-            .as_ref()
-            .map(|c| self_calibration_config(s, c))
-            .unwrap_or_default(),
-        tetra_calibration: s
-            .tetra_calibration
-            .as_ref()
-            .map(|c| nav::tetracal::TetraCalibrationConfig {
-                enabled: true,
-                latitude_deg: s.site.lat_deg,
-                base_heading_deg: s.site.heading_deg,
-                imu: mems_unit_id(s),
-                parameters_out: Some(TETRA_PARAMETER_FILE.into()),
-                // what nav's config loader makes of the file it names
-                coefficients: c.parameters.as_ref().and_then(|p| {
-                    nav::params::RedundantParameters::load(p, &mems_unit_id(s))
-                        .ok()
-                        .map(|f| f.coefficients())
-                }),
-                ..c.clone()
-            })
-            .unwrap_or_default(),
-        watchdog: WatchdogConfig {
-            imu_timeout_ms: IMU_TIMEOUT_MS,
-        },
-        record: RecordConfig {
-            mcap: Some("nav.mcap".into()),
-            summary: Some("nav-summary.json".into()),
-        },
-    }
-}
 
 /// The scenario's devices on the IMU clock, in the one order every run follows: the IMU on
 /// `motion` (with the scenario's bus faults), the turntable `tt`, the receiver `gps`, for
@@ -172,15 +48,6 @@ pub fn stepper(
         step
     }
 }
-
-/// nav's IMU watchdog on the bench (wall time, ms). It decides liveness, never a result: where
-/// the scenario stops the IMU, and at the stream's end, the scheduler holds the stream until
-/// nav's watchdog has reported the stop ([`emulators::step::Step::stop_begins`],
-/// [`Stepper::end_awaits_watchdog`]), so it fires once per stop after the same sample. Anywhere
-/// else nothing holds the stream anywhere near this long, on an idle or a loaded host (the
-/// longest gap between two batches seen under CPU hogs on host and guest: docs/pace.md). Each
-/// run's end waits this long once.
-pub const IMU_TIMEOUT_MS: u64 = 2000;
 
 /// The receiver of a scenario with a drive and a `[gps]` table, with receiver model `rx`.
 pub fn gps_run(s: &Scenario, rx: &emulators::gps::ReceiverParams) -> Result<Option<GpsRun>> {
@@ -242,7 +109,13 @@ impl InProcessBench {
             None => None,
         };
         let port = gps.is_some().then(|| Path::new("(in process)"));
-        Self::new(s, &nav_config(s, None, port), motion, tt, gps)
+        Self::new(
+            s,
+            &crate::navconfig::nav_config(s, None, port),
+            motion,
+            tt,
+            gps,
+        )
     }
 
     /// Keep every frame the pipeline sends (for comparisons with the bench's).

@@ -13,6 +13,7 @@ pub mod fuzz;
 pub mod html;
 pub mod inproc;
 pub mod montecarlo;
+pub mod navconfig;
 pub mod navexp;
 pub mod navrun;
 pub mod observe;

@@ -353,15 +353,6 @@ impl NavRun {
     }
 }
 
-/// The filter as installed: the receiver's lever arm when the filter's is left at zero.
-pub fn with_lever_arm(filter: &FilterConfig, rx: &ReceiverParams) -> FilterConfig {
-    let mut f = filter.clone();
-    if f.lever_arm_m == [0.0; 3] {
-        f.lever_arm_m = rx.lever_arm_m;
-    }
-    f
-}
-
 /// Pure inertial navigation of a drive scenario, initialised from truth.
 pub fn pure_inertial(s: &Scenario) -> Result<NavRun> {
     // the start position from an error-free receiver, then no aiding
@@ -401,14 +392,16 @@ pub fn navigate(
     let (motion, tt) = s.build();
     let finds_north = s.north_finding.is_some() && tt.is_some();
     let gps = crate::inproc::gps_run(s, rx)?;
-    let mut cfg = crate::inproc::nav_config(s, None, Some(std::path::Path::new("(in process)")));
+    let mut cfg = crate::navconfig::nav_config(s, None, Some(std::path::Path::new("(in process)")));
     let fix_delay = NavigationConfig::default().fix_delay_s;
     cfg.navigation = NavigationConfig {
         enabled: true,
         initial_heading_deg: (!finds_north)
             .then(|| drive.heading(0.0).to_degrees() + heading_err_deg),
         gps_aiding: filter.is_some(),
-        filter: filter.map(|f| with_lever_arm(f, rx)).unwrap_or_default(),
+        filter: filter
+            .map(|f| crate::navconfig::with_lever_arm(f, rx))
+            .unwrap_or_default(),
         ..s.navigation.clone().unwrap_or_else(|| NavigationConfig {
             // the first fix comes at about 1 s and is applied `fix_delay_s` after its edge
             level_s: (spec.start_wait_s - 1.2 - fix_delay).clamp(0.2, 2.0),

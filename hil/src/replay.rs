@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use emulators::truth::Motion;
 use nalgebra::UnitQuaternion;
 use nav::attitude::{ProcessingStats, quaternion_to_rotation_vector};
-use nav::imu::{ImuCalibration, ImuStats};
+use nav::imu::ImuStats;
 use serde::{Deserialize, Serialize};
 
 /// Result of an in-process run.
@@ -46,16 +46,6 @@ pub struct InProcess {
     /// (`nav::pipeline::Pipeline::sent_hash`).
     #[serde(default)]
     pub sent_hash: String,
-}
-
-/// The calibration nav is given for this scenario's IMU.
-pub fn calibration(s: &Scenario) -> ImuCalibration {
-    ImuCalibration {
-        gyro_pulse_arcsec: s.imu.gyro_pulse_arcsec,
-        accel_pulse_mps: s.imu.accel_pulse_mps,
-        rate_hz: s.imu.rate_hz,
-        ..ImuCalibration::default()
-    }
 }
 
 /// Error of an integrated attitude `q` (body at `t1` relative to body at `t0`, inertial)

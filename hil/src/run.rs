@@ -393,7 +393,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     }
     let cfg_path = nav_folder.dir.join("nav.toml");
     let mut nav_cfg =
-        crate::inproc::nav_config(s, Some(&opts.iface), gps.as_ref().map(|g| g.1.as_path()));
+        crate::navconfig::nav_config(s, Some(&opts.iface), gps.as_ref().map(|g| g.1.as_path()));
     // gpsd between the receiver and nav: started on the port before nav, stopped after the run
     let _gpsd = match (&gps, opts.gps_via_gpsd, nav_cfg.gps.as_mut()) {
         (Some((_, link)), true, Some(g)) => {

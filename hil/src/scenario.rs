@@ -53,7 +53,7 @@ pub struct Scenario {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tetra_calibration: Option<nav::tetracal::TetraCalibrationConfig>,
     /// An IMU parameter file nav loads at start (`[calibration]`), for the emulated unit
-    /// ([`crate::inproc::unit_id`]); e.g. what an earlier self-calibration wrote.
+    /// ([`Scenario::unit_id`]); e.g. what an earlier self-calibration wrote.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub nav_parameters: Option<std::path::PathBuf>,
     /// A drill passes when the heading error is within this, deg.
@@ -223,7 +223,7 @@ impl Scenario {
             }
         }
         if let Some(p) = &self.nav_parameters {
-            nav::params::ImuParameters::load(p, &crate::inproc::unit_id(self))?;
+            nav::params::ImuParameters::load(p, &self.unit_id())?;
         }
         if let Some(c) = &self.tetra_calibration {
             c.check()?;
@@ -249,7 +249,7 @@ impl Scenario {
                 );
             }
             if let Some(p) = &c.parameters {
-                nav::params::RedundantParameters::load(p, &crate::inproc::mems_unit_id(self))?;
+                nav::params::RedundantParameters::load(p, &self.mems_unit_id())?;
             }
             if self.north_finding.is_some()
                 || self.self_calibration.is_some()
@@ -382,6 +382,19 @@ impl Scenario {
             Some(d) => d.heading(0.0).to_degrees(),
             None => self.site.heading_deg,
         }
+    }
+
+    /// The emulated IMU unit's serial number (what a parameter file for it names).
+    pub fn unit_id(&self) -> String {
+        format!("emulated-imu-seed-{}", self.imu.seed)
+    }
+
+    /// The emulated redundant unit's serial number.
+    pub fn mems_unit_id(&self) -> String {
+        format!(
+            "emulated-mems-seed-{}",
+            self.imu.tetra.as_ref().map_or(0, |t| t.gyros.seed)
+        )
     }
 
     /// A procedure on the mechanism (north-finding, a self-calibration, the tetrahedral

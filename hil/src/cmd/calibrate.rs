@@ -36,7 +36,7 @@ pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
         if let Some(p) = &o.parameters {
             let mut p = p.clone();
             p.date = nav::params::now_rfc3339();
-            let f = out.join(hil::inproc::PARAMETER_FILE);
+            let f = out.join(hil::navconfig::PARAMETER_FILE);
             std::fs::write(&f, p.to_toml()).with_context(|| format!("writing {}", f.display()))?;
             eprintln!("hil: parameter file {}", f.display());
         }
@@ -136,7 +136,7 @@ pub(crate) fn calibrate_tetrahedral(a: TetraArgs) -> Result<i32> {
         if let Some(p) = &o.parameters {
             let mut p = p.clone();
             p.date = nav::params::now_rfc3339();
-            let f = out.join(hil::inproc::TETRA_PARAMETER_FILE);
+            let f = out.join(hil::navconfig::TETRA_PARAMETER_FILE);
             std::fs::write(&f, p.to_toml()).with_context(|| format!("writing {}", f.display()))?;
             eprintln!("hil: parameter file {}", f.display());
         }

@@ -1,0 +1,160 @@
+//! What a scenario means for nav's configuration, in one place: the config file the bench
+//! writes for the nav binary and the in-process runs give the pipeline (navigation, north-finding,
+//! the calibrations, the IMU's calibration, the watchdog, the recording), from the scenario alone.
+
+use crate::scenario::Scenario;
+use emulators::gps::ReceiverParams;
+use nav::config::{CanConfig, GpsConfig, NavConfig, RecordConfig, WatchdogConfig};
+use nav::imu::ImuCalibration;
+use nav::kf::FilterConfig;
+use nav::navigator::NavigationConfig;
+use nav::northfind::NorthFindingConfig;
+use std::path::Path;
+
+/// nav's `[navigation]` for a scenario: enabled, the surveyed heading when north-finding does
+/// not give one, the receiver's lever arm when the filter's is left at zero.
+pub fn navigation_config(s: &Scenario) -> Option<NavigationConfig> {
+    let mut n = s.navigation.clone()?;
+    n.enabled = true;
+    if s.north_finding.is_none() && n.initial_heading_deg.is_none() {
+        n.initial_heading_deg = Some(s.truth_heading_deg());
+    }
+    if let Some(g) = &s.gps {
+        n.filter = crate::navconfig::with_lever_arm(&n.filter, g);
+    }
+    Some(n)
+}
+
+/// nav's `[self_calibration]` for a scenario: enabled, at the site's latitude, the unit named
+/// by the IMU's seed, the parameter file written in the run folder.
+pub fn self_calibration_config(
+    s: &Scenario,
+    c: &nav::selfcal::SelfCalibrationConfig,
+) -> nav::selfcal::SelfCalibrationConfig {
+    nav::selfcal::SelfCalibrationConfig {
+        enabled: true,
+        latitude_deg: s.site.lat_deg,
+        imu: s.unit_id(),
+        parameters_out: Some(PARAMETER_FILE.into()),
+        ..c.clone()
+    }
+}
+
+/// nav's `[imu]` for a scenario, with the parameter file it names loaded (as nav loads it).
+pub fn imu_calibration(s: &Scenario) -> nav::imu::ImuCalibration {
+    let mut c = crate::navconfig::calibration(s);
+    if let Some(p) = s
+        .nav_parameters
+        .as_ref()
+        .and_then(|p| nav::params::ImuParameters::load(p, &s.unit_id()).ok())
+    {
+        c.gyro_bias_dph = p.gyro.bias_dph;
+        c.gyro_scale_factor_ppm = p.gyro.scale_factor_ppm;
+    }
+    c
+}
+
+/// The parameter file nav's calibration of the redundant unit writes, in the run folder.
+pub const TETRA_PARAMETER_FILE: &str = "tetra-parameters.toml";
+
+/// The parameter file nav's self-calibration writes, in the run folder.
+pub const PARAMETER_FILE: &str = "gyro-parameters.toml";
+
+/// nav's config for a scenario. `iface`: the CAN interface (none in process); `gps_port`: the
+/// receiver's port when the scenario has one (in process a name only: nothing opens it).
+pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) -> NavConfig {
+    NavConfig {
+        calibration: s
+            .nav_parameters
+            .as_ref()
+            .map(|p| nav::config::CalibrationConfig {
+                imu: s.unit_id(),
+                parameters: p.clone(),
+            }),
+        can: iface.map(|i| CanConfig {
+            interface: i.into(),
+            rcvbuf_bytes: s.bus.nav_rcvbuf_bytes,
+        }),
+        gps: gps_port.map(|p| GpsConfig {
+            port: p.to_path_buf(),
+            baud: 9600,
+            fixes_jsonl: Some("gps-fixes.jsonl".into()),
+            ..GpsConfig::default()
+        }),
+        navigation: navigation_config(s).unwrap_or_default(),
+        imu: imu_calibration(s),
+        processing: s.processing,
+        north_finding: s
+            .north_finding
+            .as_ref()
+            .map(|nf| crate::navconfig::nf_config(s, nf))
+            .unwrap_or_default(),
+        self_calibration: s
+            .self_calibration
+            .as_ref()
+            .map(|c| self_calibration_config(s, c))
+            .unwrap_or_default(),
+        tetra_calibration: s
+            .tetra_calibration
+            .as_ref()
+            .map(|c| nav::tetracal::TetraCalibrationConfig {
+                enabled: true,
+                latitude_deg: s.site.lat_deg,
+                base_heading_deg: s.site.heading_deg,
+                imu: s.mems_unit_id(),
+                parameters_out: Some(TETRA_PARAMETER_FILE.into()),
+                // what nav's config loader makes of the file it names
+                coefficients: c.parameters.as_ref().and_then(|p| {
+                    nav::params::RedundantParameters::load(p, &s.mems_unit_id())
+                        .ok()
+                        .map(|f| f.coefficients())
+                }),
+                ..c.clone()
+            })
+            .unwrap_or_default(),
+        watchdog: WatchdogConfig {
+            imu_timeout_ms: IMU_TIMEOUT_MS,
+        },
+        record: RecordConfig {
+            mcap: Some("nav.mcap".into()),
+            summary: Some("nav-summary.json".into()),
+        },
+    }
+}
+
+/// nav's IMU watchdog on the bench (wall time, ms). It decides liveness, never a result: where
+/// the scenario stops the IMU, and at the stream's end, the scheduler holds the stream until
+/// nav's watchdog has reported the stop ([`emulators::step::Step::stop_begins`],
+/// [`Stepper::end_awaits_watchdog`]), so it fires once per stop after the same sample. Anywhere
+/// else nothing holds the stream anywhere near this long, on an idle or a loaded host (the
+/// longest gap between two batches seen under CPU hogs on host and guest: docs/pace.md). Each
+/// run's end waits this long once.
+pub const IMU_TIMEOUT_MS: u64 = 2000;
+
+/// The calibration nav is given for this scenario's IMU.
+pub fn calibration(s: &Scenario) -> ImuCalibration {
+    ImuCalibration {
+        gyro_pulse_arcsec: s.imu.gyro_pulse_arcsec,
+        accel_pulse_mps: s.imu.accel_pulse_mps,
+        rate_hz: s.imu.rate_hz,
+        ..ImuCalibration::default()
+    }
+}
+
+/// The filter as installed: the receiver's lever arm when the filter's is left at zero.
+pub fn with_lever_arm(filter: &FilterConfig, rx: &ReceiverParams) -> FilterConfig {
+    let mut f = filter.clone();
+    if f.lever_arm_m == [0.0; 3] {
+        f.lever_arm_m = rx.lever_arm_m;
+    }
+    f
+}
+
+/// The drill's north-finding settings for a scenario (latitude from the site).
+pub fn nf_config(s: &Scenario, base: &NorthFindingConfig) -> NorthFindingConfig {
+    NorthFindingConfig {
+        enabled: true,
+        latitude_deg: s.site.lat_deg,
+        ..base.clone()
+    }
+}
