@@ -2,7 +2,7 @@
 //! scenario, its run in process (the same pipeline the bench's nav runs), and its scoring
 //! against the emulated unit's true errors, on the bus or in process alike.
 
-use crate::calibexp::{CalibOptions, fog_params};
+use crate::fogunit::{CalibOptions, fog_params};
 use crate::scenario::Scenario;
 use anyhow::{Result, bail};
 use nav::procedure::Procedure;
@@ -181,7 +181,7 @@ pub fn outcome(
     // the east drift of a bias vector (deg/h) with the IMU at the mechanism's zero
     let heading = |b: [f64; 3]| {
         let rad_s = nalgebra::Vector3::from(b).map(|x| (x / 3600.0).to_radians());
-        crate::calibexp::drift_heading_deg(&s.site, &rad_s)
+        crate::fogunit::drift_heading_deg(&s.site, &rad_s)
     };
     // what nav started with; its estimates are residuals on top (composed as nav's front end
     // applies them: `(raw - b0) / (1 + k0)` reads `(1 + k') w + b'`)

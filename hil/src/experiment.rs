@@ -471,7 +471,7 @@ fn write_files(r: &ConingReport, fir: &Fir, out: &Path) -> Result<()> {
     };
     w("coning-drift.svg", chart.svg())?;
     w("report.md", markdown(r))?;
-    crate::html::folder_page(out, "Coning experiment (paper 000)", &markdown(r))?;
+    crate::page::folder_page(out, "Coning experiment (paper 000)", &markdown(r))?;
     Ok(())
 }
 

@@ -979,7 +979,7 @@ pub fn write(m: &FaultMatrix, out: &Path) -> Result<()> {
     std::fs::write(out.join("faults.json"), serde_json::to_string_pretty(m)?)
         .context("writing faults.json")?;
     std::fs::write(out.join("faults.md"), markdown(m)).context("writing faults.md")?;
-    crate::html::folder_page(out, "Fault matrix", &markdown(m))?;
+    crate::page::folder_page(out, "Fault matrix", &markdown(m))?;
     Ok(())
 }
 

@@ -314,7 +314,7 @@ pub fn merge(parts: &[McPart], out: &Path, progress: bool) -> Result<McReport> {
     std::fs::write(out.join("report.json"), serde_json::to_string_pretty(&r)?)?;
     let md = format!("# North-finding Monte Carlo\n\n```\n{}```\n", text(&r));
     std::fs::write(out.join("report.md"), &md)?;
-    crate::html::folder_page(out, "North-finding Monte Carlo", &md)?;
+    crate::page::folder_page(out, "North-finding Monte Carlo", &md)?;
     Ok(r)
 }
 

@@ -631,7 +631,7 @@ fn write_files(r: &NavExperiment, dir: &Path) -> Result<()> {
             &|x| x.position_error_m,
         ),
     )?;
-    crate::html::folder_page(dir, "Navigation experiment (paper 003)", &markdown(r))?;
+    crate::page::folder_page(dir, "Navigation experiment (paper 003)", &markdown(r))?;
     Ok(())
 }
 

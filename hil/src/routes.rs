@@ -234,7 +234,7 @@ pub fn merge(parts: &[RoutesPart], out: Option<&Path>) -> Result<RoutesReport> {
                 sigma_chart(s, &mine, false),
             )?;
         }
-        crate::html::folder_page(dir, "The filters over the routes", &markdown(&r))?;
+        crate::page::folder_page(dir, "The filters over the routes", &markdown(&r))?;
     }
     Ok(r)
 }

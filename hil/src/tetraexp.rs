@@ -11,7 +11,7 @@
 //! six-position method ([`nav::calib::six_position`]) gets its own 360 s: plus and minus 20 deg/s
 //! about x, y and z, 60 s each.
 
-use crate::calibexp::median;
+use crate::stats::median;
 use anyhow::{Result, bail};
 use emulators::mems::{TetraGyros, TetraParams};
 use emulators::truth::{AxisAngle, Composed, Indexer, Motion, RateWindows, Static};

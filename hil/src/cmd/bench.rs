@@ -107,7 +107,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
         serde_json::to_string_pretty(&suite)?,
     )?;
     std::fs::write(out.join("bench.md"), &md)?;
-    hil::html::folder_page(&out, "Pace benchmark (hil bench)", &md)?;
+    hil::page::folder_page(&out, "Pace benchmark (hil bench)", &md)?;
     if a.bus.json {
         println!("{}", serde_json::to_string_pretty(&suite)?);
     } else {

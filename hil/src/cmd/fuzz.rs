@@ -75,7 +75,7 @@ pub(crate) fn fuzz(
         out.join("fuzz.json"),
         serde_json::to_string_pretty(&reports)?,
     )?;
-    hil::html::folder_page(&out, "Hostile input (hil fuzz)", &md)?;
+    hil::page::folder_page(&out, "Hostile input (hil fuzz)", &md)?;
     print!("{md}");
     for r in &reports {
         for c in &r.crashes {

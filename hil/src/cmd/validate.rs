@@ -88,7 +88,7 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
     )?;
     let md = hil::validate::markdown(&v);
     std::fs::write(out.join("validation.md"), &md)?;
-    hil::html::folder_page(&out, "Turntable validation", &md)?;
+    hil::page::folder_page(&out, "Turntable validation", &md)?;
     if a.bus.json {
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
