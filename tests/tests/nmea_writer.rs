@@ -117,3 +117,32 @@ fn gga_altitude_is_above_the_geoid_and_nav_takes_the_ellipsoid_height() {
         assert!((e - h).abs() < 0.1, "{lat} {lon}: {e} against {h}");
     }
 }
+
+/// A multi-GNSS receiver (talker GN) puts out sentences nav reads, every one: GNGGA, GNRMC,
+/// GNGSA, and its satellites in view under their constellation's talker (GPGSV).
+#[test]
+fn a_multi_gnss_receivers_sentences_all_decode() {
+    let mut w = NmeaWriter::new(ReceiverParams {
+        talker: "GN".into(),
+        ..ReceiverParams::default()
+    });
+    let truth = AntennaTruth {
+        lat_deg: 46.5,
+        lon_deg: 7.9,
+        h_m: 1700.0,
+        vel_enu: [3.0, 4.0, 0.0],
+    };
+    let mut dec = nav::gps::GpsDecoder::default();
+    let mut fixes = Vec::new();
+    for i in 0..5 {
+        let (s, _) = w.fix(f64::from(i), 4.0 * 3600.0, (21, 11, 2026), &truth);
+        assert!(
+            s.contains("$GNGGA") && s.contains("$GPGSV") && !s.contains("$GNGSV"),
+            "{s}"
+        );
+        dec.push_bytes(s.as_bytes(), &mut fixes);
+    }
+    let st = dec.stats();
+    assert_eq!((st.unparsed, st.bad_checksum), (0, 0), "{st:?}");
+    assert_eq!(st.accuracy, 5, "GST with each fix: {st:?}");
+}

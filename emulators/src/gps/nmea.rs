@@ -151,8 +151,11 @@ impl NmeaWriter {
             hdop * 1.3
         ));
         let nsv = sats.max(1).div_ceil(4);
+        // satellites in view are listed per constellation (NMEA 4.1): a multi-GNSS receiver
+        // (talker GN) puts its GPS satellites, the ones listed here, under GP
+        let sv_tk = if tk == "GN" { "GP" } else { tk.as_str() };
         for k in 0..nsv {
-            let mut body = format!("{tk}GSV,{nsv},{},{sats:02}", k + 1);
+            let mut body = format!("{sv_tk}GSV,{nsv},{},{sats:02}", k + 1);
             for j in 0..4 {
                 let i = k * 4 + j;
                 if i < sats {
