@@ -1144,7 +1144,7 @@ mod tests {
     /// first minute is rejected.
     #[test]
     fn navigation_starts_at_the_receivers_height_with_no_rejection() {
-        for height in [1700.0, -430.0, 4000.0] {
+        for height in [1700.0, -430.0, 4000.0, 5000.0] {
             let mut n = Navigator::new(NavigationConfig {
                 enabled: true,
                 initial_heading_deg: Some(0.0),
