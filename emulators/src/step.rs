@@ -133,11 +133,6 @@ impl Stepper {
                 .is_none_or(|last| self.next_index() <= last)
     }
 
-    /// The sample the stream ends after because nav's procedure is over, once nav has said so.
-    pub fn procedure_ended_at(&self) -> Option<u64> {
-        self.procedure_end.and_then(|p| p.last)
-    }
-
     /// Simulated time at the end of the next sample, s.
     pub fn next_time(&self) -> f64 {
         self.imu.next_time()
