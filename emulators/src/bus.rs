@@ -283,6 +283,65 @@ pub struct Devices {
     pub gps: Option<GpsDevice>,
     /// Where every frame put on the bus is logged, when given.
     pub sent_log: Option<SentLog>,
+    /// The interface taken down and brought up at points of the stream, when given.
+    pub link: Option<LinkOutages>,
+}
+
+/// The CAN interface going down and coming back up at points of the simulated stream (a
+/// controller switched off, a connector pulled): the scheduler switches the link between two
+/// samples, so nav has every frame before the outage, the frames due inside it are lost to the
+/// downed interface (counted), and the stream goes on after it, at any pace.
+pub struct LinkOutages {
+    /// Each outage: [down at, up at] simulated time, s.
+    pub windows: Vec<[f64; 2]>,
+    /// Takes the interface down (`false`) or brings it up (`true`).
+    pub switch: Box<dyn FnMut(bool) -> std::io::Result<()> + Send>,
+    /// An outage is under way.
+    down: bool,
+}
+
+impl LinkOutages {
+    /// Outages `windows` ([down at, up at], s), the link switched by `switch`.
+    pub fn new(
+        windows: Vec<[f64; 2]>,
+        switch: Box<dyn FnMut(bool) -> std::io::Result<()> + Send>,
+    ) -> Self {
+        Self {
+            windows,
+            switch,
+            down: false,
+        }
+    }
+
+    /// Before the sample at `t`: the link switch due, if any (everything written before it went
+    /// out first).
+    fn before(&mut self, t: f64, port: &mut Port, nav: &mut NavSide) -> Result<(), CanTxError> {
+        let due = if self.down {
+            self.windows.first().is_some_and(|w| t >= w[1])
+        } else {
+            self.windows.first().is_some_and(|w| t >= w[0])
+        };
+        if !due {
+            return Ok(());
+        }
+        port.flush(nav)?;
+        let up = self.down;
+        (self.switch)(up).map_err(|source| CanTxError::Link {
+            iface: port.iface.into(),
+            up,
+            source,
+        })?;
+        tracing::info!(
+            interface = port.iface,
+            "the interface {} at {t:.4} s",
+            if up { "is back up" } else { "went down" }
+        );
+        self.down = !up;
+        if up {
+            self.windows.remove(0);
+        }
+        Ok(())
+    }
 }
 
 /// What the scheduler did.
@@ -682,6 +741,9 @@ pub fn run(
         let t = dev.step.next_time();
         let batch_start = k.is_multiple_of(batch_samples);
         wait_for_nav(&mut port, &mut nav, &mut dev.step, k, batch_start, stop)?;
+        if let Some(l) = dev.link.as_mut() {
+            l.before(t, &mut port, &mut nav)?;
+        }
         if batch_start {
             clock.sleep_until(t);
             let lag = Instant::now().saturating_duration_since(clock.wall_at(t));

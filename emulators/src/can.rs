@@ -102,6 +102,16 @@ pub enum CanTxError {
         /// Cause.
         source: std::io::Error,
     },
+    /// A scheduled link outage could not switch the interface.
+    #[error("CAN interface {iface}: could not {} the link", if *up { "bring up" } else { "take down" })]
+    Link {
+        /// Interface.
+        iface: String,
+        /// It was to come up (else to go down).
+        up: bool,
+        /// Cause.
+        source: std::io::Error,
+    },
 }
 
 /// A `candump -l` log of the frames the bench put on the bus: what its emulators sent, each

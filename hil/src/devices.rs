@@ -53,12 +53,14 @@ impl<T> Running<T> {
 /// Starts a scenario's devices on `iface` behind the bus scheduler, at the scenario's speed
 /// factor and in lockstep with nav (unless the scenario's `[bus]` says otherwise): the IMU (with the scenario's stream faults), the turntable
 /// when the scenario has one, and `gps` (the receiver, and its pty) when given. Every frame put on
-/// the bus goes to the `candump -l` log `sent_log` when given.
+/// the bus goes to the `candump -l` log `sent_log` when given. The interface goes down and up
+/// again at each of `link_downs` ([down at, up at], simulated s).
 pub fn start_scenario(
     s: &Scenario,
     iface: &str,
     gps: Option<(emulators::gps::GpsRun, GpsDevice)>,
     sent_log: Option<&std::path::Path>,
+    link_downs: &[[f64; 2]],
 ) -> Result<Running<BusOutcome>> {
     let lockstep = Lockstep::at_rate(s.imu.rate_hz);
     let follow = s.bus.lockstep.then_some(lockstep);
@@ -70,6 +72,15 @@ pub fn start_scenario(
         sent_log: sent_log
             .map(|p| emulators::can::SentLog::create(p, iface))
             .transpose()?,
+        link: (!link_downs.is_empty()).then(|| {
+            let name = iface.to_string();
+            let mut windows = link_downs.to_vec();
+            windows.sort_by(|a, b| a[0].total_cmp(&b[0]));
+            emulators::bus::LinkOutages::new(
+                windows,
+                Box::new(move |up| vcan_setup::set_link(&name, up).map_err(std::io::Error::other)),
+            )
+        }),
     };
     let stop = Arc::new(AtomicBool::new(false));
     let progress = Arc::new(Progress::default());

@@ -75,7 +75,7 @@ impl Device<'_> {
     }
 }
 
-/// Every fault event of scenario `s` run with `link_downs` ([simulated time, wall ms]) and a
+/// Every fault event of scenario `s` run with `link_downs` ([down at, up at], s) and a
 /// SIGKILL of nav at `kill_at_s`, in time order.
 pub fn schedule(s: &Scenario, link_downs: &[[f64; 2]], kill_at_s: Option<f64>) -> Vec<FaultEvent> {
     let mut ev = Vec::new();
@@ -205,13 +205,9 @@ pub fn schedule(s: &Scenario, link_downs: &[[f64; 2]], kill_at_s: Option<f64>) -
         name: "bench",
         ev: &mut ev,
     };
-    for [t, ms] in link_downs {
-        bench.push(
-            *t,
-            "link_downs",
-            "at",
-            format!("CAN interface down for {ms} ms"),
-        );
+    for [down, up] in link_downs {
+        bench.push(*down, "link_downs", "starts", "CAN interface down".into());
+        bench.push(*up, "link_downs", "ends", "CAN interface back up".into());
     }
     bench.at(
         "kill_nav_at_s",
@@ -234,13 +230,14 @@ mod tests {
         s.faults.stop_s = vec![[10.0, 10.5]];
         s.faults.drop_samples = vec![4000];
         s.imu.pps_spurious_at_s = vec![3.25];
-        let ev = schedule(&s, &[[7.0, 200.0]], Some(12.0));
+        let ev = schedule(&s, &[[7.0, 7.5]], Some(12.0));
         let brief: Vec<(f64, &str, &str)> = ev.iter().map(|e| (e.t_s, e.fault, e.phase)).collect();
         let k = 4000.0 / s.imu.rate_hz;
         let mut expected = vec![
             (k, "drop_samples", "at"),
             (3.25, "pps_spurious_at_s", "at"),
-            (7.0, "link_downs", "at"),
+            (7.0, "link_downs", "starts"),
+            (7.5, "link_downs", "ends"),
             (10.0, "stop_s", "starts"),
             (10.5, "stop_s", "ends"),
             (12.0, "kill_nav_at_s", "at"),

@@ -34,8 +34,8 @@ pub struct RunOptions {
     pub reference_checks: bool,
     /// Write `report.html` (plots read from nav's recording) beside `report.md`.
     pub html: bool,
-    /// Take the interface down during the run: [simulated time s, wall time down ms] (the
-    /// fault matrix's "CAN interface down and up").
+    /// Take the interface down during the run: [down at, up at], simulated s, switched by the
+    /// scheduler between two samples (the fault matrix's "CAN interface down and up").
     pub link_downs: Vec<[f64; 2]>,
     /// Kill nav outright (SIGKILL) at this simulated time, s; its recording is then read back
     /// and its summary rebuilt from it.
@@ -371,11 +371,11 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         &opts.iface,
         gps_device,
         Some(&opts.out.join("bench-can.log")),
+        &opts.link_downs,
     )?;
     let mut drill = DrillWatch::default();
     let mut next_report = Instant::now() + Duration::from_secs(5);
     let mut last_report = (Instant::now(), 0.0);
-    let mut link_downs = opts.link_downs.clone();
     let mut killed_at: Option<f64> = None;
     let mut memory = NavMemory::new(s.duration_s);
     let mut next_memory = Instant::now();
@@ -396,16 +396,6 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             killed_at = Some(t);
             // nothing more can reach a dead nav: the devices stop rather than wait for it
             devices.stop();
-        }
-        if let Some(i) = link_downs.iter().position(|d| devices.sim_time() >= d[0]) {
-            let [at, ms] = link_downs.swap_remove(i);
-            info!(interface = %opts.iface, "taking the interface down at {at} s for {ms} ms");
-            vcan_setup::set_link(&opts.iface, false)?;
-            std::thread::sleep(Duration::from_secs_f64(ms.max(0.0) / 1000.0));
-            vcan_setup::set_link(&opts.iface, true)?;
-            let flags = std::fs::read_to_string(format!("/sys/class/net/{}/flags", opts.iface))
-                .unwrap_or_default();
-            info!(interface = %opts.iface, flags = flags.trim(), "the interface is back up");
         }
         // (a procedure with no drive after it ends the stream itself, when nav's NAV_TIME says
         // it is over: `inproc::stepper`)
