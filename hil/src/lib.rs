@@ -1,36 +1,28 @@
 //! The HIL bench: scenarios, runs on vcan, checks and reports.
+//!
+//! Folders from the bottom up; each imports only from those above it in this list (and the
+//! small helpers at the top level, which import nothing of the crate):
+//! - [`scenario`]: the scenario file, its checks, and what it means for nav's configuration;
+//! - [`engine`]: the scenario's devices stepped in process or put behind the bus scheduler, the
+//!   in-process reference and navigation runs, nav's recording read back, the fault schedule and
+//!   the truth recording;
+//! - [`procedures`]: the procedures on the mechanism (north-finding, the rotating-IMU and the
+//!   tetrahedral calibrations): their scenarios, outcomes, progress lines and result cards;
+//! - [`report`]: a run's checks and its report (Markdown, HTML, SVG plots);
+//! - [`run`]: the bench run on vcan with the nav binary, and recorded traffic put back on the bus;
+//! - [`experiments`]: the papers' tables in process, in parts when asked;
+//! - [`suites`]: the fault matrix, the validation suite, fuzzing, the benchmarks.
+//!
+//! The commands (`src/cmd`, `src/main.rs`) parse arguments and call into these.
 
-pub mod bench;
-pub mod busreplay;
-pub mod calibexp;
-pub mod calibrate;
-pub mod devices;
-pub mod drill;
-pub mod experiment;
-pub mod faultlog;
-pub mod faults;
-pub mod fogunit;
-pub mod fuzz;
-pub mod html;
-pub mod inproc;
-pub mod montecarlo;
-pub mod navconfig;
-pub mod navexp;
-pub mod navrun;
-pub mod observe;
-pub mod page;
+pub mod engine;
+pub mod experiments;
 pub mod par;
-pub mod playback;
-pub mod plot;
-pub mod replay;
+pub mod procedures;
 pub mod report;
-pub mod routes;
 pub mod run;
 pub mod scenario;
-pub mod shard;
 pub mod stats;
 pub mod status;
-pub mod tetraexp;
-pub mod truthrec;
-pub mod validate;
+pub mod suites;
 pub mod values;

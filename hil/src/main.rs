@@ -97,7 +97,7 @@ enum Cmd {
     Fuzz {
         /// Targets (default: all).
         #[arg(long, value_enum)]
-        target: Vec<hil::fuzz::Target>,
+        target: Vec<hil::suites::fuzz::Target>,
         /// Inputs per target.
         #[arg(long, default_value_t = 1_000_000)]
         inputs: u64,
@@ -435,7 +435,7 @@ enum Experiment {
         /// Run only part K of N (0-based, `K/N`): the drills whose place in the plan is K modulo
         /// N. Writes part-K-of-N.json to the output folder; `hil experiment merge` makes the
         /// report of all parts (e.g. the tasks of a Slurm array or a Kubernetes indexed Job).
-        #[arg(long, value_parser = hil::shard::parse)]
+        #[arg(long, value_parser = hil::experiments::shard::parse)]
         shard: Option<(usize, usize)>,
         /// Output folder (default runs/experiment-north-finding-<unix time>).
         #[arg(long)]
@@ -473,7 +473,7 @@ enum Experiment {
         /// Run only part K of N (0-based, `K/N`): the runs whose place in the plan is K modulo
         /// N. Writes part-K-of-N.json to the output folder; `hil experiment merge` makes the
         /// report of all parts.
-        #[arg(long, value_parser = hil::shard::parse)]
+        #[arg(long, value_parser = hil::experiments::shard::parse)]
         shard: Option<(usize, usize)>,
         /// Output folder (default runs/experiment-navigation-<unix time>).
         #[arg(long)]
@@ -500,7 +500,7 @@ enum Experiment {
         )]
         filters: Vec<String>,
         /// Run only part K of N (0-based, `K/N`); `hil experiment merge` makes the report.
-        #[arg(long, value_parser = hil::shard::parse)]
+        #[arg(long, value_parser = hil::experiments::shard::parse)]
         shard: Option<(usize, usize)>,
         /// Output folder (default runs/experiment-routes-<unix time>).
         #[arg(long)]
@@ -558,7 +558,7 @@ enum Experiment {
         /// Run only part K of N (0-based, `K/N`): the table rows whose place in the plan is K
         /// modulo N. Writes part-K-of-N.json to the output folder; `hil experiment merge`
         /// makes the report of all parts.
-        #[arg(long, value_parser = hil::shard::parse)]
+        #[arg(long, value_parser = hil::experiments::shard::parse)]
         shard: Option<(usize, usize)>,
     },
 }

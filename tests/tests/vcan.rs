@@ -581,7 +581,7 @@ fn a_drive_with_every_receiver_event_sends_the_same_frames_loaded_or_idle() {
 /// The campus loop shortened (6 s dwells, one lap of about 1 km at 8 m/s, 200 s) through vcan and the pty
 /// at speed factor 10: nav finds north with the turntable over CAN, hands the heading to the
 /// navigator, levels while still parked, and navigates with the fading filter on the receiver's
-/// NMEA. Limits as in process (`hil::navrun::tests::north_finding_hands_its_heading_to_the_filter`):
+/// NMEA. Limits as in process (`hil::engine::navigate::tests::north_finding_hands_its_heading_to_the_filter`):
 /// heading within 0.5 deg, end position within 25 m. And the receiver misbehaves while the
 /// vehicle drives: its device vanishes for 4 s and comes back (nav re-opens it), a multipath
 /// burst puts three fixes 2 km off (the innovation gate rejects them) and a 10 s outage sends

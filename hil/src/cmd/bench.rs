@@ -1,7 +1,7 @@
 //! `hil bench`: the benchmark suite, where vcan is (natively, or all of it in the guest).
 
 use crate::*;
-use hil::bench::{BusPace, Suite};
+use hil::suites::bench::{BusPace, Suite};
 
 pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
     if a.seconds.is_nan() || a.seconds <= 0.1 || a.bus_seconds.is_nan() || a.bus_seconds < 1.0 {
@@ -48,20 +48,20 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
     };
     let mut suite = Suite::new(if in_guest { "vm" } else { "native" });
     for s in &scenarios {
-        let r = hil::bench::emulators(s, a.seconds.min(s.duration_s));
+        let r = hil::suites::bench::emulators(s, a.seconds.min(s.duration_s));
         say(format!(
             "hil bench: emulators of {}: x{:.1}",
             r.scenario, r.speed_factor
         ));
         suite.emulators.push(r);
     }
-    suite.front_end = Some(hil::bench::frontend(a.seconds, a.passes)?);
+    suite.front_end = Some(hil::suites::bench::frontend(a.seconds, a.passes)?);
     say("hil bench: nav's front end timed".into());
     if let Some(s) = scenarios
         .iter()
         .find(|s| s.gps.is_some() && s.drive.is_some() && s.turntable.is_none())
     {
-        let r = hil::bench::pipeline_drive(s, a.seconds)?;
+        let r = hil::suites::bench::pipeline_drive(s, a.seconds)?;
         say(format!(
             "hil bench: nav's pipeline on {}: x{:.1}",
             r.scenario, r.speed_factor
@@ -71,7 +71,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
     if !a.no_bus {
         vcan_setup::ensure_vcan(&a.bus.iface)?;
         for per_write in [1, wire::BATCH] {
-            let r = hil::bench::raw_vcan(&a.bus.iface, a.raw_frames, per_write)?;
+            let r = hil::suites::bench::raw_vcan(&a.bus.iface, a.raw_frames, per_write)?;
             say(format!(
                 "hil bench: raw vcan, {per_write} frame(s) per write: {:.0} frames/s",
                 r.frames_per_second
@@ -81,7 +81,9 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
         let nav_bin = sibling_binary("nav")?;
         let mut bus_scenarios: Vec<Scenario> = scenarios.clone();
         if a.scenario.is_empty() {
-            bus_scenarios.push(hil::drill::scenario(359.97, -33.92, 10.0, 7));
+            bus_scenarios.push(hil::procedures::northfinding::scenario(
+                359.97, -33.92, 10.0, 7,
+            ));
         }
         for mut s in bus_scenarios {
             s.duration_s = s.duration_s.min(a.bus_seconds);
@@ -101,13 +103,13 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
             suite.bus.push(p);
         }
     }
-    let md = hil::bench::markdown(&suite);
+    let md = hil::suites::bench::markdown(&suite);
     std::fs::write(
         out.join("bench.json"),
         serde_json::to_string_pretty(&suite)?,
     )?;
     std::fs::write(out.join("bench.md"), &md)?;
-    hil::page::folder_page(&out, "Pace benchmark (hil bench)", &md)?;
+    hil::report::page::folder_page(&out, "Pace benchmark (hil bench)", &md)?;
     if a.bus.json {
         println!("{}", serde_json::to_string_pretty(&suite)?);
     } else {

@@ -63,7 +63,7 @@ pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> 
     };
     std::fs::write(
         out.join("report.html"),
-        hil::page::page(
+        hil::report::page::page(
             "Bench demo",
             &format!(
                 "<table>\n<tr><th>part</th><th>result</th><th>report</th></tr>\n{}{}</table>\n",

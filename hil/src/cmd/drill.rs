@@ -20,7 +20,7 @@ pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
             rand::rngs::StdRng::seed_from_u64(a.seed).random::<f64>() * 360.0
         }
     };
-    let mut s = hil::drill::scenario(heading, a.lat, a.dwell, a.seed);
+    let mut s = hil::procedures::northfinding::scenario(heading, a.lat, a.dwell, a.seed);
     s.speed = a.speed;
     s.heading_tolerance_deg = a.tolerance;
     if let Some(p) = &a.disturbances {
@@ -43,7 +43,7 @@ pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
     );
     if a.in_process {
         let nf = s.north_finding.clone().unwrap_or_default();
-        let o = hil::drill::run_in_process(&s, &nf, |_| {})?;
+        let o = hil::procedures::northfinding::run_in_process(&s, &nf, |_| {})?;
         let j = serde_json::json!({ "in_process": true, "drill": o });
         std::fs::write(out.join("report.json"), serde_json::to_string_pretty(&j)?)?;
         if a.bus.json {

@@ -5,30 +5,43 @@ use crate::*;
 pub(crate) fn experiment(e: Experiment) -> Result<i32> {
     match e {
         Experiment::Merge { parts, out } => {
-            let kind = hil::shard::experiment_of(&parts[0])?;
+            let kind = hil::experiments::shard::experiment_of(&parts[0])?;
             let out = out.unwrap_or_else(|| default_out(&format!("experiment-{kind}")));
             match kind.as_str() {
-                hil::montecarlo::EXPERIMENT => {
-                    let r = hil::montecarlo::merge(&hil::shard::read(&parts)?, &out, true)?;
-                    print!("{}", hil::montecarlo::text(&r));
+                hil::experiments::northfinding::EXPERIMENT => {
+                    let r = hil::experiments::northfinding::merge(
+                        &hil::experiments::shard::read(&parts)?,
+                        &out,
+                        true,
+                    )?;
+                    print!("{}", hil::experiments::northfinding::text(&r));
                     println!(" files: {}", out.display());
                     Ok(if r.within_1_2 { 0 } else { 1 })
                 }
-                hil::navexp::EXPERIMENT => {
-                    let r = hil::navexp::merge(&hil::shard::read(&parts)?, Some(&out))?;
-                    print!("{}", hil::navexp::text(&r));
+                hil::experiments::navigation::EXPERIMENT => {
+                    let r = hil::experiments::navigation::merge(
+                        &hil::experiments::shard::read(&parts)?,
+                        Some(&out),
+                    )?;
+                    print!("{}", hil::experiments::navigation::text(&r));
                     println!(" files: {}", out.display());
                     Ok(navigation_status(&r))
                 }
-                hil::routes::EXPERIMENT => {
-                    let r = hil::routes::merge(&hil::shard::read(&parts)?, Some(&out))?;
-                    print!("{}", hil::routes::markdown(&r));
+                hil::experiments::routes::EXPERIMENT => {
+                    let r = hil::experiments::routes::merge(
+                        &hil::experiments::shard::read(&parts)?,
+                        Some(&out),
+                    )?;
+                    print!("{}", hil::experiments::routes::markdown(&r));
                     println!(" files: {}", out.display());
                     Ok(routes_status(&r))
                 }
-                hil::experiment::CONING => {
-                    let r = hil::experiment::coning_merge(&hil::shard::read(&parts)?, &out)?;
-                    print!("{}", hil::experiment::text(&r));
+                hil::experiments::coning::CONING => {
+                    let r = hil::experiments::coning::coning_merge(
+                        &hil::experiments::shard::read(&parts)?,
+                        &out,
+                    )?;
+                    print!("{}", hil::experiments::coning::text(&r));
                     println!(" files: {}", out.display());
                     Ok(coning_status(&r))
                 }
@@ -50,7 +63,7 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 bail!("--runs must be positive and --dwell at least 2 s");
             }
             let out = out.unwrap_or_else(|| default_out("experiment-north-finding"));
-            let o = hil::montecarlo::McOptions {
+            let o = hil::experiments::northfinding::McOptions {
                 runs,
                 dwell_s: dwell,
                 latitude_deg: lat,
@@ -58,11 +71,11 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 ..Default::default()
             };
             if let Some((k, n)) = shard {
-                let part = hil::montecarlo::run_part(&o, k, n)?;
+                let part = hil::experiments::northfinding::run_part(&o, k, n)?;
                 return written(&part, &out);
             }
-            let r = hil::montecarlo::north_finding(&o, &out, true)?;
-            print!("{}", hil::montecarlo::text(&r));
+            let r = hil::experiments::northfinding::north_finding(&o, &out, true)?;
+            print!("{}", hil::experiments::northfinding::text(&r));
             println!(" files: {}", out.display());
             Ok(if r.within_1_2 { 0 } else { 1 })
         }
@@ -87,7 +100,7 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 bail!("--runs must be positive and every --misspecified sigma positive");
             }
             let out = out.unwrap_or_else(|| default_out("experiment-navigation"));
-            let o = hil::navexp::NavExpOptions {
+            let o = hil::experiments::navigation::NavExpOptions {
                 scenario: s,
                 runs,
                 misspecified_sigma_m: misspecified,
@@ -96,11 +109,11 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 threads: hil::par::threads(),
             };
             if let Some((k, n)) = shard {
-                let part = hil::navexp::run_part(&o, k, n, true)?;
+                let part = hil::experiments::navigation::run_part(&o, k, n, true)?;
                 return written(&part, &out);
             }
-            let r = hil::navexp::run(&o, Some(&out), true)?;
-            print!("{}", hil::navexp::text(&r));
+            let r = hil::experiments::navigation::run(&o, Some(&out), true)?;
+            print!("{}", hil::experiments::navigation::text(&r));
             println!(" files: {}", out.display());
             Ok(navigation_status(&r))
         }
@@ -133,7 +146,7 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                     })
                 })
                 .collect::<Result<Vec<_>>>()?;
-            let o = hil::routes::RoutesOptions {
+            let o = hil::experiments::routes::RoutesOptions {
                 scenarios,
                 runs,
                 kinds,
@@ -141,11 +154,11 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
             };
             let out = out.unwrap_or_else(|| default_out("experiment-routes"));
             if let Some((k, n)) = shard {
-                let part = hil::routes::run_part(&o, k, n, true)?;
+                let part = hil::experiments::routes::run_part(&o, k, n, true)?;
                 return written(&part, &out);
             }
-            let r = hil::routes::run(&o, Some(&out), true)?;
-            print!("{}", hil::routes::markdown(&r));
+            let r = hil::experiments::routes::run(&o, Some(&out), true)?;
+            print!("{}", hil::experiments::routes::markdown(&r));
             println!(" files: {}", out.display());
             Ok(routes_status(&r))
         }
@@ -169,8 +182,8 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 );
             }
             let out = out.unwrap_or_else(|| default_out("experiment-calibration"));
-            let defaults = hil::calibexp::CalibOptions::default();
-            let o = hil::calibexp::CalibOptions {
+            let defaults = hil::experiments::calibration::CalibOptions::default();
+            let o = hil::experiments::calibration::CalibOptions {
                 runs,
                 seed,
                 duration_s: duration,
@@ -181,8 +194,8 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 coarse_heading_deg: heading - (defaults.heading_deg - defaults.coarse_heading_deg),
                 ..defaults
             };
-            let r = hil::calibexp::calibration(&o, Some(&out), true)?;
-            print!("{}", hil::calibexp::markdown(&r));
+            let r = hil::experiments::calibration::calibration(&o, Some(&out), true)?;
+            print!("{}", hil::experiments::calibration::markdown(&r));
             println!(" files: {}", out.display());
             let tetra_ok = r.tetra.first().is_some_and(|t| t.meets_paper);
             Ok(if r.meets_paper && tetra_ok { 0 } else { 1 })
@@ -198,18 +211,18 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 bail!("--duration must exceed 1 s and --sweep-step be positive");
             }
             let out = out.unwrap_or_else(|| default_out("experiment-coning"));
-            let mut opts = hil::experiment::ConingOptions {
+            let mut opts = hil::experiments::coning::ConingOptions {
                 duration_s: duration,
                 sweep_step_hz: sweep_step,
                 ..Default::default()
             };
             opts.imu.seed = seed;
             if let Some((k, n)) = shard {
-                let part = hil::experiment::coning_part(&opts, k, n, true)?;
+                let part = hil::experiments::coning::coning_part(&opts, k, n, true)?;
                 return written(&part, &out);
             }
-            let r = hil::experiment::coning(&opts, &out, true)?;
-            print!("{}", hil::experiment::text(&r));
+            let r = hil::experiments::coning::coning(&opts, &out, true)?;
+            print!("{}", hil::experiments::coning::text(&r));
             println!(" files: {}", out.display());
             Ok(coning_status(&r))
         }
@@ -217,8 +230,11 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
 }
 
 /// Writes one part of an experiment and says how to merge the parts.
-fn written<T: serde::Serialize>(part: &hil::shard::Part<T>, out: &Path) -> Result<i32> {
-    let f = hil::shard::write(part, out)?;
+fn written<T: serde::Serialize>(
+    part: &hil::experiments::shard::Part<T>,
+    out: &Path,
+) -> Result<i32> {
+    let f = hil::experiments::shard::write(part, out)?;
     println!(
         "part {} of {}: {} runs; merge all parts with `hil experiment merge`: {}",
         part.shard,
@@ -230,7 +246,7 @@ fn written<T: serde::Serialize>(part: &hil::shard::Part<T>, out: &Path) -> Resul
 }
 
 /// The navigation experiment's exit status: 0 when it meets its targets.
-fn navigation_status(r: &hil::navexp::NavExperiment) -> i32 {
+fn navigation_status(r: &hil::experiments::navigation::NavExperiment) -> i32 {
     if r.pure_km_class
         && r.filters_within_paper
         && r.fading_no_worse_overstated
@@ -243,7 +259,7 @@ fn navigation_status(r: &hil::navexp::NavExperiment) -> i32 {
 }
 
 /// The coning experiment's exit status: 0 when it meets its targets.
-fn coning_status(r: &hil::experiment::ConingReport) -> i32 {
+fn coning_status(r: &hil::experiments::coning::ConingReport) -> i32 {
     if r.ours_10x_below_paper_alg3 && r.ours_worse_than_alg2_at.is_empty() {
         0
     } else {
@@ -253,7 +269,7 @@ fn coning_status(r: &hil::experiment::ConingReport) -> i32 {
 
 /// The routes experiment's exit status: 0 when every filter is consistent on every route, no
 /// velocity error went unflagged and no fix was rejected in a filter's first minute.
-fn routes_status(r: &hil::routes::RoutesReport) -> i32 {
+fn routes_status(r: &hil::experiments::routes::RoutesReport) -> i32 {
     let clean_starts = r.rows.iter().all(|x| x.rejected_first_minute == 0);
     if r.all_consistent && r.no_unflagged_velocity_errors && clean_starts {
         0

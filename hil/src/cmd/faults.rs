@@ -1,7 +1,7 @@
 //! `hil faults`: the fault matrix, where vcan is (natively, or all of it in the guest).
 
 use crate::*;
-use hil::faults::{FaultOptions, matrix, run_matrix};
+use hil::suites::faults::{FaultOptions, matrix, run_matrix};
 
 pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
     if a.list {
@@ -46,7 +46,7 @@ pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
     if a.bus.json {
         println!("{}", serde_json::to_string_pretty(&m)?);
     } else {
-        print!("{}", hil::faults::markdown(&m));
+        print!("{}", hil::suites::faults::markdown(&m));
         println!("\n files: {}", out.display());
     }
     Ok(if m.pass { 0 } else { 1 })

@@ -1,7 +1,7 @@
 //! `hil fuzz`: hostile input for nav's decoders and the bench's parsers.
 
 use crate::*;
-use hil::fuzz::Target;
+use hil::suites::fuzz::Target;
 
 pub(crate) fn fuzz(
     targets: Vec<Target>,
@@ -14,7 +14,7 @@ pub(crate) fn fuzz(
         let [t] = targets[..] else {
             bail!("--rerun needs exactly one --target (the target the inputs were kept from)");
         };
-        let rs = hil::fuzz::rerun(t, &rerun, seed)?;
+        let rs = hil::suites::fuzz::rerun(t, &rerun, seed)?;
         for r in &rs {
             match &r.panic {
                 Some(p) => println!(
@@ -27,7 +27,7 @@ pub(crate) fn fuzz(
                     r.file.display(),
                     r.cpu_ms,
                     if r.accepted { ", accepted" } else { "" },
-                    if r.cpu_ms > hil::fuzz::HANG.as_secs_f64() * 1e3 {
+                    if r.cpu_ms > hil::suites::fuzz::HANG.as_secs_f64() * 1e3 {
                         " (HANG)"
                     } else {
                         ""
@@ -37,7 +37,7 @@ pub(crate) fn fuzz(
         }
         let bad = rs
             .iter()
-            .any(|r| r.panic.is_some() || r.cpu_ms > hil::fuzz::HANG.as_secs_f64() * 1e3);
+            .any(|r| r.panic.is_some() || r.cpu_ms > hil::suites::fuzz::HANG.as_secs_f64() * 1e3);
         return Ok(if bad { 1 } else { 0 });
     }
     if inputs == 0 {
@@ -53,7 +53,7 @@ pub(crate) fn fuzz(
     let mut reports = Vec::new();
     for t in targets {
         let t0 = std::time::Instant::now();
-        let r = hil::fuzz::run(t, inputs, seed, &out, |i| {
+        let r = hil::suites::fuzz::run(t, inputs, seed, &out, |i| {
             if i > 0 {
                 hil::status::count(
                     i as usize,
@@ -69,13 +69,13 @@ pub(crate) fn fuzz(
         ));
         reports.push(r);
     }
-    let md = hil::fuzz::markdown(&reports);
+    let md = hil::suites::fuzz::markdown(&reports);
     std::fs::write(out.join("fuzz.md"), &md)?;
     std::fs::write(
         out.join("fuzz.json"),
         serde_json::to_string_pretty(&reports)?,
     )?;
-    hil::page::folder_page(&out, "Hostile input (hil fuzz)", &md)?;
+    hil::report::page::folder_page(&out, "Hostile input (hil fuzz)", &md)?;
     print!("{md}");
     for r in &reports {
         for c in &r.crashes {

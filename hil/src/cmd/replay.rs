@@ -30,14 +30,14 @@ fn recording_and_config(
 pub(crate) fn replay(recording: &Path, config: Option<&Path>, json: bool) -> Result<i32> {
     let (mcap, cfg) = recording_and_config(recording, config)?;
     let r = if is_candump(&mcap) {
-        hil::playback::replay_candump(&mcap, &cfg)?
+        hil::engine::recording::replay_candump(&mcap, &cfg)?
     } else {
-        hil::playback::replay(&mcap, &cfg)?
+        hil::engine::recording::replay(&mcap, &cfg)?
     };
     if json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
-        print!("{}", hil::playback::text(&r));
+        print!("{}", hil::engine::recording::text(&r));
     }
     Ok(i32::from(!r.identical()))
 }
@@ -70,14 +70,14 @@ pub(crate) fn replay_bus(
         None => sibling_binary("nav")?,
     };
     if bus.here() {
-        let opts = hil::busreplay::BusReplayOptions {
+        let opts = hil::run::busreplay::BusReplayOptions {
             iface: bus.iface.clone(),
             out: out.clone(),
             nav_bin,
             speed,
             progress: !bus.json,
         };
-        let r = hil::busreplay::replay_on_bus(&mcap, &cfg, &opts)?;
+        let r = hil::run::busreplay::replay_on_bus(&mcap, &cfg, &opts)?;
         let json = serde_json::to_string_pretty(&r)?;
         std::fs::write(out.join("replay.json"), &json)
             .with_context(|| format!("writing {}", out.join("replay.json").display()))?;
@@ -135,11 +135,13 @@ pub(crate) fn candump(recording: &Path, out: Option<&Path>, iface: &str) -> Resu
             let f =
                 std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?;
             let mut w = std::io::BufWriter::new(f);
-            let n = hil::playback::export_candump(&mcap, iface, &mut w)?;
+            let n = hil::engine::recording::export_candump(&mcap, iface, &mut w)?;
             std::io::Write::flush(&mut w).with_context(|| format!("writing {}", p.display()))?;
             n
         }
-        None => hil::playback::export_candump(&mcap, iface, &mut std::io::stdout().lock())?,
+        None => {
+            hil::engine::recording::export_candump(&mcap, iface, &mut std::io::stdout().lock())?
+        }
     };
     eprintln!("hil candump: {n} frames from {}", mcap.display());
     Ok(0)

@@ -68,11 +68,11 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
             ..TurntableParams::default()
         };
         p.check()?;
-        let tt = hil::devices::start_turntable(&a.bus.iface, Turntable::new(p), a.speed)?;
+        let tt = hil::engine::devices::start_turntable(&a.bus.iface, Turntable::new(p), a.speed)?;
         std::thread::sleep(std::time::Duration::from_millis(50));
         Some(tt)
     };
-    let result = hil::validate::run_suite(
+    let result = hil::suites::validate::run_suite(
         &a.bus.iface,
         a.axis,
         if a.real { 1.0 } else { a.speed },
@@ -86,13 +86,13 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
         out.join("validation.json"),
         serde_json::to_string_pretty(&v)?,
     )?;
-    let md = hil::validate::markdown(&v);
+    let md = hil::suites::validate::markdown(&v);
     std::fs::write(out.join("validation.md"), &md)?;
-    hil::page::folder_page(&out, "Turntable validation", &md)?;
+    hil::report::page::folder_page(&out, "Turntable validation", &md)?;
     if a.bus.json {
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
-        print!("{}", hil::validate::table(&v));
+        print!("{}", hil::suites::validate::table(&v));
         println!(" report: {}", out.join("validation.json").display());
     }
     Ok(if v.pass { 0 } else { 1 })

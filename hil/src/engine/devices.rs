@@ -67,7 +67,7 @@ pub fn start_scenario(
     let (motion, turntable) = s.build();
     let (receiver, gps) = gps.unzip();
     let devices = Devices {
-        step: crate::inproc::stepper(s, motion, turntable, receiver, s.duration_s),
+        step: crate::engine::inproc::stepper(s, motion, turntable, receiver, s.duration_s),
         gps,
         sent_log: sent_log
             .map(|p| emulators::can::SentLog::create(p, iface))

@@ -7,7 +7,7 @@
 //! bit for bit (the end-to-end tests check it).
 //!
 //! Also here: the receiver's model a scenario sets up for both (nav's config is
-//! [`crate::navconfig`]'s).
+//! [`crate::scenario::navconfig`]'s).
 
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
@@ -111,7 +111,7 @@ impl InProcessBench {
         let port = gps.is_some().then(|| Path::new("(in process)"));
         Self::new(
             s,
-            &crate::navconfig::nav_config(s, None, port),
+            &crate::scenario::navconfig::nav_config(s, None, port),
             motion,
             tt,
             gps,

@@ -2,7 +2,7 @@
 //! drill on vcan): heading error RMS against the noise bound `ARW / (W_ie cos L sqrt(T))`, the
 //! effect of gyro bias, and drill time against accuracy.
 
-use crate::drill::{DrillOutcome, run_in_process};
+use crate::procedures::northfinding::{DrillOutcome, run_in_process};
 use anyhow::{Context, Result};
 use nav::northfind::NorthFindingConfig;
 use rand::rngs::StdRng;
@@ -201,7 +201,8 @@ fn run_job(c: &CaseSpec, j: &Job) -> Result<DrillOutcome> {
         dwell_s: c.dwell_s,
         ..NorthFindingConfig::default()
     };
-    let mut s = crate::drill::scenario(j.heading, c.latitude_deg, c.dwell_s, j.seed);
+    let mut s =
+        crate::procedures::northfinding::scenario(j.heading, c.latitude_deg, c.dwell_s, j.seed);
     s.imu.gyro_bias_dph = [c.gyro_bias_dph; 3];
     s.imu.gyro_bias_instability_dph = c.gyro_drift_dph;
     s.duration_s = 4.0 * c.dwell_s + 80.0;
@@ -211,7 +212,7 @@ fn run_job(c: &CaseSpec, j: &Job) -> Result<DrillOutcome> {
 /// Part `k` of `n` of a Monte Carlo: the drills whose place in the plan is `k` modulo `n`, with
 /// their outcomes; the plan is the cases. Parts written by separate processes or machines merge
 /// into the very report a single run gives ([`merge`]).
-pub type McPart = crate::shard::Part<DrillOutcome>;
+pub type McPart = crate::experiments::shard::Part<DrillOutcome>;
 
 /// The experiment's name in its parts.
 pub const EXPERIMENT: &str = "north-finding";
@@ -221,7 +222,7 @@ pub fn run_part(o: &McOptions, shard: usize, shards: usize) -> Result<McPart> {
     let cases = plan(o);
     let all = jobs(&cases);
     let total = all.len();
-    let mine = crate::shard::select(all, shard, shards)?;
+    let mine = crate::experiments::shard::select(all, shard, shards)?;
     let results = crate::par::map(
         &mine,
         o.threads,
@@ -260,7 +261,7 @@ fn case_stats(c: &CaseSpec, outs: &[DrillOutcome]) -> Case {
 /// Merge parts (all of one plan, every shard once) into the report and write CSV, JSON and
 /// Markdown to `out`.
 pub fn merge(parts: &[McPart], out: &Path, progress: bool) -> Result<McReport> {
-    let all = crate::shard::assemble(parts)?;
+    let all = crate::experiments::shard::assemble(parts)?;
     let cases: Vec<CaseSpec> = serde_json::from_value(parts[0].plan.clone())
         .context("the parts' plan is not a north-finding Monte Carlo's")?;
     let total: usize = cases.iter().map(|c| c.runs).sum();
@@ -314,7 +315,7 @@ pub fn merge(parts: &[McPart], out: &Path, progress: bool) -> Result<McReport> {
     std::fs::write(out.join("report.json"), serde_json::to_string_pretty(&r)?)?;
     let md = format!("# North-finding Monte Carlo\n\n```\n{}```\n", text(&r));
     std::fs::write(out.join("report.md"), &md)?;
-    crate::page::folder_page(out, "North-finding Monte Carlo", &md)?;
+    crate::report::page::folder_page(out, "North-finding Monte Carlo", &md)?;
     Ok(r)
 }
 

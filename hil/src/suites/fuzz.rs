@@ -13,8 +13,8 @@
 //! - `config`: nav's config file text through its parser and checks;
 //! - `scenario`: scenario file text through the bench's parser and checks.
 
-use crate::bench::each_sample;
 use crate::scenario::Scenario;
+use crate::suites::bench::each_sample;
 use anyhow::{Context, Result, bail};
 use nav::pipeline::Pipeline;
 use rand::rngs::StdRng;
@@ -226,7 +226,7 @@ fn corpus(target: Target) -> Result<Vec<Vec<u8>>> {
     Ok(match target {
         Target::Can => {
             // a drill's first seconds: IMU frames, turntable status and acknowledgements
-            let s = crate::drill::scenario(37.0, 28.2, 10.0, 1);
+            let s = crate::procedures::northfinding::scenario(37.0, 28.2, 10.0, 1);
             let mut corpus = Vec::new();
             each_sample(&s, 400.0 / s.imu.rate_hz, |frames| {
                 corpus.push(frames.iter().flat_map(encode).collect());
@@ -238,7 +238,7 @@ fn corpus(target: Target) -> Result<Vec<Vec<u8>>> {
                 &Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml"),
             )?;
             let rx = s.gps.clone().context("drive-gps has a [gps]")?;
-            let run = crate::inproc::gps_run(&s, &rx)?.context("drive-gps has a drive")?;
+            let run = crate::engine::inproc::gps_run(&s, &rx)?.context("drive-gps has a drive")?;
             let mut g = emulators::gps::GpsReceiver::new(run);
             let mut corpus = Vec::new();
             let mut t = 0.0;
@@ -255,12 +255,20 @@ fn corpus(target: Target) -> Result<Vec<Vec<u8>>> {
                 &Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/campus-loop.toml"),
             )?;
             vec![
-                crate::navconfig::nav_config(&s, Some("can0"), Some(Path::new("/dev/ttyS1")))
-                    .to_toml()
-                    .into_bytes(),
-                crate::navconfig::nav_config(&Scenario::builtin_static(), Some("vcan0"), None)
-                    .to_toml()
-                    .into_bytes(),
+                crate::scenario::navconfig::nav_config(
+                    &s,
+                    Some("can0"),
+                    Some(Path::new("/dev/ttyS1")),
+                )
+                .to_toml()
+                .into_bytes(),
+                crate::scenario::navconfig::nav_config(
+                    &Scenario::builtin_static(),
+                    Some("vcan0"),
+                    None,
+                )
+                .to_toml()
+                .into_bytes(),
             ]
         }
         Target::Scenario => Scenario::shipped_files()?
@@ -342,8 +350,8 @@ struct CanTarget {
 
 impl CanTarget {
     fn new() -> Result<Self> {
-        let s = crate::drill::scenario(37.0, 28.2, 10.0, 1);
-        let mut cfg = crate::navconfig::nav_config(&s, None, None);
+        let s = crate::procedures::northfinding::scenario(37.0, 28.2, 10.0, 1);
+        let mut cfg = crate::scenario::navconfig::nav_config(&s, None, None);
         cfg.navigation.enabled = true;
         cfg.navigation.initial_heading_deg = Some(37.0);
         Ok(Self {

@@ -75,7 +75,7 @@ impl Recording {
             bad_records: 0,
             cut: false,
         };
-        r.cut = crate::playback::each_message(mcap, "replaying", |m| {
+        r.cut = crate::engine::recording::each_message(mcap, "replaying", |m| {
             let frame = || nav::rawmsg::frame_of(m);
             match m.channel.topic.as_str() {
                 "/can/raw" => match frame() {
@@ -220,7 +220,7 @@ pub struct BusReplay {
     /// Frames nav sent on the replay.
     pub replayed_tx: u64,
     /// The first frame at which the two differ (index, recorded, replayed), if any.
-    pub first_difference: crate::playback::Difference,
+    pub first_difference: crate::engine::recording::Difference,
     /// The solutions compared at the same IMU times.
     pub solutions: SolutionDifference,
     /// Records of the recording that could not be read.
@@ -257,7 +257,7 @@ impl BusReplay {
             "nav sent {} frames in the recording, {} on the replay: {}\n",
             self.recorded_tx,
             self.replayed_tx,
-            crate::playback::verdict(&self.first_difference)
+            crate::engine::recording::verdict(&self.first_difference)
         );
         let d = &self.solutions;
         s += &format!(
@@ -399,7 +399,7 @@ pub fn replay_on_bus(mcap: &Path, cfg: &NavConfig, opts: &BusReplayOptions) -> R
         play,
         recorded_tx: rec.sent.len() as u64,
         replayed_tx: new.sent.len() as u64,
-        first_difference: crate::playback::first_difference(&rec.sent, &new.sent),
+        first_difference: crate::engine::recording::first_difference(&rec.sent, &new.sent),
         solutions: compare_solutions(&rec.solutions, &new.solutions),
         bad_records: rec.bad_records,
         nav_exit,

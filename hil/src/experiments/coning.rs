@@ -1,8 +1,8 @@
 //! Experiments that reproduce the papers' tables in process (same model and nav code as the
 //! bench, no bus): `hil experiment coning` is paper 000's Tables 1-3.
 
-use crate::plot::{LogChart, Series};
-use crate::replay::run_in_process;
+use crate::engine::reference::run_in_process;
+use crate::report::plot::{LogChart, Series};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
 use emulators::imu::ImuParams;
@@ -116,7 +116,7 @@ pub fn ideal_drift(alg: Alg, fir: &Fir, f_hz: f64, duration_s: f64) -> Result<f6
         p.origin().unwrap_or(0) as f64 * dt,
         p.valid_sample() as f64 * dt,
     );
-    let e = crate::replay::attitude_error(&motion, t0, t1, &p.attitude());
+    let e = crate::engine::reference::attitude_error(&motion, t0, t1, &p.attitude());
     Ok(e[0].to_degrees() * 60.0 / (t1 - t0))
 }
 
@@ -261,8 +261,8 @@ fn run_row(job: RowJob, opts: &ConingOptions, fir: &Fir) -> Result<Row> {
     })
 }
 
-/// Part `k` of `n` of the coning experiment: its rows (see [`crate::shard`]).
-pub type ConingPart = crate::shard::Part<Row>;
+/// Part `k` of `n` of the coning experiment: its rows (see [`crate::experiments::shard`]).
+pub type ConingPart = crate::experiments::shard::Part<Row>;
 
 /// The coning experiment's name in its parts.
 pub const CONING: &str = "coning";
@@ -278,7 +278,7 @@ pub fn coning_part(
     let fir = Fir::default_dither_filter();
     let all = row_jobs(opts);
     let total = all.len();
-    let mine = crate::shard::select(all, shard, shards)?;
+    let mine = crate::experiments::shard::select(all, shard, shards)?;
     if progress {
         eprintln!(
             "experiment: {} of {total} rows (Tables 2 and 3 at {} frequencies, the sweep in {} Hz steps)",
@@ -311,7 +311,7 @@ pub fn coning(opts: &ConingOptions, out: &Path, progress: bool) -> Result<Coning
 
 /// Merge the parts of a coning experiment (every part once) into its report, written to `out`.
 pub fn coning_merge(parts: &[ConingPart], out: &Path) -> Result<ConingReport> {
-    let rows = crate::shard::assemble(parts)?;
+    let rows = crate::experiments::shard::assemble(parts)?;
     let opts: ConingOptions = serde_json::from_value(parts[0].plan.clone())
         .context("the parts' plan is not a coning experiment's")?;
     let jobs = row_jobs(&opts);
@@ -471,7 +471,7 @@ fn write_files(r: &ConingReport, fir: &Fir, out: &Path) -> Result<()> {
     };
     w("coning-drift.svg", chart.svg())?;
     w("report.md", markdown(r))?;
-    crate::page::folder_page(out, "Coning experiment (paper 000)", &markdown(r))?;
+    crate::report::page::folder_page(out, "Coning experiment (paper 000)", &markdown(r))?;
     Ok(())
 }
 

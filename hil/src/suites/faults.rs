@@ -774,7 +774,7 @@ fn tt_faults(s: &mut Scenario, f: impl FnOnce(&mut emulators::turntable::Turntab
 fn end_error(r: &RunReport) -> Option<f64> {
     let drive = emulators::drive::Drive::plan(r.scenario.drive.as_ref()?).ok()?;
     let t_first = 1.0 / r.scenario.imu.rate_hz;
-    crate::navrun::score_summary(&drive, &r.nav, t_first).map(|n| n.position_error_m)
+    crate::engine::navigate::score_summary(&drive, &r.nav, t_first).map(|n| n.position_error_m)
 }
 
 /// What nav must do with a frame overtaken on the bus.
@@ -860,7 +860,7 @@ pub fn base_scenario(b: Base, name: &str) -> Result<Scenario> {
             s
         }
         Base::Gps => {
-            let mut s = Scenario::from_text(include_str!("../../scenarios/drive-gps.toml"))
+            let mut s = Scenario::from_text(include_str!("../../../scenarios/drive-gps.toml"))
                 .context("the drive-gps scenario")?;
             s.duration_s = 16.0;
             if let Some(d) = s.drive.as_mut() {
@@ -870,7 +870,7 @@ pub fn base_scenario(b: Base, name: &str) -> Result<Scenario> {
             s
         }
         Base::Drill => {
-            let mut s = crate::drill::scenario(30.0, 45.0, 6.0, 7);
+            let mut s = crate::procedures::northfinding::scenario(30.0, 45.0, 6.0, 7);
             s.duration_s = 45.0;
             s
         }
@@ -979,7 +979,7 @@ pub fn write(m: &FaultMatrix, out: &Path) -> Result<()> {
     std::fs::write(out.join("faults.json"), serde_json::to_string_pretty(m)?)
         .context("writing faults.json")?;
     std::fs::write(out.join("faults.md"), markdown(m)).context("writing faults.md")?;
-    crate::page::folder_page(out, "Fault matrix", &markdown(m))?;
+    crate::report::page::folder_page(out, "Fault matrix", &markdown(m))?;
     Ok(())
 }
 

@@ -5,8 +5,8 @@
 //! satellites changing, multipath bursts, HDOP along the route). Every run is
 //! `navrun::navigate`: the emulators and nav's own code, as on the bench, without the bus.
 
-use crate::navrun::{NavRun, NavSample, navigate};
-use crate::plot::{LogChart, Series};
+use crate::engine::navigate::{NavRun, NavSample, navigate};
+use crate::report::plot::{LogChart, Series};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
 use emulators::gps::ReceiverParams;
@@ -258,8 +258,8 @@ impl Tally {
     }
 }
 
-/// Part `k` of `n` of the experiment (see [`crate::shard`]).
-pub type NavPart = crate::shard::Part<PartRun>;
+/// Part `k` of `n` of the experiment (see [`crate::experiments::shard`]).
+pub type NavPart = crate::experiments::shard::Part<PartRun>;
 
 /// The experiment's name in its parts.
 pub const EXPERIMENT: &str = "navigation";
@@ -380,7 +380,7 @@ pub fn run_part(o: &NavExpOptions, shard: usize, shards: usize, progress: bool) 
         ..
     } = plan(o)?;
     let total = jobs.len();
-    let mine = crate::shard::select(jobs, shard, shards)?;
+    let mine = crate::experiments::shard::select(jobs, shard, shards)?;
     if progress {
         eprintln!(
             "hil: {} of {} runs of {} ({} cases x {} seeds, {} s each) on {} threads",
@@ -424,7 +424,7 @@ pub fn run_part(o: &NavExpOptions, shard: usize, shards: usize, progress: bool) 
 /// Merge the parts of one experiment (every part once) into its report; files go to `out`
 /// when given.
 pub fn merge(parts: &[NavPart], out: Option<&Path>) -> Result<NavExperiment> {
-    let all = crate::shard::assemble(parts)?;
+    let all = crate::experiments::shard::assemble(parts)?;
     let p: NavPlan = serde_json::from_value(parts[0].plan.clone())
         .context("the parts' plan is not a navigation experiment's")?;
     let o = NavExpOptions {
@@ -522,7 +522,7 @@ pub fn merge(parts: &[NavPart], out: Option<&Path>) -> Result<NavExperiment> {
         north_finding_error_deg: first
             .north_finding
             .as_ref()
-            .map(|n| crate::drill::wrap180(n.heading_deg - s.truth_heading_deg())),
+            .map(|n| crate::stats::wrap180(n.heading_deg - s.truth_heading_deg())),
         pure_km_class: table4[0].end_position_error_m > 1000.0,
         filters_within_paper: table4[1..]
             .iter()
@@ -584,7 +584,7 @@ fn write_files(r: &NavExperiment, dir: &Path) -> Result<()> {
     let chart = |title: &str,
                  y: &str,
                  cases: &[&CaseResult],
-                 f: &dyn Fn(&crate::navrun::NavSample) -> f64| {
+                 f: &dyn Fn(&crate::engine::navigate::NavSample) -> f64| {
         LogChart {
             title: title.into(),
             x_label: "time, s".into(),
@@ -631,7 +631,7 @@ fn write_files(r: &NavExperiment, dir: &Path) -> Result<()> {
             &|x| x.position_error_m,
         ),
     )?;
-    crate::page::folder_page(dir, "Navigation experiment (paper 003)", &markdown(r))?;
+    crate::report::page::folder_page(dir, "Navigation experiment (paper 003)", &markdown(r))?;
     Ok(())
 }
 

@@ -43,7 +43,7 @@ pub fn frontend(seconds: f64, passes: u32) -> Result<BenchResult> {
     while bus.next_time() <= seconds {
         bus.next_frames(&mut frames);
     }
-    let cfg = crate::navconfig::nav_config(&s, None, None);
+    let cfg = crate::scenario::navconfig::nav_config(&s, None, None);
     let mut best = f64::INFINITY;
     let mut samples = 0;
     for _ in 0..passes.max(1) {
@@ -112,7 +112,7 @@ pub fn emulators(s: &Scenario, seconds: f64) -> EmulatorBench {
 /// [`emulators::step::Stepper`]; nothing answers the turntable, so it only reports its status).
 pub fn each_sample(s: &Scenario, seconds: f64, mut f: impl FnMut(&[RawFrame])) {
     let (motion, tt) = s.build();
-    let mut step = crate::inproc::stepper(s, motion, tt, None, seconds);
+    let mut step = crate::engine::inproc::stepper(s, motion, tt, None, seconds);
     let mut st = emulators::step::Step::default();
     while step.running() {
         step.step(&mut st);
@@ -261,10 +261,10 @@ pub fn pipeline_drive(s: &Scenario, seconds: f64) -> Result<PipelineBench> {
         s.name
     );
     let seconds = seconds.min(s.duration_s);
-    let run = crate::inproc::gps_run(s, rx)?.context("the scenario has no [drive]")?;
+    let run = crate::engine::inproc::gps_run(s, rx)?.context("the scenario has no [drive]")?;
     let (motion, _) = s.build();
     // the devices in the scheduler's order, taken before the clock starts
-    let mut step = crate::inproc::stepper(s, motion, None, Some(run), seconds);
+    let mut step = crate::engine::inproc::stepper(s, motion, None, Some(run), seconds);
     let mut st = emulators::step::Step::default();
     let mut inputs = Vec::new();
     while step.running() {
@@ -277,7 +277,8 @@ pub fn pipeline_drive(s: &Scenario, seconds: f64) -> Result<PipelineBench> {
                 .map(|e| Input::Gps(e.text)),
         );
     }
-    let cfg = crate::navconfig::nav_config(s, None, Some(std::path::Path::new("(in process)")));
+    let cfg =
+        crate::scenario::navconfig::nav_config(s, None, Some(std::path::Path::new("(in process)")));
     let mut p = Pipeline::new(&cfg, false).context("nav's pipeline")?;
     let mut out = Vec::new();
     let mut n_frames = 0u64;

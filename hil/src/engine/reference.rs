@@ -1,5 +1,5 @@
 //! In-process reference runs: the scenario's devices (faults included) driving nav's own
-//! pipeline with no bus in between ([`crate::inproc`]). The bench compares nav's result on vcan
+//! pipeline with no bus in between ([`crate::engine::inproc`]). The bench compares nav's result on vcan
 //! against this; experiments use it directly. Same code, no copies.
 
 use crate::scenario::Scenario;
@@ -56,9 +56,9 @@ pub fn attitude_error(motion: &dyn Motion, t0: f64, t1: f64, q: &UnitQuaternion<
 }
 
 /// Run the scenario in process: its devices driving nav's pipeline
-/// ([`crate::inproc::InProcessBench`]), the integrated attitude scored against the truth.
+/// ([`crate::engine::inproc::InProcessBench`]), the integrated attitude scored against the truth.
 pub fn run_in_process(s: &Scenario) -> Result<InProcess> {
-    let mut bench = crate::inproc::InProcessBench::of(s)?;
+    let mut bench = crate::engine::inproc::InProcessBench::of(s)?;
     while bench.running() {
         bench.step();
     }

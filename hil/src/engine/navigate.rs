@@ -1,9 +1,9 @@
 //! In-process navigation runs: the scenario's devices driving nav's pipeline
-//! ([`crate::inproc`]), scored against the truth trajectory with the truth side's geodesy
+//! ([`crate::engine::inproc`]), scored against the truth trajectory with the truth side's geodesy
 //! (ECEF), never with nav's.
 
-use crate::drill::wrap180;
 use crate::scenario::Scenario;
+use crate::stats::wrap180;
 use anyhow::{Result, bail};
 use emulators::drive::Drive;
 use emulators::geodesy::enu_offset;
@@ -174,7 +174,7 @@ pub fn score_recording(
 ) -> Result<(Vec<NavScore>, u64)> {
     let mut out = Vec::new();
     let mut bad = 0u64;
-    let cut = crate::playback::each_message(mcap_path, "scoring", |m| {
+    let cut = crate::engine::recording::each_message(mcap_path, "scoring", |m| {
         if m.channel.topic != "/nav/solution" {
             return;
         }
@@ -241,7 +241,7 @@ pub fn recorded_fixes(
         [x[0], x[1]]
     };
     let mut out = Vec::new();
-    crate::playback::each_message(mcap_path, "fixes", |m| {
+    crate::engine::recording::each_message(mcap_path, "fixes", |m| {
         let t = m.publish_time as f64 * 1e-9;
         match m.channel.topic.as_str() {
             "/gps/fix" => {
@@ -391,8 +391,9 @@ pub fn navigate(
     let drive = Drive::plan(spec)?;
     let (motion, tt) = s.build();
     let finds_north = s.north_finding.is_some() && tt.is_some();
-    let gps = crate::inproc::gps_run(s, rx)?;
-    let mut cfg = crate::navconfig::nav_config(s, None, Some(std::path::Path::new("(in process)")));
+    let gps = crate::engine::inproc::gps_run(s, rx)?;
+    let mut cfg =
+        crate::scenario::navconfig::nav_config(s, None, Some(std::path::Path::new("(in process)")));
     let fix_delay = NavigationConfig::default().fix_delay_s;
     cfg.navigation = NavigationConfig {
         enabled: true,
@@ -400,7 +401,7 @@ pub fn navigate(
             .then(|| drive.heading(0.0).to_degrees() + heading_err_deg),
         gps_aiding: filter.is_some(),
         filter: filter
-            .map(|f| crate::navconfig::with_lever_arm(f, rx))
+            .map(|f| crate::scenario::navconfig::with_lever_arm(f, rx))
             .unwrap_or_default(),
         ..s.navigation.clone().unwrap_or_else(|| NavigationConfig {
             // the first fix comes at about 1 s and is applied `fix_delay_s` after its edge
@@ -409,7 +410,7 @@ pub fn navigate(
         })
     };
     let level_s = cfg.navigation.level_s;
-    let mut bench = crate::inproc::InProcessBench::new(s, &cfg, motion, tt, gps)?;
+    let mut bench = crate::engine::inproc::InProcessBench::new(s, &cfg, motion, tt, gps)?;
     let mut series = Vec::new();
     let mut outage_end = Vec::new();
     let mut next_score = 1.0;
@@ -648,7 +649,7 @@ mod tests {
             r.north_finding, r.started_at_s, r.end_position_error_m
         );
         let nf = r.north_finding.as_ref().expect("north-finding ran");
-        let err = crate::drill::wrap180(nf.heading_deg - s.truth_heading_deg());
+        let err = crate::stats::wrap180(nf.heading_deg - s.truth_heading_deg());
         assert!(
             err.abs() < 4.0 * nf.sigma_deg.max(0.05),
             "{err} vs {}",

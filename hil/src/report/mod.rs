@@ -1,6 +1,10 @@
 //! Checks of a run against truth and the bus accounting, and the result card.
 
-use crate::replay::InProcess;
+pub mod html;
+pub mod page;
+pub mod plot;
+
+use crate::engine::reference::InProcess;
 use crate::scenario::Scenario;
 use emulators::can::TxStats;
 use nalgebra::Vector3;
@@ -44,21 +48,21 @@ pub struct RunReport {
     /// What the turntable emulator did (runs with a turntable).
     pub turntable: Option<emulators::can::TurntableTxStats>,
     /// The north-finding drill's outcome (drills).
-    pub drill: Option<crate::drill::DrillOutcome>,
+    pub drill: Option<crate::procedures::northfinding::DrillOutcome>,
     /// The self-calibration's outcome, scored against the unit's truth (calibration runs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub calibration: Option<crate::calibrate::CalibrateOutcome>,
+    pub calibration: Option<crate::procedures::calibrate::CalibrateOutcome>,
     /// The redundant unit's calibration, scored against its truth (paper 001 runs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub tetra_calibration: Option<crate::calibrate::TetraOutcome>,
+    pub tetra_calibration: Option<crate::procedures::calibrate::TetraOutcome>,
     /// What the GPS emulator wrote (runs with a receiver).
     pub gps: Option<emulators::gps::GpsTxStats>,
     /// nav's solution frames as the bench received them.
-    pub solution: crate::observe::SolutionWatch,
+    pub solution: crate::procedures::observe::SolutionWatch,
     /// nav's navigation scored against truth (runs that navigate).
-    pub navigation: Option<crate::navrun::NavScore>,
+    pub navigation: Option<crate::engine::navigate::NavScore>,
     /// The same second by second, from nav's recording.
-    pub navigation_series: Option<crate::navrun::SeriesStats>,
+    pub navigation_series: Option<crate::engine::navigate::SeriesStats>,
     /// nav's exit status.
     pub nav_exit: Option<i32>,
     /// nav's summary (as nav wrote it; rebuilt from its recording when it was killed).
@@ -214,7 +218,11 @@ pub fn checks(
 }
 
 /// The drill's verdict: finished, within tolerance, error against the estimated sigma.
-pub fn drill_checks(out: &mut Vec<Check>, s: &Scenario, o: &crate::drill::DrillOutcome) {
+pub fn drill_checks(
+    out: &mut Vec<Check>,
+    s: &Scenario,
+    o: &crate::procedures::northfinding::DrillOutcome,
+) {
     out.push(Check {
         name: "north-finding finished".into(),
         pass: o.abort.is_none() && o.heading_deg.is_some(),
@@ -246,7 +254,7 @@ pub fn drill_checks(out: &mut Vec<Check>, s: &Scenario, o: &crate::drill::DrillO
 /// for the unit.
 pub fn calibration_checks(
     out: &mut Vec<Check>,
-    o: &crate::calibrate::CalibrateOutcome,
+    o: &crate::procedures::calibrate::CalibrateOutcome,
     nav: &Summary,
 ) {
     out.push(Check {
@@ -314,7 +322,11 @@ pub fn calibration_checks(
 /// The redundant unit's calibration: finished (the table having done what was commanded
 /// throughout), every estimate within 3 of its sigmas of the truth, and with a failure
 /// injected, the monitor isolating that gyro.
-pub fn tetra_checks(out: &mut Vec<Check>, o: &crate::calibrate::TetraOutcome, nav: &Summary) {
+pub fn tetra_checks(
+    out: &mut Vec<Check>,
+    o: &crate::procedures::calibrate::TetraOutcome,
+    nav: &Summary,
+) {
     out.push(Check {
         name: "tetra-calibration finished, the table's rates checked".into(),
         pass: o.result.as_ref().is_some_and(|r| r.checked_s > 0),
@@ -387,7 +399,11 @@ pub fn tetra_checks(out: &mut Vec<Check>, o: &crate::calibrate::TetraOutcome, na
 
 /// nav's solution output: every NAV_* frame nav sent reached the bench and decoded, no epoch
 /// was skipped, and the last position on the bus is nav's final one.
-pub fn solution_checks(out: &mut Vec<Check>, w: &crate::observe::SolutionWatch, nav: &Summary) {
+pub fn solution_checks(
+    out: &mut Vec<Check>,
+    w: &crate::procedures::observe::SolutionWatch,
+    nav: &Summary,
+) {
     let sent = nav.solution.frames_sent;
     let epochs = nav.solution.epochs;
     let mut pass = w.frames == sent && w.bad_frames == 0 && w.seq_gaps == 0 && epochs > 0;
@@ -421,7 +437,7 @@ pub fn solution_checks(out: &mut Vec<Check>, w: &crate::observe::SolutionWatch, 
 }
 
 /// nav's recording replayed through its pipeline in process sends exactly what nav sent.
-pub fn replay_check(r: Result<&crate::playback::Playback, &anyhow::Error>) -> Check {
+pub fn replay_check(r: Result<&crate::engine::recording::Playback, &anyhow::Error>) -> Check {
     let name = "nav's output replays bit for bit from its recording".to_string();
     match r {
         Ok(p) => Check {
@@ -449,7 +465,7 @@ pub fn replay_check(r: Result<&crate::playback::Playback, &anyhow::Error>) -> Ch
 pub fn navigation_checks(
     out: &mut Vec<Check>,
     s: &Scenario,
-    score: Option<&crate::navrun::NavScore>,
+    score: Option<&crate::engine::navigate::NavScore>,
     nav: &Summary,
     gps: Option<&emulators::gps::GpsTxStats>,
 ) {
@@ -638,13 +654,13 @@ pub fn card(r: &RunReport) -> String {
         let _ = writeln!(s, "{line}");
     }
     if let Some(c) = &r.calibration {
-        for l in crate::calibrate::card(c).lines() {
+        for l in crate::procedures::calibrate::card(c).lines() {
             let _ = writeln!(s, " {l}");
         }
         let _ = writeln!(s, "{line}");
     }
     if let Some(c) = &r.tetra_calibration {
-        for l in crate::calibrate::tetra_card(c).lines() {
+        for l in crate::procedures::calibrate::tetra_card(c).lines() {
             let _ = writeln!(s, " {l}");
         }
         let _ = writeln!(s, "{line}");
@@ -699,14 +715,14 @@ pub fn markdown(r: &RunReport) -> String {
         let _ = writeln!(
             s,
             "## Self-calibration\n\n```\n{}```\n",
-            crate::calibrate::card(c)
+            crate::procedures::calibrate::card(c)
         );
     }
     if let Some(c) = &r.tetra_calibration {
         let _ = writeln!(
             s,
             "## Redundant unit's calibration\n\n```\n{}```\n",
-            crate::calibrate::tetra_card(c)
+            crate::procedures::calibrate::tetra_card(c)
         );
     }
     if let Some(d) = &r.drill {

@@ -265,7 +265,7 @@ impl Client {
     }
 }
 
-use crate::drill::wrap180;
+use crate::stats::wrap180;
 
 fn check(
     out: &mut Vec<VCheck>,

@@ -27,7 +27,7 @@ use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::Path;
 
-pub use crate::fogunit::{CalibOptions, drift_heading_deg, fog_params};
+pub use crate::scenario::fogunit::{CalibOptions, drift_heading_deg, fog_params};
 use crate::stats::median;
 
 /// Experiment name (for its report).
@@ -40,7 +40,7 @@ pub const PAPER_SF_RATIO: f64 = 0.4668;
 pub const PAPER_HEADING_RATIO: f64 = 0.4799;
 
 const DEG_H: f64 = std::f64::consts::PI / 180.0 / 3600.0;
-use crate::fogunit::G0;
+use crate::scenario::fogunit::G0;
 
 /// One method's figures in one run.
 #[derive(Debug, Clone, Copy, Default, Serialize)]
@@ -88,9 +88,9 @@ pub struct CalibReport {
     /// Both ratios at or below the paper's.
     pub meets_paper: bool,
     /// Paper 001 at the paper's noise and at realistic MEMS noise.
-    pub tetra: Vec<crate::tetraexp::TetraSummary>,
+    pub tetra: Vec<crate::experiments::tetrahedral::TetraSummary>,
     /// One failed gyro of the four, each kind, with and without a reference rate.
-    pub failures: Vec<crate::tetraexp::FailureRow>,
+    pub failures: Vec<crate::experiments::tetrahedral::FailureRow>,
 }
 
 /// One run of both estimators.
@@ -281,10 +281,14 @@ pub fn calibration(o: &CalibOptions, out: Option<&Path>, progress: bool) -> Resu
     let uncal = mean_abs(&|r| r.heading_uncalibrated_deg);
     let heading_ratio_rls = mean_abs(&|r| r.rls.heading_deg) / uncal;
     let heading_ratio_kf = mean_abs(&|r| r.kf.heading_deg) / uncal;
-    let tetra = crate::tetraexp::experiment(&crate::tetraexp::NOISES, o.runs, o.seed)?;
+    let tetra = crate::experiments::tetrahedral::experiment(
+        &crate::experiments::tetrahedral::NOISES,
+        o.runs,
+        o.seed,
+    )?;
     let report = CalibReport {
         tetra,
-        failures: crate::tetraexp::failures(o.seed),
+        failures: crate::experiments::tetrahedral::failures(o.seed),
         options: o.clone(),
         meets_paper: bias_ratio <= PAPER_BIAS_RATIO && sf_ratio <= PAPER_SF_RATIO,
         runs,
@@ -305,7 +309,7 @@ pub fn calibration(o: &CalibOptions, out: Option<&Path>, progress: bool) -> Resu
             std::fs::write(&f, parameters(o, first).to_toml())
                 .with_context(|| format!("writing {}", f.display()))?;
         }
-        crate::page::folder_page(
+        crate::report::page::folder_page(
             out,
             "Experiment: calibration (paper 004)",
             &markdown(&report),
@@ -379,8 +383,8 @@ pub fn markdown(r: &CalibReport) -> String {
         "Target (ratios at or below the paper's): {}\n",
         if r.meets_paper { "met" } else { "NOT met" }
     );
-    s += &crate::tetraexp::markdown(&r.tetra);
-    s += &crate::tetraexp::failures_markdown(&r.failures);
+    s += &crate::experiments::tetrahedral::markdown(&r.tetra);
+    s += &crate::experiments::tetrahedral::failures_markdown(&r.failures);
     s
 }
 

@@ -20,7 +20,7 @@ pub fn navigation_config(s: &Scenario) -> Option<NavigationConfig> {
         n.initial_heading_deg = Some(s.truth_heading_deg());
     }
     if let Some(g) = &s.gps {
-        n.filter = crate::navconfig::with_lever_arm(&n.filter, g);
+        n.filter = crate::scenario::navconfig::with_lever_arm(&n.filter, g);
     }
     Some(n)
 }
@@ -42,7 +42,7 @@ pub fn self_calibration_config(
 
 /// nav's `[imu]` for a scenario, with the parameter file it names loaded (as nav loads it).
 pub fn imu_calibration(s: &Scenario) -> nav::imu::ImuCalibration {
-    let mut c = crate::navconfig::calibration(s);
+    let mut c = crate::scenario::navconfig::calibration(s);
     if let Some(p) = s
         .nav_parameters
         .as_ref()
@@ -87,7 +87,7 @@ pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) ->
         north_finding: s
             .north_finding
             .as_ref()
-            .map(|nf| crate::navconfig::nf_config(s, nf))
+            .map(|nf| crate::scenario::navconfig::nf_config(s, nf))
             .unwrap_or_default(),
         self_calibration: s
             .self_calibration

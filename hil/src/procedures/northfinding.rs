@@ -2,6 +2,7 @@
 //! nav code as on the bench, and the drill's scoring.
 
 use crate::scenario::Scenario;
+use crate::stats::wrap180;
 use anyhow::{Result, bail};
 use nav::northfind::{NorthFinder, NorthFindingConfig, NorthResult, Progress};
 use serde::{Deserialize, Serialize};
@@ -70,12 +71,6 @@ pub fn scenario(heading_deg: f64, lat_deg: f64, dwell_s: f64, seed: u64) -> Scen
     s
 }
 
-/// Wrap an angle difference to (-180, 180].
-pub fn wrap180(d: f64) -> f64 {
-    let w = d.rem_euclid(360.0);
-    if w > 180.0 { w - 360.0 } else { w }
-}
-
 /// Score a result against truth.
 pub fn outcome(
     truth_deg: f64,
@@ -96,7 +91,7 @@ pub fn outcome(
 }
 
 /// A drill in process (no bus): the scenario's devices driving nav's pipeline, stepped sample
-/// by sample in the bench's bus order ([`crate::inproc::InProcessBench`]); the result is the
+/// by sample in the bench's bus order ([`crate::engine::inproc::InProcessBench`]); the result is the
 /// bench's, bit for bit. `progress` gets nav's progress at every stage change and every second.
 pub fn run_in_process(
     s: &Scenario,
@@ -110,9 +105,9 @@ pub fn run_in_process(
             s.name
         );
     };
-    let mut cfg = crate::navconfig::nav_config(s, None, None);
-    cfg.north_finding = crate::navconfig::nf_config(s, nf);
-    let mut bench = crate::inproc::InProcessBench::new(s, &cfg, motion, Some(tt), None)?;
+    let mut cfg = crate::scenario::navconfig::nav_config(s, None, None);
+    cfg.north_finding = crate::scenario::navconfig::nf_config(s, nf);
+    let mut bench = crate::engine::inproc::InProcessBench::new(s, &cfg, motion, Some(tt), None)?;
     let mut last_phase = None;
     let dt = 1.0 / s.imu.rate_hz;
     let mut k: u64 = 0;

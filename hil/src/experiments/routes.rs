@@ -7,9 +7,9 @@
 //! [0.5, 2] for position and velocity (the sigmas nav sends are honest), and no run ends with a
 //! velocity error above 1 m/s without nav's integrity monitor having flagged it.
 
-use crate::navexp::filter;
-use crate::navrun::{NavRun, NavSample};
-use crate::plot::{LogChart, Series};
+use crate::engine::navigate::{NavRun, NavSample};
+use crate::experiments::navigation::filter;
+use crate::report::plot::{LogChart, Series};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
 use nav::kf::FilterKind;
@@ -84,10 +84,10 @@ pub struct RoutesReport {
 }
 
 /// One run of a part: its errors and its series (for the plots).
-pub type PartRun = crate::navexp::PartRun;
+pub type PartRun = crate::experiments::navigation::PartRun;
 
-/// Part `k` of `n` of the experiment (see [`crate::shard`]).
-pub type RoutesPart = crate::shard::Part<PartRun>;
+/// Part `k` of `n` of the experiment (see [`crate::experiments::shard`]).
+pub type RoutesPart = crate::experiments::shard::Part<PartRun>;
 
 /// The experiment's name in its parts.
 pub const EXPERIMENT: &str = "routes";
@@ -132,7 +132,7 @@ pub fn run_part(
     check(o)?;
     let all = jobs(o);
     let total = all.len();
-    let mine = crate::shard::select(all, shard, shards)?;
+    let mine = crate::experiments::shard::select(all, shard, shards)?;
     if progress {
         eprintln!(
             "hil: {} of {total} runs ({} routes x {} filters x {} seeds) on {} threads",
@@ -143,7 +143,7 @@ pub fn run_part(
             o.threads
         );
     }
-    let tally = crate::navexp::Tally::new(mine.len(), progress);
+    let tally = crate::experiments::navigation::Tally::new(mine.len(), progress);
     let results = crate::par::map(
         &mine,
         o.threads,
@@ -153,8 +153,13 @@ pub fn run_part(
                 bail!("{}: no [gps]", s.name);
             };
             let label = format!("{} {:?}", s.name, j.kind);
-            let r = crate::navexp::seeded_run(s, Some(&filter(j.kind, None)), rx, j.seed)
-                .with_context(|| format!("{label}, seed {}", j.seed));
+            let r = crate::experiments::navigation::seeded_run(
+                s,
+                Some(&filter(j.kind, None)),
+                rx,
+                j.seed,
+            )
+            .with_context(|| format!("{label}, seed {}", j.seed));
             tally.done(&label, &r);
             r.map(|r| (*g, r))
         },
@@ -178,7 +183,7 @@ pub fn run(o: &RoutesOptions, out: Option<&Path>, progress: bool) -> Result<Rout
 
 /// Merge the parts (every part once) into the report; files go to `out` when given.
 pub fn merge(parts: &[RoutesPart], out: Option<&Path>) -> Result<RoutesReport> {
-    let all = crate::shard::assemble(parts)?;
+    let all = crate::experiments::shard::assemble(parts)?;
     let o: RoutesOptions = serde_json::from_value(parts[0].plan.clone())
         .context("the parts' plan is not a routes experiment's")?;
     let jobs = jobs(&o);
@@ -234,7 +239,7 @@ pub fn merge(parts: &[RoutesPart], out: Option<&Path>) -> Result<RoutesReport> {
                 sigma_chart(s, &mine, false),
             )?;
         }
-        crate::page::folder_page(dir, "The filters over the routes", &markdown(&r))?;
+        crate::report::page::folder_page(dir, "The filters over the routes", &markdown(&r))?;
     }
     Ok(r)
 }

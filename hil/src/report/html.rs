@@ -3,9 +3,9 @@
 //! sigma bounds, the turntable's angle against what nav commanded), with links to the CSV and
 //! JSON files beside it. No scripts and no external resources: any browser opens it offline.
 
-use crate::page::{esc, figure, page};
-use crate::plot::{LogChart, Series};
 use crate::report::RunReport;
+use crate::report::page::{esc, figure, page};
+use crate::report::plot::{LogChart, Series};
 use std::fmt::Write;
 use std::path::Path;
 
@@ -62,7 +62,7 @@ pub fn turntable_series(mcap_path: &Path, rate_hz: f64) -> anyhow::Result<(Point
     use wire::{Message, TtCommand};
     let (mut angle, mut targets): (Points, Points) = (Vec::new(), Vec::new());
     let mut gyro = 0u64;
-    crate::playback::each_message(mcap_path, "plotting", |m| {
+    crate::engine::recording::each_message(mcap_path, "plotting", |m| {
         if m.channel.topic != "/can/raw" && m.channel.topic != "/can/tx" {
             return;
         }

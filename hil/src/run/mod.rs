@@ -2,7 +2,9 @@
 //! file differs from a vehicle's), run the emulators for the scenario's simulated duration,
 //! stop `nav` with SIGTERM, check and report.
 
-use crate::observe::{DrillWatch, solution_socket, watch_solution};
+pub mod busreplay;
+
+use crate::procedures::observe::{DrillWatch, solution_socket, watch_solution};
 use crate::report::{self, RunReport};
 use crate::report::{KillOutcome, NavMemory, cpu_seconds};
 use crate::scenario::Scenario;
@@ -300,8 +302,11 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         pty.give_to(uid, gid)?;
     }
     let cfg_path = nav_folder.dir.join("nav.toml");
-    let mut nav_cfg =
-        crate::navconfig::nav_config(s, Some(&opts.iface), gps.as_ref().map(|g| g.1.as_path()));
+    let mut nav_cfg = crate::scenario::navconfig::nav_config(
+        s,
+        Some(&opts.iface),
+        gps.as_ref().map(|g| g.1.as_path()),
+    );
     // gpsd between the receiver and nav: started on the port before nav, stopped after the run
     let _gpsd = match (&gps, opts.gps_via_gpsd, nav_cfg.gps.as_mut()) {
         (Some((_, link)), true, Some(g)) => {
@@ -347,7 +352,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         std::thread::spawn(move || watch_solution(sock, &iface, &stop))
     };
     let gps_device = match (gps, &s.gps) {
-        (Some((pty, link)), Some(rx)) => match crate::inproc::gps_run(s, rx)? {
+        (Some((pty, link)), Some(rx)) => match crate::engine::inproc::gps_run(s, rx)? {
             // what the receiver sent, kept beside nav's recording (gpsd's .log form)
             Some(run) => {
                 let dev = GpsDevice::new(pty, Some(link))
@@ -366,7 +371,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         _ => None,
     };
     let t0 = Instant::now();
-    let devices = crate::devices::start_scenario(
+    let devices = crate::engine::devices::start_scenario(
         s,
         &opts.iface,
         gps_device,
@@ -480,7 +485,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         Err(nav::summary::SummaryError::Read { .. }) if killed_at.is_some() => {
             // killed outright: what it recorded is all there is; nav's pipeline rebuilds the
             // summary from it
-            let p = crate::playback::replay(&opts.out.join("nav.mcap"), &nav_cfg)
+            let p = crate::engine::recording::replay(&opts.out.join("nav.mcap"), &nav_cfg)
                 .context("reading back the recording of the killed nav")?;
             let at_s = killed_at.unwrap_or(0.0);
             let sm = &p.summary;
@@ -527,18 +532,18 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let (reference, replayed, scored) = std::thread::scope(|sc| {
         // (through gpsd, nav gets only the sentences gpsd keeps: not the receiver's bytes)
         let reference = sc.spawn(|| match s.turntable {
-            None if opts.reference_checks && !opts.gps_via_gpsd => {
-                Some(crate::replay::run_in_process(s).context("in-process reference run"))
-            }
+            None if opts.reference_checks && !opts.gps_via_gpsd => Some(
+                crate::engine::reference::run_in_process(s).context("in-process reference run"),
+            ),
             _ => None,
         });
         let replayed = sc.spawn(|| {
             opts.reference_checks
-                .then(|| crate::playback::replay(&mcap_path, &nav_cfg))
+                .then(|| crate::engine::recording::replay(&mcap_path, &nav_cfg))
         });
         let scored = drive
             .as_ref()
-            .map(|d| crate::navrun::score_recording(d, &mcap_path, t_first));
+            .map(|d| crate::engine::navigate::score_recording(d, &mcap_path, t_first));
         let join = |what: &str| anyhow::anyhow!("the {what} panicked");
         Ok::<_, anyhow::Error>((
             reference
@@ -561,7 +566,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     );
     let drill_outcome = s.north_finding.as_ref().map(|_| {
         let nf = nav_json.north_finding.as_ref();
-        crate::drill::outcome(
+        crate::procedures::northfinding::outcome(
             s.truth_heading_deg(),
             nf.and_then(|n| n.result.as_ref()),
             nf.map_or(Some("north-finding was not enabled in nav"), |n| {
@@ -578,7 +583,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         .as_ref()
         .map(|_| {
             let c = nav_json.self_calibration.as_ref();
-            crate::calibrate::outcome(
+            crate::procedures::calibrate::outcome(
                 s,
                 c.and_then(|c| c.result.as_ref()),
                 c.map_or(Some("self-calibration was not enabled in nav"), |c| {
@@ -599,7 +604,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     }
     let tetra_calibration = s.tetra_calibration.as_ref().map(|_| {
         let c = nav_json.tetra_calibration.as_ref();
-        crate::calibrate::tetra_outcome(
+        crate::procedures::calibrate::tetra_outcome(
             s,
             c.and_then(|c| c.result.as_ref()),
             c.map_or(Some("tetra-calibration was not enabled in nav"), |c| {
@@ -628,14 +633,15 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let mut navigation_series = None;
     let navigation = match (drive, scored) {
         (Some(drive), Some(scored)) => {
-            let o = crate::navrun::score_summary(&drive, &nav_json, t_first);
+            let o = crate::engine::navigate::score_summary(&drive, &nav_json, t_first);
             // second by second from nav's recording: statistics, CSV and a plot
             match scored {
                 Ok((scores, bad)) if !scores.is_empty() => {
-                    navigation_series = Some(crate::navrun::SeriesStats::of(&scores, bad));
+                    navigation_series =
+                        Some(crate::engine::navigate::SeriesStats::of(&scores, bad));
                     write_navigation_series(&opts.out, &s.name, &scores)?;
                     // the receiver's fixes nav took, for the track
-                    match crate::navrun::recorded_fixes(&drive, &mcap_path) {
+                    match crate::engine::navigate::recorded_fixes(&drive, &mcap_path) {
                         Ok(f) => write_fixes(&opts.out, &f)?,
                         Err(e) => tracing::warn!("nav's recording, fixes: {e:#}"),
                     }
@@ -654,8 +660,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         Some(d) => Some(Drive::plan(d)?),
         None => None,
     };
-    let faults = crate::faultlog::schedule(s, &opts.link_downs, opts.kill_nav_at_s);
-    if let Err(e) = crate::truthrec::write(
+    let faults = crate::engine::faultlog::schedule(s, &opts.link_downs, opts.kill_nav_at_s);
+    if let Err(e) = crate::engine::truthrec::write(
         &opts.out,
         truth_drive.as_ref(),
         &s.site,
@@ -708,7 +714,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     if opts.html {
         std::fs::write(
             opts.out.join("report.html"),
-            crate::html::run_report(&r, &opts.out),
+            crate::report::html::run_report(&r, &opts.out),
         )?;
     }
     Ok(r)
@@ -716,8 +722,11 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
 
 /// The receiver's fixes nav took (east, north of the drive's start, m) and what became of them:
 /// `fixes.csv` (fate: valid, void or rejected).
-fn write_fixes(out: &Path, fixes: &[(f64, [f64; 2], crate::navrun::FixFate)]) -> Result<()> {
-    use crate::navrun::FixFate;
+fn write_fixes(
+    out: &Path,
+    fixes: &[(f64, [f64; 2], crate::engine::navigate::FixFate)],
+) -> Result<()> {
+    use crate::engine::navigate::FixFate;
     let mut csv = String::from("t_s,east_m,north_m,fate\n");
     for (t, [e, n], fate) in fixes {
         let fate = match fate {
@@ -735,7 +744,7 @@ fn write_fixes(out: &Path, fixes: &[(f64, [f64; 2], crate::navrun::FixFate)]) ->
 fn write_navigation_series(
     out: &Path,
     name: &str,
-    scores: &[crate::navrun::NavScore],
+    scores: &[crate::engine::navigate::NavScore],
 ) -> Result<()> {
     let mut csv = String::from(
         "t_s,position_error_m,velocity_error_mps,heading_error_deg,position_sigma_m,heading_sigma_deg,\
@@ -776,11 +785,11 @@ fn write_navigation_series(
         );
     }
     std::fs::write(out.join("navigation.csv"), csv)?;
-    let chart = crate::plot::LogChart {
+    let chart = crate::report::plot::LogChart {
         title: format!("{name}: nav's horizontal position error (from its recording)"),
         x_label: "time, s".into(),
         y_label: "m".into(),
-        series: vec![crate::plot::Series {
+        series: vec![crate::report::plot::Series {
             name: "nav".into(),
             color: "#1f77b4",
             points: scores.iter().map(|x| (x.t_s, x.position_error_m)).collect(),

@@ -2,8 +2,8 @@
 //! scenario, its run in process (the same pipeline the bench's nav runs), and its scoring
 //! against the emulated unit's true errors, on the bus or in process alike.
 
-use crate::fogunit::{CalibOptions, fog_params};
 use crate::scenario::Scenario;
+use crate::scenario::fogunit::{CalibOptions, fog_params};
 use anyhow::{Result, bail};
 use nav::procedure::Procedure;
 use nav::selfcal::{SelfCalibrationConfig, SelfCalibrationResult};
@@ -181,7 +181,7 @@ pub fn outcome(
     // the east drift of a bias vector (deg/h) with the IMU at the mechanism's zero
     let heading = |b: [f64; 3]| {
         let rad_s = nalgebra::Vector3::from(b).map(|x| (x / 3600.0).to_radians());
-        crate::fogunit::drift_heading_deg(&s.site, &rad_s)
+        crate::scenario::fogunit::drift_heading_deg(&s.site, &rad_s)
     };
     // what nav started with; its estimates are residuals on top (composed as nav's front end
     // applies them: `(raw - b0) / (1 + k0)` reads `(1 + k') w + b'`)
@@ -217,7 +217,7 @@ pub fn outcome(
     CalibrateOutcome {
         loaded,
         coarse_heading_error_deg: result
-            .map(|r| crate::drill::wrap180(r.base_heading_deg - s.site.heading_deg)),
+            .map(|r| crate::stats::wrap180(r.base_heading_deg - s.site.heading_deg)),
         true_bias_dph: tb,
         true_sf_ppm: tk,
         true_heading_deg: s.site.heading_deg,
@@ -239,8 +239,8 @@ pub fn until_finished(
     s: &Scenario,
     pick: fn(&nav::pipeline::Pipeline) -> Option<&dyn Procedure>,
     mut progress: impl FnMut(&serde_json::Value),
-) -> Result<(crate::inproc::InProcessBench, f64, Option<String>)> {
-    let mut bench = crate::inproc::InProcessBench::of(s)?;
+) -> Result<(crate::engine::inproc::InProcessBench, f64, Option<String>)> {
+    let mut bench = crate::engine::inproc::InProcessBench::of(s)?;
     let Some(name) = pick(bench.pipeline()).map(|p| p.name()) else {
         bail!(
             "scenario {}: the procedure is not enabled in nav's config",
@@ -556,7 +556,7 @@ pub struct TetraOutcome {
     /// nav's result.
     pub result: Option<nav::tetracal::TetraCalibrationResult>,
     /// Largest errors and the mean relative error.
-    pub errors: Option<crate::tetraexp::TetraErrors>,
+    pub errors: Option<crate::experiments::tetrahedral::TetraErrors>,
     /// Largest |error| / sigma over the 16 coefficients.
     pub worst_sigma_ratio: Option<f64>,
     /// The failure injected, if any.
@@ -595,7 +595,7 @@ pub fn tetra_outcome(
     });
     TetraOutcome {
         truth: t.clone(),
-        errors: result.map(|r| crate::tetraexp::errors(&r.coefficients, t)),
+        errors: result.map(|r| crate::experiments::tetrahedral::errors(&r.coefficients, t)),
         worst_sigma_ratio: ratio,
         result: result.cloned(),
         failure: unit.failure,

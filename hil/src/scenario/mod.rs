@@ -1,5 +1,8 @@
 //! Scenario files (TOML): what the emulated vehicle does and how its sensors err.
 
+pub mod fogunit;
+pub mod navconfig;
+
 use anyhow::{Context, Result, bail};
 use emulators::can::BusFaults;
 use emulators::drive::{Drive, DriveSpec};
@@ -417,7 +420,7 @@ impl Scenario {
 
     /// The built-in static scenario (paper 003's start point).
     pub fn builtin_static() -> Self {
-        toml::from_str(include_str!("../../scenarios/static-campus.toml"))
+        toml::from_str(include_str!("../../../scenarios/static-campus.toml"))
             .expect("built-in scenario parses")
     }
 }

@@ -9,7 +9,7 @@
 //! - `/truth/turntable` (`hil/schemas/turntable-truth.json`): the turntable's true angle, rate
 //!   and state per axis from its model, 10 Hz, where the run has one;
 //! - `/bench/faults` (`foxglove.Log`): each fault the bench injects, when it starts and ends
-//!   ([`crate::faultlog`]), beside nav's own `/nav/log`.
+//!   ([`crate::engine::faultlog`]), beside nav's own `/nav/log`.
 //!
 //! Times: the publish time is simulated time, the IMU sample counter's time base, as nav's
 //! publish times are. The log time is the wall time at which nav logged the same instant: read
@@ -85,7 +85,7 @@ pub fn write(
     duration_s: f64,
     clock: &[(f64, u64)],
     turntable: &[emulators::bus::TtTruth],
-    faults: &[crate::faultlog::FaultEvent],
+    faults: &[crate::engine::faultlog::FaultEvent],
 ) -> Result<u64> {
     let path = out.join("truth.mcap");
     let file =
@@ -103,13 +103,13 @@ pub fn write(
     let state_ch = channel(
         &mut w,
         "rlg-hil/bench/truth-state",
-        include_bytes!("../schemas/truth-state.json"),
+        include_bytes!("../../schemas/truth-state.json"),
         "/truth/state",
     )?;
     let fix_ch = channel(
         &mut w,
         "foxglove.LocationFix",
-        include_bytes!("../../nav/schemas/foxglove/LocationFix.json"),
+        include_bytes!("../../../nav/schemas/foxglove/LocationFix.json"),
         "/truth/location",
     )?;
     let mut n = 0u64;
@@ -129,7 +129,7 @@ pub fn write(
         let ch = channel(
             &mut w,
             "rlg-hil/bench/turntable-truth",
-            include_bytes!("../schemas/turntable-truth.json"),
+            include_bytes!("../../schemas/turntable-truth.json"),
             "/truth/turntable",
         )?;
         for (k, tt) in turntable.iter().enumerate() {
@@ -142,7 +142,7 @@ pub fn write(
         let ch = channel(
             &mut w,
             "foxglove.Log",
-            include_bytes!("../../nav/schemas/foxglove/Log.json"),
+            include_bytes!("../../../nav/schemas/foxglove/Log.json"),
             "/bench/faults",
         )?;
         for (k, f) in faults.iter().enumerate() {

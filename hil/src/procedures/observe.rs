@@ -140,15 +140,15 @@ impl DrillWatch {
         let progress: [(&str, Render); 3] = [
             (
                 "nav: north-finding progress ",
-                crate::drill::progress_line as Render,
+                crate::procedures::northfinding::progress_line as Render,
             ),
             (
                 "nav: self-calibration progress ",
-                crate::calibrate::progress_line as Render,
+                crate::procedures::calibrate::progress_line as Render,
             ),
             (
                 "nav: tetra-calibration progress ",
-                crate::calibrate::tetra_progress_line as Render,
+                crate::procedures::calibrate::tetra_progress_line as Render,
             ),
         ];
         for (prefix, render) in progress {
