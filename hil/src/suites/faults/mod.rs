@@ -1,0 +1,417 @@
+//! The fault matrix (`hil faults`): each fault injected into the emulated devices (from a
+//! scenario's fault fields, or by the bench taking the CAN interface down), run through vcan and
+//! the pty against the unmodified nav binary, and judged against what nav must do: a counter in
+//! its summary, a health bit in NAV_TIME, a mode, an abort reason, and by when.
+//!
+//! Every case is a short scenario of its own (a static IMU, a parked vehicle navigating with its
+//! receiver, or a north-finding drill) with one fault; the whole matrix runs in one guest boot.
+//! Detection latency is measured on the bus: the first NAV_TIME carrying the health bit (or the
+//! mode) after the injection, in IMU time.
+
+mod bus;
+mod gps;
+mod imu;
+mod turntable;
+
+use crate::report::RunReport;
+use crate::run::{RunOptions, run_here};
+use crate::scenario::Scenario;
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The scenario a fault is injected into.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Base {
+    /// The IMU alone, static, 6 s.
+    Imu,
+    /// A parked vehicle navigating with its receiver (surveyed heading), 16 s.
+    Gps,
+    /// A north-finding drill with 6 s dwells, cut at 45 s.
+    Drill,
+}
+
+/// One row of the matrix: the fault and what nav must do.
+pub struct FaultCase {
+    /// Short name (`--only` takes it).
+    pub name: &'static str,
+    /// The scenario it goes into.
+    pub base: Base,
+    /// What is injected, in words.
+    pub injected: &'static str,
+    /// What nav must do, in words.
+    pub expected: &'static str,
+    /// IMU time of the injection, s.
+    pub at_s: f64,
+    /// Put the fault into the scenario (and the bench's actions into the options).
+    inject: fn(&mut Scenario, &mut RunOptions),
+    /// Judge the run.
+    judge: fn(&RunReport, f64) -> Verdict,
+}
+
+/// What was seen of one case.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Verdict {
+    /// Met the expectation.
+    pub pass: bool,
+    /// What was observed, in words (the counters and bits the judgement used).
+    pub observed: String,
+    /// Detection latency (IMU time from the injection to the first NAV_TIME showing it), s.
+    pub latency_s: Option<f64>,
+}
+
+/// One row of the table.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FaultRow {
+    /// Fault name.
+    pub fault: String,
+    /// Scenario base.
+    pub base: Base,
+    /// What was injected.
+    pub injected: String,
+    /// What nav must do.
+    pub expected: String,
+    /// What was seen.
+    pub verdict: Verdict,
+    /// nav's exit status.
+    pub nav_exit: Option<i32>,
+    /// Wall seconds of the run.
+    pub wall_seconds: f64,
+    /// The run's folder.
+    pub run_dir: String,
+}
+
+/// The matrix's result.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FaultMatrix {
+    /// `native` or `vm`.
+    pub backend: String,
+    /// Rows, in matrix order.
+    pub rows: Vec<FaultRow>,
+    /// Every row passed.
+    pub pass: bool,
+}
+
+/// IMU time of NAV_TIME sample count `k` in run `r`, s.
+fn imu_time(r: &RunReport, k: u64) -> f64 {
+    let first = r.nav.first_sample.unwrap_or(0);
+    (k.saturating_sub(first) as f64 + 1.0) / r.scenario.imu.rate_hz
+}
+
+/// Latency of health bit `bit` after `at_s`, s.
+fn bit_latency(r: &RunReport, bit: &str, at_s: f64) -> Option<f64> {
+    r.solution.health_on_at(bit).map(|k| imu_time(r, k) - at_s)
+}
+
+/// Latency of mode `mode` after `at_s`, s.
+fn mode_latency(r: &RunReport, mode: &str, at_s: f64) -> Option<f64> {
+    let first = r.nav.first_sample.unwrap_or(0);
+    let from = first + (at_s * r.scenario.imu.rate_hz) as u64;
+    r.solution
+        .mode_at(mode, from)
+        .map(|k| imu_time(r, k) - at_s)
+}
+
+fn verdict(pass: bool, observed: String, latency_s: Option<f64>) -> Verdict {
+    Verdict {
+        pass,
+        observed,
+        latency_s,
+    }
+}
+
+/// nav survived: it exited 0 and wrote its summary.
+fn survived(r: &RunReport) -> bool {
+    r.nav_exit == Some(0)
+}
+
+fn lat_text(l: Option<f64>) -> String {
+    l.map_or("never".into(), |l| format!("{l:.3} s"))
+}
+
+/// The counter jump of `imu-counter-jump`, samples.
+const COUNTER_JUMP: u64 = 30_000;
+
+/// The matrix, in table order.
+pub fn matrix() -> Vec<FaultCase> {
+    let groups: [fn() -> Vec<FaultCase>; 7] = [
+        imu::frames,
+        imu::sensor,
+        bus::interface,
+        bus::nav_process,
+        gps::stream,
+        gps::device,
+        turntable::cases,
+    ];
+    groups.into_iter().flat_map(|g| g()).collect()
+}
+
+fn tt_faults(s: &mut Scenario, f: impl FnOnce(&mut emulators::turntable::TurntableFaults)) {
+    if let Some(t) = s.turntable.as_mut() {
+        f(&mut t.faults);
+    }
+}
+
+/// The end position error of a navigating run (nav's final output against the truth), m.
+fn end_error(r: &RunReport) -> Option<f64> {
+    let drive = emulators::drive::Drive::plan(r.scenario.drive.as_ref()?).ok()?;
+    let t_first = 1.0 / r.scenario.imu.rate_hz;
+    crate::engine::navigate::score_summary(&drive, &r.nav, t_first).map(|n| n.position_error_m)
+}
+
+/// What nav must do with a frame overtaken on the bus.
+const LATE_FRAME: &str = "the late frame counted and dropped, the gap it left counted and differenced across (cumulative counters: no angle lost, attitude valid), imu_gaps health bit within 0.1 s";
+
+/// A frame overtaken on the bus: dropped and counted, the gap differenced across, no
+/// re-synchronisation, the attitude valid, `imu_gaps` within 0.1 s.
+fn late_frame(r: &RunReport, at: f64) -> Verdict {
+    let i = &r.nav.imu;
+    let l = bit_latency(r, "imu_gaps", at);
+    let pass = survived(r)
+        && i.gaps >= 1
+        && i.late_frames == 1
+        && i.backwards == 0
+        && r.nav.attitude.valid
+        && l.is_some_and(|l| (0.0..=0.1).contains(&l));
+    verdict(
+        pass,
+        format!(
+            "late frames {}, gaps {}, missing {}, re-synchronisations {}, attitude valid {}, imu_gaps after {}",
+            i.late_frames,
+            i.gaps,
+            i.missing_samples,
+            i.backwards,
+            r.nav.attitude.valid,
+            lat_text(l)
+        ),
+        l,
+    )
+}
+
+/// A GPS outage from `at` to `end`: Coasting within 3.5 s of its start, GpsAided again after
+/// its end.
+fn gps_outage(r: &RunReport, at: f64, end: f64, void: bool) -> Verdict {
+    let l = mode_latency(r, "Coasting", at);
+    let stale = bit_latency(r, "gps_stale", at);
+    let back = mode_latency(r, "GpsAided", end);
+    let no_fix = r.nav.gps.as_ref().map_or(0, |g| g.stats.no_fix);
+    let pass = survived(r)
+        && l.is_some_and(|l| (0.0..=3.5).contains(&l))
+        && stale.is_some()
+        && back.is_some()
+        && (!void || no_fix >= 5);
+    verdict(
+        pass,
+        format!(
+            "Coasting after {}, gps_stale seen {}, GpsAided again {}, void fixes {no_fix}",
+            lat_text(l),
+            if stale.is_some() { "yes" } else { "no" },
+            if back.is_some() { "yes" } else { "no" }
+        ),
+        l,
+    )
+}
+
+/// North-finding aborted with `word` in its reason and the turntable health bit set; latency
+/// from `at` to the bit.
+fn nf_abort(r: &RunReport, at: f64, word: &str) -> Verdict {
+    let abort = r.nav.north_finding.as_ref().and_then(|n| n.abort.clone());
+    let l = bit_latency(r, "turntable", at);
+    let pass = survived(r)
+        && abort
+            .as_deref()
+            .is_some_and(|a| a.to_lowercase().contains(word))
+        && l.is_some();
+    verdict(
+        pass,
+        format!(
+            "aborted: {}; turntable bit after {}",
+            abort.as_deref().unwrap_or("no"),
+            lat_text(l)
+        ),
+        l,
+    )
+}
+
+/// The scenario of base `b` for fault `name`.
+pub fn base_scenario(b: Base, name: &str) -> Result<Scenario> {
+    let mut s = match b {
+        Base::Imu => {
+            let mut s = Scenario::builtin_static();
+            s.duration_s = 6.0;
+            s
+        }
+        Base::Gps => {
+            let mut s = Scenario::from_text(include_str!("../../../../scenarios/drive-gps.toml"))
+                .context("the drive-gps scenario")?;
+            s.duration_s = 16.0;
+            if let Some(d) = s.drive.as_mut() {
+                // parked the whole run: the faults, not the drive, are what is looked at
+                d.start_wait_s = 1000.0;
+            }
+            s
+        }
+        Base::Drill => {
+            let mut s = crate::procedures::northfinding::scenario(30.0, 45.0, 6.0, 7);
+            s.duration_s = 45.0;
+            s
+        }
+    };
+    s.name = format!("fault-{name}");
+    s.speed = 10.0;
+    Ok(s)
+}
+
+/// Settings of a matrix run.
+pub struct FaultOptions {
+    /// CAN interface.
+    pub iface: String,
+    /// Output folder (one sub-folder per case).
+    pub out: std::path::PathBuf,
+    /// The nav binary.
+    pub nav_bin: std::path::PathBuf,
+    /// Only these faults (all when empty).
+    pub only: Vec<String>,
+    /// Speed factor.
+    pub speed: f64,
+    /// Print a line per case.
+    pub progress: bool,
+}
+
+/// Run the matrix here (the kernel must have CAN).
+pub fn run_matrix(o: &FaultOptions, backend: &str) -> Result<FaultMatrix> {
+    let cases: Vec<FaultCase> = matrix()
+        .into_iter()
+        .filter(|c| o.only.is_empty() || o.only.iter().any(|n| n == c.name))
+        .collect();
+    if cases.is_empty() {
+        bail!(
+            "--only names no fault of the matrix ({})",
+            matrix()
+                .iter()
+                .map(|c| c.name)
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    let mut rows = Vec::new();
+    for (i, c) in cases.iter().enumerate() {
+        let mut s = base_scenario(c.base, c.name)?;
+        s.speed = o.speed;
+        let dir = o.out.join(c.name);
+        let mut opts = RunOptions {
+            // the matrix's own table (faults.md) is the report of its runs
+            html: false,
+            ..RunOptions::new(&o.iface, dir.clone(), o.nav_bin.clone())
+        };
+        (c.inject)(&mut s, &mut opts);
+        s.check()
+            .with_context(|| format!("the scenario of fault {}", c.name))?;
+        let t0 = std::time::Instant::now();
+        let row = match run_here(&s, &opts, backend) {
+            Ok(r) => {
+                let v = (c.judge)(&r, c.at_s);
+                FaultRow {
+                    fault: c.name.into(),
+                    base: c.base,
+                    injected: c.injected.into(),
+                    expected: c.expected.into(),
+                    verdict: v,
+                    nav_exit: r.nav_exit,
+                    wall_seconds: r.wall_seconds,
+                    run_dir: dir.display().to_string(),
+                }
+            }
+            Err(e) => FaultRow {
+                fault: c.name.into(),
+                base: c.base,
+                injected: c.injected.into(),
+                expected: c.expected.into(),
+                verdict: verdict(false, format!("the run failed: {e:#}"), None),
+                nav_exit: None,
+                wall_seconds: t0.elapsed().as_secs_f64(),
+                run_dir: dir.display().to_string(),
+            },
+        };
+        if o.progress {
+            eprintln!(
+                "hil faults: {}/{} {} {} ({:.1} s): {}",
+                i + 1,
+                cases.len(),
+                if row.verdict.pass { "PASS" } else { "FAIL" },
+                row.fault,
+                t0.elapsed().as_secs_f64(),
+                row.verdict.observed
+            );
+        }
+        rows.push(row);
+    }
+    let m = FaultMatrix {
+        backend: backend.into(),
+        pass: rows.iter().all(|r| r.verdict.pass),
+        rows,
+    };
+    write(&m, &o.out)?;
+    Ok(m)
+}
+
+/// Write `faults.json` and `faults.md`.
+pub fn write(m: &FaultMatrix, out: &Path) -> Result<()> {
+    std::fs::write(out.join("faults.json"), serde_json::to_string_pretty(m)?)
+        .context("writing faults.json")?;
+    std::fs::write(out.join("faults.md"), markdown(m)).context("writing faults.md")?;
+    crate::report::page::folder_page(out, "Fault matrix", &markdown(m))?;
+    Ok(())
+}
+
+/// The table as Markdown.
+pub fn markdown(m: &FaultMatrix) -> String {
+    use std::fmt::Write;
+    let mut s = format!(
+        "# Fault matrix ({})\n\n{} of {} faults handled as expected.\n\n| fault | injected | expected | observed | detection latency | result |\n|---|---|---|---|---|---|\n",
+        m.backend,
+        m.rows.iter().filter(|r| r.verdict.pass).count(),
+        m.rows.len()
+    );
+    for r in &m.rows {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {} |",
+            r.fault,
+            r.injected,
+            r.expected,
+            r.verdict.observed.replace('|', "/"),
+            r.verdict
+                .latency_s
+                .map_or("--".into(), |l| format!("{l:.3} s")),
+            if r.verdict.pass { "pass" } else { "**FAIL**" }
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The matrix covers at least 16 faults, each name once, and every case's scenario passes
+    /// its checks with the fault in it.
+    #[test]
+    fn every_case_builds_a_valid_scenario() {
+        let m = matrix();
+        assert!(m.len() >= 16, "{} faults", m.len());
+        let mut names: Vec<&str> = m.iter().map(|c| c.name).collect();
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), m.len(), "a name is used twice");
+        for c in &m {
+            let mut s = base_scenario(c.base, c.name).unwrap();
+            let mut o = RunOptions::new("vcan0", "/tmp".into(), "nav".into());
+            (c.inject)(&mut s, &mut o);
+            s.check().unwrap_or_else(|e| panic!("{}: {e:#}", c.name));
+            assert!(c.at_s < s.duration_s, "{}", c.name);
+        }
+    }
+}
