@@ -217,6 +217,24 @@ pub fn checks(
     (out, lost)
 }
 
+/// The checks of every procedure scenario `s` ran, on its outcome and nav's summary.
+pub fn procedure_checks(
+    out: &mut Vec<Check>,
+    s: &Scenario,
+    o: &crate::procedures::Outcomes,
+    nav: &Summary,
+) {
+    if let Some(o) = &o.north_finding {
+        drill_checks(out, s, o);
+    }
+    if let Some(o) = &o.rotating_imu {
+        calibration_checks(out, o, nav);
+    }
+    if let Some(o) = &o.tetrahedral {
+        tetra_checks(out, o, nav);
+    }
+}
+
 /// The drill's verdict: finished, within tolerance, error against the estimated sigma.
 pub fn drill_checks(
     out: &mut Vec<Check>,

@@ -278,7 +278,101 @@ pub(crate) fn stop_nav(mut nav: NavProcess) -> Result<(Option<i32>, Vec<String>)
 }
 
 /// Run a scenario here (the kernel must have CAN). Returns the report; files go to `opts.out`.
+/// The stages: [`prepare`] the devices' pty and nav's config, start nav and the devices,
+/// [`supervise`] them to the stream's end, stop them, [`read_summary`], [`score`] nav against
+/// the truth and the reference runs, [`write_report`].
 pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunReport> {
+    let mut setup = prepare(s, opts)?;
+    info!(interface = %opts.iface, account = ?opts.nav_account, "starting nav");
+    let mut phases = Phases::starting_now();
+    let nav = start_nav(&opts.nav_bin, &setup.cfg_path, opts.nav_account)?;
+    phases.end("nav start");
+
+    let watch_stop = Arc::new(AtomicBool::new(false));
+    let watch = {
+        // opened before the IMU starts, so the first epoch is not missed
+        let sock = solution_socket(&opts.iface)?;
+        let (iface, stop) = (opts.iface.clone(), watch_stop.clone());
+        std::thread::spawn(move || watch_solution(sock, &iface, &stop))
+    };
+    let gps_device = receiver_device(s, opts, setup.gps.take())?;
+    let t0 = Instant::now();
+    let devices = crate::engine::devices::start_scenario(
+        s,
+        &opts.iface,
+        gps_device,
+        Some(&opts.out.join("bench-can.log")),
+        &opts.link_downs,
+    )?;
+    let Supervised {
+        mut drill,
+        killed_at,
+        mut memory,
+    } = supervise(s, opts, &nav, &devices);
+    let wall = t0.elapsed().as_secs_f64();
+    phases.end("devices");
+    let sim_reached = devices.sim_time();
+    let bus = devices.join();
+    // in lockstep nav has confirmed the last sample and reported the stream's end; else a
+    // moment for nav to take the last frames (it also drains its socket when told to stop)
+    if !s.bus.lockstep {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    if killed_at.is_none() {
+        memory.read(nav.child.id(), sim_reached);
+    }
+    let (bus, nav_out) = match bus {
+        Ok(b) => (b, stop_nav(nav)?),
+        Err(e) => {
+            let _ = stop_nav(nav);
+            return Err(e);
+        }
+    };
+    memory.finish();
+    phases.end("nav stop");
+    let (nav_exit, nav_lines) = nav_out;
+    setup.nav_folder.finish()?;
+    watch_stop.store(true, Ordering::Relaxed);
+    let solution = watch
+        .join()
+        .map_err(|_| anyhow::anyhow!("solution watcher panicked"))??;
+    for l in &nav_lines {
+        // nav's own words (its summary, warnings), unless the caller wants the figures only
+        if !drill.line(l, false) && opts.progress {
+            crate::status::line(l);
+        }
+    }
+    let (nav_json, killed) = read_summary(s, opts, &setup.nav_cfg, killed_at, nav_exit)?;
+    phases.end("summary");
+    let ended = Ended {
+        bus,
+        sim_reached,
+        wall,
+        nav_exit,
+        nav: nav_json,
+        killed,
+        memory,
+        solution,
+    };
+    let r = score(s, opts, &setup.nav_cfg, backend, ended, &mut phases)?;
+    write_report(&r, opts)?;
+    Ok(r)
+}
+
+/// What a run needs before nav starts, and what must live as long as the run: the receiver's
+/// pty (behind a link, removed when the run ends), nav's folder and config, gpsd when asked.
+struct Setup {
+    gps: Option<(GpsPty, PathBuf)>,
+    _link_guard: Option<RemoveOnDrop>,
+    nav_folder: NavFolder,
+    cfg_path: PathBuf,
+    nav_cfg: nav::config::NavConfig,
+    _gpsd: Option<Gpsd>,
+}
+
+/// The run folder, the receiver's pty, nav's folder and its config file (with the parameter
+/// files it loads beside it), gpsd when the run puts it between the receiver and nav.
+fn prepare(s: &Scenario, opts: &RunOptions) -> Result<Setup> {
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("creating {}", opts.out.display()))?;
     vcan_setup::ensure_vcan(&opts.iface)?;
@@ -295,7 +389,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     };
     // the link goes when the run ends, however it ends
     let _link_guard = gps.as_ref().map(|g| RemoveOnDrop(g.1.clone()));
-    let mut nav_folder = NavFolder::new(&opts.out, opts.nav_account)?;
+    let nav_folder = NavFolder::new(&opts.out, opts.nav_account)?;
     if let (Some((uid, gid)), Some((pty, _))) = (opts.nav_account, &gps) {
         // the receiver's port is nav's to open, as udev gives a vehicle's serial port to nav's
         // group
@@ -339,19 +433,23 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
     }
     std::fs::write(&cfg_path, nav_cfg.to_toml())?;
-    info!(interface = %opts.iface, account = ?opts.nav_account, "starting nav");
-    let mut phases = Phases::starting_now();
-    let nav = start_nav(&opts.nav_bin, &cfg_path, opts.nav_account)?;
-    phases.end("nav start");
+    Ok(Setup {
+        gps,
+        _link_guard,
+        nav_folder,
+        cfg_path,
+        nav_cfg,
+        _gpsd,
+    })
+}
 
-    let watch_stop = Arc::new(AtomicBool::new(false));
-    let watch = {
-        // opened before the IMU starts, so the first epoch is not missed
-        let sock = solution_socket(&opts.iface)?;
-        let (iface, stop) = (opts.iface.clone(), watch_stop.clone());
-        std::thread::spawn(move || watch_solution(sock, &iface, &stop))
-    };
-    let gps_device = match (gps, &s.gps) {
+/// The receiver on its pty (and what it sent, logged), when the scenario has one.
+fn receiver_device(
+    s: &Scenario,
+    opts: &RunOptions,
+    gps: Option<(GpsPty, PathBuf)>,
+) -> Result<Option<(emulators::gps::GpsRun, GpsDevice)>> {
+    Ok(match (gps, &s.gps) {
         (Some((pty, link)), Some(rx)) => match crate::engine::inproc::gps_run(s, rx)? {
             // what the receiver sent, kept beside nav's recording (gpsd's .log form)
             Some(run) => {
@@ -369,15 +467,24 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             None => None,
         },
         _ => None,
-    };
-    let t0 = Instant::now();
-    let devices = crate::engine::devices::start_scenario(
-        s,
-        &opts.iface,
-        gps_device,
-        Some(&opts.out.join("bench-can.log")),
-        &opts.link_downs,
-    )?;
+    })
+}
+
+/// What the bench saw while the devices ran.
+struct Supervised {
+    drill: DrillWatch,
+    killed_at: Option<f64>,
+    memory: NavMemory,
+}
+
+/// Watch nav and the devices until the stream ends: nav's progress lines, its memory each
+/// second, the kill the fault matrix asks for, the pace on the terminal.
+fn supervise(
+    s: &Scenario,
+    opts: &RunOptions,
+    nav: &NavProcess,
+    devices: &crate::engine::devices::Running<emulators::bus::BusOutcome>,
+) -> Supervised {
     let mut drill = DrillWatch::default();
     let mut next_report = Instant::now() + Duration::from_secs(5);
     let mut last_report = (Instant::now(), 0.0);
@@ -441,43 +548,22 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         }
     }
     crate::status::finish();
-    let wall = t0.elapsed().as_secs_f64();
-    phases.end("devices");
-    let sim_reached = devices.sim_time();
-    let bus = devices.join();
-    // in lockstep nav has confirmed the last sample and reported the stream's end; else a
-    // moment for nav to take the last frames (it also drains its socket when told to stop)
-    if !s.bus.lockstep {
-        std::thread::sleep(Duration::from_millis(100));
+    Supervised {
+        drill,
+        killed_at,
+        memory,
     }
-    if killed_at.is_none() {
-        memory.read(nav.child.id(), sim_reached);
-    }
-    let (bus, nav_out) = match bus {
-        Ok(b) => (b, stop_nav(nav)?),
-        Err(e) => {
-            let _ = stop_nav(nav);
-            return Err(e);
-        }
-    };
-    memory.finish();
-    phases.end("nav stop");
-    let (nav_exit, nav_lines) = nav_out;
-    nav_folder.finish()?;
-    let (tx, tt_stats, lockstep_stats) = (bus.imu, bus.turntable, bus.lockstep);
-    let turntable_truth = bus.turntable_truth;
-    // the receiver's device stayed until nav had stopped
-    let gps_stats = bus.gps.map(|(st, _pty)| st);
-    watch_stop.store(true, Ordering::Relaxed);
-    let solution = watch
-        .join()
-        .map_err(|_| anyhow::anyhow!("solution watcher panicked"))??;
-    for l in &nav_lines {
-        // nav's own words (its summary, warnings), unless the caller wants the figures only
-        if !drill.line(l, false) && opts.progress {
-            crate::status::line(l);
-        }
-    }
+}
+
+/// nav's summary file; for a nav killed outright, rebuilt by nav's pipeline from its recording
+/// (and what the kill cost). Paths nav wrote in its own folder point into the run folder.
+fn read_summary(
+    s: &Scenario,
+    opts: &RunOptions,
+    nav_cfg: &nav::config::NavConfig,
+    killed_at: Option<f64>,
+    nav_exit: Option<i32>,
+) -> Result<(nav::summary::Summary, Option<KillOutcome>)> {
     let summary_path = opts.out.join("nav-summary.json");
     let mut killed = None;
     let mut nav_json = match nav::summary::Summary::read(&summary_path) {
@@ -485,7 +571,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         Err(nav::summary::SummaryError::Read { .. }) if killed_at.is_some() => {
             // killed outright: what it recorded is all there is; nav's pipeline rebuilds the
             // summary from it
-            let p = crate::engine::recording::replay(&opts.out.join("nav.mcap"), &nav_cfg)
+            let p = crate::engine::recording::replay(&opts.out.join("nav.mcap"), nav_cfg)
                 .context("reading back the recording of the killed nav")?;
             let at_s = killed_at.unwrap_or(0.0);
             let sm = &p.summary;
@@ -519,7 +605,46 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     {
         tc.parameters_file = Some(opts.out.join(name));
     }
-    phases.end("summary");
+    Ok((nav_json, killed))
+}
+
+/// A run whose devices and nav have stopped: what the bus, nav and the bench's watchers said.
+struct Ended {
+    bus: emulators::bus::BusOutcome,
+    sim_reached: f64,
+    wall: f64,
+    nav_exit: Option<i32>,
+    nav: nav::summary::Summary,
+    killed: Option<KillOutcome>,
+    memory: NavMemory,
+    solution: crate::procedures::observe::SolutionWatch,
+}
+
+/// Check and score a run: the in-process reference run, nav's recording replayed through its
+/// pipeline and scored against truth (side by side), the procedures' outcomes, the checks; the
+/// truth recording beside nav's.
+fn score(
+    s: &Scenario,
+    opts: &RunOptions,
+    nav_cfg: &nav::config::NavConfig,
+    backend: &str,
+    e: Ended,
+    phases: &mut Phases,
+) -> Result<RunReport> {
+    let Ended {
+        bus,
+        sim_reached,
+        wall,
+        nav_exit,
+        nav: nav_json,
+        killed,
+        memory,
+        solution,
+    } = e;
+    let (tx, tt_stats, lockstep_stats) = (bus.imu, bus.turntable, bus.lockstep);
+    let turntable_truth = bus.turntable_truth;
+    // the receiver's device stayed until nav had stopped
+    let gps_stats = bus.gps.map(|(st, _pty)| st);
     // the checks that recompute things (the in-process reference run, the replay of nav's
     // recording through its pipeline, the scoring of its recording against truth) are
     // independent: they run side by side
@@ -539,7 +664,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         });
         let replayed = sc.spawn(|| {
             opts.reference_checks
-                .then(|| crate::engine::recording::replay(&mcap_path, &nav_cfg))
+                .then(|| crate::engine::recording::replay(&mcap_path, nav_cfg))
         });
         let scored = drive
             .as_ref()
@@ -564,58 +689,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         &lockstep_stats,
         tt_stats.as_ref(),
     );
-    let drill_outcome = s.north_finding.as_ref().map(|_| {
-        let nf = nav_json.north_finding.as_ref();
-        crate::procedures::northfinding::outcome(
-            s.truth_heading_deg(),
-            nf.and_then(|n| n.result.as_ref()),
-            nf.map_or(Some("north-finding was not enabled in nav"), |n| {
-                n.abort.as_deref()
-            }),
-            sim_reached,
-        )
-    });
-    if let Some(o) = &drill_outcome {
-        report::drill_checks(&mut checks, s, o);
-    }
-    let calibration = s
-        .self_calibration
-        .as_ref()
-        .map(|_| {
-            let c = nav_json.self_calibration.as_ref();
-            crate::procedures::calibrate::outcome(
-                s,
-                c.and_then(|c| c.result.as_ref()),
-                c.map_or(Some("self-calibration was not enabled in nav"), |c| {
-                    c.abort.as_deref()
-                }),
-                sim_reached,
-            )
-        })
-        .map(|mut o| {
-            o.parameters = nav_json
-                .self_calibration
-                .as_ref()
-                .and_then(|c| c.parameters.clone());
-            o
-        });
-    if let Some(o) = &calibration {
-        report::calibration_checks(&mut checks, o, &nav_json);
-    }
-    let tetra_calibration = s.tetra_calibration.as_ref().map(|_| {
-        let c = nav_json.tetra_calibration.as_ref();
-        crate::procedures::calibrate::tetra_outcome(
-            s,
-            c.and_then(|c| c.result.as_ref()),
-            c.map_or(Some("tetra-calibration was not enabled in nav"), |c| {
-                c.abort.as_deref()
-            }),
-            sim_reached,
-        )
-    });
-    if let Some(o) = &tetra_calibration {
-        report::tetra_checks(&mut checks, o, &nav_json);
-    }
+    let procedures = crate::procedures::Outcomes::of(s, &nav_json, sim_reached);
+    report::procedure_checks(&mut checks, s, &procedures, &nav_json);
     report::solution_checks(&mut checks, &solution, &nav_json);
     // nav's binary is a shell around its pipeline: from its own recording, the pipeline in
     // process must send exactly what nav sent
@@ -630,30 +705,15 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             .collect(),
         _ => Vec::new(),
     };
-    let mut navigation_series = None;
-    let navigation = match (drive, scored) {
-        (Some(drive), Some(scored)) => {
-            let o = crate::engine::navigate::score_summary(&drive, &nav_json, t_first);
-            // second by second from nav's recording: statistics, CSV and a plot
-            match scored {
-                Ok((scores, bad)) if !scores.is_empty() => {
-                    navigation_series =
-                        Some(crate::engine::navigate::SeriesStats::of(&scores, bad));
-                    write_navigation_series(&opts.out, &s.name, &scores)?;
-                    // the receiver's fixes nav took, for the track
-                    match crate::engine::navigate::recorded_fixes(&drive, &mcap_path) {
-                        Ok(f) => write_fixes(&opts.out, &f)?,
-                        Err(e) => tracing::warn!("nav's recording, fixes: {e:#}"),
-                    }
-                }
-                Ok(_) => {}
-                Err(e) => tracing::warn!("nav's recording: {e:#}"),
-            }
-            report::navigation_checks(&mut checks, s, o.as_ref(), &nav_json, gps_stats.as_ref());
-            o
-        }
-        _ => None,
-    };
+    let (navigation, navigation_series) = score_navigation(
+        s,
+        opts,
+        drive,
+        scored,
+        &nav_json,
+        gps_stats.as_ref(),
+        &mut checks,
+    )?;
     // the bench's own side: the truth (the vehicle's, the turntable's) and the faults injected,
     // beside nav's recording, on nav's logged wall clock
     let truth_drive = match &s.drive {
@@ -691,9 +751,9 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         tx,
         in_process: reference,
         turntable: tt_stats,
-        drill: drill_outcome,
-        calibration,
-        tetra_calibration,
+        drill: procedures.north_finding,
+        calibration: procedures.rotating_imu,
+        tetra_calibration: procedures.tetrahedral,
         gps: gps_stats,
         navigation,
         navigation_series,
@@ -706,18 +766,66 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         checks,
         pass,
     };
+    Ok(r)
+}
+
+/// Navigation scored against truth: from nav's summary, and second by second from its
+/// recording (statistics, navigation.csv, fixes.csv); the navigation checks.
+fn score_navigation(
+    s: &Scenario,
+    opts: &RunOptions,
+    drive: Option<Drive>,
+    scored: Option<Result<(Vec<crate::engine::navigate::NavScore>, u64)>>,
+    nav_json: &nav::summary::Summary,
+    gps_stats: Option<&emulators::gps::GpsTxStats>,
+    checks: &mut Vec<report::Check>,
+) -> Result<(
+    Option<crate::engine::navigate::NavScore>,
+    Option<crate::engine::navigate::SeriesStats>,
+)> {
+    let t_first = 1.0 / s.imu.rate_hz;
+    let mcap_path = opts.out.join("nav.mcap");
+    let mut navigation_series = None;
+    let navigation = match (drive, scored) {
+        (Some(drive), Some(scored)) => {
+            let o = crate::engine::navigate::score_summary(&drive, nav_json, t_first);
+            // second by second from nav's recording: statistics, CSV and a plot
+            match scored {
+                Ok((scores, bad)) if !scores.is_empty() => {
+                    navigation_series =
+                        Some(crate::engine::navigate::SeriesStats::of(&scores, bad));
+                    write_navigation_series(&opts.out, &s.name, &scores)?;
+                    // the receiver's fixes nav took, for the track
+                    match crate::engine::navigate::recorded_fixes(&drive, &mcap_path) {
+                        Ok(f) => write_fixes(&opts.out, &f)?,
+                        Err(e) => tracing::warn!("nav's recording, fixes: {e:#}"),
+                    }
+                }
+                Ok(_) => {}
+                Err(e) => tracing::warn!("nav's recording: {e:#}"),
+            }
+            report::navigation_checks(checks, s, o.as_ref(), nav_json, gps_stats);
+            o
+        }
+        _ => None,
+    };
+    Ok((navigation, navigation_series))
+}
+
+/// The run's report.json, report.md and, when asked, report.html.
+fn write_report(r: &RunReport, opts: &RunOptions) -> Result<()> {
     std::fs::write(
         opts.out.join("report.json"),
         serde_json::to_string_pretty(&r)?,
     )?;
-    std::fs::write(opts.out.join("report.md"), report::markdown(&r))?;
+    std::fs::write(opts.out.join("report.md"), report::markdown(r))?;
     if opts.html {
         std::fs::write(
             opts.out.join("report.html"),
-            crate::report::html::run_report(&r, &opts.out),
+            crate::report::html::run_report(r, &opts.out),
         )?;
     }
-    Ok(r)
+    Ok(())
 }
 
 /// The receiver's fixes nav took (east, north of the drive's start, m) and what became of them:
