@@ -304,6 +304,42 @@ fn expect(out: &mut Vec<VCheck>, name: &str, a: &Answer, want: TtResult) {
 pub fn run_suite(iface: &str, axis: u8, speed: f64, lim: &Limits) -> Result<Validation> {
     let mut c = Client::open(iface, axis, speed)?;
     let mut out = Vec::new();
+    first_status(&mut c, iface, axis)?;
+    command_checks(&mut c, &mut out, lim)?;
+    detent_checks(&mut c, &mut out, lim)?;
+    // a lock away from a detent is refused
+    let fresh = c.last.is_some_and(|s| s.state == TtState::Idle);
+    if fresh {
+        zero_and_rate_checks(&mut c, &mut out, lim)?;
+        stop_checks(&mut c, &mut out, lim)?;
+    } else {
+        check(
+            &mut out,
+            "remaining checks",
+            false,
+            "not run".into(),
+            "-".into(),
+            format!(
+                "the axis is not idle after the detent checks: {}",
+                c.faults_text()
+            ),
+        );
+    }
+    acknowledged_check(&c, &mut out);
+    let pass = out.iter().all(|x| x.pass);
+    Ok(Validation {
+        interface: iface.into(),
+        axis,
+        checks: out,
+        pass,
+        commands: c.commands,
+        acks: c.acks,
+        status_frames: c.status_frames,
+    })
+}
+
+/// Wait for the mechanism's first status: it must be talking.
+fn first_status(c: &mut Client, iface: &str, axis: u8) -> Result<()> {
     // the mechanism must be talking: its first status within 0.3 s of its time, or 2 s of
     // wall time (an emulator in a software-emulated guest under load may start late)
     let wait = c.wall(0.3).max(Duration::from_secs(2));
@@ -317,26 +353,32 @@ pub fn run_suite(iface: &str, axis: u8, speed: f64, lim: &Limits) -> Result<Vali
             wait.as_secs_f64()
         );
     }
+    Ok(())
+}
+
+/// Commands refused or accepted from a known state: unknown, a move while disabled, enable
+/// (and how soon it is acknowledged), an angle out of range.
+fn command_checks(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> Result<()> {
     // start from a known state
     c.cmd(TtCommand::Disable, 0.0)?;
     let a = c.cmd_raw(99, 0.0)?;
     expect(
-        &mut out,
+        out,
         "rejects an unknown command",
         &a,
         TtResult::UnknownCommand,
     );
     let a = c.cmd(TtCommand::IndexAbs, 90.0)?;
     expect(
-        &mut out,
+        out,
         "rejects a move while disabled",
         &a,
         TtResult::NotEnabled,
     );
     let a = c.cmd(TtCommand::Enable, 0.0)?;
-    expect(&mut out, "accepts enable", &a, TtResult::Accepted);
+    expect(out, "accepts enable", &a, TtResult::Accepted);
     check(
-        &mut out,
+        out,
         "acknowledges promptly",
         a.ack.is_some() && a.latency_s <= lim.ack_s,
         format!("{:.1} ms", a.latency_s * 1e3),
@@ -349,11 +391,17 @@ pub fn run_suite(iface: &str, axis: u8, speed: f64, lim: &Limits) -> Result<Vali
     );
     let a = c.cmd(TtCommand::IndexAbs, 400.0)?;
     expect(
-        &mut out,
+        out,
         "rejects an out-of-range angle",
         &a,
         TtResult::OutOfRange,
     );
+    Ok(())
+}
+
+/// Index through the four detents: accuracy, settle time, the lock at each, the encoder while
+/// idle, a move refused while locked.
+fn detent_checks(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> Result<()> {
     // unlock if a pin is in, then index through the detents
     c.cmd(TtCommand::Unlock, 0.0)?;
     c.wait_state(TtState::Idle, 2.0)?;
@@ -408,18 +456,13 @@ pub fn run_suite(iface: &str, axis: u8, speed: f64, lim: &Limits) -> Result<Vali
         }
         let a = c.cmd(TtCommand::IndexAbs, target + 10.0)?;
         if target == 90.0 {
-            expect(
-                &mut out,
-                "rejects a move while locked",
-                &a,
-                TtResult::Locked,
-            );
+            expect(out, "rejects a move while locked", &a, TtResult::Locked);
         }
         c.cmd(TtCommand::Unlock, 0.0)?;
         c.wait_state(TtState::Idle, lim.lock_s * 3.0)?;
     }
     check(
-        &mut out,
+        out,
         "index accuracy at the detents",
         idx_fail.is_empty() && worst_err <= lim.index_arcsec,
         format!("{worst_err:.2} arcsec worst"),
@@ -431,7 +474,7 @@ pub fn run_suite(iface: &str, axis: u8, speed: f64, lim: &Limits) -> Result<Vali
         },
     );
     check(
-        &mut out,
+        out,
         "settle time of a 90 deg index",
         idx_fail.is_empty() && worst_settle <= lim.settle_s,
         format!("{worst_settle:.2} s worst"),
@@ -443,7 +486,7 @@ pub fn run_suite(iface: &str, axis: u8, speed: f64, lim: &Limits) -> Result<Vali
         },
     );
     check(
-        &mut out,
+        out,
         "lock engages at each detent",
         lock_fail.is_empty() && idx_fail.is_empty() && worst_lock <= lim.lock_s,
         format!("{worst_lock:.2} s worst"),
@@ -457,160 +500,154 @@ pub fn run_suite(iface: &str, axis: u8, speed: f64, lim: &Limits) -> Result<Vali
         },
     );
     check(
-        &mut out,
+        out,
         "encoder steady while idle",
         jump <= lim.encoder_jump_deg,
         format!("{jump:.4} deg largest step"),
         format!("<= {} deg", lim.encoder_jump_deg),
         format!("the idle angle jumped {jump:.4} deg between two frames (encoder glitch)"),
     );
-    // a lock away from a detent is refused
-    let fresh = c.last.is_some_and(|s| s.state == TtState::Idle);
-    if fresh {
-        c.cmd(TtCommand::IndexAbs, 45.0)?;
-        c.wait_state(TtState::Moving, 1.0)?;
-        c.wait_state(TtState::Idle, lim.settle_s * 2.0)?;
-        let a = c.cmd(TtCommand::Lock, 0.0)?;
-        expect(
-            &mut out,
-            "refuses to lock away from a detent",
-            &a,
-            TtResult::NotAtDetent,
-        );
-        // zero return
-        c.cmd(TtCommand::Home, 0.0)?;
-        c.wait_state(TtState::Moving, 1.0)?;
-        let (ok, _) = c.wait_state(TtState::Idle, lim.settle_s * 2.0)?;
-        let m = c.mean_angle(0.3)?.unwrap_or(f64::NAN);
-        let e = wrap180(m).abs() * 3600.0;
-        check(
-            &mut out,
-            "returns to zero",
-            ok && e <= lim.zero_arcsec,
-            format!("{e:.2} arcsec"),
-            format!("<= {} arcsec", lim.zero_arcsec),
-            if ok {
-                format!("off by {e:.2} arcsec")
-            } else {
-                format!("did not settle: {}", c.faults_text())
-            },
-        );
-        // rate mode
-        let rate = 10.0;
-        let a = c.cmd(TtCommand::Rate, rate)?;
-        c.pump(c.wall(1.0), None)?; // ramp
-        let from = c.statuses.len();
-        c.pump(c.wall(3.0), None)?;
-        let s = &c.statuses[from..];
-        let (mut acc, mut rates) = (0.0, Vec::new());
-        for w in s.windows(2) {
-            let d = wrap180(w[1].1.angle_deg - w[0].1.angle_deg);
-            acc += d;
-            let dt = (w[1].0 - w[0].0).as_secs_f64() * c.speed;
-            if dt > 0.0 {
-                rates.push(d / dt);
-            }
+    Ok(())
+}
+
+/// A lock refused away from a detent, the return to zero, rate mode's accuracy and stability.
+fn zero_and_rate_checks(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> Result<()> {
+    c.cmd(TtCommand::IndexAbs, 45.0)?;
+    c.wait_state(TtState::Moving, 1.0)?;
+    c.wait_state(TtState::Idle, lim.settle_s * 2.0)?;
+    let a = c.cmd(TtCommand::Lock, 0.0)?;
+    expect(
+        out,
+        "refuses to lock away from a detent",
+        &a,
+        TtResult::NotAtDetent,
+    );
+    // zero return
+    c.cmd(TtCommand::Home, 0.0)?;
+    c.wait_state(TtState::Moving, 1.0)?;
+    let (ok, _) = c.wait_state(TtState::Idle, lim.settle_s * 2.0)?;
+    let m = c.mean_angle(0.3)?.unwrap_or(f64::NAN);
+    let e = wrap180(m).abs() * 3600.0;
+    check(
+        out,
+        "returns to zero",
+        ok && e <= lim.zero_arcsec,
+        format!("{e:.2} arcsec"),
+        format!("<= {} arcsec", lim.zero_arcsec),
+        if ok {
+            format!("off by {e:.2} arcsec")
+        } else {
+            format!("did not settle: {}", c.faults_text())
+        },
+    );
+    // rate mode
+    let rate = 10.0;
+    let a = c.cmd(TtCommand::Rate, rate)?;
+    c.pump(c.wall(1.0), None)?; // ramp
+    let from = c.statuses.len();
+    c.pump(c.wall(3.0), None)?;
+    let s = &c.statuses[from..];
+    let (mut acc, mut rates) = (0.0, Vec::new());
+    for w in s.windows(2) {
+        let d = wrap180(w[1].1.angle_deg - w[0].1.angle_deg);
+        acc += d;
+        let dt = (w[1].0 - w[0].0).as_secs_f64() * c.speed;
+        if dt > 0.0 {
+            rates.push(d / dt);
         }
-        let span = s
-            .last()
-            .zip(s.first())
-            .map_or(0.0, |(l, f)| (l.0 - f.0).as_secs_f64() * c.speed);
-        // mean rate from the reported rate (time stamps of frames are wall arrival times)
-        let reported: Vec<f64> = s.iter().map(|x| x.1.rate_dps).collect();
-        let mean = reported.iter().sum::<f64>() / reported.len().max(1) as f64;
-        let sd = (reported.iter().map(|r| (r - mean).powi(2)).sum::<f64>()
-            / reported.len().max(1) as f64)
-            .sqrt();
-        let from_angle = if span > 0.0 { acc / span } else { f64::NAN };
-        let err = (mean - rate).abs() / rate;
-        check(
-            &mut out,
-            "rate-mode accuracy",
-            a.ack.map(|a| a.result) == Some(TtResult::Accepted) && err <= lim.rate_accuracy,
-            format!(
-                "{mean:.5} deg/s ({:.3} % off; {from_angle:.3} deg/s from the angle)",
-                err * 100.0
-            ),
-            format!("within {:.2} % of {rate} deg/s", lim.rate_accuracy * 100.0),
-            format!("mean rate {mean:.5} deg/s: {}", c.faults_text()),
-        );
-        check(
-            &mut out,
-            "rate-mode stability",
-            sd <= lim.rate_stability_dps && !reported.is_empty(),
-            format!("{sd:.5} deg/s std"),
-            format!("<= {} deg/s", lim.rate_stability_dps),
-            format!("rate scatter {sd:.5} deg/s"),
-        );
-        // emergency stop
-        let a = c.cmd(TtCommand::EStop, 0.0)?;
-        c.pump(c.wall(0.1), None)?;
-        let st = c.last;
-        check(
-            &mut out,
-            "emergency stop",
-            a.ack.is_some()
-                && st.is_some_and(|s| {
-                    s.rate_dps.abs() < 1e-6 && s.faults.estop && s.state == TtState::Fault
-                }),
-            st.map_or("no status".into(), |s| {
-                format!(
-                    "rate {:.4} deg/s, state {:?}, estop {}",
-                    s.rate_dps, s.state, s.faults.estop
-                )
-            }),
-            "rate 0 at once, fault state, e-stop bit".into(),
-            "the axis did not stop and latch the e-stop".into(),
-        );
-        let a = c.cmd(TtCommand::Home, 0.0)?;
-        expect(
-            &mut out,
-            "rejects moves while faulted",
-            &a,
-            TtResult::Faulted,
-        );
-        c.cmd(TtCommand::Disable, 0.0)?;
-        // heartbeat watchdog: enable, rate, then silence
-        c.cmd(TtCommand::Enable, 0.0)?;
-        c.cmd(TtCommand::Rate, 5.0)?;
-        c.heartbeat = false;
-        let t0 = Instant::now();
-        let (stopped, _) = c.wait_state(TtState::Fault, lim.heartbeat_stop_s * 2.0)?;
-        let t = t0.elapsed().as_secs_f64() * c.speed;
-        c.pump(c.wall(1.0), None)?;
-        let st = c.last;
-        c.heartbeat = true;
-        check(
-            &mut out,
-            "heartbeat timeout stops the axis",
-            stopped
-                && t <= lim.heartbeat_stop_s
-                && st.is_some_and(|s| s.faults.heartbeat && s.rate_dps.abs() < 1e-6),
-            format!(
-                "fault after {t:.2} s of silence, then rate {:.4} deg/s",
-                st.map_or(f64::NAN, |s| s.rate_dps)
-            ),
-            format!("<= {} s, then at rest", lim.heartbeat_stop_s),
-            if stopped {
-                "stopped too late or not at rest".into()
-            } else {
-                "no stop without heartbeat".into()
-            },
-        );
-        c.cmd(TtCommand::Disable, 0.0)?;
-    } else {
-        check(
-            &mut out,
-            "remaining checks",
-            false,
-            "not run".into(),
-            "-".into(),
-            format!(
-                "the axis is not idle after the detent checks: {}",
-                c.faults_text()
-            ),
-        );
     }
+    let span = s
+        .last()
+        .zip(s.first())
+        .map_or(0.0, |(l, f)| (l.0 - f.0).as_secs_f64() * c.speed);
+    // mean rate from the reported rate (time stamps of frames are wall arrival times)
+    let reported: Vec<f64> = s.iter().map(|x| x.1.rate_dps).collect();
+    let mean = reported.iter().sum::<f64>() / reported.len().max(1) as f64;
+    let sd = (reported.iter().map(|r| (r - mean).powi(2)).sum::<f64>()
+        / reported.len().max(1) as f64)
+        .sqrt();
+    let from_angle = if span > 0.0 { acc / span } else { f64::NAN };
+    let err = (mean - rate).abs() / rate;
+    check(
+        out,
+        "rate-mode accuracy",
+        a.ack.map(|a| a.result) == Some(TtResult::Accepted) && err <= lim.rate_accuracy,
+        format!(
+            "{mean:.5} deg/s ({:.3} % off; {from_angle:.3} deg/s from the angle)",
+            err * 100.0
+        ),
+        format!("within {:.2} % of {rate} deg/s", lim.rate_accuracy * 100.0),
+        format!("mean rate {mean:.5} deg/s: {}", c.faults_text()),
+    );
+    check(
+        out,
+        "rate-mode stability",
+        sd <= lim.rate_stability_dps && !reported.is_empty(),
+        format!("{sd:.5} deg/s std"),
+        format!("<= {} deg/s", lim.rate_stability_dps),
+        format!("rate scatter {sd:.5} deg/s"),
+    );
+    Ok(())
+}
+
+/// The emergency stop, moves refused while faulted, the heartbeat watchdog.
+fn stop_checks(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> Result<()> {
+    // emergency stop
+    let a = c.cmd(TtCommand::EStop, 0.0)?;
+    c.pump(c.wall(0.1), None)?;
+    let st = c.last;
+    check(
+        out,
+        "emergency stop",
+        a.ack.is_some()
+            && st.is_some_and(|s| {
+                s.rate_dps.abs() < 1e-6 && s.faults.estop && s.state == TtState::Fault
+            }),
+        st.map_or("no status".into(), |s| {
+            format!(
+                "rate {:.4} deg/s, state {:?}, estop {}",
+                s.rate_dps, s.state, s.faults.estop
+            )
+        }),
+        "rate 0 at once, fault state, e-stop bit".into(),
+        "the axis did not stop and latch the e-stop".into(),
+    );
+    let a = c.cmd(TtCommand::Home, 0.0)?;
+    expect(out, "rejects moves while faulted", &a, TtResult::Faulted);
+    c.cmd(TtCommand::Disable, 0.0)?;
+    // heartbeat watchdog: enable, rate, then silence
+    c.cmd(TtCommand::Enable, 0.0)?;
+    c.cmd(TtCommand::Rate, 5.0)?;
+    c.heartbeat = false;
+    let t0 = Instant::now();
+    let (stopped, _) = c.wait_state(TtState::Fault, lim.heartbeat_stop_s * 2.0)?;
+    let t = t0.elapsed().as_secs_f64() * c.speed;
+    c.pump(c.wall(1.0), None)?;
+    let st = c.last;
+    c.heartbeat = true;
+    check(
+        out,
+        "heartbeat timeout stops the axis",
+        stopped
+            && t <= lim.heartbeat_stop_s
+            && st.is_some_and(|s| s.faults.heartbeat && s.rate_dps.abs() < 1e-6),
+        format!(
+            "fault after {t:.2} s of silence, then rate {:.4} deg/s",
+            st.map_or(f64::NAN, |s| s.rate_dps)
+        ),
+        format!("<= {} s, then at rest", lim.heartbeat_stop_s),
+        if stopped {
+            "stopped too late or not at rest".into()
+        } else {
+            "no stop without heartbeat".into()
+        },
+    );
+    c.cmd(TtCommand::Disable, 0.0)?;
+    Ok(())
+}
+
+/// Every command the suite sent was acknowledged.
+fn acknowledged_check(c: &Client, out: &mut Vec<VCheck>) {
     let lost: Vec<String> = c
         .unanswered
         .iter()
@@ -621,23 +658,13 @@ pub fn run_suite(iface: &str, axis: u8, speed: f64, lim: &Limits) -> Result<Vali
         })
         .collect();
     check(
-        &mut out,
+        out,
         "every command acknowledged",
         lost.is_empty(),
         format!("{} of {} unanswered", lost.len(), c.commands),
         "none unanswered within 0.5 s".into(),
         format!("no acknowledgement of {}", lost.join(", ")),
     );
-    let pass = out.iter().all(|x| x.pass);
-    Ok(Validation {
-        interface: iface.into(),
-        axis,
-        checks: out,
-        pass,
-        commands: c.commands,
-        acks: c.acks,
-        status_frames: c.status_frames,
-    })
 }
 
 /// The table printed at the end.
