@@ -134,22 +134,7 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
             .map_or("no status (killed)".into(), |c| c.to_string())
     );
     if let Some(d) = &r.drill {
-        let f = |x: Option<f64>| x.map_or("--".to_string(), |v| format!("{v:.4}"));
-        b += "<h2>North-finding drill</h2>\n";
-        b += &kv_table(&[
-            ("found heading, deg", f(d.heading_deg)),
-            ("truth, deg", format!("{:.4}", d.truth_deg)),
-            ("error, deg", f(d.error_deg)),
-            ("nav's sigma, deg", f(d.sigma_deg)),
-            ("duration, s", format!("{:.1}", d.duration_s)),
-            ("dwells repeated", d.repeats.to_string()),
-            ("aborted", d.abort.clone().unwrap_or_else(|| "no".into())),
-        ]);
-        let nf = serde_json::to_value(&r.nav.north_finding).unwrap_or_default();
-        if let Some(p) = nf["result"]["positions"].as_array() {
-            b += "<p>The dwells (positions) as nav measured them:</p>\n";
-            b += &json_table(p);
-        }
+        b += &drill_section(r, d);
     }
     b += "<h2>Checks</h2>\n<table>\n<tr><th>check</th><th>result</th><th>measured and limit</th></tr>\n";
     for c in &r.checks {
@@ -163,6 +148,41 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
         );
     }
     b += "</table>\n";
+    b += &frames_section(r);
+    let plots = turntable_plot(r, out) + &navigation_csv_plots(out);
+    if !plots.is_empty() {
+        b += "<h2>Plots</h2>\n";
+        b += &plots;
+    }
+    b += &files_section(out);
+    page(&format!("Bench run {}", r.scenario.name), &b)
+}
+
+/// The north-finding drill's figures and the dwells as nav measured them.
+fn drill_section(r: &RunReport, d: &crate::procedures::northfinding::DrillOutcome) -> String {
+    let mut b = String::new();
+    let f = |x: Option<f64>| x.map_or("--".to_string(), |v| format!("{v:.4}"));
+    b += "<h2>North-finding drill</h2>\n";
+    b += &kv_table(&[
+        ("found heading, deg", f(d.heading_deg)),
+        ("truth, deg", format!("{:.4}", d.truth_deg)),
+        ("error, deg", f(d.error_deg)),
+        ("nav's sigma, deg", f(d.sigma_deg)),
+        ("duration, s", format!("{:.1}", d.duration_s)),
+        ("dwells repeated", d.repeats.to_string()),
+        ("aborted", d.abort.clone().unwrap_or_else(|| "no".into())),
+    ]);
+    let nf = serde_json::to_value(&r.nav.north_finding).unwrap_or_default();
+    if let Some(p) = nf["result"]["positions"].as_array() {
+        b += "<p>The dwells (positions) as nav measured them:</p>\n";
+        b += &json_table(p);
+    }
+    b
+}
+
+/// What went over the bus and the pty, and nav's memory and CPU time.
+fn frames_section(r: &RunReport) -> String {
+    let mut b = String::new();
     b += "<h2>Frames and sentences</h2>\n";
     let nav = serde_json::to_value(&r.nav).unwrap_or_default();
     let n = |path: &[&str]| {
@@ -221,7 +241,11 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
     }
     b += &kv_table(&rows);
 
-    // plots
+    b
+}
+
+/// The turntable's angle against what nav commanded, from nav's recording.
+fn turntable_plot(r: &RunReport, out: &Path) -> String {
     let mut plots = String::new();
     if r.scenario.turntable.is_some() {
         match turntable_series(&out.join("nav.mcap"), r.scenario.imu.rate_hz) {
@@ -260,6 +284,13 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
             }
         }
     }
+    plots
+}
+
+/// Position, velocity and heading errors second by second against nav's bounds (from
+/// navigation.csv), then [`navigation_plots`].
+fn navigation_csv_plots(out: &Path) -> String {
+    let mut plots = String::new();
     if let Ok(text) = std::fs::read_to_string(out.join("navigation.csv")) {
         let rows: Vec<Vec<f64>> = text
             .lines()
@@ -325,10 +356,12 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
         );
         plots += &navigation_plots(out, &col);
     }
-    if !plots.is_empty() {
-        b += "<h2>Plots</h2>\n";
-        b += &plots;
-    }
+    plots
+}
+
+/// Links to the run's files that exist.
+fn files_section(out: &Path) -> String {
+    let mut b = String::new();
     b += "<h2>Files</h2>\n<ul>\n";
     for (f, what) in [
         ("report.json", "this report as data"),
@@ -356,7 +389,7 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
         }
     }
     b += "</ul>\n";
-    page(&format!("Bench run {}", r.scenario.name), &b)
+    b
 }
 
 /// The plots a navigation engineer looks at first, from `navigation.csv` (column `i` by
