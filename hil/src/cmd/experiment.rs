@@ -1,6 +1,11 @@
 //! `hil experiment`: the papers' tables in process.
 
 use crate::*;
+use hil::experiments::Experiment as Exp;
+use hil::experiments::coning::ConingTables;
+use hil::experiments::navigation::Navigation;
+use hil::experiments::northfinding::NorthFindingMc;
+use hil::experiments::routes::Routes;
 
 pub(crate) fn experiment(e: Experiment) -> Result<i32> {
     match e {
@@ -8,43 +13,10 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
             let kind = hil::experiments::shard::experiment_of(&parts[0])?;
             let out = out.unwrap_or_else(|| default_out(&format!("experiment-{kind}")));
             match kind.as_str() {
-                hil::experiments::northfinding::EXPERIMENT => {
-                    let r = hil::experiments::northfinding::merge(
-                        &hil::experiments::shard::read(&parts)?,
-                        &out,
-                        true,
-                    )?;
-                    print!("{}", hil::experiments::northfinding::text(&r));
-                    println!(" files: {}", out.display());
-                    Ok(if r.within_1_2 { 0 } else { 1 })
-                }
-                hil::experiments::navigation::EXPERIMENT => {
-                    let r = hil::experiments::navigation::merge(
-                        &hil::experiments::shard::read(&parts)?,
-                        Some(&out),
-                    )?;
-                    print!("{}", hil::experiments::navigation::text(&r));
-                    println!(" files: {}", out.display());
-                    Ok(navigation_status(&r))
-                }
-                hil::experiments::routes::EXPERIMENT => {
-                    let r = hil::experiments::routes::merge(
-                        &hil::experiments::shard::read(&parts)?,
-                        Some(&out),
-                    )?;
-                    print!("{}", hil::experiments::routes::markdown(&r));
-                    println!(" files: {}", out.display());
-                    Ok(routes_status(&r))
-                }
-                hil::experiments::coning::CONING => {
-                    let r = hil::experiments::coning::coning_merge(
-                        &hil::experiments::shard::read(&parts)?,
-                        &out,
-                    )?;
-                    print!("{}", hil::experiments::coning::text(&r));
-                    println!(" files: {}", out.display());
-                    Ok(coning_status(&r))
-                }
+                NorthFindingMc::NAME => merged::<NorthFindingMc>(&parts, &out),
+                Navigation::NAME => merged::<Navigation>(&parts, &out),
+                Routes::NAME => merged::<Routes>(&parts, &out),
+                ConingTables::NAME => merged::<ConingTables>(&parts, &out),
                 other => bail!(
                     "{}: parts of a `{other}` experiment cannot be merged",
                     parts[0].display()
@@ -70,14 +42,7 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 seed,
                 ..Default::default()
             };
-            if let Some((k, n)) = shard {
-                let part = hil::experiments::northfinding::run_part(&o, k, n)?;
-                return written(&part, &out);
-            }
-            let r = hil::experiments::northfinding::north_finding(&o, &out, true)?;
-            print!("{}", hil::experiments::northfinding::text(&r));
-            println!(" files: {}", out.display());
-            Ok(if r.within_1_2 { 0 } else { 1 })
+            run_or_part::<NorthFindingMc>(&o, shard, &out)
         }
         Experiment::Navigation {
             scenario,
@@ -108,14 +73,7 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 environment: emulators::gps::errors::Environment::preset(preset),
                 threads: hil::par::threads(),
             };
-            if let Some((k, n)) = shard {
-                let part = hil::experiments::navigation::run_part(&o, k, n, true)?;
-                return written(&part, &out);
-            }
-            let r = hil::experiments::navigation::run(&o, Some(&out), true)?;
-            print!("{}", hil::experiments::navigation::text(&r));
-            println!(" files: {}", out.display());
-            Ok(navigation_status(&r))
+            run_or_part::<Navigation>(&o, shard, &out)
         }
         Experiment::Routes {
             scenario,
@@ -124,43 +82,9 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
             shard,
             out,
         } => {
-            let files = if scenario.is_empty() {
-                shipped_routes()?
-            } else {
-                scenario
-            };
-            let scenarios = files
-                .iter()
-                .map(|f| Scenario::load(f))
-                .collect::<Result<Vec<_>>>()?;
-            let kinds = filters
-                .iter()
-                .map(|f| {
-                    serde_json::from_value::<nav::kf::FilterKind>(serde_json::Value::String(
-                        f.trim().to_string(),
-                    ))
-                    .map_err(|_| {
-                        anyhow::anyhow!(
-                            "--filters: `{f}` is not a filter kind (standard, fading, adaptive)"
-                        )
-                    })
-                })
-                .collect::<Result<Vec<_>>>()?;
-            let o = hil::experiments::routes::RoutesOptions {
-                scenarios,
-                runs,
-                kinds,
-                threads: hil::par::threads(),
-            };
+            let o = routes_options(scenario, runs, &filters)?;
             let out = out.unwrap_or_else(|| default_out("experiment-routes"));
-            if let Some((k, n)) = shard {
-                let part = hil::experiments::routes::run_part(&o, k, n, true)?;
-                return written(&part, &out);
-            }
-            let r = hil::experiments::routes::run(&o, Some(&out), true)?;
-            print!("{}", hil::experiments::routes::markdown(&r));
-            println!(" files: {}", out.display());
-            Ok(routes_status(&r))
+            run_or_part::<Routes>(&o, shard, &out)
         }
         Experiment::Calibration {
             runs,
@@ -170,36 +94,7 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
             heading,
             inner_delay,
             out,
-        } => {
-            let ok = |x: f64, lo: f64, hi: f64| (lo..=hi).contains(&x);
-            if runs == 0
-                || !ok(duration, 20.0, 1e6)
-                || !ok(lat, -89.0, 89.0)
-                || !ok(inner_delay, 0.0, 1e6)
-            {
-                bail!(
-                    "--runs must be positive, --duration at least 20 s, |--lat| at most 89 deg and --inner-delay not negative"
-                );
-            }
-            let out = out.unwrap_or_else(|| default_out("experiment-calibration"));
-            let defaults = hil::experiments::calibration::CalibOptions::default();
-            let o = hil::experiments::calibration::CalibOptions {
-                runs,
-                seed,
-                duration_s: duration,
-                score_from_s: duration / 2.0,
-                lat_deg: lat,
-                heading_deg: heading,
-                inner_delay_s: inner_delay,
-                coarse_heading_deg: heading - (defaults.heading_deg - defaults.coarse_heading_deg),
-                ..defaults
-            };
-            let r = hil::experiments::calibration::calibration(&o, Some(&out), true)?;
-            print!("{}", hil::experiments::calibration::markdown(&r));
-            println!(" files: {}", out.display());
-            let tetra_ok = r.tetra.first().is_some_and(|t| t.meets_paper);
-            Ok(if r.meets_paper && tetra_ok { 0 } else { 1 })
-        }
+        } => calibration(runs, seed, duration, lat, heading, inner_delay, out),
         Experiment::Coning {
             out,
             duration,
@@ -217,16 +112,106 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 ..Default::default()
             };
             opts.imu.seed = seed;
-            if let Some((k, n)) = shard {
-                let part = hil::experiments::coning::coning_part(&opts, k, n, true)?;
-                return written(&part, &out);
-            }
-            let r = hil::experiments::coning::coning(&opts, &out, true)?;
-            print!("{}", hil::experiments::coning::text(&r));
-            println!(" files: {}", out.display());
-            Ok(coning_status(&r))
+            run_or_part::<ConingTables>(&opts, shard, &out)
         }
     }
+}
+
+/// `hil experiment calibration`: papers 004 and 001 in process.
+fn calibration(
+    runs: usize,
+    seed: u64,
+    duration: f64,
+    lat: f64,
+    heading: f64,
+    inner_delay: f64,
+    out: Option<PathBuf>,
+) -> Result<i32> {
+    let ok = |x: f64, lo: f64, hi: f64| (lo..=hi).contains(&x);
+    if runs == 0 || !ok(duration, 20.0, 1e6) || !ok(lat, -89.0, 89.0) || !ok(inner_delay, 0.0, 1e6)
+    {
+        bail!(
+            "--runs must be positive, --duration at least 20 s, |--lat| at most 89 deg and --inner-delay not negative"
+        );
+    }
+    let out = out.unwrap_or_else(|| default_out("experiment-calibration"));
+    let defaults = hil::experiments::calibration::CalibOptions::default();
+    let o = hil::experiments::calibration::CalibOptions {
+        runs,
+        seed,
+        duration_s: duration,
+        score_from_s: duration / 2.0,
+        lat_deg: lat,
+        heading_deg: heading,
+        inner_delay_s: inner_delay,
+        coarse_heading_deg: heading - (defaults.heading_deg - defaults.coarse_heading_deg),
+        ..defaults
+    };
+    let r = hil::experiments::calibration::calibration(&o, Some(&out), true)?;
+    print!("{}", hil::experiments::calibration::markdown(&r));
+    println!(" files: {}", out.display());
+    let tetra_ok = r.tetra.first().is_some_and(|t| t.meets_paper);
+    Ok(if r.meets_paper && tetra_ok { 0 } else { 1 })
+}
+
+/// The routes experiment's options from its arguments: the scenarios (every shipped route when
+/// none is given) and the filter kinds.
+fn routes_options(
+    scenario: Vec<PathBuf>,
+    runs: usize,
+    filters: &[String],
+) -> Result<hil::experiments::routes::RoutesOptions> {
+    let files = if scenario.is_empty() {
+        shipped_routes()?
+    } else {
+        scenario
+    };
+    let scenarios = files
+        .iter()
+        .map(|f| Scenario::load(f))
+        .collect::<Result<Vec<_>>>()?;
+    let kinds = filters
+        .iter()
+        .map(|f| {
+            serde_json::from_value::<nav::kf::FilterKind>(serde_json::Value::String(
+                f.trim().to_string(),
+            ))
+            .map_err(|_| {
+                anyhow::anyhow!(
+                    "--filters: `{f}` is not a filter kind (standard, fading, adaptive)"
+                )
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(hil::experiments::routes::RoutesOptions {
+        scenarios,
+        runs,
+        kinds,
+        threads: hil::par::threads(),
+    })
+}
+
+/// Runs experiment `E` whole (its report printed; exit status 0 when it meets its targets), or
+/// only part `shard` of it.
+fn run_or_part<E: Exp>(o: &E::Options, shard: Option<(usize, usize)>, out: &Path) -> Result<i32> {
+    if let Some((k, n)) = shard {
+        return written(&E::part(o, k, n, true)?, out);
+    }
+    let r = E::run(o, out, true)?;
+    printed::<E>(&r, out)
+}
+
+/// Merges the parts of experiment `E` into its report.
+fn merged<E: Exp>(parts: &[PathBuf], out: &Path) -> Result<i32> {
+    let r = E::merge(&hil::experiments::shard::read(parts)?, out, true)?;
+    printed::<E>(&r, out)
+}
+
+/// Prints experiment `E`'s report and where its files are; its exit status.
+fn printed<E: Exp>(r: &E::Report, out: &Path) -> Result<i32> {
+    print!("{}", E::text(r));
+    println!(" files: {}", out.display());
+    Ok(if E::met(r) { 0 } else { 1 })
 }
 
 /// Writes one part of an experiment and says how to merge the parts.
@@ -243,39 +228,6 @@ fn written<T: serde::Serialize>(
         f.display()
     );
     Ok(0)
-}
-
-/// The navigation experiment's exit status: 0 when it meets its targets.
-fn navigation_status(r: &hil::experiments::navigation::NavExperiment) -> i32 {
-    if r.pure_km_class
-        && r.filters_within_paper
-        && r.fading_no_worse_overstated
-        && r.beats_standard_by_paper_margin
-    {
-        0
-    } else {
-        1
-    }
-}
-
-/// The coning experiment's exit status: 0 when it meets its targets.
-fn coning_status(r: &hil::experiments::coning::ConingReport) -> i32 {
-    if r.ours_10x_below_paper_alg3 && r.ours_worse_than_alg2_at.is_empty() {
-        0
-    } else {
-        1
-    }
-}
-
-/// The routes experiment's exit status: 0 when every filter is consistent on every route, no
-/// velocity error went unflagged and no fix was rejected in a filter's first minute.
-fn routes_status(r: &hil::experiments::routes::RoutesReport) -> i32 {
-    let clean_starts = r.rows.iter().all(|x| x.rejected_first_minute == 0);
-    if r.all_consistent && r.no_unflagged_velocity_errors && clean_starts {
-        0
-    } else {
-        1
-    }
 }
 
 /// The shipped scenarios that are routes: a drive with a receiver.

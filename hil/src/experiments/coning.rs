@@ -570,6 +570,28 @@ fn markdown(r: &ConingReport) -> String {
     )
 }
 
+/// Paper 000's coning tables as an [`Experiment`](crate::experiments::Experiment).
+pub struct ConingTables;
+
+impl crate::experiments::Experiment for ConingTables {
+    const NAME: &'static str = CONING;
+    type Options = ConingOptions;
+    type Run = Row;
+    type Report = ConingReport;
+    fn part(o: &ConingOptions, k: usize, n: usize, progress: bool) -> Result<ConingPart> {
+        coning_part(o, k, n, progress)
+    }
+    fn merge(parts: &[ConingPart], out: &Path, _progress: bool) -> Result<ConingReport> {
+        coning_merge(parts, out)
+    }
+    fn text(r: &ConingReport) -> String {
+        text(r)
+    }
+    fn met(r: &ConingReport) -> bool {
+        r.ours_10x_below_paper_alg3 && r.ours_worse_than_alg2_at.is_empty()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -857,6 +857,31 @@ pub fn text(r: &NavExperiment) -> String {
     s
 }
 
+/// Paper 003's Table 4 as an [`Experiment`](crate::experiments::Experiment).
+pub struct Navigation;
+
+impl crate::experiments::Experiment for Navigation {
+    const NAME: &'static str = EXPERIMENT;
+    type Options = NavExpOptions;
+    type Run = PartRun;
+    type Report = NavExperiment;
+    fn part(o: &NavExpOptions, k: usize, n: usize, progress: bool) -> Result<NavPart> {
+        run_part(o, k, n, progress)
+    }
+    fn merge(parts: &[NavPart], out: &Path, _progress: bool) -> Result<NavExperiment> {
+        merge(parts, Some(out))
+    }
+    fn text(r: &NavExperiment) -> String {
+        text(r)
+    }
+    fn met(r: &NavExperiment) -> bool {
+        r.pure_km_class
+            && r.filters_within_paper
+            && r.fading_no_worse_overstated
+            && r.beats_standard_by_paper_margin
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

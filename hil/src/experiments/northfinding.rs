@@ -377,6 +377,28 @@ pub fn text(r: &McReport) -> String {
     s
 }
 
+/// The north-finding Monte Carlo as an [`Experiment`](crate::experiments::Experiment).
+pub struct NorthFindingMc;
+
+impl crate::experiments::Experiment for NorthFindingMc {
+    const NAME: &'static str = EXPERIMENT;
+    type Options = McOptions;
+    type Run = DrillOutcome;
+    type Report = McReport;
+    fn part(o: &McOptions, k: usize, n: usize, _progress: bool) -> Result<McPart> {
+        run_part(o, k, n)
+    }
+    fn merge(parts: &[McPart], out: &Path, progress: bool) -> Result<McReport> {
+        merge(parts, out, progress)
+    }
+    fn text(r: &McReport) -> String {
+        text(r)
+    }
+    fn met(r: &McReport) -> bool {
+        r.within_1_2
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -412,6 +412,31 @@ pub fn markdown(r: &RoutesReport) -> String {
     m
 }
 
+/// The filters over the routes as an [`Experiment`](crate::experiments::Experiment).
+pub struct Routes;
+
+impl crate::experiments::Experiment for Routes {
+    const NAME: &'static str = EXPERIMENT;
+    type Options = RoutesOptions;
+    type Run = PartRun;
+    type Report = RoutesReport;
+    fn part(o: &RoutesOptions, k: usize, n: usize, progress: bool) -> Result<RoutesPart> {
+        run_part(o, k, n, progress)
+    }
+    fn merge(parts: &[RoutesPart], out: &Path, _progress: bool) -> Result<RoutesReport> {
+        merge(parts, Some(out))
+    }
+    fn text(r: &RoutesReport) -> String {
+        markdown(r)
+    }
+    /// Every filter consistent on every route, no velocity error unflagged and no fix rejected
+    /// in a filter's first minute.
+    fn met(r: &RoutesReport) -> bool {
+        let clean_starts = r.rows.iter().all(|x| x.rejected_first_minute == 0);
+        r.all_consistent && r.no_unflagged_velocity_errors && clean_starts
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
