@@ -10,7 +10,7 @@ use nav::config::NavConfig;
 use nav::gpsport::GpsEvent;
 use nav::pipeline::{Output, Pipeline};
 use nav::record::{Record, Recorder, wall_ns};
-use nav::summary::{GpsSummary, Summary};
+use nav::summary::Summary;
 use std::os::fd::AsRawFd;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -247,66 +247,98 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
             }
         }
     }
+    let ended = Ended {
+        gps,
+        read_errors,
+        start,
+    };
+    let mut summary = finish(cfg, ended, &mut pipeline, &mut shell, &mut batch, &mut out).await?;
+    drop(shell);
+    write_summary(cfg, recorder, &mut summary)?;
+    Ok(summary)
+}
+
+/// What the receive loop leaves for the end of the run.
+struct Ended {
+    gps: Option<nav::gpsport::GpsPort>,
+    read_errors: u64,
+    start: Instant,
+}
+
+/// The end of a run: what is still waiting on the socket and the port goes through the
+/// pipeline, which flushes; its summary, with the shell's counts.
+async fn finish(
+    cfg: &NavConfig,
+    ended: Ended,
+    pipeline: &mut Pipeline,
+    shell: &mut Shell<'_>,
+    batch: &mut Vec<Received>,
+    out: &mut Vec<Output>,
+) -> Result<Summary> {
+    let Ended {
+        mut gps,
+        mut read_errors,
+        start,
+    } = ended;
+    let iface = shell.iface;
     // what reached the socket and the port before the signal is processed, not left unread:
     // every frame on the bus is then either received or in the kernel's drop count
     let mut later = Vec::new();
-    read_errors += drain_can(
-        &mut batch,
-        None,
-        &mut later,
-        &mut pipeline,
-        &mut shell,
-        &mut out,
-    )
-    .await?;
+    read_errors += drain_can(batch, None, &mut later, pipeline, shell, out).await?;
     if let Some(g) = gps.as_mut() {
         while let Some(bytes) = g.try_read() {
-            shell
-                .gps_bytes(wall_ns(), bytes, &mut pipeline, &mut out)
-                .await?;
+            shell.gps_bytes(wall_ns(), bytes, pipeline, out).await?;
         }
     }
-    pipeline.flush(&mut out);
-    shell.act(&mut out).await?;
-    let mut summary = pipeline.summary();
-    summary.interface = iface.to_string();
-    summary.read_errors = read_errors;
-    summary.command_send_errors = shell.command_errors;
-    file_parameters(&mut summary, shell.parameters.drain(..));
-    // SAFETY: getuid(2) cannot fail.
-    summary.process_uid = Some(unsafe { libc::getuid() });
+    pipeline.flush(out);
+    shell.act(out).await?;
+    let mut kernel_dropped_frames = 0;
     if let Some(s) = &shell.sock {
         match wire::socket_drops(s.as_raw_fd()) {
-            Ok(n) => summary.kernel_dropped_frames = n,
+            Ok(n) => kernel_dropped_frames = n,
             Err(e) => warn!(
                 interface = iface,
                 "cannot read the socket's drop counter: {e}"
             ),
         }
     }
-    summary.wall_seconds = start.elapsed().as_secs_f64();
-    summary.solution.frames_sent = shell.frames_sent;
-    summary.solution.send_errors = shell.send_errors;
-    summary.mcap = cfg.record.mcap.clone();
     if let Some(w) = shell.export.as_mut() {
         use std::io::Write;
         if let Err(e) = w.flush() {
             warn!("the GPS fix export: {e}");
         }
     }
-    if let (Some(g), Some(c)) = (gps, &cfg.gps) {
-        let (port_errors, opens) = g.counters();
-        let (fixes, last_fix) = pipeline.fixes();
-        summary.gps = Some(GpsSummary {
-            port: c.port.clone(),
-            stats: pipeline.gps_stats(),
-            port_errors,
-            opens,
-            fixes,
-            last_fix: last_fix.cloned(),
-            fixes_jsonl: c.fixes_jsonl.clone(),
-        });
-    }
+    let gps = match (gps, &cfg.gps) {
+        (Some(g), Some(c)) => {
+            let (port_errors, opens) = g.counters();
+            Some(nav::summary::GpsPortCounts {
+                port: c.port.clone(),
+                port_errors,
+                opens,
+                fixes_jsonl: c.fixes_jsonl.clone(),
+            })
+        }
+        _ => None,
+    };
+    let summary = pipeline.summary_with(nav::summary::ShellCounts {
+        interface: iface.to_string(),
+        read_errors,
+        command_send_errors: shell.command_errors,
+        kernel_dropped_frames,
+        // SAFETY: getuid(2) cannot fail.
+        process_uid: Some(unsafe { libc::getuid() }),
+        wall_seconds: start.elapsed().as_secs_f64(),
+        frames_sent: shell.frames_sent,
+        send_errors: shell.send_errors,
+        gps,
+        mcap: cfg.record.mcap.clone(),
+        parameter_files: std::mem::take(&mut shell.parameters),
+    });
+    Ok(summary)
+}
+
+/// The summary into the recording (whose message count it then takes) and its file.
+fn write_summary(cfg: &NavConfig, recorder: Option<Recorder>, summary: &mut Summary) -> Result<()> {
     if let Some(r) = recorder {
         r.send(Record::Json {
             channel: nav::record::JsonChannel::Summary,
@@ -320,7 +352,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         std::fs::write(p, serde_json::to_string_pretty(&summary)?)
             .with_context(|| format!("writing summary {}", p.display()))?;
     }
-    Ok(summary)
+    Ok(())
 }
 
 /// What the receiver's port gave, through the pipeline (the read errors met on the way).
@@ -346,29 +378,6 @@ async fn on_gps_event(
     }
     shell.act(out).await?;
     Ok(read_errors)
-}
-
-/// The parameter files the calibrations wrote (where, and as stamped), into the summary.
-fn file_parameters(
-    summary: &mut Summary,
-    files: impl Iterator<Item = (Option<PathBuf>, nav::params::ParameterFile)>,
-) {
-    for (file, p) in files {
-        match p {
-            nav::params::ParameterFile::Imu(p) => {
-                if let Some(sc) = summary.self_calibration.as_mut() {
-                    sc.parameters = Some(p);
-                    sc.parameters_file = file;
-                }
-            }
-            nav::params::ParameterFile::Redundant(p) => {
-                if let Some(tc) = summary.tetra_calibration.as_mut() {
-                    tc.parameters = Some(p);
-                    tc.parameters_file = file;
-                }
-            }
-        }
-    }
 }
 
 /// Write `text` to `path` through a temporary file beside it and a rename: whoever reads the

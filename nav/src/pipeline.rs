@@ -1092,6 +1092,50 @@ impl Pipeline {
         self.sums.last
     }
 
+    /// The summary of the run so far with what only the shell knows (its devices, their I/O
+    /// counts, the files it wrote): the binary's summary file.
+    pub fn summary_with(&self, io: crate::summary::ShellCounts) -> Summary {
+        let mut s = self.summary();
+        s.interface = io.interface;
+        s.read_errors = io.read_errors;
+        s.command_send_errors = io.command_send_errors;
+        for (file, p) in io.parameter_files {
+            match p {
+                crate::params::ParameterFile::Imu(p) => {
+                    if let Some(sc) = s.self_calibration.as_mut() {
+                        sc.parameters = Some(p);
+                        sc.parameters_file = file;
+                    }
+                }
+                crate::params::ParameterFile::Redundant(p) => {
+                    if let Some(tc) = s.tetra_calibration.as_mut() {
+                        tc.parameters = Some(p);
+                        tc.parameters_file = file;
+                    }
+                }
+            }
+        }
+        s.process_uid = io.process_uid;
+        s.kernel_dropped_frames = io.kernel_dropped_frames;
+        s.wall_seconds = io.wall_seconds;
+        s.solution.frames_sent = io.frames_sent;
+        s.solution.send_errors = io.send_errors;
+        s.mcap = io.mcap;
+        s.gps = io.gps.map(|g| {
+            let (fixes, last_fix) = self.fixes();
+            crate::summary::GpsSummary {
+                port: g.port,
+                stats: self.gps_stats(),
+                port_errors: g.port_errors,
+                opens: g.opens,
+                fixes,
+                last_fix: last_fix.cloned(),
+                fixes_jsonl: g.fixes_jsonl,
+            }
+        });
+        s
+    }
+
     /// The run's summary (the shell fills in what only it knows: interface, read errors, wall
     /// time, the GPS port, the frames it sent, the recording).
     pub fn summary(&self) -> Summary {

@@ -134,6 +134,47 @@ pub struct GpsSummary {
     pub fixes_jsonl: Option<PathBuf>,
 }
 
+/// What only the shell around the pipeline knows: its devices, their I/O counts and the files
+/// it wrote. [`crate::pipeline::Pipeline::summary_with`] builds the summary with them.
+#[derive(Debug, Clone, Default)]
+pub struct ShellCounts {
+    /// CAN interface.
+    pub interface: String,
+    /// Socket read errors.
+    pub read_errors: u64,
+    /// Turntable commands the socket refused.
+    pub command_send_errors: u64,
+    /// Frames the kernel dropped at the socket (its receive buffer full).
+    pub kernel_dropped_frames: u64,
+    /// The user id nav ran as.
+    pub process_uid: Option<u32>,
+    /// Wall time from start to exit, s.
+    pub wall_seconds: f64,
+    /// Solution frames sent.
+    pub frames_sent: u64,
+    /// Solution frames the socket refused.
+    pub send_errors: u64,
+    /// The receiver's port, when nav reads one.
+    pub gps: Option<GpsPortCounts>,
+    /// The recording's file, when nav records.
+    pub mcap: Option<PathBuf>,
+    /// The parameter files written (where, when written, and what).
+    pub parameter_files: Vec<(Option<PathBuf>, crate::params::ParameterFile)>,
+}
+
+/// The receiver's port as the shell saw it.
+#[derive(Debug, Clone, Default)]
+pub struct GpsPortCounts {
+    /// Serial device.
+    pub port: PathBuf,
+    /// Port trouble (read errors, the device vanishing).
+    pub port_errors: u64,
+    /// Times the port was (re)opened.
+    pub opens: u64,
+    /// Export file of the fixes.
+    pub fixes_jsonl: Option<PathBuf>,
+}
+
 /// North-finding at exit.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -246,9 +287,19 @@ fn opt<T: std::fmt::Display>(x: Option<T>) -> String {
 impl Summary {
     /// The summary for people, one aspect per line.
     pub fn text(&self) -> String {
-        let s = self;
         let mut o = String::new();
-        let _ = writeln!(o, "nav summary ({})", s.interface);
+        let _ = writeln!(o, "nav summary ({})", self.interface);
+        self.bus_text(&mut o);
+        self.imu_text(&mut o);
+        self.north_finding_text(&mut o);
+        self.navigation_text(&mut o);
+        self.outputs_text(&mut o);
+        o
+    }
+
+    /// What came over the bus: frames by message, drops, IMU samples and gaps, bad frames.
+    fn bus_text(&self, o: &mut String) {
+        let s = self;
         let by: Vec<String> = s
             .frames_by_message
             .iter()
@@ -290,6 +341,11 @@ impl Summary {
             s.read_errors,
             s.encode_errors
         );
+    }
+
+    /// The IMU's own flags, its mean rate and force, the attitude, the integrity of the processing.
+    fn imu_text(&self, o: &mut String) {
+        let s = self;
         let _ = writeln!(
             o,
             "  accel frames      missing {}, unpaired {}; BIT-fail samples {}, saturated {}, PPS edges {}",
@@ -336,6 +392,11 @@ impl Summary {
             opt(s.processing.first_suspect)
         );
         let _ = writeln!(o, "  IMU timeouts      {}", s.imu_timeouts);
+    }
+
+    /// North-finding's result or why it has none.
+    fn north_finding_text(&self, o: &mut String) {
+        let s = self;
         if let Some(nf) = &s.north_finding {
             match (&nf.result, &nf.abort) {
                 (Some(r), _) => {
@@ -358,6 +419,11 @@ impl Summary {
                 }
             }
         }
+    }
+
+    /// Navigation: the last output, the fixes, the filter, the integrity alarms.
+    fn navigation_text(&self, o: &mut String) {
+        let s = self;
         if let Some(n) = &s.navigation {
             match &n.output {
                 Some(x) => {
@@ -417,6 +483,11 @@ impl Summary {
                 i.max_velocity_diff_mps
             );
         }
+    }
+
+    /// The receiver's port, the solution frames sent, the recording.
+    fn outputs_text(&self, o: &mut String) {
+        let s = self;
         if let Some(g) = &s.gps {
             let t = &g.stats;
             let _ = writeln!(
@@ -454,7 +525,6 @@ impl Summary {
                 s.mcap_messages
             );
         }
-        o
     }
 
     /// Read a summary file (`nav-summary.json`).
