@@ -98,176 +98,24 @@ fn wrap(a: f64) -> f64 {
 impl Drive {
     /// Plan the route; errors name what is wrong with the spec.
     pub fn plan(spec: &DriveSpec) -> Result<Self, crate::ParamError> {
-        let pos = |x: f64| x.is_finite() && x > 0.0;
-        if !(pos(spec.speed_mps)
-            && pos(spec.accel_mps2)
-            && pos(spec.turn_rate_dps)
-            && pos(spec.lateral_accel_mps2))
-        {
-            return Err(crate::ParamError::new(
-                "drive",
-                "speed_mps, accel_mps2, turn_rate_dps and lateral_accel_mps2 must be positive",
-            ));
-        }
-        if spec.waypoints.is_empty() || spec.laps == 0 {
-            return Err(crate::ParamError::new(
-                "drive",
-                "needs at least one waypoint and one lap",
-            ));
-        }
-        let mut pts = vec![[0.0, 0.0]];
-        for _ in 0..spec.laps {
-            pts.extend(spec.waypoints.iter().copied());
-        }
-        if spec.laps > 1 {
-            let last = spec.waypoints[spec.waypoints.len() - 1];
-            if last[0].hypot(last[1]) > 1.0 {
-                return Err(crate::ParamError::new(
-                    "drive",
-                    "with laps > 1 the last waypoint must be the start [0, 0]",
-                ));
-            }
-        }
-        pts.dedup_by(|a, b| (a[0] - b[0]).hypot(a[1] - b[1]) < 1e-6);
-        if pts.len() < 2 {
-            return Err(crate::ParamError::new(
-                "drive",
-                "the waypoints do not leave the start",
-            ));
-        }
-        let v = spec.speed_mps;
-        let rate = spec
-            .turn_rate_dps
-            .to_radians()
-            .min(spec.lateral_accel_mps2 / v);
-        let r = v / rate;
-        let legs: Vec<(f64, f64)> = pts
-            .windows(2)
-            .map(|w| {
-                let (de, dn) = (w[1][0] - w[0][0], w[1][1] - w[0][1]);
-                (de.hypot(dn), de.atan2(dn)) // length, heading (clockwise from north)
-            })
-            .collect();
-        // turn at each inner waypoint; its tangent length comes off both legs
-        let turns: Vec<f64> = legs.windows(2).map(|w| wrap(w[1].1 - w[0].1)).collect();
-        // a reversal has no arc to drive (its tangent is infinite): say where it is
-        if let Some(i) = turns.iter().position(|d| d.abs() > 170f64.to_radians()) {
-            let at = pts[i + 1];
-            return Err(crate::ParamError::new(
-                "drive",
-                format!(
-                    "the route turns back on itself by {:.0} deg at [{:.1}, {:.1}] (waypoint {} of the laps); U-turns are not driven: add a waypoint to turn around, or end each lap heading the way the next begins",
-                    turns[i].abs().to_degrees(),
-                    at[0],
-                    at[1],
-                    i + 1
-                ),
-            ));
-        }
-        let tangent: Vec<f64> = turns.iter().map(|d| r * (d.abs() / 2.0).tan()).collect();
-        let mut segs = Vec::new();
-        let mut t = 0.0;
-        let mut p = [0.0, 0.0];
-        let mut psi = legs[0].1;
-        let mut push = |dur: f64,
-                        s0: f64,
-                        accel: f64,
-                        rate: f64,
-                        t: &mut f64,
-                        p: &mut [f64; 2],
-                        psi: &mut f64| {
-            if dur <= 0.0 {
-                return;
-            }
-            let seg = Segment {
-                t0: *t,
-                dur,
-                p0: *p,
-                s0,
-                accel,
-                psi0: *psi,
-                rate,
-            };
-            *p = seg.position(dur);
-            *psi = wrap(*psi + rate * dur);
-            *t += dur;
-            segs.push(seg);
+        check_spec(spec)?;
+        let pts = route_points(spec)?;
+        let Geometry {
+            rate,
+            r,
+            legs,
+            turns,
+            tangent,
+        } = geometry(spec, &pts)?;
+        let mut out = Segments {
+            segs: Vec::new(),
+            t: 0.0,
+            p: [0.0, 0.0],
+            psi: legs[0].1,
         };
-        push(spec.start_wait_s, 0.0, 0.0, 0.0, &mut t, &mut p, &mut psi);
-        let d_acc = v * v / (2.0 * spec.accel_mps2);
-        let total: f64 = legs.iter().map(|l| l.0).sum::<f64>() - 2.0 * tangent.iter().sum::<f64>();
-        if total < 2.0 * d_acc {
-            return Err(crate::ParamError::new(
-                "drive",
-                format!(
-                    "the route ({total:.0} m of straight road) is too short to reach {v} m/s and stop"
-                ),
-            ));
-        }
-        let mut speed = 0.0;
-        let mut to_accel = d_acc; // distance of acceleration still to do
-        let mut straight_left = total; // straight road still ahead
-        for (i, (len, _)) in legs.iter().enumerate() {
-            let before = if i > 0 { tangent[i - 1] } else { 0.0 };
-            let after = tangent.get(i).copied().unwrap_or(0.0);
-            let mut d = (len - before - after).max(0.0);
-            // acceleration at the start
-            if to_accel > 0.0 && d > 0.0 {
-                let da = to_accel.min(d);
-                let s1 = (speed * speed + 2.0 * spec.accel_mps2 * da).sqrt();
-                push(
-                    (s1 - speed) / spec.accel_mps2,
-                    speed,
-                    spec.accel_mps2,
-                    0.0,
-                    &mut t,
-                    &mut p,
-                    &mut psi,
-                );
-                speed = s1;
-                to_accel -= da;
-                d -= da;
-                straight_left -= da;
-            }
-            // cruise, keeping the braking distance for the end
-            let cruise = (d - (d_acc - (straight_left - d)).max(0.0)).max(0.0);
-            if cruise > 0.0 {
-                push(cruise / speed, speed, 0.0, 0.0, &mut t, &mut p, &mut psi);
-                d -= cruise;
-                straight_left -= cruise;
-            }
-            // braking at the end
-            if d > 1e-9 {
-                let s1 = (speed * speed - 2.0 * spec.accel_mps2 * d).max(0.0).sqrt();
-                push(
-                    (speed - s1) / spec.accel_mps2,
-                    speed,
-                    -spec.accel_mps2,
-                    0.0,
-                    &mut t,
-                    &mut p,
-                    &mut psi,
-                );
-                speed = s1;
-                straight_left -= d;
-            }
-            if let Some(dpsi) = turns.get(i) {
-                if speed > 0.0 {
-                    let w = rate.min(speed / r.max(1e-9)) * dpsi.signum();
-                    let w = if w == 0.0 { rate } else { w };
-                    push(
-                        dpsi.abs() / w.abs(),
-                        speed,
-                        0.0,
-                        w,
-                        &mut t,
-                        &mut p,
-                        &mut psi,
-                    );
-                }
-                psi = legs[i + 1].1;
-            }
-        }
+        out.push(spec.start_wait_s, 0.0, 0.0, 0.0);
+        drive_legs(spec, &mut out, rate, r, &legs, &turns, &tangent)?;
+        let segs = out.segs;
         let lat0 = spec.lat_deg.to_radians();
         let (rm, rn) = earth::radii(lat0);
         Ok(Self {
@@ -477,6 +325,206 @@ impl Motion for Drive {
     fn latitude(&self, t: f64) -> f64 {
         self.position(t).0
     }
+}
+
+/// The spec's speeds, rates and waypoints are usable.
+fn check_spec(spec: &DriveSpec) -> Result<(), crate::ParamError> {
+    let pos = |x: f64| x.is_finite() && x > 0.0;
+    if !(pos(spec.speed_mps)
+        && pos(spec.accel_mps2)
+        && pos(spec.turn_rate_dps)
+        && pos(spec.lateral_accel_mps2))
+    {
+        return Err(crate::ParamError::new(
+            "drive",
+            "speed_mps, accel_mps2, turn_rate_dps and lateral_accel_mps2 must be positive",
+        ));
+    }
+    if spec.waypoints.is_empty() || spec.laps == 0 {
+        return Err(crate::ParamError::new(
+            "drive",
+            "needs at least one waypoint and one lap",
+        ));
+    }
+    Ok(())
+}
+
+/// The start, then the waypoints of every lap, repeated points dropped.
+fn route_points(spec: &DriveSpec) -> Result<Vec<[f64; 2]>, crate::ParamError> {
+    let mut pts = vec![[0.0, 0.0]];
+    for _ in 0..spec.laps {
+        pts.extend(spec.waypoints.iter().copied());
+    }
+    if spec.laps > 1 {
+        let last = spec.waypoints[spec.waypoints.len() - 1];
+        if last[0].hypot(last[1]) > 1.0 {
+            return Err(crate::ParamError::new(
+                "drive",
+                "with laps > 1 the last waypoint must be the start [0, 0]",
+            ));
+        }
+    }
+    pts.dedup_by(|a, b| (a[0] - b[0]).hypot(a[1] - b[1]) < 1e-6);
+    if pts.len() < 2 {
+        return Err(crate::ParamError::new(
+            "drive",
+            "the waypoints do not leave the start",
+        ));
+    }
+    Ok(pts)
+}
+
+/// The route's legs and turns at the planned speed.
+struct Geometry {
+    /// Turn rate, rad/s.
+    rate: f64,
+    /// Turn radius, m.
+    r: f64,
+    /// Each leg's length (m) and heading (rad, clockwise from north).
+    legs: Vec<(f64, f64)>,
+    /// The turn at each inner waypoint, rad.
+    turns: Vec<f64>,
+    /// Each turn's tangent length, m (off both legs).
+    tangent: Vec<f64>,
+}
+
+/// Legs and turns of the route through `pts`; a U-turn is refused with where it is.
+fn geometry(spec: &DriveSpec, pts: &[[f64; 2]]) -> Result<Geometry, crate::ParamError> {
+    let v = spec.speed_mps;
+    let rate = spec
+        .turn_rate_dps
+        .to_radians()
+        .min(spec.lateral_accel_mps2 / v);
+    let r = v / rate;
+    let legs: Vec<(f64, f64)> = pts
+        .windows(2)
+        .map(|w| {
+            let (de, dn) = (w[1][0] - w[0][0], w[1][1] - w[0][1]);
+            (de.hypot(dn), de.atan2(dn)) // length, heading (clockwise from north)
+        })
+        .collect();
+    // turn at each inner waypoint; its tangent length comes off both legs
+    let turns: Vec<f64> = legs.windows(2).map(|w| wrap(w[1].1 - w[0].1)).collect();
+    // a reversal has no arc to drive (its tangent is infinite): say where it is
+    if let Some(i) = turns.iter().position(|d| d.abs() > 170f64.to_radians()) {
+        let at = pts[i + 1];
+        return Err(crate::ParamError::new(
+            "drive",
+            format!(
+                "the route turns back on itself by {:.0} deg at [{:.1}, {:.1}] (waypoint {} of the laps); U-turns are not driven: add a waypoint to turn around, or end each lap heading the way the next begins",
+                turns[i].abs().to_degrees(),
+                at[0],
+                at[1],
+                i + 1
+            ),
+        ));
+    }
+    let tangent: Vec<f64> = turns.iter().map(|d| r * (d.abs() / 2.0).tan()).collect();
+    Ok(Geometry {
+        rate,
+        r,
+        legs,
+        turns,
+        tangent,
+    })
+}
+
+/// The segments planned so far and where they end.
+struct Segments {
+    segs: Vec<Segment>,
+    /// End time, s.
+    t: f64,
+    /// End position (east, north), m.
+    p: [f64; 2],
+    /// End heading, rad.
+    psi: f64,
+}
+
+impl Segments {
+    /// A segment of `dur` s from speed `s0` at `accel` m/s^2 turning at `rate` rad/s (none when
+    /// `dur` is not positive).
+    fn push(&mut self, dur: f64, s0: f64, accel: f64, rate: f64) {
+        if dur <= 0.0 {
+            return;
+        }
+        let seg = Segment {
+            t0: self.t,
+            dur,
+            p0: self.p,
+            s0,
+            accel,
+            psi0: self.psi,
+            rate,
+        };
+        self.p = seg.position(dur);
+        self.psi = wrap(self.psi + rate * dur);
+        self.t += dur;
+        self.segs.push(seg);
+    }
+}
+
+/// Drive the legs: accelerate at the start, cruise, brake at the end, turn at each waypoint.
+fn drive_legs(
+    spec: &DriveSpec,
+    out: &mut Segments,
+    rate: f64,
+    r: f64,
+    legs: &[(f64, f64)],
+    turns: &[f64],
+    tangent: &[f64],
+) -> Result<(), crate::ParamError> {
+    let v = spec.speed_mps;
+    let d_acc = v * v / (2.0 * spec.accel_mps2);
+    let total: f64 = legs.iter().map(|l| l.0).sum::<f64>() - 2.0 * tangent.iter().sum::<f64>();
+    if total < 2.0 * d_acc {
+        return Err(crate::ParamError::new(
+            "drive",
+            format!(
+                "the route ({total:.0} m of straight road) is too short to reach {v} m/s and stop"
+            ),
+        ));
+    }
+    let mut speed = 0.0;
+    let mut to_accel = d_acc; // distance of acceleration still to do
+    let mut straight_left = total; // straight road still ahead
+    for (i, (len, _)) in legs.iter().enumerate() {
+        let before = if i > 0 { tangent[i - 1] } else { 0.0 };
+        let after = tangent.get(i).copied().unwrap_or(0.0);
+        let mut d = (len - before - after).max(0.0);
+        // acceleration at the start
+        if to_accel > 0.0 && d > 0.0 {
+            let da = to_accel.min(d);
+            let s1 = (speed * speed + 2.0 * spec.accel_mps2 * da).sqrt();
+            out.push((s1 - speed) / spec.accel_mps2, speed, spec.accel_mps2, 0.0);
+            speed = s1;
+            to_accel -= da;
+            d -= da;
+            straight_left -= da;
+        }
+        // cruise, keeping the braking distance for the end
+        let cruise = (d - (d_acc - (straight_left - d)).max(0.0)).max(0.0);
+        if cruise > 0.0 {
+            out.push(cruise / speed, speed, 0.0, 0.0);
+            d -= cruise;
+            straight_left -= cruise;
+        }
+        // braking at the end
+        if d > 1e-9 {
+            let s1 = (speed * speed - 2.0 * spec.accel_mps2 * d).max(0.0).sqrt();
+            out.push((speed - s1) / spec.accel_mps2, speed, -spec.accel_mps2, 0.0);
+            speed = s1;
+            straight_left -= d;
+        }
+        if let Some(dpsi) = turns.get(i) {
+            if speed > 0.0 {
+                let w = rate.min(speed / r.max(1e-9)) * dpsi.signum();
+                let w = if w == 0.0 { rate } else { w };
+                out.push(dpsi.abs() / w.abs(), speed, 0.0, w);
+            }
+            out.psi = legs[i + 1].1;
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
