@@ -62,34 +62,7 @@ impl LogChart {
         if !x0.is_finite() {
             (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
         }
-        // log: whole decades; linear: from zero (or the lowest value below it), 5 even steps
-        let (y0, y1, ticks): (f64, f64, Vec<(f64, String)>) = if log {
-            let (a, b) = (y0.floor(), y1.ceil().max(y0.floor() + 1.0));
-            let n = (b - a).round() as i32;
-            (
-                a,
-                b,
-                (0..=n)
-                    .map(|i| (a + f64::from(i), format!("1e{}", a as i32 + i)))
-                    .collect(),
-            )
-        } else {
-            let a = y0.min(0.0);
-            let step = nice_step((y1 - a).max(1e-12) / 5.0);
-            let (a, b) = (
-                (a / step).floor() * step,
-                (y1 / step).ceil().max(1.0) * step,
-            );
-            let n = ((b - a) / step).round() as i32;
-            let digits = (-step.log10().floor()).max(0.0) as usize;
-            let ticks = (0..=n)
-                .map(|i| {
-                    let v = a + step * f64::from(i);
-                    (v, format!("{v:.digits$}"))
-                })
-                .collect();
-            (a, b, ticks)
-        };
+        let (y0, y1, ticks) = y_axis(log, y0, y1);
         let x1 = if x1 > x0 { x1 } else { x0 + 1.0 };
         let px = |x: f64| L + (x - x0) / (x1 - x0) * (W - L - R);
         let py = |y: f64| T + (y1 - fy(y)) / (y1 - y0) * (H - T - B);
@@ -153,6 +126,19 @@ impl LogChart {
             (T + H - B) / 2.0,
             esc(&self.y_label)
         );
+        self.series_svg(&mut s, &px, &py, &usable);
+        s.push_str("</svg>\n");
+        s
+    }
+    /// Each series as a line or markers, and its legend entry, at plot coordinates `px`, `py`
+    /// (points `usable` leaves out are not drawn).
+    fn series_svg(
+        &self,
+        s: &mut String,
+        px: &dyn Fn(f64) -> f64,
+        py: &dyn Fn(f64) -> f64,
+        usable: &dyn Fn(f64) -> bool,
+    ) {
         for (k, ser) in self.series.iter().enumerate() {
             let good: Vec<(f64, f64)> = ser
                 .points
@@ -203,8 +189,38 @@ impl LogChart {
                 esc(&ser.name)
             );
         }
-        s.push_str("</svg>\n");
-        s
+    }
+}
+
+/// The y axis from `y0` to `y1` (log10 values when `log`): log, whole decades; linear, from
+/// zero (or the lowest value below it) in 5 even steps. Its ends and its labelled ticks.
+fn y_axis(log: bool, y0: f64, y1: f64) -> (f64, f64, Vec<(f64, String)>) {
+    if log {
+        let (a, b) = (y0.floor(), y1.ceil().max(y0.floor() + 1.0));
+        let n = (b - a).round() as i32;
+        (
+            a,
+            b,
+            (0..=n)
+                .map(|i| (a + f64::from(i), format!("1e{}", a as i32 + i)))
+                .collect(),
+        )
+    } else {
+        let a = y0.min(0.0);
+        let step = nice_step((y1 - a).max(1e-12) / 5.0);
+        let (a, b) = (
+            (a / step).floor() * step,
+            (y1 / step).ceil().max(1.0) * step,
+        );
+        let n = ((b - a) / step).round() as i32;
+        let digits = (-step.log10().floor()).max(0.0) as usize;
+        let ticks = (0..=n)
+            .map(|i| {
+                let v = a + step * f64::from(i);
+                (v, format!("{v:.digits$}"))
+            })
+            .collect();
+        (a, b, ticks)
     }
 }
 
