@@ -660,8 +660,9 @@ enum Launched {
     NoBoot(String),
 }
 
-/// Starts QEMU, echoes and collects the guest's output until it powers off.
-fn launch(l: &Launch<'_>) -> Result<Launched> {
+/// QEMU's command line for launch `l`: the accelerator and CPU, the serial console, the
+/// guest's size, the kernel and initrd, the control folder and the shares over 9p.
+fn qemu_command(l: &Launch<'_>) -> Command {
     // the guest's CPU model: `max` unless VCAN_SETUP_CPU names another (for measuring, e.g. a
     // model without FMA/AVX, whose libm paths TCG emulates more cheaply or not)
     let Launch {
@@ -671,13 +672,10 @@ fn launch(l: &Launch<'_>) -> Result<Launched> {
         shares,
         opts,
         kvm,
-        boot_limit,
-        start,
-        prog,
+        ..
     } = *l;
     let cpu =
         std::env::var("VCAN_SETUP_CPU").unwrap_or_else(|_| if kvm { "host" } else { "max" }.into());
-    let launched = Instant::now();
     let mut q = Command::new(&pre.qemu);
     q.args([
         "-accel",
@@ -714,6 +712,22 @@ fn launch(l: &Launch<'_>) -> Result<Launched> {
             s.display()
         ));
     }
+    q
+}
+
+/// Starts QEMU, echoes and collects the guest's output until it powers off.
+fn launch(l: &Launch<'_>) -> Result<Launched> {
+    let Launch {
+        pre,
+        opts,
+        kvm,
+        boot_limit,
+        start,
+        prog,
+        ..
+    } = *l;
+    let launched = Instant::now();
+    let mut q = qemu_command(l);
     let mut child = q
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
