@@ -283,43 +283,10 @@ impl GpsDecoder {
         }
     }
 
-    /// Decode one framed line.
-    pub fn line(&mut self, l: &str) -> LineOutcome {
-        let r = match nmea::parse_str(l) {
-            Ok(r) => r,
-            Err(nmea::Error::ChecksumMismatch { .. }) => {
-                self.stats.bad_checksum += 1;
-                return LineOutcome::BadChecksum;
-            }
-            // NMEA 2.0 GLL has no mode field, which the parser requires (the checksum was
-            // good, or it would have said so)
-            Err(nmea::Error::ParsingError(_)) if let Some(g) = gll_v20(l) => ParseResult::GLL(g),
-            // a receiver with no satellites in view sends `$GPGSV,1,1,00`, which the parser
-            // refuses; it is a well-formed sentence that tells nav nothing
-            Err(nmea::Error::ParsingError(_)) if gsv_none_in_view(l) => {
-                self.stats.accepted += 1;
-                self.stats.unused += 1;
-                return LineOutcome::Other;
-            }
-            Err(e) => {
-                self.stats.unparsed += 1;
-                return LineOutcome::Unparsed(format!("{e:?}"));
-            }
-        };
-        let seq = self.stats.accepted;
-        self.stats.accepted += 1;
-        let tod = |t: Option<chrono::NaiveTime>| {
-            t.map(|t| {
-                use chrono::Timelike;
-                f64::from(t.num_seconds_from_midnight()) + f64::from(t.nanosecond()) * 1e-9
-            })
-        };
-        let fmt_t = |t: Option<chrono::NaiveTime>| t.map(|t| t.format("%H:%M:%S%.3f").to_string());
-        let geoid_sep = match &r {
-            ParseResult::GGA(g) => g.geoid_separation.map(f64::from),
-            _ => None,
-        };
-        let (sentence, time, lat, lon, alt, quality, sats, hdop, speed, track, valid) = match &r {
+    /// What a position sentence reports (the time, the position, the fix's quality and
+    /// motion); any other sentence's outcome as the error (GST's sigmas taken, ZDA's date).
+    fn reported(&mut self, r: &ParseResult) -> Result<Reported, Box<LineOutcome>> {
+        let (sentence, time, lat, lon, alt, quality, sats, hdop, speed, track, valid) = match r {
             ParseResult::GGA(g) => {
                 let q = g.fix_type.map_or(0, fix_quality);
                 (
@@ -381,18 +348,82 @@ impl GpsDecoder {
                 None,
                 true,
             ),
-            ParseResult::GST(g) => return self.accuracy(GpsAccuracy::of(g, tod(g.time))),
+            ParseResult::GST(g) => {
+                return Err(Box::new(
+                    self.accuracy(GpsAccuracy::of(g, time_of_day(g.time))),
+                ));
+            }
             ParseResult::ZDA(z) => {
                 if let Some(d) = z.utc_date() {
                     self.date = Some(d);
                 }
-                return LineOutcome::Other;
+                return Err(Box::new(LineOutcome::Other));
             }
             ParseResult::Unsupported(_) => {
                 self.stats.unused += 1;
+                return Err(Box::new(LineOutcome::Other));
+            }
+            _ => return Err(Box::new(LineOutcome::Other)),
+        };
+        Ok(Reported {
+            sentence,
+            time,
+            lat,
+            lon,
+            alt,
+            quality,
+            sats,
+            hdop,
+            speed,
+            track,
+            valid,
+        })
+    }
+
+    /// Decode one framed line.
+    pub fn line(&mut self, l: &str) -> LineOutcome {
+        let r = match nmea::parse_str(l) {
+            Ok(r) => r,
+            Err(nmea::Error::ChecksumMismatch { .. }) => {
+                self.stats.bad_checksum += 1;
+                return LineOutcome::BadChecksum;
+            }
+            // NMEA 2.0 GLL has no mode field, which the parser requires (the checksum was
+            // good, or it would have said so)
+            Err(nmea::Error::ParsingError(_)) if let Some(g) = gll_v20(l) => ParseResult::GLL(g),
+            // a receiver with no satellites in view sends `$GPGSV,1,1,00`, which the parser
+            // refuses; it is a well-formed sentence that tells nav nothing
+            Err(nmea::Error::ParsingError(_)) if gsv_none_in_view(l) => {
+                self.stats.accepted += 1;
+                self.stats.unused += 1;
                 return LineOutcome::Other;
             }
-            _ => return LineOutcome::Other,
+            Err(e) => {
+                self.stats.unparsed += 1;
+                return LineOutcome::Unparsed(format!("{e:?}"));
+            }
+        };
+        let seq = self.stats.accepted;
+        self.stats.accepted += 1;
+        let geoid_sep = match &r {
+            ParseResult::GGA(g) => g.geoid_separation.map(f64::from),
+            _ => None,
+        };
+        let Reported {
+            sentence,
+            time,
+            lat,
+            lon,
+            alt,
+            quality,
+            sats,
+            hdop,
+            speed,
+            track,
+            valid,
+        } = match self.reported(&r) {
+            Ok(p) => p,
+            Err(o) => return *o,
         };
         let (Some(lat), Some(lon)) = (lat, lon) else {
             if !valid {
@@ -412,13 +443,13 @@ impl GpsDecoder {
         if !valid {
             self.stats.no_fix += 1;
         }
-        let t = tod(time);
+        let t = time_of_day(time);
         let back = self.stepped_back(t);
         self.stats.fixes += 1;
         LineOutcome::Fix(GpsFix {
             sentence: sentence.into(),
             date: self.date.map(|d| d.format("%Y-%m-%d").to_string()),
-            time: fmt_t(time),
+            time: time.map(|t| t.format("%H:%M:%S%.3f").to_string()),
             time_of_day_s: t,
             lat_deg: lat,
             lon_deg: lon,
@@ -434,6 +465,29 @@ impl GpsDecoder {
             seq,
         })
     }
+}
+
+/// What a position sentence reports.
+struct Reported {
+    sentence: &'static str,
+    time: Option<chrono::NaiveTime>,
+    lat: Option<f64>,
+    lon: Option<f64>,
+    alt: Option<f64>,
+    quality: u8,
+    sats: Option<u32>,
+    hdop: Option<f64>,
+    speed: Option<f64>,
+    track: Option<f64>,
+    valid: bool,
+}
+
+/// Seconds since midnight of a time of day.
+fn time_of_day(t: Option<chrono::NaiveTime>) -> Option<f64> {
+    t.map(|t| {
+        use chrono::Timelike;
+        f64::from(t.num_seconds_from_midnight()) + f64::from(t.nanosecond()) * 1e-9
+    })
 }
 
 /// `$xxGLL,ddmm.mm,N,dddmm.mm,W,hhmmss.ss,A*hh` (NMEA 2.0: no mode field).
