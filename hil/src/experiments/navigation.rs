@@ -738,6 +738,14 @@ pub fn markdown(r: &NavExperiment) -> String {
         s,
         "\nWith output correction the INS runs free (kilometres off after 20 minutes, like the pure INS) and the filter's linear error model has to describe that whole error.\n"
     );
+    s += &mis_modelled_markdown(r);
+    s
+}
+
+/// The section on a receiver the filters do not model.
+fn mis_modelled_markdown(r: &NavExperiment) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
     let e = &r.environment;
     let _ = writeln!(
         s,
