@@ -25,10 +25,11 @@
 //! reason naming the position and the command.
 
 use crate::earth;
+use crate::procedure::{Core, OnMechanism, Phases};
 use crate::ttlink::{LinkTiming, TtLink};
 use nalgebra::{Matrix4, Rotation3, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
-use wire::{TtAck, TtCmd, TtCommand, TtState, TtStatus};
+use wire::{TtCmd, TtCommand, TtState, TtStatus};
 
 /// North-finding settings (the `[north_finding]` table of nav's config).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -273,13 +274,9 @@ struct Dwell {
 /// The north-finding sequence.
 #[derive(Debug)]
 pub struct NorthFinder {
+    core: Core<Phase>,
     cfg: NorthFindingConfig,
-    phase: Phase,
     k: usize,
-    t: f64,
-    t_start: Option<f64>,
-    phase_since: f64,
-    link: TtLink,
     returning: bool,
     seen_moving: bool,
     dwell: Dwell,
@@ -288,7 +285,6 @@ pub struct NorthFinder {
     repeats: u32,
     results: Vec<PositionResult>,
     result: Option<NorthResult>,
-    abort: Option<String>,
 }
 
 const DPH: f64 = earth::DEG_PER_HOUR_PER_RAD_S;
@@ -306,12 +302,8 @@ impl NorthFinder {
         link.push(TtCommand::Enable, cfg.axis, 0.0);
         Ok(Self {
             cfg,
-            phase: Phase::Enabling,
             k: 0,
-            t: 0.0,
-            t_start: None,
-            phase_since: 0.0,
-            link,
+            core: Core::new(Phase::Enabling, link),
             returning: false,
             seen_moving: false,
             dwell: Dwell::default(),
@@ -320,18 +312,12 @@ impl NorthFinder {
             repeats: 0,
             results: Vec::new(),
             result: None,
-            abort: None,
         })
     }
 
     /// Phase.
     pub fn phase(&self) -> Phase {
-        self.phase
-    }
-
-    /// Finished (done or aborted)?
-    pub fn finished(&self) -> bool {
-        matches!(self.phase, Phase::Done | Phase::Aborted)
+        self.core.phase
     }
 
     /// The result, once done.
@@ -339,28 +325,8 @@ impl NorthFinder {
         self.result.as_ref()
     }
 
-    /// Commands sent again for want of an acknowledgement, and acknowledgements that came too
-    /// late (or matched nothing).
-    pub fn ack_counters(&self) -> (u64, u64) {
-        self.link.ack_counters()
-    }
-
-    /// Why it gave up, if it did.
-    pub fn abort_reason(&self) -> Option<&str> {
-        self.abort.as_deref()
-    }
-
-    fn fail(&mut self, why: String) {
-        if self.abort.is_none() {
-            self.abort = Some(why);
-            self.phase = Phase::Aborted;
-            self.link.clear();
-        }
-    }
-
     fn enter(&mut self, p: Phase) {
-        self.phase = p;
-        self.phase_since = self.t;
+        self.core.enter(p);
         self.seen_moving = false;
     }
 
@@ -379,113 +345,104 @@ impl NorthFinder {
 
     /// A turntable status frame arrived.
     pub fn on_status(&mut self, st: &TtStatus) {
-        if st.axis != self.cfg.axis || self.finished() {
+        if st.axis != self.cfg.axis || self.core.finished() {
             return;
         }
-        if st.faults.any() || st.state == TtState::Fault {
+        if let Some(names) = crate::procedure::faults_of(st) {
             let w = self.where_();
-            let names = if st.faults.any() {
-                st.faults.names()
-            } else {
-                "fault state".to_string()
-            };
-            self.fail(format!("turntable fault at {w}: {names}"));
+            self.core.fail(format!("turntable fault at {w}: {names}"));
             return;
         }
         if st.state == TtState::Moving {
             self.seen_moving = true;
         }
-        if self.phase == Phase::Dwell {
+        if self.core.phase == Phase::Dwell {
             // average the offset from the commanded angle: the encoder wraps at 360 deg, and at
             // the zero detent its noise straddles the wrap
             let d = (st.angle_deg - self.target()).rem_euclid(360.0);
             self.dwell.enc_sum += if d > 180.0 { d - 360.0 } else { d };
             self.dwell.enc_n += 1;
         }
-        self.link.on_status(self.t, st);
-    }
-
-    /// An acknowledgement arrived.
-    pub fn on_ack(&mut self, a: &TtAck) {
-        if let Err(f) = self.link.on_ack(a) {
-            let w = self.where_();
-            self.fail(f.describe(&w));
-        }
+        self.core.link.on_status(self.core.t, st);
     }
 
     /// The next command to send at IMU time `t` (s), if any. Call after feeding the inputs.
     pub fn poll(&mut self, t: f64) -> Option<TtCmd> {
-        self.t = t;
-        self.t_start.get_or_insert(t);
-        crate::ttlink::poll(self, t)
+        self.core.t = t;
+        self.core.t_start.get_or_insert(t);
+        crate::procedure::poll(self, t)
     }
 
     fn state(&self) -> Option<TtState> {
-        self.link.state(self.cfg.axis)
+        self.core.link.state(self.cfg.axis)
     }
 
     /// Advance the sequence on the turntable's state (no command outstanding).
     fn step(&mut self) {
-        let since = self.t - self.phase_since;
+        let since = self.core.t - self.core.phase_since;
         let w = self.where_();
-        match self.phase {
+        match self.core.phase {
             Phase::Enabling => {
                 if let Some(s) = self.state() {
                     if s == TtState::Disabled {
                         if since > self.cfg.move_timeout_s {
-                            self.fail("turntable stays disabled after Enable".into());
+                            self.core
+                                .fail("turntable stays disabled after Enable".into());
                         }
                         return;
                     }
                     self.k = 0;
                     self.begin_position();
                 } else if since > self.cfg.move_timeout_s {
-                    self.fail("no turntable status frames: is the mechanism on the bus?".into());
+                    self.core
+                        .fail("no turntable status frames: is the mechanism on the bus?".into());
                 }
             }
             Phase::Unlocking => match self.state() {
                 Some(TtState::Idle) => {
                     if self.returning {
                         self.enter(Phase::Returning);
-                        self.link.push(TtCommand::Home, self.cfg.axis, 0.0);
+                        self.core.link.push(TtCommand::Home, self.cfg.axis, 0.0);
                     } else {
                         let target = self.target();
                         self.enter(Phase::Indexing);
-                        self.link.push(TtCommand::IndexAbs, self.cfg.axis, target);
+                        self.core
+                            .link
+                            .push(TtCommand::IndexAbs, self.cfg.axis, target);
                     }
                 }
                 _ if since > self.cfg.lock_timeout_s => {
-                    self.fail(format!("lock pin did not withdraw at {w}"))
+                    self.core.fail(format!("lock pin did not withdraw at {w}"))
                 }
                 _ => {}
             },
             Phase::Indexing | Phase::Returning => {
                 if self.state() == Some(TtState::Idle) && (self.seen_moving || since > 1.0) {
                     // check we are where we asked to be
-                    let want = if self.phase == Phase::Returning {
+                    let want = if self.core.phase == Phase::Returning {
                         0.0
                     } else {
                         self.target()
                     };
-                    if let Some(st) = self.link.status(self.cfg.axis).copied() {
+                    if let Some(st) = self.core.link.status(self.cfg.axis).copied() {
                         let d = (st.angle_deg - want).rem_euclid(360.0);
                         if d.min(360.0 - d) > 0.05 {
-                            self.fail(format!(
+                            self.core.fail(format!(
                                 "turntable at {:.4} deg, not at {want} deg, after the move ({w})",
                                 st.angle_deg
                             ));
                             return;
                         }
                     }
-                    let next = if self.phase == Phase::Returning {
+                    let next = if self.core.phase == Phase::Returning {
                         Phase::LockingZero
                     } else {
                         Phase::Locking
                     };
                     self.enter(next);
-                    self.link.push(TtCommand::Lock, self.cfg.axis, 0.0);
+                    self.core.link.push(TtCommand::Lock, self.cfg.axis, 0.0);
                 } else if since > self.cfg.move_timeout_s {
-                    self.fail(format!(
+                    self.core.fail(format!(
                         "move did not finish within {} s at {w}",
                         self.cfg.move_timeout_s
                     ));
@@ -493,13 +450,13 @@ impl NorthFinder {
             }
             Phase::Locking | Phase::LockingZero => {
                 if self.state() == Some(TtState::Locked) {
-                    if self.phase == Phase::LockingZero {
+                    if self.core.phase == Phase::LockingZero {
                         self.finish();
                     } else {
                         self.enter(Phase::Settling);
                     }
                 } else if since > self.cfg.lock_timeout_s {
-                    self.fail(format!(
+                    self.core.fail(format!(
                         "lock pin did not engage within {} s at {w}",
                         self.cfg.lock_timeout_s
                     ));
@@ -523,14 +480,14 @@ impl NorthFinder {
         self.repeats_here = 0;
         self.enter(Phase::Unlocking);
         if self.state() == Some(TtState::Locked) {
-            self.link.push(TtCommand::Unlock, self.cfg.axis, 0.0);
+            self.core.link.push(TtCommand::Unlock, self.cfg.axis, 0.0);
         }
     }
 
     fn start_dwell(&mut self) {
         self.enter(Phase::Dwell);
         self.dwell = Dwell {
-            t0: self.t,
+            t0: self.core.t,
             ..Dwell::default()
         };
     }
@@ -538,8 +495,8 @@ impl NorthFinder {
     /// An attitude/velocity update from the processing chain, valid at IMU time `t` (s):
     /// rotation vector `phi` and velocity increment `dv` over the update interval.
     pub fn on_update(&mut self, t: f64, phi: [f64; 3], dv: [f64; 3]) {
-        self.t = t;
-        match self.phase {
+        self.core.t = t;
+        match self.core.phase {
             Phase::Dwell => self.dwell_update(t, phi, dv),
             Phase::Disturbed => {
                 // watch for quiet: a block of the quiet length with no departure
@@ -567,7 +524,7 @@ impl NorthFinder {
         d.vel += Vector3::from(dv);
         let w = self.cfg.end_window_s;
         let tau = t - d.t0;
-        let dur = if self.phase == Phase::Dwell {
+        let dur = if self.core.phase == Phase::Dwell {
             self.cfg.dwell_s
         } else {
             self.cfg.quiet_s
@@ -631,13 +588,13 @@ impl NorthFinder {
             }
             d.last_micro = Some(m);
         }
-        if self.phase == Phase::Dwell {
+        if self.core.phase == Phase::Dwell {
             if self.dwell.disturbed {
                 self.repeats_here += 1;
                 self.repeats += 1;
                 if self.repeats_here > self.cfg.max_repeats {
                     let w = self.where_();
-                    self.fail(format!(
+                    self.core.fail(format!(
                         "base disturbed during {} dwells in a row at {w}",
                         self.repeats_here
                     ));
@@ -750,7 +707,7 @@ impl NorthFinder {
             horizontal_earth_rate_dph: wn,
         }) = Self::solve(&self.results)
         else {
-            self.fail("too few positions measured to solve".into());
+            self.core.fail("too few positions measured to solve".into());
             return;
         };
         let expected = earth::OMEGA_IE * self.cfg.latitude_deg.to_radians().cos() * DPH;
@@ -762,7 +719,7 @@ impl NorthFinder {
             expected_earth_rate_dph: expected,
             tilt_deg: self.results[0].tilt_deg,
             dwell_total_s: self.cfg.dwell_s * self.results.len() as f64,
-            duration_s: self.t - self.t_start.unwrap_or(self.t),
+            duration_s: self.core.elapsed(),
             repeats: self.repeats,
             positions: self.results.clone(),
         });
@@ -771,19 +728,22 @@ impl NorthFinder {
 
     /// Phase and position (1-based): cheap, for deciding when to report progress.
     pub fn stage(&self) -> (Phase, usize) {
-        (self.phase, (self.k + 1).min(self.cfg.positions_deg.len()))
+        (
+            self.core.phase,
+            (self.k + 1).min(self.cfg.positions_deg.len()),
+        )
     }
 
     /// Live progress (solves for the estimate so far: call it when reporting, not per sample).
     pub fn progress(&self) -> Progress {
         let est = Self::solve(&self.results);
-        let dwell_left = match self.phase {
-            Phase::Dwell => (self.cfg.dwell_s - (self.t - self.dwell.t0)).max(0.0),
+        let dwell_left = match self.core.phase {
+            Phase::Dwell => (self.cfg.dwell_s - (self.core.t - self.dwell.t0)).max(0.0),
             Phase::Done | Phase::Aborted | Phase::Returning | Phase::LockingZero => 0.0,
             _ => self.cfg.dwell_s,
         };
         Progress {
-            phase: self.phase,
+            phase: self.core.phase,
             position: self.stage().1,
             positions: self.cfg.positions_deg.len(),
             dwell_left_s: dwell_left,
@@ -797,21 +757,16 @@ impl NorthFinder {
                 .as_ref()
                 .map(|r| r.sigma_deg)
                 .or(est.map(|e| e.sigma_deg)),
-            elapsed_s: self.t - self.t_start.unwrap_or(self.t),
+            elapsed_s: self.core.elapsed(),
             repeats: self.repeats,
         }
     }
 }
 
-impl crate::ttlink::OnLink for NorthFinder {
-    fn link(&mut self) -> &mut TtLink {
-        &mut self.link
-    }
-    fn done(&self) -> bool {
-        self.finished()
-    }
-    fn give_up(&mut self, why: String) {
-        self.fail(why)
+impl OnMechanism for NorthFinder {
+    type Phase = Phase;
+    fn core(&mut self) -> &mut Core<Phase> {
+        &mut self.core
     }
     fn at(&self) -> String {
         self.where_()
@@ -821,10 +776,19 @@ impl crate::ttlink::OnLink for NorthFinder {
     }
 }
 
+impl Phases for Phase {
+    const DONE: Self = Phase::Done;
+    const ABORTED: Self = Phase::Aborted;
+}
+
+// north-finding stamps status frames with its own update time
+crate::procedure::procedure!(NorthFinder, "north-finding", |s, _t, st| s.on_status(st));
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use wire::{TtFaults, TtResult};
+    use crate::procedure::Procedure;
+    use wire::{TtAck, TtFaults, TtResult};
 
     const G: f64 = 9.80665;
 
@@ -950,7 +914,7 @@ mod tests {
             f.on_update(t, wb.map(|x| x * dt), [0.0, 0.0, G * dt]);
             if i % 5 == 0 {
                 for a in m.acks.drain(..) {
-                    f.on_ack(&a);
+                    f.ack(&a);
                 }
                 let st = m.status(t);
                 f.on_status(&st);
@@ -966,7 +930,7 @@ mod tests {
                     dwell_t0 = t;
                 }
             }
-            if f.finished() {
+            if f.is_finished() {
                 break;
             }
         }
@@ -1017,7 +981,7 @@ mod tests {
         let stages = run(&mut f, &mut m, h, lat, |_, _| 0.0);
         let r = f
             .result()
-            .unwrap_or_else(|| panic!("{:?} {stages:?}", f.abort_reason()));
+            .unwrap_or_else(|| panic!("{:?} {stages:?}", f.abort()));
         let e = (r.heading_deg - h + 180.0).rem_euclid(360.0) - 180.0;
         assert!(e.abs() < 1e-6, "{r:?}");
         assert_eq!(r.repeats, 0);
@@ -1077,9 +1041,7 @@ mod tests {
             }
         };
         let stages = run(&mut f, &mut m, h, lat, slam);
-        let r = f
-            .result()
-            .unwrap_or_else(|| panic!("{:?}", f.abort_reason()));
+        let r = f.result().unwrap_or_else(|| panic!("{:?}", f.abort()));
         assert_eq!(r.repeats, 1, "{stages:?}");
         assert_eq!(r.positions[1].repeats, 1);
         assert!(stages.contains(&(Phase::Disturbed, 2)), "{stages:?}");
@@ -1101,7 +1063,7 @@ mod tests {
         let c3 = f.poll(1.2).unwrap();
         assert_eq!(c3.seq, c1.seq + 2);
         assert!(f.poll(1.8).is_none());
-        let why = f.abort_reason().unwrap();
+        let why = f.abort().unwrap();
         assert!(
             why.contains("no acknowledgement of Enable") && why.contains("after 3 tries"),
             "{why}"
@@ -1119,9 +1081,9 @@ mod tests {
         let c = f.poll(0.0).unwrap();
         m.command(0.0, c);
         for a in m.acks.drain(..) {
-            f.on_ack(&a);
+            f.ack(&a);
         }
-        let why = f.abort_reason().unwrap();
+        let why = f.abort().unwrap();
         assert!(why.contains("rejected Enable at position 1 of 4"), "{why}");
 
         let mut f = NorthFinder::new(cfg(28.2)).unwrap();
@@ -1136,7 +1098,7 @@ mod tests {
         m.command(0.0, c);
         let st = m.status(0.01);
         f.on_status(&st);
-        let why = f.abort_reason().unwrap();
+        let why = f.abort().unwrap();
         assert!(
             why.contains("turntable fault at position 1") && why.contains("lock"),
             "{why}"
@@ -1147,7 +1109,7 @@ mod tests {
     fn heartbeats_keep_the_link_alive_while_the_sequence_waits() {
         let mut f = NorthFinder::new(cfg(28.2)).unwrap();
         let c = f.poll(0.0).unwrap();
-        f.on_ack(&TtAck {
+        f.ack(&TtAck {
             seq: c.seq,
             command: c.command,
             axis: 0,
@@ -1169,7 +1131,7 @@ mod tests {
             f.on_status(&disabled);
             if let Some(b) = f.poll(t) {
                 assert_eq!(b.command, TtCommand::Heartbeat as u8);
-                f.on_ack(&TtAck {
+                f.ack(&TtAck {
                     seq: b.seq,
                     command: b.command,
                     axis: 0,
@@ -1179,6 +1141,6 @@ mod tests {
             }
         }
         assert_eq!(beats.len(), 4, "every 0.25 s: {beats:?}");
-        assert!(!f.finished());
+        assert!(!f.is_finished());
     }
 }

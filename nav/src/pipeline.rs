@@ -687,9 +687,9 @@ impl Pipeline {
                 }
                 // navigation takes over once north-finding (when it runs) is finished
                 if let Some(n) = self.navigator.as_mut() {
-                    let cal_running = self.cal.as_ref().is_some_and(|c| !c.cal.finished())
-                        || self.tcal.as_ref().is_some_and(|c| !c.cal.finished());
-                    if self.nf.as_ref().is_none_or(|f| f.finder.finished()) && !cal_running {
+                    let cal_running = self.cal.as_ref().is_some_and(|c| !c.cal.is_finished())
+                        || self.tcal.as_ref().is_some_and(|c| !c.cal.is_finished());
+                    if self.nf.as_ref().is_none_or(|f| f.finder.is_finished()) && !cal_running {
                         n.on_update(
                             t,
                             u.phi,
@@ -896,19 +896,19 @@ impl Pipeline {
     /// The solution's mode: self-calibration or north-finding while it runs, then the
     /// navigator's.
     pub fn mode(&self) -> wire::NavMode {
-        if let Some(c) = self.cal.as_ref().filter(|c| !c.cal.finished()) {
+        if let Some(c) = self.cal.as_ref().filter(|c| !c.cal.is_finished()) {
             return match c.cal.phase() {
                 CalPhase::Enabling | CalPhase::Levelling => wire::NavMode::Levelling,
                 _ => wire::NavMode::Calibrating,
             };
         }
-        if let Some(c) = self.tcal.as_ref().filter(|c| !c.cal.finished()) {
+        if let Some(c) = self.tcal.as_ref().filter(|c| !c.cal.is_finished()) {
             return match c.cal.phase() {
                 TetraPhase::Enabling => wire::NavMode::Init,
                 _ => wire::NavMode::Calibrating,
             };
         }
-        let nf_running = self.nf.as_ref().is_some_and(|f| !f.finder.finished());
+        let nf_running = self.nf.as_ref().is_some_and(|f| !f.finder.is_finished());
         match (&self.navigator, nf_running) {
             (_, true) => wire::NavMode::NorthFinding,
             (Some(n), false) => n.mode(),
@@ -925,18 +925,9 @@ impl Pipeline {
             imu_gaps: st.gaps > 0,
             imu_bit: st.bit_fail_samples > 0,
             gps_stale: self.gps_expected && nav.is_none_or(|n| n.gps_stale()),
-            turntable: self
-                .nf
-                .as_ref()
-                .is_some_and(|f| f.finder.abort_reason().is_some())
-                || self
-                    .cal
-                    .as_ref()
-                    .is_some_and(|c| c.cal.abort_reason().is_some())
-                || self
-                    .tcal
-                    .as_ref()
-                    .is_some_and(|c| c.cal.abort_reason().is_some()),
+            turntable: self.nf.as_ref().is_some_and(|f| f.finder.abort().is_some())
+                || self.cal.as_ref().is_some_and(|c| c.cal.abort().is_some())
+                || self.tcal.as_ref().is_some_and(|c| c.cal.abort().is_some()),
             filter: self.proc.stats().invalid_since.is_some()
                 || nav.is_some_and(|n| {
                     n.filter().is_some_and(|k| k.stats().reanchors > 0)
@@ -1196,7 +1187,7 @@ impl Pipeline {
             north_finding: self.nf.as_ref().map(|f| NorthFindingSummary {
                 phase: f.finder.phase(),
                 result: f.finder.result().cloned(),
-                abort: f.finder.abort_reason().map(str::to_string),
+                abort: f.finder.abort().map(str::to_string),
                 commands_sent: f.rep.commands_sent,
                 turntable_frames: f.rep.frames,
                 command_retries: f.finder.ack_counters().0,
@@ -1205,7 +1196,7 @@ impl Pipeline {
             self_calibration: self.cal.as_ref().map(|c| SelfCalibrationSummary {
                 phase: c.cal.phase(),
                 result: c.cal.result().cloned(),
-                abort: c.cal.abort_reason().map(str::to_string),
+                abort: c.cal.abort().map(str::to_string),
                 parameters: c.parameters.clone(),
                 parameters_file: None,
                 commands_sent: c.rep.commands_sent,
@@ -1218,7 +1209,7 @@ impl Pipeline {
                 parameters_file: None,
                 phase: c.cal.phase(),
                 result: c.cal.result().cloned(),
-                abort: c.cal.abort_reason().map(str::to_string),
+                abort: c.cal.abort().map(str::to_string),
                 commands_sent: c.rep.commands_sent,
                 frames: c.rep.frames,
                 command_retries: c.cal.ack_counters().0,
@@ -1389,6 +1380,6 @@ mod tests {
                 .iter()
                 .all(|t| t.mode == NavMode::NorthFinding)
         );
-        assert!(p.finder().is_some_and(|f| !f.finished()));
+        assert!(p.finder().is_some_and(|f| !f.is_finished()));
     }
 }

@@ -30,11 +30,12 @@
 
 use crate::calib::{AlignKf, AlignKfConfig, GyroRls, c_p_b, expected_rate};
 use crate::earth;
+use crate::procedure::{Core, OnMechanism, Phases};
 use crate::ttlink::{AxisTrack, LinkTiming, TtLink};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
-use wire::{TtAck, TtCmd, TtCommand, TtState, TtStatus};
+use wire::{TtCmd, TtCommand, TtState, TtStatus};
 
 const DPH: f64 = earth::DEG_PER_HOUR_PER_RAD_S;
 const G0: f64 = 9.80665;
@@ -302,13 +303,9 @@ struct Estimation {
 /// The calibration procedure.
 #[derive(Debug)]
 pub struct SelfCalibrator {
+    core: Core<CalPhase>,
     cfg: SelfCalibrationConfig,
     lat: f64,
-    phase: CalPhase,
-    t: f64,
-    t_start: Option<f64>,
-    phase_since: f64,
-    link: TtLink,
     axes: [AxisTrack; 2],
     pending: VecDeque<Pending>,
     level: (Vector3<f64>, Vector3<f64>, f64),
@@ -318,7 +315,6 @@ pub struct SelfCalibrator {
     rotation_s: f64,
     skipped: u64,
     result: Option<SelfCalibrationResult>,
-    abort: Option<String>,
 }
 
 impl SelfCalibrator {
@@ -331,11 +327,7 @@ impl SelfCalibrator {
         Ok(Self {
             lat: cfg.latitude_deg.to_radians(),
             cfg,
-            phase: CalPhase::Enabling,
-            t: 0.0,
-            t_start: None,
-            phase_since: 0.0,
-            link,
+            core: Core::new(CalPhase::Enabling, link),
             axes: [AxisTrack::default(), AxisTrack::default()],
             pending: VecDeque::new(),
             level: (Vector3::zeros(), Vector3::zeros(), 0.0),
@@ -345,7 +337,6 @@ impl SelfCalibrator {
             rotation_s: 0.0,
             skipped: 0,
             result: None,
-            abort: None,
         })
     }
 
@@ -356,12 +347,7 @@ impl SelfCalibrator {
 
     /// Phase.
     pub fn phase(&self) -> CalPhase {
-        self.phase
-    }
-
-    /// Finished (done or aborted)?
-    pub fn finished(&self) -> bool {
-        matches!(self.phase, CalPhase::Done | CalPhase::Aborted)
+        self.core.phase
     }
 
     /// The result, once done.
@@ -369,31 +355,8 @@ impl SelfCalibrator {
         self.result.as_ref()
     }
 
-    /// Why it gave up, if it did.
-    pub fn abort_reason(&self) -> Option<&str> {
-        self.abort.as_deref()
-    }
-
-    /// Resends and stale acknowledgements of the mechanism's link.
-    pub fn ack_counters(&self) -> (u64, u64) {
-        self.link.ack_counters()
-    }
-
-    fn fail(&mut self, why: String) {
-        if self.abort.is_none() {
-            self.abort = Some(why);
-            self.phase = CalPhase::Aborted;
-            self.link.clear();
-        }
-    }
-
-    fn enter(&mut self, p: CalPhase) {
-        self.phase = p;
-        self.phase_since = self.t;
-    }
-
     fn where_(&self) -> String {
-        format!("{:?}", self.phase).to_lowercase()
+        format!("{:?}", self.core.phase).to_lowercase()
     }
 
     fn slot(&self, axis: u8) -> Option<usize> {
@@ -411,26 +374,21 @@ impl SelfCalibrator {
         let Some(slot) = self.slot(st.axis) else {
             return;
         };
-        if self.finished() {
+        if self.core.finished() {
             return;
         }
-        if st.faults.any() || st.state == TtState::Fault {
-            let names = if st.faults.any() {
-                st.faults.names()
-            } else {
-                "fault state".to_string()
-            };
+        if let Some(names) = crate::procedure::faults_of(st) {
             let w = self.where_();
-            self.fail(format!(
+            self.core.fail(format!(
                 "turntable fault on axis {} while {w}: {names}",
                 st.axis
             ));
             return;
         }
-        self.link.on_status(t, st);
+        self.core.link.on_status(t, st);
         let a = &mut self.axes[slot];
         a.push(t, st.angle_deg);
-        if matches!(self.phase, CalPhase::Levelling | CalPhase::Unlocking)
+        if matches!(self.core.phase, CalPhase::Levelling | CalPhase::Unlocking)
             && let Some((_, now)) = a.latest()
         {
             // the mean at rest; restarted should the axis have crept
@@ -443,28 +401,20 @@ impl SelfCalibrator {
         self.drain();
     }
 
-    /// An acknowledgement arrived.
-    pub fn on_ack(&mut self, a: &TtAck) {
-        if let Err(f) = self.link.on_ack(a) {
-            let w = self.where_();
-            self.fail(f.describe(&w));
-        }
-    }
-
     /// One IMU sample over `(t1 - dt, t1]` (s, IMU time): its angle and velocity increments
     /// (rad, m/s), as nav's front end corrected them.
     pub fn on_sample(&mut self, t1: f64, dt: f64, dtheta: [f64; 3], dv: [f64; 3], saturated: bool) {
-        self.t = self.t.max(t1);
-        if saturated && matches!(self.phase, CalPhase::Levelling | CalPhase::Rotating) {
+        self.core.t = self.core.t.max(t1);
+        if saturated && matches!(self.core.phase, CalPhase::Levelling | CalPhase::Rotating) {
             let w = self.where_();
-            self.fail(format!(
+            self.core.fail(format!(
                 "the IMU saturated while {w} (at {} deg/s): the mechanism's rate is beyond the unit's range",
                 self.cfg.rate_dps
             ));
             return;
         }
         let (dtheta, dv) = (Vector3::from(dtheta), Vector3::from(dv));
-        match self.phase {
+        match self.core.phase {
             CalPhase::Levelling => {
                 self.level.0 += dtheta;
                 self.level.1 += dv;
@@ -545,15 +495,15 @@ impl SelfCalibrator {
 
     /// The next command to send at IMU time `t` (s), if any. Call after feeding the inputs.
     pub fn poll(&mut self, t: f64) -> Option<TtCmd> {
-        self.t = self.t.max(t);
-        self.t_start.get_or_insert(t);
-        crate::ttlink::poll(self, t)
+        self.core.t = self.core.t.max(t);
+        self.core.t_start.get_or_insert(t);
+        crate::procedure::poll(self, t)
     }
 
     fn states(&self) -> [Option<TtState>; 2] {
         [
-            self.link.state(self.cfg.outer_axis),
-            self.link.state(self.cfg.inner_axis),
+            self.core.link.state(self.cfg.outer_axis),
+            self.core.link.state(self.cfg.inner_axis),
         ]
     }
 
@@ -562,16 +512,16 @@ impl SelfCalibrator {
     }
 
     fn step(&mut self) {
-        let since = self.t - self.phase_since;
+        let since = self.core.t - self.core.phase_since;
         let timeout = self.cfg.move_timeout_s;
         let w = self.where_();
-        match self.phase {
+        match self.core.phase {
             CalPhase::Enabling => {
                 if self.both(|s| s != TtState::Disabled) {
-                    self.enter(CalPhase::Levelling);
+                    self.core.enter(CalPhase::Levelling);
                     self.level = (Vector3::zeros(), Vector3::zeros(), 0.0);
                 } else if since > timeout {
-                    self.fail(
+                    self.core.fail(
                         "the mechanism's axes did not come up after Enable: are both on the bus?"
                             .into(),
                     );
@@ -579,22 +529,23 @@ impl SelfCalibrator {
             }
             CalPhase::Levelling => {
                 if !self.both(|s| matches!(s, TtState::Idle | TtState::Locked)) {
-                    self.fail("an axis moved during the coarse alignment".into());
+                    self.core
+                        .fail("an axis moved during the coarse alignment".into());
                 } else if since >= self.cfg.level_s {
                     match self.coarse_alignment() {
                         Ok(q) => {
                             self.q_nb = Some(q);
-                            self.enter(CalPhase::Unlocking);
+                            self.core.enter(CalPhase::Unlocking);
                             for (axis, s) in [self.cfg.outer_axis, self.cfg.inner_axis]
                                 .into_iter()
                                 .zip(self.states())
                             {
                                 if s == Some(TtState::Locked) {
-                                    self.link.push(TtCommand::Unlock, axis, 0.0);
+                                    self.core.link.push(TtCommand::Unlock, axis, 0.0);
                                 }
                             }
                         }
-                        Err(why) => self.fail(why),
+                        Err(why) => self.core.fail(why),
                     }
                 }
             }
@@ -602,41 +553,52 @@ impl SelfCalibrator {
                 if self.both(|s| s == TtState::Idle) {
                     self.start_rotation();
                 } else if since > timeout {
-                    self.fail(format!("the lock pins did not withdraw while {w}"));
+                    self.core
+                        .fail(format!("the lock pins did not withdraw while {w}"));
                 }
             }
             CalPhase::Rotating => self.rotate(since),
             CalPhase::Stopping => {
                 if self.both(|s| s == TtState::Idle) {
-                    self.enter(CalPhase::Returning);
-                    self.link.push(TtCommand::Home, self.cfg.outer_axis, 0.0);
-                    self.link.push(TtCommand::Home, self.cfg.inner_axis, 0.0);
+                    self.core.enter(CalPhase::Returning);
+                    self.core
+                        .link
+                        .push(TtCommand::Home, self.cfg.outer_axis, 0.0);
+                    self.core
+                        .link
+                        .push(TtCommand::Home, self.cfg.inner_axis, 0.0);
                 } else if since > timeout {
-                    self.fail(format!("the axes did not stop within {timeout} s"));
+                    self.core
+                        .fail(format!("the axes did not stop within {timeout} s"));
                 }
             }
             CalPhase::Returning => {
                 // both back at zero and at rest (a second after the commands, so that the
                 // state read is the move's, not the rest before it)
                 if since > 1.0 && self.both(|s| s == TtState::Idle) {
-                    self.enter(CalPhase::Locking);
-                    self.link.push(TtCommand::Lock, self.cfg.outer_axis, 0.0);
-                    self.link.push(TtCommand::Lock, self.cfg.inner_axis, 0.0);
+                    self.core.enter(CalPhase::Locking);
+                    self.core
+                        .link
+                        .push(TtCommand::Lock, self.cfg.outer_axis, 0.0);
+                    self.core
+                        .link
+                        .push(TtCommand::Lock, self.cfg.inner_axis, 0.0);
                 } else if since > timeout {
-                    self.fail(format!(
+                    self.core.fail(format!(
                         "the axes did not return to zero within {timeout} s"
                     ));
                 }
             }
             CalPhase::Locking => {
                 if self.both(|s| s == TtState::Locked) {
-                    self.phase = CalPhase::Done;
-                    let d = self.t - self.t_start.unwrap_or(self.t);
+                    self.core.phase = CalPhase::Done;
+                    let d = self.core.elapsed();
                     if let Some(r) = self.result.as_mut() {
                         r.duration_s = d;
                     }
                 } else if since > timeout {
-                    self.fail(format!("the lock pins did not engage within {timeout} s"));
+                    self.core
+                        .fail(format!("the lock pins did not engage within {timeout} s"));
                 }
             }
             CalPhase::Done | CalPhase::Aborted => {}
@@ -682,13 +644,14 @@ impl SelfCalibrator {
 
     fn start_rotation(&mut self) {
         let Some(q_nb) = self.q_nb else {
-            self.fail("rotation without a coarse alignment".into());
+            self.core.fail("rotation without a coarse alignment".into());
             return;
         };
-        self.enter(CalPhase::Rotating);
+        self.core.enter(CalPhase::Rotating);
         let c = &self.cfg;
         let (Some(z), Some(x)) = (self.axes[0].latest(), self.axes[1].latest()) else {
-            self.fail("no axis angles at the start of the rotation".into());
+            self.core
+                .fail("no axis angles at the start of the rotation".into());
             return;
         };
         let q_np = q_nb * c_p_b(x.1.to_radians(), z.1.to_radians());
@@ -732,10 +695,10 @@ impl SelfCalibrator {
             } else {
                 now.1
             };
-            a.chain = Some((self.t, rest));
+            a.chain = Some((self.core.t, rest));
         }
         self.est = Some(Estimation {
-            t0: self.t,
+            t0: self.core.t,
             rls,
             q_pert,
             expected_pert: [Vector3::zeros(); 3],
@@ -745,12 +708,13 @@ impl SelfCalibrator {
             kf_steps: 0,
             measured: Vector3::zeros(),
             expected: Vector3::zeros(),
-            next_measure: self.t + c.measure_every_s,
+            next_measure: self.core.t + c.measure_every_s,
             measurements: 0,
         });
         self.axes[0].dir = 1.0;
         self.axes[0].turn_from = z.1;
-        self.link
+        self.core
+            .link
             .push(TtCommand::Rate, self.cfg.outer_axis, self.cfg.rate_dps);
         self.inner_started = false;
     }
@@ -760,9 +724,9 @@ impl SelfCalibrator {
         if since >= c.rotate_s {
             self.rotation_s = since;
             self.finish_estimates();
-            self.enter(CalPhase::Stopping);
-            self.link.push(TtCommand::Stop, c.outer_axis, 0.0);
-            self.link.push(TtCommand::Stop, c.inner_axis, 0.0);
+            self.core.enter(CalPhase::Stopping);
+            self.core.link.push(TtCommand::Stop, c.outer_axis, 0.0);
+            self.core.link.push(TtCommand::Stop, c.inner_axis, 0.0);
             return;
         }
         if !self.inner_started && since >= c.inner_delay_s {
@@ -771,7 +735,9 @@ impl SelfCalibrator {
                 self.axes[1].dir = 1.0;
                 self.axes[1].turn_from = x.1;
             }
-            self.link.push(TtCommand::Rate, c.inner_axis, c.rate_dps);
+            self.core
+                .link
+                .push(TtCommand::Rate, c.inner_axis, c.rate_dps);
             return;
         }
         for (slot, axis) in [(0, c.outer_axis), (1, c.inner_axis)] {
@@ -782,14 +748,14 @@ impl SelfCalibrator {
                 a.turn_from = now;
                 a.reversals += 1;
                 let rate = a.dir * c.rate_dps;
-                self.link.push(TtCommand::Rate, axis, rate);
+                self.core.link.push(TtCommand::Rate, axis, rate);
             }
         }
     }
 
     fn finish_estimates(&mut self) {
         let (Some(e), Some(q_nb)) = (&self.est, self.q_nb) else {
-            self.fail("no rotation data".into());
+            self.core.fail("no rotation data".into());
             return;
         };
         let lat = self.lat;
@@ -840,16 +806,16 @@ impl SelfCalibrator {
 
     /// Progress, for the operator.
     pub fn progress(&self) -> CalProgress {
-        let since = self.t - self.phase_since;
-        let left = match self.phase {
+        let since = self.core.t - self.core.phase_since;
+        let left = match self.core.phase {
             CalPhase::Levelling => (self.cfg.level_s - since).max(0.0),
             CalPhase::Rotating => (self.cfg.rotate_s - since).max(0.0),
             _ => 0.0,
         };
         let rls = self.est.as_ref().map(|e| &e.rls);
         CalProgress {
-            phase: self.phase,
-            elapsed_s: self.t - self.t_start.unwrap_or(self.t),
+            phase: self.core.phase,
+            elapsed_s: self.core.elapsed(),
             phase_left_s: left,
             rls_bias_dph: rls.map(|r| (r.bias() * DPH).into()),
             rls_scale_factor_ppm: rls.map(|r| (r.scale_factor() * 1e6).into()),
@@ -858,19 +824,14 @@ impl SelfCalibrator {
 
     /// The phase, and a coarse stage number within it, for reporting changes.
     pub fn stage(&self) -> CalPhase {
-        self.phase
+        self.core.phase
     }
 }
 
-impl crate::ttlink::OnLink for SelfCalibrator {
-    fn link(&mut self) -> &mut TtLink {
-        &mut self.link
-    }
-    fn done(&self) -> bool {
-        self.finished()
-    }
-    fn give_up(&mut self, why: String) {
-        self.fail(why)
+impl OnMechanism for SelfCalibrator {
+    type Phase = CalPhase;
+    fn core(&mut self) -> &mut Core<CalPhase> {
+        &mut self.core
     }
     fn at(&self) -> String {
         self.where_()
@@ -879,6 +840,14 @@ impl crate::ttlink::OnLink for SelfCalibrator {
         self.step()
     }
 }
+
+impl Phases for CalPhase {
+    const DONE: Self = CalPhase::Done;
+    const ABORTED: Self = CalPhase::Aborted;
+}
+
+crate::procedure::procedure!(SelfCalibrator, "self-calibration", |s, t, st| s
+    .on_status(t, st));
 
 #[cfg(test)]
 mod tests {

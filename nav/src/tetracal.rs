@@ -24,12 +24,13 @@
 //! factors came out 1e-4 off at the paper's profile, against 9e-6 without encoder noise).
 
 use crate::calib::{GyroCoefficients, TETRA_GYROS, TetraKf, table_rate};
+use crate::procedure::{Core, OnMechanism, Phases};
 use crate::redundant::{ParityMonitor, Status};
 use crate::ttlink::{AxisTrack, LinkTiming, TtLink};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
-use wire::{MemsGyro, TtAck, TtCmd, TtCommand, TtState, TtStatus};
+use wire::{MemsGyro, TtCmd, TtCommand, TtState, TtStatus};
 
 /// Calibration settings (the `[tetra_calibration]` table of nav's config).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -304,14 +305,10 @@ struct Pending {
 /// The procedure.
 #[derive(Debug)]
 pub struct TetraCalibrator {
+    core: Core<TetraPhase>,
     cfg: TetraCalibrationConfig,
     lat: f64,
     q_nb: UnitQuaternion<f64>,
-    phase: TetraPhase,
-    t: f64,
-    t_start: Option<f64>,
-    phase_since: f64,
-    link: TtLink,
     axes: [AxisTrack; 3],
     last_counts: Option<[u16; TETRA_GYROS]>,
     pending: VecDeque<Pending>,
@@ -331,7 +328,6 @@ pub struct TetraCalibrator {
     unmatched: u64,
     skipped: u64,
     result: Option<TetraCalibrationResult>,
-    abort: Option<String>,
 }
 
 impl TetraCalibrator {
@@ -362,11 +358,7 @@ impl TetraCalibrator {
             kf: TetraKf::new(cfg.p0, cfg.r),
             loaded,
             cfg,
-            phase: TetraPhase::Enabling,
-            t: 0.0,
-            t_start: None,
-            phase_since: 0.0,
-            link,
+            core: Core::new(TetraPhase::Enabling, link),
             axes: Default::default(),
             last_counts: None,
             pending: VecDeque::new(),
@@ -379,7 +371,6 @@ impl TetraCalibrator {
             unmatched: 0,
             skipped: 0,
             result: None,
-            abort: None,
         })
     }
 
@@ -414,12 +405,7 @@ impl TetraCalibrator {
 
     /// Phase.
     pub fn phase(&self) -> TetraPhase {
-        self.phase
-    }
-
-    /// Finished (done or aborted)?
-    pub fn finished(&self) -> bool {
-        matches!(self.phase, TetraPhase::Done | TetraPhase::Aborted)
+        self.core.phase
     }
 
     /// The result, once done.
@@ -427,74 +413,45 @@ impl TetraCalibrator {
         self.result.as_ref()
     }
 
-    /// Why it gave up, if it did.
-    pub fn abort_reason(&self) -> Option<&str> {
-        self.abort.as_deref()
-    }
-
-    /// Resends and stale acknowledgements of the table's link.
-    pub fn ack_counters(&self) -> (u64, u64) {
-        self.link.ack_counters()
-    }
-
-    fn fail(&mut self, why: String) {
-        if self.abort.is_none() {
-            self.abort = Some(why);
-            self.phase = TetraPhase::Aborted;
-            self.link.clear();
-        }
-    }
-
     fn enter(&mut self, p: TetraPhase) {
-        self.phase = p;
-        self.phase_since = self.t;
+        self.core.enter(p);
         self.commanded = None;
         self.block = None;
     }
 
     fn where_(&self) -> String {
-        format!("{:?}", self.phase).to_lowercase()
+        format!("{:?}", self.core.phase).to_lowercase()
     }
 
     fn profiling(&self) -> bool {
-        matches!(self.phase, TetraPhase::Calibrating | TetraPhase::Monitoring)
+        matches!(
+            self.core.phase,
+            TetraPhase::Calibrating | TetraPhase::Monitoring
+        )
     }
 
     /// A status frame arrived; `t` is the end time of the last IMU sample nav had then.
     pub fn on_status(&mut self, t: f64, st: &TtStatus) {
-        if st.axis > 2 || self.finished() {
+        if st.axis > 2 || self.core.finished() {
             return;
         }
-        if st.faults.any() || st.state == TtState::Fault {
-            let names = if st.faults.any() {
-                st.faults.names()
-            } else {
-                "fault state".to_string()
-            };
+        if let Some(names) = crate::procedure::faults_of(st) {
             let w = self.where_();
-            self.fail(format!(
+            self.core.fail(format!(
                 "table fault on axis {} while {w}: {names}",
                 st.axis
             ));
             return;
         }
-        self.link.on_status(t, st);
+        self.core.link.on_status(t, st);
         self.axes[usize::from(st.axis)].push(t, st.angle_deg);
         self.drain();
-    }
-
-    /// An acknowledgement arrived.
-    pub fn on_ack(&mut self, a: &TtAck) {
-        if let Err(f) = self.link.on_ack(a) {
-            let w = self.where_();
-            self.fail(f.describe(&w));
-        }
     }
 
     /// A MEMS_GYRO frame arrived after the IMU sample `sample` (its extended counter), which
     /// ends at `t1` and lasts `dt` (s).
     pub fn on_mems(&mut self, sample: u64, t1: f64, dt: f64, m: &MemsGyro) {
-        self.t = self.t.max(t1);
+        self.core.t = self.core.t.max(t1);
         if u64::from(m.sample_counter_low) != sample & 0xFF {
             self.unmatched += 1;
             self.last_counts = None;
@@ -566,7 +523,7 @@ impl TetraCalibrator {
             }
             let known = table_rate(self.lat, &self.q_nb, &gimbal).map(f64::to_degrees);
             self.samples += 1;
-            match self.phase {
+            match self.core.phase {
                 TetraPhase::Calibrating => self.kf.update(&p.out, &known),
                 TetraPhase::Monitoring => self.watch(p.t1, p.t1 - p.t0, &p.out, &known),
                 _ => {}
@@ -584,7 +541,7 @@ impl TetraCalibrator {
         let w =
             crate::redundant::rate_through(&axes, &biased, [true; TETRA_GYROS]).unwrap_or(*known);
         let corrected: [f64; TETRA_GYROS] = std::array::from_fn(|i| est[i].correct(i, out[i], &w));
-        let t_rel = t - self.phase_since;
+        let t_rel = t - self.core.phase_since;
         let (window, k) = (self.cfg.monitor_window, self.cfg.monitor_k);
         // the output's quantization adds to the noise: the difference of two uniform errors of
         // one pulse over the sample
@@ -617,29 +574,30 @@ impl TetraCalibrator {
 
     /// The next command to send at IMU time `t` (s), if any. Call after feeding the inputs.
     pub fn poll(&mut self, t: f64) -> Option<TtCmd> {
-        self.t = self.t.max(t);
-        self.t_start.get_or_insert(t);
-        crate::ttlink::poll(self, t)
+        self.core.t = self.core.t.max(t);
+        self.core.t_start.get_or_insert(t);
+        crate::procedure::poll(self, t)
     }
 
     fn all(&self, f: impl Fn(TtState) -> bool) -> bool {
-        (0..3).all(|a| self.link.state(a).is_some_and(&f))
+        (0..3).all(|a| self.core.link.state(a).is_some_and(&f))
     }
 
     fn step(&mut self) {
-        let since = self.t - self.phase_since;
+        let since = self.core.t - self.core.phase_since;
         let timeout = self.cfg.move_timeout_s;
-        match self.phase {
+        match self.core.phase {
             TetraPhase::Enabling => {
                 if self.all(|s| s != TtState::Disabled) {
                     self.enter(TetraPhase::Unlocking);
                     for a in 0..3 {
-                        if self.link.state(a) == Some(TtState::Locked) {
-                            self.link.push(TtCommand::Unlock, a, 0.0);
+                        if self.core.link.state(a) == Some(TtState::Locked) {
+                            self.core.link.push(TtCommand::Unlock, a, 0.0);
                         }
                     }
                 } else if since > timeout {
-                    self.fail("the table's three axes did not come up after Enable".into());
+                    self.core
+                        .fail("the table's three axes did not come up after Enable".into());
                 }
             }
             TetraPhase::Unlocking => {
@@ -650,7 +608,7 @@ impl TetraCalibrator {
                         TetraPhase::Calibrating
                     });
                 } else if since > timeout {
-                    self.fail("the lock pins did not withdraw".into());
+                    self.core.fail("the lock pins did not withdraw".into());
                 }
             }
             TetraPhase::Calibrating | TetraPhase::Monitoring => self.profile(since),
@@ -658,33 +616,35 @@ impl TetraCalibrator {
                 if self.all(|s| s == TtState::Idle) {
                     self.enter(TetraPhase::Returning);
                     for a in 0..3 {
-                        self.link.push(TtCommand::Home, a, 0.0);
+                        self.core.link.push(TtCommand::Home, a, 0.0);
                     }
                 } else if since > timeout {
-                    self.fail(format!("the axes did not stop within {timeout} s"));
+                    self.core
+                        .fail(format!("the axes did not stop within {timeout} s"));
                 }
             }
             TetraPhase::Returning => {
                 if since > 1.0 && self.all(|s| s == TtState::Idle) {
                     self.enter(TetraPhase::Locking);
                     for a in 0..3 {
-                        self.link.push(TtCommand::Lock, a, 0.0);
+                        self.core.link.push(TtCommand::Lock, a, 0.0);
                     }
                 } else if since > timeout {
-                    self.fail(format!(
+                    self.core.fail(format!(
                         "the axes did not return to zero within {timeout} s"
                     ));
                 }
             }
             TetraPhase::Locking => {
                 if self.all(|s| s == TtState::Locked) {
-                    self.phase = TetraPhase::Done;
-                    let d = self.t - self.t_start.unwrap_or(self.t);
+                    self.core.phase = TetraPhase::Done;
+                    let d = self.core.elapsed();
                     if let Some(r) = self.result.as_mut() {
                         r.duration_s = d;
                     }
                 } else if since > timeout {
-                    self.fail(format!("the lock pins did not engage within {timeout} s"));
+                    self.core
+                        .fail(format!("the lock pins did not engage within {timeout} s"));
                 }
             }
             TetraPhase::Done | TetraPhase::Aborted => {}
@@ -696,14 +656,14 @@ impl TetraCalibrator {
     fn profile(&mut self, since: f64) {
         let c = self.cfg.clone();
         if since >= c.profile_s() {
-            if self.phase == TetraPhase::Calibrating && c.monitor {
+            if self.core.phase == TetraPhase::Calibrating && c.monitor {
                 self.enter(TetraPhase::Monitoring);
                 return;
             }
             self.finish_result();
             self.enter(TetraPhase::Stopping);
             for a in 0..3 {
-                self.link.push(TtCommand::Stop, a, 0.0);
+                self.core.link.push(TtCommand::Stop, a, 0.0);
             }
             return;
         }
@@ -712,16 +672,20 @@ impl TetraCalibrator {
             && self.commanded != Some(body)
         {
             if let Some(prev) = self.commanded {
-                self.link.push(TtCommand::Stop, c.table_axis(prev), 0.0);
+                self.core
+                    .link
+                    .push(TtCommand::Stop, c.table_axis(prev), 0.0);
             }
             self.commanded = Some(body);
-            self.link.push(TtCommand::Rate, axis, c.rate_dps);
+            self.core.link.push(TtCommand::Rate, axis, c.rate_dps);
             return;
         }
         if turn.is_none()
             && let Some(prev) = self.commanded.take()
         {
-            self.link.push(TtCommand::Stop, c.table_axis(prev), 0.0);
+            self.core
+                .link
+                .push(TtCommand::Stop, c.table_axis(prev), 0.0);
             return;
         }
         self.check_rates(since, turn);
@@ -755,7 +719,7 @@ impl TetraCalibrator {
                     let got = (n.1 - b.1) / (n.0 - b.0).max(1e-9);
                     if (got - want).abs() > c.rate_tolerance_dps {
                         let w = self.where_();
-                        self.fail(format!(
+                        self.core.fail(format!(
                             "the table's axis {axis} turned at {got:.4} deg/s at {since:.1} s of the profile while {w}, commanded {want}: calibration data refused"
                         ));
                         return;
@@ -789,16 +753,16 @@ impl TetraCalibrator {
 
     /// The phase (a progress line at each change).
     pub fn stage(&self) -> TetraPhase {
-        self.phase
+        self.core.phase
     }
 
     /// Progress, for the operator.
     pub fn progress(&self) -> TetraProgress {
-        let since = self.t - self.phase_since;
+        let since = self.core.t - self.core.phase_since;
         let profiling = self.profiling();
         TetraProgress {
-            phase: self.phase,
-            elapsed_s: self.t - self.t_start.unwrap_or(self.t),
+            phase: self.core.phase,
+            elapsed_s: self.core.elapsed(),
             phase_left_s: if profiling {
                 (self.cfg.profile_s() - since).max(0.0)
             } else {
@@ -813,15 +777,10 @@ impl TetraCalibrator {
     }
 }
 
-impl crate::ttlink::OnLink for TetraCalibrator {
-    fn link(&mut self) -> &mut TtLink {
-        &mut self.link
-    }
-    fn done(&self) -> bool {
-        self.finished()
-    }
-    fn give_up(&mut self, why: String) {
-        self.fail(why)
+impl OnMechanism for TetraCalibrator {
+    type Phase = TetraPhase;
+    fn core(&mut self) -> &mut Core<TetraPhase> {
+        &mut self.core
     }
     fn at(&self) -> String {
         self.where_()
@@ -830,3 +789,11 @@ impl crate::ttlink::OnLink for TetraCalibrator {
         self.step()
     }
 }
+
+impl Phases for TetraPhase {
+    const DONE: Self = TetraPhase::Done;
+    const ABORTED: Self = TetraPhase::Aborted;
+}
+
+crate::procedure::procedure!(TetraCalibrator, "tetra-calibration", |s, t, st| s
+    .on_status(t, st));

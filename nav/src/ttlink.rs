@@ -335,45 +335,6 @@ pub(crate) fn check_site_and_link(
     Ok(())
 }
 
-/// What [`poll`] needs of a procedure on the link.
-pub(crate) trait OnLink {
-    /// Its link.
-    fn link(&mut self) -> &mut TtLink;
-    /// Finished (done or aborted)?
-    fn done(&self) -> bool;
-    /// Abort with this reason.
-    fn give_up(&mut self, why: String);
-    /// Where it is, for a reason ("position 2 of 4 (90 deg)", "rotating").
-    fn at(&self) -> String;
-    /// Advance on the mechanism's state: nothing is in flight or queued.
-    fn advance(&mut self);
-}
-
-/// A procedure's next command at IMU time `t`: the link's resend or failure first; with
-/// nothing in flight and nothing queued, the procedure advances; then its queue or a heartbeat.
-pub(crate) fn poll<P: OnLink>(p: &mut P, t: f64) -> Option<TtCmd> {
-    if p.done() {
-        return None;
-    }
-    match p.link().poll(t) {
-        LinkPoll::Failed(f) => {
-            let w = p.at();
-            p.give_up(f.describe(&w));
-            return None;
-        }
-        LinkPoll::Send(c) => return Some(c),
-        LinkPoll::Waiting => return None,
-        LinkPoll::Idle => {}
-    }
-    if !p.link().queued() {
-        p.advance();
-        if p.done() {
-            return None;
-        }
-    }
-    p.link().next(t)
-}
-
 /// One axis's encoder angles on the IMU clock (status frames stamped with the IMU time they
 /// arrived at), unwrapped, with what a procedure keeps of its rotation.
 #[derive(Debug, Clone, Default)]

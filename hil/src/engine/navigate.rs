@@ -11,6 +11,7 @@ use emulators::gps::{GpsErrorParams, ReceiverParams};
 use nalgebra::Vector3;
 use nav::kf::FilterConfig;
 use nav::navigator::{NavigationConfig, Navigator};
+use nav::procedure::Procedure;
 use nav::strapdown::NavOutput;
 use serde::Serialize;
 
@@ -441,7 +442,7 @@ pub fn navigate(
             let Some(r) = f.result() else {
                 bail!(
                     "north-finding did not finish: {}",
-                    f.abort_reason().unwrap_or("out of time")
+                    f.abort().unwrap_or("out of time")
                 );
             };
             if r.duration_s + level_s >= spec.start_wait_s {

@@ -288,7 +288,7 @@ pub fn run_in_process(
     let Some(c) = bench.pipeline().calibrator() else {
         bail!("self-calibration is not enabled in nav's config");
     };
-    let mut o = outcome(s, c.result(), unfinished.as_deref().or(c.abort_reason()), t);
+    let mut o = outcome(s, c.result(), unfinished.as_deref().or(c.abort()), t);
     o.parameters = bench
         .pipeline()
         .summary()
@@ -618,7 +618,7 @@ pub fn tetra_in_process(
     let Some(c) = bench.pipeline().tetra_calibrator() else {
         bail!("tetra_calibration is not enabled in nav's config");
     };
-    let mut o = tetra_outcome(s, c.result(), unfinished.as_deref().or(c.abort_reason()), t);
+    let mut o = tetra_outcome(s, c.result(), unfinished.as_deref().or(c.abort()), t);
     o.parameters = c.parameters();
     Ok(o)
 }

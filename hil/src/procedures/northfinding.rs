@@ -5,6 +5,7 @@ use crate::scenario::Scenario;
 use crate::stats::wrap180;
 use anyhow::{Result, bail};
 use nav::northfind::{NorthFinder, NorthFindingConfig, NorthResult, Progress};
+use nav::procedure::Procedure;
 use serde::{Deserialize, Serialize};
 
 /// The outcome of one drill.
@@ -111,7 +112,12 @@ pub fn run_in_process(
     let mut last_phase = None;
     let dt = 1.0 / s.imu.rate_hz;
     let mut k: u64 = 0;
-    while bench.running() && !bench.pipeline().finder().is_none_or(NorthFinder::finished) {
+    while bench.running()
+        && !bench
+            .pipeline()
+            .finder()
+            .is_none_or(NorthFinder::is_finished)
+    {
         bench.step();
         if let Some(f) = bench.pipeline().finder() {
             let stage = f.stage();
@@ -127,7 +133,7 @@ pub fn run_in_process(
         .pipeline()
         .finder()
         .ok_or_else(|| anyhow::anyhow!("north-finding is not enabled"))?;
-    if !finder.finished() {
+    if !finder.is_finished() {
         return Ok(outcome(
             s.truth_heading_deg(),
             None,
@@ -142,7 +148,7 @@ pub fn run_in_process(
     Ok(outcome(
         s.truth_heading_deg(),
         finder.result(),
-        finder.abort_reason(),
+        finder.abort(),
         t,
     ))
 }
