@@ -32,14 +32,14 @@ use crate::can::{CanTxError, Progress, SentLog, TurntableTxStats, TxStats, write
 use crate::clock::SimClock;
 use crate::gps::{GpsDevice, GpsTxStats, PtyError};
 use crate::step::{FromNav, Step, Stepper};
-use crate::turntable::Turntable;
+pub use crate::ttbus::{TT_TRUTH_HZ, TtBus, TtTruth};
 use serde::{Deserialize, Serialize};
 use socketcan::{CanSocket, Socket, SocketOptions};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use thiserror::Error;
-use wire::{Message, RawFrame, TtAck, TtCmd};
+use wire::{Message, RawFrame};
 
 /// How the scheduler follows nav.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -147,131 +147,6 @@ impl Latency {
         self.ms.sort_by(f32::total_cmp);
         let at = |q: f64| f64::from(self.ms[((self.ms.len() - 1) as f64 * q).round() as usize]);
         (at(0.5), at(0.99), self.ms.len() as u64)
-    }
-}
-
-/// The turntable's truth at one instant: what the mechanism really did (never on the wire), for
-/// the bench's recording.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct TtTruth {
-    /// Simulated time, s.
-    pub t_s: f64,
-    /// True angle of each axis, deg (unwrapped).
-    pub angle_deg: Vec<f64>,
-    /// True rate of each axis, deg/s.
-    pub rate_dps: Vec<f64>,
-    /// State of each axis (its controller's).
-    pub state: Vec<String>,
-}
-
-/// Rate at which the turntable's truth is kept, Hz.
-pub const TT_TRUTH_HZ: f64 = 10.0;
-
-/// The turntable on the bus, without I/O: commands in, frames out after each IMU sample.
-pub struct TtBus {
-    tt: Turntable,
-    status_every: u64,
-    truth_every: u64,
-    /// The mechanism's truth at [`TT_TRUTH_HZ`].
-    pub truth: Vec<TtTruth>,
-    latency: u64,
-    waiting: Vec<TtCmd>,
-    scheduled: VecDeque<(u64, TtCmd)>,
-    acks: Vec<TtAck>,
-    /// What went out.
-    pub stats: TurntableTxStats,
-}
-
-impl TtBus {
-    /// The mechanism `tt` beside an IMU at `imu_rate_hz`; lockstep commands take effect
-    /// `latency` samples after their NAV_TIME.
-    pub fn new(tt: Turntable, imu_rate_hz: f64, latency: u64) -> Self {
-        Self {
-            status_every: (imu_rate_hz / tt.params().status_hz).round().max(1.0) as u64,
-            truth_every: (imu_rate_hz / TT_TRUTH_HZ).round().max(1.0) as u64,
-            truth: Vec::new(),
-            tt,
-            latency,
-            waiting: Vec::new(),
-            scheduled: VecDeque::new(),
-            acks: Vec::new(),
-            stats: TurntableTxStats::default(),
-        }
-    }
-
-    /// A command arrived; it waits for the next NAV_TIME to be placed in time.
-    pub fn command(&mut self, cmd: TtCmd) {
-        self.stats.commands += 1;
-        self.waiting.push(cmd);
-    }
-
-    /// A command arrived with no lockstep: it takes effect at sample `k`.
-    pub fn command_at(&mut self, k: u64, cmd: TtCmd) {
-        self.stats.commands += 1;
-        self.scheduled.push_back((k, cmd));
-    }
-
-    /// nav has processed sample `k`: the commands that came before take effect at `k + latency`.
-    /// Returns how many were placed.
-    pub fn confirmed(&mut self, k: u64) -> u64 {
-        let n = self.waiting.len() as u64;
-        for c in self.waiting.drain(..) {
-            self.scheduled.push_back((k + self.latency, c));
-        }
-        n
-    }
-
-    /// Commands still waiting for a NAV_TIME.
-    pub fn waiting(&self) -> usize {
-        self.waiting.len()
-    }
-
-    /// The frames due right after IMU sample `k` (which ends at `t`), in bus order.
-    pub fn after_sample(&mut self, k: u64, t: f64, out: &mut Vec<Message>) {
-        while let Some(&(at, cmd)) = self.scheduled.front() {
-            if at > k {
-                break;
-            }
-            self.scheduled.pop_front();
-            match self.tt.command(t, cmd) {
-                Some(a) => out.push(Message::TtAck(a)),
-                None if self.tt.params().faults.lost_command_seqs.contains(&cmd.seq) => {
-                    self.stats.lost_commands += 1
-                }
-                None => {}
-            }
-        }
-        self.acks.clear();
-        self.tt.advance(t, &mut self.acks);
-        if k.is_multiple_of(self.truth_every) {
-            let n = self.tt.axis_count();
-            let (angle_deg, rate_dps) = (0..n).map(|a| self.tt.true_angle(a, t)).unzip();
-            self.truth.push(TtTruth {
-                t_s: t,
-                angle_deg,
-                rate_dps,
-                state: (0..n).map(|a| format!("{:?}", self.tt.state(a))).collect(),
-            });
-        }
-        out.extend(self.acks.drain(..).map(Message::TtAck));
-        if (k + 1).is_multiple_of(self.status_every) {
-            let status = self.tt.status(t);
-            let silent = self.tt.params().faults.status_silent_s.iter();
-            if silent.clone().any(|w| t >= w[0] && t < w[1]) {
-                // the mechanism's controller hangs: no heartbeat
-                self.stats.silenced_status += status.len() as u64;
-            } else {
-                out.extend(status.into_iter().map(Message::TtStatus));
-            }
-        }
-    }
-
-    /// Count frames that went out.
-    pub(crate) fn sent(&mut self, m: &Message) {
-        match m {
-            Message::TtAck(_) => self.stats.acks += 1,
-            _ => self.stats.status_frames += 1,
-        }
     }
 }
 
@@ -823,14 +698,6 @@ pub fn run(
     })
 }
 
-/// The IMU sample (0-based index) a NAV_TIME's `sample_count` names: the latest sample already
-/// sent whose 16-bit counter it matches. None before any sample went out.
-pub fn nav_time_sample(imu: &crate::imu::ImuEmulator, sample_count: u32) -> Option<u64> {
-    let newest = imu.next_index().checked_sub(1)?;
-    let back = u64::from(imu.sample_counter(newest).wrapping_sub(sample_count as u16));
-    newest.checked_sub(back)
-}
-
 /// Wait until `sock` has a frame to read, or `timeout`.
 pub(crate) fn wait_readable(sock: &CanSocket, timeout: Duration) {
     use std::os::fd::AsRawFd;
@@ -841,84 +708,4 @@ pub(crate) fn wait_readable(sock: &CanSocket, timeout: Duration) {
     };
     // SAFETY: one valid pollfd for the duration of the call.
     unsafe { libc::poll(&mut p, 1, timeout.as_millis() as libc::c_int) };
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::turntable::TurntableParams;
-    use wire::{TtCommand, TtResult};
-
-    fn cmd(seq: u8, command: TtCommand) -> TtCmd {
-        TtCmd {
-            seq,
-            command: command as u8,
-            axis: 0,
-            arg: 0.0,
-        }
-    }
-
-    #[test]
-    fn a_command_takes_effect_latency_samples_after_the_nav_time_that_followed_it() {
-        let mut b = TtBus::new(Turntable::new(TurntableParams::default()), 2000.0, 120);
-        b.command(cmd(1, TtCommand::Enable));
-        let mut out = Vec::new();
-        // however long nav's NAV_TIME takes to come, nothing happens before it is placed
-        for k in 0..500 {
-            b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
-        }
-        assert!(!out.iter().any(|m| matches!(m, Message::TtAck(_))));
-        assert_eq!(b.confirmed(520), 1);
-        assert_eq!(b.waiting(), 0);
-        for k in 500..640 {
-            out.clear();
-            b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
-            assert!(!out.iter().any(|m| matches!(m, Message::TtAck(_))), "k={k}");
-        }
-        out.clear();
-        b.after_sample(640, 641.0 / 2000.0, &mut out);
-        match out.first() {
-            Some(Message::TtAck(a)) => assert_eq!((a.seq, a.result), (1, TtResult::Accepted)),
-            other => panic!("{other:?}"),
-        }
-        // acknowledgements come first, the status frames at 100 Hz (every 20th sample)
-        assert!(out[1..].iter().all(|m| matches!(m, Message::TtStatus(_))));
-        assert_eq!(out.len(), 1 + usize::from((641 % 20) == 0));
-    }
-
-    #[test]
-    fn status_frames_come_at_the_mechanism_rate() {
-        let mut b = TtBus::new(Turntable::new(TurntableParams::default()), 2000.0, 120);
-        let mut out = Vec::new();
-        for k in 0..2000 {
-            b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
-        }
-        assert_eq!(out.len(), 100);
-    }
-
-    /// The mechanism's truth is kept at 10 Hz of IMU time, each axis's angle, rate and state,
-    /// following what the commands made it do.
-    #[test]
-    fn the_turntables_truth_is_kept_at_ten_hertz() {
-        let mut b = TtBus::new(Turntable::new(TurntableParams::default()), 2000.0, 120);
-        let mut out = Vec::new();
-        b.command_at(0, cmd(1, TtCommand::Enable));
-        for k in 0..2000 {
-            b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
-        }
-        assert_eq!(b.truth.len(), 10);
-        let first = &b.truth[0];
-        assert_eq!((first.t_s, first.angle_deg.len()), (1.0 / 2000.0, 1));
-        assert!(
-            b.truth
-                .windows(2)
-                .all(|w| (w[1].t_s - w[0].t_s - 0.1).abs() < 1e-9)
-        );
-        assert!(
-            b.truth
-                .iter()
-                .all(|t| t.state.len() == 1 && t.rate_dps[0] == 0.0)
-        );
-        assert_ne!(b.truth[9].state[0], "Disabled", "{:?}", b.truth[9]);
-    }
 }

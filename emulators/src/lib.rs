@@ -16,6 +16,7 @@ pub mod mems;
 pub mod player;
 pub mod step;
 pub mod truth;
+pub mod ttbus;
 pub mod turntable;
 
 /// A scenario parameter out of its range: which table, and what is wrong (naming the parameter).

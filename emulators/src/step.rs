@@ -14,9 +14,9 @@
 //! received before bytes it has read (`nav`'s event loop). In process they go into the
 //! pipeline right after the sample's frames.
 
-use crate::bus::{TtBus, nav_time_sample};
 use crate::can::BusStream;
 use crate::gps::{Epoch, GpsReceiver};
+use crate::ttbus::TtBus;
 use wire::{Message, RawFrame};
 
 /// What one IMU sample brings, in the order nav meets it.
@@ -256,4 +256,12 @@ impl Stepper {
     pub fn into_parts(self) -> (BusStream, Option<TtBus>) {
         (self.imu, self.tt)
     }
+}
+
+/// The IMU sample (0-based index) a NAV_TIME's `sample_count` names: the latest sample already
+/// sent whose 16-bit counter it matches. None before any sample went out.
+pub fn nav_time_sample(imu: &crate::imu::ImuEmulator, sample_count: u32) -> Option<u64> {
+    let newest = imu.next_index().checked_sub(1)?;
+    let back = u64::from(imu.sample_counter(newest).wrapping_sub(sample_count as u16));
+    newest.checked_sub(back)
 }

@@ -16,8 +16,8 @@
 //! Timestamps are IMU time (the message's publish time): nav's clock, as everywhere in the
 //! recording. The schemas (`nav/schemas/foxglove/`) are Foxglove's JSON schemas, MIT licence.
 
+use crate::channels::JsonChannel;
 use crate::gps::GpsFix;
-use crate::record::JsonChannel;
 use nalgebra::UnitQuaternion;
 use serde_json::{Value, json};
 

@@ -4,6 +4,7 @@
 
 pub mod attitude;
 pub mod calib;
+pub mod channels;
 pub mod cli;
 pub mod config;
 pub mod coning;
