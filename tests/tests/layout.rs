@@ -1,0 +1,256 @@
+//! The code's layout rules, read from the sources (`crate::` paths outside comments and test
+//! modules):
+//! - no circle of module imports in any crate of the workspace;
+//! - hil's folders import only from those before them (scenario, engine, procedures, report,
+//!   run, experiments, suites), and its top-level helpers import nothing of the crate;
+//! - no function of 150 lines or more outside tests.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+const CRATES: [&str; 5] = ["wire", "nav", "emulators", "hil", "vcan-setup"];
+
+/// hil's folders in the order they may import (each from those before it).
+const HIL_LAYERS: [&str; 7] = [
+    "scenario",
+    "engine",
+    "procedures",
+    "report",
+    "run",
+    "experiments",
+    "suites",
+];
+
+fn src(krate: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(krate)
+        .join("src")
+}
+
+/// Every source file under `dir` (recursively), with its text.
+fn files(dir: &Path, out: &mut Vec<(PathBuf, String)>) {
+    let mut entries: Vec<_> = std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.expect("a directory entry").path())
+        .collect();
+    entries.sort();
+    for p in entries {
+        if p.is_dir() {
+            files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            let t = std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            out.push((p, t));
+        }
+    }
+}
+
+/// The text before the file's test module.
+fn without_tests(t: &str) -> &str {
+    t.find("\n#[cfg(test)]").map_or(t, |i| &t[..i])
+}
+
+/// The module path of `file` under `root` (`engine::inproc`; `lib.rs`, `main.rs` by name).
+fn module_of(root: &Path, file: &Path) -> String {
+    let rel = file.strip_prefix(root).expect("under the source folder");
+    let mut parts: Vec<String> = rel
+        .with_extension("")
+        .iter()
+        .map(|p| p.to_string_lossy().into_owned())
+        .collect();
+    if parts.len() > 1 && parts.last().is_some_and(|l| l == "mod") {
+        parts.pop();
+    }
+    parts.join("::")
+}
+
+/// The crate's modules and the modules each imports (`crate::` paths, longest module prefix).
+fn imports(krate: &str) -> BTreeMap<String, BTreeSet<String>> {
+    let root = src(krate);
+    let mut fs = Vec::new();
+    files(&root, &mut fs);
+    let mods: BTreeSet<String> = fs.iter().map(|(p, _)| module_of(&root, p)).collect();
+    let mut edges = BTreeMap::new();
+    for (p, t) in &fs {
+        let m = module_of(&root, p);
+        let mut deps = BTreeSet::new();
+        for line in without_tests(t).lines() {
+            if line.trim_start().starts_with("//") {
+                continue;
+            }
+            for (i, _) in line.match_indices("crate::") {
+                let path: String = line[i + 7..]
+                    .chars()
+                    .take_while(|c| c.is_alphanumeric() || *c == '_' || *c == ':')
+                    .collect();
+                let segs: Vec<&str> = path.split("::").filter(|s| !s.is_empty()).collect();
+                for n in (1..=segs.len()).rev() {
+                    let c = segs[..n].join("::");
+                    if mods.contains(&c) {
+                        if c != m {
+                            deps.insert(c);
+                        }
+                        break;
+                    }
+                }
+            }
+        }
+        edges.insert(m, deps);
+    }
+    edges
+}
+
+/// A circle among `edges`, as the modules round it, if there is one.
+fn circle(edges: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
+    fn visit(
+        m: &str,
+        edges: &BTreeMap<String, BTreeSet<String>>,
+        state: &mut BTreeMap<String, u8>,
+        path: &mut Vec<String>,
+    ) -> Option<Vec<String>> {
+        state.insert(m.to_string(), 1);
+        path.push(m.to_string());
+        for d in edges.get(m).into_iter().flatten() {
+            match state.get(d.as_str()) {
+                Some(1) => {
+                    let from = path.iter().position(|p| p == d).unwrap_or(0);
+                    let mut c = path[from..].to_vec();
+                    c.push(d.clone());
+                    return Some(c);
+                }
+                Some(_) => {}
+                None => {
+                    if let Some(c) = visit(d, edges, state, path) {
+                        return Some(c);
+                    }
+                }
+            }
+        }
+        path.pop();
+        state.insert(m.to_string(), 2);
+        None
+    }
+    let mut state = BTreeMap::new();
+    for m in edges.keys() {
+        if !state.contains_key(m.as_str())
+            && let Some(c) = visit(m, edges, &mut state, &mut Vec::new())
+        {
+            return Some(c);
+        }
+    }
+    None
+}
+
+#[test]
+fn no_crate_has_a_circle_of_module_imports() {
+    for k in CRATES {
+        let edges = imports(k);
+        assert!(edges.len() > 3, "{k}: {} modules read", edges.len());
+        if let Some(c) = circle(&edges) {
+            panic!(
+                "{k}: modules import each other round a circle: {}",
+                c.join(" -> ")
+            );
+        }
+    }
+}
+
+#[test]
+fn hils_folders_import_only_from_those_before_them() {
+    let layer = |m: &str| -> Option<usize> {
+        let top = m.split("::").next().unwrap_or(m);
+        HIL_LAYERS.iter().position(|l| *l == top)
+    };
+    let mut checked = 0;
+    for (m, deps) in imports("hil") {
+        if m == "lib" || m == "main" || m.starts_with("cmd") {
+            continue;
+        }
+        checked += 1;
+        for d in deps {
+            match (layer(&m), layer(&d)) {
+                (Some(a), Some(b)) => assert!(
+                    b <= a,
+                    "hil::{m} ({}) imports hil::{d} ({}), a folder after its own",
+                    HIL_LAYERS[a],
+                    HIL_LAYERS[b]
+                ),
+                (None, _) => panic!("hil's top-level helper {m} imports hil::{d}"),
+                (Some(_), None) => {}
+            }
+        }
+    }
+    assert!(checked > 30, "{checked} modules of hil checked");
+}
+
+/// Where a function starts on `line`: its indentation and name (none for other lines).
+fn fn_start(line: &str) -> Option<(usize, String)> {
+    let t = line.trim_start();
+    let indent = line.len() - t.len();
+    let mut rest = t;
+    for p in [
+        "pub(crate) ",
+        "pub(super) ",
+        "pub ",
+        "const ",
+        "async ",
+        "unsafe ",
+    ] {
+        rest = rest.strip_prefix(p).unwrap_or(rest);
+    }
+    let name: String = rest
+        .strip_prefix("fn ")?
+        .chars()
+        .take_while(|c| c.is_alphanumeric() || *c == '_')
+        .collect();
+    Some((indent, name))
+}
+
+#[test]
+fn no_function_reaches_150_lines_outside_tests() {
+    let mut long = Vec::new();
+    let mut counted = 0;
+    for k in CRATES {
+        let root = src(k);
+        let mut fs = Vec::new();
+        files(&root, &mut fs);
+        for (p, t) in &fs {
+            let lines: Vec<&str> = without_tests(t).lines().collect();
+            for (i, l) in lines.iter().enumerate() {
+                let Some((indent, name)) = fn_start(l) else {
+                    continue;
+                };
+                // a declaration without a body (a trait's) ends with `;` before any `{`
+                let sig_end = lines[i..]
+                    .iter()
+                    .position(|s| s.contains('{') || s.trim_end().ends_with(';'))
+                    .map_or(i, |j| i + j);
+                if !lines[sig_end].contains('{') {
+                    continue;
+                }
+                let close = format!("{}}}", " ".repeat(indent));
+                if lines[sig_end].trim_end().ends_with('}') {
+                    continue;
+                }
+                let Some(end) = lines[sig_end..]
+                    .iter()
+                    .position(|s| s.trim_end() == close)
+                    .map(|j| sig_end + j)
+                else {
+                    continue;
+                };
+                counted += 1;
+                let n = end - i + 1;
+                if n >= 150 {
+                    long.push(format!("{}: {name}, {n} lines", p.display()));
+                }
+            }
+        }
+    }
+    assert!(counted > 500, "{counted} functions measured");
+    assert!(
+        long.is_empty(),
+        "functions of 150 lines or more:\n{}",
+        long.join("\n")
+    );
+}
