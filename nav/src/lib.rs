@@ -16,6 +16,7 @@ pub mod gpsport;
 pub mod imu;
 pub mod integrity;
 pub mod kf;
+mod mission;
 pub mod navigator;
 pub mod northfind;
 pub mod output;

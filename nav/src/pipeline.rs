@@ -5,14 +5,16 @@
 //!
 //! One CAN frame, followed from input to output ([`Pipeline::on_frame`]):
 //! 1. **decode** it with the wire contract; bad frames are counted by kind ([`FrameCounters`]);
-//! 2. **turntable** status and acknowledgements go to the north-finder's indexer link;
+//! 2. **turntable** status and acknowledgements go to the procedure commanding the mechanism
+//!    (north-finding or a calibration, [`crate::mission`]);
 //! 3. the IMU **front end** turns gyro/accel frames into samples on the one IMU clock (the
 //!    extended sample counter);
 //! 4. **processing** (dither filter, coning and sculling) turns samples into updates; a PPS
 //!    edge latched in a sample becomes an IMU time for the navigator;
-//! 5. each update goes to **north-finding**, and once it is finished (or when it is off) to the
-//!    **navigator**: the [hand-over](Pipeline::hand_over) gives it north-finding's heading;
-//! 6. north-finding's **commands** for the indexing mechanism go out;
+//! 5. each update goes to the **procedure**, and once it is finished (or when there is none) to
+//!    the **navigator**, as the [mission's phase](Pipeline::phase) says: the
+//!    [hand-over](Pipeline::hand_over) gives it north-finding's heading;
+//! 6. the procedure's **commands** for the indexing mechanism go out;
 //! 7. every `rate / 50` samples the **solution** (mode and health from [`Pipeline::mode`] and
 //!    [`Pipeline::health`]) goes out as NAV_* frames.
 //!
@@ -23,16 +25,15 @@ use crate::config::NavConfig;
 use crate::earth;
 use crate::gps::GpsFix;
 use crate::imu::{ImuEvent, ImuFrontEnd, ImuSample};
+use crate::mission::Mission;
 use crate::navigator::Navigator;
 use crate::northfind::NorthFinder;
 use crate::output::{Solution, SolutionEncoder};
 use crate::procedure::{Procedure, Reporting};
 use crate::record::JsonChannel;
-use crate::selfcal::{CalPhase, SelfCalibrationResult, SelfCalibrator};
-use crate::summary::{
-    AttitudeSummary, NorthFindingSummary, SelfCalibrationSummary, Summary, TetraCalibrationSummary,
-};
-use crate::tetracal::{TetraCalibrator, TetraPhase};
+use crate::selfcal::SelfCalibrator;
+use crate::summary::{AttitudeSummary, Summary};
+use crate::tetracal::TetraCalibrator;
 use std::collections::BTreeMap;
 use thiserror::Error;
 use tracing::{info, warn};
@@ -133,57 +134,24 @@ impl Sums {
     }
 }
 
-/// North-finding with its reporting.
+/// A procedure the pipeline runs on the mechanism, with its reporting state.
 #[derive(Debug)]
-struct NorthFinding {
-    finder: NorthFinder,
+struct Running {
+    m: Box<dyn Mission>,
     rep: Reporting,
+    /// Its heading has gone to the navigator.
     handed_over: bool,
 }
 
-/// Self-calibration with its reporting.
-#[derive(Debug)]
-struct Calibrating {
-    cal: SelfCalibrator,
-    /// The gyro parameters nav started with (the estimates are residuals on top of them).
-    start: crate::params::GyroParameters,
-    rep: Reporting,
-    parameters: Option<crate::params::ImuParameters>,
-}
-
-/// The redundant unit's calibration with its reporting.
-#[derive(Debug)]
-struct TetraCalibrating {
-    cal: TetraCalibrator,
-    rep: Reporting,
-    parameters: Option<crate::params::RedundantParameters>,
-}
-
-impl Calibrating {
-    /// The parameter file of a result: the RLS's residual estimates composed with the
-    /// parameters the front end applied (`(raw - b0) / (1 + k0)` read `(1 + k') w + b'`).
-    fn parameters(&self, r: &SelfCalibrationResult) -> crate::params::ImuParameters {
-        let c = self.cal.config();
-        let (b0, k0) = (self.start.bias_dph, self.start.scale_factor_ppm);
-        let mut g = self.start;
-        for j in 0..3 {
-            let k0f = k0[j] * 1e-6;
-            g.bias_dph[j] = b0[j] + r.rls.gyro_bias_dph[j] * (1.0 + k0f);
-            g.scale_factor_ppm[j] =
-                ((1.0 + r.rls.gyro_scale_factor_ppm[j] * 1e-6) * (1.0 + k0f) - 1.0) * 1e6;
-        }
-        crate::params::ImuParameters {
-            format: crate::params::FORMAT.into(),
-            imu: c.imu.clone(),
-            procedure: format!(
-                "nav self-calibration (paper 004 decoupled RLS, integrated): dual-axis rotation at {} deg/s reversing every {} deg, inner axis {} s behind, {:.0} s, static base at latitude {} deg",
-                c.rate_dps, c.turn_deg, c.inner_delay_s, r.rotation_s, c.latitude_deg
-            ),
-            // the shell stamps the date: the pipeline's output depends on its input only
-            date: String::new(),
-            gyro: g,
-        }
-    }
+/// What the IMU's updates are for: the mission's phase.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MissionPhase {
+    /// A procedure on the mechanism runs: the updates are its; navigation only keeps time.
+    Procedure,
+    /// Navigating (after the procedure, when there was one).
+    Navigating,
+    /// No procedure running and no navigation configured: the updates are only processed.
+    Processing,
 }
 
 const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
@@ -200,9 +168,9 @@ pub struct Pipeline {
     proc: ImuProcessor,
     fir: Option<crate::fir::FirResponse>,
     coning_method: crate::coning::ConingMethod,
-    nf: Option<NorthFinding>,
-    cal: Option<Calibrating>,
-    tcal: Option<TetraCalibrating>,
+    /// The procedures on the mechanism the config enables ([`crate::mission::REGISTRY`]'s
+    /// order; the config allows one).
+    procedures: Vec<Running>,
     navigator: Option<Navigator>,
     out_every: u64,
     next_out: Option<u64>,
@@ -238,37 +206,16 @@ impl Pipeline {
     /// records for a recording (off for in-process runs that only want the result).
     pub fn new(cfg: &NavConfig, record: bool) -> Result<Self, PipelineError> {
         let proc = ImuProcessor::new(&cfg.processing)?;
-        let nf = if cfg.north_finding.enabled {
-            Some(NorthFinding {
-                finder: NorthFinder::new(cfg.north_finding.clone())?,
-                rep: Reporting::default(),
-                handed_over: false,
-            })
-        } else {
-            None
-        };
-        let cal = if cfg.self_calibration.enabled {
-            Some(Calibrating {
-                cal: SelfCalibrator::new(cfg.self_calibration.clone())?,
-                start: crate::params::GyroParameters {
-                    bias_dph: cfg.imu.gyro_bias_dph,
-                    scale_factor_ppm: cfg.imu.gyro_scale_factor_ppm,
-                },
-                rep: Reporting::default(),
-                parameters: None,
-            })
-        } else {
-            None
-        };
-        let tcal = if cfg.tetra_calibration.enabled {
-            Some(TetraCalibrating {
-                cal: TetraCalibrator::new(cfg.tetra_calibration.clone())?,
-                rep: Reporting::default(),
-                parameters: None,
-            })
-        } else {
-            None
-        };
+        let mut procedures = Vec::new();
+        for make in crate::mission::REGISTRY {
+            if let Some(m) = make(cfg)? {
+                procedures.push(Running {
+                    m,
+                    rep: Reporting::default(),
+                    handed_over: false,
+                });
+            }
+        }
         Ok(Self {
             rate_hz: cfg.imu.rate_hz,
             sample_ns: 1e9 / cfg.imu.rate_hz,
@@ -279,9 +226,7 @@ impl Pipeline {
             fir: proc.fir_response(),
             proc,
             coning_method: cfg.processing.coning,
-            nf,
-            cal,
-            tcal,
+            procedures,
             navigator: cfg
                 .navigation
                 .enabled
@@ -403,20 +348,25 @@ impl Pipeline {
         // is stamped with the end of the last sample nav has (on the bench it follows the
         // sample it was taken at)
         let t_last = self.last_sample_time();
-        if let Message::TtStatus(_) | Message::TtAck(_) = &m {
-            self.each_procedure(|p, rep| {
-                rep.frames += 1;
-                match &m {
-                    Message::TtStatus(st) => p.status(t_last, st),
-                    Message::TtAck(a) => p.ack(a),
-                    _ => {}
+        for r in &mut self.procedures {
+            match &m {
+                Message::TtStatus(st) => {
+                    r.rep.frames += 1;
+                    r.m.procedure().status(t_last, st);
                 }
-            });
-        }
-        if let (Message::MemsGyro(g), Some(t), Some(k)) = (&m, self.tcal.as_mut(), self.sums.last) {
-            let dt = self.sample_ns * 1e-9;
-            t.rep.frames += 1;
-            t.cal.on_mems(k, t_last, dt, g);
+                Message::TtAck(a) => {
+                    r.rep.frames += 1;
+                    r.m.procedure().ack(a);
+                }
+                Message::MemsGyro(g) => {
+                    if let Some(k) = self.sums.last
+                        && r.m.on_mems(k, t_last, self.sample_ns * 1e-9, g)
+                    {
+                        r.rep.frames += 1;
+                    }
+                }
+                _ => {}
+            }
         }
         // 3. the IMU front end
         self.fe.on_message(&m, &mut self.samples, &mut self.events);
@@ -424,9 +374,7 @@ impl Pipeline {
         self.process(out);
         self.hand_over();
         // 6. the procedures' commands and progress
-        self.north_finding(out);
-        self.calibration(out);
-        self.tetra_calibration(out);
+        self.procedures_step(out);
         // 7. the solution at 50 Hz of IMU time
         self.solution(out);
         self.integrity_changes(out);
@@ -654,12 +602,14 @@ impl Pipeline {
         let samples = std::mem::take(&mut self.samples);
         for s in &samples {
             self.sums.add_sample(s);
-            if let (Some(c), Some(b)) = (self.cal.as_mut(), self.proc.baseline())
+            if let Some(b) = self.proc.baseline()
                 && !s.ambiguous
             {
                 let t1 = (s.sample as i64 - b as i64) as f64 * self.sample_ns * 1e-9;
                 let dt = f64::from(s.span) * self.sample_ns * 1e-9;
-                c.cal.on_sample(t1, dt, s.dtheta, s.dv, s.saturated);
+                for r in &mut self.procedures {
+                    r.m.on_sample(t1, dt, s);
+                }
             }
             let invalid_before = self.proc.stats().invalid_since.is_some();
             self.proc.push_sample(s, &mut self.updates);
@@ -682,14 +632,13 @@ impl Pipeline {
             let updates = std::mem::take(&mut self.updates);
             for u in &updates {
                 let t = self.imu_time(u.valid_sample);
-                if let Some(nf) = self.nf.as_mut() {
-                    nf.finder.on_update(t, u.phi, u.dv);
+                for r in &mut self.procedures {
+                    r.m.on_update(t, u.phi, u.dv);
                 }
-                // navigation takes over once north-finding (when it runs) is finished
+                // navigation takes over once the procedure (when one runs) is finished
+                let phase = self.phase();
                 if let Some(n) = self.navigator.as_mut() {
-                    let cal_running = self.cal.as_ref().is_some_and(|c| !c.cal.is_finished())
-                        || self.tcal.as_ref().is_some_and(|c| !c.cal.is_finished());
-                    if self.nf.as_ref().is_none_or(|f| f.finder.is_finished()) && !cal_running {
+                    if phase == MissionPhase::Navigating {
                         n.on_update(
                             t,
                             u.phi,
@@ -727,27 +676,35 @@ impl Pipeline {
         self.samples.clear();
     }
 
-    /// The hand-over: north-finding's heading goes to the navigator once, when it is found.
+    /// The hand-over: the heading a procedure found (north-finding's) goes to the navigator
+    /// once, when it is found.
     fn hand_over(&mut self) {
-        if let (Some(n), Some(nf)) = (self.navigator.as_mut(), self.nf.as_mut())
-            && !nf.handed_over
-            && let Some(r) = nf.finder.result()
-        {
-            n.set_heading(r.heading_deg);
-            nf.handed_over = true;
+        let Some(n) = self.navigator.as_mut() else {
+            return;
+        };
+        for r in &mut self.procedures {
+            if !r.handed_over
+                && let Some(h) = r.m.heading_deg()
+            {
+                n.set_heading(h);
+                r.handed_over = true;
+            }
         }
     }
 
-    /// `f` on each procedure present, with its reporting state.
-    fn each_procedure(&mut self, mut f: impl FnMut(&mut dyn Procedure, &mut Reporting)) {
-        if let Some(n) = self.nf.as_mut() {
-            f(&mut n.finder, &mut n.rep);
-        }
-        if let Some(c) = self.cal.as_mut() {
-            f(&mut c.cal, &mut c.rep);
-        }
-        if let Some(c) = self.tcal.as_mut() {
-            f(&mut c.cal, &mut c.rep);
+    /// The mission's phase: a procedure on the mechanism running holds the IMU's updates; once
+    /// none is, they are navigation's (when it is configured).
+    pub fn phase(&self) -> MissionPhase {
+        if self
+            .procedures
+            .iter()
+            .any(|r| !r.m.procedure_ref().is_finished())
+        {
+            MissionPhase::Procedure
+        } else if self.navigator.is_some() {
+            MissionPhase::Navigating
+        } else {
+            MissionPhase::Processing
         }
     }
 
@@ -818,66 +775,32 @@ impl Pipeline {
         true
     }
 
-    /// Step 6 for north-finding, on the processing chain's valid sample.
-    fn north_finding(&mut self, out: &mut Vec<Output>) {
-        let Some(nf) = self.nf.as_mut() else { return };
+    /// Step 6 for each procedure, at the IMU time it runs on (the processing chain's valid
+    /// sample, or the end of the last sample); once one finishes, the parameter file it made.
+    fn procedures_step(&mut self, out: &mut Vec<Output>) {
         let base = self.proc.baseline().map_or(0, |b| b as i64);
-        let t = self.proc.valid_sample().saturating_sub(base) as f64 / self.rate_hz;
+        let t_valid = self.proc.valid_sample().saturating_sub(base) as f64 / self.rate_hz;
+        let t_last = self.last_sample_time();
         let record = self.record;
-        Self::drive(
-            &mut nf.finder,
-            &mut nf.rep,
-            t,
-            record,
-            &mut self.encode_errors,
-            out,
-        );
-    }
-
-    /// Step 6 for self-calibration; once done, its parameter file.
-    fn calibration(&mut self, out: &mut Vec<Output>) {
-        let t = self.last_sample_time();
-        let record = self.record;
-        let Some(c) = self.cal.as_mut() else { return };
-        if Self::drive(
-            &mut c.cal,
-            &mut c.rep,
-            t,
-            record,
-            &mut self.encode_errors,
-            out,
-        ) && let Some(r) = c.cal.result().cloned()
-        {
-            let p = c.parameters(&r);
-            c.parameters = Some(p.clone());
-            if let Some(path) = c.cal.config().parameters_out.clone() {
+        for r in &mut self.procedures {
+            let t = if r.m.on_valid_sample() {
+                t_valid
+            } else {
+                t_last
+            };
+            if Self::drive(
+                r.m.procedure(),
+                &mut r.rep,
+                t,
+                record,
+                &mut self.encode_errors,
+                out,
+            ) && let Some((path, file)) = r.m.made()
+                && let Some(path) = path
+            {
                 out.push(Output::Parameters {
                     path,
-                    file: Box::new(crate::params::ParameterFile::Imu(p)),
-                });
-            }
-        }
-    }
-
-    /// Step 6 for the redundant unit's calibration.
-    fn tetra_calibration(&mut self, out: &mut Vec<Output>) {
-        let t = self.last_sample_time();
-        let record = self.record;
-        let Some(c) = self.tcal.as_mut() else { return };
-        if Self::drive(
-            &mut c.cal,
-            &mut c.rep,
-            t,
-            record,
-            &mut self.encode_errors,
-            out,
-        ) && let Some(p) = c.cal.parameters()
-        {
-            c.parameters = Some(p.clone());
-            if let Some(path) = c.cal.config().parameters_out.clone() {
-                out.push(Output::Parameters {
-                    path,
-                    file: Box::new(crate::params::ParameterFile::Redundant(p)),
+                    file: Box::new(file),
                 });
             }
         }
@@ -885,34 +808,37 @@ impl Pipeline {
 
     /// The redundant unit's calibration (when enabled).
     pub fn tetra_calibrator(&self) -> Option<&TetraCalibrator> {
-        self.tcal.as_ref().map(|c| &c.cal)
+        self.mission::<crate::mission::TetraCalibration>()
+            .map(|c| &c.cal)
     }
 
     /// The self-calibration procedure (when enabled).
     pub fn calibrator(&self) -> Option<&SelfCalibrator> {
-        self.cal.as_ref().map(|c| &c.cal)
+        self.mission::<crate::mission::SelfCalibration>()
+            .map(|c| &c.cal)
+    }
+
+    /// The procedure of type `M`, when the config runs it.
+    fn mission<M: 'static>(&self) -> Option<&M> {
+        self.procedures
+            .iter()
+            .find_map(|r| r.m.as_any().downcast_ref::<M>())
     }
 
     /// The solution's mode: self-calibration or north-finding while it runs, then the
     /// navigator's.
     pub fn mode(&self) -> wire::NavMode {
-        if let Some(c) = self.cal.as_ref().filter(|c| !c.cal.is_finished()) {
-            return match c.cal.phase() {
-                CalPhase::Enabling | CalPhase::Levelling => wire::NavMode::Levelling,
-                _ => wire::NavMode::Calibrating,
-            };
-        }
-        if let Some(c) = self.tcal.as_ref().filter(|c| !c.cal.is_finished()) {
-            return match c.cal.phase() {
-                TetraPhase::Enabling => wire::NavMode::Init,
-                _ => wire::NavMode::Calibrating,
-            };
-        }
-        let nf_running = self.nf.as_ref().is_some_and(|f| !f.finder.is_finished());
-        match (&self.navigator, nf_running) {
-            (_, true) => wire::NavMode::NorthFinding,
-            (Some(n), false) => n.mode(),
-            (None, false) => wire::NavMode::Init,
+        match self.phase() {
+            MissionPhase::Procedure => self
+                .procedures
+                .iter()
+                .find(|r| !r.m.procedure_ref().is_finished())
+                .map_or(wire::NavMode::Init, |r| r.m.mode()),
+            MissionPhase::Navigating => self
+                .navigator
+                .as_ref()
+                .map_or(wire::NavMode::Init, |n| n.mode()),
+            MissionPhase::Processing => wire::NavMode::Init,
         }
     }
 
@@ -925,9 +851,10 @@ impl Pipeline {
             imu_gaps: st.gaps > 0,
             imu_bit: st.bit_fail_samples > 0,
             gps_stale: self.gps_expected && nav.is_none_or(|n| n.gps_stale()),
-            turntable: self.nf.as_ref().is_some_and(|f| f.finder.abort().is_some())
-                || self.cal.as_ref().is_some_and(|c| c.cal.abort().is_some())
-                || self.tcal.as_ref().is_some_and(|c| c.cal.abort().is_some()),
+            turntable: self
+                .procedures
+                .iter()
+                .any(|r| r.m.procedure_ref().abort().is_some()),
             filter: self.proc.stats().invalid_since.is_some()
                 || nav.is_some_and(|n| {
                     n.filter().is_some_and(|k| k.stats().reanchors > 0)
@@ -1055,7 +982,8 @@ impl Pipeline {
 
     /// The north-finder (when enabled).
     pub fn finder(&self) -> Option<&NorthFinder> {
-        self.nf.as_ref().map(|n| &n.finder)
+        self.mission::<crate::mission::NorthFinding>()
+            .map(|n| &n.finder)
     }
 
     /// The navigator (when enabled).
@@ -1154,7 +1082,7 @@ impl Pipeline {
         };
         let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
         let c = &self.frames;
-        Summary {
+        let mut s = Summary {
             interface: String::new(),
             frames_total: c.total,
             frames_by_message: c
@@ -1184,37 +1112,9 @@ impl Pipeline {
             specific_force_norm_mps2: norm(mean_f),
             processing: pst,
             attitude,
-            north_finding: self.nf.as_ref().map(|f| NorthFindingSummary {
-                phase: f.finder.phase(),
-                result: f.finder.result().cloned(),
-                abort: f.finder.abort().map(str::to_string),
-                commands_sent: f.rep.commands_sent,
-                turntable_frames: f.rep.frames,
-                command_retries: f.finder.ack_counters().0,
-                stale_acks: f.finder.ack_counters().1,
-            }),
-            self_calibration: self.cal.as_ref().map(|c| SelfCalibrationSummary {
-                phase: c.cal.phase(),
-                result: c.cal.result().cloned(),
-                abort: c.cal.abort().map(str::to_string),
-                parameters: c.parameters.clone(),
-                parameters_file: None,
-                commands_sent: c.rep.commands_sent,
-                turntable_frames: c.rep.frames,
-                command_retries: c.cal.ack_counters().0,
-                stale_acks: c.cal.ack_counters().1,
-            }),
-            tetra_calibration: self.tcal.as_ref().map(|c| TetraCalibrationSummary {
-                parameters: c.parameters.clone(),
-                parameters_file: None,
-                phase: c.cal.phase(),
-                result: c.cal.result().cloned(),
-                abort: c.cal.abort().map(str::to_string),
-                commands_sent: c.rep.commands_sent,
-                frames: c.rep.frames,
-                command_retries: c.cal.ack_counters().0,
-                stale_acks: c.cal.ack_counters().1,
-            }),
+            north_finding: None,
+            self_calibration: None,
+            tetra_calibration: None,
             gps: None,
             navigation: self.navigator.as_ref().map(|n| n.summary()),
             housekeeping: self.fe.housekeeping(),
@@ -1228,7 +1128,11 @@ impl Pipeline {
             encode_errors: self.encode_errors + self.encoder.encode_errors,
             mcap: None,
             mcap_messages: 0,
+        };
+        for r in &self.procedures {
+            r.m.summarize(&r.rep, &mut s);
         }
+        s
     }
 }
 
