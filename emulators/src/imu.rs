@@ -23,6 +23,7 @@
 //! the pulse count after N samples differs from the true accumulated angle by less than one
 //! pulse, whatever N.
 
+pub use crate::pulse::PulseCounter;
 use crate::truth::Motion;
 use nalgebra::{Matrix3, Vector3};
 use rand::SeedableRng;
@@ -294,30 +295,6 @@ fn sensor_matrix(sf_ppm: &[f64; 3], mis_arcsec: &[[f64; 3]; 3]) -> Matrix3<f64> 
             mis_arcsec[i][j] * ARCSEC
         }
     })
-}
-
-/// A pulse counter that quantizes with carried remainder and wraps at 16 bits.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct PulseCounter {
-    remainder: f64,
-    /// Accumulated pulses (never wraps; the wire value is its low 16 bits).
-    pub total: i64,
-}
-
-impl PulseCounter {
-    /// Add `pulses` (fractional); returns the whole pulses emitted this step.
-    pub fn add(&mut self, pulses: f64) -> i64 {
-        let acc = self.remainder + pulses;
-        let n = acc.round();
-        self.remainder = acc - n;
-        self.total += n as i64;
-        n as i64
-    }
-
-    /// The 16-bit wire value.
-    pub fn wire(&self) -> u16 {
-        self.total.rem_euclid(65536) as u16
-    }
 }
 
 /// The IMU: truth -> errors -> pulses -> frames, one sample at a time.

@@ -14,6 +14,7 @@ pub mod gps;
 pub mod imu;
 pub mod mems;
 pub mod player;
+pub mod pulse;
 pub mod step;
 pub mod truth;
 pub mod ttbus;

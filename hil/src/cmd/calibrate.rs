@@ -4,7 +4,7 @@ use crate::*;
 use cmd::run::{procedure_folder, report_in_process, run_procedure};
 
 pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
-    let o = hil::procedures::calibrate::CalibrateOptions {
+    let o = hil::procedures::rotating::CalibrateOptions {
         lat_deg: a.lat,
         heading_deg: a.heading.rem_euclid(360.0),
         tilt_deg: a.tilt,
@@ -14,7 +14,7 @@ pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
         inner_delay_s: a.inner_delay,
         seed: a.seed,
     };
-    let mut s = hil::procedures::calibrate::scenario(&o);
+    let mut s = hil::procedures::rotating::scenario(&o);
     s.speed = a.speed;
     s.nav_parameters = a.parameters.as_deref().map(absolute).transpose()?;
     s.check()?;
@@ -29,8 +29,8 @@ pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
         o.lat_deg, o.heading_deg, o.level_s, o.rotate_s, o.rate_dps, a.speed
     );
     if a.in_process {
-        let o = hil::procedures::calibrate::run_in_process(&s, |j| {
-            hil::status::show(&hil::procedures::calibrate::progress_line(j))
+        let o = hil::procedures::rotating::run_in_process(&s, |j| {
+            hil::status::show(&hil::procedures::rotating::progress_line(j))
         })?;
         hil::status::finish();
         if let Some(p) = &o.parameters {
@@ -45,7 +45,7 @@ pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
             "calibration",
             &o,
             a.bus.json,
-            hil::procedures::calibrate::card,
+            hil::procedures::rotating::card,
         )?;
         return Ok(i32::from(o.result.is_none()));
     }
@@ -89,7 +89,7 @@ fn parse_failure(text: &str, at_s: f64) -> Result<emulators::mems::GyroFailure> 
 }
 
 pub(crate) fn calibrate_tetrahedral(a: TetraArgs) -> Result<i32> {
-    let mut o = hil::procedures::calibrate::TetraOptions {
+    let mut o = hil::procedures::tetrahedral::TetraOptions {
         lat_deg: a.lat,
         heading_deg: a.heading.rem_euclid(360.0),
         rate_dps: a.rate,
@@ -105,13 +105,13 @@ pub(crate) fn calibrate_tetrahedral(a: TetraArgs) -> Result<i32> {
     if let Some(f) = &a.fail {
         // halfway through the monitor's pass: the second, or the only one when the
         // coefficients come from a file
-        let pass = hil::procedures::calibrate::tetra_scenario(&o)
+        let pass = hil::procedures::tetrahedral::tetra_scenario(&o)
             .tetra_calibration
             .map_or(0.0, |c| c.profile_s());
         let at = if o.parameters.is_some() { 0.5 } else { 1.5 } * pass;
         o.failure = Some(parse_failure(f, at)?);
     }
-    let mut s = hil::procedures::calibrate::tetra_scenario(&o);
+    let mut s = hil::procedures::tetrahedral::tetra_scenario(&o);
     s.speed = a.speed;
     s.check()?;
     let (out, scen) = procedure_folder(
@@ -135,8 +135,8 @@ pub(crate) fn calibrate_tetrahedral(a: TetraArgs) -> Result<i32> {
         a.speed
     );
     if a.in_process {
-        let o = hil::procedures::calibrate::tetra_in_process(&s, |j| {
-            hil::status::show(&hil::procedures::calibrate::tetra_progress_line(j))
+        let o = hil::procedures::tetrahedral::tetra_in_process(&s, |j| {
+            hil::status::show(&hil::procedures::tetrahedral::tetra_progress_line(j))
         })?;
         hil::status::finish();
         if let Some(p) = &o.parameters {
@@ -151,7 +151,7 @@ pub(crate) fn calibrate_tetrahedral(a: TetraArgs) -> Result<i32> {
             "tetra_calibration",
             &o,
             a.bus.json,
-            hil::procedures::calibrate::tetra_card,
+            hil::procedures::tetrahedral::tetra_card,
         )?;
         return Ok(i32::from(o.result.is_none()));
     }

@@ -11,13 +11,14 @@
 //! six-position method ([`nav::calib::six_position`]) gets its own 360 s: plus and minus 20 deg/s
 //! about x, y and z, 60 s each.
 
+pub use crate::procedures::tetrahedral::{TetraErrors, errors};
 use crate::stats::median;
 use anyhow::{Result, bail};
 use emulators::mems::{TetraGyros, TetraParams};
 use emulators::truth::{AxisAngle, Composed, Indexer, Motion, RateWindows, Static};
 use nalgebra::{UnitQuaternion, Vector3};
 use nav::calib::{GyroCoefficients, TETRA_GYROS, TetraKf, six_position, table_rate};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 /// The paper's bias error bound, deg/s.
 pub const PAPER_BIAS_DPS: f64 = 0.0025;
@@ -41,19 +42,6 @@ const PAPER_PROFILE: [[f64; 3]; 3] = [
 ];
 const HZ: f64 = 100.0;
 
-/// Largest errors over the four gyros, per coefficient.
-#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
-pub struct TetraErrors {
-    /// Bias, deg/s.
-    pub bias_dps: f64,
-    /// Scale factor.
-    pub scale_factor: f64,
-    /// Mounting angles (both), deg.
-    pub angle_deg: f64,
-    /// Mean relative error over the 16 coefficients.
-    pub relative: f64,
-}
-
 /// One run of both methods.
 #[derive(Debug, Clone, Serialize)]
 pub struct TetraRun {
@@ -67,29 +55,6 @@ pub struct TetraRun {
     pub converged_s: f64,
     /// 1 - KF / six-position mean relative error.
     pub gain: f64,
-}
-
-/// The largest errors over the four gyros of the estimates `est` against the truth `t`, and
-/// the mean relative error over the 16 coefficients.
-pub fn errors(est: &[GyroCoefficients; TETRA_GYROS], t: &TetraParams) -> TetraErrors {
-    let mut e = TetraErrors::default();
-    let mut rel = 0.0;
-    for (i, c) in est.iter().enumerate() {
-        let pairs = [
-            (c.bias_dps, t.bias_dps[i]),
-            (c.scale_factor, t.scale_factor[i]),
-            (c.sigma_j, t.sigma_j_deg[i].to_radians()),
-            (c.sigma_k, t.sigma_k_deg[i].to_radians()),
-        ];
-        e.bias_dps = e.bias_dps.max((pairs[0].0 - pairs[0].1).abs());
-        e.scale_factor = e.scale_factor.max((pairs[1].0 - pairs[1].1).abs());
-        for (x, y) in &pairs[2..] {
-            e.angle_deg = e.angle_deg.max((x - y).abs().to_degrees());
-        }
-        rel += pairs.iter().map(|(x, y)| ((x - y) / y).abs()).sum::<f64>();
-    }
-    e.relative = rel / (4 * TETRA_GYROS) as f64;
-    e
 }
 
 /// The table: outer z, then x, then y, each axis's rate schedule; the base level at `lat_deg`.

@@ -1,15 +1,43 @@
-//! The procedures nav runs on the indexing mechanism: four-position north-finding
-//! ([`northfinding`]), the rotating-IMU and tetrahedral calibrations ([`calibrate`]): each one's
-//! scenario, outcome scored against truth, progress line and result card; [`observe`] follows
-//! them on nav's log lines.
+//! The procedures nav runs on the indexing mechanism, one file each: four-position
+//! north-finding ([`northfinding`]), the rotating IMU's self-calibration ([`rotating`]) and the
+//! tetrahedral unit's calibration ([`tetrahedral`]): each one's scenario, its in-process run,
+//! its outcome scored against truth, its progress line and its result card, and its
+//! [`BenchProcedure`] in [`ALL`]. [`observe`] follows them on nav's lines and frames.
+//!
+//! A new procedure: its file here, a line in [`ALL`] and its field in [`Outcomes`].
 
-pub mod calibrate;
 pub mod northfinding;
 pub mod observe;
+pub mod rotating;
+pub mod tetrahedral;
 
 use crate::scenario::Scenario;
-use calibrate::{CalibrateOutcome, TetraOutcome};
 use northfinding::DrillOutcome;
+use rotating::CalibrateOutcome;
+use tetrahedral::TetraOutcome;
+
+/// A procedure nav runs on the mechanism, as the bench knows it: which scenarios run it, how
+/// its progress reads to an operator, and its outcome scored against the scenario's truth.
+/// Its file also holds its scenario, its in-process run and its result card.
+pub trait BenchProcedure: Sync {
+    /// nav's name for it: nav says `nav: <name> progress {...}`, then `nav: <name> result ...`
+    /// or `nav: <name> aborted: ...`.
+    fn name(&self) -> &'static str;
+    /// Scenario `s` runs it.
+    fn runs_in(&self, s: &Scenario) -> bool;
+    /// The operator's progress line, from nav's progress JSON.
+    fn progress_line(&self, p: &serde_json::Value) -> String;
+    /// Its outcome from nav's summary `nav` (the stream having reached `sim_reached` s), into
+    /// `o`.
+    fn score(&self, s: &Scenario, nav: &nav::summary::Summary, sim_reached: f64, o: &mut Outcomes);
+}
+
+/// Every procedure the bench knows, in the order of nav's registry (`nav::mission`).
+pub const ALL: [&dyn BenchProcedure; 3] = [
+    &northfinding::NorthFinding,
+    &rotating::RotatingImu,
+    &tetrahedral::Tetrahedral,
+];
 
 /// The outcomes of the procedures a scenario runs, each scored from nav's summary against the
 /// scenario's truth (none where the scenario does not run it).
@@ -27,45 +55,12 @@ impl Outcomes {
     /// The outcomes of scenario `s`'s procedures from nav's summary `nav`, the stream having
     /// reached `sim_reached` s.
     pub fn of(s: &Scenario, nav: &nav::summary::Summary, sim_reached: f64) -> Self {
-        let north_finding = s.north_finding.as_ref().map(|_| {
-            let nf = nav.north_finding.as_ref();
-            northfinding::outcome(
-                s.truth_heading_deg(),
-                nf.and_then(|n| n.result.as_ref()),
-                nf.map_or(Some("north-finding was not enabled in nav"), |n| {
-                    n.abort.as_deref()
-                }),
-                sim_reached,
-            )
-        });
-        let rotating_imu = s.self_calibration.as_ref().map(|_| {
-            let c = nav.self_calibration.as_ref();
-            let mut o = calibrate::outcome(
-                s,
-                c.and_then(|c| c.result.as_ref()),
-                c.map_or(Some("self-calibration was not enabled in nav"), |c| {
-                    c.abort.as_deref()
-                }),
-                sim_reached,
-            );
-            o.parameters = c.and_then(|c| c.parameters.clone());
-            o
-        });
-        let tetrahedral = s.tetra_calibration.as_ref().map(|_| {
-            let c = nav.tetra_calibration.as_ref();
-            calibrate::tetra_outcome(
-                s,
-                c.and_then(|c| c.result.as_ref()),
-                c.map_or(Some("tetra-calibration was not enabled in nav"), |c| {
-                    c.abort.as_deref()
-                }),
-                sim_reached,
-            )
-        });
-        Self {
-            north_finding,
-            rotating_imu,
-            tetrahedral,
+        let mut o = Self::default();
+        for p in ALL {
+            if p.runs_in(s) {
+                p.score(s, nav, sim_reached, &mut o);
+            }
         }
+        o
     }
 }

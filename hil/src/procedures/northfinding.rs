@@ -153,6 +153,38 @@ pub fn run_in_process(
     ))
 }
 
+/// Four-position north-finding, as the bench knows it.
+pub struct NorthFinding;
+
+impl super::BenchProcedure for NorthFinding {
+    fn name(&self) -> &'static str {
+        "north-finding"
+    }
+    fn runs_in(&self, s: &Scenario) -> bool {
+        s.north_finding.is_some()
+    }
+    fn progress_line(&self, p: &serde_json::Value) -> String {
+        progress_line(p)
+    }
+    fn score(
+        &self,
+        s: &Scenario,
+        nav: &nav::summary::Summary,
+        sim_reached: f64,
+        o: &mut super::Outcomes,
+    ) {
+        let nf = nav.north_finding.as_ref();
+        o.north_finding = Some(outcome(
+            s.truth_heading_deg(),
+            nf.and_then(|n| n.result.as_ref()),
+            nf.map_or(Some("north-finding was not enabled in nav"), |n| {
+                n.abort.as_deref()
+            }),
+            sim_reached,
+        ));
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -136,46 +136,25 @@ pub struct DrillWatch {
 impl DrillWatch {
     /// Handle one nav stdout line; true when it is the procedure's final word.
     pub fn line(&mut self, l: &str, show: bool) -> bool {
-        type Render = fn(&serde_json::Value) -> String;
-        let progress: [(&str, Render); 3] = [
-            (
-                "nav: north-finding progress ",
-                crate::procedures::northfinding::progress_line as Render,
-            ),
-            (
-                "nav: self-calibration progress ",
-                crate::procedures::calibrate::progress_line as Render,
-            ),
-            (
-                "nav: tetra-calibration progress ",
-                crate::procedures::calibrate::tetra_progress_line as Render,
-            ),
-        ];
-        for (prefix, render) in progress {
-            if let Some(j) = l.strip_prefix(prefix) {
-                if show && let Ok(p) = serde_json::from_str::<serde_json::Value>(j) {
-                    crate::status::show(&render(&p));
+        for p in super::ALL {
+            let name = p.name();
+            let Some(rest) = l.strip_prefix("nav: ").and_then(|r| r.strip_prefix(name)) else {
+                continue;
+            };
+            if let Some(j) = rest.strip_prefix(" progress ") {
+                if show && let Ok(v) = serde_json::from_str::<serde_json::Value>(j) {
+                    crate::status::show(&p.progress_line(&v));
                 }
                 return false;
             }
-        }
-        if [
-            "nav: north-finding result",
-            "nav: north-finding aborted",
-            "nav: self-calibration result",
-            "nav: self-calibration aborted",
-            "nav: tetra-calibration result",
-            "nav: tetra-calibration aborted",
-        ]
-        .iter()
-        .any(|p| l.starts_with(p))
-        {
-            if show {
-                crate::status::line(l);
+            if rest.starts_with(" result") || rest.starts_with(" aborted") {
+                if show {
+                    crate::status::line(l);
+                }
+                let first = !self.done;
+                self.done = true;
+                return first;
             }
-            let first = !self.done;
-            self.done = true;
-            return first;
         }
         false
     }

@@ -51,10 +51,10 @@ pub struct RunReport {
     pub drill: Option<crate::procedures::northfinding::DrillOutcome>,
     /// The self-calibration's outcome, scored against the unit's truth (calibration runs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub calibration: Option<crate::procedures::calibrate::CalibrateOutcome>,
+    pub calibration: Option<crate::procedures::rotating::CalibrateOutcome>,
     /// The redundant unit's calibration, scored against its truth (paper 001 runs).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub tetra_calibration: Option<crate::procedures::calibrate::TetraOutcome>,
+    pub tetra_calibration: Option<crate::procedures::tetrahedral::TetraOutcome>,
     /// What the GPS emulator wrote (runs with a receiver).
     pub gps: Option<emulators::gps::GpsTxStats>,
     /// nav's solution frames as the bench received them.
@@ -272,7 +272,7 @@ pub fn drill_checks(
 /// for the unit.
 pub fn calibration_checks(
     out: &mut Vec<Check>,
-    o: &crate::procedures::calibrate::CalibrateOutcome,
+    o: &crate::procedures::rotating::CalibrateOutcome,
     nav: &Summary,
 ) {
     out.push(Check {
@@ -342,7 +342,7 @@ pub fn calibration_checks(
 /// injected, the monitor isolating that gyro.
 pub fn tetra_checks(
     out: &mut Vec<Check>,
-    o: &crate::procedures::calibrate::TetraOutcome,
+    o: &crate::procedures::tetrahedral::TetraOutcome,
     nav: &Summary,
 ) {
     out.push(Check {
@@ -672,13 +672,13 @@ pub fn card(r: &RunReport) -> String {
         let _ = writeln!(s, "{line}");
     }
     if let Some(c) = &r.calibration {
-        for l in crate::procedures::calibrate::card(c).lines() {
+        for l in crate::procedures::rotating::card(c).lines() {
             let _ = writeln!(s, " {l}");
         }
         let _ = writeln!(s, "{line}");
     }
     if let Some(c) = &r.tetra_calibration {
-        for l in crate::procedures::calibrate::tetra_card(c).lines() {
+        for l in crate::procedures::tetrahedral::tetra_card(c).lines() {
             let _ = writeln!(s, " {l}");
         }
         let _ = writeln!(s, "{line}");
@@ -733,14 +733,14 @@ pub fn markdown(r: &RunReport) -> String {
         let _ = writeln!(
             s,
             "## Self-calibration\n\n```\n{}```\n",
-            crate::procedures::calibrate::card(c)
+            crate::procedures::rotating::card(c)
         );
     }
     if let Some(c) = &r.tetra_calibration {
         let _ = writeln!(
             s,
             "## Redundant unit's calibration\n\n```\n{}```\n",
-            crate::procedures::calibrate::tetra_card(c)
+            crate::procedures::tetrahedral::tetra_card(c)
         );
     }
     if let Some(d) = &r.drill {

@@ -514,13 +514,7 @@ fn supervise(
         for l in nav.lines.try_iter() {
             drill.line(&l, opts.progress);
         }
-        if opts.progress
-            && ((s.north_finding.is_none()
-                && s.self_calibration.is_none()
-                && s.tetra_calibration.is_none())
-                || drill.done)
-            && Instant::now() >= next_report
-        {
+        if opts.progress && (!s.has_procedure() || drill.done) && Instant::now() >= next_report {
             let t = devices.sim_time();
             let reached = (t - last_report.1) / last_report.0.elapsed().as_secs_f64().max(1e-9);
             // nothing to say while the devices stand (a finished drill being stopped)

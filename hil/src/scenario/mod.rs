@@ -400,13 +400,18 @@ impl Scenario {
         )
     }
 
-    /// A procedure on the mechanism (north-finding, a self-calibration, the tetrahedral
-    /// calibration) with no drive after it: the run is over when nav says the procedure is.
+    /// The scenario runs a procedure on the mechanism (north-finding, a self-calibration, the
+    /// tetrahedral calibration).
+    pub fn has_procedure(&self) -> bool {
+        self.north_finding.is_some()
+            || self.self_calibration.is_some()
+            || self.tetra_calibration.is_some()
+    }
+
+    /// A procedure on the mechanism with no drive after it: the run is over when nav says the
+    /// procedure is.
     pub fn ends_with_procedure(&self) -> bool {
-        self.drive.is_none()
-            && (self.north_finding.is_some()
-                || self.self_calibration.is_some()
-                || self.tetra_calibration.is_some())
+        self.drive.is_none() && self.has_procedure()
     }
 
     /// True when the IMU sits still on the site (static checks apply).

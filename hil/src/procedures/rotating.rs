@@ -51,7 +51,13 @@ impl Default for CalibrateOptions {
 /// 100 Hz) parked at the site (its pitch and roll both `tilt_deg`), the processing chain at the
 /// IMU's rate (no dither to strip: it only has to pass the motion, as in
 /// scenarios/rotating-fog.toml).
-fn fog_bench(name: &str, lat_deg: f64, heading_deg: f64, tilt_deg: f64, seed: u64) -> Scenario {
+pub(super) fn fog_bench(
+    name: &str,
+    lat_deg: f64,
+    heading_deg: f64,
+    tilt_deg: f64,
+    seed: u64,
+) -> Scenario {
     let mut s = Scenario::builtin_static();
     s.name = name.into();
     s.site.lat_deg = lat_deg;
@@ -412,6 +418,40 @@ pub fn card(o: &CalibrateOutcome) -> String {
     s
 }
 
+/// The rotating IMU's self-calibration, as the bench knows it.
+pub struct RotatingImu;
+
+impl super::BenchProcedure for RotatingImu {
+    fn name(&self) -> &'static str {
+        "self-calibration"
+    }
+    fn runs_in(&self, s: &Scenario) -> bool {
+        s.self_calibration.is_some()
+    }
+    fn progress_line(&self, p: &serde_json::Value) -> String {
+        progress_line(p)
+    }
+    fn score(
+        &self,
+        s: &Scenario,
+        nav: &nav::summary::Summary,
+        sim_reached: f64,
+        o: &mut super::Outcomes,
+    ) {
+        let c = nav.self_calibration.as_ref();
+        let mut r = outcome(
+            s,
+            c.and_then(|c| c.result.as_ref()),
+            c.map_or(Some("self-calibration was not enabled in nav"), |c| {
+                c.abort.as_deref()
+            }),
+            sim_reached,
+        );
+        r.parameters = c.and_then(|c| c.parameters.clone());
+        o.rotating_imu = Some(r);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -441,315 +481,5 @@ mod tests {
         let rls = out.rls.expect("scored");
         assert!(rls.bias_mae_dph < 0.003, "{rls:?}");
         assert!(rls.sf_mae_ppm < 1.0, "{rls:?}");
-    }
-}
-
-/// Paper 001's procedure as an operator command: its settings.
-#[derive(Debug, Clone, Serialize)]
-pub struct TetraOptions {
-    /// Latitude of the table, deg.
-    pub lat_deg: f64,
-    /// Heading of the table's base, deg.
-    pub heading_deg: f64,
-    /// Rate of each turn, deg/s.
-    pub rate_dps: f64,
-    /// Rest before the turns, s.
-    pub rest_s: f64,
-    /// Each turn, s.
-    pub turn_s: f64,
-    /// Rest after the turns, s.
-    pub end_rest_s: f64,
-    /// The unit's gyro noise, deg/s per sample.
-    pub noise_dps: f64,
-    /// Run the profile again with the parity monitor.
-    pub monitor: bool,
-    /// A failure of one gyro (times from the start of the run).
-    pub failure: Option<emulators::mems::GyroFailure>,
-    /// Start from this parameter file of the unit (an earlier run's): no calibration, the
-    /// profile once with the parity monitor.
-    pub parameters: Option<std::path::PathBuf>,
-    /// Seed.
-    pub seed: u64,
-}
-
-impl Default for TetraOptions {
-    fn default() -> Self {
-        let c = nav::tetracal::TetraCalibrationConfig::default();
-        Self {
-            lat_deg: c.latitude_deg,
-            heading_deg: 0.0,
-            rate_dps: c.rate_dps,
-            rest_s: c.rest_s,
-            turn_s: c.turn_s,
-            end_rest_s: c.end_rest_s,
-            noise_dps: 0.005,
-            monitor: false,
-            failure: None,
-            parameters: None,
-            seed: 1,
-        }
-    }
-}
-
-/// Paper 001's procedure as a scenario: the redundant MEMS unit riding on a quiet 100 Hz IMU
-/// (the bench's clock) on a level three-axis table (axes 0, 1, 2 about z, x, y), nav
-/// calibrating it.
-pub fn tetra_scenario(o: &TetraOptions) -> Scenario {
-    let mut s = fog_bench(
-        "calibrate-tetrahedral",
-        o.lat_deg,
-        o.heading_deg,
-        0.0,
-        o.seed,
-    );
-    // the rate's range for the table's 20 deg/s: 16-bit counters of 0.1 arcsec at 100 Hz
-    s.imu.gyro_pulse_arcsec = [0.1; 3];
-    s.imu.gyro_range_dps = 90.0;
-    s.imu.tetra = Some(emulators::mems::TetraUnit {
-        gyros: emulators::mems::TetraParams {
-            noise_dps: o.noise_dps,
-            seed: o.seed,
-            ..Default::default()
-        },
-        failure: o.failure,
-        ..Default::default()
-    });
-    s.turntable = Some(emulators::turntable::TurntableParams {
-        axes: 3,
-        seed: o.seed,
-        // a lab table: turns of 20 deg/s and more
-        max_rate_dps: 60.0,
-        ..Default::default()
-    });
-    let c = nav::tetracal::TetraCalibrationConfig {
-        enabled: true,
-        latitude_deg: o.lat_deg,
-        base_heading_deg: o.heading_deg,
-        rate_dps: o.rate_dps,
-        rest_s: o.rest_s,
-        turn_s: o.turn_s,
-        end_rest_s: o.end_rest_s,
-        monitor: o.monitor,
-        gyro_noise_dps: o.noise_dps.max(1e-6),
-        // the paper's R, or the unit's noise where that is larger (with the output's
-        // quantization and the reference rate's noise, about 0.004 deg/s): the filter's
-        // sigmas then keep their promise at MEMS noise too
-        r: (o.noise_dps.powi(2) + 0.004f64.powi(2)).max(1e-3),
-        parameters: o.parameters.clone(),
-        ..Default::default()
-    };
-    let passes = if o.monitor && o.parameters.is_none() {
-        2.0
-    } else {
-        1.0
-    };
-    s.duration_s = passes * c.profile_s() + 90.0;
-    s.tetra_calibration = Some(c);
-    s
-}
-
-/// The outcome of paper 001's procedure.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct TetraOutcome {
-    /// The unit's true coefficients.
-    pub truth: emulators::mems::TetraParams,
-    /// nav's result.
-    pub result: Option<nav::tetracal::TetraCalibrationResult>,
-    /// Largest errors and the mean relative error.
-    pub errors: Option<crate::experiments::tetrahedral::TetraErrors>,
-    /// Largest |error| / sigma over the 16 coefficients.
-    pub worst_sigma_ratio: Option<f64>,
-    /// The failure injected, if any.
-    pub failure: Option<emulators::mems::GyroFailure>,
-    /// Why it did not finish.
-    pub abort: Option<String>,
-    /// Simulated time at the end, s.
-    pub duration_s: f64,
-    /// The unit's parameter file nav made of its estimates (undated in process).
-    #[serde(default)]
-    pub parameters: Option<nav::params::RedundantParameters>,
-}
-
-/// Score nav's result against the unit of scenario `s`.
-pub fn tetra_outcome(
-    s: &Scenario,
-    result: Option<&nav::tetracal::TetraCalibrationResult>,
-    abort: Option<&str>,
-    duration_s: f64,
-) -> TetraOutcome {
-    let unit = s.imu.tetra.clone().unwrap_or_default();
-    let t = &unit.gyros;
-    let ratio = result.map(|r| {
-        (0..4)
-            .flat_map(|i| {
-                let (c, sg) = (&r.coefficients[i], &r.sigmas[i]);
-                [
-                    (c.bias_dps - t.bias_dps[i]) / sg.bias_dps,
-                    (c.scale_factor - t.scale_factor[i]) / sg.scale_factor,
-                    (c.sigma_j - t.sigma_j_deg[i].to_radians()) / sg.sigma_j,
-                    (c.sigma_k - t.sigma_k_deg[i].to_radians()) / sg.sigma_k,
-                ]
-            })
-            .map(f64::abs)
-            .fold(0.0, f64::max)
-    });
-    TetraOutcome {
-        truth: t.clone(),
-        errors: result.map(|r| crate::experiments::tetrahedral::errors(&r.coefficients, t)),
-        worst_sigma_ratio: ratio,
-        result: result.cloned(),
-        failure: unit.failure,
-        abort: abort.map(str::to_string),
-        duration_s,
-        parameters: None,
-    }
-}
-
-/// Paper 001's procedure in process, as [`run_in_process`].
-pub fn tetra_in_process(
-    s: &Scenario,
-    progress: impl FnMut(&serde_json::Value),
-) -> Result<TetraOutcome> {
-    let (bench, t, unfinished) = until_finished(
-        s,
-        |p| p.tetra_calibrator().map(|c| c as &dyn Procedure),
-        progress,
-    )?;
-    let Some(c) = bench.pipeline().tetra_calibrator() else {
-        bail!("tetra_calibration is not enabled in nav's config");
-    };
-    let mut o = tetra_outcome(s, c.result(), unfinished.as_deref().or(c.abort()), t);
-    o.parameters = c.parameters();
-    Ok(o)
-}
-
-/// One live progress line from nav's tetra-calibration progress JSON.
-pub fn tetra_progress_line(p: &serde_json::Value) -> String {
-    let b = p["bias_dps"].as_array().map_or(String::new(), |a| {
-        a.iter()
-            .map(|x| format!("{:+.4}", x.as_f64().unwrap_or(f64::NAN)))
-            .collect::<Vec<_>>()
-            .join(" ")
-    });
-    format!(
-        "calibrate: {:<11} turning {}  left {:6.1} s  t = {:6.1} s  bias [{b}] deg/s",
-        p["phase"].as_str().unwrap_or("?"),
-        p["turning"].as_str().unwrap_or("-"),
-        p["phase_left_s"].as_f64().unwrap_or(0.0),
-        p["elapsed_s"].as_f64().unwrap_or(0.0),
-    )
-}
-
-/// The result card of paper 001's procedure.
-pub fn tetra_card(o: &TetraOutcome) -> String {
-    use std::fmt::Write as _;
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "== Kalman calibration of the redundant MEMS unit on the three-axis table (paper 001) =="
-    );
-    let Some(r) = &o.result else {
-        let _ = writeln!(
-            s,
-            "ABORTED after {:.1} s: {}",
-            o.duration_s,
-            o.abort.as_deref().unwrap_or("no result")
-        );
-        return s;
-    };
-    let _ = writeln!(
-        s,
-        "{} samples, {} s of the profile checked against the commanded rates, {} unmatched frames, {} samples without status",
-        r.samples, r.checked_s, r.unmatched_frames, r.samples_without_status
-    );
-    let _ = writeln!(
-        s,
-        "gyro  bias deg/s (true)        scale factor (true)       sigma_j deg (true)   sigma_k deg (true)"
-    );
-    let t = &o.truth;
-    for (i, c) in r.coefficients.iter().enumerate() {
-        let _ = writeln!(
-            s,
-            "{}     {:+.5} ({:+.5})   {:+.6} ({:+.6})   {:+.4} ({:+.4})    {:+.4} ({:+.4})",
-            i + 1,
-            c.bias_dps,
-            t.bias_dps[i],
-            c.scale_factor,
-            t.scale_factor[i],
-            c.sigma_j.to_degrees(),
-            t.sigma_j_deg[i],
-            c.sigma_k.to_degrees(),
-            t.sigma_k_deg[i]
-        );
-    }
-    if let (Some(e), Some(q)) = (&o.errors, o.worst_sigma_ratio) {
-        let _ = writeln!(
-            s,
-            "largest errors: bias {:.2e} deg/s (paper < 0.0025), angle {:.2e} deg (< 0.0025), scale factor {:.2e} (< 1.5e-5); mean relative error {:.3} % (< 0.9 %); worst |e|/sigma {q:.1}",
-            e.bias_dps,
-            e.angle_deg,
-            e.scale_factor,
-            100.0 * e.relative
-        );
-    }
-    if let Some(m) = &r.monitor {
-        let f = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.2} s"));
-        let _ = writeln!(
-            s,
-            "parity monitor: {} (failure injected: {}); alarm at {}, isolated at {} into the monitored pass; worst rate error {:.4} deg/s",
-            serde_json::to_string(&m.status).unwrap_or_default(),
-            o.failure
-                .map_or("none".to_string(), |f| serde_json::to_string(&f)
-                    .unwrap_or_default()),
-            f(m.detected_at_s),
-            f(m.isolated_at_s),
-            m.worst_rate_error_dps
-        );
-    }
-    let _ = writeln!(s, "duration {:.1} s", r.duration_s);
-    s
-}
-
-#[cfg(test)]
-mod tetra_tests {
-    use super::*;
-
-    /// A short profile in process: nav commands the table's three axes over the bus's
-    /// protocol, checks their rates, calibrates the four gyros, and with a bias jump injected
-    /// in the second pass its parity monitor isolates the failed gyro against the table's rate.
-    #[test]
-    fn a_short_profile_calibrates_the_unit_and_the_monitor_isolates_a_failure() {
-        let mut o = TetraOptions {
-            rest_s: 5.0,
-            turn_s: 20.0,
-            end_rest_s: 5.0,
-            monitor: true,
-            ..TetraOptions::default()
-        };
-        let s = tetra_scenario(&o);
-        let pass = s.tetra_calibration.as_ref().expect("set").profile_s();
-        // a jump of gyro 3 halfway through the second pass (the run's start is a few tenths
-        // of a second before the profile's)
-        o.failure = Some(emulators::mems::GyroFailure::BiasJump {
-            gyro: 2,
-            at_s: 1.5 * pass,
-            jump_dps: 0.5,
-        });
-        let s = tetra_scenario(&o);
-        s.check().expect("scenario");
-        let out = tetra_in_process(&s, |_| {}).expect("runs");
-        println!("{}", tetra_card(&out));
-        let r = out
-            .result
-            .as_ref()
-            .unwrap_or_else(|| panic!("{}", out.abort.as_deref().unwrap_or("no result")));
-        let e = out.errors.expect("scored");
-        assert!(e.bias_dps < 0.0025 && e.angle_deg < 0.0025, "{e:?}");
-        assert!(r.checked_s > 40, "{}", r.checked_s);
-        let m = r.monitor.expect("the monitor ran");
-        assert!(
-            matches!(m.status, nav::redundant::Status::Isolated { gyro: 2, .. }),
-            "{m:?}"
-        );
     }
 }
