@@ -168,9 +168,7 @@ impl Scenario {
 
     /// Sanity checks.
     pub fn check(&self) -> Result<()> {
-        if !(self.duration_s > 0.0 && self.duration_s.is_finite()) {
-            bail!("duration_s must be positive");
-        }
+        self.check_fields().map_err(anyhow::Error::msg)?;
         if !(self.speed > 0.0 && self.speed <= 1000.0) {
             bail!("speed must be in (0, 1000]");
         }
@@ -309,6 +307,56 @@ impl Scenario {
                 "processing.fir.fs_hz ({}) must equal imu.rate_hz ({r}) (for a 100 Hz IMU, e.g. fs_hz = 100, passband_hz = 20, stopband_hz = 45, order = 16)",
                 self.processing.fir.fs_hz
             );
+        }
+        Ok(())
+    }
+
+    /// Every field that is a quantity of a known kind, within its kind's range
+    /// ([`crate::values`]: the same ranges as the command line's flags): the error names the
+    /// field, the value and the range.
+    fn check_fields(&self) -> std::result::Result<(), String> {
+        use crate::values::{
+            DURATION, HEADING, HEIGHT, LATITUDE, LONGITUDE, OFFSET, PAUSE, RATE, SIGMA, TILT,
+            TOLERANCE, VEHICLE_ACCEL, VEHICLE_SPEED,
+        };
+        DURATION.field("duration_s", self.duration_s)?;
+        TOLERANCE.field("heading_tolerance_deg", self.heading_tolerance_deg)?;
+        SIGMA.field("position_tolerance_m", self.position_tolerance_m)?;
+        let site = &self.site;
+        LATITUDE.field("site.lat_deg", site.lat_deg)?;
+        LONGITUDE.field("site.lon_deg", site.lon_deg)?;
+        HEIGHT.field("site.height_m", site.height_m)?;
+        HEADING.field("site.heading_deg", site.heading_deg)?;
+        TILT.field("site.pitch_deg", site.pitch_deg)?;
+        TILT.field("site.roll_deg", site.roll_deg)?;
+        if let Some(d) = &self.drive {
+            LATITUDE.field("drive.lat_deg", d.lat_deg)?;
+            LONGITUDE.field("drive.lon_deg", d.lon_deg)?;
+            HEIGHT.field("drive.height_m", d.height_m)?;
+            VEHICLE_SPEED.field("drive.speed_mps", d.speed_mps)?;
+            VEHICLE_ACCEL.field("drive.accel_mps2", d.accel_mps2)?;
+            RATE.field("drive.turn_rate_dps", d.turn_rate_dps)?;
+            VEHICLE_ACCEL.field("drive.lateral_accel_mps2", d.lateral_accel_mps2)?;
+            PAUSE.field("drive.start_wait_s", d.start_wait_s)?;
+        }
+        if let Some(nf) = &self.north_finding {
+            DURATION.field("north_finding.dwell_s", nf.dwell_s)?;
+            LATITUDE.field("north_finding.latitude_deg", nf.latitude_deg)?;
+        }
+        if let Some(c) = &self.self_calibration {
+            DURATION.field("self_calibration.level_s", c.level_s)?;
+            DURATION.field("self_calibration.rotate_s", c.rotate_s)?;
+            RATE.field("self_calibration.rate_dps", c.rate_dps)?;
+            PAUSE.field("self_calibration.inner_delay_s", c.inner_delay_s)?;
+        }
+        if let Some(c) = &self.tetra_calibration {
+            RATE.field("tetra_calibration.rate_dps", c.rate_dps)?;
+            DURATION.field("tetra_calibration.turn_s", c.turn_s)?;
+        }
+        if let Some(g) = &self.gps {
+            for (a, v) in ["x", "y", "z"].iter().zip(g.lever_arm_m) {
+                OFFSET.field(&format!("gps.lever_arm_m ({a})"), v)?;
+            }
         }
         Ok(())
     }
