@@ -63,8 +63,30 @@ pub fn assemble<T: Clone>(parts: &[Part<T>]) -> Result<Vec<T>> {
             ),
         }
     }
-    if let Some(m) = seen.iter().position(|s| !s) {
-        bail!("part {m} of {} is missing", first.shards);
+    let missing: Vec<usize> = (0..first.shards).filter(|&k| !seen[k]).collect();
+    if !missing.is_empty() {
+        let each: Vec<String> = missing
+            .iter()
+            .map(|&k| {
+                format!(
+                    "part {k} of {} (Slurm array task {k}, Kubernetes completion index {k}): runs {} of the plan's {}",
+                    first.shards,
+                    places(held(k, first.shards, first.total)),
+                    first.total
+                )
+            })
+            .collect();
+        bail!(
+            "{} missing: {}; run {} again with `--shard K/{}` and the same options, then merge all parts",
+            if missing.len() == 1 {
+                "a part is"
+            } else {
+                "parts are"
+            },
+            each.join("; "),
+            if missing.len() == 1 { "it" } else { "them" },
+            first.shards
+        );
     }
     let mut all: Vec<Option<T>> = vec![None; first.total];
     for p in parts {
@@ -79,6 +101,21 @@ pub fn assemble<T: Clone>(parts: &[Part<T>]) -> Result<Vec<T>> {
         .enumerate()
         .map(|(g, o)| o.with_context(|| format!("run {g} is in no part")))
         .collect()
+}
+
+/// The places in the plan (of `total` runs) that part `shard` of `shards` holds.
+pub fn held(shard: usize, shards: usize, total: usize) -> Vec<usize> {
+    (0..total).filter(|g| g % shards.max(1) == shard).collect()
+}
+
+/// Places in the plan, for people: all of them when few, else the first ones and how many.
+fn places(v: Vec<usize>) -> String {
+    let text: Vec<String> = v.iter().take(8).map(usize::to_string).collect();
+    match v.len() {
+        0 => "none".into(),
+        n if n <= 8 => text.join(", "),
+        n => format!("{}, ... ({n} runs)", text.join(", ")),
+    }
 }
 
 /// Writes `part` as `part-K-of-N.json` in `dir`; returns the file.
@@ -157,11 +194,13 @@ mod tests {
         assert_eq!(assemble(&parts(1)).unwrap(), want);
         assert_eq!(assemble(&parts(3)).unwrap(), want);
         let p = parts(3);
+        // the missing part is named with its runs, as a Slurm array task and a Job's index
+        let e = assemble(&p[..2]).unwrap_err().to_string();
         assert!(
-            assemble(&p[..2])
-                .unwrap_err()
-                .to_string()
-                .contains("missing")
+            e.contains("part 2 of 3 (Slurm array task 2")
+                && e.contains("runs 2, 5 of the plan's 7")
+                && e.contains("--shard K/3"),
+            "{e}"
         );
         let twice = vec![p[0].clone(), p[0].clone(), p[1].clone()];
         assert!(assemble(&twice).unwrap_err().to_string().contains("twice"));
