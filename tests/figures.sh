@@ -10,9 +10,9 @@
 set -euo pipefail
 if [ "${1:-}" = --diff ]; then
   # wall times, run folders and dates are not results
-  strip() { grep -v -E 'wall|took|elapsed| in [0-9.]+ s|runs/|/tmp/|unix|cpu_s|"t_wall|generated' "$1"; }
+  strip() { grep -v -E 'wall|took|elapsed| in [0-9.]+ s|runs/|/tmp/|unix|cpu_s|"t_wall|generated|^date = ' "$1"; }
   rc=0
-  for f in $(cd "$2" && find . -type f \( -name '*.md' -o -name '*.txt' -o -name '*.csv' -o -name '*.svg' \) | sort); do
+  for f in $(cd "$2" && find . -type f \( -name '*.md' -o -name '*.txt' -o -name '*.csv' -o -name '*.svg' -o -name '*.json' -o -name '*.toml' \) | sort); do
     if ! diff -q <(strip "$2/$f") <(strip "$3/$f") >/dev/null; then
       echo "differs: $f"; diff <(strip "$2/$f") <(strip "$3/$f") | head -20; rc=1
     fi
