@@ -16,6 +16,7 @@ pub mod mems;
 pub mod player;
 pub mod pulse;
 pub mod step;
+pub mod stream;
 pub mod truth;
 pub mod ttbus;
 pub mod turntable;

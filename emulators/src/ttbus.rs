@@ -2,11 +2,28 @@
 //! acknowledgements and status frames out after each IMU sample, and its truth kept for the
 //! bench's recording. The scheduler (`bus`) and the in-process runs step it alike (`step`).
 
-use crate::can::TurntableTxStats;
 use crate::turntable::Turntable;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 use wire::{Message, TtAck, TtCmd};
+
+/// What the turntable adapter did.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+pub struct TurntableTxStats {
+    /// TT_CMD frames received.
+    pub commands: u64,
+    /// TT_ACK frames sent.
+    pub acks: u64,
+    /// TT_STATUS frames sent.
+    pub status_frames: u64,
+    /// Frames received that were not a valid TT_CMD.
+    pub bad_frames: u64,
+    /// Commands lost on purpose (fault injection: no ack).
+    pub lost_commands: u64,
+    /// Status frames withheld on purpose (fault injection: heartbeat loss).
+    #[serde(default)]
+    pub silenced_status: u64,
+}
 
 /// The turntable's truth at one instant: what the mechanism really did (never on the wire), for
 /// the bench's recording.
