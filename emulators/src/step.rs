@@ -14,7 +14,7 @@
 //! received before bytes it has read (`nav`'s event loop). In process they go into the
 //! pipeline right after the sample's frames.
 
-use crate::can::BusStream;
+use crate::stream::BusStream;
 use crate::gps::{Epoch, GpsReceiver};
 use crate::ttbus::TtBus;
 use wire::{Message, RawFrame};
