@@ -14,8 +14,8 @@
 //! received before bytes it has read (`nav`'s event loop). In process they go into the
 //! pipeline right after the sample's frames.
 
-use crate::stream::BusStream;
 use crate::gps::{Epoch, GpsReceiver};
+use crate::stream::BusStream;
 use crate::ttbus::TtBus;
 use wire::{Message, RawFrame};
 

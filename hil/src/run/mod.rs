@@ -682,6 +682,7 @@ fn score(
         nav_exit,
         &lockstep_stats,
         tt_stats.as_ref(),
+        opts.gps_via_gpsd,
     );
     let procedures = crate::procedures::Outcomes::of(s, &nav_json, sim_reached);
     report::procedure_checks(&mut checks, s, &procedures, &nav_json);
