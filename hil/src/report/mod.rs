@@ -81,17 +81,33 @@ pub struct RunReport {
     pub pass: bool,
 }
 
+/// What the bench's side of a run saw, for [`checks`].
+#[derive(Debug, Clone, Copy)]
+pub struct BenchSide<'a> {
+    /// The IMU's frames.
+    pub tx: &'a TxStats,
+    /// The lockstep with nav.
+    pub lockstep: &'a emulators::bus::LockstepStats,
+    /// The turntable's frames, when there is one.
+    pub turntable: Option<&'a emulators::can::TurntableTxStats>,
+    /// The receiver reached nav through gpsd.
+    pub gps_via_gpsd: bool,
+}
+
 /// Compute the checks of a finished run.
 pub fn checks(
     s: &Scenario,
-    tx: &TxStats,
+    bench: BenchSide<'_>,
     reference: Option<&InProcess>,
     nav: &Summary,
     nav_exit: Option<i32>,
-    lockstep: &emulators::bus::LockstepStats,
-    turntable: Option<&emulators::can::TurntableTxStats>,
-    gps_via_gpsd: bool,
 ) -> (Vec<Check>, i64) {
+    let BenchSide {
+        tx,
+        lockstep,
+        turntable,
+        gps_via_gpsd,
+    } = bench;
     let mut out = Vec::new();
     // nobody else writes on the bench's bus, and nav drains its socket before it stops
     let tt_frames = turntable.map_or(0, |t| t.acks + t.status_frames);

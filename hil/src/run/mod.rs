@@ -674,16 +674,13 @@ fn score(
     })?;
     let reference = reference.transpose()?;
     phases.end("reference, replay and scoring");
-    let (mut checks, lost) = report::checks(
-        s,
-        &tx,
-        reference.as_ref(),
-        &nav_json,
-        nav_exit,
-        &lockstep_stats,
-        tt_stats.as_ref(),
-        opts.gps_via_gpsd,
-    );
+    let bench = report::BenchSide {
+        tx: &tx,
+        lockstep: &lockstep_stats,
+        turntable: tt_stats.as_ref(),
+        gps_via_gpsd: opts.gps_via_gpsd,
+    };
+    let (mut checks, lost) = report::checks(s, bench, reference.as_ref(), &nav_json, nav_exit);
     let procedures = crate::procedures::Outcomes::of(s, &nav_json, sim_reached);
     report::procedure_checks(&mut checks, s, &procedures, &nav_json);
     report::solution_checks(&mut checks, &solution, &nav_json);
