@@ -138,10 +138,11 @@ enum Cmd {
     /// NAV_TIME-out latency), each scenario's emulators and nav's pipeline in process. Runs where
     /// vcan is: natively, or all of it inside the QEMU guest. Writes bench.json and bench.md.
     Bench(BenchArgs),
-    /// The fault matrix: 26 faults (IMU frames dropped, duplicated, reordered, delayed, counter
+    /// The fault matrix: 28 faults (IMU frames dropped, duplicated, reordered, delayed, counter
     /// jump, BIT failure, saturation, accelerometer frames missing, IMU stream stopping, CAN
-    /// interface down and up, a flood of foreign frames, bad frames; nav killed outright; GPS outages void and silent,
-    /// position jump, time going backwards, garbage, receiver unplugged, PPS missing; turntable
+    /// interface down and up, a flood of foreign frames, an overloaded bus, bad frames; nav
+    /// killed outright; GPS outages void and silent, position jump, time going backwards,
+    /// garbage, receiver unplugged, PPS missing and jittered; turntable
     /// stall, lock failure, encoder glitch, lost and late acknowledgements, heartbeat loss), each
     /// injected into the emulators or by the bench, run through vcan and the pty against the
     /// unmodified nav, and judged against what nav must do and by when. Writes faults.md and
