@@ -32,6 +32,18 @@ pub trait BenchProcedure: Sync {
     fn score(&self, s: &Scenario, nav: &nav::summary::Summary, sim_reached: f64, o: &mut Outcomes);
 }
 
+/// What nav's summary says of procedure `name` (its section's result and abort reason): the
+/// result, and why there is none; a summary without the section says it was not enabled.
+fn said<'a, R>(
+    name: &str,
+    section: Option<(Option<&'a R>, Option<&'a str>)>,
+) -> (Option<&'a R>, Option<String>) {
+    match section {
+        Some((result, abort)) => (result, abort.map(str::to_string)),
+        None => (None, Some(format!("{name} was not enabled in nav"))),
+    }
+}
+
 /// Every procedure the bench knows, in the order of nav's registry (`nav::mission`).
 pub const ALL: [&dyn BenchProcedure; 3] = [
     &northfinding::NorthFinding,

@@ -174,12 +174,14 @@ impl super::BenchProcedure for NorthFinding {
         o: &mut super::Outcomes,
     ) {
         let nf = nav.north_finding.as_ref();
+        let (result, why) = super::said(
+            self.name(),
+            nf.map(|n| (n.result.as_ref(), n.abort.as_deref())),
+        );
         o.north_finding = Some(outcome(
             s.truth_heading_deg(),
-            nf.and_then(|n| n.result.as_ref()),
-            nf.map_or(Some("north-finding was not enabled in nav"), |n| {
-                n.abort.as_deref()
-            }),
+            result,
+            why.as_deref(),
             sim_reached,
         ));
     }

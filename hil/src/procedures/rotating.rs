@@ -439,14 +439,11 @@ impl super::BenchProcedure for RotatingImu {
         o: &mut super::Outcomes,
     ) {
         let c = nav.self_calibration.as_ref();
-        let mut r = outcome(
-            s,
-            c.and_then(|c| c.result.as_ref()),
-            c.map_or(Some("self-calibration was not enabled in nav"), |c| {
-                c.abort.as_deref()
-            }),
-            sim_reached,
+        let (result, why) = super::said(
+            self.name(),
+            c.map(|c| (c.result.as_ref(), c.abort.as_deref())),
         );
+        let mut r = outcome(s, result, why.as_deref(), sim_reached);
         r.parameters = c.and_then(|c| c.parameters.clone());
         o.rotating_imu = Some(r);
     }

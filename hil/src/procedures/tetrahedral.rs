@@ -332,15 +332,13 @@ impl super::BenchProcedure for Tetrahedral {
         sim_reached: f64,
         o: &mut super::Outcomes,
     ) {
-        let c = nav.tetra_calibration.as_ref();
-        o.tetrahedral = Some(tetra_outcome(
-            s,
-            c.and_then(|c| c.result.as_ref()),
-            c.map_or(Some("tetra-calibration was not enabled in nav"), |c| {
-                c.abort.as_deref()
-            }),
-            sim_reached,
-        ));
+        let (result, why) = super::said(
+            self.name(),
+            nav.tetra_calibration
+                .as_ref()
+                .map(|c| (c.result.as_ref(), c.abort.as_deref())),
+        );
+        o.tetrahedral = Some(tetra_outcome(s, result, why.as_deref(), sim_reached));
     }
 }
 
