@@ -199,6 +199,21 @@ pub enum ConfigError {
 }
 
 impl NavConfig {
+    /// The files nav reads beyond its config (the parameter files), each with a name for a
+    /// copy of it beside the config: `(the path, the copy's name)`.
+    pub fn input_files_mut(&mut self) -> impl Iterator<Item = (&mut PathBuf, &'static str)> {
+        let imu = self
+            .calibration
+            .as_mut()
+            .map(|c| (&mut c.parameters, "nav-parameters.toml"));
+        let tetra = self
+            .tetra_calibration
+            .parameters
+            .as_mut()
+            .map(|p| (p, "nav-tetra-parameters.toml"));
+        imu.into_iter().chain(tetra)
+    }
+
     /// Load and check a config file; relative record paths are resolved against its folder.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {

@@ -25,11 +25,13 @@
 //! reason naming the position and the command.
 
 use crate::earth;
-use crate::procedure::{Core, OnMechanism, Phases};
-use crate::ttlink::{LinkTiming, TtLink};
+use crate::mission::Mission;
+use crate::procedure::{Core, OnMechanism, Phases, Procedure, Reporting};
+use crate::ttlink::{LinkTiming, SettingError, TtLink};
 use nalgebra::{Matrix4, Rotation3, Vector3, Vector4};
 use serde::{Deserialize, Serialize};
-use wire::{TtCmd, TtCommand, TtState, TtStatus};
+use std::any::Any;
+use wire::{NavMode, TtCmd, TtCommand, TtState, TtStatus};
 
 /// North-finding settings (the `[north_finding]` table of nav's config).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -783,6 +785,84 @@ impl Phases for Phase {
 
 // north-finding stamps status frames with its own update time
 crate::procedure::procedure!(NorthFinder, "north-finding", |s, _t, st| s.on_status(st));
+
+/// North-finding at exit.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct NorthFindingSummary {
+    /// Last phase.
+    pub phase: Phase,
+    /// The result, when it finished.
+    pub result: Option<NorthResult>,
+    /// Why it gave up, when it did.
+    pub abort: Option<String>,
+    /// Turntable commands sent.
+    pub commands_sent: u64,
+    /// Turntable frames received (status, acks).
+    pub turntable_frames: u64,
+    /// Commands sent again for want of an acknowledgement.
+    #[serde(default)]
+    pub command_retries: u64,
+    /// Acknowledgements that came too late (or matched no command).
+    #[serde(default)]
+    pub stale_acks: u64,
+}
+
+/// North-finding as the pipeline runs it (its [`Mission`]).
+#[derive(Debug)]
+pub(crate) struct NorthFinding {
+    pub(crate) finder: NorthFinder,
+}
+
+impl NorthFinding {
+    /// The procedure of config section `c` (none when it is not enabled).
+    pub(crate) fn make(c: &NorthFindingConfig) -> Result<Option<Box<dyn Mission>>, SettingError> {
+        if !c.enabled {
+            return Ok(None);
+        }
+        Ok(Some(Box::new(Self {
+            finder: NorthFinder::new(c.clone())?,
+        })))
+    }
+
+    /// Its section of nav's summary (`rep`: what the pipeline counted for it).
+    pub(crate) fn section(&self, rep: &Reporting) -> NorthFindingSummary {
+        let f = &self.finder;
+        NorthFindingSummary {
+            phase: f.phase(),
+            result: f.result().cloned(),
+            abort: f.abort().map(str::to_string),
+            commands_sent: rep.commands_sent,
+            turntable_frames: rep.frames,
+            command_retries: f.ack_counters().0,
+            stale_acks: f.ack_counters().1,
+        }
+    }
+}
+
+impl Mission for NorthFinding {
+    fn procedure(&mut self) -> &mut dyn Procedure {
+        &mut self.finder
+    }
+    fn procedure_ref(&self) -> &dyn Procedure {
+        &self.finder
+    }
+    fn on_valid_sample(&self) -> bool {
+        true
+    }
+    fn on_update(&mut self, t: f64, phi: [f64; 3], dv: [f64; 3]) {
+        self.finder.on_update(t, phi, dv);
+    }
+    fn mode(&self) -> NavMode {
+        NavMode::NorthFinding
+    }
+    fn heading_deg(&self) -> Option<f64> {
+        self.finder.result().map(|r| r.heading_deg)
+    }
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
 
 #[cfg(test)]
 mod tests {

@@ -168,7 +168,7 @@ pub struct Pipeline {
     proc: ImuProcessor,
     fir: Option<crate::fir::FirResponse>,
     coning_method: crate::coning::ConingMethod,
-    /// The procedures on the mechanism the config enables ([`crate::mission::REGISTRY`]'s
+    /// The procedures on the mechanism the config enables ([`REGISTRY`]'s
     /// order; the config allows one).
     procedures: Vec<Running>,
     navigator: Option<Navigator>,
@@ -201,13 +201,34 @@ pub struct Pipeline {
     sol_frames: Vec<RawFrame>,
 }
 
+/// What builds a procedure from nav's config (none when the config does not enable it).
+pub(crate) type Make =
+    fn(&NavConfig) -> Result<Option<Box<dyn Mission>>, crate::ttlink::SettingError>;
+
+/// The gyro parameters nav's front end applies (a calibration's estimates are residuals on top
+/// of them).
+fn front_end_gyro(c: &NavConfig) -> crate::params::GyroParameters {
+    crate::params::GyroParameters {
+        bias_dph: c.imu.gyro_bias_dph,
+        scale_factor_ppm: c.imu.gyro_scale_factor_ppm,
+    }
+}
+
+/// Every procedure nav can run at start, in the order the pipeline serves them: each built from
+/// its section of the config.
+pub(crate) const REGISTRY: [Make; 3] = [
+    |c| crate::northfind::NorthFinding::make(&c.north_finding),
+    |c| crate::selfcal::SelfCalibration::make(&c.self_calibration, front_end_gyro(c)),
+    |c| crate::tetracal::TetraCalibration::make(&c.tetra_calibration),
+];
+
 impl Pipeline {
     /// The pipeline of config `cfg` (its device sections are the shell's). `record`: produce
     /// records for a recording (off for in-process runs that only want the result).
     pub fn new(cfg: &NavConfig, record: bool) -> Result<Self, PipelineError> {
         let proc = ImuProcessor::new(&cfg.processing)?;
         let mut procedures = Vec::new();
-        for make in crate::mission::REGISTRY {
+        for make in REGISTRY {
             if let Some(m) = make(cfg)? {
                 procedures.push(Running {
                     m,
@@ -808,13 +829,13 @@ impl Pipeline {
 
     /// The redundant unit's calibration (when enabled).
     pub fn tetra_calibrator(&self) -> Option<&TetraCalibrator> {
-        self.mission::<crate::mission::TetraCalibration>()
+        self.mission::<crate::tetracal::TetraCalibration>()
             .map(|c| &c.cal)
     }
 
     /// The self-calibration procedure (when enabled).
     pub fn calibrator(&self) -> Option<&SelfCalibrator> {
-        self.mission::<crate::mission::SelfCalibration>()
+        self.mission::<crate::selfcal::SelfCalibration>()
             .map(|c| &c.cal)
     }
 
@@ -982,7 +1003,7 @@ impl Pipeline {
 
     /// The north-finder (when enabled).
     pub fn finder(&self) -> Option<&NorthFinder> {
-        self.mission::<crate::mission::NorthFinding>()
+        self.mission::<crate::northfind::NorthFinding>()
             .map(|n| &n.finder)
     }
 
@@ -1130,7 +1151,7 @@ impl Pipeline {
             mcap_messages: 0,
         };
         for r in &self.procedures {
-            r.m.summarize(&r.rep, &mut s);
+            crate::summary::put_section(&mut s, r.m.as_ref(), &r.rep);
         }
         s
     }

@@ -30,12 +30,17 @@
 
 use crate::calib::{AlignKf, AlignKfConfig, GyroRls, c_p_b, expected_rate};
 use crate::earth;
-use crate::procedure::{Core, OnMechanism, Phases};
-use crate::ttlink::{AxisTrack, LinkTiming, TtLink};
+use crate::imu::ImuSample;
+use crate::mission::Mission;
+use crate::params::ParameterFile;
+use crate::procedure::{Core, OnMechanism, Phases, Procedure, Reporting};
+use crate::ttlink::{AxisTrack, LinkTiming, SettingError, TtLink};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
+use std::any::Any;
 use std::collections::VecDeque;
-use wire::{TtCmd, TtCommand, TtState, TtStatus};
+use std::path::PathBuf;
+use wire::{NavMode, TtCmd, TtCommand, TtState, TtStatus};
 
 const DPH: f64 = earth::DEG_PER_HOUR_PER_RAD_S;
 const G0: f64 = 9.80665;
@@ -848,6 +853,130 @@ impl Phases for CalPhase {
 
 crate::procedure::procedure!(SelfCalibrator, "self-calibration", |s, t, st| s
     .on_status(t, st));
+
+/// Self-calibration at exit.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SelfCalibrationSummary {
+    /// Last phase.
+    pub phase: crate::selfcal::CalPhase,
+    /// The result, when it finished.
+    pub result: Option<crate::selfcal::SelfCalibrationResult>,
+    /// Why it gave up, when it did.
+    pub abort: Option<String>,
+    /// The parameter file's content (the RLS's estimates on top of the parameters nav started
+    /// with), when it finished.
+    pub parameters: Option<crate::params::ImuParameters>,
+    /// Where the parameter file was written, when it was.
+    #[serde(default)]
+    pub parameters_file: Option<PathBuf>,
+    /// Turntable commands sent.
+    pub commands_sent: u64,
+    /// Turntable frames received (status, acks).
+    pub turntable_frames: u64,
+    /// Commands sent again for want of an acknowledgement.
+    pub command_retries: u64,
+    /// Acknowledgements that came too late (or matched no command).
+    pub stale_acks: u64,
+}
+
+/// The rotating IMU's self-calibration as the pipeline runs it (its [`Mission`]).
+#[derive(Debug)]
+pub(crate) struct SelfCalibration {
+    pub(crate) cal: SelfCalibrator,
+    /// The gyro parameters nav started with (the estimates are residuals on top of them).
+    start: crate::params::GyroParameters,
+    parameters: Option<crate::params::ImuParameters>,
+}
+
+impl SelfCalibration {
+    /// The procedure of config section `c` on a unit whose front end applies the gyro
+    /// parameters `start` (none when it is not enabled).
+    pub(crate) fn make(
+        c: &SelfCalibrationConfig,
+        start: crate::params::GyroParameters,
+    ) -> Result<Option<Box<dyn Mission>>, SettingError> {
+        if !c.enabled {
+            return Ok(None);
+        }
+        Ok(Some(Box::new(Self {
+            cal: SelfCalibrator::new(c.clone())?,
+            start,
+            parameters: None,
+        })))
+    }
+
+    /// The parameter file of a result: the RLS's residual estimates composed with the
+    /// parameters the front end applied (`(raw - b0) / (1 + k0)` read `(1 + k') w + b'`).
+    fn parameters(&self, r: &SelfCalibrationResult) -> crate::params::ImuParameters {
+        let c = self.cal.config();
+        let (b0, k0) = (self.start.bias_dph, self.start.scale_factor_ppm);
+        let mut g = self.start;
+        for j in 0..3 {
+            let k0f = k0[j] * 1e-6;
+            g.bias_dph[j] = b0[j] + r.rls.gyro_bias_dph[j] * (1.0 + k0f);
+            g.scale_factor_ppm[j] =
+                ((1.0 + r.rls.gyro_scale_factor_ppm[j] * 1e-6) * (1.0 + k0f) - 1.0) * 1e6;
+        }
+        crate::params::ImuParameters {
+            format: crate::params::FORMAT.into(),
+            imu: c.imu.clone(),
+            procedure: format!(
+                "nav self-calibration (paper 004 decoupled RLS, integrated): dual-axis rotation at {} deg/s reversing every {} deg, inner axis {} s behind, {:.0} s, static base at latitude {} deg",
+                c.rate_dps, c.turn_deg, c.inner_delay_s, r.rotation_s, c.latitude_deg
+            ),
+            // the shell stamps the date: the pipeline's output depends on its input only
+            date: String::new(),
+            gyro: g,
+        }
+    }
+
+    /// Its section of nav's summary (`rep`: what the pipeline counted for it).
+    pub(crate) fn section(&self, rep: &Reporting) -> SelfCalibrationSummary {
+        let c = &self.cal;
+        SelfCalibrationSummary {
+            phase: c.phase(),
+            result: c.result().cloned(),
+            abort: c.abort().map(str::to_string),
+            parameters: self.parameters.clone(),
+            parameters_file: None,
+            commands_sent: rep.commands_sent,
+            turntable_frames: rep.frames,
+            command_retries: c.ack_counters().0,
+            stale_acks: c.ack_counters().1,
+        }
+    }
+}
+
+impl Mission for SelfCalibration {
+    fn procedure(&mut self) -> &mut dyn Procedure {
+        &mut self.cal
+    }
+    fn procedure_ref(&self) -> &dyn Procedure {
+        &self.cal
+    }
+    fn on_sample(&mut self, t1: f64, dt: f64, s: &ImuSample) {
+        self.cal.on_sample(t1, dt, s.dtheta, s.dv, s.saturated);
+    }
+    fn mode(&self) -> NavMode {
+        match self.cal.phase() {
+            CalPhase::Enabling | CalPhase::Levelling => NavMode::Levelling,
+            _ => NavMode::Calibrating,
+        }
+    }
+    fn made(&mut self) -> Option<(Option<PathBuf>, ParameterFile)> {
+        let r = self.cal.result().cloned()?;
+        let p = self.parameters(&r);
+        self.parameters = Some(p.clone());
+        Some((
+            self.cal.config().parameters_out.clone(),
+            ParameterFile::Imu(p),
+        ))
+    }
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
 
 #[cfg(test)]
 mod tests {

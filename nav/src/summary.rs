@@ -6,11 +6,19 @@ use crate::attitude::ProcessingStats;
 use crate::coning::ConingMethod;
 use crate::fir::FirResponse;
 use crate::imu::{Housekeeping, ImuStats};
-use crate::northfind::{NorthResult, Phase};
+use crate::mission::Mission;
+use crate::northfind::NorthFinding;
+use crate::procedure::Reporting;
+use crate::selfcal::SelfCalibration;
+use crate::tetracal::TetraCalibration;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::PathBuf;
+
+pub use crate::northfind::NorthFindingSummary;
+pub use crate::selfcal::SelfCalibrationSummary;
+pub use crate::tetracal::TetraCalibrationSummary;
 
 /// The run summary.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -175,79 +183,6 @@ pub struct GpsPortCounts {
     pub fixes_jsonl: Option<PathBuf>,
 }
 
-/// North-finding at exit.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct NorthFindingSummary {
-    /// Last phase.
-    pub phase: Phase,
-    /// The result, when it finished.
-    pub result: Option<NorthResult>,
-    /// Why it gave up, when it did.
-    pub abort: Option<String>,
-    /// Turntable commands sent.
-    pub commands_sent: u64,
-    /// Turntable frames received (status, acks).
-    pub turntable_frames: u64,
-    /// Commands sent again for want of an acknowledgement.
-    #[serde(default)]
-    pub command_retries: u64,
-    /// Acknowledgements that came too late (or matched no command).
-    #[serde(default)]
-    pub stale_acks: u64,
-}
-
-/// Self-calibration at exit.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct SelfCalibrationSummary {
-    /// Last phase.
-    pub phase: crate::selfcal::CalPhase,
-    /// The result, when it finished.
-    pub result: Option<crate::selfcal::SelfCalibrationResult>,
-    /// Why it gave up, when it did.
-    pub abort: Option<String>,
-    /// The parameter file's content (the RLS's estimates on top of the parameters nav started
-    /// with), when it finished.
-    pub parameters: Option<crate::params::ImuParameters>,
-    /// Where the parameter file was written, when it was.
-    #[serde(default)]
-    pub parameters_file: Option<PathBuf>,
-    /// Turntable commands sent.
-    pub commands_sent: u64,
-    /// Turntable frames received (status, acks).
-    pub turntable_frames: u64,
-    /// Commands sent again for want of an acknowledgement.
-    pub command_retries: u64,
-    /// Acknowledgements that came too late (or matched no command).
-    pub stale_acks: u64,
-}
-
-/// The redundant unit's calibration at exit.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct TetraCalibrationSummary {
-    /// The parameter file's content, when it finished calibrating.
-    pub parameters: Option<crate::params::RedundantParameters>,
-    /// Where the parameter file was written, when it was.
-    #[serde(default)]
-    pub parameters_file: Option<PathBuf>,
-    /// Last phase.
-    pub phase: crate::tetracal::TetraPhase,
-    /// The result, when it finished.
-    pub result: Option<crate::tetracal::TetraCalibrationResult>,
-    /// Why it gave up, when it did.
-    pub abort: Option<String>,
-    /// Table commands sent.
-    pub commands_sent: u64,
-    /// Frames taken (table status and acks, the unit's MEMS_GYRO).
-    pub frames: u64,
-    /// Commands sent again for want of an acknowledgement.
-    pub command_retries: u64,
-    /// Acknowledgements that came too late (or matched no command).
-    pub stale_acks: u64,
-}
-
 /// The integrated attitude at exit.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -284,7 +219,34 @@ fn opt<T: std::fmt::Display>(x: Option<T>) -> String {
     x.map_or_else(|| "-".into(), |v| v.to_string())
 }
 
+/// Procedure `m`'s section of summary `s` (`rep`: what the pipeline counted for it): the one
+/// place that knows which field each procedure's section goes in.
+pub(crate) fn put_section(s: &mut Summary, m: &dyn Mission, rep: &Reporting) {
+    let any = m.as_any();
+    if let Some(x) = any.downcast_ref::<NorthFinding>() {
+        s.north_finding = Some(x.section(rep));
+    } else if let Some(x) = any.downcast_ref::<SelfCalibration>() {
+        s.self_calibration = Some(x.section(rep));
+    } else if let Some(x) = any.downcast_ref::<TetraCalibration>() {
+        s.tetra_calibration = Some(x.section(rep));
+    }
+}
+
 impl Summary {
+    /// The parameter files nav's procedures wrote, as the summary names them (to be moved
+    /// along with nav's other files).
+    pub fn written_files_mut(&mut self) -> impl Iterator<Item = &mut PathBuf> {
+        let sc = self
+            .self_calibration
+            .as_mut()
+            .and_then(|c| c.parameters_file.as_mut());
+        let tc = self
+            .tetra_calibration
+            .as_mut()
+            .and_then(|c| c.parameters_file.as_mut());
+        sc.into_iter().chain(tc)
+    }
+
     /// The summary for people, one aspect per line.
     pub fn text(&self) -> String {
         let mut o = String::new();

@@ -24,13 +24,17 @@
 //! factors came out 1e-4 off at the paper's profile, against 9e-6 without encoder noise).
 
 use crate::calib::{GyroCoefficients, TETRA_GYROS, TetraKf, table_rate};
-use crate::procedure::{Core, OnMechanism, Phases};
+use crate::mission::Mission;
+use crate::params::ParameterFile;
+use crate::procedure::{Core, OnMechanism, Phases, Procedure, Reporting};
 use crate::redundant::{ParityMonitor, Status};
-use crate::ttlink::{AxisTrack, LinkTiming, TtLink};
+use crate::ttlink::{AxisTrack, LinkTiming, SettingError, TtLink};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
+use std::any::Any;
 use std::collections::VecDeque;
-use wire::{MemsGyro, TtCmd, TtCommand, TtState, TtStatus};
+use std::path::PathBuf;
+use wire::{MemsGyro, NavMode, TtCmd, TtCommand, TtState, TtStatus};
 
 /// Calibration settings (the `[tetra_calibration]` table of nav's config).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -797,3 +801,96 @@ impl Phases for TetraPhase {
 
 crate::procedure::procedure!(TetraCalibrator, "tetra-calibration", |s, t, st| s
     .on_status(t, st));
+
+/// The redundant unit's calibration at exit.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TetraCalibrationSummary {
+    /// The parameter file's content, when it finished calibrating.
+    pub parameters: Option<crate::params::RedundantParameters>,
+    /// Where the parameter file was written, when it was.
+    #[serde(default)]
+    pub parameters_file: Option<PathBuf>,
+    /// Last phase.
+    pub phase: crate::tetracal::TetraPhase,
+    /// The result, when it finished.
+    pub result: Option<crate::tetracal::TetraCalibrationResult>,
+    /// Why it gave up, when it did.
+    pub abort: Option<String>,
+    /// Table commands sent.
+    pub commands_sent: u64,
+    /// Frames taken (table status and acks, the unit's MEMS_GYRO).
+    pub frames: u64,
+    /// Commands sent again for want of an acknowledgement.
+    pub command_retries: u64,
+    /// Acknowledgements that came too late (or matched no command).
+    pub stale_acks: u64,
+}
+
+/// The redundant unit's calibration as the pipeline runs it (its [`Mission`]).
+#[derive(Debug)]
+pub(crate) struct TetraCalibration {
+    pub(crate) cal: TetraCalibrator,
+    parameters: Option<crate::params::RedundantParameters>,
+}
+
+impl TetraCalibration {
+    /// The procedure of config section `c` (none when it is not enabled).
+    pub(crate) fn make(
+        c: &TetraCalibrationConfig,
+    ) -> Result<Option<Box<dyn Mission>>, SettingError> {
+        if !c.enabled {
+            return Ok(None);
+        }
+        Ok(Some(Box::new(Self {
+            cal: TetraCalibrator::new(c.clone())?,
+            parameters: None,
+        })))
+    }
+
+    /// Its section of nav's summary (`rep`: what the pipeline counted for it).
+    pub(crate) fn section(&self, rep: &Reporting) -> TetraCalibrationSummary {
+        let c = &self.cal;
+        TetraCalibrationSummary {
+            parameters: self.parameters.clone(),
+            parameters_file: None,
+            phase: c.phase(),
+            result: c.result().cloned(),
+            abort: c.abort().map(str::to_string),
+            commands_sent: rep.commands_sent,
+            frames: rep.frames,
+            command_retries: c.ack_counters().0,
+            stale_acks: c.ack_counters().1,
+        }
+    }
+}
+
+impl Mission for TetraCalibration {
+    fn procedure(&mut self) -> &mut dyn Procedure {
+        &mut self.cal
+    }
+    fn procedure_ref(&self) -> &dyn Procedure {
+        &self.cal
+    }
+    fn on_mems(&mut self, k: u64, t: f64, dt: f64, g: &MemsGyro) -> bool {
+        self.cal.on_mems(k, t, dt, g);
+        true
+    }
+    fn mode(&self) -> NavMode {
+        match self.cal.phase() {
+            TetraPhase::Enabling => NavMode::Init,
+            _ => NavMode::Calibrating,
+        }
+    }
+    fn made(&mut self) -> Option<(Option<PathBuf>, ParameterFile)> {
+        let p = self.cal.parameters()?;
+        self.parameters = Some(p.clone());
+        Some((
+            self.cal.config().parameters_out.clone(),
+            ParameterFile::Redundant(p),
+        ))
+    }
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}

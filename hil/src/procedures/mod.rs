@@ -4,16 +4,21 @@
 //! its outcome scored against truth, its progress line and its result card, and its
 //! [`BenchProcedure`] in [`ALL`]. [`observe`] follows them on nav's lines and frames.
 //!
-//! A new procedure: its file here, a line in [`ALL`] and its field in [`Outcomes`].
+//! A new procedure: its file here (its [`BenchProcedure`]), a line in [`ALL`], its field in
+//! [`Outcomes`] and its section in the scenario ([`crate::scenario::Scenario`]). The run, the
+//! checks, the result card and the Markdown and HTML reports go through [`ALL`].
 
 pub mod northfinding;
 pub mod observe;
 pub mod rotating;
 pub mod tetrahedral;
 
+use crate::check::Check;
 use crate::scenario::Scenario;
+use nav::summary::Summary;
 use northfinding::DrillOutcome;
 use rotating::CalibrateOutcome;
+use serde::{Deserialize, Serialize};
 use tetrahedral::TetraOutcome;
 
 /// A procedure nav runs on the mechanism, as the bench knows it: which scenarios run it, how
@@ -29,7 +34,30 @@ pub trait BenchProcedure: Sync {
     fn progress_line(&self, p: &serde_json::Value) -> String;
     /// Its outcome from nav's summary `nav` (the stream having reached `sim_reached` s), into
     /// `o`.
-    fn score(&self, s: &Scenario, nav: &nav::summary::Summary, sim_reached: f64, o: &mut Outcomes);
+    fn score(&self, s: &Scenario, nav: &Summary, sim_reached: f64, o: &mut Outcomes);
+    /// Its checks, on its outcome in `o` and nav's summary `nav`, into `out` (none when it
+    /// did not run).
+    fn checks(&self, s: &Scenario, o: &Outcomes, nav: &Summary, out: &mut Vec<Check>);
+    /// Its part of the run's result card, lines without indent (none when it did not run).
+    fn card(&self, s: &Scenario, o: &Outcomes) -> Option<String>;
+    /// Its section of the run's Markdown report, ending in a blank line (none when it did not
+    /// run).
+    fn markdown(&self, o: &Outcomes) -> Option<String>;
+    /// Its section of the run's HTML report (none when it did not run).
+    fn html(&self, s: &Scenario, o: &Outcomes, nav: &Summary) -> Option<Section>;
+}
+
+/// A procedure's section of a run's HTML report.
+#[derive(Debug, Clone, Default)]
+pub struct Section {
+    /// Its heading.
+    pub title: &'static str,
+    /// Its figures, as (name, value) rows.
+    pub figures: Vec<(&'static str, String)>,
+    /// Text shown as it is (a result card).
+    pub text: Option<String>,
+    /// A table of JSON objects (the keys of the first as columns), with its caption.
+    pub detail: Option<(&'static str, Vec<serde_json::Value>)>,
 }
 
 /// What nav's summary says of procedure `name` (its section's result and abort reason): the
@@ -52,21 +80,33 @@ pub const ALL: [&dyn BenchProcedure; 3] = [
 ];
 
 /// The outcomes of the procedures a scenario runs, each scored from nav's summary against the
-/// scenario's truth (none where the scenario does not run it).
-#[derive(Debug, Clone, Default)]
+/// scenario's truth (none where the scenario does not run it). In a run's `report.json` they
+/// are the fields `drill`, `calibration` and `tetra_calibration`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Outcomes {
     /// Four-position north-finding.
+    #[serde(rename = "drill")]
     pub north_finding: Option<DrillOutcome>,
     /// The rotating IMU's self-calibration.
+    #[serde(
+        rename = "calibration",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub rotating_imu: Option<CalibrateOutcome>,
     /// The tetrahedral unit's calibration.
+    #[serde(
+        rename = "tetra_calibration",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
     pub tetrahedral: Option<TetraOutcome>,
 }
 
 impl Outcomes {
     /// The outcomes of scenario `s`'s procedures from nav's summary `nav`, the stream having
     /// reached `sim_reached` s.
-    pub fn of(s: &Scenario, nav: &nav::summary::Summary, sim_reached: f64) -> Self {
+    pub fn of(s: &Scenario, nav: &Summary, sim_reached: f64) -> Self {
         let mut o = Self::default();
         for p in ALL {
             if p.runs_in(s) {
@@ -74,5 +114,50 @@ impl Outcomes {
             }
         }
         o
+    }
+}
+
+/// A procedure's checks that its parameter file was written and loads for its unit: `file` as
+/// nav's summary names it, `load` reading it back and describing what it holds.
+fn parameter_file_check<P>(
+    name: &str,
+    file: Option<&std::path::Path>,
+    load: impl FnOnce(&std::path::Path) -> Result<P, nav::params::ParamsError>,
+    describe: impl FnOnce(&P) -> String,
+) -> Check {
+    let loaded = file.map(load);
+    Check {
+        name: name.into(),
+        pass: matches!(loaded, Some(Ok(_))),
+        detail: match (file, loaded) {
+            (Some(f), Some(Ok(p))) => format!("{}: {}", f.display(), describe(&p)),
+            (Some(f), Some(Err(e))) => format!("{}: {e}", f.display()),
+            _ => "nav wrote no parameter file".into(),
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The outcomes keep the field names `report.json` has always had: `drill` (null when the
+    /// run had none), `calibration` and `tetra_calibration` (absent when it had none).
+    #[test]
+    fn outcomes_keep_their_report_fields() {
+        let none = serde_json::to_value(Outcomes::default()).expect("serializes");
+        assert_eq!(none, serde_json::json!({ "drill": null }));
+        let drill = northfinding::outcome(10.0, None, Some("stopped"), 5.0);
+        let o = Outcomes {
+            north_finding: Some(drill),
+            ..Default::default()
+        };
+        let v = serde_json::to_value(&o).expect("serializes");
+        assert_eq!(v["drill"]["abort"], "stopped");
+        let back: Outcomes = serde_json::from_value(v).expect("reads back");
+        assert_eq!(
+            back.north_finding.and_then(|d| d.abort).as_deref(),
+            Some("stopped")
+        );
     }
 }

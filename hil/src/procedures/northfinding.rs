@@ -1,6 +1,7 @@
 //! North-finding drills: in process (for Monte Carlo and tests) with the same emulators and
 //! nav code as on the bench, and the drill's scoring.
 
+use crate::check::Check;
 use crate::scenario::Scenario;
 use crate::stats::wrap180;
 use anyhow::{Result, bail};
@@ -153,6 +154,100 @@ pub fn run_in_process(
     ))
 }
 
+/// The drill's verdict: finished, within tolerance, error against the estimated sigma.
+fn checks(out: &mut Vec<Check>, s: &Scenario, o: &DrillOutcome) {
+    out.push(Check {
+        name: "north-finding finished".into(),
+        pass: o.abort.is_none() && o.heading_deg.is_some(),
+        detail: match (&o.abort, o.heading_deg) {
+            (Some(why), _) => format!("aborted: {why}"),
+            (None, Some(h)) => format!(
+                "heading {h:.4} deg in {:.1} s, {} dwell(s) repeated",
+                o.duration_s, o.repeats
+            ),
+            (None, None) => "no result reported".into(),
+        },
+    });
+    if let (Some(e), Some(sig)) = (o.error_deg, o.sigma_deg) {
+        out.push(Check {
+            name: "heading within the drill's tolerance".into(),
+            pass: e.abs() <= s.heading_tolerance_deg,
+            detail: format!(
+                "error {e:+.4} deg (truth {:.4}), tolerance {} deg; estimated sigma {sig:.4} deg, error = {:.2} sigma",
+                o.truth_deg,
+                s.heading_tolerance_deg,
+                e.abs() / sig.max(1e-12)
+            ),
+        });
+    }
+}
+
+/// The drill's lines of a run's result card.
+fn card(s: &Scenario, d: &DrillOutcome) -> String {
+    use std::fmt::Write;
+    let f = |x: Option<f64>, p: usize| x.map_or("--".to_string(), |v| format!("{v:.p$}"));
+    let mut c = String::from("NORTH-FINDING DRILL\n");
+    let _ = writeln!(
+        c,
+        "  found heading {:>10} deg    truth {:.4} deg    error {:>9} deg",
+        f(d.heading_deg, 4),
+        d.truth_deg,
+        f(d.error_deg, 4)
+    );
+    let _ = writeln!(
+        c,
+        "  sigma         {:>10} deg    duration {:.1} s    dwells repeated {}    tolerance {} deg",
+        f(d.sigma_deg, 4),
+        d.duration_s,
+        d.repeats,
+        s.heading_tolerance_deg
+    );
+    if let Some(why) = &d.abort {
+        let _ = writeln!(c, "  ABORTED: {why}");
+    }
+    c
+}
+
+/// The drill's section of a run's Markdown report.
+fn markdown(d: &DrillOutcome) -> String {
+    let f = |x: Option<f64>| x.map_or("--".to_string(), |v| format!("{v:.4}"));
+    let mut m = format!(
+        "## North-finding drill\n\n| found heading | truth | error | sigma | duration | repeats |\n|---|---|---|---|---|---|\n| {} deg | {:.4} deg | {} deg | {} deg | {:.1} s | {} |\n\n",
+        f(d.heading_deg),
+        d.truth_deg,
+        f(d.error_deg),
+        f(d.sigma_deg),
+        d.duration_s,
+        d.repeats
+    );
+    if let Some(why) = &d.abort {
+        m += &format!("**Aborted:** {why}\n\n");
+    }
+    m
+}
+
+/// The drill's section of a run's HTML report: its figures and the dwells as nav measured them.
+fn html(d: &DrillOutcome, nav: &nav::summary::Summary) -> super::Section {
+    let f = |x: Option<f64>| x.map_or("--".to_string(), |v| format!("{v:.4}"));
+    let nf = serde_json::to_value(&nav.north_finding).unwrap_or_default();
+    super::Section {
+        title: "North-finding drill",
+        figures: vec![
+            ("found heading, deg", f(d.heading_deg)),
+            ("truth, deg", format!("{:.4}", d.truth_deg)),
+            ("error, deg", f(d.error_deg)),
+            ("nav's sigma, deg", f(d.sigma_deg)),
+            ("duration, s", format!("{:.1}", d.duration_s)),
+            ("dwells repeated", d.repeats.to_string()),
+            ("aborted", d.abort.clone().unwrap_or_else(|| "no".into())),
+        ],
+        text: None,
+        detail: nf["result"]["positions"]
+            .as_array()
+            .map(|p| ("The dwells (positions) as nav measured them:", p.clone())),
+    }
+}
+
 /// Four-position north-finding, as the bench knows it.
 pub struct NorthFinding;
 
@@ -184,6 +279,31 @@ impl super::BenchProcedure for NorthFinding {
             why.as_deref(),
             sim_reached,
         ));
+    }
+    fn checks(
+        &self,
+        s: &Scenario,
+        o: &super::Outcomes,
+        _nav: &nav::summary::Summary,
+        out: &mut Vec<Check>,
+    ) {
+        if let Some(o) = &o.north_finding {
+            checks(out, s, o);
+        }
+    }
+    fn card(&self, s: &Scenario, o: &super::Outcomes) -> Option<String> {
+        o.north_finding.as_ref().map(|d| card(s, d))
+    }
+    fn markdown(&self, o: &super::Outcomes) -> Option<String> {
+        o.north_finding.as_ref().map(markdown)
+    }
+    fn html(
+        &self,
+        _s: &Scenario,
+        o: &super::Outcomes,
+        nav: &nav::summary::Summary,
+    ) -> Option<super::Section> {
+        o.north_finding.as_ref().map(|d| html(d, nav))
     }
 }
 

@@ -2,6 +2,7 @@
 //! scenario, its run in process (the same pipeline the bench's nav runs), and its scoring
 //! against the emulated unit's true errors, on the bus or in process alike.
 
+use crate::check::Check;
 use crate::scenario::Scenario;
 use crate::scenario::fogunit::{CalibOptions, fog_params};
 use anyhow::{Result, bail};
@@ -418,6 +419,64 @@ pub fn card(o: &CalibrateOutcome) -> String {
     s
 }
 
+/// The self-calibration's verdict: finished, each RLS estimate within three of its sigmas of
+/// the unit's truth (the sigma a promise kept), and the parameter file written and loadable
+/// for the unit.
+fn checks(out: &mut Vec<Check>, o: &CalibrateOutcome, nav: &nav::summary::Summary) {
+    out.push(Check {
+        name: "self-calibration finished".into(),
+        pass: o.result.is_some(),
+        detail: match (&o.result, &o.abort) {
+            (Some(r), _) => format!(
+                "{:.0} s of rotation, reversals {:?}, locked at zero after {:.1} s",
+                r.rotation_s, r.reversals, r.duration_s
+            ),
+            (None, Some(why)) => format!("aborted: {why}"),
+            (None, None) => "no result reported".into(),
+        },
+    });
+    if let (Some(r), Some(sc)) = (&o.result, &o.rls) {
+        let ratios: Vec<f64> = (0..3)
+            .flat_map(|j| {
+                [
+                    sc.bias_error_dph[j].abs() / r.rls.bias_sigma_dph[j].max(1e-300),
+                    sc.sf_error_ppm[j].abs() / r.rls.scale_factor_sigma_ppm[j].max(1e-300),
+                ]
+            })
+            .collect();
+        out.push(Check {
+            name: "RLS estimates within 3 sigma of the truth".into(),
+            pass: ratios.iter().all(|x| *x <= 3.0),
+            detail: format!(
+                "bias errors {:.5?} deg/h (sigma {:.5?}), scale-factor errors {:.3?} ppm (sigma {:.3?}); worst {:.2} sigma",
+                sc.bias_error_dph,
+                r.rls.bias_sigma_dph,
+                sc.sf_error_ppm,
+                r.rls.scale_factor_sigma_ppm,
+                sc.worst_sigma_ratio
+            ),
+        });
+    }
+    if o.result.is_some() {
+        let sc = nav.self_calibration.as_ref();
+        let imu = sc
+            .and_then(|c| c.parameters.as_ref())
+            .map(|p| p.imu.clone())
+            .unwrap_or_default();
+        out.push(super::parameter_file_check(
+            "parameter file written, and loadable for the unit",
+            sc.and_then(|c| c.parameters_file.as_deref()),
+            |f| nav::params::ImuParameters::load(f, &imu),
+            |p| {
+                format!(
+                    "unit {}, gyro bias {:.5?} deg/h, scale factor {:.3?} ppm",
+                    p.imu, p.gyro.bias_dph, p.gyro.scale_factor_ppm
+                )
+            },
+        ));
+    }
+}
+
 /// The rotating IMU's self-calibration, as the bench knows it.
 pub struct RotatingImu;
 
@@ -446,6 +505,37 @@ impl super::BenchProcedure for RotatingImu {
         let mut r = outcome(s, result, why.as_deref(), sim_reached);
         r.parameters = c.and_then(|c| c.parameters.clone());
         o.rotating_imu = Some(r);
+    }
+    fn checks(
+        &self,
+        _s: &Scenario,
+        o: &super::Outcomes,
+        nav: &nav::summary::Summary,
+        out: &mut Vec<Check>,
+    ) {
+        if let Some(o) = &o.rotating_imu {
+            checks(out, o, nav);
+        }
+    }
+    fn card(&self, _s: &Scenario, o: &super::Outcomes) -> Option<String> {
+        o.rotating_imu.as_ref().map(card)
+    }
+    fn markdown(&self, o: &super::Outcomes) -> Option<String> {
+        o.rotating_imu
+            .as_ref()
+            .map(|c| format!("## Self-calibration\n\n```\n{}```\n\n", card(c)))
+    }
+    fn html(
+        &self,
+        _s: &Scenario,
+        o: &super::Outcomes,
+        _nav: &nav::summary::Summary,
+    ) -> Option<super::Section> {
+        o.rotating_imu.as_ref().map(|c| super::Section {
+            title: "Self-calibration",
+            text: Some(card(c)),
+            ..Default::default()
+        })
     }
 }
 

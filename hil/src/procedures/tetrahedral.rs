@@ -3,6 +3,7 @@
 //! runs), and its scoring against the emulated unit's truth, on the bus or in process alike.
 
 use super::rotating::{fog_bench, until_finished};
+use crate::check::Check;
 use crate::scenario::Scenario;
 use anyhow::{Result, bail};
 use emulators::mems::TetraParams;
@@ -312,6 +313,71 @@ pub fn tetra_card(o: &TetraOutcome) -> String {
     s
 }
 
+/// The redundant unit's calibration: finished (the table having done what was commanded
+/// throughout), every estimate within 3 of its sigmas of the truth, and with a failure
+/// injected, the monitor isolating that gyro.
+fn checks(out: &mut Vec<Check>, o: &TetraOutcome, nav: &nav::summary::Summary) {
+    out.push(Check {
+        name: "tetra-calibration finished, the table's rates checked".into(),
+        pass: o.result.as_ref().is_some_and(|r| r.checked_s > 0),
+        detail: match (&o.result, &o.abort) {
+            (Some(r), _) => format!(
+                "{} samples, {} s of the profile checked against the commanded rates, locked at zero after {:.1} s",
+                r.samples, r.checked_s, r.duration_s
+            ),
+            (None, Some(why)) => format!("aborted: {why}"),
+            (None, None) => "no result reported".into(),
+        },
+    });
+    let from_file = o.result.as_ref().is_some_and(|r| r.from_file);
+    if let (Some(e), Some(q), false) = (&o.errors, o.worst_sigma_ratio, from_file) {
+        out.push(Check {
+            name: "estimates within 3 sigma of the unit's truth".into(),
+            pass: q <= 3.0,
+            detail: format!(
+                "largest errors: bias {:.2e} deg/s, angle {:.2e} deg, scale factor {:.2e}; mean relative error {:.3} %; worst {q:.2} sigma",
+                e.bias_dps,
+                e.angle_deg,
+                e.scale_factor,
+                100.0 * e.relative
+            ),
+        });
+    }
+    if o.result.is_some() && !from_file {
+        let tc = nav.tetra_calibration.as_ref();
+        let unit = tc
+            .and_then(|c| c.parameters.as_ref())
+            .map(|p| p.imu.clone())
+            .unwrap_or_default();
+        out.push(super::parameter_file_check(
+            "the unit's parameter file written, and loadable for it",
+            tc.and_then(|c| c.parameters_file.as_deref()),
+            |f| nav::params::RedundantParameters::load(f, &unit),
+            |p| format!("unit {}, {} gyros", p.imu, p.gyro.len()),
+        ));
+    }
+    if let (Some(f), Some(r)) = (&o.failure, &o.result) {
+        let gyro = match *f {
+            emulators::mems::GyroFailure::Stuck { gyro, .. }
+            | emulators::mems::GyroFailure::BiasJump { gyro, .. }
+            | emulators::mems::GyroFailure::NoiseBurst { gyro, .. } => gyro,
+        };
+        let m = r.monitor;
+        out.push(Check {
+            name: "the failed gyro isolated by the parity monitor".into(),
+            pass: m.is_some_and(|m| {
+                matches!(m.status, nav::redundant::Status::Isolated { gyro: g, .. } if g == gyro)
+            }),
+            detail: format!(
+                "injected {}; monitor {}",
+                serde_json::to_string(f).unwrap_or_default(),
+                m.map_or("did not run".to_string(), |m| serde_json::to_string(&m)
+                    .unwrap_or_default())
+            ),
+        });
+    }
+}
+
 /// The tetrahedral unit's calibration, as the bench knows it.
 pub struct Tetrahedral;
 
@@ -339,6 +405,40 @@ impl super::BenchProcedure for Tetrahedral {
                 .map(|c| (c.result.as_ref(), c.abort.as_deref())),
         );
         o.tetrahedral = Some(tetra_outcome(s, result, why.as_deref(), sim_reached));
+    }
+    fn checks(
+        &self,
+        _s: &Scenario,
+        o: &super::Outcomes,
+        nav: &nav::summary::Summary,
+        out: &mut Vec<Check>,
+    ) {
+        if let Some(o) = &o.tetrahedral {
+            checks(out, o, nav);
+        }
+    }
+    fn card(&self, _s: &Scenario, o: &super::Outcomes) -> Option<String> {
+        o.tetrahedral.as_ref().map(tetra_card)
+    }
+    fn markdown(&self, o: &super::Outcomes) -> Option<String> {
+        o.tetrahedral.as_ref().map(|c| {
+            format!(
+                "## Redundant unit's calibration\n\n```\n{}```\n\n",
+                tetra_card(c)
+            )
+        })
+    }
+    fn html(
+        &self,
+        _s: &Scenario,
+        o: &super::Outcomes,
+        _nav: &nav::summary::Summary,
+    ) -> Option<super::Section> {
+        o.tetrahedral.as_ref().map(|c| super::Section {
+            title: "Redundant unit's calibration",
+            text: Some(tetra_card(c)),
+            ..Default::default()
+        })
     }
 }
 

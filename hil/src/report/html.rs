@@ -133,8 +133,10 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
         r.nav_exit
             .map_or("no status (killed)".into(), |c| c.to_string())
     );
-    if let Some(d) = &r.drill {
-        b += &drill_section(r, d);
+    for p in crate::procedures::ALL {
+        if let Some(sec) = p.html(&r.scenario, &r.procedures, &r.nav) {
+            b += &procedure_section(&sec);
+        }
     }
     b += "<h2>Checks</h2>\n<table>\n<tr><th>check</th><th>result</th><th>measured and limit</th></tr>\n";
     for c in &r.checks {
@@ -158,24 +160,18 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
     page(&format!("Bench run {}", r.scenario.name), &b)
 }
 
-/// The north-finding drill's figures and the dwells as nav measured them.
-fn drill_section(r: &RunReport, d: &crate::procedures::northfinding::DrillOutcome) -> String {
-    let mut b = String::new();
-    let f = |x: Option<f64>| x.map_or("--".to_string(), |v| format!("{v:.4}"));
-    b += "<h2>North-finding drill</h2>\n";
-    b += &kv_table(&[
-        ("found heading, deg", f(d.heading_deg)),
-        ("truth, deg", format!("{:.4}", d.truth_deg)),
-        ("error, deg", f(d.error_deg)),
-        ("nav's sigma, deg", f(d.sigma_deg)),
-        ("duration, s", format!("{:.1}", d.duration_s)),
-        ("dwells repeated", d.repeats.to_string()),
-        ("aborted", d.abort.clone().unwrap_or_else(|| "no".into())),
-    ]);
-    let nf = serde_json::to_value(&r.nav.north_finding).unwrap_or_default();
-    if let Some(p) = nf["result"]["positions"].as_array() {
-        b += "<p>The dwells (positions) as nav measured them:</p>\n";
-        b += &json_table(p);
+/// A procedure's section: its figures, its card, and its detail table.
+fn procedure_section(sec: &crate::procedures::Section) -> String {
+    let mut b = format!("<h2>{}</h2>\n", esc(sec.title));
+    if !sec.figures.is_empty() {
+        b += &kv_table(&sec.figures);
+    }
+    if let Some(t) = &sec.text {
+        let _ = writeln!(b, "<pre>{}</pre>", esc(t));
+    }
+    if let Some((caption, rows)) = &sec.detail {
+        let _ = writeln!(b, "<p>{}</p>", esc(caption));
+        b += &json_table(rows);
     }
     b
 }

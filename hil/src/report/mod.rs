@@ -11,16 +11,7 @@ use nalgebra::Vector3;
 use nav::summary::Summary;
 use serde::{Deserialize, Serialize};
 
-/// One check of a run.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct Check {
-    /// Short name.
-    pub name: String,
-    /// Passed?
-    pub pass: bool,
-    /// Measured value and limit, in words.
-    pub detail: String,
-}
+pub use crate::check::Check;
 
 /// The full report of a run.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -47,14 +38,10 @@ pub struct RunReport {
     pub in_process: Option<InProcess>,
     /// What the turntable emulator did (runs with a turntable).
     pub turntable: Option<emulators::can::TurntableTxStats>,
-    /// The north-finding drill's outcome (drills).
-    pub drill: Option<crate::procedures::northfinding::DrillOutcome>,
-    /// The self-calibration's outcome, scored against the unit's truth (calibration runs).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub calibration: Option<crate::procedures::rotating::CalibrateOutcome>,
-    /// The redundant unit's calibration, scored against its truth (paper 001 runs).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub tetra_calibration: Option<crate::procedures::tetrahedral::TetraOutcome>,
+    /// The outcomes of the procedures the scenario ran, scored against its truth (in the JSON:
+    /// `drill`, `calibration`, `tetra_calibration`).
+    #[serde(flatten)]
+    pub procedures: crate::procedures::Outcomes,
     /// What the GPS emulator wrote (runs with a receiver).
     pub gps: Option<emulators::gps::GpsTxStats>,
     /// nav's solution frames as the bench received them.
@@ -249,194 +236,8 @@ pub fn procedure_checks(
     o: &crate::procedures::Outcomes,
     nav: &Summary,
 ) {
-    if let Some(o) = &o.north_finding {
-        drill_checks(out, s, o);
-    }
-    if let Some(o) = &o.rotating_imu {
-        calibration_checks(out, o, nav);
-    }
-    if let Some(o) = &o.tetrahedral {
-        tetra_checks(out, o, nav);
-    }
-}
-
-/// The drill's verdict: finished, within tolerance, error against the estimated sigma.
-pub fn drill_checks(
-    out: &mut Vec<Check>,
-    s: &Scenario,
-    o: &crate::procedures::northfinding::DrillOutcome,
-) {
-    out.push(Check {
-        name: "north-finding finished".into(),
-        pass: o.abort.is_none() && o.heading_deg.is_some(),
-        detail: match (&o.abort, o.heading_deg) {
-            (Some(why), _) => format!("aborted: {why}"),
-            (None, Some(h)) => format!(
-                "heading {h:.4} deg in {:.1} s, {} dwell(s) repeated",
-                o.duration_s, o.repeats
-            ),
-            (None, None) => "no result reported".into(),
-        },
-    });
-    if let (Some(e), Some(sig)) = (o.error_deg, o.sigma_deg) {
-        out.push(Check {
-            name: "heading within the drill's tolerance".into(),
-            pass: e.abs() <= s.heading_tolerance_deg,
-            detail: format!(
-                "error {e:+.4} deg (truth {:.4}), tolerance {} deg; estimated sigma {sig:.4} deg, error = {:.2} sigma",
-                o.truth_deg,
-                s.heading_tolerance_deg,
-                e.abs() / sig.max(1e-12)
-            ),
-        });
-    }
-}
-
-/// The self-calibration's verdict: finished, each RLS estimate within three of its sigmas of
-/// the unit's truth (the sigma a promise kept), and the parameter file written and loadable
-/// for the unit.
-pub fn calibration_checks(
-    out: &mut Vec<Check>,
-    o: &crate::procedures::rotating::CalibrateOutcome,
-    nav: &Summary,
-) {
-    out.push(Check {
-        name: "self-calibration finished".into(),
-        pass: o.result.is_some(),
-        detail: match (&o.result, &o.abort) {
-            (Some(r), _) => format!(
-                "{:.0} s of rotation, reversals {:?}, locked at zero after {:.1} s",
-                r.rotation_s, r.reversals, r.duration_s
-            ),
-            (None, Some(why)) => format!("aborted: {why}"),
-            (None, None) => "no result reported".into(),
-        },
-    });
-    if let (Some(r), Some(sc)) = (&o.result, &o.rls) {
-        let ratios: Vec<f64> = (0..3)
-            .flat_map(|j| {
-                [
-                    sc.bias_error_dph[j].abs() / r.rls.bias_sigma_dph[j].max(1e-300),
-                    sc.sf_error_ppm[j].abs() / r.rls.scale_factor_sigma_ppm[j].max(1e-300),
-                ]
-            })
-            .collect();
-        out.push(Check {
-            name: "RLS estimates within 3 sigma of the truth".into(),
-            pass: ratios.iter().all(|x| *x <= 3.0),
-            detail: format!(
-                "bias errors {:.5?} deg/h (sigma {:.5?}), scale-factor errors {:.3?} ppm (sigma {:.3?}); worst {:.2} sigma",
-                sc.bias_error_dph,
-                r.rls.bias_sigma_dph,
-                sc.sf_error_ppm,
-                r.rls.scale_factor_sigma_ppm,
-                sc.worst_sigma_ratio
-            ),
-        });
-    }
-    if o.result.is_some() {
-        let sc = nav.self_calibration.as_ref();
-        let file = sc.and_then(|c| c.parameters_file.clone());
-        let imu = sc
-            .and_then(|c| c.parameters.as_ref())
-            .map(|p| p.imu.clone())
-            .unwrap_or_default();
-        let loaded = file
-            .as_ref()
-            .map(|f| nav::params::ImuParameters::load(f, &imu));
-        out.push(Check {
-            name: "parameter file written, and loadable for the unit".into(),
-            pass: matches!(loaded, Some(Ok(_))),
-            detail: match (&file, loaded) {
-                (Some(f), Some(Ok(p))) => format!(
-                    "{}: unit {}, gyro bias {:.5?} deg/h, scale factor {:.3?} ppm",
-                    f.display(),
-                    p.imu,
-                    p.gyro.bias_dph,
-                    p.gyro.scale_factor_ppm
-                ),
-                (Some(f), Some(Err(e))) => format!("{}: {e}", f.display()),
-                _ => "nav wrote no parameter file".into(),
-            },
-        });
-    }
-}
-
-/// The redundant unit's calibration: finished (the table having done what was commanded
-/// throughout), every estimate within 3 of its sigmas of the truth, and with a failure
-/// injected, the monitor isolating that gyro.
-pub fn tetra_checks(
-    out: &mut Vec<Check>,
-    o: &crate::procedures::tetrahedral::TetraOutcome,
-    nav: &Summary,
-) {
-    out.push(Check {
-        name: "tetra-calibration finished, the table's rates checked".into(),
-        pass: o.result.as_ref().is_some_and(|r| r.checked_s > 0),
-        detail: match (&o.result, &o.abort) {
-            (Some(r), _) => format!(
-                "{} samples, {} s of the profile checked against the commanded rates, locked at zero after {:.1} s",
-                r.samples, r.checked_s, r.duration_s
-            ),
-            (None, Some(why)) => format!("aborted: {why}"),
-            (None, None) => "no result reported".into(),
-        },
-    });
-    let from_file = o.result.as_ref().is_some_and(|r| r.from_file);
-    if let (Some(e), Some(q), false) = (&o.errors, o.worst_sigma_ratio, from_file) {
-        out.push(Check {
-            name: "estimates within 3 sigma of the unit's truth".into(),
-            pass: q <= 3.0,
-            detail: format!(
-                "largest errors: bias {:.2e} deg/s, angle {:.2e} deg, scale factor {:.2e}; mean relative error {:.3} %; worst {q:.2} sigma",
-                e.bias_dps,
-                e.angle_deg,
-                e.scale_factor,
-                100.0 * e.relative
-            ),
-        });
-    }
-    if o.result.is_some() && !from_file {
-        let tc = nav.tetra_calibration.as_ref();
-        let file = tc.and_then(|c| c.parameters_file.clone());
-        let unit = tc
-            .and_then(|c| c.parameters.as_ref())
-            .map(|p| p.imu.clone())
-            .unwrap_or_default();
-        let loaded = file
-            .as_ref()
-            .map(|f| nav::params::RedundantParameters::load(f, &unit));
-        out.push(Check {
-            name: "the unit's parameter file written, and loadable for it".into(),
-            pass: matches!(loaded, Some(Ok(_))),
-            detail: match (&file, loaded) {
-                (Some(f), Some(Ok(p))) => {
-                    format!("{}: unit {}, {} gyros", f.display(), p.imu, p.gyro.len())
-                }
-                (Some(f), Some(Err(e))) => format!("{}: {e}", f.display()),
-                _ => "nav wrote no parameter file".into(),
-            },
-        });
-    }
-    if let (Some(f), Some(r)) = (&o.failure, &o.result) {
-        let gyro = match *f {
-            emulators::mems::GyroFailure::Stuck { gyro, .. }
-            | emulators::mems::GyroFailure::BiasJump { gyro, .. }
-            | emulators::mems::GyroFailure::NoiseBurst { gyro, .. } => gyro,
-        };
-        let m = r.monitor;
-        out.push(Check {
-            name: "the failed gyro isolated by the parity monitor".into(),
-            pass: m.is_some_and(|m| {
-                matches!(m.status, nav::redundant::Status::Isolated { gyro: g, .. } if g == gyro)
-            }),
-            detail: format!(
-                "injected {}; monitor {}",
-                serde_json::to_string(f).unwrap_or_default(),
-                m.map_or("did not run".to_string(), |m| serde_json::to_string(&m)
-                    .unwrap_or_default())
-            ),
-        });
+    for p in crate::procedures::ALL {
+        p.checks(s, o, nav, out);
     }
 }
 
@@ -673,40 +474,13 @@ pub fn card(r: &RunReport) -> String {
         let _ = writeln!(s, " {}", memory_line(m));
     }
     let _ = writeln!(s, "{line}");
-    if let Some(d) = &r.drill {
-        let f = |x: Option<f64>, p: usize| x.map_or("--".to_string(), |v| format!("{v:.p$}"));
-        let _ = writeln!(s, " NORTH-FINDING DRILL");
-        let _ = writeln!(
-            s,
-            "   found heading {:>10} deg    truth {:.4} deg    error {:>9} deg",
-            f(d.heading_deg, 4),
-            d.truth_deg,
-            f(d.error_deg, 4)
-        );
-        let _ = writeln!(
-            s,
-            "   sigma         {:>10} deg    duration {:.1} s    dwells repeated {}    tolerance {} deg",
-            f(d.sigma_deg, 4),
-            d.duration_s,
-            d.repeats,
-            r.scenario.heading_tolerance_deg
-        );
-        if let Some(why) = &d.abort {
-            let _ = writeln!(s, "   ABORTED: {why}");
+    for p in crate::procedures::ALL {
+        if let Some(c) = p.card(&r.scenario, &r.procedures) {
+            for l in c.lines() {
+                let _ = writeln!(s, " {l}");
+            }
+            let _ = writeln!(s, "{line}");
         }
-        let _ = writeln!(s, "{line}");
-    }
-    if let Some(c) = &r.calibration {
-        for l in crate::procedures::rotating::card(c).lines() {
-            let _ = writeln!(s, " {l}");
-        }
-        let _ = writeln!(s, "{line}");
-    }
-    if let Some(c) = &r.tetra_calibration {
-        for l in crate::procedures::tetrahedral::tetra_card(c).lines() {
-            let _ = writeln!(s, " {l}");
-        }
-        let _ = writeln!(s, "{line}");
     }
     for c in &r.checks {
         let _ = writeln!(
@@ -754,34 +528,9 @@ pub fn markdown(r: &RunReport) -> String {
         r.frames_per_wall_second,
         if r.pass { "PASS" } else { "FAIL" }
     );
-    if let Some(c) = &r.calibration {
-        let _ = writeln!(
-            s,
-            "## Self-calibration\n\n```\n{}```\n",
-            crate::procedures::rotating::card(c)
-        );
-    }
-    if let Some(c) = &r.tetra_calibration {
-        let _ = writeln!(
-            s,
-            "## Redundant unit's calibration\n\n```\n{}```\n",
-            crate::procedures::tetrahedral::tetra_card(c)
-        );
-    }
-    if let Some(d) = &r.drill {
-        let f = |x: Option<f64>| x.map_or("--".to_string(), |v| format!("{v:.4}"));
-        let _ = writeln!(
-            s,
-            "## North-finding drill\n\n| found heading | truth | error | sigma | duration | repeats |\n|---|---|---|---|---|---|\n| {} deg | {:.4} deg | {} deg | {} deg | {:.1} s | {} |\n",
-            f(d.heading_deg),
-            d.truth_deg,
-            f(d.error_deg),
-            f(d.sigma_deg),
-            d.duration_s,
-            d.repeats
-        );
-        if let Some(why) = &d.abort {
-            let _ = writeln!(s, "**Aborted:** {why}\n");
+    for p in crate::procedures::ALL {
+        if let Some(m) = p.markdown(&r.procedures) {
+            s += &m;
         }
     }
     if let Some(n) = &r.navigation {

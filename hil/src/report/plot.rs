@@ -1,6 +1,7 @@
 //! Minimal SVG line charts for experiment reports (no plotting stack needed to view them: any
 //! browser opens the file).
 
+use crate::report::page::esc;
 use std::fmt::Write;
 
 /// One series of a chart.
@@ -232,12 +233,6 @@ fn nice_step(raw: f64) -> f64 {
         .map(|m| m * p)
         .find(|s| *s >= raw * (1.0 - 1e-9))
         .unwrap_or(10.0 * p)
-}
-
-fn esc(t: &str) -> String {
-    t.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
 }
 
 #[cfg(test)]

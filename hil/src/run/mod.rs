@@ -415,22 +415,10 @@ fn prepare(s: &Scenario, opts: &RunOptions) -> Result<Setup> {
     };
     // the parameter file nav loads goes beside its config, where nav (perhaps another user)
     // can read it, and into the run's record
-    let files = [
-        (
-            nav_cfg.calibration.as_mut().map(|c| &mut c.parameters),
-            "nav-parameters.toml",
-        ),
-        (
-            nav_cfg.tetra_calibration.parameters.as_mut(),
-            "nav-tetra-parameters.toml",
-        ),
-    ];
-    for (file, name) in files {
-        if let Some(p) = file {
-            std::fs::copy(&*p, nav_folder.dir.join(name))
-                .with_context(|| format!("copying {} for nav", p.display()))?;
-            *p = name.into();
-        }
+    for (p, name) in nav_cfg.input_files_mut() {
+        std::fs::copy(&*p, nav_folder.dir.join(name))
+            .with_context(|| format!("copying {} for nav", p.display()))?;
+        *p = name.into();
     }
     std::fs::write(&cfg_path, nav_cfg.to_toml())?;
     Ok(Setup {
@@ -589,15 +577,10 @@ fn read_summary(
         Err(e) => return Err(e.into()),
     };
     // nav wrote its files in its own folder, now moved into the run folder
-    if let Some(sc) = nav_json.self_calibration.as_mut()
-        && let Some(name) = sc.parameters_file.as_ref().and_then(|f| f.file_name())
-    {
-        sc.parameters_file = Some(opts.out.join(name));
-    }
-    if let Some(tc) = nav_json.tetra_calibration.as_mut()
-        && let Some(name) = tc.parameters_file.as_ref().and_then(|f| f.file_name())
-    {
-        tc.parameters_file = Some(opts.out.join(name));
+    for f in nav_json.written_files_mut() {
+        if let Some(name) = f.file_name() {
+            *f = opts.out.join(name);
+        }
     }
     Ok((nav_json, killed))
 }
@@ -743,9 +726,7 @@ fn score(
         tx,
         in_process: reference,
         turntable: tt_stats,
-        drill: procedures.north_finding,
-        calibration: procedures.rotating_imu,
-        tetra_calibration: procedures.tetrahedral,
+        procedures,
         gps: gps_stats,
         navigation,
         navigation_series,
