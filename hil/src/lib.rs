@@ -26,4 +26,5 @@ pub mod scenario;
 pub mod stats;
 pub mod status;
 pub mod suites;
+pub mod table;
 pub mod values;

@@ -48,11 +48,18 @@ pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> 
     let drive_out = out.join("drive");
     let drive = run_procedure(scen, drive_out.clone(), BusArgs::to(drive_out))?;
     let verdict = |c: i32| if c == 0 { "PASS" } else { "FAIL" };
-    let summary = format!(
-        "# Demo\n\n| part | result | report |\n|---|---|---|\n| north-finding drill | {} | [drill/report.md](drill/report.md) |\n| GPS-aided drive | {} | [drive/report.md](drive/report.md) |\n",
+    let mut t = hil::table::Table::left(&["part", "result", "report"]);
+    t.row([
+        "north-finding drill",
         verdict(drill),
-        verdict(drive)
-    );
+        "[drill/report.md](drill/report.md)",
+    ])
+    .row([
+        "GPS-aided drive",
+        verdict(drive),
+        "[drive/report.md](drive/report.md)",
+    ]);
+    let summary = format!("# Demo\n\n{}", t.finish());
     std::fs::write(out.join("report.md"), &summary)?;
     let row = |part: &str, code: i32, dir: &str| {
         format!(

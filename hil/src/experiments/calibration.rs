@@ -346,23 +346,23 @@ pub fn markdown(r: &CalibReport) -> String {
         o.score_from_s,
         o.duration_s
     );
-    s += "| | decoupled RLS | 14-state KF | RLS / KF | paper |\n|---|---|---|---|---|\n";
-    let _ = writeln!(
-        s,
-        "| gyro bias error, deg/h | {:.2e} | {:.2e} | {:.1} % | {:.2} % |",
-        med(&|x| x.rls.bias_dph),
-        med(&|x| x.kf.bias_dph),
-        100.0 * r.bias_ratio,
-        100.0 * PAPER_BIAS_RATIO
-    );
-    let _ = writeln!(
-        s,
-        "| scale-factor error, ppm | {:.3} | {:.3} | {:.1} % | {:.2} % |",
-        med(&|x| x.rls.sf_ppm),
-        med(&|x| x.kf.sf_ppm),
-        100.0 * r.sf_ratio,
-        100.0 * PAPER_SF_RATIO
-    );
+    let mut t =
+        crate::table::Table::left(&["", "decoupled RLS", "14-state KF", "RLS / KF", "paper"]);
+    t.row([
+        "gyro bias error, deg/h".to_string(),
+        format!("{:.2e}", med(&|x| x.rls.bias_dph)),
+        format!("{:.2e}", med(&|x| x.kf.bias_dph)),
+        format!("{:.1} %", 100.0 * r.bias_ratio),
+        format!("{:.2} %", 100.0 * PAPER_BIAS_RATIO),
+    ])
+    .row([
+        "scale-factor error, ppm".to_string(),
+        format!("{:.3}", med(&|x| x.rls.sf_ppm)),
+        format!("{:.3}", med(&|x| x.kf.sf_ppm)),
+        format!("{:.1} %", 100.0 * r.sf_ratio),
+        format!("{:.2} %", 100.0 * PAPER_SF_RATIO),
+    ]);
+    s += &t.finish();
     let mean = |f: &dyn Fn(&CalibRun) -> f64| {
         r.runs.iter().map(|x| f(x).abs()).sum::<f64>() / r.runs.len().max(1) as f64
     };

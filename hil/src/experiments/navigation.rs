@@ -8,6 +8,7 @@
 use crate::engine::navigate::{NavRun, NavSample, navigate};
 use crate::report::plot::{LogChart, Series};
 use crate::scenario::Scenario;
+use crate::table::Table;
 use anyhow::{Context, Result, bail};
 use emulators::gps::ReceiverParams;
 use emulators::gps::errors::{Environment, EnvironmentPreset};
@@ -652,54 +653,57 @@ pub fn markdown(r: &NavExperiment) -> String {
         r.north_finding_error_deg
             .map_or("--".into(), |e| format!("{e:+.4} deg"))
     );
-    let _ = writeln!(
-        s,
-        "## Table 4 (end of the run)\n\n| | paper: position | ours: position | paper: velocity | ours: velocity | ours: RMS position | ours: RMS velocity | NEES/dof pos / vel | integrity alarms |\n|---|---|---|---|---|---|---|---|---|"
-    );
+    let mut t = Table::left(&[
+        "",
+        "paper: position",
+        "ours: position",
+        "paper: velocity",
+        "ours: velocity",
+        "ours: RMS position",
+        "ours: RMS velocity",
+        "NEES/dof pos / vel",
+        "integrity alarms",
+    ]);
     for (i, c) in r.table4.iter().enumerate() {
         let p = PAPER_TABLE4.get(i);
-        let _ = writeln!(
-            s,
-            "| {} | {} | {:.1} m | {} | {:.2} m/s | {:.1} m | {:.2} m/s | {} | {} |",
-            c.name,
+        t.row([
+            c.name.clone(),
             p.map_or("--".into(), |p| format!("{} m", p.1)),
-            c.end_position_error_m,
+            format!("{:.1} m", c.end_position_error_m),
             p.map_or("--".into(), |p| format!("{} m/s", p.2)),
-            c.end_velocity_error_mps,
-            c.rms_position_error_m,
-            c.rms_velocity_error_mps,
+            format!("{:.2} m/s", c.end_velocity_error_mps),
+            format!("{:.1} m", c.rms_position_error_m),
+            format!("{:.2} m/s", c.rms_velocity_error_mps),
             nees_text(c.mean_nees_per_dof),
-            c.integrity_alarms
-        );
+            c.integrity_alarms.to_string(),
+        ]);
     }
+    s += "## Table 4 (end of the run)\n\n";
+    s += &t.finish();
     let _ = writeln!(
         s,
         "\nTargets: pure INS in the kilometre class: **{}**; every filter at or below 20.7 m: **{}**.\n",
         yes(r.pure_km_class),
         yes(r.filters_within_paper)
     );
-    let _ = writeln!(
-        s,
-        "## Mis-specified GPS noise (the receiver's error is about 13 m per axis, 19 m horizontal)\n\n| filter assumes (per axis) | {} |\n|---|{}",
-        KINDS
-            .map(|(_, n)| format!("{n}: end / RMS, NEES/dof pos"))
-            .join(" | "),
-        "---|".repeat(KINDS.len())
-    );
+    let headings: Vec<String> = std::iter::once("filter assumes (per axis)".to_string())
+        .chain(KINDS.map(|(_, n)| format!("{n}: end / RMS, NEES/dof pos")))
+        .collect();
+    let mut t = Table::left(&headings.iter().map(String::as_str).collect::<Vec<_>>());
     for (sig, cases) in &r.misspecified {
-        let cells: Vec<String> = cases
-            .iter()
-            .map(|c| {
+        t.row(
+            std::iter::once(format!("{sig} m")).chain(cases.iter().map(|c| {
                 format!(
                     "{:.1} / {:.1} m, {:.2}",
                     c.end_position_error_m,
                     c.rms_position_error_m,
                     c.mean_nees_per_dof.map_or(f64::NAN, |n| n[0])
                 )
-            })
-            .collect();
-        let _ = writeln!(s, "| {sig} m | {} |", cells.join(" | "));
+            })),
+        );
     }
+    s += "## Mis-specified GPS noise (the receiver's error is about 13 m per axis, 19 m horizontal)\n\n";
+    s += &t.finish();
     let _ = writeln!(
         s,
         "\nFading no worse than standard (RMS, 5 % margin) where the filter overstates the noise (the target): **{}**; where it understates it: {}. With the noise understated both filters already follow the receiver too closely and fading weights it more still, so it cannot win there.\n",
@@ -708,32 +712,47 @@ pub fn markdown(r: &NavExperiment) -> String {
     );
     let _ = writeln!(
         s,
-        "## 60 s outages every 180 s ({} outages per run)\n\n| filter | drift at the end of an outage: RMS | max | end error | RMS error |\n|---|---|---|---|---|",
+        "## 60 s outages every 180 s ({} outages per run)\n",
         r.outage_periods.len()
     );
+    let mut t = Table::left(&[
+        "filter",
+        "drift at the end of an outage: RMS",
+        "max",
+        "end error",
+        "RMS error",
+    ]);
     for c in &r.outages {
         let (rms, max) = c.outage_drift_m.unwrap_or((f64::NAN, f64::NAN));
-        let _ = writeln!(
-            s,
-            "| {} | {rms:.1} m | {max:.1} m | {:.1} m | {:.1} m |",
-            c.name, c.end_position_error_m, c.rms_position_error_m
-        );
+        t.row([
+            c.name.clone(),
+            format!("{rms:.1} m"),
+            format!("{max:.1} m"),
+            format!("{:.1} m", c.end_position_error_m),
+            format!("{:.1} m", c.rms_position_error_m),
+        ]);
     }
-    let _ = writeln!(
-        s,
-        "\n## Feedback (the default) against paper 003's output correction\n\n| filter | feedback: end / RMS | output correction: end / RMS |\n|---|---|---|"
-    );
+    s += &t.finish();
+    s += "\n## Feedback (the default) against paper 003's output correction\n\n";
+    let mut t = Table::left(&[
+        "filter",
+        "feedback: end / RMS",
+        "output correction: end / RMS",
+    ]);
     for (fb, oc) in r.table4[1..].iter().zip(&r.output_correction) {
-        let _ = writeln!(
-            s,
-            "| {} | {:.1} / {:.1} m | {:.1} / {:.1} m |",
-            fb.name,
-            fb.end_position_error_m,
-            fb.rms_position_error_m,
-            oc.end_position_error_m,
-            oc.rms_position_error_m
-        );
+        t.row([
+            fb.name.clone(),
+            format!(
+                "{:.1} / {:.1} m",
+                fb.end_position_error_m, fb.rms_position_error_m
+            ),
+            format!(
+                "{:.1} / {:.1} m",
+                oc.end_position_error_m, oc.rms_position_error_m
+            ),
+        ]);
     }
+    s += &t.finish();
     let _ = writeln!(
         s,
         "\nWith output correction the INS runs free (kilometres off after 20 minutes, like the pure INS) and the filter's linear error model has to describe that whole error.\n"
@@ -749,7 +768,7 @@ fn mis_modelled_markdown(r: &NavExperiment) -> String {
     let e = &r.environment;
     let _ = writeln!(
         s,
-        "## A receiver the filters do not model ({:?} surroundings)\n\nThe same 25 m class receiver, plus: the satellites used change every {:.0} s on average (the solution steps by {:.0} m per axis, 1 sigma, and the HDOP follows the number used: nominal {:.1}), and multipath bursts of {:.0}-{:.0} s add a {:.0} m error (correlated over {:.0} s) every {:.0} s on average. HDOP-scaled: the filter scales its white noise by the fix's HDOP over the nominal.\n\n| filter | end position (per run) | receiver's slow error at the end | RMS position | end velocity | RMS velocity | NEES/dof pos / vel | gate rejections | integrity alarms |\n|---|---|---|---|---|---|---|---|---|",
+        "## A receiver the filters do not model ({:?} surroundings)\n\nThe same 25 m class receiver, plus: the satellites used change every {:.0} s on average (the solution steps by {:.0} m per axis, 1 sigma, and the HDOP follows the number used: nominal {:.1}), and multipath bursts of {:.0}-{:.0} s add a {:.0} m error (correlated over {:.0} s) every {:.0} s on average. HDOP-scaled: the filter scales its white noise by the fix's HDOP over the nominal.\n",
         e.preset,
         e.constellation_change_every_s,
         e.constellation_step_sigma_m,
@@ -760,6 +779,17 @@ fn mis_modelled_markdown(r: &NavExperiment) -> String {
         e.multipath_tau_s,
         e.multipath_every_s
     );
+    let mut t = Table::left(&[
+        "filter",
+        "end position (per run)",
+        "receiver's slow error at the end",
+        "RMS position",
+        "end velocity",
+        "RMS velocity",
+        "NEES/dof pos / vel",
+        "gate rejections",
+        "integrity alarms",
+    ]);
     for c in &r.mis_modelled {
         let rejected: u64 = c
             .runs
@@ -771,21 +801,20 @@ fn mis_modelled_markdown(r: &NavExperiment) -> String {
             .iter()
             .map(|r| format!("{:.1}", r.end_position_error_m))
             .collect();
-        let _ = writeln!(
-            s,
-            "| {} | {:.1} m ({}) | {} | {:.1} m | {:.2} m/s | {:.2} m/s | {} | {rejected} | {} |",
-            c.name,
-            c.end_position_error_m,
-            per_run.join(", "),
+        t.row([
+            c.name.clone(),
+            format!("{:.1} m ({})", c.end_position_error_m, per_run.join(", ")),
             c.end_receiver_wander_m
                 .map_or("--".into(), |w| format!("{w:.1} m")),
-            c.rms_position_error_m,
-            c.end_velocity_error_mps,
-            c.rms_velocity_error_mps,
+            format!("{:.1} m", c.rms_position_error_m),
+            format!("{:.2} m/s", c.end_velocity_error_mps),
+            format!("{:.2} m/s", c.rms_velocity_error_mps),
             nees_text(c.mean_nees_per_dof),
-            c.integrity_alarms
-        );
+            rejected.to_string(),
+            c.integrity_alarms.to_string(),
+        ]);
     }
+    s += &t.finish();
     let _ = writeln!(
         s,
         "\nFading or adaptive at or below {:.0} % of the standard filter's end error (paper 003's margin, 9.7 against 20.7 m): **{}**. The receiver's slow error at the end (its mean over the last 60 s of fixes: the white noise and the bursts average out, the wander of minutes does not) is what even a filter that removed every fast error would carry; a single run's ratio scatters widely (see the per-run figures).\n",

@@ -367,30 +367,42 @@ fn sigma_chart(
 
 /// The table as Markdown.
 pub fn markdown(r: &RoutesReport) -> String {
-    let mut m = String::from(
-        "# The filters over the routes\n\n| route | filter | runs | navigated s | end pos m | RMS pos m | end vel m/s | RMS vel m/s | NEES/dof pos | NEES/dof vel | mean NIS | rejected (first minute) | alarms | consistent |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n",
-    );
+    use crate::table::{Align::*, Table};
+    let mut t = Table::new(&[
+        ("route", Left),
+        ("filter", Left),
+        ("runs", Right),
+        ("navigated s", Right),
+        ("end pos m", Right),
+        ("RMS pos m", Right),
+        ("end vel m/s", Right),
+        ("RMS vel m/s", Right),
+        ("NEES/dof pos", Right),
+        ("NEES/dof vel", Right),
+        ("mean NIS", Right),
+        ("rejected (first minute)", Right),
+        ("alarms", Right),
+        ("consistent", Left),
+    ]);
     for x in &r.rows {
-        let _ = writeln!(
-            m,
-            "| {} | {:?} | {} | {:.0} | {:.1} | {:.1} | {:.3} | {:.3} | {:.2} | {:.2} | {:.2} | {} ({}) | {} | {} |",
-            x.route,
-            x.filter,
-            x.runs,
-            x.navigated_s,
-            x.end_position_error_m,
-            x.rms_position_error_m,
-            x.end_velocity_error_mps,
-            x.rms_velocity_error_mps,
-            x.nees_per_dof[0],
-            x.nees_per_dof[1],
-            x.mean_nis,
-            x.rejected,
-            x.rejected_first_minute,
-            x.integrity_alarms,
-            if x.consistent { "yes" } else { "NO" }
-        );
+        t.row([
+            x.route.clone(),
+            format!("{:?}", x.filter),
+            x.runs.to_string(),
+            format!("{:.0}", x.navigated_s),
+            format!("{:.1}", x.end_position_error_m),
+            format!("{:.1}", x.rms_position_error_m),
+            format!("{:.3}", x.end_velocity_error_mps),
+            format!("{:.3}", x.rms_velocity_error_mps),
+            format!("{:.2}", x.nees_per_dof[0]),
+            format!("{:.2}", x.nees_per_dof[1]),
+            format!("{:.2}", x.mean_nis),
+            format!("{} ({})", x.rejected, x.rejected_first_minute),
+            x.integrity_alarms.to_string(),
+            (if x.consistent { "yes" } else { "NO" }).to_string(),
+        ]);
     }
+    let mut m = format!("# The filters over the routes\n\n{}", t.finish());
     let _ = write!(
         m,
         "\nNEES per degree of freedom within [{}, {}] everywhere: {}\n\nNo fix rejected in any filter's first minute: {}\n\nNo run ends with a velocity error above {} m/s that nav did not flag: {}\n",

@@ -13,6 +13,7 @@
 
 pub use crate::procedures::tetrahedral::{TetraErrors, errors};
 use crate::stats::median;
+use crate::table::Table;
 use anyhow::{Result, bail};
 use emulators::mems::{TetraGyros, TetraParams};
 use emulators::truth::{AxisAngle, Composed, Indexer, Motion, RateWindows, Static};
@@ -307,15 +308,20 @@ pub fn failures(seed: u64) -> Vec<FailureRow> {
 
 /// The failures' table (Markdown).
 pub fn failures_markdown(rows: &[FailureRow]) -> String {
-    use std::fmt::Write as _;
-    let mut s = String::from(
+    let s = String::from(
         "\n### One failed gyro of four (nav::redundant's parity monitor)\n\n\
          The table profile above, gyro noise 0.005 deg/s, a failure at 150 s; alarm at 5 sigmas \
          of the parity's mean over 50 samples. A stuck output is right for as long as the rate \
-         it froze at holds: it shows when the table's motion next changes (at 210 s).\n\n\
-         | failure | reference rate | outcome | detected after, s | isolated after, s | largest rate error from then on, deg/s |\n\
-         |---|---|---|---|---|---|\n",
+         it froze at holds: it shows when the table's motion next changes (at 210 s).\n\n",
     );
+    let mut t = Table::left(&[
+        "failure",
+        "reference rate",
+        "outcome",
+        "detected after, s",
+        "isolated after, s",
+        "largest rate error from then on, deg/s",
+    ]);
     for r in rows {
         let outcome = match r.status {
             nav::redundant::Status::Healthy => "not detected".to_string(),
@@ -330,18 +336,16 @@ pub fn failures_markdown(rows: &[FailureRow]) -> String {
             }
         };
         let secs = |a: Option<f64>| a.map_or("-".into(), |a| format!("{a:.2}"));
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} | {} | {} | {:.3} |",
+        t.row([
             serde_json::to_string(&r.failure).unwrap_or_default(),
-            if r.with_reference { "table's" } else { "none" },
+            (if r.with_reference { "table's" } else { "none" }).to_string(),
             outcome,
             secs(r.detected_after_s),
             secs(r.isolated_after_s),
-            r.rate_error_dps
-        );
+            format!("{:.3}", r.rate_error_dps),
+        ]);
     }
-    s
+    s + &t.finish()
 }
 
 /// Medians over the seeds at one noise level.
@@ -413,32 +417,38 @@ pub const NOISES: [f64; 3] = [1e-3 / 3600.0, 0.005, 0.05];
 
 /// The Markdown section.
 pub fn markdown(rows: &[TetraSummary]) -> String {
-    use std::fmt::Write as _;
-    let mut s = String::from(
+    let s = String::from(
         "## Paper 001: redundant MEMS IMU (four gyros, tetrahedral) on a three-axis table\n\n\
          The paper's profile (rest, x, y, z at 20 deg/s for 75 s each, rest; 360 s at 100 Hz, \
          latitude 45 deg), its 16-state filter (`P0 = I`, `R = 1e-3 I`), against the six-position \
          method (+-20 deg/s about each axis, 60 s each, the earth's rate neglected). Largest \
-         error over the four gyros, medians over the seeds.\n\n\
-         | gyro noise, deg/s | bias, deg/s (paper < 0.0025) | mounting angle, deg (< 0.0025) | scale factor (< 1.5e-5) | mean relative error (< 0.9 %) | six-position: mean relative error | gain over six-position (paper 11.37 %) | converged (paper 250 s) | paper's bounds |\n\
-         |---|---|---|---|---|---|---|---|---|\n",
+         error over the four gyros, medians over the seeds.\n\n",
     );
+    let mut t = Table::left(&[
+        "gyro noise, deg/s",
+        "bias, deg/s (paper < 0.0025)",
+        "mounting angle, deg (< 0.0025)",
+        "scale factor (< 1.5e-5)",
+        "mean relative error (< 0.9 %)",
+        "six-position: mean relative error",
+        "gain over six-position (paper 11.37 %)",
+        "converged (paper 250 s)",
+        "paper's bounds",
+    ]);
     for r in rows {
-        let _ = writeln!(
-            s,
-            "| {:.1e} | {:.2e} | {:.2e} | {:.2e} | {:.3} % | {:.3} % | {:.1} % | {:.0} s | {} |",
-            r.noise_dps,
-            r.kf.bias_dps,
-            r.kf.angle_deg,
-            r.kf.scale_factor,
-            100.0 * r.kf.relative,
-            100.0 * r.six.relative,
-            100.0 * r.gain,
-            r.converged_s,
-            if r.meets_paper { "met" } else { "not met" }
-        );
+        t.row([
+            format!("{:.1e}", r.noise_dps),
+            format!("{:.2e}", r.kf.bias_dps),
+            format!("{:.2e}", r.kf.angle_deg),
+            format!("{:.2e}", r.kf.scale_factor),
+            format!("{:.3} %", 100.0 * r.kf.relative),
+            format!("{:.3} %", 100.0 * r.six.relative),
+            format!("{:.1} %", 100.0 * r.gain),
+            format!("{:.0} s", r.converged_s),
+            (if r.meets_paper { "met" } else { "not met" }).to_string(),
+        ]);
     }
-    s
+    s + &t.finish()
 }
 
 #[cfg(test)]

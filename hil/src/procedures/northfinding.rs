@@ -211,15 +211,23 @@ fn card(s: &Scenario, d: &DrillOutcome) -> String {
 /// The drill's section of a run's Markdown report.
 fn markdown(d: &DrillOutcome) -> String {
     let f = |x: Option<f64>| x.map_or("--".to_string(), |v| format!("{v:.4}"));
-    let mut m = format!(
-        "## North-finding drill\n\n| found heading | truth | error | sigma | duration | repeats |\n|---|---|---|---|---|---|\n| {} deg | {:.4} deg | {} deg | {} deg | {:.1} s | {} |\n\n",
-        f(d.heading_deg),
-        d.truth_deg,
-        f(d.error_deg),
-        f(d.sigma_deg),
-        d.duration_s,
-        d.repeats
-    );
+    let mut t = crate::table::Table::left(&[
+        "found heading",
+        "truth",
+        "error",
+        "sigma",
+        "duration",
+        "repeats",
+    ]);
+    t.row([
+        format!("{} deg", f(d.heading_deg)),
+        format!("{:.4} deg", d.truth_deg),
+        format!("{} deg", f(d.error_deg)),
+        format!("{} deg", f(d.sigma_deg)),
+        format!("{:.1} s", d.duration_s),
+        d.repeats.to_string(),
+    ]);
+    let mut m = format!("## North-finding drill\n\n{}\n", t.finish());
     if let Some(why) = &d.abort {
         m += &format!("**Aborted:** {why}\n\n");
     }

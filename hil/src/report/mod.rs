@@ -6,6 +6,7 @@ pub mod plot;
 
 use crate::engine::reference::InProcess;
 use crate::scenario::Scenario;
+use crate::table::Table;
 use emulators::can::TxStats;
 use nalgebra::Vector3;
 use nav::summary::Summary;
@@ -534,10 +535,22 @@ pub fn markdown(r: &RunReport) -> String {
         }
     }
     if let Some(n) = &r.navigation {
+        let mut t = Table::left(&[
+            "at",
+            "horizontal position error",
+            "velocity error",
+            "heading error",
+        ]);
+        t.row([
+            format!("{:.1} s", n.t_s),
+            format!("{:.2} m", n.position_error_m),
+            format!("{:.3} m/s", n.velocity_error_mps),
+            format!("{:+.4} deg", n.heading_error_deg),
+        ]);
         let _ = writeln!(
             s,
-            "## Navigation (nav's output against truth)\n\n| at | horizontal position error | velocity error | heading error |\n|---|---|---|---|\n| {:.1} s | {:.2} m | {:.3} m/s | {:+.4} deg |\n",
-            n.t_s, n.position_error_m, n.velocity_error_mps, n.heading_error_deg
+            "## Navigation (nav's output against truth)\n\n{}",
+            t.finish()
         );
         if let Some(x) = &r.navigation_series {
             let _ = writeln!(
@@ -550,16 +563,15 @@ pub fn markdown(r: &RunReport) -> String {
     if let Some(m) = &r.nav_memory {
         let _ = writeln!(s, "{}\n", memory_line(m));
     }
-    let _ = writeln!(s, "| check | result | detail |\n|---|---|---|");
+    let mut t = Table::left(&["check", "result", "detail"]);
     for c in &r.checks {
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} |",
-            c.name,
+        t.row([
+            c.name.as_str(),
             if c.pass { "PASS" } else { "FAIL" },
-            c.detail
-        );
+            &c.detail,
+        ]);
     }
+    s += &t.finish();
     let _ = writeln!(
         s,
         "\nFiles: `report.json` (everything), `nav-summary.json`, `nav.mcap` (raw frames, decoded samples, events), `nav.toml`, `scenario.toml`."

@@ -3,6 +3,7 @@
 //! core, over frames prepared in advance (the emulator's cost is not counted).
 
 use crate::scenario::Scenario;
+use crate::table::{Align, Table};
 use anyhow::{Context, Result};
 use emulators::can::BusStream;
 use emulators::imu::{ImuEmulator, ImuParams};
@@ -431,68 +432,94 @@ pub fn markdown(s: &Suite) -> String {
     );
     if !s.raw_vcan.is_empty() {
         m += "## Raw vcan (a trivial writer and reader, nothing else on the bus)\n\n";
-        m += "| frames per write | sent | received | lost | frames/s | x of the IMU stream |\n|---:|---:|---:|---:|---:|---:|\n";
+        let mut t = Table::new(&[
+            ("frames per write", Align::Right),
+            ("sent", Align::Right),
+            ("received", Align::Right),
+            ("lost", Align::Right),
+            ("frames/s", Align::Right),
+            ("x of the IMU stream", Align::Right),
+        ]);
         for r in &s.raw_vcan {
-            m += &format!(
-                "| {} | {} | {} | {} | {:.0} | x{:.1} |\n",
-                r.frames_per_write,
-                r.sent,
-                r.received,
-                r.lost,
-                r.frames_per_second,
-                r.frames_per_second / IMU_FRAMES_PER_S
-            );
+            t.row([
+                r.frames_per_write.to_string(),
+                r.sent.to_string(),
+                r.received.to_string(),
+                r.lost.to_string(),
+                format!("{:.0}", r.frames_per_second),
+                format!("x{:.1}", r.frames_per_second / IMU_FRAMES_PER_S),
+            ]);
         }
+        m += &t.finish();
         m += "\n";
     }
     if !s.bus.is_empty() {
         m += "## Each scenario through the bench on vcan (emulators + nav, lockstep, as fast as it goes)\n\n";
-        m += "| scenario | simulated s | wall s | pace | frames/s | of the raw limit | lost | latency p50 / p99, ms | stalls |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+        let mut t = Table::figures(&[
+            "scenario",
+            "simulated s",
+            "wall s",
+            "pace",
+            "frames/s",
+            "of the raw limit",
+            "lost",
+            "latency p50 / p99, ms",
+            "stalls",
+        ]);
         for b in &s.bus {
-            m += &format!(
-                "| {} | {:.1} | {:.1} | x{:.1} | {:.0} | {} | {} | {:.1} / {:.1} | {} |\n",
-                b.scenario,
-                b.simulated_s,
-                b.wall_s,
-                b.pace_reached,
-                b.frames_per_second,
+            t.row([
+                b.scenario.clone(),
+                format!("{:.1}", b.simulated_s),
+                format!("{:.1}", b.wall_s),
+                format!("x{:.1}", b.pace_reached),
+                format!("{:.0}", b.frames_per_second),
                 b.fraction_of_limit
                     .map_or("-".into(), |f| format!("{:.0} %", 100.0 * f)),
-                b.lost,
-                b.latency_p50_ms,
-                b.latency_p99_ms,
-                b.stalls
-            );
+                b.lost.to_string(),
+                format!("{:.1} / {:.1}", b.latency_p50_ms, b.latency_p99_ms),
+                b.stalls.to_string(),
+            ]);
         }
+        m += &t.finish();
         m += "\n";
     }
     if !s.emulators.is_empty() {
         m += "## Each scenario's emulators alone (truth + sensor model + encoding), one core, in process\n\n";
-        m += "| scenario | simulated s | pace | frames/s |\n|---|---:|---:|---:|\n";
+        let mut t = Table::figures(&["scenario", "simulated s", "pace", "frames/s"]);
         for e in &s.emulators {
-            m += &format!(
-                "| {} | {:.1} | x{:.1} | {:.3e} |\n",
-                e.scenario, e.seconds, e.speed_factor, e.frames_per_second
-            );
+            t.row([
+                e.scenario.clone(),
+                format!("{:.1}", e.seconds),
+                format!("x{:.1}", e.speed_factor),
+                format!("{:.3e}", e.frames_per_second),
+            ]);
         }
+        m += &t.finish();
         m += "\n";
     }
     if s.front_end.is_some() || s.pipeline.is_some() {
-        m += "## nav, one core, in process\n\n| what | samples or frames | per second | pace |\n|---|---:|---:|---:|\n";
+        m += "## nav, one core, in process\n\n";
+        let mut t = Table::figures(&["what", "samples or frames", "per second", "pace"]);
         if let Some(f) = &s.front_end {
-            m += &format!(
-                "| front end (decode, dither FIR, coning/sculling, attitude) | {} samples | {:.3e} samples/s | x{:.0} |\n",
-                f.samples,
-                f.samples_per_second,
-                f.samples_per_second / 2000.0
-            );
+            t.row([
+                "front end (decode, dither FIR, coning/sculling, attitude)".to_string(),
+                format!("{} samples", f.samples),
+                format!("{:.3e} samples/s", f.samples_per_second),
+                format!("x{:.0}", f.samples_per_second / 2000.0),
+            ]);
         }
         if let Some(p) = &s.pipeline {
-            m += &format!(
-                "| whole pipeline with the filter on {} ({} fixes, {} updates) | {} frames | {:.3e} frames/s | x{:.0} |\n",
-                p.scenario, p.fixes, p.updates, p.frames, p.frames_per_second, p.speed_factor
-            );
+            t.row([
+                format!(
+                    "whole pipeline with the filter on {} ({} fixes, {} updates)",
+                    p.scenario, p.fixes, p.updates
+                ),
+                format!("{} frames", p.frames),
+                format!("{:.3e} frames/s", p.frames_per_second),
+                format!("x{:.0}", p.speed_factor),
+            ]);
         }
+        m += &t.finish();
     }
     m
 }

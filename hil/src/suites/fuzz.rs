@@ -424,24 +424,31 @@ fn scenario(bytes: &[u8]) -> bool {
 
 /// The figures as a Markdown table.
 pub fn markdown(rs: &[FuzzReport]) -> String {
-    let mut m = String::from(
-        "| target | inputs | accepted | panics | hangs (> 500 ms CPU) | slowest ms | seconds | inputs/s | seed |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
-    );
+    let mut t = crate::table::Table::figures(&[
+        "target",
+        "inputs",
+        "accepted",
+        "panics",
+        "hangs (> 500 ms CPU)",
+        "slowest ms",
+        "seconds",
+        "inputs/s",
+        "seed",
+    ]);
     for r in rs {
-        m += &format!(
-            "| {:?} | {} | {} | {} | {} | {:.2} | {:.1} | {:.0} | {} |\n",
-            r.target,
-            r.inputs,
-            r.accepted,
-            r.panics,
-            r.hangs,
-            r.slowest_ms,
-            r.seconds,
-            r.inputs as f64 / r.seconds.max(1e-9),
-            r.seed
-        );
+        t.row([
+            format!("{:?}", r.target),
+            r.inputs.to_string(),
+            r.accepted.to_string(),
+            r.panics.to_string(),
+            r.hangs.to_string(),
+            format!("{:.2}", r.slowest_ms),
+            format!("{:.1}", r.seconds),
+            format!("{:.0}", r.inputs as f64 / r.seconds.max(1e-9)),
+            r.seed.to_string(),
+        ]);
     }
-    m
+    t.finish()
 }
 
 #[cfg(test)]

@@ -368,28 +368,33 @@ pub fn write(m: &FaultMatrix, out: &Path) -> Result<()> {
 
 /// The table as Markdown.
 pub fn markdown(m: &FaultMatrix) -> String {
-    use std::fmt::Write;
-    let mut s = format!(
-        "# Fault matrix ({})\n\n{} of {} faults handled as expected.\n\n| fault | injected | expected | observed | detection latency | result |\n|---|---|---|---|---|---|\n",
-        m.backend,
-        m.rows.iter().filter(|r| r.verdict.pass).count(),
-        m.rows.len()
-    );
+    let mut t = crate::table::Table::left(&[
+        "fault",
+        "injected",
+        "expected",
+        "observed",
+        "detection latency",
+        "result",
+    ]);
     for r in &m.rows {
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} | {} | {} | {} |",
-            r.fault,
-            r.injected,
-            r.expected,
-            r.verdict.observed.replace('|', "/"),
+        t.row([
+            r.fault.to_string(),
+            r.injected.to_string(),
+            r.expected.to_string(),
+            r.verdict.observed.clone(),
             r.verdict
                 .latency_s
                 .map_or("--".into(), |l| format!("{l:.3} s")),
-            if r.verdict.pass { "pass" } else { "**FAIL**" }
-        );
+            (if r.verdict.pass { "pass" } else { "**FAIL**" }).to_string(),
+        ]);
     }
-    s
+    format!(
+        "# Fault matrix ({})\n\n{} of {} faults handled as expected.\n\n{}",
+        m.backend,
+        m.rows.iter().filter(|r| r.verdict.pass).count(),
+        m.rows.len(),
+        t.finish()
+    )
 }
 
 #[cfg(test)]
