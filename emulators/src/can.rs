@@ -48,6 +48,18 @@ pub enum CanTxError {
         /// Cause.
         source: std::io::Error,
     },
+    /// The client said it wrote commands the turntable never received.
+    #[error(
+        "CAN interface {iface}: the client wrote {written} turntable commands, {taken} arrived"
+    )]
+    CommandsMissing {
+        /// Interface.
+        iface: String,
+        /// Commands the client wrote.
+        written: u64,
+        /// Commands that arrived.
+        taken: u64,
+    },
     /// A scheduled link outage could not switch the interface.
     #[error("CAN interface {iface}: could not {} the link", if *up { "bring up" } else { "take down" })]
     Link {
@@ -268,29 +280,96 @@ impl Progress {
     }
 }
 
-/// Run the turntable on `iface` until `stop` is set (or `duration_s` of simulated time):
-/// TT_CMD in, TT_ACK out at once, TT_STATUS at the mechanism's status rate. Its time is the IMU
-/// stream's (`progress`), so the mechanism and the gyros share one simulated clock even when the
-/// IMU runs behind the wall clock.
+/// The lockstep of a turntable alone on the bus with the client that commands it (the
+/// validation suite): the client asks for a time, saying how many commands it has written; the
+/// mechanism takes exactly those commands, writes its frames up to that time and says how many.
+/// Both sides wait on these counts, never on the wall clock, so a run is the same at any pace and
+/// on a loaded host; the wall clock only bounds how long a side waits for the other to answer.
+#[derive(Debug, Default)]
+pub struct TtLockstep {
+    state: std::sync::Mutex<LockstepState>,
+    changed: std::sync::Condvar,
+}
+
+#[derive(Debug, Default, Clone, Copy)]
+struct LockstepState {
+    /// The time the client asks for, µs.
+    target_us: u64,
+    /// TT_CMD frames the client has written.
+    commands_written: u64,
+    /// The time the mechanism has reached, µs.
+    reached_us: u64,
+    /// Frames (TT_ACK, TT_STATUS) the mechanism has written.
+    frames_written: u64,
+}
+
+impl TtLockstep {
+    fn state(&self) -> std::sync::MutexGuard<'_, LockstepState> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The client: reach `t_s`, the client having written `commands` TT_CMD frames in all.
+    pub fn ask(&self, t_s: f64, commands: u64) {
+        let mut s = self.state();
+        s.target_us = (t_s * 1e6).round() as u64;
+        s.commands_written = commands;
+        self.changed.notify_all();
+    }
+
+    /// The client: wait up to `within` of wall time for the mechanism to reach what was asked;
+    /// the frames it has written in all, or none when it did not answer in time.
+    pub fn wait_reached(&self, within: Duration) -> Option<u64> {
+        let s = self.state();
+        let (s, _) = self
+            .changed
+            .wait_timeout_while(s, within, |s| s.reached_us < s.target_us)
+            .unwrap_or_else(|e| e.into_inner());
+        (s.reached_us >= s.target_us).then_some(s.frames_written)
+    }
+
+    /// The mechanism: the next time asked for past `reached_us` and the commands written by
+    /// then, waiting up to `within` of wall time (none: nothing new yet).
+    fn wait_asked(&self, reached_us: u64, within: Duration) -> Option<(u64, u64)> {
+        let s = self.state();
+        let (s, _) = self
+            .changed
+            .wait_timeout_while(s, within, |s| s.target_us <= reached_us)
+            .unwrap_or_else(|e| e.into_inner());
+        (s.target_us > reached_us).then_some((s.target_us, s.commands_written))
+    }
+
+    /// The mechanism: it has reached `t_us`, having written `frames` frames in all.
+    fn reached(&self, t_us: u64, frames: u64) {
+        let mut s = self.state();
+        s.reached_us = t_us;
+        s.frames_written = frames;
+        self.changed.notify_all();
+    }
+}
+
+/// Run the turntable on `iface` in lockstep with its client (`ls`) until `stop` is set: the
+/// commands the client wrote before asking for a time are taken at the time reached before it
+/// (TT_ACK out at once), then TT_STATUS at the mechanism's status rate up to the time asked for.
+/// `progress` shows the time reached.
 pub fn run_turntable(
     iface: &str,
     mut tt: crate::turntable::Turntable,
+    ls: &TtLockstep,
     progress: &Progress,
-    duration_s: f64,
     stop: &AtomicBool,
 ) -> Result<TurntableTxStats, CanTxError> {
-    let open = |iface: &str| {
-        CanSocket::open(iface).map_err(|source| CanTxError::Open {
-            iface: iface.into(),
-            source,
-        })
-    };
-    let sock = open(iface)?;
+    // how long the client may leave a command it said it wrote unread: liveness only
+    const COMMAND_WAIT: Duration = Duration::from_secs(30);
+    let sock = CanSocket::open(iface).map_err(|source| CanTxError::Open {
+        iface: iface.into(),
+        source,
+    })?;
     // only commands: the IMU's 4,000 frames/s are not ours to read
     let _ = sock.set_filters(&[socketcan::CanFilter::new(0x100, 0x7FF)]);
     let mut st = TurntableTxStats::default();
     let period = 1.0 / tt.params().status_hz;
     let mut next_status = 0.0;
+    let (mut reached_us, mut taken) = (0u64, 0u64);
     let mut acks = Vec::new();
     let send = |m: wire::Message, st: &mut TurntableTxStats| -> Result<(), CanTxError> {
         if let Ok(f) = m.encode() {
@@ -302,41 +381,58 @@ pub fn run_turntable(
         }
         Ok(())
     };
-    while next_status <= duration_s && !stop.load(Ordering::Relaxed) {
-        match sock.read_frame_timeout(Duration::from_micros(500)) {
-            Ok(f) => {
-                let t = progress.now();
-                match wire::from_can_frame(&f)
-                    .ok()
-                    .and_then(|r| wire::Message::decode(&r).ok())
-                {
-                    Some(wire::Message::TtCmd(c)) => {
-                        st.commands += 1;
-                        match tt.command(t, c) {
-                            Some(a) => send(wire::Message::TtAck(a), &mut st)?,
-                            None if tt.params().faults.lost_command_seqs.contains(&c.seq) => {
-                                st.lost_commands += 1
+    while !stop.load(Ordering::Relaxed) {
+        let Some((target_us, written)) = ls.wait_asked(reached_us, Duration::from_millis(50))
+        else {
+            continue;
+        };
+        let t = reached_us as f64 * 1e-6;
+        let since = Instant::now();
+        while taken < written && !stop.load(Ordering::Relaxed) {
+            match sock.read_frame_timeout(Duration::from_millis(20)) {
+                Ok(f) => {
+                    taken += 1;
+                    match wire::from_can_frame(&f)
+                        .ok()
+                        .and_then(|r| wire::Message::decode(&r).ok())
+                    {
+                        Some(wire::Message::TtCmd(c)) => {
+                            st.commands += 1;
+                            match tt.command(t, c) {
+                                Some(a) => send(wire::Message::TtAck(a), &mut st)?,
+                                None if tt.params().faults.lost_command_seqs.contains(&c.seq) => {
+                                    st.lost_commands += 1
+                                }
+                                None => {}
                             }
-                            None => {}
                         }
+                        _ => st.bad_frames += 1,
                     }
-                    _ => st.bad_frames += 1,
                 }
-                continue;
-            }
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock
-                ) => {}
-            Err(source) => {
-                return Err(CanTxError::Read {
-                    iface: iface.into(),
-                    source,
-                });
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock
+                    ) =>
+                {
+                    if since.elapsed() > COMMAND_WAIT {
+                        return Err(CanTxError::CommandsMissing {
+                            iface: iface.into(),
+                            written,
+                            taken,
+                        });
+                    }
+                }
+                Err(source) => {
+                    return Err(CanTxError::Read {
+                        iface: iface.into(),
+                        source,
+                    });
+                }
             }
         }
-        while next_status <= progress.now() && next_status <= duration_s {
+        let t1 = target_us as f64 * 1e-6;
+        while next_status <= t1 {
             acks.clear();
             tt.advance(next_status, &mut acks);
             for a in acks.drain(..) {
@@ -347,6 +443,9 @@ pub fn run_turntable(
             }
             next_status += period;
         }
+        reached_us = target_us;
+        progress.set(t1);
+        ls.reached(reached_us, st.acks + st.status_frames);
     }
     Ok(st)
 }

@@ -260,7 +260,9 @@ struct ValidateArgs {
     /// Inject a fault into the emulated mechanism (the suite must catch it).
     #[arg(long, value_enum)]
     fault: Option<TtFault>,
-    /// Speed factor of the emulated mechanism.
+    /// Pace of the emulated mechanism: its seconds per wall second at most. The suite runs in
+    /// lockstep with the emulator, so the result is the same at any pace and on a loaded host;
+    /// the pace only sets how fast an operator sees it (with --real, the mechanism's own time).
     #[arg(long, value_parser = hil::values::speed, default_value_t = 1.0)]
     speed: f64,
     #[command(flatten)]

@@ -4,6 +4,7 @@ use crate::*;
 
 pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
     use emulators::turntable::{Turntable, TurntableFaults, TurntableParams};
+    use hil::suites::validate::SuiteTime;
     if a.speed.is_nan() || a.speed <= 0.0 || a.speed > 100.0 {
         bail!("--speed must be in (0, 100]");
     }
@@ -68,17 +69,20 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
             ..TurntableParams::default()
         };
         p.check()?;
-        let tt = hil::engine::devices::start_turntable(&a.bus.iface, Turntable::new(p), a.speed)?;
-        std::thread::sleep(std::time::Duration::from_millis(50));
-        Some(tt)
+        Some(hil::engine::devices::start_turntable(
+            &a.bus.iface,
+            Turntable::new(p),
+        )?)
     };
-    let result = hil::suites::validate::run_suite(
-        &a.bus.iface,
-        a.axis,
-        if a.real { 1.0 } else { a.speed },
-        &Default::default(),
-    );
-    if let Some(tt) = emulator {
+    let time = match &emulator {
+        Some((_, ls)) => SuiteTime::Lockstep {
+            ls: ls.clone(),
+            pace: a.speed,
+        },
+        None => SuiteTime::Wall { speed: 1.0 },
+    };
+    let result = hil::suites::validate::run_suite(&a.bus.iface, a.axis, time, &Default::default());
+    if let Some((tt, _)) = emulator {
         tt.join()?;
     }
     let v = result?;

@@ -5,14 +5,13 @@
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, anyhow};
 use emulators::bus::{BusOutcome, Devices, Lockstep};
-use emulators::can::{Progress, TurntableTxStats};
+use emulators::can::{Progress, TtLockstep, TurntableTxStats};
 use emulators::clock::SimClock;
 use emulators::gps::GpsDevice;
 use emulators::turntable::Turntable;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
-use std::time::Duration;
 
 /// Devices running on a bus in their own thread.
 pub struct Running<T> {
@@ -103,44 +102,38 @@ pub fn start_scenario(
     })
 }
 
-/// Starts the indexing mechanism alone on `iface`, on a simulated clock paced at `speed` (no IMU
-/// to follow), until stopped.
+/// Starts the indexing mechanism alone on `iface`, in lockstep with the client that commands it
+/// (the returned [`TtLockstep`]: the mechanism's time is what the client asks for), until
+/// stopped.
 pub fn start_turntable(
     iface: &str,
     tt: Turntable,
-    speed: f64,
-) -> Result<Running<TurntableTxStats>> {
+) -> Result<(Running<TurntableTxStats>, Arc<TtLockstep>)> {
     let stop = Arc::new(AtomicBool::new(false));
     let progress = Arc::new(Progress::default());
-    let clock = SimClock::start(speed);
-    let ticker = {
-        let (progress, stop) = (progress.clone(), stop.clone());
-        std::thread::Builder::new()
-            .name("turntable-clock".into())
-            .spawn(move || {
-                while !stop.load(Ordering::Relaxed) {
-                    progress
-                        .sim_us
-                        .store((clock.now() * 1e6) as u64, Ordering::Release);
-                    std::thread::sleep(Duration::from_millis(1));
-                }
-            })
-            .context("starting the turntable's clock")?
-    };
+    let ls = Arc::new(TtLockstep::default());
     let thread = {
-        let (iface, stop, progress) = (iface.to_string(), stop.clone(), progress.clone());
+        let (iface, stop, progress, ls) = (
+            iface.to_string(),
+            stop.clone(),
+            progress.clone(),
+            ls.clone(),
+        );
         std::thread::Builder::new()
             .name("turntable".into())
             .spawn(move || {
-                emulators::can::run_turntable(&iface, tt, &progress, f64::INFINITY, &stop)
+                emulators::can::run_turntable(&iface, tt, &ls, &progress, &stop)
                     .context("turntable emulator")
             })
             .context("starting the turntable emulator")?
     };
-    Ok(Running {
-        thread,
-        ticker: Some(ticker),
-        stop,
-        progress,
-    })
+    Ok((
+        Running {
+            thread,
+            ticker: None,
+            stop,
+            progress,
+        },
+        ls,
+    ))
 }

@@ -81,20 +81,57 @@ pub struct Validation {
     pub status_frames: u64,
 }
 
+/// Whose time the suite runs on.
+#[derive(Debug, Clone)]
+pub enum SuiteTime {
+    /// A mechanism the bench does not run (real hardware, or another emulator): the wall
+    /// clock's, times `speed` (1 for real hardware).
+    Wall {
+        /// Mechanism seconds per wall second.
+        speed: f64,
+    },
+    /// The bench's emulator, in lockstep: the mechanism's time is what the suite asks for, so the
+    /// result is the same at any pace and on a loaded host. `pace`: mechanism seconds per wall
+    /// second at most (how fast an operator watching wants it), infinite for as fast as it goes.
+    Lockstep {
+        /// The emulator's side of the lockstep.
+        ls: std::sync::Arc<emulators::can::TtLockstep>,
+        /// Mechanism seconds per wall second at most.
+        pace: f64,
+    },
+}
+
+/// The suite's steps in lockstep, mechanism seconds (a command is taken at the start of the
+/// step after it was written, so this is also the resolution of the measured latencies).
+const STEP_S: f64 = 0.001;
+
+/// How long the suite waits for the emulator to answer a step (liveness only: no result
+/// depends on it).
+const ANSWER_WAIT: Duration = Duration::from_secs(30);
+
 /// The CAN client.
 struct Client {
     sock: CanSocket,
     iface: String,
     axis: u8,
     seq: u8,
-    /// Wall seconds are multiplied by this to get the mechanism's time (emulator speed factor).
-    speed: f64,
+    time: SuiteTime,
+    /// When the suite started (wall).
+    wall0: Instant,
+    /// Mechanism time reached in lockstep, s.
+    t: f64,
+    /// Frames read in lockstep.
+    frames_read: u64,
+    /// Frames read in lockstep and not yet taken.
+    pending: std::collections::VecDeque<socketcan::CanFrame>,
     last: Option<TtStatus>,
-    statuses: Vec<(Instant, TtStatus)>,
+    /// Status frames with the mechanism time they arrived at.
+    statuses: Vec<(f64, TtStatus)>,
     commands: u64,
     acks: u64,
     status_frames: u64,
-    last_sent: Instant,
+    /// When the last command went out, mechanism s.
+    last_sent: f64,
     /// Keep the heartbeat going while waiting.
     heartbeat: bool,
     /// Commands never acknowledged: (seq, code).
@@ -109,7 +146,7 @@ struct Answer {
 }
 
 impl Client {
-    fn open(iface: &str, axis: u8, speed: f64) -> Result<Self> {
+    fn open(iface: &str, axis: u8, time: SuiteTime) -> Result<Self> {
         let sock = CanSocket::open(iface).with_context(|| format!("CAN interface {iface}"))?;
         let _ = sock.set_filters(&[
             socketcan::CanFilter::new(0x101, 0x7FF),
@@ -120,21 +157,28 @@ impl Client {
             iface: iface.into(),
             axis,
             seq: 0,
-            speed,
+            time,
+            wall0: Instant::now(),
+            t: 0.0,
+            frames_read: 0,
+            pending: Default::default(),
             last: None,
             statuses: Vec::new(),
             commands: 0,
             acks: 0,
             status_frames: 0,
-            last_sent: Instant::now(),
+            last_sent: 0.0,
             heartbeat: true,
             unanswered: Vec::new(),
         })
     }
 
-    /// Mechanism seconds to wall time.
-    fn wall(&self, s: f64) -> Duration {
-        Duration::from_secs_f64((s / self.speed).max(0.0))
+    /// The mechanism's time, s.
+    fn now(&self) -> f64 {
+        match self.time {
+            SuiteTime::Wall { speed } => self.wall0.elapsed().as_secs_f64() * speed,
+            SuiteTime::Lockstep { .. } => self.t,
+        }
     }
 
     fn send_raw(&mut self, command: u8, arg: f64) -> Result<u8> {
@@ -153,54 +197,112 @@ impl Client {
             .write_frame(&f)
             .with_context(|| format!("CAN interface {}: sending TT_CMD", self.iface))?;
         self.commands += 1;
-        self.last_sent = Instant::now();
+        self.last_sent = self.now();
         Ok(self.seq)
     }
 
-    /// Read frames for `dur` of wall time; returns the ack of `want_seq` as soon as it arrives
-    /// when one is wanted.
-    fn pump(&mut self, dur: Duration, want_seq: Option<u8>) -> Result<Option<TtAck>> {
-        let end = Instant::now() + dur;
-        loop {
-            if self.heartbeat && self.last_sent.elapsed() > self.wall(0.2) && want_seq.is_none() {
-                self.send_raw(TtCommand::Heartbeat as u8, 0.0)?;
+    /// Take one frame: the ack of `want_seq` when it is that.
+    fn take(&mut self, f: &socketcan::CanFrame, want_seq: Option<u8>) -> Option<TtAck> {
+        let raw = wire::from_can_frame(f).ok()?;
+        match Message::decode(&raw) {
+            Ok(Message::TtAck(a)) if a.axis == self.axis => {
+                self.acks += 1;
+                (Some(a.seq) == want_seq).then_some(a)
             }
-            let left = end.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return Ok(None);
+            Ok(Message::TtStatus(s)) if s.axis == self.axis => {
+                self.status_frames += 1;
+                self.last = Some(s);
+                let t = self.now();
+                self.statuses.push((t, s));
+                None
             }
-            match self
-                .sock
-                .read_frame_timeout(left.min(Duration::from_millis(20)))
-            {
+            _ => None,
+        }
+    }
+
+    /// In lockstep: the mechanism to `t1`, its frames up to then read into `pending`.
+    fn step_to(&mut self, t1: f64) -> Result<()> {
+        let SuiteTime::Lockstep { ls, pace } = &self.time else {
+            return Ok(());
+        };
+        // pacing decides only how fast the run goes, never what it does
+        if pace.is_finite() {
+            let due = Duration::from_secs_f64(t1 / pace);
+            if let Some(ahead) = due.checked_sub(self.wall0.elapsed()) {
+                std::thread::sleep(ahead);
+            }
+        }
+        ls.ask(t1, self.commands);
+        let Some(written) = ls.wait_reached(ANSWER_WAIT) else {
+            bail!(
+                "the turntable emulator on {} did not reach {t1:.3} s within {} s of wall time",
+                self.iface,
+                ANSWER_WAIT.as_secs()
+            );
+        };
+        let since = Instant::now();
+        while self.frames_read < written {
+            match self.sock.read_frame_timeout(Duration::from_millis(20)) {
                 Ok(f) => {
-                    let Ok(raw) = wire::from_can_frame(&f) else {
-                        continue;
-                    };
-                    match Message::decode(&raw) {
-                        Ok(Message::TtAck(a)) if a.axis == self.axis => {
-                            self.acks += 1;
-                            if Some(a.seq) == want_seq {
-                                return Ok(Some(a));
-                            }
-                        }
-                        Ok(Message::TtStatus(s)) if s.axis == self.axis => {
-                            self.status_frames += 1;
-                            self.last = Some(s);
-                            self.statuses.push((Instant::now(), s));
-                        }
-                        _ => {}
-                    }
+                    self.frames_read += 1;
+                    self.pending.push_back(f);
                 }
                 Err(e)
                     if matches!(
                         e.kind(),
                         std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock
-                    ) => {}
+                    ) && since.elapsed() < ANSWER_WAIT => {}
                 Err(e) => {
-                    return Err(e)
-                        .with_context(|| format!("CAN interface {}: reading", self.iface));
+                    return Err(e).with_context(|| {
+                        format!(
+                            "CAN interface {}: reading the turntable's frame {} of {written}",
+                            self.iface,
+                            self.frames_read + 1
+                        )
+                    });
                 }
+            }
+        }
+        self.t = t1;
+        Ok(())
+    }
+
+    /// Read frames for `dur` s of the mechanism's time; returns the ack of `want_seq` as soon as
+    /// it arrives when one is wanted.
+    fn pump(&mut self, dur: f64, want_seq: Option<u8>) -> Result<Option<TtAck>> {
+        let end = self.now() + dur;
+        loop {
+            while let Some(f) = self.pending.pop_front() {
+                if let Some(a) = self.take(&f, want_seq) {
+                    return Ok(Some(a));
+                }
+            }
+            if self.heartbeat && self.now() - self.last_sent > 0.2 && want_seq.is_none() {
+                self.send_raw(TtCommand::Heartbeat as u8, 0.0)?;
+            }
+            let now = self.now();
+            if now >= end - 1e-9 {
+                return Ok(None);
+            }
+            if let SuiteTime::Wall { speed } = self.time {
+                let left = Duration::from_secs_f64((end - now) / speed);
+                match self
+                    .sock
+                    .read_frame_timeout(left.min(Duration::from_millis(20)))
+                {
+                    Ok(f) => self.pending.push_back(f),
+                    Err(e)
+                        if matches!(
+                            e.kind(),
+                            std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock
+                        ) => {}
+                    Err(e) => {
+                        return Err(e)
+                            .with_context(|| format!("CAN interface {}: reading", self.iface));
+                    }
+                }
+            } else {
+                self.step_to((now + STEP_S).min(end))?;
             }
         }
     }
@@ -211,29 +313,28 @@ impl Client {
     }
 
     fn cmd_raw(&mut self, code: u8, arg: f64) -> Result<Answer> {
-        let t0 = Instant::now();
+        let t0 = self.now();
         let seq = self.send_raw(code, arg)?;
-        let ack = self.pump(self.wall(0.5), Some(seq))?;
+        let ack = self.pump(0.5, Some(seq))?;
         if ack.is_none() {
             self.unanswered.push((seq, code));
         }
         Ok(Answer {
             ack,
-            latency_s: t0.elapsed().as_secs_f64() * self.speed,
+            latency_s: self.now() - t0,
         })
     }
 
     /// Wait until the state is `want` (true) or `within` mechanism seconds pass (false).
     fn wait_state(&mut self, want: TtState, within: f64) -> Result<(bool, f64)> {
-        let t0 = Instant::now();
-        let end = t0 + self.wall(within);
-        while Instant::now() < end {
-            self.pump(Duration::from_millis(10), None)?;
+        let t0 = self.now();
+        while self.now() - t0 < within {
+            self.pump(0.01, None)?;
             if self.last.is_some_and(|s| s.state == want) {
-                return Ok((true, t0.elapsed().as_secs_f64() * self.speed));
+                return Ok((true, self.now() - t0));
             }
             if self.last.is_some_and(|s| s.state == TtState::Fault) && want != TtState::Fault {
-                return Ok((false, t0.elapsed().as_secs_f64() * self.speed));
+                return Ok((false, self.now() - t0));
             }
         }
         Ok((false, within))
@@ -242,7 +343,7 @@ impl Client {
     /// Mean encoder angle over `secs` of status frames (unwrapped around the first).
     fn mean_angle(&mut self, secs: f64) -> Result<Option<f64>> {
         let from = self.statuses.len();
-        self.pump(self.wall(secs), None)?;
+        self.pump(secs, None)?;
         let s = &self.statuses[from..];
         if s.is_empty() {
             return Ok(None);
@@ -301,8 +402,8 @@ fn expect(out: &mut Vec<VCheck>, name: &str, a: &Answer, want: TtResult) {
 
 /// Run the suite against the mechanism on `iface` (axis `axis`). `speed` is the emulator's speed
 /// factor (1 for real hardware).
-pub fn run_suite(iface: &str, axis: u8, speed: f64, lim: &Limits) -> Result<Validation> {
-    let mut c = Client::open(iface, axis, speed)?;
+pub fn run_suite(iface: &str, axis: u8, time: SuiteTime, lim: &Limits) -> Result<Validation> {
+    let mut c = Client::open(iface, axis, time)?;
     let mut out = Vec::new();
     first_status(&mut c, iface, axis)?;
     command_checks(&mut c, &mut out, lim)?;
@@ -340,17 +441,19 @@ pub fn run_suite(iface: &str, axis: u8, speed: f64, lim: &Limits) -> Result<Vali
 
 /// Wait for the mechanism's first status: it must be talking.
 fn first_status(c: &mut Client, iface: &str, axis: u8) -> Result<()> {
-    // the mechanism must be talking: its first status within 0.3 s of its time, or 2 s of
-    // wall time (an emulator in a software-emulated guest under load may start late)
-    let wait = c.wall(0.3).max(Duration::from_secs(2));
-    let t0 = Instant::now();
-    while c.last.is_none() && t0.elapsed() < wait {
-        c.pump(Duration::from_millis(20), None)?;
+    // the mechanism must be talking: its first status within 0.3 s of its time (on the wall
+    // clock, 2 s: a mechanism we do not run may start late)
+    let wait = match c.time {
+        SuiteTime::Wall { speed } => (0.3f64).max(2.0 * speed),
+        SuiteTime::Lockstep { .. } => 0.3,
+    };
+    let t0 = c.now();
+    while c.last.is_none() && c.now() - t0 < wait {
+        c.pump(0.02, None)?;
     }
     if c.last.is_none() {
         bail!(
-            "no TT_STATUS frames from axis {axis} on {iface} within {:.1} s: is the mechanism powered and on the bus?",
-            wait.as_secs_f64()
+            "no TT_STATUS frames from axis {axis} on {iface} within {wait:.1} s: is the mechanism powered and on the bus?"
         );
     }
     Ok(())
@@ -543,23 +646,20 @@ fn zero_and_rate_checks(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> 
     // rate mode
     let rate = 10.0;
     let a = c.cmd(TtCommand::Rate, rate)?;
-    c.pump(c.wall(1.0), None)?; // ramp
+    c.pump(1.0, None)?; // ramp
     let from = c.statuses.len();
-    c.pump(c.wall(3.0), None)?;
+    c.pump(3.0, None)?;
     let s = &c.statuses[from..];
     let (mut acc, mut rates) = (0.0, Vec::new());
     for w in s.windows(2) {
         let d = wrap180(w[1].1.angle_deg - w[0].1.angle_deg);
         acc += d;
-        let dt = (w[1].0 - w[0].0).as_secs_f64() * c.speed;
+        let dt = w[1].0 - w[0].0;
         if dt > 0.0 {
             rates.push(d / dt);
         }
     }
-    let span = s
-        .last()
-        .zip(s.first())
-        .map_or(0.0, |(l, f)| (l.0 - f.0).as_secs_f64() * c.speed);
+    let span = s.last().zip(s.first()).map_or(0.0, |(l, f)| l.0 - f.0);
     // mean rate from the reported rate (time stamps of frames are wall arrival times)
     let reported: Vec<f64> = s.iter().map(|x| x.1.rate_dps).collect();
     let mean = reported.iter().sum::<f64>() / reported.len().max(1) as f64;
@@ -594,7 +694,7 @@ fn zero_and_rate_checks(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> 
 fn stop_checks(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> Result<()> {
     // emergency stop
     let a = c.cmd(TtCommand::EStop, 0.0)?;
-    c.pump(c.wall(0.1), None)?;
+    c.pump(0.1, None)?;
     let st = c.last;
     check(
         out,
@@ -619,10 +719,10 @@ fn stop_checks(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> Result<()
     c.cmd(TtCommand::Enable, 0.0)?;
     c.cmd(TtCommand::Rate, 5.0)?;
     c.heartbeat = false;
-    let t0 = Instant::now();
+    let t0 = c.now();
     let (stopped, _) = c.wait_state(TtState::Fault, lim.heartbeat_stop_s * 2.0)?;
-    let t = t0.elapsed().as_secs_f64() * c.speed;
-    c.pump(c.wall(1.0), None)?;
+    let t = c.now() - t0;
+    c.pump(1.0, None)?;
     let st = c.last;
     c.heartbeat = true;
     check(
@@ -699,31 +799,24 @@ pub fn table(v: &Validation) -> String {
 
 /// The validation as Markdown (`validation.md`, and the HTML report made from it).
 pub fn markdown(v: &Validation) -> String {
-    use std::fmt::Write;
-    let cell = |t: &str| t.replace('|', "\\|");
-    let mut s = format!(
-        "# Turntable validation\n\nAxis {} on `{}`: {} commands, {} acknowledgements, {} status frames. **Result: {}**\n\n| check | result | measured | limit | reason |\n|---|---|---|---|---|\n",
+    let mut t = crate::table::Table::left(&["check", "result", "measured", "limit", "reason"]);
+    for c in &v.checks {
+        t.row([
+            c.name.as_str(),
+            if c.pass { "PASS" } else { "FAIL" },
+            &c.measured,
+            &c.limit,
+            if c.pass { "" } else { &c.reason },
+        ]);
+    }
+    format!(
+        "# Turntable validation\n\nAxis {} on `{}`: {} commands, {} acknowledgements, {} status frames. **Result: {}**\n\n{}",
         v.axis,
         v.interface,
         v.commands,
         v.acks,
         v.status_frames,
-        if v.pass { "PASS" } else { "FAIL" }
-    );
-    for c in &v.checks {
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} | {} | {} |",
-            cell(&c.name),
-            if c.pass { "PASS" } else { "FAIL" },
-            cell(&c.measured),
-            cell(&c.limit),
-            if c.pass {
-                String::new()
-            } else {
-                cell(&c.reason)
-            }
-        );
-    }
-    s
+        if v.pass { "PASS" } else { "FAIL" },
+        t.finish()
+    )
 }
