@@ -40,11 +40,23 @@ pub trait BenchProcedure: Sync {
     fn checks(&self, s: &Scenario, o: &Outcomes, nav: &Summary, out: &mut Vec<Check>);
     /// Its part of the run's result card, lines without indent (none when it did not run).
     fn card(&self, s: &Scenario, o: &Outcomes) -> Option<String>;
+    /// Its heading in the reports.
+    fn title(&self) -> &'static str;
     /// Its section of the run's Markdown report, ending in a blank line (none when it did not
-    /// run).
-    fn markdown(&self, o: &Outcomes) -> Option<String>;
-    /// Its section of the run's HTML report (none when it did not run).
-    fn html(&self, s: &Scenario, o: &Outcomes, nav: &Summary) -> Option<Section>;
+    /// run): its card, unless it says more.
+    fn markdown(&self, s: &Scenario, o: &Outcomes) -> Option<String> {
+        let c = self.card(s, o)?;
+        Some(format!("## {}\n\n```\n{c}```\n\n", self.title()))
+    }
+    /// Its section of the run's HTML report (none when it did not run): its card, unless it
+    /// says more.
+    fn html(&self, s: &Scenario, o: &Outcomes, _nav: &Summary) -> Option<Section> {
+        Some(Section {
+            title: self.title(),
+            text: Some(self.card(s, o)?),
+            ..Default::default()
+        })
+    }
 }
 
 /// A procedure's section of a run's HTML report.

@@ -239,7 +239,7 @@ fn html(d: &DrillOutcome, nav: &nav::summary::Summary) -> super::Section {
     let f = |x: Option<f64>| x.map_or("--".to_string(), |v| format!("{v:.4}"));
     let nf = serde_json::to_value(&nav.north_finding).unwrap_or_default();
     super::Section {
-        title: "North-finding drill",
+        title: super::BenchProcedure::title(&NorthFinding),
         figures: vec![
             ("found heading, deg", f(d.heading_deg)),
             ("truth, deg", format!("{:.4}", d.truth_deg)),
@@ -302,7 +302,10 @@ impl super::BenchProcedure for NorthFinding {
     fn card(&self, s: &Scenario, o: &super::Outcomes) -> Option<String> {
         o.north_finding.as_ref().map(|d| card(s, d))
     }
-    fn markdown(&self, o: &super::Outcomes) -> Option<String> {
+    fn title(&self) -> &'static str {
+        "North-finding drill"
+    }
+    fn markdown(&self, _s: &Scenario, o: &super::Outcomes) -> Option<String> {
         o.north_finding.as_ref().map(markdown)
     }
     fn html(

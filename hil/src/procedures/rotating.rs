@@ -520,22 +520,8 @@ impl super::BenchProcedure for RotatingImu {
     fn card(&self, _s: &Scenario, o: &super::Outcomes) -> Option<String> {
         o.rotating_imu.as_ref().map(card)
     }
-    fn markdown(&self, o: &super::Outcomes) -> Option<String> {
-        o.rotating_imu
-            .as_ref()
-            .map(|c| format!("## Self-calibration\n\n```\n{}```\n\n", card(c)))
-    }
-    fn html(
-        &self,
-        _s: &Scenario,
-        o: &super::Outcomes,
-        _nav: &nav::summary::Summary,
-    ) -> Option<super::Section> {
-        o.rotating_imu.as_ref().map(|c| super::Section {
-            title: "Self-calibration",
-            text: Some(card(c)),
-            ..Default::default()
-        })
+    fn title(&self) -> &'static str {
+        "Self-calibration"
     }
 }
 

@@ -420,25 +420,8 @@ impl super::BenchProcedure for Tetrahedral {
     fn card(&self, _s: &Scenario, o: &super::Outcomes) -> Option<String> {
         o.tetrahedral.as_ref().map(tetra_card)
     }
-    fn markdown(&self, o: &super::Outcomes) -> Option<String> {
-        o.tetrahedral.as_ref().map(|c| {
-            format!(
-                "## Redundant unit's calibration\n\n```\n{}```\n\n",
-                tetra_card(c)
-            )
-        })
-    }
-    fn html(
-        &self,
-        _s: &Scenario,
-        o: &super::Outcomes,
-        _nav: &nav::summary::Summary,
-    ) -> Option<super::Section> {
-        o.tetrahedral.as_ref().map(|c| super::Section {
-            title: "Redundant unit's calibration",
-            text: Some(tetra_card(c)),
-            ..Default::default()
-        })
+    fn title(&self) -> &'static str {
+        "Redundant unit's calibration"
     }
 }
 

@@ -530,7 +530,7 @@ pub fn markdown(r: &RunReport) -> String {
         if r.pass { "PASS" } else { "FAIL" }
     );
     for p in crate::procedures::ALL {
-        if let Some(m) = p.markdown(&r.procedures) {
+        if let Some(m) = p.markdown(&r.scenario, &r.procedures) {
             s += &m;
         }
     }
