@@ -10,6 +10,7 @@ use vcan_setup::{CanSupport, GUEST_ENV, VmOptions};
 
 mod cmd;
 use cmd::bench::bench;
+use cmd::busload::busload;
 use cmd::calibrate::{calibrate_rotating_imu, calibrate_tetrahedral};
 use cmd::demo::demo;
 use cmd::drill::drill_north_finding;
@@ -112,11 +113,15 @@ enum Cmd {
         #[arg(long, value_name = "FILE", num_args = 1..)]
         rerun: Vec<PathBuf>,
     },
-    /// Print the bus-load table of the wire contract.
+    /// Print the bus-load table of the wire contract at its nominal rates, or of a scenario's
+    /// traffic (its IMU rate, turntable, redundant unit) and whether it fits its bit rate.
     Busload {
-        /// Bit rate, bit/s.
-        #[arg(long, value_parser = hil::values::bitrate, default_value_t = 1_000_000.0)]
-        bitrate: f64,
+        /// Bit rate, bit/s (default: 1 Mbit/s, or the scenario's `bus.bitrate_bps`).
+        #[arg(long, value_parser = hil::values::bitrate)]
+        bitrate: Option<f64>,
+        /// A scenario file: its traffic rather than the contract's nominal rates.
+        #[arg(long)]
+        scenario: Option<PathBuf>,
     },
     /// Print the DBC file of the wire contract.
     Dbc,
@@ -619,10 +624,7 @@ fn real_main(cli: Cli) -> Result<i32> {
         Cmd::Calibrate(Calibrate::RotatingImu(a)) => calibrate_rotating_imu(a),
         Cmd::Calibrate(Calibrate::Tetrahedral(a)) => calibrate_tetrahedral(a),
         Cmd::Validate(Validate::Turntable(a)) => validate_turntable(a),
-        Cmd::Busload { bitrate } => {
-            print!("{}", wire::busload::report(bitrate));
-            Ok(0)
-        }
+        Cmd::Busload { bitrate, scenario } => busload(bitrate, scenario),
         Cmd::Replay {
             recording,
             config,

@@ -110,6 +110,9 @@ pub const RATE: Kind = Kind::positive("a rate", "deg/s", 1000.0);
 pub const NOISE: Kind = Kind::within("a noise", "deg/s", 0.0, 1.0);
 /// A CAN bit rate, bit/s (CAN FD's data phase at most).
 pub const BITRATE: Kind = Kind::within("a bit rate", "bit/s", 10_000.0, 8_000_000.0);
+/// A classic CAN bus's bit rate, bit/s (1 Mbit/s at most).
+pub const CLASSIC_BITRATE: Kind =
+    Kind::within("a classic CAN bit rate", "bit/s", 10_000.0, 1_000_000.0);
 /// A size in metres (a receiver's sigma, a tolerance on position), m.
 pub const SIGMA: Kind = Kind::positive("a sigma", "m", 10_000.0);
 /// A frequency step, Hz.

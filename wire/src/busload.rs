@@ -27,20 +27,34 @@ pub fn frame_bits_worst(dlc: u8) -> u32 {
 pub struct MessageLoad {
     /// The message.
     pub spec: &'static MessageSpec,
+    /// Frames per second.
+    pub frames_per_second: f64,
     /// Bits per second without stuffing.
     pub nominal_bps: f64,
     /// Bits per second with worst-case stuffing.
     pub worst_bps: f64,
 }
 
-/// Per-message load and the totals (nominal, worst case) as fractions of `bitrate`.
+/// Per-message load of the contract at its nominal rates, and the totals (nominal, worst case)
+/// as fractions of `bitrate`.
 pub fn table(bitrate: f64) -> (Vec<MessageLoad>, f64, f64) {
-    let rows: Vec<MessageLoad> = ALL_MESSAGES
+    let rates: Vec<_> = ALL_MESSAGES
         .iter()
-        .map(|spec| MessageLoad {
+        .map(|spec| (*spec, spec.frames_per_second))
+        .collect();
+    load(&rates, bitrate)
+}
+
+/// Per-message load of the messages at the rates given (frames per second), and the totals
+/// (nominal, worst case) as fractions of `bitrate`.
+pub fn load(rates: &[(&'static MessageSpec, f64)], bitrate: f64) -> (Vec<MessageLoad>, f64, f64) {
+    let rows: Vec<MessageLoad> = rates
+        .iter()
+        .map(|&(spec, fps)| MessageLoad {
             spec,
-            nominal_bps: spec.frames_per_second * f64::from(frame_bits_nominal(spec.dlc)),
-            worst_bps: spec.frames_per_second * f64::from(frame_bits_worst(spec.dlc)),
+            frames_per_second: fps,
+            nominal_bps: fps * f64::from(frame_bits_nominal(spec.dlc)),
+            worst_bps: fps * f64::from(frame_bits_worst(spec.dlc)),
         })
         .collect();
     let nominal = rows.iter().map(|r| r.nominal_bps).sum::<f64>() / bitrate;
@@ -48,24 +62,29 @@ pub fn table(bitrate: f64) -> (Vec<MessageLoad>, f64, f64) {
     (rows, nominal, worst)
 }
 
-/// A printable bus-load report.
+/// A printable bus-load report of the contract at its nominal rates.
 pub fn report(bitrate: f64) -> String {
+    report_of(&table(bitrate), bitrate)
+}
+
+/// A printable bus-load report of a [`load`] at `bitrate`.
+pub fn report_of(load: &(Vec<MessageLoad>, f64, f64), bitrate: f64) -> String {
     use std::fmt::Write;
-    let (rows, nominal, worst) = table(bitrate);
+    let (rows, nominal, worst) = load;
     let mut s = String::new();
     let _ = writeln!(
         s,
         "{:<10} {:>6} {:>4} {:>9} {:>10} {:>10}",
         "message", "id", "dlc", "frames/s", "nominal %", "worst %"
     );
-    for r in &rows {
+    for r in rows {
         let _ = writeln!(
             s,
             "{:<10} 0x{:03X} {:>4} {:>9.0} {:>10.2} {:>10.2}",
             r.spec.name,
             r.spec.id,
             r.spec.dlc,
-            r.spec.frames_per_second,
+            r.frames_per_second,
             100.0 * r.nominal_bps / bitrate,
             100.0 * r.worst_bps / bitrate
         );

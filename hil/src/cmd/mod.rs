@@ -2,6 +2,7 @@
 //! `main.rs`; the work is in the `hil` library).
 
 pub(crate) mod bench;
+pub(crate) mod busload;
 pub(crate) mod calibrate;
 pub(crate) mod demo;
 pub(crate) mod drill;

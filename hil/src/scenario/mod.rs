@@ -1,5 +1,6 @@
 //! Scenario files (TOML): what the emulated vehicle does and how its sensors err.
 
+pub mod busload;
 pub mod fogunit;
 pub mod navconfig;
 
@@ -107,6 +108,10 @@ pub struct BusSettings {
     /// it for its bookkeeping and has a floor of about 2 KiB).
     #[serde(default = "default_rcvbuf")]
     pub nav_rcvbuf_bytes: usize,
+    /// The bus's bit rate, bit/s (classic CAN: 1 Mbit/s at most). A scenario whose traffic
+    /// does not fit it with worst-case bit stuffing is refused, with the figures.
+    #[serde(default = "default_bitrate")]
+    pub bitrate_bps: f64,
 }
 
 impl Default for BusSettings {
@@ -114,8 +119,13 @@ impl Default for BusSettings {
         Self {
             lockstep: true,
             nav_rcvbuf_bytes: default_rcvbuf(),
+            bitrate_bps: default_bitrate(),
         }
     }
+}
+
+fn default_bitrate() -> f64 {
+    wire::busload::NOMINAL_BITRATE
 }
 
 fn yes() -> bool {
@@ -302,6 +312,8 @@ impl Scenario {
                 self.processing.fir.fs_hz
             );
         }
+        // last: the devices' own checks first say what is wrong with a rate
+        busload::fits(self)?;
         Ok(())
     }
 
@@ -314,6 +326,7 @@ impl Scenario {
             TOLERANCE, VEHICLE_ACCEL, VEHICLE_SPEED,
         };
         DURATION.field("duration_s", self.duration_s)?;
+        crate::values::CLASSIC_BITRATE.field("bus.bitrate_bps", self.bus.bitrate_bps)?;
         TOLERANCE.field("heading_tolerance_deg", self.heading_tolerance_deg)?;
         SIGMA.field("position_tolerance_m", self.position_tolerance_m)?;
         let site = &self.site;
