@@ -63,8 +63,10 @@ pub fn fits(s: &Scenario) -> Result<()> {
     if worst <= 1.0 {
         return Ok(());
     }
+    // the first of equals: the message the contract lists first
     let top = rows
         .iter()
+        .rev()
         .max_by(|a, b| a.worst_bps.total_cmp(&b.worst_bps))
         .map_or(String::new(), |r| {
             format!(
