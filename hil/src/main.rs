@@ -80,11 +80,12 @@ enum Cmd {
     },
     /// Export a nav recording's CAN frames (received and sent) as a `candump -l` log, which
     /// can-utils' `canplayer` plays back, `cantools` decodes with `hil dbc`, and `hil replay`
-    /// replays.
+    /// replays; or, by the output's extension, as Vector ASC (`.asc`) or BLF (`.blf`), written by
+    /// python-can (`pip install python-can`; cantools brings it).
     Candump {
         /// A run folder (with nav.mcap) or an MCAP recording of nav.
         recording: PathBuf,
-        /// Output file (default: stdout).
+        /// Output file (default: stdout, candump); `.asc` or `.blf`: Vector's formats.
         #[arg(long)]
         out: Option<PathBuf>,
         /// Interface name written in the log (canplayer maps it: `vcan0=can0`).

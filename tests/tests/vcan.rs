@@ -408,6 +408,8 @@ fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
     // in process (no bus, the Monte Carlo's path) the very same result: checked on the host
     // from the report kept here (tests/tests/in_process.rs), where it takes a second, not ten
     keep_file(x3.path(), "drill-x3", "report.json");
+    // its recording, exported as Vector ASC and BLF on the host (tests/tests/can_logs.rs)
+    keep_file(x3.path(), "drill-x3", "nav.mcap");
     // the x3 drill's recording back onto the bus at x25, the turntable's answers from it: the
     // nav binary sends every frame it sent, turntable commands included, and finds the same
     // heading

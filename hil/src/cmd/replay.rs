@@ -124,12 +124,34 @@ fn is_candump(p: &Path) -> bool {
     std::fs::File::open(p).is_ok_and(|mut f| f.read_exact(&mut head).is_ok() && head[0] == b'(')
 }
 
+/// python-can's writers: the candump log `argv[1]` rewritten as `argv[2]` (ASC or BLF by its
+/// extension), every frame with its time stamp; prints the frames written.
+const PYTHON_CAN_CONVERT: &str = r#"
+import sys
+import can
+n = 0
+with can.Logger(sys.argv[2]) as out:
+    for m in can.LogReader(sys.argv[1]):
+        out.on_message_received(m)
+        n += 1
+print(n)
+"#;
+
 pub(crate) fn candump(recording: &Path, out: Option<&Path>, iface: &str) -> Result<i32> {
     let mcap = if recording.is_dir() {
         recording.join("nav.mcap")
     } else {
         recording.to_path_buf()
     };
+    let vector = out.and_then(|p| {
+        p.extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .filter(|e| e == "asc" || e == "blf")
+    });
+    if let (Some(format), Some(out)) = (vector, out) {
+        return vector_log(&mcap, out, iface, &format);
+    }
     let n = match out {
         Some(p) => {
             let f =
@@ -144,5 +166,51 @@ pub(crate) fn candump(recording: &Path, out: Option<&Path>, iface: &str) -> Resu
         }
     };
     eprintln!("hil candump: {n} frames from {}", mcap.display());
+    Ok(0)
+}
+
+/// The recording `mcap` as a Vector log (`format`: asc or blf) at `out`, through python-can's
+/// writers (a candump log in between).
+fn vector_log(mcap: &Path, out: &Path, iface: &str, format: &str) -> Result<i32> {
+    // the candump log in between, beside the output, removed after
+    let tmp = out.with_extension(format!("{format}.candump-tmp.log"));
+    let n = {
+        let f =
+            std::fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+        let mut w = std::io::BufWriter::new(f);
+        let n = hil::engine::recording::export_candump(mcap, iface, &mut w)?;
+        std::io::Write::flush(&mut w).with_context(|| format!("writing {}", tmp.display()))?;
+        n
+    };
+    let o = std::process::Command::new("python3")
+        .arg("-c")
+        .arg(PYTHON_CAN_CONVERT)
+        .arg(&tmp)
+        .arg(out)
+        .output();
+    let _ = std::fs::remove_file(&tmp);
+    let o = o.context("hil candump: running python3 (the ASC and BLF writers are python-can's)")?;
+    if !o.status.success() {
+        bail!(
+            "hil candump: python-can could not write {} ({format}): {}; it needs python3 with python-can (pip install python-can)",
+            out.display(),
+            String::from_utf8_lossy(&o.stderr).trim()
+        );
+    }
+    let written = String::from_utf8_lossy(&o.stdout)
+        .trim()
+        .parse::<u64>()
+        .unwrap_or(0);
+    if written != n {
+        bail!(
+            "hil candump: python-can wrote {written} of the {n} frames into {}",
+            out.display()
+        );
+    }
+    eprintln!(
+        "hil candump: {n} frames from {} as {} ({format}, python-can)",
+        mcap.display(),
+        out.display()
+    );
     Ok(0)
 }

@@ -1,0 +1,114 @@
+//! A run's bus in the logs the CAN world opens: `hil candump` writes Vector ASC and BLF through
+//! python-can's writers; python-can reads each back and finds every frame of the candump log,
+//! in order, with its identifier, length, data and time stamp (to the microsecond), and cantools
+//! decodes every frame of the ASC with our DBC. The recording is the drill the end-to-end tests
+//! ran at x3 (`target/e2e-reports/drill-x3/nav.mcap`), so this runs after them (`./run-tests`).
+
+use e2e::{bin, reports_dir};
+use serde_json::Value;
+use std::process::Command;
+
+const READ_BACK: &str = r#"
+import json, sys
+import can, cantools
+d = sys.argv[1]
+ref = list(can.LogReader(d + "/bus.log"))
+out = {"frames": len(ref)}
+for f in ("asc", "blf"):
+    got = list(can.LogReader(d + "/bus." + f))
+    r0, g0 = ref[0].timestamp, got[0].timestamp
+    out[f] = {
+        "frames": len(got),
+        "mismatched": sum(
+            1
+            for a, b in zip(ref, got)
+            if (a.arbitration_id, a.dlc, bytes(a.data)) != (b.arbitration_id, b.dlc, bytes(b.data))
+        ),
+        "worst_time_error_s": max(
+            abs((a.timestamp - r0) - (b.timestamp - g0)) for a, b in zip(ref, got)
+        ),
+        "error_frames": sum(1 for m in got if m.is_error_frame),
+    }
+db = cantools.database.load_file(d + "/bench.dbc")
+ids = {m.frame_id for m in db.messages}
+decoded, failed, foreign = 0, [], 0
+for m in can.LogReader(d + "/bus.asc"):
+    if m.arbitration_id not in ids:
+        foreign += 1
+        continue
+    try:
+        db.decode_message(m.arbitration_id, bytes(m.data))
+        decoded += 1
+    except Exception as e:
+        failed.append("0x%03X: %s" % (m.arbitration_id, e))
+out["cantools"] = {"decoded": decoded, "failed": failed[:5], "failures": len(failed), "foreign": foreign}
+print(json.dumps(out))
+"#;
+
+#[test]
+#[ignore = "needs the e2e tests' recordings: run ./run-tests"]
+fn a_runs_bus_reads_back_from_vector_asc_and_blf() {
+    let mcap = reports_dir().join("drill-x3").join("nav.mcap");
+    assert!(mcap.is_file(), "{}: run ./run-tests", mcap.display());
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["bus.log", "bus.asc", "bus.blf"] {
+        let o = Command::new(bin("hil"))
+            .arg("candump")
+            .arg(&mcap)
+            .arg("--out")
+            .arg(dir.path().join(name))
+            .output()
+            .expect("hil runs");
+        assert!(
+            o.status.success(),
+            "hil candump --out {name}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    let dbc = Command::new(bin("hil"))
+        .arg("dbc")
+        .output()
+        .expect("hil runs");
+    std::fs::write(dir.path().join("bench.dbc"), &dbc.stdout).unwrap();
+    let o = Command::new("python3")
+        .arg("-c")
+        .arg(READ_BACK)
+        .arg(dir.path())
+        .output()
+        .expect("python3 runs: ./run-tests installs cantools, which brings python-can");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: Value = serde_json::from_slice(&o.stdout).expect("the read-back prints JSON");
+    println!("{r}");
+    let frames = r["frames"].as_u64().unwrap();
+    assert!(frames > 100_000, "the drill's bus: {r}");
+    for f in ["asc", "blf"] {
+        assert_eq!(
+            r[f]["frames"].as_u64(),
+            Some(frames),
+            "{f}: every frame: {r}"
+        );
+        assert_eq!(
+            r[f]["mismatched"].as_u64(),
+            Some(0),
+            "{f}: ids and data: {r}"
+        );
+        assert!(
+            r[f]["worst_time_error_s"].as_f64().unwrap() < 1e-6,
+            "{f}: time stamps to the microsecond: {r}"
+        );
+        // the bus model has no error frames yet (issue 29): none may appear from nowhere
+        assert_eq!(r[f]["error_frames"].as_u64(), Some(0), "{f}: {r}");
+    }
+    let c = &r["cantools"];
+    assert_eq!(c["failures"].as_u64(), Some(0), "cantools: {r}");
+    assert_eq!(
+        c["foreign"].as_u64(),
+        Some(0),
+        "only the contract's frames: {r}"
+    );
+    assert_eq!(
+        c["decoded"].as_u64(),
+        Some(frames),
+        "cantools decodes them all: {r}"
+    );
+}
