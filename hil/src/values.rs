@@ -1,6 +1,6 @@
 //! The command line's numbers and the scenario file's fields, checked where they are parsed:
 //! one [`Kind`] per kind of quantity, each with its range, for flags and fields alike. clap names the flag and the value in its error
-//! ("invalid value 'nan' for '--heading <HEADING>'"); the parser says what the range is. A NaN, an
+//! (`invalid value 'nan' for '--heading <HEADING>'`); the parser says what the range is. A NaN, an
 //! infinity or a dwell of 31 years never reaches a run.
 
 /// A kind of quantity: what it is called, its unit and its range. The command line's value

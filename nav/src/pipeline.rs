@@ -6,14 +6,14 @@
 //! One CAN frame, followed from input to output ([`Pipeline::on_frame`]):
 //! 1. **decode** it with the wire contract; bad frames are counted by kind ([`FrameCounters`]);
 //! 2. **turntable** status and acknowledgements go to the procedure commanding the mechanism
-//!    (north-finding or a calibration, [`crate::mission`]);
+//!    (north-finding or a calibration, `crate::mission`);
 //! 3. the IMU **front end** turns gyro/accel frames into samples on the one IMU clock (the
 //!    extended sample counter);
 //! 4. **processing** (dither filter, coning and sculling) turns samples into updates; a PPS
 //!    edge latched in a sample becomes an IMU time for the navigator;
 //! 5. each update goes to the **procedure**, and once it is finished (or when there is none) to
 //!    the **navigator**, as the [mission's phase](Pipeline::phase) says: the
-//!    [hand-over](Pipeline::hand_over) gives it north-finding's heading;
+//!    hand-over (`Pipeline::hand_over`) gives it north-finding's heading;
 //! 6. the procedure's **commands** for the indexing mechanism go out;
 //! 7. every `rate / 50` samples the **solution** (mode and health from [`Pipeline::mode`] and
 //!    [`Pipeline::health`]) goes out as NAV_* frames.

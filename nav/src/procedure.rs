@@ -1,11 +1,11 @@
 //! The procedures that command the mechanism at start (north-finding, self-calibration, the
 //! redundant unit's calibration): what the pipeline needs of one ([`Procedure`]), the core every
-//! one of them keeps alike ([`Core`]: its phase and since when, its clock, its link to the
-//! mechanism, why it gave up), the one loop that advances any of them on the link ([`poll`]),
+//! one of them keeps alike (`Core`: its phase and since when, its clock, its link to the
+//! mechanism, why it gave up), the one loop that advances any of them on the link (`poll`),
 //! and the pipeline's reporting state for one.
 //!
-//! A new procedure is one file: its settings, its phases (with [`Phases`]), its steps
-//! ([`OnMechanism`]), and `procedure!` for the rest.
+//! A new procedure is one file: its settings, its phases (with `Phases`), its steps
+//! (`OnMechanism`), and `procedure!` for the rest.
 
 use crate::ttlink::{LinkPoll, TtLink};
 use wire::{TtAck, TtCmd, TtStatus};

@@ -90,9 +90,9 @@ pub struct VmPrereqs {
     pub kernel_version: String,
     /// Busybox binary.
     pub busybox: PathBuf,
-    /// The can-utils programs ([`CAN_UTILS`]).
+    /// The can-utils programs (`CAN_UTILS`).
     pub can_utils: Vec<PathBuf>,
-    /// The [`OPTIONAL_TOOLS`] the host has.
+    /// The `OPTIONAL_TOOLS` the host has.
     pub optional: Vec<PathBuf>,
 }
 

@@ -161,7 +161,7 @@ impl GpsPty {
     /// Wait until the reader has taken everything written, at most `timeout`; whether it did.
     /// A receiver's fix must reach nav before the IMU stream runs on past the time nav applies
     /// it: the bus scheduler and the player hold the stream here, as lockstep holds it for the
-    /// frames. The answer comes from the kernel, not from a guess about time ([`unread_in`]).
+    /// frames. The answer comes from the kernel, not from a guess about time (`unread_in`).
     pub fn wait_taken(&self, timeout: Duration) -> bool {
         self.wait_taken_until(timeout, &AtomicBool::new(false))
     }

@@ -1,6 +1,6 @@
 //! The scenario's devices at work: stepped in process driving nav's pipeline ([`inproc`]) or put
 //! behind the bus scheduler ([`devices`]); the in-process reference runs a bench run is compared
-//! with ([`reference`]) and the navigation runs scored against truth ([`navigate`]); nav's
+//! with ([`mod@reference`]) and the navigation runs scored against truth ([`navigate`]); nav's
 //! recording read back and replayed through the pipeline ([`recording`]); the faults' schedule
 //! ([`faultlog`]) and the truth recording ([`truthrec`]).
 

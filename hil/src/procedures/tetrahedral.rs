@@ -208,7 +208,7 @@ pub fn tetra_outcome(
     }
 }
 
-/// Paper 001's procedure in process, as [`run_in_process`].
+/// Paper 001's procedure in process, as [`super::rotating::run_in_process`].
 pub fn tetra_in_process(
     s: &Scenario,
     progress: impl FnMut(&serde_json::Value),

@@ -278,9 +278,9 @@ pub(crate) fn stop_nav(mut nav: NavProcess) -> Result<(Option<i32>, Vec<String>)
 }
 
 /// Run a scenario here (the kernel must have CAN). Returns the report; files go to `opts.out`.
-/// The stages: [`prepare`] the devices' pty and nav's config, start nav and the devices,
-/// [`supervise`] them to the stream's end, stop them, [`read_summary`], [`score`] nav against
-/// the truth and the reference runs, [`write_report`].
+/// The stages: `prepare` the devices' pty and nav's config, start nav and the devices,
+/// `supervise` them to the stream's end, stop them, `read_summary`, `score` nav against
+/// the truth and the reference runs, `write_report`.
 pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunReport> {
     let mut setup = prepare(s, opts)?;
     info!(interface = %opts.iface, account = ?opts.nav_account, "starting nav");

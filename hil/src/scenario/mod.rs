@@ -78,7 +78,7 @@ pub struct Scenario {
     /// Faults injected on the bus.
     #[serde(default)]
     pub faults: BusFaults,
-    /// The GPS receiver, writing NMEA on a pty nav reads (needs a [drive]: the antenna rides on
+    /// The GPS receiver, writing NMEA on a pty nav reads (needs a `[drive]`: the antenna rides on
     /// it).
     #[serde(default)]
     pub gps: Option<ReceiverParams>,

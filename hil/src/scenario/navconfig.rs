@@ -125,7 +125,7 @@ pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) ->
 /// nav's IMU watchdog on the bench (wall time, ms). It decides liveness, never a result: where
 /// the scenario stops the IMU, and at the stream's end, the scheduler holds the stream until
 /// nav's watchdog has reported the stop ([`emulators::step::Step::stop_begins`],
-/// [`Stepper::end_awaits_watchdog`]), so it fires once per stop after the same sample. Anywhere
+/// `Stepper::end_awaits_watchdog`), so it fires once per stop after the same sample. Anywhere
 /// else nothing holds the stream anywhere near this long, on an idle or a loaded host (the
 /// longest gap between two batches seen under CPU hogs on host and guest: docs/pace.md). Each
 /// run's end waits this long once.

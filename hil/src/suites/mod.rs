@@ -1,5 +1,5 @@
 //! Suites of runs with a verdict per row: the fault matrix ([`faults`]), the turntable's
-//! validation ([`validate`]), fuzzing nav's inputs ([`fuzz`]) and the benchmarks ([`bench`]).
+//! validation ([`validate`]), fuzzing nav's inputs ([`fuzz`]) and the benchmarks ([`mod@bench`]).
 
 pub mod bench;
 pub mod faults;
