@@ -58,3 +58,20 @@ pub fn keep_file(run_dir: &Path, name: &str, file: &str) {
     std::fs::copy(run_dir.join(file), to.join(file))
         .unwrap_or_else(|e| panic!("{}: no {file}: {e}", run_dir.display()));
 }
+
+/// Run the Python program `script` with `args` (a tool of the field: cantools, python-can,
+/// mcap), returning what it printed; a failure panics with `what` and Python's error.
+pub fn python<S: AsRef<std::ffi::OsStr>>(script: &str, args: &[S], what: &str) -> Vec<u8> {
+    let o = std::process::Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .args(args)
+        .output()
+        .expect("python3 runs: ./run-tests installs the Python tools");
+    assert!(
+        o.status.success(),
+        "{what} failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o.stdout
+}

@@ -70,14 +70,8 @@ fn a_runs_bus_reads_back_from_vector_asc_and_blf() {
         .output()
         .expect("hil runs");
     std::fs::write(dir.path().join("bench.dbc"), &dbc.stdout).unwrap();
-    let o = Command::new("python3")
-        .arg("-c")
-        .arg(READ_BACK)
-        .arg(dir.path())
-        .output()
-        .expect("python3 runs: ./run-tests installs cantools, which brings python-can");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let r: Value = serde_json::from_slice(&o.stdout).expect("the read-back prints JSON");
+    let out = e2e::python(READ_BACK, &[dir.path()], "python-can's read-back");
+    let r: Value = serde_json::from_slice(&out).expect("the read-back prints JSON");
     println!("{r}");
     let frames = r["frames"].as_u64().unwrap();
     assert!(frames > 100_000, "the drill's bus: {r}");

@@ -62,18 +62,8 @@ fn cantools_decodes_our_candump_logs_with_our_dbc_and_agrees_with_our_codec() {
     }
     let log_path = dir.path().join("bus.log");
     std::fs::write(&log_path, &log).unwrap();
-    let o = Command::new("python3")
-        .args(["-c", DECODE])
-        .arg(&dbc)
-        .arg(&log_path)
-        .output()
-        .expect("python3 runs");
-    assert!(
-        o.status.success(),
-        "cantools failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let decoded: Vec<serde_json::Value> = String::from_utf8(o.stdout)
+    let out = e2e::python(DECODE, &[dbc.as_os_str(), log_path.as_os_str()], "cantools");
+    let decoded: Vec<serde_json::Value> = String::from_utf8(out)
         .unwrap()
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())

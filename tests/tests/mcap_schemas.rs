@@ -6,8 +6,6 @@
 //! stamp equal to its log time; all installed by `./run-tests`. Ignored by a plain `cargo test`: `./run-tests` runs it after the
 //! end-to-end tests have left the campus loop's `nav.mcap` in `target/e2e-reports/`.
 
-use std::process::Command;
-
 const CHECK: &str = r#"
 import json, sys
 from collections import Counter
@@ -99,17 +97,8 @@ fn check(name: &str) -> serde_json::Value {
         "{} is missing (the campus loop e2e test leaves it)",
         mcap.display()
     );
-    let o = Command::new("python3")
-        .args(["-c", CHECK])
-        .arg(&mcap)
-        .output()
-        .expect("python3 runs");
-    assert!(
-        o.status.success(),
-        "the Python reader failed on {name}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    let r: serde_json::Value = serde_json::from_slice(&o.stdout).expect("the checker's JSON");
+    let out = e2e::python(CHECK, &[&mcap], &format!("the Python reader on {name}"));
+    let r: serde_json::Value = serde_json::from_slice(&out).expect("the checker's JSON");
     eprintln!("{name}: {r}");
     assert_eq!(
         r["bad"],
