@@ -39,7 +39,7 @@ use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use thiserror::Error;
-use wire::{Message, RawFrame};
+use wire::RawFrame;
 
 /// How the scheduler follows nav.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -233,6 +233,8 @@ pub struct BusOutcome {
     pub lockstep: LockstepStats,
     /// Lines in the log of sent frames ([`Devices::sent_log`]).
     pub sent_logged: Option<u64>,
+    /// The bus model: load, each identifier's delays, the command round trip.
+    pub bus: crate::canbus::BusStats,
 }
 
 /// Scheduler (and player) failures.
@@ -391,15 +393,12 @@ impl NavSide {
     ) -> Result<(), CanTxError> {
         let lockstep = self.follow.is_some();
         drain(sock, iface, |f| {
-            let m = match f {
-                Some(f) => Message::decode(&f),
-                None => {
-                    self.bad += 1;
-                    return;
-                }
+            let Some(f) = f else {
+                self.bad += 1;
+                return;
             };
-            let nav_time = matches!(m, Ok(Message::NavTime(_)));
-            match step.from_nav(m, lockstep) {
+            let nav_time = f.id == wire::nav_time::SPEC.id;
+            match step.from_nav(f, lockstep) {
                 FromNav::Confirmed {
                     sample,
                     imu_timeout,
@@ -579,8 +578,14 @@ pub fn run(
     stop: &AtomicBool,
     progress: &Progress,
 ) -> Result<BusOutcome, BusError> {
-    // what nav sends us: turntable commands and its solution header (NAV_TIME)
-    let sock = bench_socket(iface, &[wire::tt_cmd::SPEC.id, wire::nav_time::SPEC.id])?;
+    // what nav sends: turntable commands, its solution (NAV_TIME places them in time), all on
+    // the bus model
+    let from_nav: Vec<u16> = wire::ALL_MESSAGES
+        .iter()
+        .filter(|m| m.sender == "NAV")
+        .map(|m| m.id)
+        .collect();
+    let sock = bench_socket(iface, &from_nav)?;
     let mut nav = NavSide {
         follow: lockstep,
         confirmed: None,
@@ -671,6 +676,7 @@ pub fn run(
     let outbox = port.outbox;
     let mut ls = nav.ls;
     (ls.latency_p50_ms, ls.latency_p99_ms, ls.latency_samples) = nav.latency.percentiles();
+    let bus = dev.step.bus_stats();
     let (imu, mut turntable) = dev.step.into_parts();
     if let Some(tt) = turntable.as_mut() {
         tt.stats.bad_frames += nav.bad;
@@ -695,6 +701,7 @@ pub fn run(
         gps: dev.gps.map(|g| (g.stats, g.into_pty())),
         lockstep: ls,
         sent_logged: outbox.log.map(SentLog::finish).transpose()?,
+        bus,
     })
 }
 

@@ -7,6 +7,7 @@
 
 pub mod bus;
 pub mod can;
+pub mod canbus;
 pub mod clock;
 pub mod drive;
 pub mod geodesy;

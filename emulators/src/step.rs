@@ -14,9 +14,11 @@
 //! received before bytes it has read (`nav`'s event loop). In process they go into the
 //! pipeline right after the sample's frames.
 
+use crate::canbus::{BusStats, CanBus, RoundTrip, ns};
 use crate::gps::{Epoch, GpsReceiver};
 use crate::stream::BusStream;
 use crate::ttbus::TtBus;
+use std::collections::{BTreeMap, VecDeque};
 use wire::{Message, RawFrame};
 
 /// What one IMU sample brings, in the order nav meets it.
@@ -26,9 +28,12 @@ pub struct Step {
     pub k: u64,
     /// Simulated time at its end, s.
     pub t: f64,
-    /// Its frames on the bus: the IMU's (with any injected), then the turntable's.
+    /// The devices' frames that go on the bus from the sample's end until the next one's, in
+    /// the order the bus model puts them there: the IMU's (with any injected), the turntable's.
     pub frames: Vec<RawFrame>,
-    /// How many of `frames` are the turntable's (the last ones).
+    /// When each of `frames` is on the bus (its end), simulated ns.
+    pub times_ns: Vec<u64>,
+    /// How many of `frames` are the turntable's.
     pub turntable_frames: usize,
     /// The sample was deliberately not sent (a fault): nav cannot confirm it.
     pub dropped: bool,
@@ -74,8 +79,25 @@ pub struct Stepper {
     gps: Option<GpsReceiver>,
     duration_s: f64,
     msgs: Vec<Message>,
+    scratch: Vec<RawFrame>,
     in_stop: bool,
     procedure_end: Option<ProcedureEnd>,
+    bus: CanBus,
+    nav: NavFrames,
+}
+
+/// nav's frames on their way to the bus model: sent, placed by a NAV_TIME, queued.
+struct NavFrames {
+    /// Samples after a NAV_TIME's sample that the frames before it go on the bus.
+    latency: u64,
+    /// Frames nav sent since its last NAV_TIME (which places them).
+    waiting: Vec<RawFrame>,
+    /// Frames placed, and the sample at whose end they go on the bus.
+    placed: VecDeque<(u64, RawFrame)>,
+    /// Turntable commands on the bus and not yet answered: sequence number, when queued (ns).
+    unanswered: Vec<(u8, u64)>,
+    /// Command to acknowledgement, ns -> commands.
+    round_trip: BTreeMap<u64, u64>,
 }
 
 /// The stream's end when nav's procedure is over ([`Stepper::end_with_procedure`]).
@@ -91,12 +113,16 @@ struct ProcedureEnd {
 
 impl Stepper {
     /// The IMU stream `imu`, the turntable `tt` and the receiver `gps` for `duration_s` of
-    /// simulated time.
+    /// simulated time, on `bus`. In lockstep, the frames nav sends before a NAV_TIME go on the
+    /// bus `latency` samples after that NAV_TIME's sample (at least the lockstep's window, so
+    /// that they never change what was already sent).
     pub fn new(
         imu: BusStream,
         tt: Option<TtBus>,
         gps: Option<GpsReceiver>,
         duration_s: f64,
+        bus: CanBus,
+        latency: u64,
     ) -> Self {
         Self {
             imu,
@@ -104,8 +130,17 @@ impl Stepper {
             gps,
             duration_s,
             msgs: Vec::new(),
+            scratch: Vec::new(),
             in_stop: false,
             procedure_end: None,
+            bus,
+            nav: NavFrames {
+                latency,
+                waiting: Vec::new(),
+                placed: VecDeque::new(),
+                unanswered: Vec::new(),
+                round_trip: BTreeMap::new(),
+            },
         }
     }
 
@@ -169,29 +204,57 @@ impl Stepper {
     }
 
     /// One IMU sample: its frames, the turntable's after it, the epochs due by its end.
+    ///
+    /// At the sample's end the IMU queues its frames on the bus, and nav's frames placed there
+    /// are queued too; what is over on the bus by then reaches the other nodes (on the ideal
+    /// bus: everything queued, at once); the turntable's controller queues its frames due then;
+    /// the bus runs to the next sample's end, and every frame over by then is on the bus in
+    /// this step, in the bus's order. A turntable command reaches the mechanism when it is
+    /// over, and its acknowledgement is queued then.
     pub fn step(&mut self, out: &mut Step) {
         out.k = self.imu.imu().next_index();
         out.t = self.imu.next_time();
         out.frames.clear();
+        out.times_ns.clear();
         out.epochs.clear();
+        out.turntable_frames = 0;
+        let now = ns(out.t);
+        while self.nav.placed.front().is_some_and(|p| p.0 <= out.k) {
+            let Some((_, f)) = self.nav.placed.pop_front() else {
+                break;
+            };
+            // a frame lost to nav's full queue is counted by the bus
+            if self.bus.queue(now, f)
+                && let Ok(Message::TtCmd(c)) = Message::decode(&f)
+            {
+                self.nav.unanswered.push((c.seq, now));
+            }
+        }
         let dropped = self.imu.stats.dropped_samples;
-        self.imu.next_frames(&mut out.frames);
+        self.scratch.clear();
+        self.imu.next_frames(&mut self.scratch);
+        for f in &self.scratch {
+            // a frame lost to the IMU's full queue is counted by the bus
+            self.bus.queue(now, *f);
+        }
         out.dropped = self.imu.stats.dropped_samples > dropped;
         let stopped = out.dropped && self.imu.stopped_at(out.t);
         out.stop_begins = stopped && !self.in_stop;
         self.in_stop = stopped;
-        out.turntable_frames = 0;
+        self.run_bus((now, out.t), out);
         if let Some(tt) = self.tt.as_mut() {
             self.msgs.clear();
             tt.after_sample(out.k, out.t, &mut self.msgs);
             for m in &self.msgs {
-                if let Ok(f) = m.encode() {
-                    out.frames.push(f);
-                    out.turntable_frames += 1;
+                if let Ok(f) = m.encode()
+                    && self.bus.queue(now, f)
+                {
                     tt.sent(m);
                 }
             }
         }
+        let next = self.imu.next_time();
+        self.run_bus((ns(next), next), out);
         if let Some(g) = self.gps.as_mut() {
             while let Some(e) = g.poll(out.t, self.duration_s) {
                 out.epochs.push(e);
@@ -199,19 +262,75 @@ impl Stepper {
         }
     }
 
-    /// A frame nav sent, to the devices. `lockstep`: a turntable command waits for the next
-    /// NAV_TIME, which places it the lockstep's latency after its sample; otherwise it takes
-    /// effect at the next sample.
-    pub fn from_nav(&mut self, m: Result<Message, wire::DecodeError>, lockstep: bool) -> FromNav {
+    /// The bus until `limit` (ns, and the same in s): every frame over by then, the devices'
+    /// into `out`, nav's commands to the mechanism (whose answers go on the bus at once).
+    fn run_bus(&mut self, limit: (u64, f64), out: &mut Step) {
+        let Self {
+            bus, tt, nav, msgs, ..
+        } = self;
+        bus.run(limit.0, true, |b, f| {
+            let m = Message::decode(&f.frame);
+            if b.node_name(f.node) == "NAV" {
+                if let (Ok(Message::TtCmd(c)), Some(tt)) = (m, tt.as_mut()) {
+                    // the sample's own time on the ideal bus (no rounding through ns)
+                    let t = if f.end_ns == limit.0 {
+                        limit.1
+                    } else {
+                        f.end_ns as f64 * 1e-9
+                    };
+                    msgs.clear();
+                    tt.receive(t, c, msgs);
+                    for m in msgs.iter() {
+                        if let Ok(a) = m.encode()
+                            && b.queue(f.end_ns, a)
+                        {
+                            tt.sent(m);
+                        }
+                    }
+                }
+                return;
+            }
+            out.frames.push(f.frame);
+            out.times_ns.push(f.end_ns);
+            if wire::spec_for_id(f.frame.id).is_some_and(|s| s.sender == "TT") {
+                out.turntable_frames += 1;
+            }
+            if let Ok(Message::TtAck(a)) = m
+                && let Some(i) = nav.unanswered.iter().position(|u| u.0 == a.seq)
+            {
+                let (_, queued) = nav.unanswered.remove(i);
+                *nav.round_trip.entry(f.end_ns - queued).or_default() += 1;
+            }
+        });
+    }
+
+    /// A frame nav sent, to the devices and the bus model. `lockstep`: it waits for the next
+    /// NAV_TIME, which places it (and the frames before it) the lockstep's latency after its
+    /// sample; otherwise it goes on the bus at the next sample.
+    pub fn from_nav(&mut self, f: RawFrame, lockstep: bool) -> FromNav {
+        let m = Message::decode(&f);
+        let next = self.imu.imu().next_index();
+        if lockstep {
+            self.nav.waiting.push(f);
+        } else {
+            self.nav.placed.push_back((next, f));
+        }
         match m {
             Ok(Message::NavTime(nt)) => {
                 let Some(k) = nav_time_sample(self.imu.imu(), nt.sample_count) else {
                     return FromNav::Unplaced;
                 };
-                let placed = match self.tt.as_mut() {
-                    Some(tt) if lockstep => tt.confirmed(k),
-                    _ => 0,
-                };
+                let mut placed = 0;
+                if lockstep {
+                    let at = k + self.nav.latency;
+                    for f in self.nav.waiting.drain(..) {
+                        placed += u64::from(f.id == wire::tt_cmd::SPEC.id);
+                        self.nav.placed.push_back((at, f));
+                    }
+                }
+                if self.tt.is_none() {
+                    placed = 0;
+                }
                 if let Some(p) = self.procedure_end.as_mut() {
                     use wire::NavMode as M;
                     let running =
@@ -228,18 +347,18 @@ impl Stepper {
                     placed,
                 }
             }
-            Ok(Message::TtCmd(c)) => {
-                let next = self.imu.imu().next_index();
-                match self.tt.as_mut() {
-                    Some(tt) if lockstep => tt.command(c),
-                    Some(tt) => tt.command_at(next, c),
-                    None => return FromNav::Unexpected,
-                }
-                FromNav::Command
-            }
+            Ok(Message::TtCmd(_)) if self.tt.is_none() => FromNav::Unexpected,
+            Ok(Message::TtCmd(_)) => FromNav::Command,
             Ok(_) => FromNav::Other,
             Err(_) => FromNav::Unexpected,
         }
+    }
+
+    /// What the bus model did so far.
+    pub fn bus_stats(&self) -> BusStats {
+        let mut s = self.bus.stats();
+        s.round_trip = RoundTrip::of(&self.nav.round_trip);
+        s
     }
 
     /// The stream is over: whether nav's watchdog is still to report it. The end of the stream

@@ -1,10 +1,9 @@
-//! The turntable on the bus, without I/O: commands in (placed in time by nav's NAV_TIME), its
-//! acknowledgements and status frames out after each IMU sample, and its truth kept for the
+//! The turntable on the bus, without I/O: commands in (when they completed on the bus, which
+//! [`crate::step`] decides), its acknowledgements and status frames out after each IMU sample, and its truth kept for the
 //! bench's recording. The scheduler (`bus`) and the in-process runs step it alike (`step`).
 
 use crate::turntable::Turntable;
 use serde::{Deserialize, Serialize};
-use std::collections::VecDeque;
 use wire::{Message, TtAck, TtCmd};
 
 /// What the turntable adapter did.
@@ -49,73 +48,44 @@ pub struct TtBus {
     truth_every: u64,
     /// The mechanism's truth at [`TT_TRUTH_HZ`].
     pub truth: Vec<TtTruth>,
-    latency: u64,
-    waiting: Vec<TtCmd>,
-    scheduled: VecDeque<(u64, TtCmd)>,
+    /// Every command the controller received, and when (simulated s).
+    pub received: Vec<(f64, TtCmd)>,
     acks: Vec<TtAck>,
     /// What went out.
     pub stats: TurntableTxStats,
 }
 
 impl TtBus {
-    /// The mechanism `tt` beside an IMU at `imu_rate_hz`; lockstep commands take effect
-    /// `latency` samples after their NAV_TIME.
-    pub fn new(tt: Turntable, imu_rate_hz: f64, latency: u64) -> Self {
+    /// The mechanism `tt` beside an IMU at `imu_rate_hz`.
+    pub fn new(tt: Turntable, imu_rate_hz: f64) -> Self {
         Self {
             status_every: (imu_rate_hz / tt.params().status_hz).round().max(1.0) as u64,
             truth_every: (imu_rate_hz / TT_TRUTH_HZ).round().max(1.0) as u64,
             truth: Vec::new(),
+            received: Vec::new(),
             tt,
-            latency,
-            waiting: Vec::new(),
-            scheduled: VecDeque::new(),
             acks: Vec::new(),
             stats: TurntableTxStats::default(),
         }
     }
 
-    /// A command arrived; it waits for the next NAV_TIME to be placed in time.
-    pub fn command(&mut self, cmd: TtCmd) {
+    /// A command reached the mechanism's controller at `t` (simulated s: when it completed on
+    /// the bus); it acts on it at once, its acknowledgement (if it answers) to `out`. Calls come
+    /// in time order, between the [`TtBus::after_sample`] calls of the samples around `t`.
+    pub fn receive(&mut self, t: f64, cmd: TtCmd, out: &mut Vec<Message>) {
         self.stats.commands += 1;
-        self.waiting.push(cmd);
-    }
-
-    /// A command arrived with no lockstep: it takes effect at sample `k`.
-    pub fn command_at(&mut self, k: u64, cmd: TtCmd) {
-        self.stats.commands += 1;
-        self.scheduled.push_back((k, cmd));
-    }
-
-    /// nav has processed sample `k`: the commands that came before take effect at `k + latency`.
-    /// Returns how many were placed.
-    pub fn confirmed(&mut self, k: u64) -> u64 {
-        let n = self.waiting.len() as u64;
-        for c in self.waiting.drain(..) {
-            self.scheduled.push_back((k + self.latency, c));
+        self.received.push((t, cmd));
+        match self.tt.command(t, cmd) {
+            Some(a) => out.push(Message::TtAck(a)),
+            None if self.tt.params().faults.lost_command_seqs.contains(&cmd.seq) => {
+                self.stats.lost_commands += 1
+            }
+            None => {}
         }
-        n
-    }
-
-    /// Commands still waiting for a NAV_TIME.
-    pub fn waiting(&self) -> usize {
-        self.waiting.len()
     }
 
     /// The frames due right after IMU sample `k` (which ends at `t`), in bus order.
     pub fn after_sample(&mut self, k: u64, t: f64, out: &mut Vec<Message>) {
-        while let Some(&(at, cmd)) = self.scheduled.front() {
-            if at > k {
-                break;
-            }
-            self.scheduled.pop_front();
-            match self.tt.command(t, cmd) {
-                Some(a) => out.push(Message::TtAck(a)),
-                None if self.tt.params().faults.lost_command_seqs.contains(&cmd.seq) => {
-                    self.stats.lost_commands += 1
-                }
-                None => {}
-            }
-        }
         self.acks.clear();
         self.tt.advance(t, &mut self.acks);
         if k.is_multiple_of(self.truth_every) {
@@ -166,36 +136,31 @@ mod tests {
     }
 
     #[test]
-    fn a_command_takes_effect_latency_samples_after_the_nav_time_that_followed_it() {
-        let mut b = TtBus::new(Turntable::new(TurntableParams::default()), 2000.0, 120);
-        b.command(cmd(1, TtCommand::Enable));
+    fn a_command_is_answered_when_it_reaches_the_controller() {
+        let mut b = TtBus::new(Turntable::new(TurntableParams::default()), 2000.0);
         let mut out = Vec::new();
-        // however long nav's NAV_TIME takes to come, nothing happens before it is placed
-        for k in 0..500 {
+        for k in 0..640 {
             b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
         }
         assert!(!out.iter().any(|m| matches!(m, Message::TtAck(_))));
-        assert_eq!(b.confirmed(520), 1);
-        assert_eq!(b.waiting(), 0);
-        for k in 500..640 {
-            out.clear();
-            b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
-            assert!(!out.iter().any(|m| matches!(m, Message::TtAck(_))), "k={k}");
-        }
         out.clear();
-        b.after_sample(640, 641.0 / 2000.0, &mut out);
-        match out.first() {
-            Some(Message::TtAck(a)) => assert_eq!((a.seq, a.result), (1, TtResult::Accepted)),
+        // on the bus until 0.3202 s, between the ends of samples 639 and 640
+        b.receive(0.3202, cmd(1, TtCommand::Enable), &mut out);
+        match out.as_slice() {
+            [Message::TtAck(a)] => assert_eq!((a.seq, a.result), (1, TtResult::Accepted)),
             other => panic!("{other:?}"),
         }
-        // acknowledgements come first, the status frames at 100 Hz (every 20th sample)
-        assert!(out[1..].iter().all(|m| matches!(m, Message::TtStatus(_))));
-        assert_eq!(out.len(), 1 + usize::from((641 % 20) == 0));
+        assert_eq!(b.stats.commands, 1);
+        out.clear();
+        b.after_sample(640, 641.0 / 2000.0, &mut out);
+        // the status frames at 100 Hz (every 20th sample)
+        assert!(out.iter().all(|m| matches!(m, Message::TtStatus(_))));
+        assert_eq!(out.len(), usize::from((641 % 20) == 0));
     }
 
     #[test]
     fn status_frames_come_at_the_mechanism_rate() {
-        let mut b = TtBus::new(Turntable::new(TurntableParams::default()), 2000.0, 120);
+        let mut b = TtBus::new(Turntable::new(TurntableParams::default()), 2000.0);
         let mut out = Vec::new();
         for k in 0..2000 {
             b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
@@ -207,9 +172,10 @@ mod tests {
     /// following what the commands made it do.
     #[test]
     fn the_turntables_truth_is_kept_at_ten_hertz() {
-        let mut b = TtBus::new(Turntable::new(TurntableParams::default()), 2000.0, 120);
+        let mut b = TtBus::new(Turntable::new(TurntableParams::default()), 2000.0);
         let mut out = Vec::new();
-        b.command_at(0, cmd(1, TtCommand::Enable));
+        b.receive(0.0, cmd(1, TtCommand::Enable), &mut out);
+        out.clear();
         for k in 0..2000 {
             b.after_sample(k, (k + 1) as f64 / 2000.0, &mut out);
         }

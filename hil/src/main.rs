@@ -115,14 +115,22 @@ enum Cmd {
         rerun: Vec<PathBuf>,
     },
     /// Print the bus-load table of the wire contract at its nominal rates, or of a scenario's
-    /// traffic (its IMU rate, turntable, redundant unit) and whether it fits its bit rate.
+    /// traffic (its IMU rate, turntable, redundant unit) and whether it fits its bit rate. With
+    /// `--measure`, run the scenario (by default the main job's drill and GPS drive) in process
+    /// on the bus model and print what it measured: the load, each identifier's worst and p99
+    /// queueing delay, the TT_CMD -> TT_ACK round trip and each node's queue. Exit status 1
+    /// when a scenario does not fit a bit rate.
     Busload {
-        /// Bit rate, bit/s (default: 1 Mbit/s, or the scenario's `bus.bitrate_bps`).
-        #[arg(long, value_parser = hil::values::bitrate)]
-        bitrate: Option<f64>,
+        /// Bit rate, bit/s; repeat or separate by commas for several (default: 1 Mbit/s, or
+        /// the scenario's `bus.bitrate_bps`).
+        #[arg(long, value_parser = hil::values::bitrate, value_delimiter = ',')]
+        bitrate: Vec<f64>,
         /// A scenario file: its traffic rather than the contract's nominal rates.
         #[arg(long)]
         scenario: Option<PathBuf>,
+        /// Run the scenario in process on the bus model and print the measured figures.
+        #[arg(long)]
+        measure: bool,
     },
     /// Print the DBC file of the wire contract.
     Dbc,
@@ -625,7 +633,11 @@ fn real_main(cli: Cli) -> Result<i32> {
         Cmd::Calibrate(Calibrate::RotatingImu(a)) => calibrate_rotating_imu(a),
         Cmd::Calibrate(Calibrate::Tetrahedral(a)) => calibrate_tetrahedral(a),
         Cmd::Validate(Validate::Turntable(a)) => validate_turntable(a),
-        Cmd::Busload { bitrate, scenario } => busload(bitrate, scenario),
+        Cmd::Busload {
+            bitrate,
+            scenario,
+            measure,
+        } => busload(&bitrate, scenario, measure),
         Cmd::Replay {
             recording,
             config,

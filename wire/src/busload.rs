@@ -22,6 +22,57 @@ pub fn frame_bits_worst(dlc: u8) -> u32 {
     exposed + 13 + (exposed - 1) / 4
 }
 
+/// Bits on the wire for `frame` exactly as a classic CAN controller sends it (11-bit
+/// identifier, data frame): start of frame, arbitration, control and data fields and the
+/// CRC-15 sequence with their stuff bits (a bit of opposite value after five equal bits, the
+/// stuff bit counting towards the next run), then the 13 unstuffed bits of CRC delimiter, ACK
+/// slot and delimiter, end of frame and intermission. Between [`frame_bits_nominal`] and
+/// [`frame_bits_worst`].
+pub fn frame_bits_exact(frame: &crate::RawFrame) -> u32 {
+    let len = frame.len.min(8);
+    let mut bits = Vec::with_capacity(34 + 64);
+    bits.push(false); // start of frame (dominant)
+    bits.extend((0..11).rev().map(|i| (frame.id >> i) & 1 == 1));
+    bits.extend([false, false, false]); // RTR, IDE, r0: a data frame, standard identifier
+    bits.extend((0..4).rev().map(|i| (len >> i) & 1 == 1));
+    for b in &frame.data[..usize::from(len)] {
+        bits.extend((0..8).rev().map(|i| (b >> i) & 1 == 1));
+    }
+    let crc = crc15(&bits);
+    bits.extend((0..15).rev().map(|i| (crc >> i) & 1 == 1));
+    let mut stuffed = 0u32;
+    let mut last = None;
+    let mut run = 0u32;
+    for b in bits.iter().copied() {
+        if last == Some(b) {
+            run += 1;
+        } else {
+            last = Some(b);
+            run = 1;
+        }
+        if run == 5 {
+            // the stuff bit has the other value and begins the next run
+            stuffed += 1;
+            last = Some(!b);
+            run = 1;
+        }
+    }
+    bits.len() as u32 + stuffed + 13
+}
+
+/// CAN's CRC-15 (polynomial 0x4599) over `bits`.
+fn crc15(bits: &[bool]) -> u16 {
+    let mut crc = 0u16;
+    for &b in bits {
+        let next = b ^ ((crc >> 14) & 1 == 1);
+        crc = (crc << 1) & 0x7FFF;
+        if next {
+            crc ^= 0x4599;
+        }
+    }
+    crc
+}
+
 /// Load of one message type.
 #[derive(Debug, Clone, Copy)]
 pub struct MessageLoad {
@@ -109,6 +160,49 @@ mod tests {
         assert_eq!(frame_bits_nominal(8), 111);
         assert_eq!(frame_bits_worst(8), 135);
         assert_eq!(frame_bits_worst(0), 55);
+    }
+
+    #[test]
+    fn exact_lengths_count_the_stuff_bits_of_the_frame() {
+        use crate::RawFrame;
+        // all zeros: 34 dominant bits before the CRC (which is zero too): a stuff bit after
+        // every fifth, six in all, plus the 13 unstuffed bits
+        let zero = RawFrame {
+            id: 0,
+            len: 0,
+            data: [0; 8],
+        };
+        assert_eq!(crc15(&[false; 19]), 0);
+        assert_eq!(frame_bits_exact(&zero), 19 + 15 + 6 + 13);
+        // every length lies between the unstuffed and the worst case, over many payloads
+        let mut x = 0x1234_5678_u32;
+        for n in 0..2000u32 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            let len = (n % 9) as u8;
+            let mut data = [0u8; 8];
+            for (i, d) in data.iter_mut().enumerate().take(usize::from(len)) {
+                *d = (x >> (i % 4 * 8)) as u8 ^ (n as u8);
+            }
+            let f = RawFrame {
+                id: (x % 0x800) as u16,
+                len,
+                data,
+            };
+            let b = frame_bits_exact(&f);
+            assert!(
+                (frame_bits_nominal(len)..=frame_bits_worst(len)).contains(&b),
+                "{f:?}: {b} bits"
+            );
+        }
+        // 0x7FF with 0xFF data: long recessive runs, many stuff bits
+        let ones = RawFrame {
+            id: 0x7FF,
+            len: 8,
+            data: [0xFF; 8],
+        };
+        assert!(frame_bits_exact(&ones) > frame_bits_nominal(8) + 12);
     }
 
     #[test]

@@ -1,35 +1,83 @@
-//! `hil busload`: the bus load of the wire contract, or of a scenario's traffic at its bit rate.
+//! `hil busload`: the bus load of the wire contract, or of a scenario's traffic at its bit rate,
+//! and with `--measure` what the bus model measured when the scenario ran in process.
 
 use crate::*;
 
-pub(crate) fn busload(bitrate: Option<f64>, scenario: Option<PathBuf>) -> Result<i32> {
-    let Some(path) = scenario else {
-        print!(
-            "{}",
-            wire::busload::report(bitrate.unwrap_or(wire::busload::NOMINAL_BITRATE))
-        );
-        return Ok(0);
+pub(crate) fn busload(bitrates: &[f64], scenario: Option<PathBuf>, measure: bool) -> Result<i32> {
+    if let Some(b) = bitrates.iter().find(|b| **b > 1_000_000.0) {
+        bail!("--bitrate {b}: a classic CAN bus runs at 1 Mbit/s at most");
+    }
+    let scenarios: Vec<Scenario> = match (scenario, measure) {
+        (Some(path), _) => {
+            // read without the scenario's checks: the table is wanted most when the traffic
+            // does not fit
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("cannot read scenario {}", path.display()))?;
+            vec![toml::from_str(&text).with_context(|| format!("scenario {}", path.display()))?]
+        }
+        (None, true) => main_job()?,
+        (None, false) => {
+            for b in or_default(bitrates, wire::busload::NOMINAL_BITRATE) {
+                print!("{}", wire::busload::report(b));
+            }
+            return Ok(0);
+        }
     };
-    // read without the scenario's checks: the table is wanted most when the traffic does not fit
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("cannot read scenario {}", path.display()))?;
-    let mut s: Scenario =
-        toml::from_str(&text).with_context(|| format!("scenario {}", path.display()))?;
-    if let Some(b) = bitrate {
-        if b > 1_000_000.0 {
-            bail!("--bitrate {b}: a classic CAN bus runs at 1 Mbit/s at most");
-        }
-        s.bus.bitrate_bps = b;
-    }
-    print!("{}", hil::scenario::busload::report(&s));
-    match hil::scenario::busload::fits(&s) {
-        Ok(()) => {
-            println!("fits: {} can run at this bit rate", s.name);
-            Ok(0)
-        }
-        Err(e) => {
-            println!("does not fit: {e}");
-            Ok(1)
+    let mut status = 0;
+    for base in scenarios {
+        for b in or_default(bitrates, base.bus.bitrate_bps) {
+            let mut s = base.clone();
+            s.bus.bitrate_bps = b;
+            println!("## {} at {:.0} kbit/s\n", s.name, b / 1000.0);
+            print!("{}", hil::scenario::busload::report(&s));
+            if let Err(e) = hil::scenario::busload::fits(&s) {
+                println!("does not fit: {e}\n");
+                status = 1;
+                continue;
+            }
+            println!("fits: {} can run at this bit rate\n", s.name);
+            if measure {
+                println!("{}", measured(&s)?);
+            }
         }
     }
+    Ok(status)
+}
+
+/// The bit rates asked for, else `default`.
+fn or_default(bitrates: &[f64], default: f64) -> Vec<f64> {
+    if bitrates.is_empty() {
+        vec![default]
+    } else {
+        bitrates.to_vec()
+    }
+}
+
+/// The main job's two scenarios (`hil demo`): the drill (at a fixed heading and seed, so that
+/// the figures repeat) and the GPS-aided drive.
+fn main_job() -> Result<Vec<Scenario>> {
+    let drill = hil::procedures::northfinding::scenario(30.0, 28.218157, 60.0, 1);
+    let drive: Scenario =
+        toml::from_str(crate::cmd::demo::DRIVE_GPS).context("built-in drive scenario")?;
+    Ok(vec![drill, drive])
+}
+
+/// Run `s` in process on its bus model: what the model measured, as a report's section.
+fn measured(s: &Scenario) -> Result<String> {
+    s.check().with_context(|| format!("scenario {}", s.name))?;
+    let mut bench = hil::engine::inproc::InProcessBench::of(s)?;
+    while bench.running() {
+        bench.step();
+    }
+    bench.finish();
+    let b = bench.bus_stats();
+    let (_, nominal, worst) = hil::scenario::busload::of(s);
+    Ok(format!(
+        "Measured in process on the bus model ({:.1} s simulated): load {:.2} % (predicted {:.2} % unstuffed, {:.2} % with worst-case stuffing).\n\n{}",
+        b.span_s,
+        100.0 * b.load,
+        100.0 * nominal,
+        100.0 * worst,
+        hil::report::bus::markdown(&b)
+    ))
 }

@@ -38,9 +38,11 @@ pub fn stepper(
     let latency = Lockstep::at_rate(s.imu.rate_hz).latency;
     let step = Stepper::new(
         BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults),
-        tt.map(|t| TtBus::new(t, s.imu.rate_hz, latency)),
+        tt.map(|t| TtBus::new(t, s.imu.rate_hz)),
         gps.map(GpsReceiver::new),
         duration_s,
+        emulators::canbus::CanBus::new(s.bus.timing()),
+        latency,
     );
     if s.ends_with_procedure() {
         step.end_with_procedure(latency)
@@ -214,7 +216,7 @@ impl InProcessBench {
             if let Some(s) = self.sent.as_mut() {
                 s.push(f);
             }
-            if self.step.from_nav(wire::Message::decode(&f), true) == FromNav::Unexpected {
+            if self.step.from_nav(f, true) == FromNav::Unexpected {
                 self.bad_from_nav += 1;
             }
         }
@@ -243,6 +245,21 @@ impl InProcessBench {
 
     fn rate_hz(&self) -> f64 {
         self.imu().params().rate_hz
+    }
+
+    /// The devices' frames of the last step, in the order nav met them.
+    pub fn last_frames(&self) -> &[RawFrame] {
+        &self.st.frames
+    }
+
+    /// The devices, stepped.
+    pub fn stepper(&self) -> &Stepper {
+        &self.step
+    }
+
+    /// What the bus model did so far: load, each identifier's delays, the command round trip.
+    pub fn bus_stats(&self) -> emulators::canbus::BusStats {
+        self.step.bus_stats()
     }
 
     /// Frames nav sent that no device here takes (a TT_CMD without a turntable).

@@ -46,6 +46,9 @@ pub struct InProcess {
     /// (`nav::pipeline::Pipeline::sent_hash`).
     #[serde(default)]
     pub sent_hash: String,
+    /// The bus model: load, each identifier's delays, the command round trip.
+    #[serde(default)]
+    pub bus: emulators::canbus::BusStats,
 }
 
 /// Error of an integrated attitude `q` (body at `t1` relative to body at `t0`, inertial)
@@ -116,6 +119,7 @@ pub fn run_in_process(s: &Scenario) -> Result<InProcess> {
         rotation_vector_deg: sum.attitude.rotation_vector_deg,
         error_deg: err.map(f64::to_degrees),
         sent_hash: sum.solution.sent_hash,
+        bus: bench.bus_stats(),
     })
 }
 

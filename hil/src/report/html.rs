@@ -151,6 +151,7 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
     }
     b += "</table>\n";
     b += &frames_section(r);
+    b += &crate::report::bus::html(&r.bus);
     let plots = turntable_plot(r, out) + &navigation_csv_plots(out);
     if !plots.is_empty() {
         b += "<h2>Plots</h2>\n";

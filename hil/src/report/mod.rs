@@ -1,5 +1,6 @@
 //! Checks of a run against truth and the bus accounting, and the result card.
 
+pub mod bus;
 pub mod html;
 pub mod page;
 pub mod plot;
@@ -32,6 +33,10 @@ pub struct RunReport {
     pub pace_reached: f64,
     /// How the emulators followed nav (lockstep).
     pub lockstep: emulators::bus::LockstepStats,
+    /// The bus model: load, each identifier's queueing delays, the turntable command round
+    /// trip, each node's queue.
+    #[serde(default)]
+    pub bus: emulators::canbus::BusStats,
     /// What the emulator sent.
     pub tx: TxStats,
     /// The same scenario run in process (no bus): the reference nav must reproduce (none for
@@ -76,6 +81,8 @@ pub struct BenchSide<'a> {
     pub tx: &'a TxStats,
     /// The lockstep with nav.
     pub lockstep: &'a emulators::bus::LockstepStats,
+    /// The bus model.
+    pub bus: &'a emulators::canbus::BusStats,
     /// The turntable's frames, when there is one.
     pub turntable: Option<&'a emulators::can::TurntableTxStats>,
     /// The receiver reached nav through gpsd.
@@ -93,6 +100,7 @@ pub fn checks(
     let BenchSide {
         tx,
         lockstep,
+        bus,
         turntable,
         gps_via_gpsd,
     } = bench;
@@ -213,6 +221,20 @@ pub fn checks(
                 nav.solution.frames_sent
             ),
         });
+        if lockstep.enabled && lockstep.stalls == 0 {
+            // the bus model saw nav's frames placed by its NAV_TIMEs, on vcan as in process
+            out.push(Check {
+                name: "the bus model on vcan equals the in-process run's".into(),
+                pass: *bus == reference.bus,
+                detail: format!(
+                    "load {:.2} % and {} identifiers' delays on vcan, {:.2} % and {} in process",
+                    100.0 * bus.load,
+                    bus.ids.len(),
+                    100.0 * reference.bus.load,
+                    reference.bus.ids.len()
+                ),
+            });
+        }
     }
     if let (Some(w_truth), Some(f_truth)) = (
         reference.expected_rate_dph,
@@ -563,6 +585,7 @@ pub fn markdown(r: &RunReport) -> String {
     if let Some(m) = &r.nav_memory {
         let _ = writeln!(s, "{}\n", memory_line(m));
     }
+    s += &bus::markdown(&r.bus);
     let mut t = Table::left(&["check", "result", "detail"]);
     for c in &r.checks {
         t.row([

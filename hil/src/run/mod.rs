@@ -618,7 +618,7 @@ fn score(
         memory,
         solution,
     } = e;
-    let (tx, tt_stats, lockstep_stats) = (bus.imu, bus.turntable, bus.lockstep);
+    let (tx, tt_stats, lockstep_stats, bus_stats) = (bus.imu, bus.turntable, bus.lockstep, bus.bus);
     let turntable_truth = bus.turntable_truth;
     // the receiver's device stayed until nav had stopped
     let gps_stats = bus.gps.map(|(st, _pty)| st);
@@ -660,6 +660,7 @@ fn score(
     let bench = report::BenchSide {
         tx: &tx,
         lockstep: &lockstep_stats,
+        bus: &bus_stats,
         turntable: tt_stats.as_ref(),
         gps_via_gpsd: opts.gps_via_gpsd,
     };
@@ -723,6 +724,7 @@ fn score(
         pace_reached: sim_reached
             / (wall - lockstep_stats.watchdog_wait_ms as f64 * 1e-3).max(1e-9),
         lockstep: lockstep_stats,
+        bus: bus_stats,
         tx,
         in_process: reference,
         turntable: tt_stats,

@@ -112,6 +112,42 @@ pub struct BusSettings {
     /// does not fit it with worst-case bit stuffing is refused, with the figures.
     #[serde(default = "default_bitrate")]
     pub bitrate_bps: f64,
+    /// `model` (default): the devices' frames reach vcan in the order, and at the simulated
+    /// times, they would complete on a real bus of this bit rate (frame durations with their
+    /// stuff bits, arbitration by identifier, a transmit queue per node; nav's frames on it
+    /// too). `ideal`: vcan's own timing, every frame there the moment it is due.
+    #[serde(default)]
+    pub timing: TimingModel,
+    /// Depth of each node's transmit queue on the model, frames: a frame queued on a full
+    /// queue is lost and counted.
+    #[serde(default = "default_tx_queue")]
+    pub tx_queue_frames: usize,
+}
+
+/// How the bus's timing is modelled.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum TimingModel {
+    /// A physical bus of the scenario's bit rate.
+    #[default]
+    Model,
+    /// vcan's: no time on the bus, no arbitration.
+    Ideal,
+}
+
+impl BusSettings {
+    /// The bus model of these settings.
+    pub fn timing(&self) -> emulators::canbus::BusTiming {
+        emulators::canbus::BusTiming {
+            bitrate_bps: self.bitrate_bps,
+            ideal: self.timing == TimingModel::Ideal,
+            tx_queue: self.tx_queue_frames,
+        }
+    }
+}
+
+fn default_tx_queue() -> usize {
+    emulators::canbus::DEFAULT_TX_QUEUE
 }
 
 impl Default for BusSettings {
@@ -120,6 +156,8 @@ impl Default for BusSettings {
             lockstep: true,
             nav_rcvbuf_bytes: default_rcvbuf(),
             bitrate_bps: default_bitrate(),
+            timing: TimingModel::default(),
+            tx_queue_frames: default_tx_queue(),
         }
     }
 }
@@ -281,6 +319,12 @@ impl Scenario {
         }
         if self.gps.is_some() && self.drive.is_none() {
             bail!("[gps] needs a [drive]: the antenna rides on the vehicle's route");
+        }
+        if !(1..=4096).contains(&self.bus.tx_queue_frames) {
+            bail!(
+                "bus.tx_queue_frames {} is not in [1, 4096]",
+                self.bus.tx_queue_frames
+            );
         }
         if let Some(g) = &self.gps
             && !(1.0..=10.0).contains(&g.rate_hz)
