@@ -235,6 +235,8 @@ pub struct BusOutcome {
     pub sent_logged: Option<u64>,
     /// The bus model: load, each identifier's delays, the command round trip.
     pub bus: crate::canbus::BusStats,
+    /// Error frames of nav's controller written to the bus.
+    pub error_frames: u64,
 }
 
 /// Scheduler (and player) failures.
@@ -446,12 +448,33 @@ struct Port<'a> {
     sock: &'a CanSocket,
     iface: &'a str,
     outbox: Outbox,
+    /// Error frames written.
+    error_frames: u64,
 }
 
 impl Port<'_> {
     fn flush(&mut self, nav: &mut NavSide) -> Result<(), CanTxError> {
         self.outbox
             .flush(self.sock, self.iface, &mut nav.confirmed, &mut nav.latency)
+    }
+
+    /// An error frame of nav's controller on the bus (after everything before it).
+    fn error_frame(&mut self, e: &wire::errframe::ErrorFrame) -> Result<(), CanTxError> {
+        use std::os::fd::AsRawFd;
+        match wire::send_error_frame(self.sock.as_raw_fd(), e) {
+            Ok(()) => {
+                self.error_frames += 1;
+                Ok(())
+            }
+            // a downed interface loses it, like any frame
+            Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => Ok(()),
+            Err(source) => Err(CanTxError::Write {
+                iface: self.iface.into(),
+                // the error frame's class: its identifier without CAN_ERR_FLAG
+                id: (e.class & 0xFFFF) as u16,
+                source,
+            }),
+        }
     }
 }
 
@@ -604,6 +627,7 @@ pub fn run(
     let mut port = Port {
         sock: &sock,
         iface,
+        error_frames: 0,
         outbox: Outbox {
             frames: Vec::with_capacity(wire::BATCH),
             last: None,
@@ -637,6 +661,11 @@ pub fn run(
             hold_for_watchdog(&mut port, &mut nav, &mut dev.step, l.stall, stop)?;
             silent = true;
         }
+        if st.lost {
+            // frames lost on the bus model (a full queue, a bus-off): nav cannot confirm
+            // their samples
+            nav.confirmed = Some(nav.confirmed.map_or(k, |c| c.max(k)));
+        }
         if st.dropped {
             // a sample deliberately not sent (a fault): nav cannot confirm it, so the lockstep
             // does not wait for it (an IMU that stops for seconds is then paced by the clock)
@@ -651,8 +680,16 @@ pub fn run(
         } else {
             silent = false;
         }
-        port.outbox.frames.extend_from_slice(&st.frames);
         port.outbox.last = Some(k);
+        let mut from = 0;
+        for (at, _, e) in &st.errors {
+            // nav's controller raises its error frame between the frames around it
+            port.outbox.frames.extend_from_slice(&st.frames[from..*at]);
+            from = *at;
+            port.flush(&mut nav)?;
+            port.error_frame(e)?;
+        }
+        port.outbox.frames.extend_from_slice(&st.frames[from..]);
         if !st.epochs.is_empty()
             || (k + 1).is_multiple_of(batch_samples)
             || port.outbox.frames.len() + 8 > wire::BATCH
@@ -673,6 +710,7 @@ pub fn run(
         hold_for_watchdog(&mut port, &mut nav, &mut dev.step, l.stall, stop)?;
     }
     progress.set(dev.step.next_time());
+    let error_frames = port.error_frames;
     let outbox = port.outbox;
     let mut ls = nav.ls;
     (ls.latency_p50_ms, ls.latency_p99_ms, ls.latency_samples) = nav.latency.percentiles();
@@ -702,6 +740,7 @@ pub fn run(
         lockstep: ls,
         sent_logged: outbox.log.map(SentLog::finish).transpose()?,
         bus,
+        error_frames,
     })
 }
 

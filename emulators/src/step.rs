@@ -14,7 +14,7 @@
 //! received before bytes it has read (`nav`'s event loop). In process they go into the
 //! pipeline right after the sample's frames.
 
-use crate::canbus::{BusStats, CanBus, RoundTrip, ns};
+use crate::canbus::{BusStats, CanBus, Delivered, RoundTrip, ns};
 use crate::gps::{Epoch, GpsReceiver};
 use crate::stream::BusStream;
 use crate::ttbus::TtBus;
@@ -35,6 +35,12 @@ pub struct Step {
     pub times_ns: Vec<u64>,
     /// How many of `frames` are the turntable's.
     pub turntable_frames: usize,
+    /// Error frames nav's controller raises in this step: before which of `frames` each goes
+    /// (its index; `frames.len()`: after them), when (ns), the frame.
+    pub errors: Vec<(usize, u64, wire::errframe::ErrorFrame)>,
+    /// Frames of the devices were lost on the bus in this step (a full queue, a node bus-off,
+    /// nav's controller bus-off): nav cannot confirm their samples.
+    pub lost: bool,
     /// The sample was deliberately not sent (a fault): nav cannot confirm it.
     pub dropped: bool,
     /// The IMU stops sending at this sample (a `stop_s` fault begins): before anything more
@@ -84,6 +90,10 @@ pub struct Stepper {
     procedure_end: Option<ProcedureEnd>,
     bus: CanBus,
     nav: NavFrames,
+    /// Devices' frames on the bus that nav's controller did not take (it was bus-off).
+    unseen: u64,
+    /// Error frames nav's controller raised.
+    error_frames: u64,
 }
 
 /// nav's frames on their way to the bus model: sent, placed by a NAV_TIME, queued.
@@ -134,6 +144,8 @@ impl Stepper {
             in_stop: false,
             procedure_end: None,
             bus,
+            unseen: 0,
+            error_frames: 0,
             nav: NavFrames {
                 latency,
                 waiting: Vec::new(),
@@ -217,7 +229,9 @@ impl Stepper {
         out.frames.clear();
         out.times_ns.clear();
         out.epochs.clear();
+        out.errors.clear();
         out.turntable_frames = 0;
+        let lost_before = self.bus.lost_device_frames() + self.unseen;
         let now = ns(out.t);
         while self.nav.placed.front().is_some_and(|p| p.0 <= out.k) {
             let Some((_, f)) = self.nav.placed.pop_front() else {
@@ -255,6 +269,7 @@ impl Stepper {
         }
         let next = self.imu.next_time();
         self.run_bus((ns(next), next), out);
+        out.lost = self.bus.lost_device_frames() + self.unseen > lost_before;
         if let Some(g) = self.gps.as_mut() {
             while let Some(e) = g.poll(out.t, self.duration_s) {
                 out.epochs.push(e);
@@ -266,9 +281,23 @@ impl Stepper {
     /// into `out`, nav's commands to the mechanism (whose answers go on the bus at once).
     fn run_bus(&mut self, limit: (u64, f64), out: &mut Step) {
         let Self {
-            bus, tt, nav, msgs, ..
+            bus,
+            tt,
+            nav,
+            msgs,
+            unseen,
+            error_frames,
+            ..
         } = self;
-        bus.run(limit.0, true, |b, f| {
+        bus.run(limit.0, true, |b, d| {
+            let f = match d {
+                Delivered::Frame(f) => f,
+                Delivered::Error { t_ns, frame } => {
+                    *error_frames += 1;
+                    out.errors.push((out.frames.len(), t_ns, frame));
+                    return;
+                }
+            };
             let m = Message::decode(&f.frame);
             if b.node_name(f.node) == "NAV" {
                 if let (Ok(Message::TtCmd(c)), Some(tt)) = (m, tt.as_mut()) {
@@ -288,6 +317,11 @@ impl Stepper {
                         }
                     }
                 }
+                return;
+            }
+            if !f.nav_receives {
+                // nav's controller is bus-off: the frame is on the bus, not in nav's socket
+                *unseen += 1;
                 return;
             }
             out.frames.push(f.frame);
@@ -357,6 +391,8 @@ impl Stepper {
     /// What the bus model did so far.
     pub fn bus_stats(&self) -> BusStats {
         let mut s = self.bus.stats();
+        s.unseen_by_nav = self.unseen;
+        s.nav_error_frames = self.error_frames;
         s.round_trip = RoundTrip::of(&self.nav.round_trip);
         s
     }

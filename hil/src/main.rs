@@ -152,9 +152,11 @@ enum Cmd {
     /// NAV_TIME-out latency), each scenario's emulators and nav's pipeline in process. Runs where
     /// vcan is: natively, or all of it inside the QEMU guest. Writes bench.json and bench.md.
     Bench(BenchArgs),
-    /// The fault matrix: 28 faults (IMU frames dropped, duplicated, reordered, delayed, counter
+    /// The fault matrix: 34 faults (IMU frames dropped, duplicated, reordered, delayed, counter
     /// jump, BIT failure, saturation, accelerometer frames missing, IMU stream stopping, CAN
-    /// interface down and up, a flood of foreign frames, an overloaded bus, bad frames; nav
+    /// interface down and up, a flood of foreign frames, an overloaded bus, bad frames; on the
+    /// physical layer error frames, a stuck-dominant bus, a babbling node, the IMU's, nav's and
+    /// the turntable's controllers bus-off; nav
     /// killed outright; GPS outages void and silent, position jump, time going backwards,
     /// garbage, receiver unplugged, PPS missing and jittered; turntable
     /// stall, lock failure, encoder glitch, lost and late acknowledgements, heartbeat loss), each

@@ -123,6 +123,14 @@ fn open_can(c: &nav::config::CanConfig) -> Result<socketcan::tokio::CanSocket> {
             "no kernel receive times (SO_TIMESTAMPNS: {e}): frames are recorded at read time"
         );
     }
+    // the controller's error frames (bus errors, error-passive, bus-off, restarts): counted,
+    // reported, a health bit
+    if let Err(e) = wire::set_error_filter(sock.as_raw_fd(), wire::errframe::CAN_ERR_MASK) {
+        warn!(
+            interface = iface,
+            "cannot receive the controller's error frames (CAN_RAW_ERR_FILTER: {e}): bus errors and bus-off go unreported"
+        );
+    }
     match wire::set_rcvbuf(sock.as_raw_fd(), c.rcvbuf_bytes) {
         Ok(got) if got < c.rcvbuf_bytes => warn!(
             interface = iface,
@@ -420,6 +428,15 @@ async fn take_frames(
                     r.send(Record::Frame { t_ns, frame: raw });
                 }
                 pipeline.on_frame(&raw, out);
+            }
+            Err(wire::FrameConvError::Error(e)) => {
+                if let Some(r) = shell.recorder {
+                    r.send(Record::ErrorFrame {
+                        t_ns: stamp.unwrap_or(read_ns),
+                        frame: e,
+                    });
+                }
+                pipeline.on_can_error(&e, out);
             }
             Err(e) => pipeline.on_non_data(&e.to_string(), out),
         }

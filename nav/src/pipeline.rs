@@ -32,6 +32,7 @@ use crate::output::{Solution, SolutionEncoder};
 use crate::procedure::{Procedure, Reporting};
 use crate::record::JsonChannel;
 use crate::selfcal::SelfCalibrator;
+use crate::summary::CanBusHealth;
 use crate::summary::{AttitudeSummary, Summary};
 use crate::tetracal::TetraCalibrator;
 use std::collections::BTreeMap;
@@ -100,7 +101,8 @@ pub struct FrameCounters {
     pub bad_length: u64,
     /// A value out of its range.
     pub invalid: u64,
-    /// Remote and error frames.
+    /// Remote frames and others that are not data frames (error frames are counted in
+    /// [`CanBusHealth`]).
     pub non_data: u64,
 }
 
@@ -189,6 +191,10 @@ pub struct Pipeline {
     gps_rx_bytes: u64,
     /// The last sample at which the receiver's stream carried bad data.
     gps_bad_at: Option<u64>,
+    /// What nav's CAN controller reported (error frames).
+    can: CanBusHealth,
+    /// The IMU sample at the last error frame that spoke of errors.
+    can_error_at: Option<u64>,
     /// FNV-1a over every frame sent and the IMU sample it was sent at.
     sent_hash: u64,
     encode_errors: u64,
@@ -266,6 +272,8 @@ impl Pipeline {
             decoded: Vec::new(),
             gps_rx_bytes: 0,
             gps_bad_at: None,
+            can: Default::default(),
+            can_error_at: None,
             sent_hash: FNV_OFFSET,
             encode_errors: 0,
             integrity: None,
@@ -485,7 +493,62 @@ impl Pipeline {
         );
     }
 
-    /// A remote or error frame (`what` says which): counted and recorded, otherwise ignored.
+    /// An error frame from nav's CAN controller (`CAN_RAW_ERR_FILTER`): counted by class, the
+    /// controller's state and counters followed, the health bit set (bus errors in the last
+    /// second of IMU time, or a controller error-passive or bus-off), recorded as an event.
+    pub fn on_can_error(&mut self, e: &wire::errframe::ErrorFrame, out: &mut Vec<Output>) {
+        use wire::errframe::{ErrorState, class};
+        let c = &mut self.can;
+        c.error_frames += 1;
+        if e.class & (class::PROT | class::BUSERROR) != 0 {
+            c.bus_errors += 1;
+        }
+        if let Some((tec, rec)) = e.counters() {
+            c.tx_errors = tec;
+            c.rx_errors = rec;
+            c.max_tx_errors = c.max_tx_errors.max(tec);
+            c.max_rx_errors = c.max_rx_errors.max(rec);
+        }
+        if let Some(st) = e.state() {
+            match st {
+                ErrorState::Warning => c.warnings += 1,
+                ErrorState::Passive => c.passives += 1,
+                ErrorState::BusOff => c.bus_offs += 1,
+                ErrorState::Active => {}
+            }
+            if e.class & class::RESTARTED != 0 {
+                c.restarts += 1;
+            }
+            c.state = CanBusHealth::name(st).into();
+            if CanBusHealth::rank(&c.worst_state) < CanBusHealth::rank(c.state.as_str()) {
+                c.worst_state = c.state.clone();
+            }
+        }
+        if e.class & !(class::CNT | class::RESTARTED) != 0 && e.state() != Some(ErrorState::Active)
+        {
+            self.can_error_at = Some(self.sums.last.unwrap_or(0));
+        }
+        if self.can.error_frames <= 20 {
+            warn!("CAN controller: {}", e.describe());
+        }
+        if self.record {
+            let json = serde_json::json!({
+                "kind": "can_error",
+                "class": e.class,
+                "detail": e.describe(),
+                "state": self.can.state,
+            });
+            self.json(
+                JsonChannel::Event,
+                self.fe.stats().samples,
+                json.to_string(),
+                out,
+            );
+        }
+    }
+
+    /// A remote or other non-data frame (`what` says which): counted and recorded, otherwise
+    /// ignored.
     pub fn on_non_data(&mut self, what: &str, out: &mut Vec<Output>) {
         self.frames.total += 1;
         self.frames.non_data += 1;
@@ -885,6 +948,11 @@ impl Pipeline {
                 .gps_bad_at
                 .zip(self.sums.last)
                 .is_some_and(|(b, k)| (k.saturating_sub(b) as f64) < self.rate_hz),
+            can_bus: CanBusHealth::rank(&self.can.state) >= 2
+                || self
+                    .can_error_at
+                    .zip(self.sums.last)
+                    .is_some_and(|(b, k)| (k.saturating_sub(b) as f64) < self.rate_hz),
         }
     }
 
@@ -1116,6 +1184,7 @@ impl Pipeline {
             bad_length_frames: c.bad_length,
             invalid_value_frames: c.invalid,
             non_data_frames: c.non_data,
+            can_bus: self.can.clone(),
             read_errors: 0,
             command_send_errors: 0,
             kernel_dropped_frames: 0,

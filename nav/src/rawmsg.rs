@@ -56,6 +56,40 @@ pub fn encode_frame(frame: &RawFrame, t_ns: u64) -> [u8; CAN_FRAME_BYTES] {
     b
 }
 
+/// An error frame and its time stamp as a CDR [`CAN_FRAME_SCHEMA`] message: its identifier with
+/// `CAN_ERR_FLAG`, eight data bytes (SocketCAN's `struct can_frame`).
+pub fn encode_error_frame(frame: &wire::errframe::ErrorFrame, t_ns: u64) -> [u8; CAN_FRAME_BYTES] {
+    let mut b = [0u8; CAN_FRAME_BYTES];
+    b[..4].copy_from_slice(&CDR_LE);
+    b[4..12].copy_from_slice(&stamp(t_ns));
+    b[12..16].copy_from_slice(&frame.can_id().to_le_bytes());
+    b[18] = 8;
+    b[19..].copy_from_slice(&frame.data);
+    b
+}
+
+/// The error frame of a CDR [`CAN_FRAME_SCHEMA`] message, if it is one.
+pub fn decode_error_frame(encoding: &str, data: &[u8]) -> Option<wire::errframe::ErrorFrame> {
+    if encoding != CDR || data.len() < CAN_FRAME_BYTES {
+        return None;
+    }
+    let id = u32::from_le_bytes([data[12], data[13], data[14], data[15]]);
+    if id & wire::errframe::CAN_ERR_FLAG == 0 {
+        return None;
+    }
+    let mut d = [0u8; 8];
+    d.copy_from_slice(&data[19..27]);
+    Some(wire::errframe::ErrorFrame {
+        class: id & wire::errframe::CAN_ERR_MASK,
+        data: d,
+    })
+}
+
+/// The error frame of an MCAP message, by its channel's encoding.
+pub fn error_frame_of(m: &mcap::Message) -> Option<wire::errframe::ErrorFrame> {
+    decode_error_frame(&m.channel.message_encoding, &m.data)
+}
+
 /// Bytes and their time stamp as a CDR [`SERIAL_BYTES_SCHEMA`] message, written to `out`.
 pub fn encode_serial(t_ns: u64, bytes: &[u8], out: &mut Vec<u8>) {
     out.clear();

@@ -40,6 +40,14 @@ pub enum Record {
         /// The frame.
         frame: RawFrame,
     },
+    /// An error frame from nav's CAN controller: `/can/raw`, its identifier with
+    /// `CAN_ERR_FLAG` as SocketCAN carries it.
+    ErrorFrame {
+        /// Receive wall time, ns since the epoch.
+        t_ns: u64,
+        /// The frame.
+        frame: wire::errframe::ErrorFrame,
+    },
     /// A frame nav sent (turntable commands, the solution): `/can/tx`.
     Sent {
         /// Send wall time, ns since the epoch.
@@ -159,6 +167,10 @@ impl Recorder {
                                     ch.raw
                                 };
                                 (c, *t_ns, *t_ns, &buf)
+                            }
+                            Record::ErrorFrame { t_ns, frame } => {
+                                buf = rawmsg::encode_error_frame(frame, *t_ns);
+                                (ch.raw, *t_ns, *t_ns, &buf)
                             }
                             Record::GpsBytes { t_ns, bytes } => {
                                 rawmsg::encode_serial(*t_ns, bytes, &mut bytes_msg);

@@ -38,8 +38,11 @@ pub struct Summary {
     pub bad_length_frames: u64,
     /// Frames with a value outside its signal's range.
     pub invalid_value_frames: u64,
-    /// Remote and error frames.
+    /// Remote frames and other non-data frames (error frames: [`Summary::can_bus`]).
     pub non_data_frames: u64,
+    /// What nav's CAN controller reported in error frames.
+    #[serde(default)]
+    pub can_bus: CanBusHealth,
     /// Socket read errors.
     pub read_errors: u64,
     /// Turntable commands the CAN socket refused (sent again by north-finding).
@@ -521,4 +524,58 @@ pub enum SummaryError {
         /// Cause (names the field).
         source: serde_json::Error,
     },
+}
+
+/// What nav's CAN controller reported in its error frames (`CAN_RAW_ERR_FILTER`: a Linux CAN
+/// driver's bus errors, state changes, bus-off and restarts).
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq, Eq)]
+pub struct CanBusHealth {
+    /// Error frames received.
+    pub error_frames: u64,
+    /// Of which protocol violations and bus errors.
+    pub bus_errors: u64,
+    /// Times the controller reported error-warning.
+    pub warnings: u64,
+    /// Times it reported error-passive.
+    pub passives: u64,
+    /// Times it reported bus-off.
+    pub bus_offs: u64,
+    /// Times it restarted after bus-off.
+    pub restarts: u64,
+    /// Its state at the end: `active`, `warning`, `passive` or `bus-off` (empty: never
+    /// reported).
+    pub state: String,
+    /// The worst state it reported.
+    pub worst_state: String,
+    /// Its transmit error counter, last reported.
+    pub tx_errors: u8,
+    /// Its receive error counter, last reported.
+    pub rx_errors: u8,
+    /// The largest transmit error counter reported.
+    pub max_tx_errors: u8,
+    /// The largest receive error counter reported.
+    pub max_rx_errors: u8,
+}
+
+impl CanBusHealth {
+    /// The name of a state in the summary.
+    pub fn name(s: wire::errframe::ErrorState) -> &'static str {
+        use wire::errframe::ErrorState as E;
+        match s {
+            E::Active => "active",
+            E::Warning => "warning",
+            E::Passive => "passive",
+            E::BusOff => "bus-off",
+        }
+    }
+
+    /// A state's rank, worst last (0: never reported or active).
+    pub fn rank(state: &str) -> u8 {
+        match state {
+            "warning" => 1,
+            "passive" => 2,
+            "bus-off" => 3,
+            _ => 0,
+        }
+    }
 }

@@ -384,6 +384,15 @@ fn north_finding_drill_lands_within_3_sigma_and_is_the_same_at_any_pace() {
         "the same drill at x3 and x25 must give the same result"
     );
     assert_eq!(r["drill"]["duration_s"], fast["drill"]["duration_s"]);
+    // on the bus model of a 1 Mbit/s bus (the default), which is part of what repeats: every
+    // identifier's delays, the load, the command round trip, each node's queue
+    assert_eq!(r["bus"]["bitrate_bps"], 1_000_000.0);
+    assert_eq!(r["bus"]["ideal"], false);
+    assert!(r["bus"]["round_trip"]["commands"].as_u64().unwrap() > 20);
+    assert_eq!(
+        r["bus"], fast["bus"],
+        "the bus model's figures at x3 and x25"
+    );
     // and all nav sent, to its last frame: the drill's end is where nav's NAV_TIME says the
     // procedure is over, and the stream's end waits for nav's watchdog, so no wall time
     // decides how many samples nav gets after its result

@@ -57,6 +57,22 @@ pub fn format_line(t_us: u64, iface: &str, frame: &RawFrame) -> String {
     s
 }
 
+/// An error frame as `candump -l` writes it: its identifier with `CAN_ERR_FLAG` in eight hex
+/// digits, its eight data bytes.
+pub fn format_error_line(t_us: u64, iface: &str, e: &crate::errframe::ErrorFrame) -> String {
+    use std::fmt::Write;
+    let mut s = format!(
+        "({}.{:06}) {iface} {:08X}#",
+        t_us / 1_000_000,
+        t_us % 1_000_000,
+        e.can_id()
+    );
+    for b in e.data {
+        let _ = write!(s, "{b:02X}");
+    }
+    s
+}
+
 /// Parse line number `line` (from 1) of a log; `Ok(None)` for a blank line.
 pub fn parse_line(text: &str, line: usize) -> Result<Option<LogEntry>, LogError> {
     let t = text.trim();

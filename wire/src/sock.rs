@@ -14,8 +14,8 @@ pub enum FrameConvError {
     #[error("remote frame 0x{0:03X}: the contract has no remote frames")]
     Remote(u32),
     /// Error frame from the controller.
-    #[error("CAN error frame (class 0x{0:08X})")]
-    Error(u32),
+    #[error("CAN error frame (class 0x{:08X}: {})", .0.class, .0.describe())]
+    Error(crate::errframe::ErrorFrame),
     /// Id out of range for a standard frame.
     #[error("id 0x{0:X} does not fit an 11-bit identifier")]
     BadId(u16),
@@ -41,7 +41,15 @@ pub fn from_can_frame(f: &CanFrame) -> Result<RawFrame, FrameConvError> {
             Id::Standard(id) => u32::from(id.as_raw()),
             Id::Extended(id) => id.as_raw(),
         })),
-        CanFrame::Error(e) => Err(FrameConvError::Error(e.error_bits())),
+        CanFrame::Error(e) => {
+            let mut data = [0u8; 8];
+            let p = e.data();
+            data[..p.len().min(8)].copy_from_slice(&p[..p.len().min(8)]);
+            Err(FrameConvError::Error(crate::errframe::ErrorFrame {
+                class: e.error_bits(),
+                data,
+            }))
+        }
     }
 }
 
@@ -145,6 +153,51 @@ fn timestamp_ns(c: &Control, len: usize) -> Option<u64> {
     None
 }
 
+/// Send the error frame `e` on the CAN raw socket `fd` (as a controller's driver would raise
+/// it; on vcan every socket with an error filter receives it).
+pub fn send_error_frame(
+    fd: std::os::fd::RawFd,
+    e: &crate::errframe::ErrorFrame,
+) -> std::io::Result<()> {
+    let k = KernelFrame {
+        can_id: e.can_id(),
+        len: 8,
+        data: e.data,
+        ..Default::default()
+    };
+    // SAFETY: one live, initialised KernelFrame of its own size.
+    let n = unsafe {
+        libc::write(
+            fd,
+            (&k as *const KernelFrame).cast(),
+            std::mem::size_of::<KernelFrame>(),
+        )
+    };
+    if n < 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}
+
+/// Sets the error classes socket `fd` receives as error frames (`CAN_RAW_ERR_FILTER`; 0: none,
+/// the kernel's default; [`crate::errframe::CAN_ERR_MASK`]: all).
+pub fn set_error_filter(fd: std::os::fd::RawFd, mask: u32) -> std::io::Result<()> {
+    // SAFETY: a u32 option value of its own size for a CAN raw socket option.
+    let r = unsafe {
+        libc::setsockopt(
+            fd,
+            libc::SOL_CAN_RAW,
+            libc::CAN_RAW_ERR_FILTER,
+            (&mask as *const u32).cast(),
+            std::mem::size_of::<u32>() as libc::socklen_t,
+        )
+    };
+    if r != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}
+
 /// Send `frames` on the CAN raw socket `fd`, up to [`BATCH`] per system call (`sendmmsg`).
 /// Returns how many went out: fewer than given when the socket would block or the transmit queue
 /// is full after the first ones (the caller retries the rest); an error only when none did.
@@ -219,7 +272,10 @@ fn convert(f: &KernelFrame) -> Result<RawFrame, FrameConvError> {
     {
         let id = f.can_id;
         if id & CAN_ERR_FLAG != 0 {
-            Err(FrameConvError::Error(id & 0x1FFF_FFFF))
+            Err(FrameConvError::Error(crate::errframe::ErrorFrame {
+                class: id & 0x1FFF_FFFF,
+                data: f.data,
+            }))
         } else if id & CAN_EFF_FLAG != 0 {
             Err(FrameConvError::Extended(id & 0x1FFF_FFFF))
         } else if id & CAN_RTR_FLAG != 0 {

@@ -157,11 +157,23 @@ impl InProcessBench {
             self.t_first.get_or_insert(t);
         }
         let frames = std::mem::take(&mut self.st.frames);
-        for f in &frames {
+        let errors = std::mem::take(&mut self.st.errors);
+        let mut e = errors.iter().peekable();
+        for (i, f) in frames.iter().enumerate() {
+            // nav's controller's error frames where the bus raised them
+            while let Some((_, _, err)) = e.next_if(|x| x.0 <= i) {
+                self.pipeline.on_can_error(err, &mut self.out);
+                self.act();
+            }
             self.pipeline.on_frame(f, &mut self.out);
             self.act();
         }
+        for (_, _, err) in e {
+            self.pipeline.on_can_error(err, &mut self.out);
+            self.act();
+        }
         self.st.frames = frames;
+        self.st.errors = errors;
         let epochs = std::mem::take(&mut self.st.epochs);
         for e in &epochs {
             // while the receiver's device is gone its output is lost; nav's port goes and comes

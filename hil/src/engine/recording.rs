@@ -84,6 +84,8 @@ enum Input {
     Frame(RawFrame),
     /// A frame nav sent.
     Sent(RawFrame),
+    /// An error frame from nav's controller.
+    Error(wire::errframe::ErrorFrame),
     /// A fix nav decoded.
     Fix(Box<nav::gps::GpsFix>),
     /// Bytes nav read from the receiver.
@@ -127,6 +129,7 @@ impl Replayer {
                 self.p.on_frame(&f, &mut self.out);
             }
             Input::Sent(f) => self.recorded.push(f),
+            Input::Error(e) => self.p.on_can_error(&e, &mut self.out),
             // the fixes are decoded from the bytes where the recording has them
             Input::Fix(_) if self.has_bytes => {}
             Input::Fix(fix) => {
@@ -203,7 +206,11 @@ pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
     let cut = each_message(mcap_path, "replaying", |m| {
         let frame = nav::rawmsg::frame_of;
         let input = match m.channel.topic.as_str() {
-            "/can/raw" => frame(m).map_or(Input::Bad, Input::Frame),
+            "/can/raw" => match (frame(m), nav::rawmsg::error_frame_of(m)) {
+                (Some(f), _) => Input::Frame(f),
+                (None, Some(e)) => Input::Error(e),
+                (None, None) => Input::Bad,
+            },
             "/can/tx" => frame(m).map_or(Input::Bad, Input::Sent),
             // the liveness watchdog's changes, where they happened
             "/nav/event" => match serde_json::from_slice::<serde_json::Value>(&m.data) {
@@ -314,14 +321,12 @@ pub fn export_candump(mcap_path: &Path, iface: &str, out: &mut impl std::io::Wri
         if failed.is_some() || !matches!(m.channel.topic.as_str(), "/can/raw" | "/can/tx") {
             return;
         }
-        let Some(f) = nav::rawmsg::frame_of(m) else {
-            return;
+        let line = match (nav::rawmsg::frame_of(m), nav::rawmsg::error_frame_of(m)) {
+            (Some(f), _) => wire::candump::format_line(m.log_time / 1000, iface, &f),
+            (None, Some(e)) => wire::candump::format_error_line(m.log_time / 1000, iface, &e),
+            (None, None) => return,
         };
-        match writeln!(
-            out,
-            "{}",
-            wire::candump::format_line(m.log_time / 1000, iface, &f)
-        ) {
+        match writeln!(out, "{line}") {
             Ok(()) => n += 1,
             Err(e) => failed = Some(e),
         }

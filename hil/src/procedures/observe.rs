@@ -111,6 +111,8 @@ pub fn watch_solution(
                     ("gps_stale", h.gps_stale),
                     ("turntable", h.turntable),
                     ("filter", h.filter),
+                    ("gps_data", h.gps_data),
+                    ("can_bus", h.can_bus),
                 ] {
                     if on && !w.health_first.iter().any(|(b, _)| b == bit) {
                         w.health_first.push((bit.to_string(), k));

@@ -122,6 +122,14 @@ pub struct BusSettings {
     /// queue is lost and counted.
     #[serde(default = "default_tx_queue")]
     pub tx_queue_frames: usize,
+    /// Faults of the physical layer on the bus model (`[bus.faults]`): a disturbed harness
+    /// (error frames), a stuck-dominant bus, a babbling node, a node's faulty transmitter
+    /// (error-passive, bus-off and recovery; `node = "NAV"`: nav's own controller).
+    #[serde(
+        default,
+        skip_serializing_if = "emulators::canbus::PhysicalFaults::is_empty"
+    )]
+    pub faults: emulators::canbus::PhysicalFaults,
 }
 
 /// How the bus's timing is modelled.
@@ -142,6 +150,7 @@ impl BusSettings {
             bitrate_bps: self.bitrate_bps,
             ideal: self.timing == TimingModel::Ideal,
             tx_queue: self.tx_queue_frames,
+            faults: self.faults.clone(),
         }
     }
 }
@@ -158,6 +167,7 @@ impl Default for BusSettings {
             bitrate_bps: default_bitrate(),
             timing: TimingModel::default(),
             tx_queue_frames: default_tx_queue(),
+            faults: Default::default(),
         }
     }
 }
@@ -212,6 +222,65 @@ impl Scenario {
         let s: Scenario = toml::from_str(text)?;
         s.check()?;
         Ok(s)
+    }
+
+    /// The bus model's physical faults make sense: windows in order and in the run, a
+    /// babbling identifier of 11 bits, a faulty transmitter of a node the contract knows, and
+    /// none on the ideal bus (which has no physical layer).
+    fn check_bus_faults(&self) -> Result<()> {
+        let f = &self.bus.faults;
+        if f.is_empty() {
+            return Ok(());
+        }
+        if self.bus.timing == TimingModel::Ideal {
+            bail!("[bus.faults] need the bus model: bus.timing = \"ideal\" has no physical layer");
+        }
+        let window = |what: &str, from: f64, to: f64| -> Result<()> {
+            if !(from >= 0.0 && to > from && to <= self.duration_s + 1e-9) {
+                bail!(
+                    "bus.faults.{what} [{from}, {to}]: a window from 0 s to the run's end ({} s), its end after its start",
+                    self.duration_s
+                );
+            }
+            Ok(())
+        };
+        for w in &f.disturbed_s {
+            window("disturbed_s", w[0], w[1])?;
+            if !(w[2] > 0.0 && w[2] <= 100_000.0) {
+                bail!(
+                    "bus.faults.disturbed_s: {} errors per second is not in (0, 100000]",
+                    w[2]
+                );
+            }
+        }
+        for w in &f.stuck_dominant_s {
+            window("stuck_dominant_s", w[0], w[1])?;
+        }
+        if f.stuck_dominant_s.windows(2).any(|p| p[1][0] < p[0][1]) {
+            bail!("bus.faults.stuck_dominant_s: the windows must be in time order, apart");
+        }
+        for w in &f.babbling_s {
+            window("babbling_s", w[0], w[1])?;
+            if !(0.0..=2047.0).contains(&w[2]) || w[2].fract() != 0.0 {
+                bail!(
+                    "bus.faults.babbling_s: identifier {} is not an 11-bit identifier",
+                    w[2]
+                );
+            }
+        }
+        for t in &f.tx_faults {
+            window("tx_faults", t.from_s, t.to_s)?;
+            if !wire::ALL_MESSAGES.iter().any(|m| m.sender == t.node) {
+                let mut nodes: Vec<&str> = wire::ALL_MESSAGES.iter().map(|m| m.sender).collect();
+                nodes.dedup();
+                bail!(
+                    "bus.faults.tx_faults: node {:?} sends nothing in the contract (its nodes: {})",
+                    t.node,
+                    nodes.join(", ")
+                );
+            }
+        }
+        Ok(())
     }
 
     /// Sanity checks.
@@ -320,6 +389,7 @@ impl Scenario {
         if self.gps.is_some() && self.drive.is_none() {
             bail!("[gps] needs a [drive]: the antenna rides on the vehicle's route");
         }
+        self.check_bus_faults()?;
         if !(1..=4096).contains(&self.bus.tx_queue_frames) {
             bail!(
                 "bus.tx_queue_frames {} is not in [1, 4096]",

@@ -10,7 +10,7 @@ pub mod nav_time {
     sig!(MODE = SignalSpec::uint("Mode", 40, 4));
     sig!(GPS_RX_BYTES = SignalSpec::uint("GpsRxBytes", 50, 12));
     /// Health bits, in the order of [`super::NavHealth`]'s fields.
-    pub const HEALTH: [SignalSpec; 7] = [
+    pub const HEALTH: [SignalSpec; 8] = [
         SignalSpec::uint("HealthImuTimeout", 44, 1),
         SignalSpec::uint("HealthImuGaps", 45, 1),
         SignalSpec::uint("HealthImuBit", 46, 1),
@@ -18,6 +18,7 @@ pub mod nav_time {
         SignalSpec::uint("HealthTurntable", 48, 1),
         SignalSpec::uint("HealthFilter", 49, 1),
         SignalSpec::uint("HealthGpsData", 62, 1),
+        SignalSpec::uint("HealthCanBus", 63, 1),
     ];
     /// The message.
     pub const SPEC: MessageSpec = MessageSpec {
@@ -36,6 +37,7 @@ pub mod nav_time {
             &HEALTH[5],
             &GPS_RX_BYTES,
             &HEALTH[6],
+            &HEALTH[7],
         ],
         frames_per_second: 50.0,
         sender: "NAV",
@@ -152,10 +154,13 @@ pub struct NavHealth {
     /// The receiver's stream carried bad data (a checksum, framing or binary line, garbage
     /// bytes) in the last second of IMU time.
     pub gps_data: bool,
+    /// nav's CAN controller is error-passive or bus-off, or reported bus errors in the last
+    /// second of IMU time.
+    pub can_bus: bool,
 }
 
 impl NavHealth {
-    pub(crate) fn to_array(self) -> [bool; 7] {
+    pub(crate) fn to_array(self) -> [bool; 8] {
         [
             self.imu_timeout,
             self.imu_gaps,
@@ -164,9 +169,10 @@ impl NavHealth {
             self.turntable,
             self.filter,
             self.gps_data,
+            self.can_bus,
         ]
     }
-    pub(crate) fn from_array(b: [bool; 7]) -> Self {
+    pub(crate) fn from_array(b: [bool; 8]) -> Self {
         Self {
             imu_timeout: b[0],
             imu_gaps: b[1],
@@ -175,6 +181,7 @@ impl NavHealth {
             turntable: b[4],
             filter: b[5],
             gps_data: b[6],
+            can_bus: b[7],
         }
     }
 }

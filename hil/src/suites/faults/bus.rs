@@ -48,22 +48,35 @@ pub(super) fn interface() -> Vec<FaultCase> {
         FaultCase {
             name: "foreign-frame-flood",
             base: Base::Imu,
-            injected: "6 foreign frames per IMU sample (12,000 frames/s, 3 times the IMU's frame rate) from 2 s to 4 s",
-            expected: "every foreign frame counted exactly by id, no IMU sample lost beyond what the kernel counted",
+            injected: "a foreign node queues 6 frames of the lowest priority (0x7E6) per IMU sample (12,000 frames/s, more than the 1 Mbit/s bus can carry beside the IMU) from 2 s to 4 s",
+            expected: "the bus carries what fits after the IMU's frames, the rest overflows the foreign node's queue (counted by the bus model); nav counts every foreign frame that reached it exactly by id; the IMU keeps its priority: no IMU sample lost",
             at_s: 2.0,
             inject: |s, _| s.faults.flood_s = vec![[2.0, 4.0, 6.0]],
             judge: |r, _| {
                 let flood = r.tx.flood_frames;
+                let on_bus = r
+                    .bus
+                    .ids
+                    .iter()
+                    .find(|i| i.id == 0x7E6)
+                    .map_or(0, |i| i.frames);
+                let overflow = r
+                    .bus
+                    .nodes
+                    .iter()
+                    .find(|n| n.name == emulators::canbus::FOREIGN)
+                    .map_or(0, |n| n.overflow);
                 let seen = r.nav.unknown_id_frames;
                 let pass = survived(r)
-                    && flood > 0
-                    && seen + r.nav.kernel_dropped_frames >= flood
-                    && seen <= flood
-                    && r.nav.imu.missing_samples as i64 <= r.bus_lost_frames;
+                    && on_bus > 0
+                    && on_bus + overflow == flood
+                    && seen + r.nav.kernel_dropped_frames >= on_bus
+                    && seen <= on_bus
+                    && r.nav.imu.missing_samples == 0;
                 verdict(
                     pass,
                     format!(
-                        "sent {flood}, counted {seen} (ids {:?}), kernel dropped {}, IMU samples missing {}",
+                        "queued {flood}: {on_bus} on the bus, {overflow} overflowed the node's queue; nav counted {seen} (ids {:?}), kernel dropped {}, IMU samples missing {}",
                         r.nav.unknown_ids, r.nav.kernel_dropped_frames, r.nav.imu.missing_samples
                     ),
                     None,

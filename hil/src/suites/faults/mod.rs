@@ -11,6 +11,7 @@
 mod bus;
 mod gps;
 mod imu;
+mod physical;
 mod turntable;
 
 use crate::report::RunReport;
@@ -135,10 +136,11 @@ const COUNTER_JUMP: u64 = 30_000;
 
 /// The matrix, in table order.
 pub fn matrix() -> Vec<FaultCase> {
-    let groups: [fn() -> Vec<FaultCase>; 7] = [
+    let groups: [fn() -> Vec<FaultCase>; 8] = [
         imu::frames,
         imu::sensor,
         bus::interface,
+        physical::cases,
         bus::nav_process,
         gps::stream,
         gps::device,
