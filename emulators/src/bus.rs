@@ -158,6 +158,9 @@ pub struct Devices {
     pub gps: Option<GpsDevice>,
     /// Where every frame put on the bus is logged, when given.
     pub sent_log: Option<SentLog>,
+    /// Where the bus model's log goes, when given: every frame on the model (nav's too) and
+    /// the error frames of nav's controller, at their simulated times.
+    pub bus_log: Option<SentLog>,
     /// The interface taken down and brought up at points of the stream, when given.
     pub link: Option<LinkOutages>,
 }
@@ -233,6 +236,8 @@ pub struct BusOutcome {
     pub lockstep: LockstepStats,
     /// Lines in the log of sent frames ([`Devices::sent_log`]).
     pub sent_logged: Option<u64>,
+    /// Lines in the bus model's log ([`Devices::bus_log`]).
+    pub bus_logged: Option<u64>,
     /// The bus model: load, each identifier's delays, the command round trip.
     pub bus: crate::canbus::BusStats,
     /// Error frames of nav's controller written to the bus.
@@ -696,6 +701,14 @@ pub fn run(
         {
             port.flush(&mut nav)?;
         }
+        if let Some(log) = dev.bus_log.as_mut() {
+            for (t_ns, x) in &st.trace {
+                match x {
+                    crate::step::Traced::Frame(f) => log.frame_at(*t_ns, f)?,
+                    crate::step::Traced::Error(e) => log.error_at(*t_ns, e)?,
+                }
+            }
+        }
         if let Some(g) = dev.gps.as_mut() {
             deliver_epochs(g, &mut st.epochs, k, &mut nav, stop)?;
         }
@@ -739,6 +752,7 @@ pub fn run(
         gps: dev.gps.map(|g| (g.stats, g.into_pty())),
         lockstep: ls,
         sent_logged: outbox.log.map(SentLog::finish).transpose()?,
+        bus_logged: dev.bus_log.map(SentLog::finish).transpose()?,
         bus,
         error_frames,
     })

@@ -88,8 +88,9 @@ pub struct SentLog {
     lines: u64,
 }
 
-/// Bytes of one binary record: time µs (8), id (2), length (1), data (8).
-const SENT_RECORD: usize = 19;
+/// Bytes of one binary record: time µs (8), the kernel's identifier (4: `CAN_ERR_FLAG` for an
+/// error frame), length (1), data (8).
+const SENT_RECORD: usize = 21;
 
 impl SentLog {
     /// Create the log file `path` for frames written on `iface`.
@@ -117,19 +118,44 @@ impl SentLog {
 
     /// Frames just written to the bus.
     pub(crate) fn frames(&mut self, frames: &[RawFrame]) -> Result<(), CanTxError> {
-        use std::io::Write;
         let t_us = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_micros() as u64);
+        for f in frames {
+            self.record(t_us, u32::from(f.id), f.len, &f.data)?;
+        }
+        Ok(())
+    }
+
+    /// A frame over on the bus model at `t_ns` of simulated time.
+    pub fn frame_at(&mut self, t_ns: u64, f: &RawFrame) -> Result<(), CanTxError> {
+        self.record(t_ns / 1000, u32::from(f.id), f.len, &f.data)
+    }
+
+    /// An error frame raised at `t_ns` of simulated time.
+    pub fn error_at(
+        &mut self,
+        t_ns: u64,
+        e: &wire::errframe::ErrorFrame,
+    ) -> Result<(), CanTxError> {
+        self.record(t_ns / 1000, e.can_id(), 8, &e.data)
+    }
+
+    fn record(
+        &mut self,
+        t_us: u64,
+        can_id: u32,
+        len: u8,
+        data: &[u8; 8],
+    ) -> Result<(), CanTxError> {
+        use std::io::Write;
         let mut rec = [0u8; SENT_RECORD];
         rec[..8].copy_from_slice(&t_us.to_le_bytes());
-        for f in frames {
-            rec[8..10].copy_from_slice(&f.id.to_le_bytes());
-            rec[10] = f.len;
-            rec[11..].copy_from_slice(&f.data);
-            self.out.write_all(&rec).map_err(|e| self.err(e))?;
-        }
-        self.lines += frames.len() as u64;
+        rec[8..12].copy_from_slice(&can_id.to_le_bytes());
+        rec[12] = len;
+        rec[13..].copy_from_slice(data);
+        self.out.write_all(&rec).map_err(|e| self.err(e))?;
+        self.lines += 1;
         Ok(())
     }
 
@@ -145,19 +171,24 @@ impl SentLog {
         for _ in 0..self.lines {
             raw.read_exact(&mut rec).map_err(|e| self.err(e))?;
             let mut data = [0u8; 8];
-            data.copy_from_slice(&rec[11..]);
-            let f = RawFrame {
-                id: u16::from_le_bytes([rec[8], rec[9]]),
-                len: rec[10],
-                data,
-            };
+            data.copy_from_slice(&rec[13..]);
+            let can_id = u32::from_le_bytes([rec[8], rec[9], rec[10], rec[11]]);
             let t_us = u64::from_le_bytes(rec[..8].try_into().unwrap_or([0; 8]));
-            writeln!(
-                text,
-                "{}",
+            let line = if can_id & wire::errframe::CAN_ERR_FLAG != 0 {
+                let e = wire::errframe::ErrorFrame {
+                    class: can_id & wire::errframe::CAN_ERR_MASK,
+                    data,
+                };
+                wire::candump::format_error_line(t_us, &self.iface, &e)
+            } else {
+                let f = RawFrame {
+                    id: (can_id & 0x7FF) as u16,
+                    len: rec[12],
+                    data,
+                };
                 wire::candump::format_line(t_us, &self.iface, &f)
-            )
-            .map_err(|e| self.err(e))?;
+            };
+            writeln!(text, "{line}").map_err(|e| self.err(e))?;
         }
         text.flush().map_err(|e| self.err(e))?;
         let _ = std::fs::remove_file(&self.raw);

@@ -38,6 +38,9 @@ pub struct Step {
     /// Error frames nav's controller raises in this step: before which of `frames` each goes
     /// (its index; `frames.len()`: after them), when (ns), the frame.
     pub errors: Vec<(usize, u64, wire::errframe::ErrorFrame)>,
+    /// Everything on the bus model in this step, nav's frames and the error frames of nav's
+    /// controller included, at its time (ns): the bus's own log on the simulated clock.
+    pub trace: Vec<(u64, Traced)>,
     /// Frames of the devices were lost on the bus in this step (a full queue, a node bus-off,
     /// nav's controller bus-off): nav cannot confirm their samples.
     pub lost: bool,
@@ -51,6 +54,15 @@ pub struct Step {
     pub stop_begins: bool,
     /// The receiver's epochs due by the sample's end, after its frames.
     pub epochs: Vec<Epoch>,
+}
+
+/// An entry of the bus's log ([`Step::trace`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Traced {
+    /// A frame over on the bus.
+    Frame(RawFrame),
+    /// An error frame of nav's controller.
+    Error(wire::errframe::ErrorFrame),
 }
 
 /// What a frame from nav meant to the devices.
@@ -230,6 +242,7 @@ impl Stepper {
         out.times_ns.clear();
         out.epochs.clear();
         out.errors.clear();
+        out.trace.clear();
         out.turntable_frames = 0;
         let lost_before = self.bus.lost_device_frames() + self.unseen;
         let now = ns(out.t);
@@ -294,10 +307,12 @@ impl Stepper {
                 Delivered::Frame(f) => f,
                 Delivered::Error { t_ns, frame } => {
                     *error_frames += 1;
+                    out.trace.push((t_ns, Traced::Error(frame)));
                     out.errors.push((out.frames.len(), t_ns, frame));
                     return;
                 }
             };
+            out.trace.push((f.end_ns, Traced::Frame(f.frame)));
             let m = Message::decode(&f.frame);
             if b.node_name(f.node) == "NAV" {
                 if let (Ok(Message::TtCmd(c)), Some(tt)) = (m, tt.as_mut()) {

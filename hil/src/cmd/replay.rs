@@ -132,12 +132,33 @@ import can
 n = 0
 with can.Logger(sys.argv[2]) as out:
     for m in can.LogReader(sys.argv[1]):
+        # python-can's candump reader takes only bus errors for error frames: a controller's
+        # state change, bus-off or restart (CAN_ERR_FLAG without CAN_ERR_BUSERROR) is one too
+        if not m.is_error_frame and m.is_extended_id and m.arbitration_id & 0x20000000:
+            m = can.Message(
+                timestamp=m.timestamp,
+                channel=m.channel,
+                is_error_frame=True,
+                is_extended_id=True,
+                arbitration_id=m.arbitration_id & 0x1FFFFFFF,
+                data=m.data,
+            )
         out.on_message_received(m)
         n += 1
 print(n)
 "#;
 
 pub(crate) fn candump(recording: &Path, out: Option<&Path>, iface: &str) -> Result<i32> {
+    if recording.extension().is_some_and(|e| e == "log") {
+        // a candump log (a run's bus.log, on the simulated clock): to Vector's formats
+        let Some(out) = out else {
+            bail!(
+                "hil candump {}: a candump log is already candump; give --out FILE.asc or FILE.blf",
+                recording.display()
+            );
+        };
+        return convert_log(recording, out);
+    }
     let mcap = if recording.is_dir() {
         recording.join("nav.mcap")
     } else {
@@ -171,6 +192,50 @@ pub(crate) fn candump(recording: &Path, out: Option<&Path>, iface: &str) -> Resu
 
 /// The recording `mcap` as a Vector log (`format`: asc or blf) at `out`, through python-can's
 /// writers (a candump log in between).
+/// A candump log `log` to `out` (ASC or BLF by its extension), through python-can.
+fn convert_log(log: &Path, out: &Path) -> Result<i32> {
+    let text =
+        std::fs::read_to_string(log).with_context(|| format!("reading {}", log.display()))?;
+    let n = text.lines().filter(|l| !l.trim().is_empty()).count() as u64;
+    let written = python_can_convert(log, out)?;
+    if written != n {
+        bail!(
+            "hil candump: python-can wrote {written} of the {n} frames of {} into {}",
+            log.display(),
+            out.display()
+        );
+    }
+    eprintln!(
+        "hil candump: {n} frames from {} as {} (python-can)",
+        log.display(),
+        out.display()
+    );
+    Ok(0)
+}
+
+/// python-can converts the candump log `log` to `out` (its writer by extension); how many
+/// frames it wrote.
+fn python_can_convert(log: &Path, out: &Path) -> Result<u64> {
+    let o = std::process::Command::new("python3")
+        .arg("-c")
+        .arg(PYTHON_CAN_CONVERT)
+        .arg(log)
+        .arg(out)
+        .output()
+        .context("hil candump: running python3 (the ASC and BLF writers are python-can's)")?;
+    if !o.status.success() {
+        bail!(
+            "hil candump: python-can could not write {}: {}; it needs python3 with python-can (pip install python-can)",
+            out.display(),
+            String::from_utf8_lossy(&o.stderr).trim()
+        );
+    }
+    Ok(String::from_utf8_lossy(&o.stdout)
+        .trim()
+        .parse::<u64>()
+        .unwrap_or(0))
+}
+
 fn vector_log(mcap: &Path, out: &Path, iface: &str, format: &str) -> Result<i32> {
     // the candump log in between, beside the output, removed after
     let tmp = out.with_extension(format!("{format}.candump-tmp.log"));
@@ -182,25 +247,9 @@ fn vector_log(mcap: &Path, out: &Path, iface: &str, format: &str) -> Result<i32>
         std::io::Write::flush(&mut w).with_context(|| format!("writing {}", tmp.display()))?;
         n
     };
-    let o = std::process::Command::new("python3")
-        .arg("-c")
-        .arg(PYTHON_CAN_CONVERT)
-        .arg(&tmp)
-        .arg(out)
-        .output();
+    let written = python_can_convert(&tmp, out);
     let _ = std::fs::remove_file(&tmp);
-    let o = o.context("hil candump: running python3 (the ASC and BLF writers are python-can's)")?;
-    if !o.status.success() {
-        bail!(
-            "hil candump: python-can could not write {} ({format}): {}; it needs python3 with python-can (pip install python-can)",
-            out.display(),
-            String::from_utf8_lossy(&o.stderr).trim()
-        );
-    }
-    let written = String::from_utf8_lossy(&o.stdout)
-        .trim()
-        .parse::<u64>()
-        .unwrap_or(0);
+    let written = written?;
     if written != n {
         bail!(
             "hil candump: python-can wrote {written} of the {n} frames into {}",

@@ -71,6 +71,11 @@ pub fn start_scenario(
         sent_log: sent_log
             .map(|p| emulators::can::SentLog::create(p, iface))
             .transpose()?,
+        // the bus model's own log on the simulated clock, beside the bench's
+        bus_log: sent_log
+            .filter(|_| s.bus.log)
+            .map(|p| emulators::can::SentLog::create(&p.with_file_name("bus.log"), iface))
+            .transpose()?,
         link: (!link_downs.is_empty()).then(|| {
             let name = iface.to_string();
             let mut windows = link_downs.to_vec();

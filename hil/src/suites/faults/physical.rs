@@ -64,7 +64,12 @@ pub(super) fn cases() -> Vec<FaultCase> {
             injected: "the harness disturbed from 2 s to 3 s: 200 frames corrupted (cut by an error frame, sent again)",
             expected: "nav reads every error frame its controller raises (CAN_RAW_ERR_FILTER), counts them as bus errors, sets the can_bus health bit within 0.1 s; no IMU sample lost (the frames are sent again)",
             at_s: 2.0,
-            inject: |s, _| with(s, |f| f.disturbed_s = vec![[2.0, 3.0, 200.0]]),
+            inject: |s, _| {
+                with(s, |f| f.disturbed_s = vec![[2.0, 3.0, 200.0]]);
+                // the bus model's log on the simulated clock, error frames included (read back
+                // as Vector ASC and BLF by tests/tests/can_logs.rs)
+                s.bus.log = true;
+            },
             judge: |r, at| {
                 let l = bit_latency(r, "can_bus", at);
                 let pass = reported(r)
