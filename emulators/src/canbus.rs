@@ -580,7 +580,7 @@ impl CanBus {
         bits: u32,
         events: &mut Vec<(u64, wire::errframe::ErrorFrame)>,
     ) {
-        use wire::errframe::{ErrorFrame, prot};
+        use wire::errframe::prot;
         self.corrupted += 1;
         let end = start + self.bits_ns(bits / 2 + ERROR_FRAME_BITS);
         self.free_ns = end;
@@ -588,31 +588,53 @@ impl CanBus {
         self.last_ns = self.last_ns.max(end);
         self.busy_ns += end - start;
         let at = start + self.bits_ns(bits / 2);
-        for j in 0..self.nodes.len() {
-            if self.nodes[j].off_until.is_some() {
-                continue;
-            }
-            let before = self.nodes[j].state();
-            let n = &mut self.nodes[j];
-            if j == i {
+        // nav's controller reports the error it sent (a bit error) or saw (a stuff error)
+        let kind = if i == self.nav {
+            prot::BIT | prot::TX
+        } else {
+            prot::STUFF
+        };
+        self.confine(i, at, end, Some(kind), events, |n, sender| {
+            if sender {
                 n.tec += 8;
                 n.failed += 1;
                 n.max_tec = n.max_tec.max(n.tec);
             } else {
                 n.rec = (n.rec + 1).min(255);
             }
+        });
+    }
+
+    /// Fault confinement after a frame of `sender`'s: `update` changes each node's counters
+    /// (told whether it is the sender); a node past 255 goes bus-off at `off_at`; nav's
+    /// controller reports the bus error `bus_error` (a protocol error type) and any change of
+    /// its state, at `at`.
+    fn confine(
+        &mut self,
+        sender: usize,
+        at: u64,
+        off_at: u64,
+        bus_error: Option<u8>,
+        events: &mut Vec<(u64, wire::errframe::ErrorFrame)>,
+        update: impl Fn(&mut Node, bool),
+    ) {
+        use wire::errframe::{ErrorFrame, prot};
+        for j in 0..self.nodes.len() {
+            if self.nodes[j].off_until.is_some() {
+                continue;
+            }
+            let before = self.nodes[j].state();
+            update(&mut self.nodes[j], j == sender);
+            let n = &self.nodes[j];
             let (tec, rec, now) = (n.tec, n.rec, n.state());
-            if j == self.nav {
-                let kind = if j == i {
-                    prot::BIT | prot::TX
-                } else {
-                    prot::STUFF
-                };
+            if j == self.nav
+                && let Some(kind) = bus_error
+            {
                 events.push((at, ErrorFrame::bus_error(kind, prot::LOC_DATA, tec, rec)));
                 self.nav_errors += 1;
             }
             if tec > 255 {
-                self.bus_off(j, end, end, events);
+                self.bus_off(j, off_at, off_at, events);
             } else if now != before && j == self.nav {
                 events.push((at, ErrorFrame::state_change(now, tec, rec)));
             }
@@ -630,25 +652,15 @@ impl CanBus {
         if self.timing.faults.is_empty() {
             return;
         }
-        for j in 0..self.nodes.len() {
-            if self.nodes[j].off_until.is_some() {
-                continue;
-            }
-            let before = self.nodes[j].state();
-            let n = &mut self.nodes[j];
-            if j == i {
+        self.confine(i, end, end, None, events, |n, sender| {
+            if sender {
                 n.tec = n.tec.saturating_sub(1);
             } else if n.rec > 127 {
                 n.rec = 120;
             } else {
                 n.rec = n.rec.saturating_sub(1);
             }
-            let now = n.state();
-            if now != before && j == self.nav {
-                let (tec, rec) = (n.tec, n.rec);
-                events.push((end, wire::errframe::ErrorFrame::state_change(now, tec, rec)));
-            }
-        }
+        });
     }
 
     /// Frames of the devices (every node but nav's) lost so far: to a full queue, to a bus-off.

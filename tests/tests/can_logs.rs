@@ -45,6 +45,24 @@ out["cantools"] = {"decoded": decoded, "failed": failed[:5], "failures": len(fai
 print(json.dumps(out))
 "#;
 
+/// `hil candump INPUT --out OUT`, which must succeed.
+fn hil_candump(input: &std::path::Path, out: &std::path::Path) {
+    let o = Command::new(bin("hil"))
+        .arg("candump")
+        .arg(input)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("hil runs");
+    assert!(
+        o.status.success(),
+        "hil candump {} --out {}: {}",
+        input.display(),
+        out.display(),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
 #[test]
 #[ignore = "needs the e2e tests' recordings: run ./run-tests"]
 fn a_runs_bus_reads_back_from_vector_asc_and_blf() {
@@ -52,18 +70,7 @@ fn a_runs_bus_reads_back_from_vector_asc_and_blf() {
     assert!(mcap.is_file(), "{}: run ./run-tests", mcap.display());
     let dir = tempfile::tempdir().unwrap();
     for name in ["bus.log", "bus.asc", "bus.blf"] {
-        let o = Command::new(bin("hil"))
-            .arg("candump")
-            .arg(&mcap)
-            .arg("--out")
-            .arg(dir.path().join(name))
-            .output()
-            .expect("hil runs");
-        assert!(
-            o.status.success(),
-            "hil candump --out {name}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
+        hil_candump(&mcap, &dir.path().join(name));
     }
     let dbc = Command::new(bin("hil"))
         .arg("dbc")
@@ -148,18 +155,7 @@ fn the_bus_models_log_reads_back_with_its_error_frames_on_the_simulated_clock() 
     let dir = tempfile::tempdir().unwrap();
     std::fs::copy(&log, dir.path().join("bus.log")).unwrap();
     for name in ["bus.asc", "bus.blf"] {
-        let o = Command::new(bin("hil"))
-            .arg("candump")
-            .arg(dir.path().join("bus.log"))
-            .arg("--out")
-            .arg(dir.path().join(name))
-            .output()
-            .expect("hil runs");
-        assert!(
-            o.status.success(),
-            "hil candump bus.log --out {name}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
+        hil_candump(&dir.path().join("bus.log"), &dir.path().join(name));
     }
     let out = e2e::python(READ_BACK_ERRORS, &[dir.path()], "python-can's read-back");
     let r: Value = serde_json::from_slice(&out).expect("the read-back prints JSON");

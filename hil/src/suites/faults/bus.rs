@@ -29,9 +29,7 @@ pub(super) fn interface() -> Vec<FaultCase> {
                     // comes first
                     && r.nav.read_errors + r.nav.solution.send_errors + r.nav.command_send_errors
                         >= 1
-                    && r.nav
-                        .last_sample
-                        .is_some_and(|k| imu_time(r, k) > r.scenario.duration_s - 0.5);
+                    && ran_to_end(r);
                 verdict(
                     pass,
                     format!(

@@ -127,6 +127,13 @@ fn survived(r: &RunReport) -> bool {
     r.nav_exit == Some(0)
 }
 
+/// nav took IMU data to the run's last half second (navigation went on after the fault).
+fn ran_to_end(r: &RunReport) -> bool {
+    r.nav
+        .last_sample
+        .is_some_and(|k| imu_time(r, k) > r.scenario.duration_s - 0.5)
+}
+
 fn lat_text(l: Option<f64>) -> String {
     l.map_or("never".into(), |l| format!("{l:.3} s"))
 }
