@@ -52,6 +52,9 @@ pub fn rate_through(
     Some(hth.try_inverse()? * htm)
 }
 
+/// How many times any other gyro's RMS departure from the reference the failed gyro's must be.
+pub const DOMINANCE: f64 = 3.0;
+
 /// How a failure was told apart.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -95,6 +98,8 @@ pub struct ParityMonitor {
     parity: VecDeque<f64>,
     parity_sum: f64,
     recent: VecDeque<[f64; TETRA_GYROS]>,
+    /// The reference rate of each of `recent`'s samples, where there was one.
+    references: VecDeque<Option<Vector3<f64>>>,
     n: u64,
     status: Status,
     last_parity: f64,
@@ -111,6 +116,7 @@ impl ParityMonitor {
             parity: VecDeque::new(),
             parity_sum: 0.0,
             recent: VecDeque::new(),
+            references: VecDeque::new(),
             n: 0,
             status: Status::Healthy,
             last_parity: 0.0,
@@ -144,8 +150,10 @@ impl ParityMonitor {
             self.parity_sum -= self.parity.pop_front().unwrap_or(0.0);
         }
         self.recent.push_back(*outputs);
+        self.references.push_back(reference.copied());
         if self.recent.len() > self.window {
             self.recent.pop_front();
+            self.references.pop_front();
         }
         let alarm = self.parity.len() == self.window
             && (self.parity_sum / self.window as f64).abs()
@@ -170,14 +178,45 @@ impl ParityMonitor {
         rate(outputs, use_)
     }
 
+    /// The gyro that stands out against the reference over the window ([`Self::isolate`]).
+    fn against_reference(&self) -> Option<usize> {
+        let mut ss = [0.0; TETRA_GYROS];
+        let mut n = 0usize;
+        for (o, w) in self.recent.iter().zip(&self.references) {
+            let Some(w) = w else { continue };
+            n += 1;
+            for (i, s) in ss.iter_mut().enumerate() {
+                *s += (o[i] - tetra_triad(i)[0].dot(w)).powi(2);
+            }
+        }
+        if n == 0 {
+            return None;
+        }
+        let mut rms: Vec<(usize, f64)> = ss
+            .iter()
+            .enumerate()
+            .map(|(i, s)| (i, (s / n as f64).sqrt()))
+            .collect();
+        rms.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let (i, first) = rms[0];
+        let second = rms[1].1;
+        (first > self.k * self.sigma && first > DOMINANCE * second).then_some(i)
+    }
+
     /// Which gyro failed, and how that is known.
+    ///
+    /// Against the reference, the gyro whose RMS departure from it over the window is beyond
+    /// `k` sigmas and at least [`DOMINANCE`] times any other gyro's: one sample alone is not
+    /// enough (where the table starts or stops turning, the reference, a rate from the
+    /// encoders over a window, departs from every gyro for a moment, and the largest departure
+    /// can then be a healthy gyro's while a stuck one still reads what the table did before).
+    /// When the reference decides nothing, the signatures below may.
     fn isolate(&self, reference: Option<&Vector3<f64>>) -> Option<(usize, Isolation)> {
         let last = self.recent.back()?;
-        if let Some(w) = reference {
-            let (i, r) = (0..TETRA_GYROS)
-                .map(|i| (i, (last[i] - tetra_triad(i)[0].dot(w)).abs()))
-                .max_by(|a, b| a.1.total_cmp(&b.1))?;
-            return (r > self.k * self.sigma).then_some((i, Isolation::Reference));
+        if reference.is_some()
+            && let Some(i) = self.against_reference()
+        {
+            return Some((i, Isolation::Reference));
         }
         // stuck: not a single change over the window, while the others moved
         let still: Vec<usize> = (0..TETRA_GYROS)
