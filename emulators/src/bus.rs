@@ -463,6 +463,20 @@ impl Port<'_> {
             .flush(self.sock, self.iface, &mut nav.confirmed, &mut nav.latency)
     }
 
+    /// A step's frames into the outbox, with nav's controller's error frames written where
+    /// the bus raised them (between the frames around them).
+    fn take(&mut self, st: &Step, nav: &mut NavSide) -> Result<(), CanTxError> {
+        let mut from = 0;
+        for (at, _, e) in &st.errors {
+            self.outbox.frames.extend_from_slice(&st.frames[from..*at]);
+            from = *at;
+            self.flush(nav)?;
+            self.error_frame(e)?;
+        }
+        self.outbox.frames.extend_from_slice(&st.frames[from..]);
+        Ok(())
+    }
+
     /// An error frame of nav's controller on the bus (after everything before it).
     fn error_frame(&mut self, e: &wire::errframe::ErrorFrame) -> Result<(), CanTxError> {
         use std::os::fd::AsRawFd;
@@ -686,15 +700,7 @@ pub fn run(
             silent = false;
         }
         port.outbox.last = Some(k);
-        let mut from = 0;
-        for (at, _, e) in &st.errors {
-            // nav's controller raises its error frame between the frames around it
-            port.outbox.frames.extend_from_slice(&st.frames[from..*at]);
-            from = *at;
-            port.flush(&mut nav)?;
-            port.error_frame(e)?;
-        }
-        port.outbox.frames.extend_from_slice(&st.frames[from..]);
+        port.take(&st, &mut nav)?;
         if !st.epochs.is_empty()
             || (k + 1).is_multiple_of(batch_samples)
             || port.outbox.frames.len() + 8 > wire::BATCH
@@ -702,12 +708,7 @@ pub fn run(
             port.flush(&mut nav)?;
         }
         if let Some(log) = dev.bus_log.as_mut() {
-            for (t_ns, x) in &st.trace {
-                match x {
-                    crate::step::Traced::Frame(f) => log.frame_at(*t_ns, f)?,
-                    crate::step::Traced::Error(e) => log.error_at(*t_ns, e)?,
-                }
-            }
+            log.trace(&st.trace)?;
         }
         if let Some(g) = dev.gps.as_mut() {
             deliver_epochs(g, &mut st.epochs, k, &mut nav, stop)?;

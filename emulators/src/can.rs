@@ -132,6 +132,17 @@ impl SentLog {
         self.record(t_ns / 1000, u32::from(f.id), f.len, &f.data)
     }
 
+    /// A step's entries of the bus model's log ([`crate::step::Step::trace`]).
+    pub fn trace(&mut self, entries: &[(u64, crate::step::Traced)]) -> Result<(), CanTxError> {
+        for (t_ns, x) in entries {
+            match x {
+                crate::step::Traced::Frame(f) => self.frame_at(*t_ns, f)?,
+                crate::step::Traced::Error(e) => self.error_at(*t_ns, e)?,
+            }
+        }
+        Ok(())
+    }
+
     /// An error frame raised at `t_ns` of simulated time.
     pub fn error_at(
         &mut self,

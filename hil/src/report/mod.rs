@@ -117,21 +117,7 @@ pub fn checks(
             tx.frames, nav.frames_total, nav.non_data_frames, nav.kernel_dropped_frames
         ),
     });
-    if bus.nav_error_frames > 0 || nav.can_bus.error_frames > 0 {
-        out.push(Check {
-            name: "every error frame of nav's controller reached nav".into(),
-            pass: nav.can_bus.error_frames == bus.nav_error_frames,
-            detail: format!(
-                "the bus model raised {} error frames for nav's controller; nav counted {} ({} bus errors, {} bus-off, {} restarts, worst state {:?})",
-                bus.nav_error_frames,
-                nav.can_bus.error_frames,
-                nav.can_bus.bus_errors,
-                nav.can_bus.bus_offs,
-                nav.can_bus.restarts,
-                nav.can_bus.worst_state
-            ),
-        });
-    }
+    out.extend(error_frame_check(bus, nav));
     out.push(Check {
         name: "nav exited cleanly".into(),
         pass: nav_exit == Some(0),
@@ -191,33 +177,7 @@ pub fn checks(
             100.0 * s.max_bus_loss
         ),
     });
-    // frames of identifiers the contract does not know, as the bus carried them (injected,
-    // a foreign node's flood, a babbling node)
-    let foreign: u64 = bus
-        .ids
-        .iter()
-        .filter(|i| wire::spec_for_id(i.id).is_none())
-        .map(|i| i.frames)
-        .sum();
-    for (name, got, want) in [
-        (
-            "unknown-id frames reported",
-            nav.unknown_id_frames,
-            foreign as usize,
-        ),
-        (
-            "wrong-length frames reported",
-            nav.bad_length_frames,
-            s.faults.bad_length_at_s.len(),
-        ),
-    ] {
-        let got = got as usize;
-        out.push(Check {
-            name: name.into(),
-            pass: got == want,
-            detail: format!("nav counted {got}, {want} on the bus"),
-        });
-    }
+    frame_kind_checks(&mut out, s, bus, nav);
     let got = nav.imu.duplicates as usize;
     out.push(Check {
         name: "duplicate frames reported".into(),
@@ -273,6 +233,59 @@ pub fn checks(
         );
     }
     (out, lost)
+}
+
+/// nav counted every error frame the bus model raised for its controller (runs with any).
+fn error_frame_check(bus: &emulators::canbus::BusStats, nav: &Summary) -> Option<Check> {
+    let c = &nav.can_bus;
+    (bus.nav_error_frames > 0 || c.error_frames > 0).then(|| Check {
+        name: "every error frame of nav's controller reached nav".into(),
+        pass: c.error_frames == bus.nav_error_frames,
+        detail: format!(
+            "the bus model raised {} error frames for nav's controller; nav counted {} ({} bus errors, {} bus-off, {} restarts, worst state {:?})",
+            bus.nav_error_frames,
+            c.error_frames,
+            c.bus_errors,
+            c.bus_offs,
+            c.restarts,
+            c.worst_state
+        ),
+    })
+}
+
+/// nav counted the frames of identifiers the contract does not know as the bus carried them
+/// (injected, a foreign node's flood, a babbling node), and the wrong-length frames injected.
+fn frame_kind_checks(
+    out: &mut Vec<Check>,
+    s: &Scenario,
+    bus: &emulators::canbus::BusStats,
+    nav: &Summary,
+) {
+    let foreign: u64 = bus
+        .ids
+        .iter()
+        .filter(|i| wire::spec_for_id(i.id).is_none())
+        .map(|i| i.frames)
+        .sum();
+    for (name, got, want) in [
+        (
+            "unknown-id frames reported",
+            nav.unknown_id_frames,
+            foreign as usize,
+        ),
+        (
+            "wrong-length frames reported",
+            nav.bad_length_frames,
+            s.faults.bad_length_at_s.len(),
+        ),
+    ] {
+        let got = got as usize;
+        out.push(Check {
+            name: name.into(),
+            pass: got == want,
+            detail: format!("nav counted {got}, {want} on the bus"),
+        });
+    }
 }
 
 /// The checks of every procedure scenario `s` ran, on its outcome and nav's summary.

@@ -57,6 +57,13 @@ fn with(s: &mut Scenario, f: impl FnOnce(&mut PhysicalFaults)) {
 /// Error frames, a stuck bus, a babbling node, controllers going bus-off (the IMU's, nav's
 /// own, the turntable's).
 pub(super) fn cases() -> Vec<FaultCase> {
+    let mut v = disturbances();
+    v.extend(bus_off());
+    v
+}
+
+/// What the bus does to everybody: error frames, a stuck bus, a babbling node.
+fn disturbances() -> Vec<FaultCase> {
     vec![
         FaultCase {
             name: "can-error-frames",
@@ -157,6 +164,12 @@ pub(super) fn cases() -> Vec<FaultCase> {
                 )
             },
         },
+    ]
+}
+
+/// A controller going bus-off: the IMU's, nav's own, the turntable's.
+fn bus_off() -> Vec<FaultCase> {
+    vec![
         FaultCase {
             name: "can-imu-bus-off",
             base: Base::Imu,
