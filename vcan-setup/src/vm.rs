@@ -30,7 +30,7 @@ pub const APT_PACKAGES: &[&str] = &[
 
 /// can-utils programs the guest carries (at their host paths), so that tests and people can
 /// watch and play the bus with the field's own tools.
-pub const CAN_UTILS: &[&str] = &["candump", "canplayer", "cansend", "cangen"];
+pub const CAN_UTILS: &[&str] = &["candump", "canplayer", "cansend", "cangen", "canbusload"];
 
 /// Programs the guest carries when the host has them (at their host paths): gpsd, so that a
 /// bench run in the guest can put gpsd between the GPS emulator's pty and nav, as a vehicle
