@@ -2,9 +2,9 @@
 //! that what nav receives, and in what order, depends on the scenario and its seed only.
 //!
 //! For each IMU sample the scheduler writes what [`crate::step::Stepper`] says, in its order:
-//! the sample's IMU frames; then the turntable's frames due at that sample (acknowledgements of
-//! the commands that take effect there, then the status frames when due); then the GPS
-//! receiver's sentences due by then on its pty. The frames of one sample therefore always reach
+//! the frames over on the bus model by the next sample's end (the sample's IMU frames, the
+//! turntable's acknowledgements and status frames, a babbling node's; the error frames of nav's
+//! controller between them); then the GPS receiver's sentences due by then on its pty. The frames of one sample therefore always reach
 //! nav in the same order, whatever the machine's speed or the way its processes are scheduled.
 //!
 //! **The receiver's bytes** go to the pty once the frames before them are on vcan, when nav has

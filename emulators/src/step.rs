@@ -1,7 +1,9 @@
-//! The order in which the bench's devices act, written once: each IMU sample's frames, then the
-//! turntable's frames due after that sample, then the GPS receiver's epochs due by the
-//! sample's end; and what the devices make of nav's frames (NAV_TIME places the turntable
-//! commands that came before it). Pure: no I/O, no wall time.
+//! The order in which the bench's devices act, written once: each IMU sample's frames and the
+//! turntable's frames due after that sample, through the bus model ([`crate::canbus`]: on the
+//! ideal bus in that order, on the modelled bus in the order they complete, nav's frames taking
+//! bus time among them), then the GPS receiver's epochs due by the sample's end; and what the
+//! devices make of nav's frames (NAV_TIME places the frames nav sent before it on the bus; a
+//! turntable command reaches the mechanism when it is over). Pure: no I/O, no wall time.
 //!
 //! The bus scheduler ([`crate::bus::run`]) puts each [`Step`] on vcan and the pty; the
 //! in-process runs feed it to nav's pipeline directly. Both call [`Stepper::step`] and
