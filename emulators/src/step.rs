@@ -33,8 +33,6 @@ pub struct Step {
     /// The devices' frames that go on the bus from the sample's end until the next one's, in
     /// the order the bus model puts them there: the IMU's (with any injected), the turntable's.
     pub frames: Vec<RawFrame>,
-    /// When each of `frames` is on the bus (its end), simulated ns.
-    pub times_ns: Vec<u64>,
     /// How many of `frames` are the turntable's.
     pub turntable_frames: usize,
     /// Error frames nav's controller raises in this step: before which of `frames` each goes
@@ -241,7 +239,6 @@ impl Stepper {
         out.k = self.imu.imu().next_index();
         out.t = self.imu.next_time();
         out.frames.clear();
-        out.times_ns.clear();
         out.epochs.clear();
         out.errors.clear();
         out.trace.clear();
@@ -342,7 +339,6 @@ impl Stepper {
                 return;
             }
             out.frames.push(f.frame);
-            out.times_ns.push(f.end_ns);
             if wire::spec_for_id(f.frame.id).is_some_and(|s| s.sender == "TT") {
                 out.turntable_frames += 1;
             }
