@@ -48,10 +48,33 @@ enum Cmd {
         /// Install missing guest prerequisites first (needs root).
         #[arg(long)]
         install: bool,
+        /// Make a TCP port of the guest reachable from the host (repeatable):
+        /// `HOST_ADDR:PORT` forwards that host address to the same port in the guest,
+        /// `HOST_ADDR:PORT=GUEST_PORT` to another. Natively: nothing to forward.
+        #[arg(long = "forward", value_parser = parse_forward)]
+        forward: Vec<(std::net::SocketAddr, u16)>,
         /// The command and its arguments.
         #[arg(trailing_var_arg = true, required = true)]
         command: Vec<String>,
     },
+}
+
+/// `ADDR:PORT` or `ADDR:PORT=GUEST_PORT`.
+fn parse_forward(s: &str) -> Result<(std::net::SocketAddr, u16), String> {
+    let (host, guest) = match s.split_once('=') {
+        Some((h, g)) => (h, Some(g)),
+        None => (s, None),
+    };
+    let host: std::net::SocketAddr = host
+        .parse()
+        .map_err(|e| format!("{host:?} is not ADDR:PORT ({e})"))?;
+    let guest = match guest {
+        Some(g) => g
+            .parse()
+            .map_err(|e| format!("{g:?} is not a port ({e})"))?,
+        None => host.port(),
+    };
+    Ok((host, guest))
 }
 
 fn main() -> std::process::ExitCode {
@@ -107,6 +130,7 @@ fn real_main() -> Result<()> {
             memory_mb,
             timeout_s,
             install,
+            forward,
             command,
         } => {
             let native = !vm && matches!(vcan_setup::can_support(), CanSupport::Available);
@@ -122,6 +146,7 @@ fn real_main() -> Result<()> {
                 shares,
                 memory_mb,
                 timeout: Duration::from_secs(timeout_s),
+                forward_tcp: forward,
                 ..VmOptions::default()
             };
             let out = if native {

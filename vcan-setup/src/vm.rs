@@ -20,6 +20,12 @@ const MODULES: &[&str] = &[
     "virtio_pci",
 ];
 
+/// Kernel modules the guest loads when it has a network card ([`VmOptions::forward_tcp`]).
+const NET_MODULES: &[&str] = &["virtio_net"];
+
+/// The guest's address on QEMU's user-mode network (its default).
+pub const GUEST_IP: &str = "10.0.2.15";
+
 /// Debian packages the guest needs.
 pub const APT_PACKAGES: &[&str] = &[
     "qemu-system-x86",
@@ -62,6 +68,11 @@ pub struct VmOptions {
     pub echo: bool,
     /// More executables whose shared libraries the guest needs (the command's own are found).
     pub libs_for: Vec<PathBuf>,
+    /// TCP ports of the guest reachable from the host: (host address, guest port). The guest
+    /// then gets a network card on QEMU's user-mode network (address [`GUEST_IP`], no route
+    /// out) and QEMU forwards each host address to the guest's port (a live view's server
+    /// inside the guest, watched from the host).
+    pub forward_tcp: Vec<(std::net::SocketAddr, u16)>,
 }
 
 impl Default for VmOptions {
@@ -75,6 +86,7 @@ impl Default for VmOptions {
             timeout: Duration::from_secs(40 * 60),
             echo: true,
             libs_for: Vec::new(),
+            forward_tcp: Vec::new(),
         }
     }
 }
@@ -224,7 +236,7 @@ pub fn install_prereqs() -> Result<VmPrereqs> {
 }
 
 /// Module files in load order (dependencies first), from `modules.dep`.
-fn module_files(kver: &str) -> Result<Vec<PathBuf>> {
+fn module_files(kver: &str, wanted: &[&str]) -> Result<Vec<PathBuf>> {
     let base = Path::new("/lib/modules").join(kver);
     let dep = std::fs::read_to_string(base.join("modules.dep"))
         .map_err(io_ctx(format!("reading {}/modules.dep", base.display())))?;
@@ -267,7 +279,7 @@ fn module_files(kver: &str) -> Result<Vec<PathBuf>> {
         }
         order.push(path.to_string());
     }
-    for m in MODULES {
+    for m in wanted {
         let key = m.replace('-', "_");
         match table.get(&key) {
             Some((path, _)) => visit(&path.clone(), &table, &mut order, &norm),
@@ -343,6 +355,7 @@ fn build_initramfs(
     mods: &[PathBuf],
     execs: &[PathBuf],
     shares: &[PathBuf],
+    net: bool,
 ) -> Result<Vec<u8>> {
     let mut a = Archive::default();
     for d in [
@@ -408,7 +421,7 @@ mount -t proc proc /proc; mount -t sysfs sys /sys; mount -t devtmpfs dev /dev
 mkdir -p /dev/pts /dev/shm; mount -t devpts devpts /dev/pts; mount -t tmpfs tmp /tmp; mount -t tmpfs shm /dev/shm
 for m in {mods}; do insmod /lib/modules/$m || echo "vcan-setup-guest: insmod $m failed"; done
 ip link set lo up
-# nav runs unprivileged: the socket buffer it asks for is capped by rmem_max (set-up's job, as
+{net}# nav runs unprivileged: the socket buffer it asks for is capped by rmem_max (set-up's job, as
 # on a vehicle's image)
 echo 16777216 > /proc/sys/net/core/rmem_max
 mount -t 9p -o trans=virtio,version=9p2000.L,msize=512000 ctl /run/vcan-setup
@@ -418,7 +431,12 @@ echo $? > /run/vcan-setup/rc
 sync
 poweroff -f
 "#,
-        mods = names.join(" ")
+        mods = names.join(" "),
+        net = if net {
+            format!("ip link set eth0 up && ip addr add {GUEST_IP}/24 dev eth0 || echo 'vcan-setup-guest: no network card'\n")
+        } else {
+            String::new()
+        }
     );
     a.file("init", 0o755, init.as_bytes());
     Ok(a.finish())
@@ -432,7 +450,11 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
         context: "run".into(),
         source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "empty command"),
     })?;
-    let mods = module_files(&pre.kernel_version)?;
+    let mut wanted: Vec<&str> = MODULES.to_vec();
+    if !opts.forward_tcp.is_empty() {
+        wanted.extend(NET_MODULES);
+    }
+    let mods = module_files(&pre.kernel_version, &wanted)?;
     let mut shares: Vec<PathBuf> = Vec::new();
     for s in &opts.shares {
         let c = s
@@ -466,7 +488,8 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
         .tempdir()
         .map_err(io_ctx("creating the guest's control folder"))?;
     let initrd = ctl.path().join("initrd.cpio");
-    std::fs::write(&initrd, build_initramfs(&pre, &mods, &execs, &shares)?)
+    let net = !opts.forward_tcp.is_empty();
+    std::fs::write(&initrd, build_initramfs(&pre, &mods, &execs, &shares, net)?)
         .map_err(io_ctx("writing the initramfs"))?;
     let cwd = opts
         .cwd
@@ -712,6 +735,18 @@ fn qemu_command(l: &Launch<'_>) -> Command {
             s.display()
         ));
     }
+    if !opts.forward_tcp.is_empty() {
+        // user-mode networking: no privilege, nothing on the host's network but the forwards
+        let mut nic = String::from("user,model=virtio-net-pci,restrict=on");
+        for (host, port) in &opts.forward_tcp {
+            nic.push_str(&format!(
+                ",hostfwd=tcp:{}:{}-{GUEST_IP}:{port}",
+                host.ip(),
+                host.port()
+            ));
+        }
+        q.arg("-nic").arg(nic);
+    }
     q
 }
 
@@ -845,7 +880,7 @@ mod tests {
             eprintln!("skipped: no Debian kernel installed (vcan-setup install)");
             return;
         };
-        let files = module_files(&pre.kernel_version).expect("modules resolve");
+        let files = module_files(&pre.kernel_version, MODULES).expect("modules resolve");
         let pos = |n: &str| {
             files
                 .iter()
