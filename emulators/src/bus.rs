@@ -163,6 +163,32 @@ pub struct Devices {
     pub bus_log: Option<SentLog>,
     /// The interface taken down and brought up at points of the stream, when given.
     pub link: Option<LinkOutages>,
+    /// Called after every sample with what it put on the bus model and the devices (a live
+    /// view's watcher): it must return at once (it runs on the scheduler's thread) and it
+    /// changes nothing.
+    pub watch: Option<Watch>,
+    /// A pause a viewer may ask for, when given ([`Hold`]).
+    pub hold: Option<Hold>,
+}
+
+/// A watcher of the stream ([`Devices::watch`]).
+pub type Watch = Box<dyn FnMut(&Step, &Stepper) + Send>;
+
+/// A pause of the stream between two batches, asked for from outside (a viewer's pause
+/// button). While `paused` is set the scheduler stands before its next batch: it writes what
+/// it has, then calls `notify(true)`; once `paused` clears, it writes the next sample's frames
+/// first and then calls `notify(false)`. Whoever pauses nav in `notify` (the bench stops its
+/// process) has nav take what was written before or after the stop, in order, and finds the
+/// stream's next frames waiting for it when it goes on (nav's watchdog does not count a
+/// stopped process's time while an IMU frame waits in its socket): nothing of the pause
+/// reaches a result.
+pub struct Hold {
+    /// The pause is asked for.
+    pub paused: std::sync::Arc<AtomicBool>,
+    /// The stream stands (`true`), the stream goes on (`false`).
+    pub notify: Box<dyn FnMut(bool) + Send>,
+    /// Pauses taken.
+    pub pauses: u64,
 }
 
 /// The CAN interface going down and coming back up at points of the simulated stream (a
@@ -589,6 +615,26 @@ fn hold_for_watchdog(
     Ok(())
 }
 
+/// Stand before sample `k` while `hold` is paused (see [`Hold`]): everything written goes out
+/// before `notify(true)`.
+fn hold_while_paused(
+    port: &mut Port,
+    nav: &mut NavSide,
+    hold: &mut Hold,
+    k: u64,
+    stop: &AtomicBool,
+) -> Result<(), CanTxError> {
+    port.flush(nav)?;
+    hold.pauses += 1;
+    tracing::info!(interface = port.iface, "paused before sample {k}");
+    (hold.notify)(true);
+    while hold.paused.load(Ordering::Relaxed) && !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    tracing::info!(interface = port.iface, "resumed at sample {k}");
+    Ok(())
+}
+
 /// The receiver's epochs due after sample `k` to its device; what nav owes on the bus.
 fn deliver_epochs(
     g: &mut GpsDevice,
@@ -659,6 +705,7 @@ pub fn run(
     let batch_samples = 16u64;
     let mut max_lag_ms = 0u64;
     let mut silent = false;
+    let mut resumed = false;
     while dev.step.running() && !stop.load(Ordering::Relaxed) {
         let k = dev.step.next_index();
         let t = dev.step.next_time();
@@ -666,6 +713,14 @@ pub fn run(
         wait_for_nav(&mut port, &mut nav, &mut dev.step, k, batch_start, stop)?;
         if let Some(l) = dev.link.as_mut() {
             l.before(t, &mut port, &mut nav)?;
+        }
+        if batch_start
+            && let Some(h) = dev.hold.as_mut()
+            && h.paused.load(Ordering::Relaxed)
+        {
+            hold_while_paused(&mut port, &mut nav, h, k, stop)?;
+            clock.catch_up(t);
+            resumed = true;
         }
         if batch_start {
             clock.sleep_until(t);
@@ -701,6 +756,15 @@ pub fn run(
         }
         port.outbox.last = Some(k);
         port.take(&st, &mut nav)?;
+        if let Some(w) = dev.watch.as_mut() {
+            w(&st, &dev.step);
+        }
+        if resumed && let Some(h) = dev.hold.as_mut() {
+            // the stream's next frames wait for nav before it goes on
+            port.flush(&mut nav)?;
+            (h.notify)(false);
+            resumed = false;
+        }
         if !st.epochs.is_empty()
             || (k + 1).is_multiple_of(batch_samples)
             || port.outbox.frames.len() + 8 > wire::BATCH
@@ -716,6 +780,10 @@ pub fn run(
         progress.set(t);
     }
     port.flush(&mut nav)?;
+    if resumed && let Some(h) = dev.hold.as_mut() {
+        // stopped while paused: whoever paused nav lets it go on
+        (h.notify)(false);
+    }
     if let Some(l) = nav.follow
         && !stop.load(Ordering::Relaxed)
         && dev.step.end_awaits_watchdog()

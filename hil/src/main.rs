@@ -52,6 +52,8 @@ enum Cmd {
         /// Output folder (default runs/drill-north-finding-<unix time>).
         #[arg(long)]
         out: Option<PathBuf>,
+        #[command(flatten)]
+        live: LiveArgs,
     },
     /// Replay a nav recording and compare what nav sends with what it sent (bit for bit for the
     /// same build). By default through nav's pipeline in process; with `--bus`, the recorded
@@ -246,6 +248,70 @@ struct BusArgs {
     vm: bool,
 }
 
+/// The live view a run can be watched on.
+#[derive(clap::Args, Clone, Default)]
+struct LiveArgs {
+    /// Serve a live view of the run over Foxglove's WebSocket protocol on ADDR (default
+    /// 127.0.0.1:8765) for the command's whole length: open it in Foxglove or Lichtblick
+    /// ("Open connection", "Foxglove WebSocket", ws://ADDR) with docs/foxglove-layout.json.
+    /// Times are simulated time; the viewer's pause holds the run (its result does not change).
+    /// Through the QEMU guest the port is forwarded to this host.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = hil::live::DEFAULT_ADDR)]
+    live: Option<std::net::SocketAddr>,
+    /// With --live: before the run starts, wait until N viewers have subscribed to every
+    /// channel (at most 5 minutes), so that they see it from its first sample.
+    #[arg(long, value_name = "N", default_value_t = 0, requires = "live")]
+    live_wait: usize,
+    /// The view, once started (a demo's parts share one).
+    #[arg(skip)]
+    view: Option<std::sync::Arc<hil::live::View>>,
+}
+
+impl LiveArgs {
+    /// The arguments that ask for this view again (a command run again in the guest).
+    fn to_args(&self) -> Vec<String> {
+        match self.live {
+            Some(a) => vec![
+                "--live".into(),
+                a.to_string(),
+                "--live-wait".into(),
+                self.live_wait.to_string(),
+            ],
+            None => Vec::new(),
+        }
+    }
+
+    /// The view to run on: the one already started, or a new one (`true`: this caller owns it
+    /// and finishes it), or none.
+    fn view(&self, duration_s: f64) -> Result<(Option<std::sync::Arc<hil::live::View>>, bool)> {
+        Ok(match (&self.view, self.live) {
+            (Some(v), _) => (Some(v.clone()), false),
+            (None, Some(addr)) => (
+                Some(hil::live::View::start(addr, self.live_wait, duration_s)?),
+                true,
+            ),
+            _ => (None, false),
+        })
+    }
+}
+
+/// Stop a live view this command started and say what its viewers got.
+fn finish_view(v: std::sync::Arc<hil::live::View>) {
+    let st = v.finish();
+    for c in &st.clients {
+        eprintln!(
+            "hil: live view: client {}: {} messages sent, {} dropped (fell behind), {} subscriptions",
+            c.peer, c.sent, c.dropped, c.subscriptions
+        );
+    }
+    if st.clients.is_empty() {
+        eprintln!(
+            "hil: live view: nobody watched ({} messages published)",
+            st.published
+        );
+    }
+}
+
 impl BusArgs {
     /// Whether the run goes here: this kernel has CAN and the guest was not asked for (or this
     /// is the guest). Otherwise the command runs again inside the QEMU guest.
@@ -348,6 +414,8 @@ struct TetraArgs {
     #[arg(long)]
     in_process: bool,
     #[command(flatten)]
+    live: LiveArgs,
+    #[command(flatten)]
     bus: BusArgs,
 }
 
@@ -391,6 +459,8 @@ struct CalibrateArgs {
     #[arg(long)]
     in_process: bool,
     #[command(flatten)]
+    live: LiveArgs,
+    #[command(flatten)]
     bus: BusArgs,
 }
 
@@ -429,6 +499,8 @@ struct NorthFindingArgs {
     /// stepped in the order the bench delivers the frames); its result equals the bench's.
     #[arg(long)]
     in_process: bool,
+    #[command(flatten)]
+    live: LiveArgs,
     #[command(flatten)]
     bus: BusArgs,
 }
@@ -606,6 +678,8 @@ struct RunArgs {
     #[arg(long)]
     gpsd: bool,
     #[command(flatten)]
+    live: LiveArgs,
+    #[command(flatten)]
     bus: BusArgs,
 }
 
@@ -630,7 +704,12 @@ fn main() {
 fn real_main(cli: Cli) -> Result<i32> {
     match cli.cmd {
         Cmd::Run(a) => run(a),
-        Cmd::Demo { speed, dwell, out } => demo(speed, dwell, out),
+        Cmd::Demo {
+            speed,
+            dwell,
+            out,
+            live,
+        } => demo(speed, dwell, out, live),
         Cmd::Drill(Drill::NorthFinding(a)) => drill_north_finding(a),
         Cmd::Calibrate(Calibrate::RotatingImu(a)) => calibrate_rotating_imu(a),
         Cmd::Calibrate(Calibrate::Tetrahedral(a)) => calibrate_tetrahedral(a),

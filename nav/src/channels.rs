@@ -42,7 +42,7 @@ impl JsonChannel {
     ];
 
     /// The channel's JSON schema (`nav/schemas/`): its name and text.
-    pub fn schema(self) -> (&'static str, &'static str) {
+    pub const fn schema(self) -> (&'static str, &'static str) {
         match self {
             JsonChannel::ImuSample => (
                 "rlg-hil/nav/imu-sample",

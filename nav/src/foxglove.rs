@@ -30,6 +30,11 @@ pub fn time(ns: u64) -> Value {
     json!({"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000})
 }
 
+/// `position_covariance_type` of a LocationFix: the full covariance is known.
+pub const COVARIANCE_KNOWN: u8 = 3;
+/// `position_covariance_type` of a LocationFix: its diagonal is known.
+pub const COVARIANCE_DIAGONAL: u8 = 2;
+
 /// Foxglove `Log` levels.
 pub const LOG_INFO: u8 = 2;
 /// Warning.
@@ -133,32 +138,66 @@ impl Views {
             .as_array()
             .map(|a| a.iter().filter_map(Value::as_f64).collect())
             .filter(|c: &Vec<f64>| c.len() == 9);
-        let m = json!({
+        let cov = cov.map(|c| (c, COVARIANCE_KNOWN));
+        let (loc, pose) = self.location_and_pose(publish_ns, [lat, lon, h], hpr, vel, cov);
+        out.push((JsonChannel::Location, loc.to_string()));
+        out.push((JsonChannel::Pose, pose.to_string()));
+    }
+
+    /// A solution's `foxglove.LocationFix` (frame `nav`) and `foxglove.PoseInFrame` (frame
+    /// [`POSE_FRAME`], whose origin is the first position given): position `llh` (deg, deg,
+    /// m), heading, pitch, roll `hpr` (deg), ENU velocity (m/s), and the ENU position
+    /// covariance (m^2, row-major) with its Foxglove type ([`COVARIANCE_KNOWN`],
+    /// [`COVARIANCE_DIAGONAL`]) when known. nav's recorder and the bench's live view (from the
+    /// NAV_* frames) make them here, so they look the same.
+    pub fn location_and_pose(
+        &mut self,
+        publish_ns: u64,
+        llh: [f64; 3],
+        hpr: [f64; 3],
+        vel: [f64; 3],
+        cov: Option<(Vec<f64>, u8)>,
+    ) -> (Value, Value) {
+        let [lat, lon, h] = llh;
+        let (cov, cov_type) = cov.unwrap_or_else(|| (vec![0.0; 9], 0));
+        let loc = json!({
             "timestamp": time(publish_ns),
             "frame_id": "nav",
             "latitude": lat,
             "longitude": lon,
             "altitude": h,
-            "position_covariance": cov.clone().unwrap_or_else(|| vec![0.0; 9]),
-            "position_covariance_type": if cov.is_some() { 3 } else { 0 },
+            "position_covariance": cov,
+            "position_covariance_type": cov_type,
             "heading": hpr[0].to_radians(),
             "velocity": {"x": vel[0], "y": vel[1], "z": vel[2]},
         });
-        out.push((JsonChannel::Location, m.to_string()));
+        let [east, north, up] = self.offset(llh);
+        let q = orientation_enu(hpr);
+        let pose = json!({
+            "timestamp": time(publish_ns),
+            "frame_id": POSE_FRAME,
+            "pose": {
+                "position": {"x": east, "y": north, "z": up},
+                "orientation": {"x": q.i, "y": q.j, "z": q.k, "w": q.w},
+            },
+        });
+        (loc, pose)
+    }
+
+    /// Metres east, north and up of [`POSE_FRAME`]'s origin (the first position given; nav's
+    /// own earth model), for position `llh` (deg, deg, m).
+    pub fn offset(&mut self, llh: [f64; 3]) -> [f64; 3] {
+        let [lat, lon, h] = llh;
         let (lat0, lon0, h0) = *self.origin.get_or_insert((lat, lon, h));
         let (rm, rn) = crate::earth::radii(lat0.to_radians());
         let east = (lon - lon0).to_radians() * (rn + h0) * lat0.to_radians().cos();
         let north = (lat - lat0).to_radians() * (rm + h0);
-        let q = orientation_enu(hpr);
-        let m = json!({
-            "timestamp": time(publish_ns),
-            "frame_id": POSE_FRAME,
-            "pose": {
-                "position": {"x": east, "y": north, "z": h - h0},
-                "orientation": {"x": q.i, "y": q.j, "z": q.k, "w": q.w},
-            },
-        });
-        out.push((JsonChannel::Pose, m.to_string()));
+        [east, north, h - h0]
+    }
+
+    /// [`POSE_FRAME`]'s origin (latitude, longitude deg, height m), once a position came.
+    pub fn origin(&self) -> Option<(f64, f64, f64)> {
+        self.origin
     }
 }
 

@@ -248,7 +248,12 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                 }
             }
             _ = tick.tick() => {
-                if gyro_frames > 0 && last_imu.elapsed() > timeout {
+                // an IMU frame waiting in the socket means the loop is late (a loaded computer,
+                // a process stopped and continued), not that the IMU is silent
+                if gyro_frames > 0
+                    && last_imu.elapsed() > timeout
+                    && !shell.sock.as_ref().is_some_and(|s| imu_frame_waiting(s.as_raw_fd()))
+                {
                     pipeline.set_imu_timeout(true, timeout_ms, &mut out);
                     shell.act(&mut out).await?;
                 }
@@ -621,4 +626,28 @@ impl Shell<'_> {
             });
         }
     }
+}
+
+/// Whether the next frame waiting in CAN socket `fd` is an IMU frame (read without taking it).
+fn imu_frame_waiting(fd: std::os::fd::RawFd) -> bool {
+    let mut b = [0u8; 16];
+    // SAFETY: recv(2) into a buffer of its length; MSG_PEEK leaves the frame in the socket.
+    let n = unsafe {
+        libc::recv(
+            fd,
+            b.as_mut_ptr().cast(),
+            b.len(),
+            libc::MSG_PEEK | libc::MSG_DONTWAIT,
+        )
+    };
+    if n < 4 {
+        return false;
+    }
+    let id = u32::from_ne_bytes([b[0], b[1], b[2], b[3]]) & libc::CAN_SFF_MASK;
+    [
+        wire::imu_gyro::SPEC.id,
+        wire::imu_accel::SPEC.id,
+        wire::imu_hk::SPEC.id,
+    ]
+    .contains(&(id as u16))
 }

@@ -433,7 +433,9 @@ poweroff -f
 "#,
         mods = names.join(" "),
         net = if net {
-            format!("ip link set eth0 up && ip addr add {GUEST_IP}/24 dev eth0 || echo 'vcan-setup-guest: no network card'\n")
+            format!(
+                "ip link set eth0 up && ip addr add {GUEST_IP}/24 dev eth0 || echo 'vcan-setup-guest: no network card'\n"
+            )
         } else {
             String::new()
         }

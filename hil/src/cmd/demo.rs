@@ -6,7 +6,7 @@ use cmd::run::run_procedure;
 /// The built-in GPS-aided drive of the demo.
 pub(crate) const DRIVE_GPS: &str = include_str!("../../../scenarios/drive-gps.toml");
 
-pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> {
+pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>, live: LiveArgs) -> Result<i32> {
     let out = absolute(&out.unwrap_or_else(|| default_out("demo")))?;
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
@@ -21,6 +21,7 @@ pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> 
             "--out".into(),
             out.to_string_lossy().into_owned(),
         ];
+        let args = [args, live.to_args()].concat();
         let status = run_in_guest(args, &out, vec![], vec![sibling_binary("nav")?], None)?;
         return Ok(status);
     }
@@ -28,25 +29,14 @@ pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> 
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_secs())
         .unwrap_or(1);
-    eprintln!("hil: demo part 1 of 2: four-position north-finding drill");
-    let drill = drill_north_finding(NorthFindingArgs {
-        heading: None,
-        lat: 28.218157,
-        dwell,
-        speed,
-        disturbances: None,
-        tolerance: 0.1,
-        seed,
-        in_process: false,
-        bus: BusArgs::to(out.join("drill")),
-    })?;
-    eprintln!("hil: demo part 2 of 2: GPS-aided drive (one 1 km lap, NMEA receiver on a pty)");
-    let mut s: Scenario = toml::from_str(DRIVE_GPS).context("built-in drive scenario")?;
-    s.speed = speed;
-    let scen = out.join("drive-gps.toml");
-    std::fs::write(&scen, toml::to_string_pretty(&s)?)?;
-    let drive_out = out.join("drive");
-    let drive = run_procedure(scen, drive_out.clone(), BusArgs::to(drive_out))?;
+    // one live view for both parts, the drive after the drill on its timeline
+    let (view, own_view) = live.view(0.0)?;
+    let live = LiveArgs { view, ..live };
+    let parts = demo_parts(speed, dwell, &out, seed, &live);
+    if let (Some(v), true) = (live.view, own_view) {
+        finish_view(v);
+    }
+    let (drill, drive) = parts?;
     let verdict = |c: i32| if c == 0 { "PASS" } else { "FAIL" };
     let mut t = hil::table::Table::left(&["part", "result", "report"]);
     t.row([
@@ -91,4 +81,40 @@ pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>) -> Result<i32> 
     );
     println!("==============================================================================");
     Ok(if drill == 0 && drive == 0 { 0 } else { 1 })
+}
+
+/// The demo's two parts (drill, drive): their exit statuses.
+fn demo_parts(
+    speed: f64,
+    dwell: f64,
+    out: &Path,
+    seed: u64,
+    live: &LiveArgs,
+) -> Result<(i32, i32)> {
+    eprintln!("hil: demo part 1 of 2: four-position north-finding drill");
+    let drill = drill_north_finding(NorthFindingArgs {
+        heading: None,
+        lat: 28.218157,
+        dwell,
+        speed,
+        disturbances: None,
+        tolerance: 0.1,
+        seed,
+        in_process: false,
+        live: live.clone(),
+        bus: BusArgs::to(out.join("drill")),
+    })?;
+    eprintln!("hil: demo part 2 of 2: GPS-aided drive (one 1 km lap, NMEA receiver on a pty)");
+    let mut s: Scenario = toml::from_str(DRIVE_GPS).context("built-in drive scenario")?;
+    s.speed = speed;
+    let scen = out.join("drive-gps.toml");
+    std::fs::write(&scen, toml::to_string_pretty(&s)?)?;
+    let drive_out = out.join("drive");
+    let drive = run_procedure(
+        scen,
+        drive_out.clone(),
+        BusArgs::to(drive_out),
+        live.clone(),
+    )?;
+    Ok((drill, drive))
 }

@@ -59,5 +59,5 @@ pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
         }
         return Ok(i32::from(o.error_deg.is_none_or(|e| e.abs() > a.tolerance)));
     }
-    run_procedure(scen, out, a.bus)
+    run_procedure(scen, out, a.bus, a.live)
 }

@@ -54,11 +54,13 @@ pub(crate) fn run_in_guest(
     extra.push(out.to_path_buf());
     let exe = std::env::current_exe()?;
     let mut full = vec![exe.to_string_lossy().into_owned()];
+    let (args, forward_tcp) = live_through_guest(args)?;
     full.extend(args);
     let shares = dedupe_nested(vcan_setup::default_shares(&exe, &extra));
     let mut opts = VmOptions {
         shares,
         libs_for,
+        forward_tcp,
         ..VmOptions::default()
     };
     // long runs (the full campus loop) may need more than the default 40 minutes
@@ -94,4 +96,34 @@ pub(crate) fn dedupe_nested(mut shares: Vec<PathBuf>) -> Vec<PathBuf> {
     shares.retain(|p| !all.iter().any(|q| q != p && p.starts_with(q)));
     shares.dedup();
     shares
+}
+
+/// A TCP port of the guest reachable from this host: (host address, guest port).
+pub(crate) type Forward = (std::net::SocketAddr, u16);
+
+/// A live view (`--live ADDR`) asked of a command that runs again in the guest: the guest's
+/// server listens on the same port on all its addresses (the guest has no network but QEMU's
+/// forward), and QEMU forwards ADDR on this host to it. Port 0 becomes a free port here.
+pub(crate) fn live_through_guest(
+    mut args: Vec<String>,
+) -> Result<(Vec<String>, Vec<Forward>)> {
+    let mut forward = Vec::new();
+    if let Some(i) = args.iter().position(|a| a == "--live")
+        && let Some(addr) = args.get(i + 1)
+    {
+        let mut host: std::net::SocketAddr = addr
+            .parse()
+            .with_context(|| format!("--live {addr}: not ADDR:PORT"))?;
+        if host.port() == 0 {
+            let l = std::net::TcpListener::bind(host)
+                .with_context(|| format!("--live {host}: no free port"))?;
+            host = l.local_addr()?;
+        }
+        args[i + 1] = format!("0.0.0.0:{}", host.port());
+        forward.push((host, host.port()));
+        eprintln!(
+            "hil: live view: ws://{host} on this host, forwarded into the guest (up once it has booted)"
+        );
+    }
+    Ok((args, forward))
 }

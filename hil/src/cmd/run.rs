@@ -24,14 +24,21 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
             Some(n) => n.clone(),
             None => sibling_binary("nav")?,
         };
+        let (view, own_view) = a.live.view(s.duration_s)?;
         let opts = RunOptions {
             progress: true,
             reference_checks: !a.no_reference,
             gps_via_gpsd: a.gpsd,
+            live: view.clone(),
             ..RunOptions::new(&a.bus.iface, out.clone(), nav_bin)
         };
         let backend = if in_guest { "vm" } else { "native" };
-        let r = run_here(&s, &opts, backend)?;
+        let r = run_here(&s, &opts, backend);
+        drop(opts);
+        if let (Some(v), true) = (view, own_view) {
+            finish_view(v);
+        }
+        let r = r?;
         if a.bus.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
         } else {
@@ -77,6 +84,7 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
     if a.gpsd {
         args.push("--gpsd".into());
     }
+    args.extend(a.live.to_args());
     run_in_guest(
         args,
         &out,
@@ -102,7 +110,12 @@ pub(crate) fn procedure_folder(
 }
 
 /// An operator procedure on the bench: the scenario file `scen` through `hil run` into `out`.
-pub(crate) fn run_procedure(scen: PathBuf, out: PathBuf, bus: BusArgs) -> Result<i32> {
+pub(crate) fn run_procedure(
+    scen: PathBuf,
+    out: PathBuf,
+    bus: BusArgs,
+    live: LiveArgs,
+) -> Result<i32> {
     run(RunArgs {
         scenario: Some(scen),
         duration: None,
@@ -110,6 +123,7 @@ pub(crate) fn run_procedure(scen: PathBuf, out: PathBuf, bus: BusArgs) -> Result
         nav: None,
         no_reference: false,
         gpsd: false,
+        live,
         bus: BusArgs {
             out: Some(out),
             ..bus

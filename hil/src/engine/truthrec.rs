@@ -26,9 +26,18 @@ use std::path::Path;
 /// Rate of the truth channels, Hz.
 pub const TRUTH_HZ: f64 = 10.0;
 
+/// `/truth/state`'s JSON schema.
+pub const STATE_SCHEMA: &str = include_str!("../../schemas/truth-state.json");
+/// `/truth/turntable`'s JSON schema.
+pub const TURNTABLE_SCHEMA: &str = include_str!("../../schemas/turntable-truth.json");
+
 /// The truth at simulated time `t`: (lat deg, lon deg, h m, velocity ENU m/s, heading, pitch,
 /// roll deg).
-fn state(drive: Option<&Drive>, site: &Static, t: f64) -> (f64, f64, f64, [f64; 3], [f64; 3]) {
+pub(crate) fn state(
+    drive: Option<&Drive>,
+    site: &Static,
+    t: f64,
+) -> (f64, f64, f64, [f64; 3], [f64; 3]) {
     match drive {
         Some(d) => {
             let (lat, lon, h) = d.position(t);
@@ -103,7 +112,7 @@ pub fn write(
     let state_ch = channel(
         &mut w,
         "rlg-hil/bench/truth-state",
-        include_bytes!("../../schemas/truth-state.json"),
+        STATE_SCHEMA.as_bytes(),
         "/truth/state",
     )?;
     let fix_ch = channel(
@@ -129,7 +138,7 @@ pub fn write(
         let ch = channel(
             &mut w,
             "rlg-hil/bench/turntable-truth",
-            include_bytes!("../../schemas/turntable-truth.json"),
+            TURNTABLE_SCHEMA.as_bytes(),
             "/truth/turntable",
         )?;
         for (k, tt) in turntable.iter().enumerate() {
@@ -146,14 +155,7 @@ pub fn write(
             "/bench/faults",
         )?;
         for (k, f) in faults.iter().enumerate() {
-            let detail = if f.detail.is_empty() {
-                String::new()
-            } else {
-                format!(": {}", f.detail)
-            };
-            let message = format!("{} {} {}{detail}", f.device, f.fault, f.phase);
-            let ns = (f.t_s.max(0.0) * 1e9) as u64;
-            let m = nav::foxglove::log(ns, nav::foxglove::LOG_WARNING, "bench", message);
+            let m = fault_message(f);
             put(&mut w, ch, k, f.t_s, m.to_string().as_bytes())?;
             n += 1;
         }
@@ -161,21 +163,7 @@ pub fn write(
     let steps = (duration_s.max(0.0) * TRUTH_HZ).floor() as u64;
     for k in 0..=steps {
         let t = k as f64 / TRUTH_HZ;
-        let (lat, lon, h, v, hpr) = state(drive, site, t);
-        let publish = (t * 1e9) as u64;
-        let s = serde_json::json!({
-            "t_s": t, "lat_deg": lat, "lon_deg": lon, "h_m": h,
-            "vel_enu_mps": v, "hpr_deg": hpr,
-        });
-        let f = serde_json::json!({
-            "timestamp": nav::foxglove::time(publish),
-            "frame_id": "truth",
-            "latitude": lat, "longitude": lon, "altitude": h,
-            "position_covariance": vec![0.0; 9],
-            "position_covariance_type": 0,
-            "heading": hpr[0].to_radians(),
-            "velocity": {"x": v[0], "y": v[1], "z": v[2]},
-        });
+        let (s, f) = truth_messages(drive, site, t);
         for (ch, m) in [(state_ch, s), (fix_ch, f)] {
             put(&mut w, ch, k as usize, t, m.to_string().as_bytes())?;
             n += 1;
@@ -183,6 +171,43 @@ pub fn write(
     }
     w.finish().with_context(|| format!("{}", path.display()))?;
     Ok(n)
+}
+
+/// `/truth/state` and `/truth/location` at simulated time `t` (the MCAP file's and the live
+/// view's).
+pub(crate) fn truth_messages(
+    drive: Option<&Drive>,
+    site: &Static,
+    t: f64,
+) -> (serde_json::Value, serde_json::Value) {
+    let (lat, lon, h, v, hpr) = state(drive, site, t);
+    let publish = (t.max(0.0) * 1e9) as u64;
+    let s = serde_json::json!({
+        "t_s": t, "lat_deg": lat, "lon_deg": lon, "h_m": h,
+        "vel_enu_mps": v, "hpr_deg": hpr,
+    });
+    let f = serde_json::json!({
+        "timestamp": nav::foxglove::time(publish),
+        "frame_id": "truth",
+        "latitude": lat, "longitude": lon, "altitude": h,
+        "position_covariance": vec![0.0; 9],
+        "position_covariance_type": 0,
+        "heading": hpr[0].to_radians(),
+        "velocity": {"x": v[0], "y": v[1], "z": v[2]},
+    });
+    (s, f)
+}
+
+/// `/bench/faults`' `foxglove.Log` of an injected fault's start or end.
+pub(crate) fn fault_message(f: &crate::engine::faultlog::FaultEvent) -> serde_json::Value {
+    let detail = if f.detail.is_empty() {
+        String::new()
+    } else {
+        format!(": {}", f.detail)
+    };
+    let message = format!("{} {} {}{detail}", f.device, f.fault, f.phase);
+    let ns = (f.t_s.max(0.0) * 1e9) as u64;
+    nav::foxglove::log(ns, nav::foxglove::LOG_WARNING, "bench", message)
 }
 
 #[cfg(test)]

@@ -72,6 +72,9 @@ pub struct RunReport {
     pub checks: Vec<Check>,
     /// All checks passed.
     pub pass: bool,
+    /// The live view, when the run had one: what its clients got and lost.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub live: Option<crate::live::bench::RunViewStats>,
 }
 
 /// What the bench's side of a run saw, for [`checks`].

@@ -47,6 +47,8 @@ pub struct RunOptions {
     /// Put gpsd between the GPS emulator's pty and nav (nav's `[gps] source = "gpsd"`), as a
     /// vehicle shares one receiver; gpsd's own log goes to `gpsd.log` in the run folder.
     pub gps_via_gpsd: bool,
+    /// The live view the run is shown on, when there is one.
+    pub live: Option<std::sync::Arc<crate::live::View>>,
 }
 
 /// The account nav runs as. nav needs no privilege (a raw CAN socket, and the serial port it
@@ -182,6 +184,7 @@ impl RunOptions {
             kill_nav_at_s: None,
             nav_account: nav_account(),
             gps_via_gpsd: false,
+            live: None,
         }
     }
 }
@@ -287,6 +290,15 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let mut phases = Phases::starting_now();
     let nav = start_nav(&opts.nav_bin, &setup.cfg_path, opts.nav_account)?;
     phases.end("nav start");
+    let live = match &opts.live {
+        Some(v) => {
+            let faults = crate::engine::faultlog::schedule(s, &opts.link_downs, opts.kill_nav_at_s);
+            let l = crate::live::bench::BenchRun::begin(v, s, faults)?;
+            l.set_nav_pid(nav.child.id());
+            Some(l)
+        }
+        None => None,
+    };
 
     let watch_stop = Arc::new(AtomicBool::new(false));
     let watch = {
@@ -303,12 +315,13 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         gps_device,
         Some(&opts.out.join("bench-can.log")),
         &opts.link_downs,
+        live.as_ref(),
     )?;
     let Supervised {
         mut drill,
         killed_at,
         mut memory,
-    } = supervise(s, opts, &nav, &devices);
+    } = supervise(s, opts, &nav, &devices, live.as_ref());
     let wall = t0.elapsed().as_secs_f64();
     phases.end("devices");
     let sim_reached = devices.sim_time();
@@ -354,7 +367,11 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         memory,
         solution,
     };
-    let r = score(s, opts, &setup.nav_cfg, backend, ended, &mut phases)?;
+    let mut r = score(s, opts, &setup.nav_cfg, backend, ended, &mut phases)?;
+    if let Some(l) = live {
+        let j = serde_json::to_value(&r)?;
+        r.live = Some(l.end(j, crate::report::card(&r)));
+    }
     write_report(&r, opts)?;
     Ok(r)
 }
@@ -472,6 +489,7 @@ fn supervise(
     opts: &RunOptions,
     nav: &NavProcess,
     devices: &crate::engine::devices::Running<emulators::bus::BusOutcome>,
+    live: Option<&crate::live::bench::BenchRun>,
 ) -> Supervised {
     let mut drill = DrillWatch::default();
     let mut next_report = Instant::now() + Duration::from_secs(5);
@@ -501,6 +519,9 @@ fn supervise(
         // it is over: `inproc::stepper`)
         for l in nav.lines.try_iter() {
             drill.line(&l, opts.progress);
+            if let Some(v) = live {
+                v.line(&l);
+            }
         }
         if opts.progress && (!s.has_procedure() || drill.done) && Instant::now() >= next_report {
             let t = devices.sim_time();
@@ -740,6 +761,7 @@ fn score(
         bus_lost_frames: lost,
         checks,
         pass,
+        live: None,
     };
     Ok(r)
 }
