@@ -468,6 +468,10 @@ fn serve(stream: TcpStream, peer: SocketAddr, shared: &Shared) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("handshake: {e}"))?;
     ws.get_mut()
         .set_read_timeout(Some(Duration::from_millis(10)))?;
+    // a viewer that stops reading but keeps its connection is let go, rather than hold this
+    // thread (and the server's end) in a write
+    ws.get_mut()
+        .set_write_timeout(Some(Duration::from_secs(10)))?;
     let client = Arc::new(Client {
         peer,
         outbox: Mutex::new(VecDeque::new()),
@@ -600,5 +604,114 @@ fn on_binary(b: &[u8], client: &Client, shared: &Shared) {
         && let Some(tx) = tx.as_ref()
     {
         let _ = tx.send(c);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec() -> Vec<ChannelSpec> {
+        vec![ChannelSpec {
+            topic: "/x",
+            schema_name: "x",
+            schema: "{\"type\":\"object\"}",
+        }]
+    }
+
+    fn connect(addr: SocketAddr) -> tungstenite::WebSocket<TcpStream> {
+        let stream = TcpStream::connect(addr).expect("connects");
+        let mut req = tungstenite::client::IntoClientRequest::into_client_request(format!(
+            "ws://{addr}/"
+        ))
+        .expect("request");
+        req.headers_mut().insert(
+            "Sec-WebSocket-Protocol",
+            tungstenite::http::HeaderValue::from_static(SUBPROTOCOL),
+        );
+        let (ws, resp) = tungstenite::client(req, stream).expect("handshake");
+        assert_eq!(
+            resp.headers()
+                .get("Sec-WebSocket-Protocol")
+                .and_then(|v| v.to_str().ok()),
+            Some(SUBPROTOCOL)
+        );
+        ws
+    }
+
+    fn text(ws: &mut tungstenite::WebSocket<TcpStream>) -> serde_json::Value {
+        match ws.read().expect("a message") {
+            Message::Text(t) => serde_json::from_str(&t).expect("JSON"),
+            m => panic!("not text: {m:?}"),
+        }
+    }
+
+    #[test]
+    fn a_client_subscribes_and_gets_messages_with_their_time() {
+        let s = Server::start("127.0.0.1:0".parse().unwrap(), spec(), Options::default())
+            .expect("starts");
+        let mut ws = connect(s.addr());
+        let info = text(&mut ws);
+        assert_eq!(info["op"], "serverInfo");
+        assert!(
+            info["capabilities"]
+                .as_array()
+                .unwrap()
+                .contains(&"time".into())
+        );
+        let adv = text(&mut ws);
+        assert_eq!(adv["channels"][0]["topic"], "/x");
+        assert_eq!(adv["channels"][0]["schemaEncoding"], "jsonschema");
+        let sub = r#"{"op":"subscribe","subscriptions":[{"id":7,"channelId":1}]}"#;
+        ws.send(Message::Text(sub.into())).unwrap();
+        assert!(s.wait_for_subscribers(1, Duration::from_secs(10)));
+        s.publish(0, 1_500_000_000, b"{\"a\":1}");
+        s.time(1_600_000_000);
+        let Message::Binary(b) = ws.read().unwrap() else {
+            panic!("binary")
+        };
+        assert_eq!(b[0], 1, "message data");
+        assert_eq!(u32::from_le_bytes(b[1..5].try_into().unwrap()), 7);
+        assert_eq!(
+            u64::from_le_bytes(b[5..13].try_into().unwrap()),
+            1_500_000_000
+        );
+        assert_eq!(&b[13..], b"{\"a\":1}");
+        let Message::Binary(b) = ws.read().unwrap() else {
+            panic!("binary")
+        };
+        assert_eq!((b[0], b.len()), (2, 9), "time");
+        let st = s.finish(Duration::from_secs(5));
+        assert_eq!(st.clients.len(), 1);
+        assert_eq!((st.clients[0].sent, st.clients[0].dropped), (2, 0));
+    }
+
+    #[test]
+    fn a_client_that_falls_behind_loses_its_oldest_messages_counted_and_holds_nobody() {
+        let opts = Options {
+            backlog: 16,
+            ..Options::default()
+        };
+        let s = Server::start("127.0.0.1:0".parse().unwrap(), spec(), opts).expect("starts");
+        let mut slow = connect(s.addr());
+        let _ = (text(&mut slow), text(&mut slow));
+        let sub = r#"{"op":"subscribe","subscriptions":[{"id":1,"channelId":1}]}"#;
+        slow.send(Message::Text(sub.into())).unwrap();
+        assert!(s.wait_for_subscribers(1, Duration::from_secs(10)));
+        // the client reads nothing: the socket's buffers fill, then its outbox
+        let payload = vec![b'x'; 64 * 1024];
+        let n = 2000u64;
+        for k in 0..n {
+            s.publish(0, k, &payload);
+        }
+        let st = s.stats();
+        let c = &st.clients[0];
+        assert!(c.dropped > 0, "{c:?}");
+        assert!(c.sent + c.dropped <= n, "{c:?}");
+        assert_eq!(st.published, n);
+        drop(slow);
+        let st = s.finish(Duration::from_secs(1));
+        let c = &st.clients[0];
+        assert!(c.dropped > 0 && c.sent + c.dropped <= n, "{c:?}");
     }
 }
