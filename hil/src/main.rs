@@ -18,7 +18,7 @@ use cmd::experiment::experiment;
 use cmd::faults::faults;
 use cmd::fuzz::fuzz;
 use cmd::guest::{absolute, default_out, rerun_in_guest, run_in_guest};
-use cmd::replay::{candump, replay, replay_bus};
+use cmd::replay::{candump, replay, replay_bus, replay_live};
 use cmd::run::run;
 use cmd::validate::validate_turntable;
 
@@ -71,12 +71,16 @@ enum Cmd {
         /// Put the traffic back onto vcan and a pty and run the nav binary on it.
         #[arg(long)]
         bus: bool,
-        /// With --bus: speed factor over real time (1 = as the IMU sent it).
+        /// With --bus or --live: speed factor over real time (1 = as the IMU sent it).
         #[arg(long, value_parser = hil::values::speed, default_value_t = 1.0)]
         speed: f64,
         /// With --bus: the nav binary to run (default: the one beside hil), e.g. a newer build.
         #[arg(long)]
         nav: Option<PathBuf>,
+        /// Without --bus: watch the replay on a live view (`--live [ADDR]`, as on `hil run`),
+        /// paced at --speed, with the viewer's pause, play and seek.
+        #[command(flatten)]
+        live: LiveArgs,
         #[command(flatten)]
         bus_args: BusArgs,
     },
@@ -725,9 +729,17 @@ fn real_main(cli: Cli) -> Result<i32> {
             bus,
             speed,
             nav,
+            live,
             bus_args,
         } => {
-            if bus {
+            if let Some(addr) = live.live {
+                if bus {
+                    bail!(
+                        "--live with --bus: not yet; watch the replay in process (without --bus), or a bench run (hil run --live)"
+                    );
+                }
+                replay_live(&recording, config.as_deref(), addr, live.live_wait, speed)
+            } else if bus {
                 replay_bus(
                     &recording,
                     config.as_deref(),

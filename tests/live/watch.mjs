@@ -3,11 +3,13 @@
 // decodes each message by its advertised schema (JSON, validated against the JSON schema with
 // Ajv) and writes what it saw as JSON when the server closes the connection.
 //
-//   node watch.mjs ws://HOST:PORT OUT.json [--pause-at S --pause-for MS] [--deadline S]
+//   node watch.mjs ws://HOST:PORT OUT.json [--pause-at S --pause-for MS] [--seek-at S --seek-to T]
+//                  [--until-result] [--deadline S]
 //
 // --pause-at S: once the server's time passes S seconds, ask for a pause (the protocol's
 // playback control request, binary op 3, as Foxglove's app sends it), wait MS milliseconds of
-// wall time, then ask to play again.
+// wall time, then ask to play again. --seek-at S --seek-to T: once the server's time passes S
+// seconds, ask to play from T seconds (a seek, as Foxglove's timeline sends it).
 import wsProtocol from "@foxglove/ws-protocol";
 import WebSocket from "ws";
 import Ajv2020 from "ajv/dist/2020.js";
@@ -26,6 +28,11 @@ const opt = (name, dflt) => {
 };
 const pauseAt = opt("--pause-at", NaN);
 const pauseForMs = opt("--pause-for", 3000);
+const seekAt = opt("--seek-at", NaN);
+const seekTo = opt("--seek-to", 0);
+// --until-result: close once the run's result has come (a replay's server stays up for seeks
+// while a viewer is connected)
+const untilResult = rest.includes("--until-result");
 const deadline = Date.now() + opt("--deadline", 900) * 1000;
 
 const ajv = new Ajv2020({ strict: false, allErrors: false, validateFormats: false });
@@ -53,6 +60,7 @@ const seen = {
   maxTableAngle: null,
   playbackStates: [],
   paused: null,
+  seek: null,
   resumed: null,
   connectAttempts: 0,
   errors: [],
@@ -111,6 +119,7 @@ function onMessage({ subscriptionId, timestamp, data }) {
       break;
     case "/hil/result":
       seen.result = m;
+      if (untilResult) setTimeout(() => finish(0), 500);
       break;
     case "/hil/log":
       seen.hilLog.push(m.message);
@@ -125,12 +134,18 @@ function onMessage({ subscriptionId, timestamp, data }) {
 }
 
 let pauseState = "none";
+let seekState = "none";
 function onTime({ timestamp }, ws) {
   const t = timeNs(timestamp);
   seen.times += 1;
   if (seen.lastTime !== null && t < BigInt(seen.lastTime)) seen.timeDecreases += 1;
   seen.firstTime ??= t.toString();
   seen.lastTime = t.toString();
+  if (!Number.isNaN(seekAt) && seekState === "none" && t >= BigInt(Math.round(seekAt * 1e9))) {
+    seekState = "asked";
+    seen.seek = { at_ns: t.toString(), to_ns: String(Math.round(seekTo * 1e9)) };
+    ws.send(playbackRequest(0, "seek-1", BigInt(Math.round(seekTo * 1e9))));
+  }
   if (!Number.isNaN(pauseAt) && pauseState === "none" && t >= BigInt(Math.round(pauseAt * 1e9))) {
     pauseState = "paused";
     seen.paused = { at_ns: t.toString(), wall: Date.now() };
@@ -145,15 +160,15 @@ function onTime({ timestamp }, ws) {
 
 // The protocol's playback control request (client binary op 3): command (0 play, 1 pause),
 // speed f32, had_seek u8, seek time u64, request id (u32 length, UTF-8).
-function playbackRequest(command, id) {
+function playbackRequest(command, id, seekNs) {
   const idBytes = new TextEncoder().encode(id);
   const b = Buffer.alloc(1 + 1 + 4 + 1 + 8 + 4 + idBytes.length);
   let o = 0;
   b.writeUInt8(3, o++);
   b.writeUInt8(command, o++);
   b.writeFloatLE(1.0, o); o += 4;
-  b.writeUInt8(0, o++);
-  b.writeBigUInt64LE(0n, o); o += 8;
+  b.writeUInt8(seekNs === undefined ? 0 : 1, o++);
+  b.writeBigUInt64LE(seekNs ?? 0n, o); o += 8;
   b.writeUInt32LE(idBytes.length, o); o += 4;
   Buffer.from(idBytes).copy(b, o);
   return b;

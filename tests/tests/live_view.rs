@@ -269,6 +269,7 @@ fn a_drill_is_watched_live_by_foxglove_clients_and_a_pause_changes_nothing() {
         assert!(c["sent"].as_u64().unwrap_or(0) > 1000, "{c}");
         assert!(c["dropped"].is_u64(), "{c}");
     }
+    replay_is_watched_and_seeks_back(&out, result);
     println!(
         "live view: {} messages to each client, time to {:.1} s, dwells {:?}, heading {}, pause answered {states:?}",
         a["messages"]
@@ -285,4 +286,82 @@ fn a_drill_is_watched_live_by_foxglove_clients_and_a_pause_changes_nothing() {
             .collect::<Vec<_>>()),
         result["heading_deg"]
     );
+}
+
+/// The drill's recording replayed in process on a live view (`hil replay RUN --live`), a client
+/// seeking from 30 s back to 10 s: the stream goes on from there, and the replay still ends
+/// with the drill's heading and sends what nav sent.
+fn replay_is_watched_and_seeks_back(run: &Path, result: &Value) {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let mut hil = Command::new(bin("hil"))
+        .arg("replay")
+        .arg(run)
+        .args(["--speed", "20", "--live"])
+        .arg(format!("127.0.0.1:{port}"))
+        .args(["--live-wait", "1"])
+        .stdout(Stdio::inherit())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("hil runs");
+    let out = dir.path().join("r.json");
+    let mut c = client(
+        &format!("ws://127.0.0.1:{port}"),
+        &out,
+        &["--seek-at", "30", "--seek-to", "10", "--until-result"],
+    );
+    let sc = wait(&mut c, "the replay's client", Duration::from_secs(600));
+    let status = wait(&mut hil, "hil replay --live", Duration::from_secs(60));
+    let r = read(&out);
+    assert!(sc.success(), "client: {sc}: {r:#}");
+    assert!(
+        status.success(),
+        "the replay differs from what nav sent: {status}"
+    );
+    let caps = r["serverInfo"]["capabilities"].as_array().expect("caps");
+    assert!(caps.contains(&"playbackControl".into()), "{caps:?}");
+    let end = r["serverInfo"]["dataEndTime"]["sec"]
+        .as_f64()
+        .unwrap_or(0.0);
+    let drill_s = result["duration_s"].as_f64().expect("duration");
+    assert!(
+        (end - drill_s).abs() < 2.0,
+        "data end {end} s, drill {drill_s} s"
+    );
+    assert_eq!(r["timeDecreases"], 1, "time goes back once, at the seek");
+    assert_eq!(
+        r["invalid"].as_array().map(Vec::len),
+        Some(0),
+        "{:#}",
+        r["invalid"]
+    );
+    // after the seek the dwells from 10 s on come again: the last three are the positions at
+    // 90, 180 and 270 deg (those before the seek may have gone out once already)
+    let dwells: Vec<(f64, f64)> = r["dwells"]
+        .as_array()
+        .expect("dwells")
+        .iter()
+        .filter_map(|d| Some((d["angle_deg"].as_f64()?, d["from_s"].as_f64()?)))
+        .collect();
+    let tail = &dwells[dwells.len().saturating_sub(3)..];
+    assert!(
+        tail.len() == 3
+            && tail
+                .iter()
+                .zip([90.0, 180.0, 270.0])
+                .all(|((a, from), want)| (a - want).abs() < 0.05 && *from > 10.0),
+        "the dwells from 10 s on, again: {dwells:?}"
+    );
+    assert_eq!(
+        r["northFindingResult"]["heading_deg"],
+        result["heading_deg"]
+    );
+    assert_eq!(r["result"]["pass"], true, "{:#}", r["result"]);
+    let states: Vec<u64> = r["playbackStates"]
+        .as_array()
+        .expect("states")
+        .iter()
+        .filter_map(|s| s["status"].as_u64())
+        .collect();
+    assert_eq!(states, [0, 3], "playing from the seek, then ended");
 }

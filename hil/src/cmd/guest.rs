@@ -104,9 +104,7 @@ pub(crate) type Forward = (std::net::SocketAddr, u16);
 /// A live view (`--live ADDR`) asked of a command that runs again in the guest: the guest's
 /// server listens on the same port on all its addresses (the guest has no network but QEMU's
 /// forward), and QEMU forwards ADDR on this host to it. Port 0 becomes a free port here.
-pub(crate) fn live_through_guest(
-    mut args: Vec<String>,
-) -> Result<(Vec<String>, Vec<Forward>)> {
+pub(crate) fn live_through_guest(mut args: Vec<String>) -> Result<(Vec<String>, Vec<Forward>)> {
     let mut forward = Vec::new();
     if let Some(i) = args.iter().position(|a| a == "--live")
         && let Some(addr) = args.get(i + 1)

@@ -42,6 +42,41 @@ pub(crate) fn replay(recording: &Path, config: Option<&Path>, json: bool) -> Res
     Ok(i32::from(!r.identical()))
 }
 
+/// `hil replay --live`: in process, on a live view, paced at `speed`, with the viewer's
+/// playback controls; the truth from the run's `scenario.toml` when the folder has it.
+pub(crate) fn replay_live(
+    recording: &Path,
+    config: Option<&Path>,
+    addr: std::net::SocketAddr,
+    wait: usize,
+    speed: f64,
+) -> Result<i32> {
+    let (mcap, cfg) = recording_and_config(recording, config)?;
+    if is_candump(&mcap) {
+        bail!("--live replays nav's MCAP recordings, not CAN logs");
+    }
+    let scen = mcap.with_file_name("scenario.toml");
+    let scenario = if scen.is_file() {
+        Some(Scenario::load(&scen)?)
+    } else {
+        eprintln!(
+            "hil: no scenario.toml beside {}: the live view shows no truth",
+            mcap.display()
+        );
+        None
+    };
+    let (r, stats) =
+        hil::live::replay::replay_live(&mcap, &cfg, scenario.as_ref(), addr, wait, speed)?;
+    for c in &stats.clients {
+        eprintln!(
+            "hil: live view: client {}: {} messages sent, {} dropped (fell behind)",
+            c.peer, c.sent, c.dropped
+        );
+    }
+    print!("{}", hil::engine::recording::text(&r));
+    Ok(i32::from(!r.identical()))
+}
+
 /// `hil replay --bus`: the recording's traffic onto vcan and a pty with the nav binary on it,
 /// here where the kernel has CAN, else in the QEMU guest.
 pub(crate) fn replay_bus(

@@ -79,7 +79,8 @@ fn show(f: &RawFrame) -> String {
 }
 
 /// One thing met in a recording, in order.
-enum Input {
+#[derive(Clone)]
+pub(crate) enum Input {
     /// A frame nav received.
     Frame(RawFrame),
     /// A frame nav sent.
@@ -97,9 +98,11 @@ enum Input {
 }
 
 /// The pipeline being fed, and what came out.
-struct Replayer {
+pub(crate) struct Replayer {
     p: Pipeline,
     out: Vec<Output>,
+    /// Everything the pipeline put out, when tapped (a live view of the replay).
+    pub(crate) tap: Option<Vec<Output>>,
     replayed: Vec<RawFrame>,
     recorded: Vec<RawFrame>,
     frames_in: u64,
@@ -110,9 +113,15 @@ struct Replayer {
 
 impl Replayer {
     fn new(cfg: &NavConfig) -> Result<Self> {
+        Self::with_records(cfg, false)
+    }
+
+    /// A replayer whose pipeline also makes the records nav's recorder writes (`record`).
+    pub(crate) fn with_records(cfg: &NavConfig, record: bool) -> Result<Self> {
         Ok(Self {
-            p: Pipeline::new(cfg, false).context("nav's pipeline")?,
+            p: Pipeline::new(cfg, record).context("nav's pipeline")?,
             out: Vec::new(),
+            tap: None,
             replayed: Vec::new(),
             recorded: Vec::new(),
             frames_in: 0,
@@ -122,7 +131,7 @@ impl Replayer {
         })
     }
 
-    fn feed(&mut self, i: Input) {
+    pub(crate) fn feed(&mut self, i: Input) {
         match i {
             Input::Frame(f) => {
                 self.frames_in += 1;
@@ -149,14 +158,17 @@ impl Replayer {
     }
 
     fn take_sent(&mut self) {
-        self.replayed
-            .extend(self.out.drain(..).filter_map(|o| match o {
-                Output::Command(f) | Output::Solution(f) => Some(f),
-                _ => None,
-            }));
+        for o in self.out.drain(..) {
+            if let Output::Command(f) | Output::Solution(f) = &o {
+                self.replayed.push(*f);
+            }
+            if let Some(t) = self.tap.as_mut() {
+                t.push(o);
+            }
+        }
     }
 
-    fn finish(mut self, what: &str) -> Playback {
+    pub(crate) fn finish(mut self, what: &str) -> Playback {
         self.p.flush(&mut self.out);
         self.take_sent();
         let (recorded, replayed) = (&self.recorded, &self.replayed);
@@ -204,42 +216,46 @@ pub fn each_message(path: &Path, doing: &str, mut f: impl FnMut(&mcap::Message))
 pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
     let mut r = Replayer::new(cfg)?;
     let cut = each_message(mcap_path, "replaying", |m| {
-        let frame = nav::rawmsg::frame_of;
-        let input = match m.channel.topic.as_str() {
-            "/can/raw" => match (frame(m), nav::rawmsg::error_frame_of(m)) {
-                (Some(f), _) => Input::Frame(f),
-                (None, Some(e)) => Input::Error(e),
-                (None, None) => Input::Bad,
-            },
-            "/can/tx" => frame(m).map_or(Input::Bad, Input::Sent),
-            // the liveness watchdog's changes, where they happened
-            "/nav/event" => match serde_json::from_slice::<serde_json::Value>(&m.data) {
-                Ok(e) => match e["kind"].as_str() {
-                    Some("imu_timeout") => {
-                        Input::Timeout(true, e["after_ms"].as_u64().unwrap_or(0))
-                    }
-                    Some("imu_back") => Input::Timeout(false, 0),
-                    _ => return,
-                },
-                Err(_) => Input::Bad,
-            },
-            "/gps/fix" => match serde_json::from_slice::<nav::gps::GpsFix>(&m.data) {
-                Ok(fix) => Input::Fix(Box::new(fix)),
-                Err(_) => Input::Bad,
-            },
-            "/gps/raw" => match nav::rawmsg::serial_of(m) {
-                Some(b) => Input::Bytes(b.to_vec()),
-                None => Input::Bad,
-            },
-            _ => return,
-        };
-        r.feed(input);
+        if let Some(input) = input_of(m) {
+            r.feed(input);
+        }
     })?;
     if cut {
         // a recording cut short still replays what it has
         r.feed(Input::Bad);
     }
     Ok(r.finish(&mcap_path.display().to_string()))
+}
+
+/// What a message of nav's recording gives its pipeline on replay (none: nothing).
+pub(crate) fn input_of(m: &mcap::Message) -> Option<Input> {
+    let frame = nav::rawmsg::frame_of;
+    Some(match m.channel.topic.as_str() {
+        "/can/raw" => match (frame(m), nav::rawmsg::error_frame_of(m)) {
+            (Some(f), _) => Input::Frame(f),
+            (None, Some(e)) => Input::Error(e),
+            (None, None) => Input::Bad,
+        },
+        "/can/tx" => frame(m).map_or(Input::Bad, Input::Sent),
+        // the liveness watchdog's changes, where they happened
+        "/nav/event" => match serde_json::from_slice::<serde_json::Value>(&m.data) {
+            Ok(e) => match e["kind"].as_str() {
+                Some("imu_timeout") => Input::Timeout(true, e["after_ms"].as_u64().unwrap_or(0)),
+                Some("imu_back") => Input::Timeout(false, 0),
+                _ => return None,
+            },
+            Err(_) => Input::Bad,
+        },
+        "/gps/fix" => match serde_json::from_slice::<nav::gps::GpsFix>(&m.data) {
+            Ok(fix) => Input::Fix(Box::new(fix)),
+            Err(_) => Input::Bad,
+        },
+        "/gps/raw" => match nav::rawmsg::serial_of(m) {
+            Some(b) => Input::Bytes(b.to_vec()),
+            None => Input::Bad,
+        },
+        _ => return None,
+    })
 }
 
 /// Replay a `candump -l` log of the bus (made by can-utils' `candump`, or exported with

@@ -39,6 +39,8 @@ enum Event {
     Nav(Box<NavEpoch>),
     Line(String),
     End(Box<Value>, String),
+    /// Stop without an end.
+    Quit,
 }
 
 struct NavEpoch {
@@ -68,19 +70,30 @@ pub struct RunViewStats {
 }
 
 impl BenchRun {
-    /// Begin run `s` (its faults: `faults`) on `view`.
+    /// Begin run `name` on `view`, with the truth of scenario `truth` when known and its
+    /// `faults`; `new_run`: after the view's last run on its timeline (else on the same
+    /// timeline, from the start: a replay seeking back).
     pub fn begin(
         view: &Arc<View>,
-        s: &Scenario,
+        name: &str,
+        truth: Option<&Scenario>,
         faults: Vec<crate::engine::faultlog::FaultEvent>,
+        new_run: bool,
     ) -> anyhow::Result<Self> {
-        view.begin_run(&s.name);
+        if new_run {
+            view.begin_run(name);
+        }
         let (tx, rx) = sync_channel(QUEUE);
-        let drive = match &s.drive {
-            Some(d) => Some(Drive::plan(d)?),
+        let truth = match truth {
+            Some(s) => Some((
+                match &s.drive {
+                    Some(d) => Some(Drive::plan(d)?),
+                    None => None,
+                },
+                s.site,
+            )),
             None => None,
         };
-        let site = s.site;
         let last_t_ns = Arc::new(AtomicU64::new(0));
         let thread = {
             let (view, last) = (view.clone(), last_t_ns.clone());
@@ -89,8 +102,7 @@ impl BenchRun {
                 .spawn(move || {
                     let mut p = Publisher {
                         view,
-                        drive,
-                        site,
+                        truth,
                         faults,
                         next_fault: 0,
                         nav_views: nav::foxglove::Views::default(),
@@ -113,14 +125,30 @@ impl BenchRun {
 
     /// The scheduler's watcher for scenario `s`.
     pub fn watcher(&self, s: &Scenario) -> emulators::bus::Watch {
-        let mut w = Watcher {
+        let mut w = self.frame_watcher(
+            s.imu.gyro_pulse_arcsec,
+            s.imu.accel_pulse_mps,
+            s.imu.rate_hz,
+        );
+        Box::new(move |st, step| w.on_step(st, step))
+    }
+
+    /// A watcher of the frames of an IMU of these pulse weights and rate (a replay feeds it the
+    /// recording's).
+    pub(crate) fn frame_watcher(
+        &self,
+        gyro_pulse_arcsec: [f64; 3],
+        accel_pulse_mps: [f64; 3],
+        rate_hz: f64,
+    ) -> Watcher {
+        Watcher {
             tx: self.tx.clone(),
             dropped: self.dropped.clone(),
-            gyro_deg: s.imu.gyro_pulse_arcsec.map(|a| a / 3600.0),
-            accel_mps: s.imu.accel_pulse_mps,
-            rate_hz: s.imu.rate_hz,
-            every: (s.imu.rate_hz / IMU_RATES_HZ).round().max(1.0) as u32,
-            tick_every: (s.imu.rate_hz / TICK_HZ).round().max(1.0) as u64,
+            gyro_deg: gyro_pulse_arcsec.map(|a| a / 3600.0),
+            accel_mps: accel_pulse_mps,
+            rate_hz,
+            every: (rate_hz / IMU_RATES_HZ).round().max(1.0) as u32,
+            tick_every: (rate_hz / TICK_HZ).round().max(1.0) as u64,
             gyro: None,
             accel: None,
             sum_g: [0; 3],
@@ -131,8 +159,7 @@ impl BenchRun {
             att: None,
             vel: None,
             pos: None,
-        };
-        Box::new(move |st, step| w.on_step(st, step))
+        }
     }
 
     /// The view's pause for the scheduler.
@@ -156,6 +183,15 @@ impl BenchRun {
         }
     }
 
+    /// Stop publishing this run without an end (a replay seeking elsewhere).
+    pub fn abandon(mut self) {
+        // a watcher may still hold a sender: the publisher is told, not left waiting for them
+        let _ = self.tx.send(Event::Quit);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+
     /// The run is over: its report and result card go out, the publisher ends.
     pub fn end(mut self, report: Value, card: String) -> RunViewStats {
         self.view.set_nav_pid(0);
@@ -174,7 +210,7 @@ impl BenchRun {
 }
 
 /// On the scheduler's thread after each sample: decodes what the view shows, queues it.
-struct Watcher {
+pub(crate) struct Watcher {
     tx: SyncSender<Event>,
     dropped: Arc<AtomicU64>,
     gyro_deg: [f64; 3],
@@ -211,54 +247,71 @@ impl Watcher {
 
     fn on_step(&mut self, st: &Step, step: &Stepper) {
         for (ns, e) in &st.trace {
-            let Traced::Frame(f) = e else {
-                continue;
-            };
-            match Message::decode(f) {
-                Ok(Message::ImuGyro(g)) => {
-                    let d = steps(self.gyro, g.counts);
-                    self.gyro = Some(g.counts);
-                    for (s, d) in self.sum_g.iter_mut().zip(d) {
-                        *s += d;
-                    }
-                    self.n += 1;
-                }
-                Ok(Message::ImuAccel(a)) => {
-                    let d = steps(self.accel, a.counts);
-                    self.accel = Some(a.counts);
-                    for (s, d) in self.sum_a.iter_mut().zip(d) {
-                        *s += d;
-                    }
-                }
-                Ok(Message::TtStatus(s)) => self.send(Event::Status(*ns, s)),
-                Ok(Message::TtCmd(c)) if c.command != 0 => self.send(Event::Command(*ns, c)),
-                Ok(Message::NavTime(t)) => {
-                    self.send(Event::NavTime(*ns, t));
-                    self.time = Some(t);
-                }
-                Ok(Message::NavAtt(a)) => self.att = Some(a),
-                Ok(Message::NavVel(v)) => self.vel = Some(v),
-                Ok(Message::NavPos(p)) => self.pos = Some(p),
-                Ok(Message::NavHgt(h)) => {
-                    if let (Some(t), Some(att), Some(vel), Some(pos)) =
-                        (self.time, self.att, self.vel, self.pos)
-                    {
-                        let t_ns = (f64::from(t.sample_count) / self.rate_hz * 1e9) as u64;
-                        self.send(Event::Nav(Box::new(NavEpoch {
-                            t_ns,
-                            att,
-                            vel,
-                            pos,
-                            hgt: h,
-                        })));
-                    }
-                }
-                _ => {}
+            if let Traced::Frame(f) = e {
+                self.on_frame(*ns, f);
             }
         }
+        if let Some(tt) = step.turntable()
+            && tt.truth.len() > self.tt_seen
+        {
+            for r in &tt.truth[self.tt_seen..] {
+                self.send(Event::Truth(Box::new(r.clone())));
+            }
+            self.tt_seen = tt.truth.len();
+        }
+        self.after_sample(st.k, st.t);
+    }
+
+    /// A frame on the bus at `ns`.
+    pub(crate) fn on_frame(&mut self, ns: u64, f: &wire::RawFrame) {
+        match Message::decode(f) {
+            Ok(Message::ImuGyro(g)) => {
+                let d = steps(self.gyro, g.counts);
+                self.gyro = Some(g.counts);
+                for (s, d) in self.sum_g.iter_mut().zip(d) {
+                    *s += d;
+                }
+                self.n += 1;
+            }
+            Ok(Message::ImuAccel(a)) => {
+                let d = steps(self.accel, a.counts);
+                self.accel = Some(a.counts);
+                for (s, d) in self.sum_a.iter_mut().zip(d) {
+                    *s += d;
+                }
+            }
+            Ok(Message::TtStatus(s)) => self.send(Event::Status(ns, s)),
+            Ok(Message::TtCmd(c)) if c.command != 0 => self.send(Event::Command(ns, c)),
+            Ok(Message::NavTime(t)) => {
+                self.send(Event::NavTime(ns, t));
+                self.time = Some(t);
+            }
+            Ok(Message::NavAtt(a)) => self.att = Some(a),
+            Ok(Message::NavVel(v)) => self.vel = Some(v),
+            Ok(Message::NavPos(p)) => self.pos = Some(p),
+            Ok(Message::NavHgt(h)) => {
+                if let (Some(t), Some(att), Some(vel), Some(pos)) =
+                    (self.time, self.att, self.vel, self.pos)
+                {
+                    let t_ns = (f64::from(t.sample_count) / self.rate_hz * 1e9) as u64;
+                    self.send(Event::Nav(Box::new(NavEpoch {
+                        t_ns,
+                        att,
+                        vel,
+                        pos,
+                        hgt: h,
+                    })));
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Sample `k` (0-based) is over at simulated time `t`, s.
+    pub(crate) fn after_sample(&mut self, k: u64, t: f64) {
         if self.n >= self.every {
             let dt = f64::from(self.n) / self.rate_hz;
-            let t_ns = (st.t * 1e9) as u64;
+            let t_ns = (t * 1e9) as u64;
             let g: [f64; 3] = std::array::from_fn(|i| self.sum_g[i] as f64 * self.gyro_deg[i] / dt);
             let a: [f64; 3] =
                 std::array::from_fn(|i| self.sum_a[i] as f64 * self.accel_mps[i] / dt);
@@ -269,16 +322,8 @@ impl Watcher {
             });
             (self.sum_g, self.sum_a, self.n) = ([0; 3], [0; 3], 0);
         }
-        if let Some(tt) = step.turntable()
-            && tt.truth.len() > self.tt_seen
-        {
-            for r in &tt.truth[self.tt_seen..] {
-                self.send(Event::Truth(Box::new(r.clone())));
-            }
-            self.tt_seen = tt.truth.len();
-        }
-        if (st.k + 1).is_multiple_of(self.tick_every) {
-            self.send(Event::Tick((st.t * 1e9).round() as u64));
+        if (k + 1).is_multiple_of(self.tick_every) {
+            self.send(Event::Tick((t * 1e9).round() as u64));
         }
     }
 }
@@ -286,8 +331,8 @@ impl Watcher {
 /// The publisher's state.
 struct Publisher {
     view: Arc<View>,
-    drive: Option<Drive>,
-    site: emulators::truth::Static,
+    /// The truth's models (the drive, if any, and the site), when known.
+    truth: Option<(Option<Drive>, emulators::truth::Static)>,
     faults: Vec<crate::engine::faultlog::FaultEvent>,
     next_fault: usize,
     nav_views: nav::foxglove::Views,
@@ -372,7 +417,11 @@ impl Publisher {
                     let m = nav::foxglove::log(at, level, "nav", text);
                     self.view.publish(Ch::NavLog, t, &m);
                 }
-                Event::End(report, card) => self.end(&report, &card),
+                Event::End(report, card) => {
+                    self.end(&report, &card);
+                    return;
+                }
+                Event::Quit => return,
             }
         }
     }
@@ -380,12 +429,13 @@ impl Publisher {
     fn tick(&mut self, t: u64) {
         self.last.fetch_max(t, Ordering::Relaxed);
         let ts = secs(t);
-        let (state, loc) =
-            crate::engine::truthrec::truth_messages(self.drive.as_ref(), &self.site, ts);
         let offset = self.view.offset_ns.load(Ordering::Relaxed);
-        self.view.publish(Ch::TruthState, t, &state);
-        self.view
-            .publish(Ch::TruthLocation, t, &with_time(loc, offset + t));
+        if let Some((drive, site)) = &self.truth {
+            let (state, loc) = crate::engine::truthrec::truth_messages(drive.as_ref(), site, ts);
+            self.view.publish(Ch::TruthState, t, &state);
+            self.view
+                .publish(Ch::TruthLocation, t, &with_time(loc, offset + t));
+        }
         while let Some(f) = self.faults.get(self.next_fault)
             && f.t_s <= ts
         {
@@ -468,9 +518,9 @@ impl Publisher {
         // nav's body and the truth's, in nav's start frame: the truth placed by the bench's own
         // geodesy around the same origin
         let mut transforms = vec![transform(at, "nav_body", &pose["pose"])];
-        if let Some(o) = self.nav_views.origin() {
+        if let (Some(o), Some((drive, site))) = (self.nav_views.origin(), &self.truth) {
             let (lat, lon, h, _, thpr) =
-                crate::engine::truthrec::state(self.drive.as_ref(), &self.site, secs(e.t_ns));
+                crate::engine::truthrec::state(drive.as_ref(), site, secs(e.t_ns));
             let d = emulators::geodesy::enu_offset(
                 (o.0.to_radians(), o.1.to_radians(), o.2),
                 (lat.to_radians(), lon.to_radians(), h),

@@ -26,6 +26,7 @@
 //! pauses a drill and checks it against the in-process reference).
 
 pub mod bench;
+pub mod replay;
 pub mod server;
 
 use anyhow::Result;
@@ -324,6 +325,36 @@ impl View {
             }),
             pauses: 0,
         }
+    }
+
+    /// Viewers' playback requests go to `tx` (a replay's controls) rather than to the pause.
+    pub(crate) fn controls_to(&self, tx: mpsc::Sender<Control>) {
+        self.server.on_control(tx);
+    }
+
+    /// The playback state, at time `t_ns` of the current run, to the viewers that asked for
+    /// playback.
+    pub(crate) fn playback(
+        &self,
+        status: Playback,
+        t_ns: u64,
+        speed: f64,
+        did_seek: bool,
+        request: Option<&str>,
+    ) {
+        let at = self.offset() + t_ns;
+        self.server
+            .playback_state(status, at, speed as f32, did_seek, request);
+    }
+
+    /// Where the current run starts on the view's timeline, ns.
+    pub(crate) fn offset(&self) -> u64 {
+        self.offset_ns.load(Ordering::Relaxed)
+    }
+
+    /// Viewers connected now.
+    pub fn clients(&self) -> usize {
+        self.server.clients()
     }
 
     /// nav's process (0: none).

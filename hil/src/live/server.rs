@@ -621,10 +621,9 @@ mod tests {
 
     fn connect(addr: SocketAddr) -> tungstenite::WebSocket<TcpStream> {
         let stream = TcpStream::connect(addr).expect("connects");
-        let mut req = tungstenite::client::IntoClientRequest::into_client_request(format!(
-            "ws://{addr}/"
-        ))
-        .expect("request");
+        let mut req =
+            tungstenite::client::IntoClientRequest::into_client_request(format!("ws://{addr}/"))
+                .expect("request");
         req.headers_mut().insert(
             "Sec-WebSocket-Protocol",
             tungstenite::http::HeaderValue::from_static(SUBPROTOCOL),

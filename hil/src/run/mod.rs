@@ -293,7 +293,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let live = match &opts.live {
         Some(v) => {
             let faults = crate::engine::faultlog::schedule(s, &opts.link_downs, opts.kill_nav_at_s);
-            let l = crate::live::bench::BenchRun::begin(v, s, faults)?;
+            let l = crate::live::bench::BenchRun::begin(v, &s.name, Some(s), faults, true)?;
             l.set_nav_pid(nav.child.id());
             Some(l)
         }
