@@ -78,7 +78,7 @@ impl JsonChannel {
     }
 
     /// The channel's MCAP topic.
-    pub(crate) fn topic(self) -> &'static str {
+    pub fn topic(self) -> &'static str {
         match self {
             JsonChannel::ImuSample => "/imu/sample",
             JsonChannel::Event => "/nav/event",
