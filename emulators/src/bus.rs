@@ -793,7 +793,17 @@ pub fn run(
     }
     progress.set(dev.step.next_time());
     let error_frames = port.error_frames;
-    let outbox = port.outbox;
+    outcome(dev, port.outbox, nav, max_lag_ms, error_frames)
+}
+
+/// What the scheduler did, from the devices, the outbox and nav's side at the end.
+fn outcome(
+    dev: Devices,
+    outbox: Outbox,
+    mut nav: NavSide,
+    max_lag_ms: u64,
+    error_frames: u64,
+) -> Result<BusOutcome, BusError> {
     let mut ls = nav.ls;
     (ls.latency_p50_ms, ls.latency_p99_ms, ls.latency_samples) = nav.latency.percentiles();
     let bus = dev.step.bus_stats();

@@ -11,9 +11,10 @@ use std::path::{Path, PathBuf};
 const CRATES: [&str; 5] = ["wire", "nav", "emulators", "hil", "vcan-setup"];
 
 /// hil's folders in the order they may import (each from those before it).
-const HIL_LAYERS: [&str; 7] = [
+const HIL_LAYERS: [&str; 8] = [
     "scenario",
     "engine",
+    "live",
     "procedures",
     "report",
     "run",

@@ -53,15 +53,16 @@ impl<T> Running<T> {
 /// factor and in lockstep with nav (unless the scenario's `[bus]` says otherwise): the IMU (with the scenario's stream faults), the turntable
 /// when the scenario has one, and `gps` (the receiver, and its pty) when given. Every frame put on
 /// the bus goes to the `candump -l` log `sent_log` when given. The interface goes down and up
-/// again at each of `link_downs` ([down at, up at], simulated s). A live view (`live`) watches
-/// the bus model and may pause the stream.
+/// again at each of `link_downs` ([down at, up at], simulated s). A live view watches the bus
+/// model (`watch`) and may pause the stream (`hold`).
 pub fn start_scenario(
     s: &Scenario,
     iface: &str,
     gps: Option<(emulators::gps::GpsRun, GpsDevice)>,
     sent_log: Option<&std::path::Path>,
     link_downs: &[[f64; 2]],
-    live: Option<&crate::live::bench::BenchRun>,
+    watch: Option<emulators::bus::Watch>,
+    hold: Option<emulators::bus::Hold>,
 ) -> Result<Running<BusOutcome>> {
     let lockstep = Lockstep::at_rate(s.imu.rate_hz);
     let follow = s.bus.lockstep.then_some(lockstep);
@@ -87,8 +88,8 @@ pub fn start_scenario(
                 Box::new(move |up| vcan_setup::set_link(&name, up).map_err(std::io::Error::other)),
             )
         }),
-        watch: live.map(|l| l.watcher(s)),
-        hold: live.map(|l| l.hold()),
+        watch,
+        hold,
     };
     let stop = Arc::new(AtomicBool::new(false));
     let progress = Arc::new(Progress::default());

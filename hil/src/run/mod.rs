@@ -315,7 +315,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         gps_device,
         Some(&opts.out.join("bench-can.log")),
         &opts.link_downs,
-        live.as_ref(),
+        live.as_ref().map(|l| l.watcher(s)),
+        live.as_ref().map(|l| l.hold()),
     )?;
     let Supervised {
         mut drill,
