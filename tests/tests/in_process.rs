@@ -20,8 +20,7 @@ fn the_in_process_drill_gives_the_result_of_the_drill_through_vcan() {
     let dir = tempfile::tempdir().unwrap();
     // the drill of tests/tests/vcan.rs (`drill_in`), in process
     let o = Command::new(bin("hil"))
-        .args(["drill", "north-finding", "--dwell", "6"])
-        .args(["--heading", "287.5", "--seed", "7", "--tolerance", "0.5"])
+        .args(e2e::DRILL)
         .args(["--in-process", "--json", "--out"])
         .arg(dir.path())
         .output()

@@ -12,19 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// The drill of `tests/tests/vcan.rs` and `tests/tests/in_process.rs`.
-const DRILL: &[&str] = &[
-    "drill",
-    "north-finding",
-    "--dwell",
-    "6",
-    "--heading",
-    "287.5",
-    "--seed",
-    "7",
-    "--tolerance",
-    "0.5",
-];
+use e2e::DRILL;
 
 fn live_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("live")
@@ -131,14 +119,12 @@ fn a_drill_is_watched_live_by_foxglove_clients_and_a_pause_changes_nothing() {
         "nav's watchdog must not see the pause"
     );
 
-    let topics: Vec<&str> = [
+    // what a drill publishes (no faults, no navigation output while it finds north), and the
+    // rest of the channels
+    let drill_topics = [
         "/truth/state",
         "/truth/location",
         "/truth/turntable",
-        "/bench/faults",
-        "/nav/location",
-        "/nav/pose",
-        "/tf",
         "/nav/status",
         "/turntable/status",
         "/turntable/command",
@@ -148,8 +134,9 @@ fn a_drill_is_watched_live_by_foxglove_clients_and_a_pause_changes_nothing() {
         "/nav/event",
         "/hil/log",
         "/hil/result",
-    ]
-    .to_vec();
+    ];
+    let mut topics: Vec<&str> = drill_topics.to_vec();
+    topics.extend(["/bench/faults", "/nav/location", "/nav/pose", "/tf"]);
     for (name, c) in [("a", &a), ("b", &b)] {
         let chans = c["channels"].as_object().expect("channels");
         let mut got: Vec<&str> = chans.keys().map(String::as_str).collect();
@@ -172,21 +159,7 @@ fn a_drill_is_watched_live_by_foxglove_clients_and_a_pause_changes_nothing() {
             "{:#}",
             c["errors"]
         );
-        // what a drill publishes (no faults, no navigation output while it finds north)
-        for t in [
-            "/truth/state",
-            "/truth/location",
-            "/truth/turntable",
-            "/nav/status",
-            "/turntable/status",
-            "/turntable/command",
-            "/turntable/dwell",
-            "/imu/rates",
-            "/nav/log",
-            "/nav/event",
-            "/hil/log",
-            "/hil/result",
-        ] {
+        for t in drill_topics {
             assert!(
                 c["messages"][t].as_u64().unwrap_or(0) > 0,
                 "client {name}: nothing on {t}: {:#}",

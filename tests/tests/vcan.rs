@@ -313,24 +313,8 @@ fn drill_at(speed: &str, iface: &str) -> Value {
 /// One north-finding drill (6 s dwells, truth 287.5 deg, seed 7) through vcan at `speed`: the
 /// drill of `tests/tests/in_process.rs` (keep the two alike).
 fn drill_in(speed: &str, iface: &str, dir: &tempfile::TempDir) -> Value {
-    let args = [
-        "drill",
-        "north-finding",
-        "--dwell",
-        "6",
-        "--heading",
-        "287.5",
-        "--seed",
-        "7",
-        "--tolerance",
-        "0.5",
-        "--iface",
-        iface,
-        "--speed",
-        speed,
-        "--json",
-        "--out",
-    ];
+    let mut args = e2e::DRILL.to_vec();
+    args.extend(["--iface", iface, "--speed", speed, "--json", "--out"]);
     let (r, _) = hil_json(&args, &[dir.path()]);
     for (name, pass, detail) in checks(&r) {
         eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
