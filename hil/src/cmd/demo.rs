@@ -30,7 +30,12 @@ pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>, live: LiveArgs)
         .map(|d| d.as_secs())
         .unwrap_or(1);
     // one live view for both parts, the drive after the drill on its timeline
-    let (view, own_view) = live.view(0.0)?;
+    // the timeline's length the viewers are told: the drill's, a second, the drive's
+    let drill_s = hil::procedures::northfinding::scenario(0.0, 28.218157, dwell, seed).duration_s;
+    let drive_s = toml::from_str::<Scenario>(DRIVE_GPS)
+        .map(|s| s.duration_s)
+        .unwrap_or(0.0);
+    let (view, own_view) = live.view(drill_s.ceil() + 1.0 + drive_s)?;
     let live = LiveArgs { view, ..live };
     let parts = demo_parts(speed, dwell, &out, seed, &live);
     if let (Some(v), true) = (live.view, own_view) {

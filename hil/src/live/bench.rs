@@ -57,7 +57,6 @@ pub struct BenchRun {
     tx: SyncSender<Event>,
     dropped: Arc<AtomicU64>,
     thread: Option<JoinHandle<()>>,
-    last_t_ns: Arc<AtomicU64>,
 }
 
 /// What the view lost of a run (its queue was full: the publisher fell behind the scheduler).
@@ -94,9 +93,8 @@ impl BenchRun {
             )),
             None => None,
         };
-        let last_t_ns = Arc::new(AtomicU64::new(0));
         let thread = {
-            let (view, last) = (view.clone(), last_t_ns.clone());
+            let view = view.clone();
             std::thread::Builder::new()
                 .name("live-publish".into())
                 .spawn(move || {
@@ -109,7 +107,7 @@ impl BenchRun {
                         last_nav: None,
                         next_nav_ns: 0,
                         dwell: Vec::new(),
-                        last: last.clone(),
+                        last: 0,
                     };
                     p.run(&rx);
                 })?
@@ -119,7 +117,6 @@ impl BenchRun {
             tx,
             dropped: Arc::new(AtomicU64::new(0)),
             thread: Some(thread),
-            last_t_ns,
         })
     }
 
@@ -201,7 +198,6 @@ impl BenchRun {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
-        let _ = self.last_t_ns.load(Ordering::Relaxed);
         RunViewStats {
             dropped_events: self.dropped.load(Ordering::Relaxed),
             server: self.view.stats(),
@@ -341,7 +337,8 @@ struct Publisher {
     next_nav_ns: u64,
     /// Per axis: the dwell under way (angle, from ns).
     dwell: Vec<Option<(f64, u64)>>,
-    last: Arc<AtomicU64>,
+    /// The latest tick's time, ns.
+    last: u64,
 }
 
 fn secs(ns: u64) -> f64 {
@@ -403,7 +400,7 @@ impl Publisher {
                     }
                 }
                 Event::Line(l) => {
-                    let t = self.last.load(Ordering::Relaxed);
+                    let t = self.last;
                     let text = l.strip_prefix("nav: ").unwrap_or(&l).to_string();
                     let level = if text.contains("aborted") || text.contains("WARN") {
                         LOG_WARNING
@@ -427,7 +424,7 @@ impl Publisher {
     }
 
     fn tick(&mut self, t: u64) {
-        self.last.fetch_max(t, Ordering::Relaxed);
+        self.last = self.last.max(t);
         let ts = secs(t);
         let offset = self.view.offset_ns.load(Ordering::Relaxed);
         if let Some((drive, site)) = &self.truth {
@@ -540,7 +537,7 @@ impl Publisher {
     fn end(&mut self, report: &Value, card: &str) {
         // the last epoch always goes out: the final heading is the report's
         self.nav_epoch();
-        let t = self.last.load(Ordering::Relaxed);
+        let t = self.last;
         for l in card.lines().filter(|l| !l.trim().is_empty()) {
             let level = if l.contains("FAIL") {
                 LOG_WARNING
