@@ -14,8 +14,13 @@ pub struct SolutionWatch {
     pub epochs: u64,
     /// Frames that did not decode.
     pub bad_frames: u64,
-    /// Epoch sequence numbers skipped.
+    /// Epoch sequence numbers skipped (and not come later).
     pub seq_gaps: u64,
+    /// Epochs that came after a later one (vcan on a machine of several CPUs may deliver a
+    /// sender's frames out of order when the sender moves between CPUs: its frames go through
+    /// each CPU's own receive queue); each filled the gap it had left.
+    #[serde(default)]
+    pub reordered: u64,
     /// The last NAV_POS, deg.
     pub last_position_deg: Option<[f64; 2]>,
     /// The last mode.
@@ -93,9 +98,14 @@ pub fn watch_solution(
         {
             Some(wire::Message::NavTime(t)) => {
                 w.epochs += 1;
-                if let Some(p) = last_seq {
-                    w.seq_gaps += u64::from(t.seq.wrapping_sub(p).wrapping_sub(1));
+                let step = last_seq.map_or(1, |p| t.seq.wrapping_sub(p) as i8);
+                if step <= 0 {
+                    // an epoch after a later one: it fills the gap that one left
+                    w.reordered += 1;
+                    w.seq_gaps = w.seq_gaps.saturating_sub(1);
+                    continue;
                 }
+                w.seq_gaps += u64::from(step as u8 - 1);
                 last_seq = Some(t.seq);
                 let mode = format!("{:?}", t.mode);
                 let k = u64::from(t.sample_count);

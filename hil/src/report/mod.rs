@@ -314,12 +314,13 @@ pub fn solution_checks(
     let epochs = nav.solution.epochs;
     let mut pass = w.frames == sent && w.bad_frames == 0 && w.seq_gaps == 0 && epochs > 0;
     let mut detail = format!(
-        "nav sent {sent} frames in {epochs} epochs ({} refused by the socket); the bench received {} frames, {} epochs, {} undecodable, {} sequence gaps; last mode {}",
+        "nav sent {sent} frames in {epochs} epochs ({} refused by the socket); the bench received {} frames, {} epochs, {} undecodable, {} sequence gaps, {} out of order; last mode {}",
         nav.solution.send_errors,
         w.frames,
         w.epochs,
         w.bad_frames,
         w.seq_gaps,
+        w.reordered,
         w.last_mode.as_deref().unwrap_or("--")
     );
     if let (Some(p), Some(o)) = (
