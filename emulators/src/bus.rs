@@ -187,8 +187,6 @@ pub struct Hold {
     pub paused: std::sync::Arc<AtomicBool>,
     /// The stream stands (`true`), the stream goes on (`false`).
     pub notify: Box<dyn FnMut(bool) + Send>,
-    /// Pauses taken.
-    pub pauses: u64,
 }
 
 /// The CAN interface going down and coming back up at points of the simulated stream (a
@@ -625,7 +623,6 @@ fn hold_while_paused(
     stop: &AtomicBool,
 ) -> Result<(), CanTxError> {
     port.flush(nav)?;
-    hold.pauses += 1;
     tracing::info!(interface = port.iface, "paused before sample {k}");
     (hold.notify)(true);
     while hold.paused.load(Ordering::Relaxed) && !stop.load(Ordering::Relaxed) {

@@ -473,7 +473,7 @@ impl Publisher {
         if self.dwell.len() <= ax {
             self.dwell.resize(ax + 1, None);
         }
-        let locked = state == "Locked";
+        let locked = s.state == wire::TtState::Locked;
         match (self.dwell[ax], locked) {
             (None, true) => self.dwell[ax] = Some((s.angle_deg, t)),
             (Some((angle, from)), false) => {

@@ -323,7 +323,6 @@ impl View {
                         .publish(Ch::HilLog as usize, t, m.to_string().as_bytes());
                 }
             }),
-            pauses: 0,
         }
     }
 

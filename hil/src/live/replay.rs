@@ -47,15 +47,17 @@ pub fn replay_live(
             inputs.push(i);
         }
     })?;
-    let rate = cfg.imu.rate_hz;
-    let gyro = wire::imu_gyro::SPEC.id;
-    let is_gyro = |i: &Input| matches!(i, Input::Frame(f) if f.id == gyro);
     let samples = inputs.iter().filter(|i| is_gyro(i)).count() as u64;
-    let end_ns = (samples as f64 / rate * 1e9) as u64;
+    let end_ns = (samples as f64 / cfg.imu.rate_hz * 1e9) as u64;
     let view = View::start(addr, wait, end_ns as f64 * 1e-9)?;
     let pb = play(&inputs, cfg, scenario, &view, speed, end_ns, mcap);
     let stats = view.finish();
     Ok((pb?, stats))
+}
+
+/// An IMU_GYRO frame: one IMU sample (the recording's clock).
+fn is_gyro(i: &Input) -> bool {
+    matches!(i, Input::Frame(f) if f.id == wire::imu_gyro::SPEC.id)
 }
 
 fn play(
@@ -68,8 +70,6 @@ fn play(
     mcap: &Path,
 ) -> Result<Playback> {
     let rate = cfg.imu.rate_hz;
-    let gyro = wire::imu_gyro::SPEC.id;
-    let is_gyro = |i: &Input| matches!(i, Input::Frame(f) if f.id == gyro);
     let (tx, rx) = mpsc::channel();
     view.controls_to(tx);
     let faults = scenario

@@ -508,7 +508,7 @@ fn client_loop(
 ) -> Result<()> {
     loop {
         match ws.read() {
-            Ok(Message::Text(t)) => on_text(&t, client, shared),
+            Ok(Message::Text(t)) => on_text(&t, client),
             Ok(Message::Binary(b)) => on_binary(&b, client, shared),
             Ok(Message::Close(_)) => return Ok(()),
             Ok(_) => {}
@@ -537,7 +537,7 @@ fn client_loop(
     }
 }
 
-fn on_text(t: &str, client: &Client, shared: &Shared) {
+fn on_text(t: &str, client: &Client) {
     let Ok(v) = serde_json::from_str::<serde_json::Value>(t) else {
         tracing::info!("live view: client {}: not JSON: {t:.80}", client.peer);
         return;
@@ -569,7 +569,6 @@ fn on_text(t: &str, client: &Client, shared: &Shared) {
         }
         other => tracing::debug!("live view: client {}: op {other:?} ignored", client.peer),
     }
-    let _ = shared;
 }
 
 /// A playback control request (binary op 3): command u8, speed f32, had_seek u8, seek u64,
