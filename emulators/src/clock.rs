@@ -18,6 +18,15 @@ impl SimClock {
         }
     }
 
+    /// A clock whose simulated time 0 is the host's instant `origin` (devices started apart
+    /// share one clock by sharing it).
+    pub fn starting_at(origin: Instant, speed: f64) -> Self {
+        Self {
+            origin,
+            speed: speed.max(1e-6),
+        }
+    }
+
     /// Speed factor.
     pub fn speed(&self) -> f64 {
         self.speed

@@ -39,6 +39,13 @@ struct Cli {
 enum Cmd {
     /// Run a scenario on vcan: emulators + nav, then checks, a result card and a report.
     Run(RunArgs),
+    /// One emulated device on its own, free-running on the host's clock as hardware runs, until
+    /// stopped: the IMU or the turntable on a CAN interface, the GPS receiver on a pty. A
+    /// stand-in for the hardware for any device under test (ours, another team's, a board on
+    /// can0); the IMU can ride a table on the bus it does not model (--follow-turntable). On
+    /// stop it prints what it sent and its own lateness; exit status 3 when the host could not
+    /// keep real time.
+    Emulate(cmd::emulate::EmulateArgs),
     /// The main job: a four-position north-finding drill at the paper's start point with a random
     /// true heading, then a short GPS-aided drive (one 1 km lap with the NMEA receiver on a pty),
     /// each with its result card and report, and a summary of both.
@@ -708,6 +715,7 @@ fn main() {
 fn real_main(cli: Cli) -> Result<i32> {
     match cli.cmd {
         Cmd::Run(a) => run(a),
+        Cmd::Emulate(a) => cmd::emulate::emulate(a),
         Cmd::Demo {
             speed,
             dwell,

@@ -88,7 +88,9 @@ pub fn ensure_vcan(name: &str) -> Result<()> {
                     detail,
                 });
             }
-        } else {
+        } else if !sys.exists() {
+            // (another process creating the same interface at the same moment wins the race:
+            // then it exists, and is brought up below like any other)
             return Err(Error::Netlink {
                 name: name.into(),
                 action: "create",

@@ -6,6 +6,7 @@ pub(crate) mod busload;
 pub(crate) mod calibrate;
 pub(crate) mod demo;
 pub(crate) mod drill;
+pub(crate) mod emulate;
 pub(crate) mod experiment;
 pub(crate) mod faults;
 pub(crate) mod fuzz;

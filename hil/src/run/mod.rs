@@ -433,11 +433,7 @@ fn prepare(s: &Scenario, opts: &RunOptions) -> Result<Setup> {
     };
     // the parameter file nav loads goes beside its config, where nav (perhaps another user)
     // can read it, and into the run's record
-    for (p, name) in nav_cfg.input_files_mut() {
-        std::fs::copy(&*p, nav_folder.dir.join(name))
-            .with_context(|| format!("copying {} for nav", p.display()))?;
-        *p = name.into();
-    }
+    crate::scenario::navconfig::copy_inputs_beside(&mut nav_cfg, &nav_folder.dir)?;
     std::fs::write(&cfg_path, nav_cfg.to_toml())?;
     Ok(Setup {
         gps,

@@ -496,6 +496,38 @@ impl Scenario {
             return (self.motion(), None);
         };
         let tt = Turntable::new(tp.clone());
+        let m = self.on_table(tp.axes, |i, about| {
+            Box::new(Indexer {
+                about,
+                axis: ProfileAxis(tt.profile(i)),
+            })
+        });
+        (m, Some(tt))
+    }
+
+    /// The truth motion of this scenario with its IMU on a table the bench does not model,
+    /// following the table's reported angles (`tracks`, one per axis of the scenario's
+    /// `[turntable]`; none: no table).
+    pub fn following(&self, tracks: &[emulators::reported::SharedTrack]) -> Box<dyn Motion> {
+        let axes = self.turntable.as_ref().map_or(0, |t| t.axes);
+        if axes == 0 || tracks.is_empty() {
+            return self.motion();
+        }
+        self.on_table(axes.min(tracks.len() as u8), |i, about| {
+            Box::new(Indexer {
+                about,
+                axis: emulators::reported::ReportedAxis(tracks[i].clone()),
+            })
+        })
+    }
+
+    /// The base motion with the disturbances, the vibration and `axes` axes of a table (each
+    /// made by `axis` from its index and the direction it turns about) on top.
+    fn on_table(
+        &self,
+        axes: u8,
+        axis: impl Fn(usize, nalgebra::Unit<nalgebra::Vector3<f64>>) -> Box<dyn RelativeRotation>,
+    ) -> Box<dyn Motion> {
         let mut relative: Vec<Box<dyn RelativeRotation>> = Vec::new();
         if !self.disturbance.is_empty() {
             relative.push(Box::new(Disturbances(self.disturbance.clone())));
@@ -503,24 +535,19 @@ impl Scenario {
         if let Some(v) = &self.vibration {
             relative.push(Box::new(v.clone()));
         }
-        let axes = [
+        let about = [
             nalgebra::Vector3::z_axis(),
             nalgebra::Vector3::x_axis(),
             nalgebra::Vector3::y_axis(),
         ];
-        for (i, about) in axes.into_iter().enumerate().take(usize::from(tp.axes)) {
-            relative.push(Box::new(Indexer {
-                about,
-                axis: ProfileAxis(tt.profile(i)),
-            }));
+        for (i, about) in about.into_iter().enumerate().take(usize::from(axes)) {
+            relative.push(axis(i, about));
         }
-        let base = self.base_motion();
-        let m = Composed {
-            base,
+        Box::new(Composed {
+            base: self.base_motion(),
             relative,
             linear: self.vibration.clone(),
-        };
-        (Box::new(m), Some(tt))
+        })
     }
 
     fn base_motion(&self) -> Box<dyn Motion> {

@@ -3,6 +3,7 @@
 //! the calibrations, the IMU's calibration, the watchdog, the recording), from the scenario alone.
 
 use crate::scenario::Scenario;
+use anyhow::{Context, Result};
 use emulators::gps::ReceiverParams;
 use nav::config::{CanConfig, GpsConfig, NavConfig, RecordConfig, WatchdogConfig};
 use nav::imu::ImuCalibration;
@@ -157,4 +158,28 @@ pub fn nf_config(s: &Scenario, base: &NorthFindingConfig) -> NorthFindingConfig 
         latitude_deg: s.site.lat_deg,
         ..base.clone()
     }
+}
+
+/// Write nav's config for a scenario to `path` (as [`nav_config`]), the parameter files it
+/// loads copied beside it (where nav, perhaps another user, can read them) and named there.
+pub fn write_nav_config(
+    s: &Scenario,
+    iface: Option<&str>,
+    gps_port: Option<&Path>,
+    path: &Path,
+) -> Result<NavConfig> {
+    let mut cfg = nav_config(s, iface, gps_port);
+    copy_inputs_beside(&mut cfg, path.parent().unwrap_or(Path::new(".")))?;
+    std::fs::write(path, cfg.to_toml()).with_context(|| format!("writing {}", path.display()))?;
+    Ok(cfg)
+}
+
+/// The parameter files `cfg` loads, copied into `dir` (beside its config file) and named there.
+pub fn copy_inputs_beside(cfg: &mut NavConfig, dir: &Path) -> Result<()> {
+    for (p, name) in cfg.input_files_mut() {
+        std::fs::copy(&*p, dir.join(name))
+            .with_context(|| format!("copying {} for nav", p.display()))?;
+        *p = name.into();
+    }
+    Ok(())
 }

@@ -1,0 +1,463 @@
+//! Free-running devices: one emulated device on its own, paced by the host's clock with
+//! absolute deadlines, as hardware runs: it waits for nobody.
+//!
+//! This is the other mode beside the lockstep of [`crate::bus`]. A device under test the bench
+//! does not pace (another build, another team's box, a board on `can0`) meets emulators that
+//! behave like the hardware they stand in for: the IMU sends every sample at its time, the
+//! turntable's controller answers commands and reports its status at its rate, the receiver
+//! writes its epochs at their PPS edges. Nothing here reads what the device under test says.
+//!
+//! What the bench can promise in this mode is measured, not assumed: every sample, tick and
+//! epoch has a due instant on the host's clock (`origin + t / speed`) and the instant its write
+//! returned, and their difference is the bench's own **lateness** ([`Lateness`]), kept apart
+//! from anything the device under test does. When the host cannot keep real time (a sample
+//! later than the limit), the device stops and says so ([`FreeStats::behind`]) rather than
+//! feed a device under test a stream whose timing is the host's fault.
+//!
+//! The models are the same pure ones the lockstep bench steps ([`crate::stream::BusStream`],
+//! [`crate::ttbus::TtBus`], [`crate::gps::GpsReceiver`]); only the pacing and the transport are
+//! here. An IMU on a table the bench does not model follows the table's reports
+//! ([`crate::reported`]).
+
+use crate::bus::{bench_socket, drain};
+use crate::can::{CanTxError, Progress, write_all};
+use crate::clock::SimClock;
+use crate::gps::{GpsPty, GpsReceiver, PtyError};
+use crate::reported::{ReportStats, SharedTrack};
+use crate::stream::{BusStream, TxStats};
+use crate::ttbus::{TtBus, TurntableTxStats};
+use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use thiserror::Error;
+use wire::{Message, RawFrame};
+
+/// How a free-running device is paced.
+#[derive(Debug, Clone, Copy)]
+pub struct Pacing {
+    /// The host instant of simulated time 0 (devices started apart share it to share a clock).
+    pub origin: Instant,
+    /// Simulated seconds per second of the host's clock (1: real time).
+    pub speed: f64,
+    /// Simulated time to run to, s (infinite: until stopped).
+    pub until_s: f64,
+    /// The bench's lateness beyond which it stops: it cannot keep real time.
+    pub max_late: Duration,
+}
+
+impl Pacing {
+    fn clock(&self) -> SimClock {
+        SimClock::starting_at(self.origin, self.speed)
+    }
+}
+
+/// Free-running failures.
+#[derive(Debug, Error)]
+pub enum FreeError {
+    /// CAN trouble.
+    #[error(transparent)]
+    Can(#[from] CanTxError),
+    /// The receiver's pty.
+    #[error("GPS receiver: {0}")]
+    Gps(#[from] PtyError),
+}
+
+/// Width of a bin of [`Lateness`], µs.
+const BIN_US: f64 = 10.0;
+/// Bins: lateness up to 100 ms is binned, beyond it counted in the last bin (its maximum exact).
+const BINS: usize = 10_000;
+
+/// The bench's own lateness: for each write, the host's instant its write returned minus the
+/// instant it was due. A histogram of 10 µs bins (bounded memory for runs of hours) and the
+/// exact worst.
+#[derive(Debug, Clone)]
+pub struct Lateness {
+    bins: Vec<u64>,
+    count: u64,
+    max_ms: f64,
+    over_1ms: u64,
+}
+
+impl Default for Lateness {
+    fn default() -> Self {
+        Self {
+            bins: vec![0; BINS],
+            count: 0,
+            max_ms: 0.0,
+            over_1ms: 0,
+        }
+    }
+}
+
+/// Lateness in figures.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct LatenessSummary {
+    /// Writes measured.
+    pub count: u64,
+    /// Median, ms (to the 10 µs bin's upper edge).
+    pub p50_ms: f64,
+    /// 99th percentile, ms.
+    pub p99_ms: f64,
+    /// Worst, ms (exact).
+    pub max_ms: f64,
+    /// Writes more than 1 ms late.
+    pub over_1ms: u64,
+}
+
+impl Lateness {
+    /// A write `late` after its due instant.
+    pub fn add(&mut self, late: Duration) {
+        let us = late.as_secs_f64() * 1e6;
+        let i = ((us / BIN_US) as usize).min(BINS - 1);
+        self.bins[i] += 1;
+        self.count += 1;
+        self.max_ms = self.max_ms.max(us * 1e-3);
+        self.over_1ms += u64::from(us > 1000.0);
+    }
+
+    /// The figures.
+    pub fn summary(&self) -> LatenessSummary {
+        let at = |q: f64| {
+            if self.count == 0 {
+                return 0.0;
+            }
+            let want = ((self.count as f64) * q).ceil().max(1.0) as u64;
+            let mut seen = 0;
+            for (i, n) in self.bins.iter().enumerate() {
+                seen += n;
+                if seen >= want {
+                    return ((i + 1) as f64 * BIN_US * 1e-3).min(self.max_ms);
+                }
+            }
+            self.max_ms
+        };
+        LatenessSummary {
+            count: self.count,
+            p50_ms: at(0.5),
+            p99_ms: at(0.99),
+            max_ms: self.max_ms,
+            over_1ms: self.over_1ms,
+        }
+    }
+}
+
+/// What a free-running device did.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct FreeStats {
+    /// `imu`, `turntable`, `gps`.
+    pub device: String,
+    /// The interface or the device path it wrote to.
+    pub port: String,
+    /// Speed over real time.
+    pub speed: f64,
+    /// Simulated time reached, s.
+    pub reached_s: f64,
+    /// Wall time it ran, s.
+    pub wall_s: f64,
+    /// Frames (or NMEA bytes, for the receiver) written.
+    pub written: u64,
+    /// The bench's own lateness.
+    pub lateness: LatenessSummary,
+    /// It stopped because the host could not keep real time: what was late, and by how much.
+    pub behind: Option<String>,
+    /// The IMU's stream.
+    pub imu: Option<TxStats>,
+    /// The turntable's frames.
+    pub turntable: Option<TurntableTxStats>,
+    /// The table reports an IMU followed, one per axis.
+    pub followed: Vec<ReportStats>,
+    /// The receiver's epochs.
+    pub gps: Option<FreeGpsStats>,
+}
+
+/// What a free-running receiver wrote.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct FreeGpsStats {
+    /// Epochs written.
+    pub epochs: u64,
+    /// Epochs not written because nobody had the device open (a serial line loses them too).
+    pub no_reader: u64,
+    /// Epochs not written because the reader had left more than a few epochs unread.
+    pub reader_behind: u64,
+    /// Epochs the receiver puts out nothing (an outage, a port drop in the scenario).
+    pub silent: u64,
+}
+
+/// Sleep until `t` is due on `clock`, in slices short enough to see `stop` (false: stopped).
+fn sleep_until(clock: &SimClock, t: f64, stop: &AtomicBool) -> bool {
+    let due = clock.wall_at(t);
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return false;
+        }
+        let now = Instant::now();
+        if now >= due {
+            return true;
+        }
+        std::thread::sleep((due - now).min(Duration::from_millis(50)));
+    }
+}
+
+/// Measure a write due at `t` that has just returned; the reason to stop when it is beyond the
+/// limit.
+fn measure(
+    late: &mut Lateness,
+    clock: &SimClock,
+    t: f64,
+    p: &Pacing,
+    what: impl FnOnce() -> String,
+) -> Option<String> {
+    let l = Instant::now().saturating_duration_since(clock.wall_at(t));
+    late.add(l);
+    (l > p.max_late).then(|| {
+        format!(
+            "the host cannot keep real time at x{}: {} went out {:.1} ms after its time (limit {:.0} ms); stopped rather than feed a device under test a late stream",
+            p.speed,
+            what(),
+            l.as_secs_f64() * 1e3,
+            p.max_late.as_secs_f64() * 1e3
+        )
+    })
+}
+
+/// The IMU free-running on `iface`: each sample's frames at the sample's time (samples that
+/// fell due together in one write). With `tracks` (one per table axis), it follows the table's
+/// TT_STATUS reports on the bus (its truth turns as the table reported, [`crate::reported`]).
+pub fn run_imu(
+    iface: &str,
+    mut stream: BusStream,
+    tracks: &[SharedTrack],
+    p: &Pacing,
+    stop: &AtomicBool,
+    progress: &Progress,
+) -> Result<FreeStats, FreeError> {
+    let ids: Vec<u16> = if tracks.is_empty() {
+        Vec::new()
+    } else {
+        vec![wire::tt_status::SPEC.id]
+    };
+    let sock = bench_socket(iface, &ids)?;
+    let clock = p.clock();
+    let start = Instant::now();
+    let mut late = Lateness::default();
+    let mut frames: Vec<RawFrame> = Vec::with_capacity(wire::BATCH);
+    let mut due: Vec<(u64, f64)> = Vec::new();
+    let (mut written, mut behind) = (0u64, None);
+    while behind.is_none() && stream.next_time() <= p.until_s {
+        if !sleep_until(&clock, stream.next_time(), stop) {
+            break;
+        }
+        if !tracks.is_empty() {
+            let now = clock.now();
+            drain(&sock, iface, |f| {
+                if let Some(Ok(Message::TtStatus(s))) = f.map(|f| Message::decode(&f))
+                    && let Some(tr) = tracks.get(usize::from(s.axis))
+                {
+                    tr.lock().unwrap_or_else(|e| e.into_inner()).report(
+                        now,
+                        s.angle_deg,
+                        s.faults.encoder,
+                    );
+                }
+            })?;
+        }
+        // every sample due by now, in one write
+        let now = clock.now();
+        frames.clear();
+        due.clear();
+        loop {
+            due.push((stream.imu().next_index(), stream.next_time()));
+            stream.next_frames(&mut frames);
+            if stream.next_time() > now.min(p.until_s) || frames.len() + 8 > wire::BATCH {
+                break;
+            }
+        }
+        let w = write_all(&sock, iface, &frames)?;
+        written += frames.len() as u64 - w.lost_down;
+        for &(k, t) in &due {
+            behind = behind.or(measure(&mut late, &clock, t, p, || {
+                format!("IMU sample {k}")
+            }));
+        }
+        progress.set(stream.next_time());
+    }
+    Ok(FreeStats {
+        device: "imu".into(),
+        port: iface.into(),
+        speed: p.speed,
+        reached_s: stream.next_time() - 1.0 / stream.imu().params().rate_hz,
+        wall_s: start.elapsed().as_secs_f64(),
+        written,
+        lateness: late.summary(),
+        behind,
+        imu: Some(TxStats {
+            frames: written,
+            ..stream.stats
+        }),
+        followed: tracks
+            .iter()
+            .map(|t| t.lock().unwrap_or_else(|e| e.into_inner()).stats)
+            .collect(),
+        ..FreeStats::default()
+    })
+}
+
+/// The turntable's controller free-running on `iface`, its loop at `tick_hz`: at each tick the
+/// commands received since the last one (each acknowledged at once), then the mechanism moved
+/// to the tick's time and its frames due (status at its rate). Its truth stays in `tt`.
+pub fn run_turntable(
+    iface: &str,
+    tt: &mut TtBus,
+    tick_hz: f64,
+    p: &Pacing,
+    stop: &AtomicBool,
+    progress: &Progress,
+) -> Result<FreeStats, FreeError> {
+    let sock = bench_socket(iface, &[wire::tt_cmd::SPEC.id])?;
+    let clock = p.clock();
+    let start = Instant::now();
+    let mut late = Lateness::default();
+    let (mut msgs, mut out) = (Vec::new(), Vec::new());
+    let (mut written, mut behind, mut k) = (0u64, None, 0u64);
+    let mut bad = 0u64;
+    loop {
+        let t = (k + 1) as f64 / tick_hz;
+        if behind.is_some() || t > p.until_s || !sleep_until(&clock, t, stop) {
+            break;
+        }
+        // the commands since the last tick, taken at this tick (the controller's loop)
+        out.clear();
+        drain(&sock, iface, |f| match f.map(|f| Message::decode(&f)) {
+            Some(Ok(Message::TtCmd(c))) => {
+                msgs.clear();
+                tt.receive(t, c, &mut msgs);
+                out.append(&mut msgs);
+            }
+            _ => bad += 1,
+        })?;
+        tt.after_sample(k, t, &mut out);
+        if !out.is_empty() {
+            let frames: Vec<RawFrame> = out.iter().filter_map(|m| m.encode().ok()).collect();
+            let w = write_all(&sock, iface, &frames)?;
+            written += frames.len() as u64 - w.lost_down;
+            for m in &out {
+                tt.sent(m);
+            }
+            behind = measure(&mut late, &clock, t, p, || {
+                format!("the turntable's tick at {t:.3} s")
+            });
+        }
+        progress.set(t);
+        k += 1;
+    }
+    tt.stats.bad_frames += bad;
+    Ok(FreeStats {
+        device: "turntable".into(),
+        port: iface.into(),
+        speed: p.speed,
+        reached_s: k as f64 / tick_hz,
+        wall_s: start.elapsed().as_secs_f64(),
+        written,
+        lateness: late.summary(),
+        behind,
+        turntable: Some(tt.stats),
+        ..FreeStats::default()
+    })
+}
+
+/// Bytes a reader may leave unread before epochs are no longer written (a few epochs' worth).
+const UNREAD_LIMIT: usize = 2048;
+
+/// The receiver free-running on `pty`: each epoch's sentences at its time, whoever reads them.
+/// An epoch nobody has the device open for, or that a reader far behind would not take, is
+/// counted and not written, as a serial line loses it.
+pub fn run_gps(
+    pty: &mut GpsPty,
+    rx: &mut GpsReceiver,
+    p: &Pacing,
+    stop: &AtomicBool,
+    progress: &Progress,
+) -> Result<FreeStats, FreeError> {
+    let clock = p.clock();
+    let start = Instant::now();
+    let mut late = Lateness::default();
+    let mut st = FreeGpsStats::default();
+    let (mut written, mut behind) = (0u64, None);
+    while behind.is_none() {
+        let t = rx.next_write_time();
+        if t > p.until_s || !sleep_until(&clock, t, stop) {
+            break;
+        }
+        while let Some(e) = rx.poll(t, p.until_s) {
+            if e.port_drop.is_some() || e.text.is_empty() {
+                st.silent += 1;
+            } else if !pty.reader_attached() {
+                st.no_reader += 1;
+            } else if pty.unread().is_some_and(|n| n > UNREAD_LIMIT) {
+                st.reader_behind += 1;
+            } else {
+                pty.write(e.text.as_bytes())?;
+                written += e.text.len() as u64;
+                st.epochs += 1;
+                behind = behind.or(measure(&mut late, &clock, t, p, || {
+                    format!("the epoch of {:.1} s", e.edge)
+                }));
+            }
+        }
+        progress.set(t);
+    }
+    Ok(FreeStats {
+        device: "gps".into(),
+        port: pty.path().into(),
+        speed: p.speed,
+        reached_s: clock.now().min(p.until_s),
+        wall_s: start.elapsed().as_secs_f64(),
+        written,
+        lateness: late.summary(),
+        behind,
+        gps: Some(st),
+        ..FreeStats::default()
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lateness_percentiles_come_from_the_histogram_and_the_worst_is_exact() {
+        let mut l = Lateness::default();
+        for us in 0..1000u64 {
+            l.add(Duration::from_micros(us));
+        }
+        l.add(Duration::from_millis(250));
+        let s = l.summary();
+        assert_eq!(s.count, 1001);
+        assert!((s.p50_ms - 0.5).abs() <= 0.011, "{s:?}");
+        assert!((s.p99_ms - 0.99).abs() <= 0.011, "{s:?}");
+        assert_eq!(s.max_ms, 250.0);
+        assert_eq!(s.over_1ms, 1);
+        assert_eq!(Lateness::default().summary(), LatenessSummary::default());
+    }
+
+    #[test]
+    fn a_write_beyond_the_limit_says_the_host_cannot_keep_real_time() {
+        let p = Pacing {
+            origin: Instant::now() - Duration::from_millis(500),
+            speed: 1.0,
+            until_s: f64::INFINITY,
+            max_late: Duration::from_millis(100),
+        };
+        let clock = p.clock();
+        let mut l = Lateness::default();
+        // due at 0.45 s of a clock started 0.5 s ago: 50 ms late, within the limit
+        assert!(measure(&mut l, &clock, 0.45, &p, || "a".into()).is_none());
+        // due at 0.1 s: 400 ms late
+        let why = measure(&mut l, &clock, 0.1, &p, || "IMU sample 200".into());
+        let why = why.expect("beyond the limit");
+        assert!(
+            why.contains("IMU sample 200") && why.contains("cannot keep real time"),
+            "{why}"
+        );
+    }
+}
