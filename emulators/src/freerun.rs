@@ -62,6 +62,50 @@ pub enum FreeError {
     Gps(#[from] PtyError),
 }
 
+/// When each IMU sample went on the bus: its index, its 16-bit counter (what a device under
+/// test names in NAV_TIME), and the host's instant its write began. The newest `capacity`
+/// samples are kept (a device's latency is measured against them).
+#[derive(Debug)]
+pub struct SentSamples {
+    ring: std::sync::Mutex<std::collections::VecDeque<(u64, u16, Instant)>>,
+    capacity: usize,
+}
+
+impl SentSamples {
+    /// Keep the newest `capacity` samples.
+    pub fn new(capacity: usize) -> Self {
+        Self {
+            ring: std::sync::Mutex::new(std::collections::VecDeque::with_capacity(capacity)),
+            capacity: capacity.max(1),
+        }
+    }
+
+    fn push(&self, k: u64, counter: u16, at: Instant) {
+        let mut r = self.ring.lock().unwrap_or_else(|e| e.into_inner());
+        if r.len() == self.capacity {
+            r.pop_front();
+        }
+        r.push_back((k, counter, at));
+    }
+
+    /// The newest sample sent whose counter is `counter` (the low 16 bits of a NAV_TIME's
+    /// SampleCount): its index and when it went on the bus. None when no such sample is kept.
+    pub fn find(&self, counter: u16) -> Option<(u64, Instant)> {
+        let r = self.ring.lock().unwrap_or_else(|e| e.into_inner());
+        let &(_, newest, _) = r.back()?;
+        let back = usize::from(newest.wrapping_sub(counter));
+        let i = r.len().checked_sub(1 + back)?;
+        let (k, c, at) = r[i];
+        (c == counter).then_some((k, at))
+    }
+
+    /// The newest sample sent: its index and counter.
+    pub fn newest(&self) -> Option<(u64, u16)> {
+        let r = self.ring.lock().unwrap_or_else(|e| e.into_inner());
+        r.back().map(|&(k, c, _)| (k, c))
+    }
+}
+
 /// Width of a bin of [`Lateness`], µs.
 const BIN_US: f64 = 10.0;
 /// Bins: lateness up to 100 ms is binned, beyond it counted in the last bin (its maximum exact).
@@ -227,6 +271,7 @@ pub fn run_imu(
     iface: &str,
     mut stream: BusStream,
     tracks: &[SharedTrack],
+    sent: Option<&SentSamples>,
     p: &Pacing,
     stop: &AtomicBool,
     progress: &Progress,
@@ -270,6 +315,13 @@ pub fn run_imu(
             stream.next_frames(&mut frames);
             if stream.next_time() > now.min(p.until_s) || frames.len() + 8 > wire::BATCH {
                 break;
+            }
+        }
+        // kept before the write: a device may answer before the write returns
+        if let Some(s) = sent {
+            let at = Instant::now();
+            for &(k, _) in &due {
+                s.push(k, stream.imu().sample_counter(k), at);
             }
         }
         let w = write_all(&sock, iface, &frames)?;
@@ -423,6 +475,26 @@ pub fn run_gps(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_sample_is_found_by_its_counter_across_the_wrap() {
+        let s = SentSamples::new(100);
+        let t = Instant::now();
+        for k in 0..80u64 {
+            s.push(k, (65_500 + k) as u16, t + Duration::from_micros(500 * k));
+        }
+        // the counter wraps between samples 35 (65,535) and 36 (0)
+        assert_eq!(s.newest(), Some((79, 43)));
+        assert_eq!(s.find(65_535).map(|x| x.0), Some(35));
+        assert_eq!(s.find(0).map(|x| x.0), Some(36));
+        assert_eq!(s.find(43).map(|x| x.0), Some(79));
+        for k in 80..300u64 {
+            s.push(k, (65_500 + k) as u16, t);
+        }
+        assert_eq!(s.find(200).map(|x| x.0), Some(236));
+        // older than what is kept
+        assert_eq!(s.find(100), None);
+    }
 
     #[test]
     fn lateness_percentiles_come_from_the_histogram_and_the_worst_is_exact() {

@@ -18,6 +18,7 @@
 pub mod check;
 pub mod engine;
 pub mod experiments;
+pub mod free;
 pub mod live;
 pub mod par;
 pub mod procedures;

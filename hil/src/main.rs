@@ -514,6 +514,8 @@ struct NorthFindingArgs {
     live: LiveArgs,
     #[command(flatten)]
     bus: BusArgs,
+    #[command(flatten)]
+    free: FreeArgs,
 }
 
 #[derive(Subcommand)]
@@ -692,6 +694,103 @@ struct RunArgs {
     live: LiveArgs,
     #[command(flatten)]
     bus: BusArgs,
+    #[command(flatten)]
+    free: FreeArgs,
+}
+
+/// A free-running run: the device under test as it runs in the vehicle.
+#[derive(clap::Args, Clone, Default)]
+struct FreeArgs {
+    /// Free-running, as in the vehicle: the emulators run on the host's clock at x1 and wait
+    /// for nobody; the device under test (our nav by default, or --dut) is judged by what it
+    /// sends on the bus, by the DBC only: its heading against truth at the sample its NAV_TIME
+    /// names, its latency from that sample on the bus, its output rate, its time tags, frames
+    /// outside the DBC. The bench's own lateness is measured apart; when the host cannot keep
+    /// real time the run stops with no verdict (exit status 3). Results are measured, not
+    /// bit-identical (docs/your-device.md).
+    #[arg(long)]
+    free: bool,
+    /// With --free: the device under test, a command run through `sh -c` with {iface}, {gps}
+    /// (the receiver's port), {config} (the nav.toml the bench wrote for the scenario), {out}
+    /// (its folder) and {nav} (our nav binary) replaced; `none`: nothing to start, the device
+    /// is already on the interface. Default: our nav (--nav).
+    #[arg(long, requires = "free")]
+    dut: Option<String>,
+    /// With --free: a device that is real, not emulated: `turntable=IFACE` (a table on the
+    /// bench's interface; the IMU rides it as its TT_STATUS reports), `gps=PORT` (a receiver on
+    /// a serial port, handed to the device under test). Repeatable.
+    #[arg(long, value_name = "DEVICE=PORT", requires = "free")]
+    real: Vec<String>,
+    /// With --free: the device's latency budget, ms: the 99th percentile of IMU sample on
+    /// the bus to the NAV_TIME naming it.
+    #[arg(long, default_value_t = 50.0, requires = "free")]
+    latency_budget_ms: f64,
+    /// With --free: the device must send its first NAV_TIME within this long, s.
+    #[arg(long, value_parser = hil::values::duration_s, default_value_t = 15.0, requires = "free")]
+    answer_within: f64,
+    /// With --free: the bench's own lateness beyond which it stops, ms.
+    #[arg(long, default_value_t = 200.0, requires = "free")]
+    max_late_ms: f64,
+}
+
+impl FreeArgs {
+    /// The arguments that ask for this again (a command run again in the guest).
+    fn to_args(&self) -> Vec<String> {
+        if !self.free {
+            return Vec::new();
+        }
+        let mut a = vec![
+            "--free".into(),
+            "--latency-budget-ms".into(),
+            self.latency_budget_ms.to_string(),
+            "--answer-within".into(),
+            self.answer_within.to_string(),
+            "--max-late-ms".into(),
+            self.max_late_ms.to_string(),
+        ];
+        if let Some(d) = &self.dut {
+            a.extend(["--dut".into(), d.clone()]);
+        }
+        for r in &self.real {
+            a.extend(["--real".into(), r.clone()]);
+        }
+        a
+    }
+
+    /// The run's options, on `iface` into `out`, our nav being `nav`.
+    fn options(&self, iface: &str, out: PathBuf, nav: PathBuf) -> Result<hil::free::FreeOptions> {
+        let mut o = hil::free::FreeOptions {
+            iface: iface.into(),
+            out,
+            dut: match self.dut.as_deref() {
+                None => hil::free::Dut::Nav(nav),
+                Some("none") => hil::free::Dut::Nothing,
+                Some(c) => hil::free::Dut::Command(c.into(), nav),
+            },
+            real_turntable: false,
+            real_gps: None,
+            latency_budget_ms: self.latency_budget_ms,
+            answer_within_s: self.answer_within,
+            max_late_ms: self.max_late_ms,
+            progress: true,
+        };
+        for r in &self.real {
+            match r.split_once('=') {
+                Some(("turntable", i)) if i == iface => o.real_turntable = true,
+                Some(("turntable", _)) => bail!(
+                    "--real {r}: the bench has one bus, --iface {iface}: the real turntable must be on it"
+                ),
+                Some(("gps", p)) => o.real_gps = Some(PathBuf::from(p)),
+                _ => bail!("--real {r}: turntable=IFACE or gps=PORT"),
+            }
+        }
+        if !(0.0..=10_000.0).contains(&self.latency_budget_ms)
+            || !(0.0..=10_000.0).contains(&self.max_late_ms)
+        {
+            bail!("--latency-budget-ms and --max-late-ms: between 0 and 10000");
+        }
+        Ok(o)
+    }
 }
 
 fn main() {

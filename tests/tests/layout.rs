@@ -11,13 +11,14 @@ use std::path::{Path, PathBuf};
 const CRATES: [&str; 5] = ["wire", "nav", "emulators", "hil", "vcan-setup"];
 
 /// hil's folders in the order they may import (each from those before it).
-const HIL_LAYERS: [&str; 8] = [
+const HIL_LAYERS: [&str; 9] = [
     "scenario",
     "engine",
     "live",
     "procedures",
     "report",
     "run",
+    "free",
     "experiments",
     "suites",
 ];

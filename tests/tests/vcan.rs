@@ -1549,3 +1549,107 @@ fn a_drill_runs_free_against_emulators_in_their_own_processes() {
         assert!((a - c).abs() < 0.01, "{p}");
     }
 }
+
+/// The check named `name` of a report: (pass, detail).
+fn check_named(r: &Value, name: &str) -> (bool, String) {
+    checks(r)
+        .into_iter()
+        .find(|c| c.0 == name)
+        .map(|c| (c.1, c.2))
+        .unwrap_or_else(|| panic!("no check {name:?} in {r}"))
+}
+
+/// `hil drill north-finding --free`: the bench free-running at x1, judging the device under
+/// test by what it sends on the bus, by the DBC only. Our nav (the default device) lands within
+/// 3 of the sigma it sends (NAV_HGT) at the sample its NAV_TIME names, its latency from that
+/// sample on the bus is measured against the budget, every frame is within the DBC, its tags
+/// go forward. Then devices that fail are verdicts with figures, never a hang: nothing on the
+/// bus (it never answers), and our nav killed after 10 s under a budget it cannot meet (it dies
+/// in the middle, it is too late). Should the host not keep real time, the bench says so
+/// (exit 3) and the test does not judge the device.
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn a_free_running_drill_judges_the_device_by_the_dbc_and_names_its_failures() {
+    let dir = tempfile::tempdir().unwrap();
+    let drill = |out: &str, extra: &[&str]| {
+        let mut args = vec![
+            "drill",
+            "north-finding",
+            "--free",
+            "--heading",
+            "137.5",
+            "--dwell",
+            "15",
+            "--seed",
+            "7",
+            "--iface",
+            "vcan-free2",
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        args.push("--out");
+        hil_json(&args, &[&dir.path().join(out)])
+    };
+    let (r, code) = drill("ours", &[]);
+    if code == 3 {
+        eprintln!(
+            "the host could not keep real time: {}; no verdict on the device",
+            r["bench_behind"]
+        );
+    } else {
+        for (name, pass, detail) in checks(&r) {
+            eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
+        }
+        assert_eq!(code, 0, "{r}");
+        let h = &r["heading"];
+        let (err, sigma) = (
+            h["error_deg"].as_f64().unwrap(),
+            h["sigma_deg"].as_f64().unwrap(),
+        );
+        assert!(err.abs() <= 3.0 * sigma && sigma > 0.0, "{h}");
+        assert!(
+            r["latency"]["count"].as_u64().unwrap() > 1000,
+            "{}",
+            r["latency"]
+        );
+        let hz = r["rate"]["hz"].as_f64().unwrap();
+        assert!((hz - 50.0).abs() < 2.0, "{}", r["rate"]);
+        assert_eq!(r["rate"]["step_samples"].as_u64(), Some(40));
+        let bench: Vec<&str> = r["bench"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|b| b["device"].as_str().unwrap())
+            .collect();
+        assert_eq!(bench, ["turntable", "imu", "gps"]);
+        assert!(r["commands"].as_u64().unwrap() >= 8);
+    }
+    // nothing on the bus: a verdict within the answer time, not a hang
+    let (r, code) = drill("silent", &["--dut", "none", "--answer-within", "3"]);
+    assert_eq!(code, 1, "{r}");
+    let (pass, detail) = check_named(&r, "the device answered");
+    assert!(!pass && detail.contains("no NAV_TIME"), "{detail}");
+    // our nav killed after 10 s, under a budget of 50 us
+    let (r, code) = drill(
+        "dies",
+        &[
+            "--dut",
+            "timeout -s KILL 10 {nav} --config {config}",
+            "--latency-budget-ms",
+            "0.05",
+        ],
+    );
+    if code != 3 {
+        assert_eq!(code, 1, "{r}");
+        let (pass, detail) = check_named(&r, "the device ran to the end");
+        assert!(
+            !pass
+                && detail.contains("exited")
+                && (detail.contains("137") || detail.contains("signal 9")),
+            "{detail}"
+        );
+        let (pass, detail) = check_named(&r, "latency within the budget");
+        assert!(!pass && detail.contains("budget p99 0.05 ms"), "{detail}");
+        assert!(check_named(&r, "the device answered").0);
+    }
+}

@@ -49,7 +49,7 @@ pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
         )?;
         return Ok(i32::from(o.result.is_none()));
     }
-    run_procedure(scen, out, a.bus, a.live)
+    run_procedure(scen, out, a.bus, a.live, FreeArgs::default())
 }
 
 /// `--fail` of `hil calibrate tetrahedral`: `stuck:G`, `bias-jump:G:DPS` or `noise:G:DPS`
@@ -155,5 +155,5 @@ pub(crate) fn calibrate_tetrahedral(a: TetraArgs) -> Result<i32> {
         )?;
         return Ok(i32::from(o.result.is_none()));
     }
-    run_procedure(scen, out, a.bus, a.live)
+    run_procedure(scen, out, a.bus, a.live, FreeArgs::default())
 }

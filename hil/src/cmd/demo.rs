@@ -108,6 +108,7 @@ fn demo_parts(
         in_process: false,
         live: live.clone(),
         bus: BusArgs::to(out.join("drill")),
+        free: FreeArgs::default(),
     })?;
     eprintln!("hil: demo part 2 of 2: GPS-aided drive (one 1 km lap, NMEA receiver on a pty)");
     let mut s: Scenario = toml::from_str(DRIVE_GPS).context("built-in drive scenario")?;
@@ -120,6 +121,7 @@ fn demo_parts(
         drive_out.clone(),
         BusArgs::to(drive_out),
         live.clone(),
+        FreeArgs::default(),
     )?;
     Ok((drill, drive))
 }

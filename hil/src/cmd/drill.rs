@@ -30,6 +30,11 @@ pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
             toml::from_str(&text).with_context(|| format!("disturbance script {}", p.display()))?;
         s.disturbance = d.disturbance;
     }
+    if a.free.free {
+        // free-running, the device is judged by what it sends: our nav says its heading on the
+        // bus (NAV_ATT, NAV_HGT's sigma) once it navigates after north-finding
+        s = hil::free::parked_with_receiver(&s)?;
+    }
     s.check()?;
     let (out, scen) = procedure_folder(
         &s,
@@ -59,5 +64,5 @@ pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
         }
         return Ok(i32::from(o.error_deg.is_none_or(|e| e.abs() > a.tolerance)));
     }
-    run_procedure(scen, out, a.bus, a.live)
+    run_procedure(scen, out, a.bus, a.live, a.free)
 }

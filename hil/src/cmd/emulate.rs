@@ -239,7 +239,7 @@ fn imu(
     };
     let stream = BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults);
     Ok(emulators::freerun::run_imu(
-        iface, stream, &tracks, p, stop, progress,
+        iface, stream, &tracks, None, p, stop, progress,
     )?)
 }
 

@@ -19,6 +19,24 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
         None => default_out(&s.name),
     })?;
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
+    if a.free.free && a.bus.here() {
+        let nav_bin = match &a.nav {
+            Some(n) => n.clone(),
+            None => sibling_binary("nav")?,
+        };
+        let r = hil::free::run_free(&s, &a.free.options(&a.bus.iface, out.clone(), nav_bin)?)?;
+        if a.bus.json {
+            println!("{}", serde_json::to_string_pretty(&r)?);
+        } else {
+            print!("{}", hil::free::card(&r));
+            println!(" report: {}", out.join("report.json").display());
+        }
+        return Ok(match (&r.bench_behind, r.pass) {
+            (Some(_), _) => 3,
+            (None, true) => 0,
+            (None, false) => 1,
+        });
+    }
     if a.bus.here() {
         let nav_bin = match &a.nav {
             Some(n) => n.clone(),
@@ -85,6 +103,7 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
         args.push("--gpsd".into());
     }
     args.extend(a.live.to_args());
+    args.extend(a.free.to_args());
     run_in_guest(
         args,
         &out,
@@ -115,8 +134,10 @@ pub(crate) fn run_procedure(
     out: PathBuf,
     bus: BusArgs,
     live: LiveArgs,
+    free: FreeArgs,
 ) -> Result<i32> {
     run(RunArgs {
+        free,
         scenario: Some(scen),
         duration: None,
         speed: None,

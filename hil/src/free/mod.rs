@@ -1,0 +1,690 @@
+//! A free-running run: the bench's emulators on the host's clock at x1, waiting for nobody,
+//! and a device under test that the bench does not pace (our nav like any other, another
+//! team's implementation of the DBC, a box already on the interface), judged by what it sends
+//! on the bus, by the DBC only ([`score`]), against truth at the IMU sample each of its
+//! NAV_TIMEs names, with its latency from that sample on the bus.
+//!
+//! Devices may be real instead of emulated: a turntable on the interface (the IMU then rides
+//! it: its truth turns as the table's TT_STATUS reports, `emulators::reported`, and so does the
+//! truth the heading is scored against), a receiver on a serial port (given to the device under
+//! test; not scored here). What the bench cannot know is said on the card.
+//!
+//! The bench measures its own lateness apart from the device's; when it cannot keep real time
+//! it stops and says so, and gives no verdict on the device.
+
+pub mod observe;
+pub mod score;
+
+use crate::check::Check;
+use crate::scenario::Scenario;
+use anyhow::{Context, Result, bail};
+use emulators::can::{BusStream, Progress};
+use emulators::freerun::{FreeStats, Pacing, SentSamples};
+use emulators::gps::{GpsPty, GpsReceiver};
+use emulators::imu::ImuEmulator;
+use emulators::reported::{ReportedTrack, SharedTrack};
+use emulators::ttbus::TtBus;
+use observe::Observed;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// The device under test.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Dut {
+    /// Our nav binary, on the config the bench writes for the scenario.
+    Nav(PathBuf),
+    /// A command the bench starts (through `sh -c`), with `{iface}`, `{gps}` (the receiver's
+    /// port), `{config}` (the nav.toml the bench wrote for the scenario), `{out}` (its folder)
+    /// and `{nav}` (our nav binary) replaced.
+    Command(String, PathBuf),
+    /// Nothing to start: the device is already on the interface.
+    Nothing,
+}
+
+/// How a free-running run goes.
+#[derive(Debug, Clone)]
+pub struct FreeOptions {
+    /// The CAN interface.
+    pub iface: String,
+    /// The run folder.
+    pub out: PathBuf,
+    /// The device under test.
+    pub dut: Dut,
+    /// The turntable on the interface is real: the bench does not emulate it.
+    pub real_turntable: bool,
+    /// The receiver is real, on this port: the bench does not emulate it.
+    pub real_gps: Option<PathBuf>,
+    /// The device's latency budget: the 99th percentile of IMU sample on the bus to the
+    /// NAV_TIME naming it, ms.
+    pub latency_budget_ms: f64,
+    /// The device must send its first NAV_TIME within this long of the stream's start, s.
+    pub answer_within_s: f64,
+    /// The bench's own lateness beyond which it stops, ms.
+    pub max_late_ms: f64,
+    /// Progress on the terminal.
+    pub progress: bool,
+}
+
+/// What a free-running run found.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FreeReport {
+    /// The scenario.
+    pub scenario: String,
+    /// The interface.
+    pub interface: String,
+    /// The device under test, as started.
+    pub device: String,
+    /// How it ended (exit status, or still running when stopped).
+    pub device_exit: String,
+    /// Why the run ended.
+    pub ended: String,
+    /// Wall time from the stream's start, s.
+    pub wall_s: f64,
+    /// The bench's emulated devices: what each sent and its own lateness.
+    pub bench: Vec<FreeStats>,
+    /// The bench could not keep real time: why (no verdict on the device then).
+    pub bench_behind: Option<String>,
+    /// Devices that were real, and where.
+    pub real: Vec<String>,
+    /// The device's solution epochs.
+    pub epochs: u64,
+    /// Its stated latency: IMU sample on the bus to the NAV_TIME naming it.
+    pub latency: score::Spread,
+    /// NAV_TIMEs naming no sample the bench sent.
+    pub unnamed_samples: u64,
+    /// Its output rate.
+    pub rate: score::Rate,
+    /// The heading at the drill's end, against truth.
+    pub heading: Option<score::HeadingScore>,
+    /// The offset of its time tags the data show (s) and the epochs it rests on; none when
+    /// the data cannot tell.
+    pub time_tag_offset: Option<(f64, usize)>,
+    /// NAV_TIMEs whose sample count went back.
+    pub backwards: u64,
+    /// Frames outside the DBC, by what they were.
+    pub outside_dbc: std::collections::BTreeMap<String, u64>,
+    /// Turntable commands the device sent.
+    pub commands: u64,
+    /// What the bench could not judge, and why.
+    pub not_judged: Vec<String>,
+    /// The checks.
+    pub checks: Vec<Check>,
+    /// All checks passed (and the bench kept real time).
+    pub pass: bool,
+}
+
+/// A drill's vehicle parked with its receiver on, as our nav needs to say its heading on the
+/// bus (it navigates after north-finding, from the first fix): a drive that stands still at
+/// the site, facing the site's heading, for the whole run, and the scenario's receiver (the
+/// default one when it has none). A scenario with a drive already is returned as it is.
+pub fn parked_with_receiver(s: &Scenario) -> Result<Scenario> {
+    let mut s = s.clone();
+    if s.drive.is_some() {
+        return Ok(s);
+    }
+    let h = s.site.heading_deg.to_radians();
+    let text = format!(
+        "lat_deg = {}\nlon_deg = {}\nheight_m = {}\nwaypoints = [[{}, {}]]\nspeed_mps = 1.0\nstart_wait_s = {}\n",
+        s.site.lat_deg,
+        s.site.lon_deg,
+        s.site.height_m,
+        1000.0 * h.sin(),
+        1000.0 * h.cos(),
+        s.duration_s + 60.0
+    );
+    s.drive = Some(toml::from_str(&text).context("the parked vehicle's drive")?);
+    s.gps.get_or_insert_with(Default::default);
+    s.navigation.get_or_insert_with(Default::default);
+    Ok(s)
+}
+
+/// The scenario is a drill: north-finding with the vehicle standing still throughout (the run
+/// ends when the device has said its heading).
+fn is_drill(s: &Scenario) -> bool {
+    s.north_finding.is_some()
+        && s.drive
+            .as_ref()
+            .is_none_or(|d| d.start_wait_s >= s.duration_s)
+}
+
+/// The devices the bench runs, each in its thread.
+struct Bench {
+    threads: Vec<(&'static str, JoinHandle<Result<FreeStats>>)>,
+    stop: Arc<AtomicBool>,
+    progress: Arc<Progress>,
+    tracks: Vec<SharedTrack>,
+    sent: Arc<SentSamples>,
+    origin: Instant,
+}
+
+/// Run `s` free-running with the device under test of `o`.
+pub fn run_free(s: &Scenario, o: &FreeOptions) -> Result<FreeReport> {
+    std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    vcan_setup::ensure_vcan(&o.iface)?;
+    std::fs::write(o.out.join("scenario.toml"), toml::to_string_pretty(s)?)?;
+    // the receiver's port: the real one, or the emulator's pty behind a link
+    let pty = match (&s.gps, &o.real_gps) {
+        (Some(_), None) => Some(GpsPty::open().context("GPS emulator")?),
+        _ => None,
+    };
+    let link = std::env::temp_dir().join(format!("hil-free-gps-{}", std::process::id()));
+    let gps_port = match (&pty, &o.real_gps) {
+        (_, Some(p)) => Some(p.clone()),
+        (Some(p), None) => {
+            emulators::gps::relink(&link, p.path())?;
+            Some(link.clone())
+        }
+        _ => None,
+    };
+    let nav_dir = o.out.join("device");
+    std::fs::create_dir_all(&nav_dir)?;
+    let cfg = nav_dir.join("nav.toml");
+    crate::scenario::navconfig::write_nav_config(s, Some(&o.iface), gps_port.as_deref(), &cfg)?;
+    let (mut child, device) = start_dut(o, &cfg, gps_port.as_deref(), &nav_dir)?;
+    // a moment for the device to open its devices, as a vehicle's computer boots first
+    std::thread::sleep(Duration::from_secs(1));
+    let stop = Arc::new(AtomicBool::new(false));
+    let seen = Arc::new(Mutex::new(Observed::default()));
+    let sock = observe::open(&o.iface)?;
+    let bench = start_bench(s, o, pty, stop.clone())?;
+    let observer = observe::spawn(
+        sock,
+        bench.origin,
+        bench.sent.clone(),
+        seen.clone(),
+        stop.clone(),
+    )?;
+    let ended = supervise(s, o, &bench, &seen, child.as_mut());
+    stop.store(true, Ordering::Relaxed);
+    let device_exit = stop_dut(child);
+    let wall_s = bench.origin.elapsed().as_secs_f64();
+    let tracks = bench.tracks.clone();
+    let mut stats = Vec::new();
+    for (name, t) in bench.threads {
+        let r = t
+            .join()
+            .map_err(|_| anyhow::anyhow!("the {name} emulator panicked"))?;
+        stats.push(r.with_context(|| format!("{name} emulator"))?);
+    }
+    observer
+        .join()
+        .map_err(|_| anyhow::anyhow!("the bus observer panicked"))??;
+    let _ = std::fs::remove_file(&link);
+    let seen = std::mem::take(&mut *seen.lock().unwrap_or_else(|e| e.into_inner()));
+    let ctx = Judged {
+        device,
+        device_exit,
+        ended,
+        wall_s,
+        stats,
+        tracks,
+    };
+    let r = judge(s, o, ctx, seen);
+    std::fs::write(o.out.join("report.json"), serde_json::to_string_pretty(&r)?)?;
+    std::fs::write(o.out.join("report.md"), format!("```\n{}```\n", card(&r)))?;
+    Ok(r)
+}
+
+/// Start the device under test; its description.
+fn start_dut(
+    o: &FreeOptions,
+    cfg: &Path,
+    gps: Option<&Path>,
+    dir: &Path,
+) -> Result<(Option<Child>, String)> {
+    let log = |name: &str| -> Result<Stdio> {
+        Ok(std::fs::File::create(dir.join(name))
+            .with_context(|| format!("creating {}", dir.join(name).display()))?
+            .into())
+    };
+    let (mut cmd, what) = match &o.dut {
+        Dut::Nothing => {
+            return Ok((
+                None,
+                "already on the interface (not started by the bench)".into(),
+            ));
+        }
+        Dut::Nav(bin) => {
+            let mut c = Command::new(bin);
+            c.arg("--config").arg(cfg);
+            (
+                c,
+                format!("{} --config {} (ours)", bin.display(), cfg.display()),
+            )
+        }
+        Dut::Command(text, nav) => {
+            let text = text
+                .replace("{nav}", &nav.to_string_lossy())
+                .replace("{iface}", &o.iface)
+                .replace("{config}", &cfg.to_string_lossy())
+                .replace("{out}", &dir.to_string_lossy())
+                .replace(
+                    "{gps}",
+                    &gps.map(|g| g.to_string_lossy().into_owned())
+                        .unwrap_or_default(),
+                );
+            let mut c = Command::new("sh");
+            c.arg("-c").arg(&text);
+            (c, text)
+        }
+    };
+    cmd.current_dir(dir)
+        .stdin(Stdio::null())
+        .stdout(log("device.out")?)
+        .stderr(log("device.err")?);
+    let child = cmd
+        .spawn()
+        .with_context(|| format!("starting the device under test: {what}"))?;
+    Ok((Some(child), what))
+}
+
+/// Stop the device under test (SIGTERM, then SIGKILL after 10 s): how it ended.
+fn stop_dut(child: Option<Child>) -> String {
+    let Some(mut c) = child else {
+        return "not the bench's to stop".into();
+    };
+    if let Ok(Some(st)) = c.try_wait() {
+        return format!("ended before the bench stopped it: {}", exit_words(st));
+    }
+    // SAFETY: kill(2) on our own child's pid.
+    unsafe { libc::kill(c.id() as libc::pid_t, libc::SIGTERM) };
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while Instant::now() < deadline {
+        if let Ok(Some(st)) = c.try_wait() {
+            return format!("stopped by SIGTERM: {}", exit_words(st));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = c.kill();
+    let _ = c.wait();
+    "did not stop within 10 s of SIGTERM: killed".into()
+}
+
+/// An exit status in words.
+fn exit_words(st: std::process::ExitStatus) -> String {
+    use std::os::unix::process::ExitStatusExt;
+    match (st.code(), st.signal()) {
+        (Some(c), _) => format!("exit status {c}"),
+        (None, Some(s)) => format!("killed by signal {s}"),
+        _ => "ended".into(),
+    }
+}
+
+/// Start the emulated devices, sharing one origin a little ahead.
+fn start_bench(
+    s: &Scenario,
+    o: &FreeOptions,
+    pty: Option<GpsPty>,
+    stop: Arc<AtomicBool>,
+) -> Result<Bench> {
+    let origin = Instant::now() + Duration::from_millis(50);
+    let pacing = Pacing {
+        origin,
+        speed: 1.0,
+        until_s: s.duration_s,
+        max_late: Duration::from_secs_f64(o.max_late_ms * 1e-3),
+    };
+    let progress = Arc::new(Progress::default());
+    let sent = Arc::new(SentSamples::new((30.0 * s.imu.rate_hz) as usize));
+    // the IMU rides the table, emulated or real, as its TT_STATUS reports it
+    let axes = s.turntable.as_ref().map_or(0, |t| usize::from(t.axes));
+    let tracks: Vec<SharedTrack> = (0..axes)
+        .map(|_| Arc::new(Mutex::new(ReportedTrack::new(s.imu.rate_hz, 0.02))))
+        .collect();
+    let mut threads: Vec<(&'static str, JoinHandle<Result<FreeStats>>)> = Vec::new();
+    let spawn = |name: &'static str, f: Box<dyn FnOnce() -> Result<FreeStats> + Send>| {
+        std::thread::Builder::new()
+            .name(name.into())
+            .spawn(f)
+            .with_context(|| format!("starting the {name} emulator"))
+    };
+    if let (Some(tp), false) = (&s.turntable, o.real_turntable) {
+        let mut tt = TtBus::new(emulators::turntable::Turntable::new(tp.clone()), 1000.0);
+        let (iface, stop, progress) =
+            (o.iface.clone(), stop.clone(), Arc::new(Progress::default()));
+        threads.push((
+            "turntable",
+            spawn(
+                "turntable",
+                Box::new(move || {
+                    Ok(emulators::freerun::run_turntable(
+                        &iface, &mut tt, 1000.0, &pacing, &stop, &progress,
+                    )?)
+                }),
+            )?,
+        ));
+    }
+    {
+        let motion = s.following(&tracks);
+        let stream = BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults);
+        let (iface, stop, progress, sent, tracks) = (
+            o.iface.clone(),
+            stop.clone(),
+            progress.clone(),
+            sent.clone(),
+            tracks.clone(),
+        );
+        threads.push((
+            "imu",
+            spawn(
+                "imu",
+                Box::new(move || {
+                    Ok(emulators::freerun::run_imu(
+                        &iface,
+                        stream,
+                        &tracks,
+                        Some(&sent),
+                        &pacing,
+                        &stop,
+                        &progress,
+                    )?)
+                }),
+            )?,
+        ));
+    }
+    if let (Some(mut pty), Some(rx)) = (pty, &s.gps) {
+        let Some(run) = crate::engine::inproc::gps_run(s, rx)? else {
+            bail!("scenario {}: a receiver needs a [drive]", s.name);
+        };
+        let (stop, progress) = (stop.clone(), Arc::new(Progress::default()));
+        threads.push((
+            "gps",
+            spawn(
+                "gps",
+                Box::new(move || {
+                    let mut rx = GpsReceiver::new(run);
+                    Ok(emulators::freerun::run_gps(
+                        &mut pty, &mut rx, &pacing, &stop, &progress,
+                    )?)
+                }),
+            )?,
+        ));
+    }
+    Ok(Bench {
+        threads,
+        stop,
+        progress,
+        tracks,
+        sent,
+        origin,
+    })
+}
+
+/// Watch the run until it is over: the scenario's time, the drill's end as the device says
+/// it, the device's death or silence, an emulator stopping (the host behind real time). Why
+/// it ended.
+fn supervise(
+    s: &Scenario,
+    o: &FreeOptions,
+    bench: &Bench,
+    seen: &Mutex<Observed>,
+    mut child: Option<&mut Child>,
+) -> String {
+    let drill = is_drill(s);
+    let mut over_at: Option<Instant> = None;
+    let mut shown = Instant::now();
+    loop {
+        std::thread::sleep(Duration::from_millis(50));
+        let t = bench.origin.elapsed().as_secs_f64();
+        if let Some((name, _)) = bench.threads.iter().find(|(_, h)| h.is_finished()) {
+            if t < s.duration_s {
+                return format!("the {name} emulator stopped at {t:.1} s");
+            }
+            return format!("the scenario's {} s are over", s.duration_s);
+        }
+        if let Some(c) = child.as_deref_mut()
+            && let Ok(Some(st)) = c.try_wait()
+        {
+            return format!(
+                "the device under test exited at {t:.1} s ({})",
+                exit_words(st)
+            );
+        }
+        let (answered, done) = {
+            let g = seen.lock().unwrap_or_else(|e| e.into_inner());
+            (!g.epochs.is_empty(), drill && score::drill_over(&g.epochs))
+        };
+        if !answered && t > o.answer_within_s {
+            return format!(
+                "the device under test sent no NAV_TIME within {} s of the stream's start",
+                o.answer_within_s
+            );
+        }
+        // the drill is over when the device has said its heading; a second more of its output
+        if done && over_at.get_or_insert_with(Instant::now).elapsed() > Duration::from_secs(1) {
+            return format!(
+                "the drill ended at {t:.1} s (the device's heading after north-finding)"
+            );
+        }
+        if o.progress && shown.elapsed() >= Duration::from_secs(1) {
+            shown = Instant::now();
+            let n = seen.lock().map_or(0, |g| g.epochs.len());
+            crate::status::show(&format!(
+                "free-running: {:.1} s of {:.0}, {n} solution epochs from the device",
+                bench.progress.now(),
+                s.duration_s
+            ));
+        }
+        let _ = &bench.stop;
+    }
+}
+
+/// What the run left for judging.
+struct Judged {
+    device: String,
+    device_exit: String,
+    ended: String,
+    wall_s: f64,
+    stats: Vec<FreeStats>,
+    tracks: Vec<SharedTrack>,
+}
+
+/// The verdict: the device's figures against truth and its budget, unless the bench fell
+/// behind real time.
+fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) -> FreeReport {
+    let rate_hz = s.imu.rate_hz;
+    let table = j.tracks.first().cloned();
+    let table_deg = move |t: f64| {
+        table.as_ref().map_or(0.0, |tr| {
+            tr.lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .eval(t)
+                .0
+                .to_degrees()
+        })
+    };
+    // the IMU's heading: the vehicle's less the table's angle (it turns counter-clockwise)
+    let truth_at_t = |t: f64| s.truth_heading_deg() - table_deg(t);
+    let t_of = |k: u64| (k + 1) as f64 / rate_hz;
+    let e = &seen.epochs;
+    let (latency, unnamed) = score::stated_latency(e);
+    let rate = score::rate(e);
+    let (backwards, first_back) = score::backwards(e);
+    let heading = s
+        .north_finding
+        .as_ref()
+        .and_then(|_| score::drill_heading(e, |k| truth_at_t(t_of(k))));
+    let offset = score::time_tag_offset(e, truth_at_t, t_of);
+    let behind = j.stats.iter().find_map(|st| st.behind.clone());
+    let mut not_judged = Vec::new();
+    if !is_drill(s) && s.drive.is_some() {
+        not_judged.push(
+            "position and velocity along the drive: not yet scored in free-running mode".into(),
+        );
+    }
+    if offset.is_none() {
+        not_judged.push("the device's latency from its data: it sent no attitude while the table or the vehicle turned (fewer than 10 epochs)".into());
+    }
+    if o.real_gps.is_some() {
+        not_judged.push("the real receiver's fixes: the bench has no truth for them".into());
+    }
+    let mut checks = vec![
+        Check {
+            name: "the device answered".into(),
+            pass: !e.is_empty(),
+            detail: match e.first() {
+                Some(f) => format!(
+                    "first NAV_TIME {:.2} s after the stream started; {} epochs",
+                    f.rx_s,
+                    e.len()
+                ),
+                None => format!("no NAV_TIME at all ({})", j.ended),
+            },
+        },
+        Check {
+            name: "the device ran to the end".into(),
+            pass: !j.ended.contains("device under test exited")
+                && !j.device_exit.starts_with("ended before"),
+            detail: format!("{}; the device {}", j.ended, j.device_exit),
+        },
+        Check {
+            name: "latency within the budget".into(),
+            pass: latency.count > 0 && latency.p99_ms <= o.latency_budget_ms,
+            detail: format!(
+                "IMU sample on the bus to the NAV_TIME naming it: median {:.1} ms, p99 {:.1} ms, worst {:.1} ms over {} epochs ({unnamed} named no sample sent); budget p99 {} ms",
+                latency.p50_ms, latency.p99_ms, latency.max_ms, latency.count, o.latency_budget_ms
+            ),
+        },
+        Check {
+            name: "frames within the DBC".into(),
+            pass: seen.outside_count() == 0,
+            detail: if seen.outside_dbc.is_empty() {
+                "every frame heard is defined by wire/bench.dbc".into()
+            } else {
+                seen.outside_dbc
+                    .iter()
+                    .map(|(w, n)| format!("{n} x {w}"))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            },
+        },
+        Check {
+            name: "time tags never go backwards".into(),
+            pass: backwards == 0,
+            detail: match first_back {
+                Some((a, b)) => format!("{backwards} times; first from sample {a} to {b}"),
+                None => format!("{} NAV_TIMEs in order", e.len()),
+            },
+        },
+    ];
+    if s.north_finding.is_some() {
+        checks.push(Check {
+            name: "heading at the drill's end within 3 of the device's sigmas".into(),
+            pass: heading.is_some_and(|h| h.in_sigmas().is_some_and(|x| x.abs() <= 3.0)),
+            detail: match heading {
+                Some(h) => format!(
+                    "{:.4} deg at sample {} ({:.2} s), truth {:.4}, error {:+.4} deg{}",
+                    h.heading_deg,
+                    h.sample,
+                    t_of(h.sample),
+                    h.truth_deg,
+                    h.error_deg,
+                    match (h.sigma_deg, h.in_sigmas()) {
+                        (Some(sg), Some(x)) => format!(" = {x:+.2} sigma ({sg:.4} deg)"),
+                        _ => ", no sigma sent (NAV_HGT's HeadingSigma)".into(),
+                    }
+                ),
+                None => "the device sent no heading (NAV_ATT) after north-finding".into(),
+            },
+        });
+    }
+    if let Some((tau, n)) = offset {
+        checks.push(Check {
+            name: "time tags agree with the data".into(),
+            pass: tau.abs() <= 1.0 / 50.0,
+            detail: format!(
+                "its headings line up with the truth {:+.0} ms from the samples they name ({n} epochs while turning); limit one output period, 20 ms",
+                tau * 1e3
+            ),
+        });
+    }
+    let pass = behind.is_none() && checks.iter().all(|c| c.pass);
+    let mut real = Vec::new();
+    if o.real_turntable {
+        real.push(format!("turntable on {}", o.iface));
+    }
+    if let Some(p) = &o.real_gps {
+        real.push(format!("receiver on {}", p.display()));
+    }
+    FreeReport {
+        scenario: s.name.clone(),
+        interface: o.iface.clone(),
+        device: j.device,
+        device_exit: j.device_exit,
+        ended: j.ended,
+        wall_s: j.wall_s,
+        bench: j.stats,
+        bench_behind: behind,
+        real,
+        epochs: e.len() as u64,
+        latency,
+        unnamed_samples: unnamed,
+        rate,
+        heading,
+        time_tag_offset: offset,
+        backwards,
+        outside_dbc: seen.outside_dbc.clone(),
+        commands: seen.commands,
+        not_judged,
+        checks,
+        pass,
+    }
+}
+
+/// The result card.
+pub fn card(r: &FreeReport) -> String {
+    let mut out = format!(
+        " FREE-RUNNING {} on {}  {:.1} s at x1 (the host's clock); device: {}\n",
+        r.scenario, r.interface, r.wall_s, r.device
+    );
+    for b in &r.bench {
+        let l = &b.lateness;
+        out += &format!(
+            " bench {:<9} {} {}, its own lateness median {:.2} ms, p99 {:.2} ms, worst {:.1} ms{}\n",
+            b.device,
+            b.written,
+            if b.device == "gps" { "bytes" } else { "frames" },
+            l.p50_ms,
+            l.p99_ms,
+            l.max_ms,
+            if b.behind.is_some() {
+                " (fell behind)"
+            } else {
+                ""
+            }
+        );
+    }
+    for x in &r.real {
+        out += &format!(" real     {x}\n");
+    }
+    out += &format!(
+        " output   {} epochs, {:.1} Hz by the host's clock, every {} samples, jitter {:.2} ms rms, longest gap {:.1} ms; {} turntable commands\n",
+        r.epochs,
+        r.rate.hz,
+        r.rate.step_samples,
+        r.rate.jitter_rms_ms,
+        r.rate.max_interval_ms,
+        r.commands
+    );
+    for c in &r.checks {
+        out += &format!(
+            " [{}] {:<58} {}\n",
+            if c.pass { "PASS" } else { "FAIL" },
+            c.name,
+            c.detail
+        );
+    }
+    for n in &r.not_judged {
+        out += &format!(" [----] not judged: {n}\n");
+    }
+    match &r.bench_behind {
+        Some(why) => out += &format!(" RESULT: NO VERDICT: {why}\n"),
+        None => out += &format!(" RESULT: {}\n", if r.pass { "PASS" } else { "FAIL" }),
+    }
+    out
+}

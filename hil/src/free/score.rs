@@ -1,0 +1,326 @@
+//! Judging a device under test from what it sent on the bus, by the DBC only: its solution
+//! epochs (NAV_TIME and the frames of the same Seq) against the truth at the IMU sample each
+//! NAV_TIME names, its latency from that sample on the bus to the NAV_TIME, its output rate,
+//! and what its data say of its time tags. Pure: times are seconds on the host's clock since
+//! the run's origin.
+
+use crate::stats::wrap180;
+use serde::{Deserialize, Serialize};
+use wire::NavMode;
+
+/// One solution epoch as the device sent it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Epoch {
+    /// NAV_TIME's SampleCount.
+    pub sample_count: u32,
+    /// NAV_TIME's Seq.
+    pub seq: u8,
+    /// NAV_TIME's mode.
+    pub mode: NavMode,
+    /// NAV_TIME's health bits that were set, by name.
+    pub health: Vec<String>,
+    /// When NAV_TIME arrived, s.
+    pub rx_s: f64,
+    /// The IMU sample it names (its index) and when that sample went on the bus, s; none when
+    /// it names no sample the bench sent (or one older than the bench keeps).
+    pub sample: Option<(u64, f64)>,
+    /// NAV_ATT of the same Seq: heading, pitch, roll, deg.
+    pub att: Option<[f64; 3]>,
+    /// NAV_VEL: east, north, up, m/s.
+    pub vel: Option<[f64; 3]>,
+    /// NAV_POS: latitude, longitude, deg.
+    pub pos: Option<[f64; 2]>,
+    /// NAV_HGT of the same Seq: height m, position sigma m, heading sigma deg.
+    pub hgt: Option<[f64; 3]>,
+}
+
+/// Percentiles of a set of values, ms.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Spread {
+    /// Values.
+    pub count: u64,
+    /// Median, ms.
+    pub p50_ms: f64,
+    /// 99th percentile, ms.
+    pub p99_ms: f64,
+    /// Worst, ms.
+    pub max_ms: f64,
+}
+
+impl Spread {
+    /// Of `ms` (sorted here).
+    pub fn of(mut ms: Vec<f64>) -> Self {
+        if ms.is_empty() {
+            return Self::default();
+        }
+        ms.sort_by(f64::total_cmp);
+        let at = |q: f64| ms[((ms.len() - 1) as f64 * q).round() as usize];
+        Self {
+            count: ms.len() as u64,
+            p50_ms: at(0.5),
+            p99_ms: at(0.99),
+            max_ms: ms[ms.len() - 1],
+        }
+    }
+}
+
+/// The latency the device's time tags state: from the IMU sample on the bus to the NAV_TIME
+/// naming it; and how many NAV_TIMEs named no sample sent.
+pub fn stated_latency(epochs: &[Epoch]) -> (Spread, u64) {
+    let ms = epochs
+        .iter()
+        .filter_map(|e| e.sample.map(|(_, at)| (e.rx_s - at) * 1e3))
+        .collect();
+    let unnamed = epochs.iter().filter(|e| e.sample.is_none()).count() as u64;
+    (Spread::of(ms), unnamed)
+}
+
+/// The device's output rate on the host's clock.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Rate {
+    /// Epochs.
+    pub epochs: u64,
+    /// Epochs per second of the host's clock.
+    pub hz: f64,
+    /// RMS departure of the intervals between epochs from their mean, ms.
+    pub jitter_rms_ms: f64,
+    /// Largest interval, ms.
+    pub max_interval_ms: f64,
+    /// The most common step of SampleCount between epochs, samples.
+    pub step_samples: u32,
+}
+
+/// The rate of `epochs`.
+pub fn rate(epochs: &[Epoch]) -> Rate {
+    let n = epochs.len();
+    if n < 2 {
+        return Rate {
+            epochs: n as u64,
+            ..Rate::default()
+        };
+    }
+    let iv: Vec<f64> = epochs.windows(2).map(|w| w[1].rx_s - w[0].rx_s).collect();
+    let mean = iv.iter().sum::<f64>() / iv.len() as f64;
+    let var = iv.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / iv.len() as f64;
+    let mut steps = std::collections::BTreeMap::new();
+    for w in epochs.windows(2) {
+        *steps
+            .entry(w[1].sample_count.wrapping_sub(w[0].sample_count))
+            .or_insert(0u64) += 1;
+    }
+    Rate {
+        epochs: n as u64,
+        hz: (n - 1) as f64 / (epochs[n - 1].rx_s - epochs[0].rx_s).max(1e-9),
+        jitter_rms_ms: var.sqrt() * 1e3,
+        max_interval_ms: iv.iter().copied().fold(0.0, f64::max) * 1e3,
+        step_samples: steps.iter().max_by_key(|(_, n)| **n).map_or(0, |(s, _)| *s),
+    }
+}
+
+/// NAV_TIMEs whose SampleCount went back from the one before (a wrap of the 32-bit count
+/// aside), and the first such pair.
+pub fn backwards(epochs: &[Epoch]) -> (u64, Option<(u32, u32)>) {
+    let mut n = 0;
+    let mut first = None;
+    for w in epochs.windows(2) {
+        let step = w[1].sample_count.wrapping_sub(w[0].sample_count);
+        if step > u32::MAX / 2 {
+            n += 1;
+            first = first.or(Some((w[0].sample_count, w[1].sample_count)));
+        }
+    }
+    (n, first)
+}
+
+/// A heading against truth.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HeadingScore {
+    /// The IMU sample its NAV_TIME names.
+    pub sample: u64,
+    /// The device's heading, deg.
+    pub heading_deg: f64,
+    /// Truth at that sample, deg.
+    pub truth_deg: f64,
+    /// Error, deg (-180, 180].
+    pub error_deg: f64,
+    /// The device's sigma (NAV_HGT's HeadingSigma), deg; none when it sent none.
+    pub sigma_deg: Option<f64>,
+}
+
+impl HeadingScore {
+    /// The error in the device's own sigmas.
+    pub fn in_sigmas(&self) -> Option<f64> {
+        self.sigma_deg
+            .filter(|s| *s > 0.0)
+            .map(|s| self.error_deg / s)
+    }
+}
+
+/// The heading at a drill's end: the first epoch with an attitude after the device's mode has
+/// left north-finding (having shown it), else the last epoch with an attitude. `truth_deg`: the
+/// true heading at an IMU sample.
+pub fn drill_heading(epochs: &[Epoch], truth_deg: impl Fn(u64) -> f64) -> Option<HeadingScore> {
+    let found = epochs
+        .iter()
+        .position(|e| e.mode == NavMode::NorthFinding)
+        .and_then(|i| {
+            epochs[i..]
+                .iter()
+                .find(|e| e.mode != NavMode::NorthFinding && e.att.is_some() && e.sample.is_some())
+        })
+        .or_else(|| {
+            epochs
+                .iter()
+                .rev()
+                .find(|e| e.att.is_some() && e.sample.is_some())
+        })?;
+    let (k, _) = found.sample?;
+    let heading = found.att?[0];
+    let truth = truth_deg(k);
+    Some(HeadingScore {
+        sample: k,
+        heading_deg: heading,
+        truth_deg: truth.rem_euclid(360.0),
+        error_deg: wrap180(heading - truth),
+        sigma_deg: found.hgt.map(|h| h[2]),
+    })
+}
+
+/// The device's first heading after north-finding is over (the drill's end is then known).
+pub fn drill_over(epochs: &[Epoch]) -> bool {
+    epochs
+        .iter()
+        .position(|e| e.mode == NavMode::NorthFinding)
+        .is_some_and(|i| {
+            epochs[i..]
+                .iter()
+                .any(|e| e.mode != NavMode::NorthFinding && e.att.is_some())
+        })
+}
+
+/// What the data say of the device's time tags: the offset (s) that best lines its headings up
+/// with the truth while the truth turns (its headings belong to `offset` s before the samples
+/// they name: positive for a device that stamps its solutions late data as new), searched over
+/// ±0.5 s in 1 ms steps; with the number of epochs it rests on. None when fewer than 10 of its
+/// epochs carry an attitude while the truth turns (`truth_deg` at a time, s of the IMU's clock;
+/// `t_of`: the time of a sample).
+pub fn time_tag_offset(
+    epochs: &[Epoch],
+    truth_deg: impl Fn(f64) -> f64,
+    t_of: impl Fn(u64) -> f64,
+) -> Option<(f64, usize)> {
+    let turning: Vec<(f64, f64)> = epochs
+        .iter()
+        .filter_map(|e| Some((t_of(e.sample?.0), e.att?[0])))
+        .filter(|(t, _)| wrap180(truth_deg(t + 0.5) - truth_deg(t - 0.5)).abs() > 0.5)
+        .collect();
+    if turning.len() < 10 {
+        return None;
+    }
+    let cost = |tau: f64| -> f64 {
+        turning
+            .iter()
+            .map(|(t, h)| wrap180(h - truth_deg(t - tau)).powi(2))
+            .sum()
+    };
+    let best = (-500..=500)
+        .map(|ms| f64::from(ms) * 1e-3)
+        .min_by(|a, b| cost(*a).total_cmp(&cost(*b)))?;
+    Some((best, turning.len()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn epoch(k: u64, rate: f64, lag_s: f64) -> Epoch {
+        let t = k as f64 / rate;
+        Epoch {
+            sample_count: k as u32,
+            seq: (k / 40) as u8,
+            mode: NavMode::Navigation,
+            health: Vec::new(),
+            rx_s: t + lag_s,
+            sample: Some((k, t)),
+            att: None,
+            vel: None,
+            pos: None,
+            hgt: None,
+        }
+    }
+
+    /// A table turning at 10 deg/s for 9 s from t = 1 s.
+    fn table_deg(t: f64) -> f64 {
+        10.0 * (t - 1.0).clamp(0.0, 9.0)
+    }
+
+    #[test]
+    fn latency_rate_and_backward_tags_come_from_the_epochs() {
+        let mut e: Vec<Epoch> = (1..=100).map(|i| epoch(i * 40, 2000.0, 0.004)).collect();
+        e[50].sample = None;
+        let (l, unnamed) = stated_latency(&e);
+        assert_eq!((l.count, unnamed), (99, 1));
+        assert!(
+            (l.p50_ms - 4.0).abs() < 1e-9 && (l.max_ms - 4.0).abs() < 1e-9,
+            "{l:?}"
+        );
+        let r = rate(&e);
+        assert!(
+            (r.hz - 50.0).abs() < 1e-6 && r.jitter_rms_ms < 1e-6,
+            "{r:?}"
+        );
+        assert_eq!(r.step_samples, 40);
+        assert_eq!(backwards(&e), (0, None));
+        e[70].sample_count = 10;
+        assert_eq!(backwards(&e).0, 1);
+        assert_eq!(backwards(&e).1, Some((70 * 40, 10)));
+    }
+
+    #[test]
+    fn the_heading_is_taken_when_north_finding_is_over() {
+        let mut e: Vec<Epoch> = (1..=10).map(|i| epoch(i * 40, 2000.0, 0.0)).collect();
+        for x in &mut e[..5] {
+            x.mode = NavMode::NorthFinding;
+        }
+        assert!(!drill_over(&e));
+        e[7].att = Some([30.2, 0.0, 0.0]);
+        e[7].hgt = Some([0.0, 0.0, 0.1]);
+        e[9].att = Some([99.0, 0.0, 0.0]);
+        assert!(drill_over(&e));
+        let h = drill_heading(&e, |_| 30.0).unwrap();
+        assert_eq!(h.sample, 320);
+        assert!((h.error_deg - 0.2).abs() < 1e-9 && (h.in_sigmas().unwrap() - 2.0).abs() < 1e-9);
+        // across north
+        e[7].att = Some([0.2, 0.0, 0.0]);
+        let h = drill_heading(&e, |_| 359.9).unwrap();
+        assert!((h.error_deg - 0.3).abs() < 1e-9, "{h:?}");
+    }
+
+    /// A device whose headings belong to 100 ms before the samples it names is caught; an
+    /// honest one is found honest; without turns there is nothing to tell.
+    #[test]
+    fn the_data_tell_a_time_tag_that_lies() {
+        let truth = |t: f64| 30.0 - table_deg(t);
+        let t_of = |k: u64| k as f64 / 2000.0;
+        let honest: Vec<Epoch> = (1..=600)
+            .map(|i| {
+                let mut e = epoch(i * 40, 2000.0, 0.002);
+                e.att = Some([truth(t_of(i * 40)).rem_euclid(360.0), 0.0, 0.0]);
+                e
+            })
+            .collect();
+        let (tau, n) = time_tag_offset(&honest, truth, t_of).unwrap();
+        assert!(tau.abs() < 0.0015 && n > 300, "{tau} {n}");
+        let early: Vec<Epoch> = honest
+            .iter()
+            .map(|e| {
+                let mut e = e.clone();
+                e.att = Some([truth(t_of(e.sample.unwrap().0) - 0.1), 0.0, 0.0]);
+                e
+            })
+            .collect();
+        let (tau, _) = time_tag_offset(&early, truth, t_of).unwrap();
+        assert!((tau - 0.1).abs() < 0.0015, "{tau}");
+        assert_eq!(time_tag_offset(&honest, |_| 30.0, t_of), None);
+    }
+}
