@@ -1410,144 +1410,89 @@ impl Drop for Child {
     }
 }
 
-/// Free-running, as in the vehicle: the turntable and the IMU each `hil emulate` in a process of
-/// its own on one vcan interface, paced by the host's clock and waiting for nobody; the IMU's
-/// gyros turn as the table's TT_STATUS reports (`--follow-turntable`: the table is not the
-/// IMU's to know). Our unmodified nav, started on the config `hil emulate --nav-config`
-/// wrote, drives the table through its four positions and finds north. Its heading lands
-/// within 3 of its own sigmas of the scenario's truth; the turntable answered every command;
-/// the IMU followed the table's reports; each emulator reports its own lateness. Should the
-/// host not keep real time, the emulators say so and stop, and the test says so rather than
-/// judge nav on a late stream.
+/// A real turntable's stand-in: `hil emulate turntable` in a process of its own on the
+/// interface, free-running, that the bench does not control; the bench runs a free drill with
+/// `--real turntable=IFACE`: it emulates only the IMU (whose gyros turn as the table's
+/// TT_STATUS reports) and the receiver, and our nav drives the real table through its four
+/// positions. nav's heading lands within 3 of its sigmas; the table answered every command.
+/// Should the host not keep real time, the bench says so and the test does not judge nav.
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
-fn a_drill_runs_free_against_emulators_in_their_own_processes() {
-    use std::io::BufRead;
+fn a_real_turntable_stand_in_turns_the_emulated_imu_in_a_free_drill() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let truth_deg = 137.5;
-    let scenario = d.join("drill.toml");
-    std::fs::write(
-        &scenario,
-        format!(
-            "name = \"free-drill\"\nduration_s = 600.0\n[site]\nlat_deg = 28.218157\nlon_deg = 112.989583\nheading_deg = {truth_deg}\n[imu]\nseed = 7\n[turntable]\nseed = 7\n[north_finding]\ndwell_s = 15.0\n"
-        ),
-    )
-    .unwrap();
     let iface = "vcan-free";
-    let emulate = |device: &str, extra: &[&str]| {
-        let mut c = Command::new(bin("hil"));
-        c.args(["emulate", device, "--iface", iface, "--duration", "400"])
-            .arg("--scenario")
-            .arg(&scenario)
-            .arg("--report")
-            .arg(d.join(format!("{device}.json")))
-            .args(extra)
-            .stdout(std::process::Stdio::null());
-        Child(c.spawn().expect("hil emulate starts"))
-    };
-    let mut tt = emulate("turntable", &[]);
-    let nav_toml = d.join("nav.toml");
-    let mut imu = emulate(
-        "imu",
+    let mut tt = Command::new(bin("hil"));
+    tt.args([
+        "emulate",
+        "turntable",
+        "--iface",
+        iface,
+        "--duration",
+        "400",
+    ])
+    .arg("--report")
+    .arg(d.join("turntable.json"))
+    .stdout(std::process::Stdio::null());
+    let mut tt = Child(tt.spawn().expect("hil emulate starts"));
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let real = format!("turntable={iface}");
+    let (r, code) = hil_json(
         &[
-            "--follow-turntable",
-            "--nav-config",
-            nav_toml.to_str().unwrap(),
+            "drill",
+            "north-finding",
+            "--free",
+            "--real",
+            &real,
+            "--heading",
+            "137.5",
+            "--dwell",
+            "15",
+            "--seed",
+            "7",
+            "--iface",
+            iface,
+            "--json",
+            "--out",
         ],
+        &[&d.join("run")],
     );
-    let t0 = std::time::Instant::now();
-    while !nav_toml.exists() {
-        assert!(
-            t0.elapsed().as_secs() < 60,
-            "hil emulate imu wrote no nav.toml"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
-    std::thread::sleep(std::time::Duration::from_millis(200));
-    let mut nav = Command::new(bin("nav"));
-    nav.arg("--config")
-        .arg(&nav_toml)
-        .current_dir(d)
-        .stdout(std::process::Stdio::piped());
-    let mut nav = Child(nav.spawn().expect("nav starts"));
-    let out = nav.0.stdout.take().unwrap();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for l in std::io::BufReader::new(out).lines().map_while(Result::ok) {
-            if tx.send(l).is_err() {
-                break;
-            }
-        }
-    });
-    // liveness only: about 85 s of drill at x1
-    let mut result = None;
-    while let Ok(l) = rx.recv_timeout(std::time::Duration::from_secs(300)) {
-        if let Some(j) = l.strip_prefix("nav: north-finding result ") {
-            result = Some(serde_json::from_str::<Value>(j).unwrap());
-            break;
-        }
-        assert!(!l.contains("north-finding aborted"), "{l}");
-    }
-    let nav_exit = nav.stop();
-    let (imu_exit, tt_exit) = (imu.stop(), tt.stop());
-    let report = |device: &str| -> Value {
-        let p = d.join(format!("{device}.json"));
-        serde_json::from_slice(&std::fs::read(&p).unwrap_or_else(|e| panic!("{p:?}: {e}"))).unwrap()
-    };
-    let (imu_r, tt_r) = (report("imu"), report("turntable"));
-    for r in [&imu_r, &tt_r] {
+    let tt_exit = tt.stop();
+    let t: Value =
+        serde_json::from_slice(&std::fs::read(d.join("turntable.json")).unwrap()).unwrap();
+    eprintln!("hil emulate turntable: {t}");
+    if code == 3 {
         eprintln!(
-            "hil emulate {}: {} frames, lateness p50 {} ms, p99 {} ms, worst {} ms, {} writes; behind: {}",
-            r["device"],
-            r["written"],
-            r["lateness"]["p50_ms"],
-            r["lateness"]["p99_ms"],
-            r["lateness"]["max_ms"],
-            r["lateness"]["count"],
-            r["behind"]
-        );
-        assert!(r["lateness"]["count"].as_u64().unwrap() > 0, "{r}");
-    }
-    if !imu_r["behind"].is_null() || !tt_r["behind"].is_null() {
-        assert!(
-            imu_exit == Some(3) || tt_exit == Some(3),
-            "{imu_exit:?} {tt_exit:?}"
-        );
-        eprintln!(
-            "the host could not keep real time here: the emulators stopped and said so; nav is not judged on a late stream"
+            "the host could not keep real time: {}; no verdict on nav",
+            r["bench_behind"]
         );
         return;
     }
-    assert_eq!((nav_exit, imu_exit, tt_exit), (Some(0), Some(0), Some(0)));
-    let r = result.expect("nav gave a north-finding result");
-    let (heading, sigma) = (
-        r["heading_deg"].as_f64().unwrap(),
-        r["sigma_deg"].as_f64().unwrap(),
+    for (name, pass, detail) in checks(&r) {
+        eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
+    }
+    assert_eq!((code, tt_exit), (0, Some(0)), "{r}");
+    assert_eq!(r["real"][0].as_str(), Some("turntable on vcan-free"));
+    let bench: Vec<&str> = r["bench"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| b["device"].as_str().unwrap())
+        .collect();
+    assert_eq!(bench, ["imu", "gps"]);
+    let followed = &r["bench"][0]["followed"][0];
+    assert!(followed["reports"].as_u64().unwrap() > 5000, "{followed}");
+    let h = &r["heading"];
+    let (err, sigma) = (
+        h["error_deg"].as_f64().unwrap(),
+        h["sigma_deg"].as_f64().unwrap(),
     );
-    let err = (heading - truth_deg + 540.0).rem_euclid(360.0) - 180.0;
-    eprintln!(
-        "free-running drill: heading {heading:.4} deg, truth {truth_deg}, error {err:.4} deg = {:.2} sigma ({sigma:.4} deg)",
-        err / sigma
-    );
-    assert!(err.abs() <= 3.0 * sigma, "error {err} deg, sigma {sigma}");
-    assert!(sigma > 0.0 && sigma < 0.5, "{sigma}");
-    let t = &tt_r["turntable"];
+    assert!(err.abs() <= 3.0 * sigma && sigma > 0.0, "{h}");
+    let t = &t["turntable"];
     let commands = t["commands"].as_u64().unwrap();
     assert!(commands >= 8, "{t}");
     assert_eq!(t["acks"].as_u64(), Some(commands), "{t}");
     assert_eq!(t["bad_frames"].as_u64(), Some(0), "{t}");
-    let followed = &imu_r["followed"][0];
-    assert!(followed["reports"].as_u64().unwrap() > 5000, "{followed}");
-    // each position's table angle, as nav read it, within a hundredth of a degree of the
-    // commanded one: the followed IMU and the table agree
-    for p in r["positions"].as_array().unwrap() {
-        let (c, a) = (
-            p["commanded_deg"].as_f64().unwrap(),
-            p["table_deg"].as_f64().unwrap(),
-        );
-        assert!((a - c).abs() < 0.01, "{p}");
-    }
 }
 
 /// The check named `name` of a report: (pass, detail).
