@@ -53,10 +53,35 @@ enum Cmd {
         /// `HOST_ADDR:PORT=GUEST_PORT` to another. Natively: nothing to forward.
         #[arg(long = "forward", value_parser = parse_forward)]
         forward: Vec<(std::net::SocketAddr, u16)>,
+        /// A program or shared object whose shared libraries the guest needs besides the
+        /// command's own (repeatable); a folder: every `*.so` in it (an interpreter's extension
+        /// modules, which it loads at run time). Natively: nothing to do.
+        #[arg(long = "libs-for")]
+        libs_for: Vec<PathBuf>,
         /// The command and its arguments.
         #[arg(trailing_var_arg = true, required = true)]
         command: Vec<String>,
     },
+}
+
+/// The files of `--libs-for`: each file as given, each folder's `*.so` files.
+fn expand_libs_for(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for p in paths {
+        if p.is_dir() {
+            for e in std::fs::read_dir(p).with_context(|| format!("--libs-for {}", p.display()))? {
+                let f = e?.path();
+                if f.extension().is_some_and(|x| x == "so") || f.to_string_lossy().contains(".so.") {
+                    out.push(f);
+                }
+            }
+        } else if p.is_file() {
+            out.push(p.clone());
+        } else {
+            anyhow::bail!("--libs-for {}: no such file or folder", p.display());
+        }
+    }
+    Ok(out)
 }
 
 /// `ADDR:PORT` or `ADDR:PORT=GUEST_PORT`.
@@ -131,6 +156,7 @@ fn real_main() -> Result<()> {
             timeout_s,
             install,
             forward,
+            libs_for,
             command,
         } => {
             let native = !vm && matches!(vcan_setup::can_support(), CanSupport::Available);
@@ -147,6 +173,7 @@ fn real_main() -> Result<()> {
                 memory_mb,
                 timeout: Duration::from_secs(timeout_s),
                 forward_tcp: forward,
+                libs_for: expand_libs_for(&libs_for)?,
                 ..VmOptions::default()
             };
             let out = if native {
