@@ -71,7 +71,8 @@ fn expand_libs_for(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
         if p.is_dir() {
             for e in std::fs::read_dir(p).with_context(|| format!("--libs-for {}", p.display()))? {
                 let f = e?.path();
-                if f.extension().is_some_and(|x| x == "so") || f.to_string_lossy().contains(".so.") {
+                if f.extension().is_some_and(|x| x == "so") || f.to_string_lossy().contains(".so.")
+                {
                     out.push(f);
                 }
             }

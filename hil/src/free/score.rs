@@ -199,7 +199,7 @@ pub fn drill_over(epochs: &[Epoch]) -> bool {
 }
 
 /// What the data say of the device's time tags: the offset (s) that best lines its headings up
-/// with the truth while the truth turns (its headings belong to `offset` s before the samples
+/// with the truth (to within a constant) while the truth turns (its headings belong to `offset` s before the samples
 /// they name: positive for a device that stamps its solutions late data as new), searched over
 /// ±0.5 s in 1 ms steps; with the number of epochs it rests on. None when fewer than 10 of its
 /// epochs carry an attitude while the truth turns (`truth_deg` at a time, s of the IMU's clock;
@@ -217,10 +217,20 @@ pub fn time_tag_offset(
     if turning.len() < 10 {
         return None;
     }
+    // a device may state its heading from where it started (it does not know north while it
+    // indexes): a constant offset, the differences' circular mean, is removed at each lag
     let cost = |tau: f64| -> f64 {
-        turning
+        let d: Vec<f64> = turning
             .iter()
-            .map(|(t, h)| wrap180(h - truth_deg(t - tau)).powi(2))
+            .map(|(t, h)| (h - truth_deg(t - tau)).to_radians())
+            .collect();
+        let c = d
+            .iter()
+            .map(|x| x.sin())
+            .sum::<f64>()
+            .atan2(d.iter().map(|x| x.cos()).sum());
+        d.iter()
+            .map(|x| wrap180((x - c).to_degrees()).powi(2))
             .sum()
     };
     let best = (-500..=500)
@@ -320,6 +330,17 @@ mod tests {
             })
             .collect();
         let (tau, _) = time_tag_offset(&early, truth, t_of).unwrap();
+        assert!((tau - 0.1).abs() < 0.0015, "{tau}");
+        // a heading stated from where the device started: the same lag
+        let relative: Vec<Epoch> = early
+            .iter()
+            .map(|e| {
+                let mut e = e.clone();
+                e.att = e.att.map(|a| [(a[0] - 137.0).rem_euclid(360.0), 0.0, 0.0]);
+                e
+            })
+            .collect();
+        let (tau, _) = time_tag_offset(&relative, truth, t_of).unwrap();
         assert!((tau - 0.1).abs() < 0.0015, "{tau}");
         assert_eq!(time_tag_offset(&honest, |_| 30.0, t_of), None);
     }

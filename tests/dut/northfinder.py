@@ -1,0 +1,302 @@
+#!/usr/bin/env python3
+"""An independent device under test: a minimal four-position north-finder.
+
+Written against the wire contract only: python-can on a SocketCAN interface, cantools reading
+wire/bench.dbc for every frame it decodes and encodes, and the IMU's pulse weight and rate from
+the nav.toml the bench writes (its calibration binding). No code of the bench is imported.
+
+It commands the turntable over CAN (Enable, Unlock, IndexAbs to 0/90/180/270, Lock, with a
+10 Hz heartbeat), fits each dwell's gyro counters by least squares (the dither averages out),
+takes the heading from the four positions' horizontal rates, and sends NAV_TIME at 50 Hz of IMU
+samples, with NAV_ATT (its relative heading from the z gyro while it indexes, the found heading
+after) and NAV_HGT (its heading sigma).
+
+Faults on purpose, for the bench to catch:
+  --delay S        every solution goes out S seconds late (its time tags stay honest);
+  --stamp-early S  every solution names the sample S seconds before the one its data reach.
+"""
+
+import argparse
+import collections
+import math
+import select
+import socket
+import struct
+import sys
+import time
+import tomllib
+
+import can
+import cantools
+
+OMEGA = 7.2921151467e-5  # earth rate, rad/s
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--iface", required=True)
+    ap.add_argument("--dbc", required=True)
+    ap.add_argument("--config", required=True, help="the nav.toml the bench wrote")
+    ap.add_argument("--dwell", type=float, default=15.0)
+    ap.add_argument("--delay", type=float, default=0.0)
+    ap.add_argument("--stamp-early", type=float, default=0.0)
+    a = ap.parse_args()
+    cfg = tomllib.load(open(a.config, "rb"))
+    imu = cfg.get("imu", {})
+    pulse = imu.get("gyro_pulse_arcsec", [1.0, 1.0, 1.0])
+    rate_hz = imu.get("rate_hz", 2000.0)
+    NorthFinder(a, pulse, rate_hz).run()
+
+
+class NorthFinder:
+    def __init__(self, a, pulse, rate_hz):
+        self.a = a
+        self.db = cantools.database.load_file(a.dbc)
+        m = self.db.get_message_by_name
+        self.gyro, self.status = m("IMU_GYRO"), m("TT_STATUS")
+        self.cmd, self.ack = m("TT_CMD"), m("TT_ACK")
+        self.nav_time, self.nav_att, self.nav_hgt = m("NAV_TIME"), m("NAV_ATT"), m("NAV_HGT")
+        # python-can sends (commands, the solution); the 2 kHz stream is read in bulk from a
+        # raw SocketCAN socket: python-can's message object per frame costs about 80 us in an
+        # emulated guest, more than the stream leaves
+        self.bus = can.Bus(
+            interface="socketcan",
+            channel=a.iface,
+            can_filters=[{"can_id": 0x7FF, "can_mask": 0x7FF}],
+        )
+        self.rx = socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
+        ids = [self.gyro.frame_id, self.status.frame_id, self.ack.frame_id]
+        self.rx.setsockopt(
+            socket.SOL_CAN_RAW,
+            socket.CAN_RAW_FILTER,
+            b"".join(struct.pack("=II", i, 0x7FF) for i in ids),
+        )
+        self.rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+        self.rx.bind((a.iface,))
+        self.rx.setblocking(False)
+        self.gyro_layout = layout(self.gyro)
+        self.pulse_rad = [p * math.pi / (180 * 3600) for p in pulse]
+        self.rate_hz = rate_hz
+        self.seq = 0
+        self.nav_seq = 0
+        self.last_hb = 0.0
+        self.table = None  # (state, angle)
+        self.count = None  # unwrapped [x, y, z] pulses, 32-bit sample count
+        self.raw = None
+        self.sample = None
+        self.fit = None  # least-squares sums of the dwell, in chunks
+        self.heading = None
+        self.sigma = 6.5
+        self.mode = 2  # NorthFinding
+        self.out = collections.deque()
+
+    # ---- the bus ----
+    def send(self, msg, **signals):
+        data = msg.encode(signals, strict=False)
+        self.bus.send(can.Message(arbitration_id=msg.frame_id, data=data, is_extended_id=False))
+
+    def command(self, name, arg=0.0):
+        self.seq = (self.seq + 1) % 256
+        code = self.cmd.get_signal_by_name("Command").choices
+        number = next(k for k, v in code.items() if str(v) == name)
+        self.send(self.cmd, Seq=self.seq, Command=number, Axis=0, Arg=arg)
+
+    def poll(self, timeout=0.01):
+        """Take the frames waiting (a few at a time), heartbeat, send what is due."""
+        select.select([self.rx], [], [], timeout)
+        n = 0
+        while True:
+            try:
+                f = self.rx.recv(16)
+            except BlockingIOError:
+                break
+            can_id, dlc = struct.unpack_from("=IB", f)
+            self.take(can_id & 0x7FF, f[8 : 8 + dlc])
+            n += 1
+            if n % 20 == 0:
+                self.housekeeping()
+        self.housekeeping()
+
+    def housekeeping(self):
+        now = time.monotonic()
+        if now - self.last_hb >= 0.1:
+            self.last_hb = now
+            self.command("Heartbeat")
+        while self.out and self.out[0][0] <= now:
+            for m, s in self.out.popleft()[1]:
+                self.send(m, **s)
+
+    def take(self, can_id, data):
+        if can_id == self.gyro.frame_id:
+            d = self.gyro_layout(data)
+            raw = (d["GyroX_Count"], d["GyroY_Count"], d["GyroZ_Count"], d["SampleCounter"])
+            if self.raw is None:
+                self.count = [0, 0, 0, raw[3]]
+            else:
+                for i in range(4):
+                    step = (raw[i] - self.raw[i] + 32768) % 65536 - 32768
+                    self.count[i] += step
+            self.raw = raw
+            self.sample = self.count[3]
+            if self.fit is not None:
+                self.fit.add(self.sample, self.count[0], self.count[1])
+            if self.sample % 40 == 0:
+                self.solution()
+        elif can_id == self.status.frame_id:
+            d = self.status.decode(data, decode_choices=False)
+            if d["Axis"] == 0:
+                self.table = (int(d["State"]), float(d["Angle"]))
+        elif can_id == self.ack.frame_id:
+            d = self.ack.decode(data, decode_choices=False)
+            if d["Result"] != 0 and d["Command"] != 0:
+                sys.exit(f"northfinder: the table refused command {d['Command']}: result {d['Result']}")
+
+    def solution(self):
+        named = self.sample - round(self.a.stamp_early * self.rate_hz)
+        if self.heading is None:
+            # while indexing: the heading relative to the start, from the z gyro
+            h = -math.degrees(self.count[2] * self.pulse_rad[2])
+        else:
+            h = self.heading
+        s = self.nav_seq
+        self.nav_seq = (s + 1) % 256
+        frames = [
+            (self.nav_time, dict(SampleCount=named % 2**32, Seq=s, Mode=self.mode,
+                                 HealthImuTimeout=0, HealthImuGaps=0, HealthImuBit=0,
+                                 HealthGpsStale=0, HealthTurntable=0, HealthFilter=0,
+                                 GpsRxBytes=0, HealthGpsData=0, HealthCanBus=0)),
+            (self.nav_att, dict(Seq=s, Heading=h % 360.0, Pitch=0.0, Roll=0.0)),
+            (self.nav_hgt, dict(Seq=s, Height=0.0, PosSigma=655.35, HeadingSigma=min(self.sigma, 6.5))),
+        ]
+        self.out.append((time.monotonic() + self.a.delay, frames))
+
+    # ---- the procedure ----
+    def wait(self, what, cond, limit=60.0):
+        t0 = time.monotonic()
+        while not cond():
+            if time.monotonic() - t0 > limit:
+                sys.exit(f"northfinder: no {what} within {limit} s (table {self.table})")
+            self.poll()
+
+    def run_for(self, seconds):
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < seconds:
+            self.poll()
+
+    def index(self, angle):
+        self.command("Unlock")
+        self.wait("unlocked table", lambda: self.table is not None and self.table[0] == 1)
+        self.command("IndexAbs", angle)
+        self.run_for(0.1)
+        near = lambda: abs((self.table[1] - angle + 180.0) % 360.0 - 180.0) < 0.01
+        self.wait(f"table at {angle} deg", lambda: self.table[0] == 1 and near())
+        self.command("Lock")
+        self.wait("locked table", lambda: self.table[0] == 4)
+
+    def run(self):
+        self.wait("IMU stream", lambda: self.sample is not None and self.table is not None)
+        self.command("Enable")
+        self.run_for(0.2)
+        rates = []
+        for angle in (0.0, 90.0, 180.0, 270.0):
+            self.index(angle)
+            self.run_for(1.0)  # settle
+            self.fit = Fit(self.a.dwell * self.rate_hz / 10)
+            self.run_for(self.a.dwell)
+            rates.append(self.fit.rates(self.rate_hz, self.pulse_rad))
+            self.fit = None
+            (x, y), (sx, sy) = rates[-1]
+            dph = math.degrees(1) * 3600
+            print(f"northfinder: at {angle:.0f} deg: x {x * dph:+.4f} y {y * dph:+.4f} deg/h "
+                  f"(sigma {sx * dph:.4f}, {sy * dph:.4f})", flush=True)
+        self.index(0.0)
+        (x0, y0), (x90, y90), (x180, y180), (x270, y270) = [r[0] for r in rates]
+        # level body, y forward: at the IMU's heading p, wx = -W sin p, wy = W cos p; the table
+        # at angle a turns the IMU's heading to (heading - a)
+        s = (-x0 + x180 + y90 - y270) / 4.0
+        c = (y0 - y180 + x90 - x270) / 4.0
+        self.heading = math.degrees(math.atan2(s, c)) % 360.0
+        var = sum(r[1][i] ** 2 for r, i in zip(rates, (0, 1, 0, 1))) / 16.0
+        w = math.hypot(s, c)
+        # the simple method's sigma: the dwells' noise, and a floor for what it leaves out
+        # (tilt, the table's angles)
+        self.sigma = math.hypot(math.degrees(math.sqrt(var) / w), 0.05)
+        self.mode = 3  # Navigation: the heading is known
+        print(f"northfinder: heading {self.heading:.4f} deg, sigma {self.sigma:.4f} deg, "
+              f"earth rate {math.degrees(w) * 3600:.3f} deg/h", flush=True)
+        while True:
+            self.poll()
+
+
+def layout(msg):
+    """A fast decoder of `msg`'s raw signals, from its layout in the DBC: when every signal is
+    a little-endian unsigned field of 8, 16 or 32 bits on a byte boundary, one struct.unpack;
+    else cantools' own decode."""
+    sigs = sorted(msg.signals, key=lambda s: s.start)
+    fmt, at = "<", 0
+    for s in sigs:
+        code = {8: "B", 16: "H", 32: "I"}.get(s.length)
+        if s.byte_order != "little_endian" or s.is_signed or code is None or s.start != at:
+            return lambda data: msg.decode(data, decode_choices=False, scaling=False)
+        fmt += code
+        at += s.length
+    names = [s.name for s in sigs]
+    unpack = struct.Struct(fmt).unpack_from
+    return lambda data: dict(zip(names, unpack(data)))
+
+
+class Fit:
+    """Least-squares slopes of the x and y gyro counters over a whole dwell: the dither (a few
+    hundred arcsec at 300-430 Hz) leaves the slope over 10 s almost untouched, where it would
+    spoil the slope of a short window. The sigma comes from the residuals' chunk means (the
+    dither averages out inside each chunk): the slope's standard error for points spread over
+    the dwell."""
+
+    def __init__(self, chunk):
+        self.chunk = max(int(chunk), 10)
+        self.k0 = None
+        self.s = [0.0] * 7  # n, su, suu, sx, sux, sy, suy
+        self.chunks = []  # [n, su, sx, sy]
+
+    def add(self, k, x, y):
+        if self.k0 is None:
+            self.k0 = (k, x, y)
+        u, x, y = k - self.k0[0], x - self.k0[1], y - self.k0[2]
+        s = self.s
+        s[0] += 1
+        s[1] += u
+        s[2] += u * u
+        s[3] += x
+        s[4] += u * x
+        s[5] += y
+        s[6] += u * y
+        if not self.chunks or self.chunks[-1][0] >= self.chunk:
+            self.chunks.append([0, 0.0, 0.0, 0.0])
+        c = self.chunks[-1]
+        c[0] += 1
+        c[1] += u
+        c[2] += x
+        c[3] += y
+
+    def rates(self, rate_hz, pulse_rad):
+        """Mean (x, y) rate, rad/s, and their sigmas."""
+        n, su, suu, sx, sux, sy, suy = self.s
+        den = n * suu - su * su
+        out, sig = [], []
+        for i, (sv, suv) in enumerate(((sx, sux), (sy, suy))):
+            b = (n * suv - su * sv) / den
+            a = (sv - b * su) / n
+            # a short last chunk's mean is the dither's, not the noise's
+            full = [c for c in self.chunks if c[0] >= self.chunk // 2]
+            res = [c[2 + i] / c[0] - (a + b * c[1] / c[0]) for c in full]
+            m = len(res)
+            sd = math.sqrt(sum(r * r for r in res) / max(m - 2, 1))
+            span = n  # samples the dwell spans
+            k = rate_hz * pulse_rad[i]
+            out.append(b * k)
+            sig.append(sd * math.sqrt(12.0 / m) / span * k)
+        return tuple(out), tuple(sig)
+
+
+if __name__ == "__main__":
+    main()
