@@ -218,9 +218,11 @@ class NorthFinder:
         self.heading = math.degrees(math.atan2(s, c)) % 360.0
         var = sum(r[1][i] ** 2 for r, i in zip(rates, (0, 1, 0, 1))) / 16.0
         w = math.hypot(s, c)
-        # the simple method's sigma: the dwells' noise, and a floor for what it leaves out
-        # (tilt, the table's angles)
-        self.sigma = math.hypot(math.degrees(math.sqrt(var) / w), 0.05)
+        # the simple method's sigma: the dwells' noise, and a floor for what it leaves out: it
+        # has no accelerometers and takes the IMU as level, so a tilt of up to 0.3 deg lets
+        # the vertical earth rate (7 deg/h here) into the horizontal ones by up to 0.04 deg/h,
+        # 0.15 deg of heading
+        self.sigma = math.hypot(math.degrees(math.sqrt(var) / w), 0.15)
         self.mode = 3  # Navigation: the heading is known
         print(f"northfinder: heading {self.heading:.4f} deg, sigma {self.sigma:.4f} deg, "
               f"earth rate {math.degrees(w) * 3600:.3f} deg/h", flush=True)
