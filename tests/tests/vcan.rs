@@ -1620,7 +1620,9 @@ fn guest_python() -> Option<std::path::PathBuf> {
 #[ignore = "needs vcan and the guest's Python: run ./run-tests"]
 fn an_independent_python_device_is_judged_by_the_same_checks() {
     let Some(py) = guest_python() else {
-        eprintln!("SKIPPED: no Python for the guest (target/debug/e2e-python, written by ./run-tests)");
+        eprintln!(
+            "SKIPPED: no Python for the guest (target/debug/e2e-python, written by ./run-tests)"
+        );
         return;
     };
     let here = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
