@@ -101,6 +101,8 @@ pub struct FreeReport {
     pub rate: score::Rate,
     /// The heading at the drill's end, against truth.
     pub heading: Option<score::HeadingScore>,
+    /// Navigation along the drive, against truth.
+    pub navigation: Option<score::DriveScore>,
     /// The offset of its time tags the data show (s) and the epochs it rests on; none when
     /// the data cannot tell.
     pub time_tag_offset: Option<(f64, usize)>,
@@ -431,11 +433,18 @@ fn supervise(
     loop {
         std::thread::sleep(Duration::from_millis(50));
         let t = bench.origin.elapsed().as_secs_f64();
-        if let Some((name, _)) = bench.threads.iter().find(|(_, h)| h.is_finished()) {
-            if t < s.duration_s {
-                return format!("the {name} emulator stopped at {t:.1} s");
+        // the IMU's stream is the run; a receiver ends up to a period before it (its last
+        // epoch), any other device earlier only when it failed or fell behind
+        for (name, h) in &bench.threads {
+            let early = if *name == "imu" { 0.0 } else { 2.0 };
+            if h.is_finished() {
+                if t < s.duration_s - early {
+                    return format!("the {name} emulator stopped at {t:.1} s");
+                }
+                if *name == "imu" {
+                    return format!("the scenario's {} s are over", s.duration_s);
+                }
             }
-            return format!("the scenario's {} s are over", s.duration_s);
         }
         if let Some(c) = child.as_deref_mut()
             && let Ok(Some(st)) = c.try_wait()
@@ -499,7 +508,15 @@ fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) -> FreeReport
         })
     };
     // the IMU's heading: the vehicle's less the table's angle (it turns counter-clockwise)
-    let truth_at_t = |t: f64| s.truth_heading_deg() - table_deg(t);
+    let plan = s
+        .drive
+        .as_ref()
+        .and_then(|d| emulators::drive::Drive::plan(d).ok());
+    let vehicle_deg = |t: f64| match &plan {
+        Some(p) => p.heading(t).to_degrees(),
+        None => s.truth_heading_deg(),
+    };
+    let truth_at_t = |t: f64| vehicle_deg(t) - table_deg(t);
     let t_of = |k: u64| (k + 1) as f64 / rate_hz;
     let e = &seen.epochs;
     let (latency, unnamed) = score::stated_latency(e);
@@ -512,11 +529,22 @@ fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) -> FreeReport
     let offset = score::time_tag_offset(e, truth_at_t, t_of);
     let behind = j.stats.iter().find_map(|st| st.behind.clone());
     let mut not_judged = Vec::new();
-    if !is_drill(s) && s.drive.is_some() {
-        not_judged.push(
-            "position and velocity along the drive: not yet scored in free-running mode".into(),
-        );
-    }
+    let navigation = match (&plan, is_drill(s), &o.real_gps) {
+        (Some(plan), false, None) => score::drive(
+            e,
+            |t, p| {
+                let (lat, lon, h) = plan.position(t);
+                let d = emulators::geodesy::enu_offset(
+                    (lat, lon, h),
+                    (p[0].to_radians(), p[1].to_radians(), p[2]),
+                );
+                let v = plan.velocity(t);
+                ([d[0], d[1]], [v.x, v.y])
+            },
+            t_of,
+        ),
+        _ => None,
+    };
     if offset.is_none() {
         not_judged.push("the device's latency from its data: it sent no attitude while the table or the vehicle turned (fewer than 10 epochs)".into());
     }
@@ -593,6 +621,28 @@ fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) -> FreeReport
             },
         });
     }
+    if s.drive.is_some() && !is_drill(s) && o.real_gps.is_some() {
+        not_judged.push("position along the drive: the real receiver's fixes steer it, and the bench has no truth for where that receiver was".into());
+    } else if s.drive.is_some() && !is_drill(s) {
+        checks.push(Check {
+            name: "navigation error within tolerance".into(),
+            pass: navigation.is_some_and(|n| n.last_m <= s.position_tolerance_m),
+            detail: match navigation {
+                Some(n) => format!(
+                    "at {:.1} s: horizontal {:.2} m (limit {} m); along the drive RMS {:.2} m, worst {:.2} m, velocity RMS {:.3} m/s over {} epochs; position NEES per dof {}",
+                    n.last_t_s,
+                    n.last_m,
+                    s.position_tolerance_m,
+                    n.rms_m,
+                    n.max_m,
+                    n.vel_rms_mps,
+                    n.epochs,
+                    n.nees.map_or("-- (no PosSigma sent)".into(), |x| format!("{x:.2}"))
+                ),
+                None => "the device sent no position (NAV_POS) while navigating".into(),
+            },
+        });
+    }
     if let Some((tau, n)) = offset {
         checks.push(Check {
             name: "time tags agree with the data".into(),
@@ -626,6 +676,7 @@ fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) -> FreeReport
         unnamed_samples: unnamed,
         rate,
         heading,
+        navigation,
         time_tag_offset: offset,
         backwards,
         outside_dbc: seen.outside_dbc.clone(),

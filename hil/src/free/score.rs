@@ -239,6 +239,76 @@ pub fn time_tag_offset(
     Some((best, turning.len()))
 }
 
+/// Navigation along a drive, against truth at the sample each epoch names.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct DriveScore {
+    /// Epochs scored (with a position, while navigating).
+    pub epochs: u64,
+    /// RMS horizontal position error, m.
+    pub rms_m: f64,
+    /// Worst horizontal position error, m.
+    pub max_m: f64,
+    /// The last epoch's horizontal error, m, and its time, s.
+    pub last_m: f64,
+    /// The last epoch's time, s of the IMU's clock.
+    pub last_t_s: f64,
+    /// RMS horizontal velocity error, m/s.
+    pub vel_rms_mps: f64,
+    /// Mean of (error / PosSigma)^2 over the epochs that carry a sigma: the position's NEES
+    /// per degree of freedom (1 when the sigmas hold); none without sigmas.
+    pub nees: Option<f64>,
+}
+
+/// Score the epochs that carry a position while the device navigates. `truth`: at a time, the
+/// truth's east, north error of a position (lat, lon deg, height m) in m and its horizontal
+/// velocity (east, north) m/s; `t_of`: the time of a sample.
+pub fn drive(
+    epochs: &[Epoch],
+    truth: impl Fn(f64, [f64; 3]) -> ([f64; 2], [f64; 2]),
+    t_of: impl Fn(u64) -> f64,
+) -> Option<DriveScore> {
+    let navigating = |m: NavMode| {
+        matches!(
+            m,
+            NavMode::Navigation | NavMode::GpsAided | NavMode::Coasting
+        )
+    };
+    let (mut sum, mut vsum, mut max, mut n, mut vn) = (0.0, 0.0, 0.0f64, 0u64, 0u64);
+    let (mut nees, mut nees_n) = (0.0, 0u64);
+    let mut last = (0.0, 0.0);
+    for e in epochs.iter().filter(|e| navigating(e.mode)) {
+        let (Some((k, _)), Some(p)) = (e.sample, e.pos) else {
+            continue;
+        };
+        let t = t_of(k);
+        let h = e.hgt.map_or(0.0, |h| h[0]);
+        let (d, v) = truth(t, [p[0], p[1], h]);
+        let err = d[0].hypot(d[1]);
+        sum += err * err;
+        max = max.max(err);
+        n += 1;
+        last = (err, t);
+        if let Some(ve) = e.vel {
+            vsum += (ve[0] - v[0]).powi(2) + (ve[1] - v[1]).powi(2);
+            vn += 1;
+        }
+        // 655.35 m is the field's top: a sigma it cannot state
+        if let Some(sg) = e.hgt.map(|h| h[1]).filter(|s| *s > 0.0 && *s < 655.0) {
+            nees += (err / sg).powi(2);
+            nees_n += 1;
+        }
+    }
+    (n > 0).then(|| DriveScore {
+        epochs: n,
+        rms_m: (sum / n as f64).sqrt(),
+        max_m: max,
+        last_m: last.0,
+        last_t_s: last.1,
+        vel_rms_mps: (vsum / vn.max(1) as f64).sqrt(),
+        nees: (nees_n > 0).then(|| nees / nees_n as f64),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -284,6 +354,24 @@ mod tests {
         e[70].sample_count = 10;
         assert_eq!(backwards(&e).0, 1);
         assert_eq!(backwards(&e).1, Some((70 * 40, 10)));
+    }
+
+    #[test]
+    fn a_drive_is_scored_where_the_device_navigates() {
+        let mut e: Vec<Epoch> = (1..=10).map(|i| epoch(i * 40, 2000.0, 0.0)).collect();
+        for (i, x) in e.iter_mut().enumerate() {
+            // 3 m east, 4 m north off: 5 m; sigma 5 m from the third epoch on
+            x.pos = Some([0.0, 0.0]);
+            x.vel = Some([1.0, 0.0, 0.0]);
+            x.hgt = Some([0.0, if i >= 2 { 5.0 } else { 655.35 }, 0.1]);
+        }
+        e[0].mode = NavMode::Levelling;
+        let d = drive(&e, |_, _| ([3.0, 4.0], [1.0, 0.0]), |k| k as f64 / 2000.0).unwrap();
+        assert_eq!(d.epochs, 9);
+        assert!((d.rms_m - 5.0).abs() < 1e-12 && (d.max_m - 5.0).abs() < 1e-12);
+        assert!((d.last_t_s - 0.2).abs() < 1e-12 && d.vel_rms_mps == 0.0);
+        assert!((d.nees.unwrap() - 1.0).abs() < 1e-12);
+        assert!(drive(&e[..1], |_, _| ([0.0; 2], [0.0; 2]), |k| k as f64).is_none());
     }
 
     #[test]
