@@ -1461,15 +1461,8 @@ fn a_real_turntable_stand_in_turns_the_emulated_imu_in_a_free_drill() {
     let t: Value =
         serde_json::from_slice(&std::fs::read(d.join("turntable.json")).unwrap()).unwrap();
     eprintln!("hil emulate turntable: {t}");
-    if code == 3 {
-        eprintln!(
-            "the host could not keep real time: {}; no verdict on nav",
-            r["bench_behind"]
-        );
+    if !judged(&r, code) {
         return;
-    }
-    for (name, pass, detail) in checks(&r) {
-        eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
     }
     assert_eq!((code, tt_exit), (0, Some(0)), "{r}");
     assert_eq!(r["real"][0].as_str(), Some("turntable on vcan-free"));
@@ -1493,6 +1486,22 @@ fn a_real_turntable_stand_in_turns_the_emulated_imu_in_a_free_drill() {
     assert!(commands >= 8, "{t}");
     assert_eq!(t["acks"].as_u64(), Some(commands), "{t}");
     assert_eq!(t["bad_frames"].as_u64(), Some(0), "{t}");
+}
+
+/// A free-running run's report: false (and why, said) when the host could not keep real time
+/// and the bench gave no verdict (exit 3); else its checks are shown and true.
+fn judged(r: &Value, code: i32) -> bool {
+    if code == 3 {
+        eprintln!(
+            "the host could not keep real time: {}; no verdict on the device",
+            r["bench_behind"]
+        );
+        return false;
+    }
+    for (name, pass, detail) in checks(r) {
+        eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
+    }
+    true
 }
 
 /// The check named `name` of a report: (pass, detail).
@@ -1537,15 +1546,7 @@ fn a_free_running_drill_judges_the_device_by_the_dbc_and_names_its_failures() {
     };
     // the budget is not what this run is about (a loaded guest is slow, not nav): generous
     let (r, code) = drill("ours", &["--latency-budget-ms", "1000"]);
-    if code == 3 {
-        eprintln!(
-            "the host could not keep real time: {}; no verdict on the device",
-            r["bench_behind"]
-        );
-    } else {
-        for (name, pass, detail) in checks(&r) {
-            eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
-        }
+    if judged(&r, code) {
         assert_eq!(code, 0, "{r}");
         let h = &r["heading"];
         let (err, sigma) = (
@@ -1589,10 +1590,7 @@ fn a_free_running_drill_judges_the_device_by_the_dbc_and_names_its_failures() {
         ],
         &[&dir.path().join("drive")],
     );
-    if code != 3 {
-        for (name, pass, detail) in checks(&r) {
-            eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
-        }
+    if judged(&r, code) {
         assert_eq!(code, 0, "{r}");
         let n = &r["navigation"];
         assert!(n["epochs"].as_u64().unwrap() > 1000, "{n}");
@@ -1614,7 +1612,7 @@ fn a_free_running_drill_judges_the_device_by_the_dbc_and_names_its_failures() {
             "0.05",
         ],
     );
-    if code != 3 {
+    if judged(&r, code) {
         assert_eq!(code, 1, "{r}");
         let (pass, detail) = check_named(&r, "the device ran to the end");
         assert!(
@@ -1692,15 +1690,8 @@ fn an_independent_python_device_is_judged_by_the_same_checks() {
         )
     };
     let (r, code) = drill("honest", "", 200.0);
-    if code == 3 {
-        eprintln!(
-            "the host could not keep real time: {}; no verdict",
-            r["bench_behind"]
-        );
+    if !judged(&r, code) {
         return;
-    }
-    for (name, pass, detail) in checks(&r) {
-        eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
     }
     assert_eq!(code, 0, "{r}");
     let h = &r["heading"];
@@ -1715,7 +1706,7 @@ fn an_independent_python_device_is_judged_by_the_same_checks() {
     // 50 ms more on every solution, against a budget 25 ms above the honest p99
     let budget = (p99 + 25.0).max(30.0);
     let (r, code) = drill("delayed", "--delay 0.05", budget);
-    if code != 3 {
+    if judged(&r, code) {
         assert_eq!(code, 1, "{r}");
         let (pass, detail) = check_named(&r, "latency within the budget");
         assert!(!pass && detail.contains("budget p99"), "{detail}");
@@ -1728,7 +1719,7 @@ fn an_independent_python_device_is_judged_by_the_same_checks() {
     }
     // solutions named 100 ms before the samples their data reach
     let (r, code) = drill("early", "--stamp-early 0.1", 1000.0);
-    if code != 3 {
+    if judged(&r, code) {
         assert_eq!(code, 1, "{r}");
         let (pass, detail) = check_named(&r, "time tags agree with the data");
         assert!(!pass, "{detail}");
