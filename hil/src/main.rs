@@ -491,6 +491,9 @@ struct NorthFindingArgs {
     /// Latitude, deg.
     #[arg(long, value_parser = hil::values::latitude_deg, allow_negative_numbers = true, default_value_t = 28.218157)]
     lat: f64,
+    /// Longitude, deg (the site's surveyed position, with --lat: where a real receiver is).
+    #[arg(long, value_parser = hil::values::longitude_deg, allow_negative_numbers = true, default_value_t = 112.989583)]
+    lon: f64,
     /// Dwell per position, s.
     #[arg(long, value_parser = hil::values::duration_s, default_value_t = 60.0)]
     dwell: f64,

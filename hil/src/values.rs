@@ -129,6 +129,11 @@ pub fn latitude_deg(s: &str) -> Result<f64, String> {
     LATITUDE.parse(s)
 }
 
+/// Longitude, deg: -180 to 360.
+pub fn longitude_deg(s: &str) -> Result<f64, String> {
+    LONGITUDE.parse(s)
+}
+
 /// A heading or an angle about the vertical, deg: -360 to 360.
 pub fn heading_deg(s: &str) -> Result<f64, String> {
     HEADING.parse(s)

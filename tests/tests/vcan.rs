@@ -1727,3 +1727,99 @@ fn an_independent_python_device_is_judged_by_the_same_checks() {
         assert!((tau + 0.1).abs() < 0.02, "{tau} s: {detail}");
     }
 }
+
+/// A real receiver's stand-in: a recorded receiver (gpsd's capture of a Telit HE910 in
+/// ../shared/testdata/gpsd-nmea: half a minute of searching, then fixes of a receiver standing
+/// still) played at its own rate onto a pty by socat, given to the bench with `--real gps=PTY`.
+/// The drill's site is the receiver's surveyed position. Our nav finds north on the emulated IMU
+/// and table, then navigates from the real receiver's fixes: its heading is scored against
+/// truth, its position against the site, and the card says what it could not judge (the
+/// receiver's fixes themselves).
+#[test]
+#[ignore = "needs vcan, socat and ../shared: run ./run-tests"]
+fn a_recorded_receiver_on_a_pty_stands_in_for_a_real_one() {
+    let here = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let log = here.join("../../shared/testdata/gpsd-nmea/telit-he910.log");
+    if !log.is_file() {
+        eprintln!("SKIPPED: {} is absent", log.display());
+        return;
+    }
+    if Command::new("socat").arg("-V").output().is_err() {
+        eprintln!("SKIPPED: no socat here (./run-tests installs it)");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let pty = dir.path().join("receiver");
+    let mut socat = Command::new("socat");
+    socat
+        .arg(format!("PTY,link={},raw,echo=0", pty.display()))
+        .arg(format!(
+            "EXEC:sh {} {}",
+            here.join("dut/pace-nmea.sh").display(),
+            log.display()
+        ));
+    let _socat = Child(socat.spawn().expect("socat starts"));
+    let t0 = std::time::Instant::now();
+    while !pty.exists() {
+        assert!(t0.elapsed().as_secs() < 30, "socat made no pty");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    // the capture's position: 50 50.4126 N, 4 20.8228 E
+    let real = format!("gps={}", pty.display());
+    let (r, code) = hil_json(
+        &[
+            "drill",
+            "north-finding",
+            "--free",
+            "--real",
+            &real,
+            "--lat",
+            "50.84021",
+            "--lon",
+            "4.347047",
+            "--heading",
+            "33",
+            "--dwell",
+            "15",
+            "--seed",
+            "3",
+            "--iface",
+            "vcan-rx",
+            "--latency-budget-ms",
+            "1000",
+            "--json",
+            "--out",
+        ],
+        &[&dir.path().join("run")],
+    );
+    if !judged(&r, code) {
+        return;
+    }
+    assert_eq!(code, 0, "{r}");
+    assert!(
+        r["receiver_bytes"].as_u64().unwrap() > 5000,
+        "{}",
+        r["receiver_bytes"]
+    );
+    let bench: Vec<&str> = r["bench"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| b["device"].as_str().unwrap())
+        .collect();
+    assert_eq!(bench, ["turntable", "imu"]);
+    let (pass, detail) = check_named(
+        &r,
+        "position at the drill's end within 3 of its sigmas of the site",
+    );
+    assert!(pass, "{detail}");
+    assert!(
+        r["not_judged"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|n| n.as_str().unwrap().contains("real receiver's fixes")),
+        "{}",
+        r["not_judged"]
+    );
+}

@@ -40,8 +40,9 @@ pub const CAN_UTILS: &[&str] = &["candump", "canplayer", "cansend", "cangen", "c
 
 /// Programs the guest carries when the host has them (at their host paths): gpsd, so that a
 /// bench run in the guest can put gpsd between the GPS emulator's pty and nav, as a vehicle
-/// shares one receiver (`./run-tests` installs it on the host).
-pub const OPTIONAL_TOOLS: &[&str] = &["gpsd"];
+/// shares one receiver; socat, which puts a recorded receiver's log on a pty of its own (a real
+/// receiver's stand-in). `./run-tests` installs both on the host.
+pub const OPTIONAL_TOOLS: &[&str] = &["gpsd", "socat"];
 
 /// Environment variables passed from the host into the guest when set.
 const PASS_ENV: &[&str] = &["RUST_LOG", "RUST_BACKTRACE", "NO_COLOR", "TERM"];

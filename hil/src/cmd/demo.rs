@@ -100,6 +100,7 @@ fn demo_parts(
     let drill = drill_north_finding(NorthFindingArgs {
         heading: None,
         lat: 28.218157,
+        lon: 112.989583,
         dwell,
         speed,
         disturbances: None,

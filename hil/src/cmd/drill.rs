@@ -22,6 +22,7 @@ pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
     };
     let mut s = hil::procedures::northfinding::scenario(heading, a.lat, a.dwell, a.seed);
     s.speed = a.speed;
+    s.site.lon_deg = a.lon;
     s.heading_tolerance_deg = a.tolerance;
     if let Some(p) = &a.disturbances {
         let text = std::fs::read_to_string(p)

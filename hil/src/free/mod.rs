@@ -112,6 +112,11 @@ pub struct FreeReport {
     pub outside_dbc: std::collections::BTreeMap<String, u64>,
     /// Turntable commands the device sent.
     pub commands: u64,
+    /// Bytes the device says it took from the receiver (NAV_TIME's GpsRxBytes).
+    pub receiver_bytes: u64,
+    /// The device's position at the drill's end against the site's surveyed position: the
+    /// horizontal distance, m, and its PosSigma, m.
+    pub site_error: Option<(f64, Option<f64>)>,
     /// What the bench could not judge, and why.
     pub not_judged: Vec<String>,
     /// The checks.
@@ -549,8 +554,26 @@ fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) -> FreeReport
         not_judged.push("the device's latency from its data: it sent no attitude while the table or the vehicle turned (fewer than 10 epochs)".into());
     }
     if o.real_gps.is_some() {
-        not_judged.push("the real receiver's fixes: the bench has no truth for them".into());
+        not_judged.push("the real receiver's fixes themselves: the bench's only truth for them is the site's surveyed position".into());
     }
+    // a drill stands at the site: its surveyed position is the truth for position, whoever's
+    // the receiver
+    let site_error = heading.and_then(|h| {
+        let at = e
+            .iter()
+            .find(|x| x.sample.is_some_and(|(k, _)| k == h.sample))?;
+        let p = at.pos?;
+        let d = emulators::geodesy::enu_offset(
+            (
+                s.site.lat_deg.to_radians(),
+                s.site.lon_deg.to_radians(),
+                s.site.height_m,
+            ),
+            (p[0].to_radians(), p[1].to_radians(), s.site.height_m),
+        );
+        let sigma = at.hgt.map(|g| g[1]).filter(|x| *x > 0.0 && *x < 655.0);
+        Some((d[0].hypot(d[1]), sigma))
+    });
     let mut checks = vec![
         Check {
             name: "the device answered".into(),
@@ -643,6 +666,25 @@ fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) -> FreeReport
             },
         });
     }
+    if is_drill(s) && s.drive.is_some() {
+        checks.push(Check {
+            name: "position at the drill's end within 3 of its sigmas of the site".into(),
+            pass: site_error
+                .is_some_and(|(d, sg)| d <= sg.map_or(s.position_tolerance_m, |x| 3.0 * x)),
+            detail: match site_error {
+                Some((d, sg)) => format!(
+                    "{d:.2} m from the site's surveyed position ({:.6}, {:.6}){}",
+                    s.site.lat_deg,
+                    s.site.lon_deg,
+                    sg.map_or(
+                        format!(", no PosSigma sent: limit {} m", s.position_tolerance_m),
+                        |x| format!(", PosSigma {x:.2} m ({:.2} sigma)", d / x)
+                    )
+                ),
+                None => "the device sent no position (NAV_POS) with its heading".into(),
+            },
+        });
+    }
     if let Some((tau, n)) = offset {
         checks.push(Check {
             name: "time tags agree with the data".into(),
@@ -681,6 +723,8 @@ fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) -> FreeReport
         backwards,
         outside_dbc: seen.outside_dbc.clone(),
         commands: seen.commands,
+        receiver_bytes: seen.receiver_bytes,
+        site_error,
         not_judged,
         checks,
         pass,
@@ -714,13 +758,14 @@ pub fn card(r: &FreeReport) -> String {
         out += &format!(" real     {x}\n");
     }
     out += &format!(
-        " output   {} epochs, {:.1} Hz by the host's clock, every {} samples, jitter {:.2} ms rms, longest gap {:.1} ms; {} turntable commands\n",
+        " output   {} epochs, {:.1} Hz by the host's clock, every {} samples, jitter {:.2} ms rms, longest gap {:.1} ms; {} turntable commands; {} bytes taken from the receiver\n",
         r.epochs,
         r.rate.hz,
         r.rate.step_samples,
         r.rate.jitter_rms_ms,
         r.rate.max_interval_ms,
-        r.commands
+        r.commands,
+        r.receiver_bytes
     );
     for c in &r.checks {
         out += &format!(

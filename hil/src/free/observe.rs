@@ -23,6 +23,10 @@ pub struct Observed {
     pub outside_dbc: BTreeMap<String, u64>,
     /// TT_CMD frames on the bus (the device under test commanding the table).
     pub commands: u64,
+    /// Bytes the device says it took from the receiver (NAV_TIME's GpsRxBytes, 12 bits,
+    /// accumulated), and the last value seen.
+    pub receiver_bytes: u64,
+    last_rx_bytes: Option<u16>,
 }
 
 impl Observed {
@@ -116,6 +120,10 @@ fn take(o: &mut Observed, m: Message, rx_s: f64, origin: Instant, sent: &SentSam
     };
     match m {
         Message::NavTime(t) => {
+            if let Some(prev) = o.last_rx_bytes {
+                o.receiver_bytes += u64::from(t.gps_rx_bytes.wrapping_sub(prev) & 0xFFF);
+            }
+            o.last_rx_bytes = Some(t.gps_rx_bytes);
             let sample = sent
                 .find(t.sample_count as u16)
                 .map(|(k, at)| (k, at.saturating_duration_since(origin).as_secs_f64()));
