@@ -14,6 +14,7 @@
 
 pub mod observe;
 pub mod score;
+mod verdict;
 
 use crate::check::Check;
 use crate::scenario::Scenario;
@@ -152,7 +153,7 @@ pub fn parked_with_receiver(s: &Scenario) -> Result<Scenario> {
 
 /// The scenario is a drill: north-finding with the vehicle standing still throughout (the run
 /// ends when the device has said its heading).
-fn is_drill(s: &Scenario) -> bool {
+pub(crate) fn is_drill(s: &Scenario) -> bool {
     s.north_finding.is_some()
         && s.drive
             .as_ref()
@@ -231,7 +232,7 @@ pub fn run_free(s: &Scenario, o: &FreeOptions) -> Result<FreeReport> {
         stats,
         tracks,
     };
-    let r = judge(s, o, ctx, seen);
+    let r = verdict::judge(s, o, ctx, seen);
     std::fs::write(o.out.join("report.json"), serde_json::to_string_pretty(&r)?)?;
     std::fs::write(o.out.join("report.md"), format!("```\n{}```\n", card(&r)))?;
     Ok(r)
@@ -489,246 +490,13 @@ fn supervise(
 }
 
 /// What the run left for judging.
-struct Judged {
-    device: String,
-    device_exit: String,
-    ended: String,
-    wall_s: f64,
-    stats: Vec<FreeStats>,
-    tracks: Vec<SharedTrack>,
-}
-
-/// The verdict: the device's figures against truth and its budget, unless the bench fell
-/// behind real time.
-fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) -> FreeReport {
-    let rate_hz = s.imu.rate_hz;
-    let table = j.tracks.first().cloned();
-    let table_deg = move |t: f64| {
-        table.as_ref().map_or(0.0, |tr| {
-            tr.lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .eval(t)
-                .0
-                .to_degrees()
-        })
-    };
-    // the IMU's heading: the vehicle's less the table's angle (it turns counter-clockwise)
-    let plan = s
-        .drive
-        .as_ref()
-        .and_then(|d| emulators::drive::Drive::plan(d).ok());
-    let vehicle_deg = |t: f64| match &plan {
-        Some(p) => p.heading(t).to_degrees(),
-        None => s.truth_heading_deg(),
-    };
-    let truth_at_t = |t: f64| vehicle_deg(t) - table_deg(t);
-    let t_of = |k: u64| (k + 1) as f64 / rate_hz;
-    let e = &seen.epochs;
-    let (latency, unnamed) = score::stated_latency(e);
-    let rate = score::rate(e);
-    let (backwards, first_back) = score::backwards(e);
-    let heading = s
-        .north_finding
-        .as_ref()
-        .and_then(|_| score::drill_heading(e, |k| truth_at_t(t_of(k))));
-    let offset = score::time_tag_offset(e, truth_at_t, t_of);
-    let behind = j.stats.iter().find_map(|st| st.behind.clone());
-    let mut not_judged = Vec::new();
-    let navigation = match (&plan, is_drill(s), &o.real_gps) {
-        (Some(plan), false, None) => score::drive(
-            e,
-            |t, p| {
-                let (lat, lon, h) = plan.position(t);
-                let d = emulators::geodesy::enu_offset(
-                    (lat, lon, h),
-                    (p[0].to_radians(), p[1].to_radians(), p[2]),
-                );
-                let v = plan.velocity(t);
-                ([d[0], d[1]], [v.x, v.y])
-            },
-            t_of,
-        ),
-        _ => None,
-    };
-    if offset.is_none() {
-        not_judged.push("the device's latency from its data: it sent no attitude while the table or the vehicle turned (fewer than 10 epochs)".into());
-    }
-    if o.real_gps.is_some() {
-        not_judged.push("the real receiver's fixes themselves: the bench's only truth for them is the site's surveyed position".into());
-    }
-    // a drill stands at the site: its surveyed position is the truth for position, whoever's
-    // the receiver
-    let site_error = heading.and_then(|h| {
-        let at = e
-            .iter()
-            .find(|x| x.sample.is_some_and(|(k, _)| k == h.sample))?;
-        let p = at.pos?;
-        let d = emulators::geodesy::enu_offset(
-            (
-                s.site.lat_deg.to_radians(),
-                s.site.lon_deg.to_radians(),
-                s.site.height_m,
-            ),
-            (p[0].to_radians(), p[1].to_radians(), s.site.height_m),
-        );
-        let sigma = at.hgt.map(|g| g[1]).filter(|x| *x > 0.0 && *x < 655.0);
-        Some((d[0].hypot(d[1]), sigma))
-    });
-    let mut checks = vec![
-        Check {
-            name: "the device answered".into(),
-            pass: !e.is_empty(),
-            detail: match e.first() {
-                Some(f) => format!(
-                    "first NAV_TIME {:.2} s after the stream started; {} epochs",
-                    f.rx_s,
-                    e.len()
-                ),
-                None => format!("no NAV_TIME at all ({})", j.ended),
-            },
-        },
-        Check {
-            name: "the device ran to the end".into(),
-            pass: !j.ended.contains("device under test exited")
-                && !j.device_exit.starts_with("ended before"),
-            detail: format!("{}; the device {}", j.ended, j.device_exit),
-        },
-        Check {
-            name: "latency within the budget".into(),
-            pass: latency.count > 0 && latency.p99_ms <= o.latency_budget_ms,
-            detail: format!(
-                "IMU sample on the bus to the NAV_TIME naming it: median {:.1} ms, p99 {:.1} ms, worst {:.1} ms over {} epochs ({unnamed} named no sample sent); budget p99 {} ms",
-                latency.p50_ms, latency.p99_ms, latency.max_ms, latency.count, o.latency_budget_ms
-            ),
-        },
-        Check {
-            name: "frames within the DBC".into(),
-            pass: seen.outside_count() == 0,
-            detail: if seen.outside_dbc.is_empty() {
-                "every frame heard is defined by wire/bench.dbc".into()
-            } else {
-                seen.outside_dbc
-                    .iter()
-                    .map(|(w, n)| format!("{n} x {w}"))
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            },
-        },
-        Check {
-            name: "time tags never go backwards".into(),
-            pass: backwards == 0,
-            detail: match first_back {
-                Some((a, b)) => format!("{backwards} times; first from sample {a} to {b}"),
-                None => format!("{} NAV_TIMEs in order", e.len()),
-            },
-        },
-    ];
-    if s.north_finding.is_some() {
-        checks.push(Check {
-            name: "heading at the drill's end within 3 of the device's sigmas".into(),
-            pass: heading.is_some_and(|h| h.in_sigmas().is_some_and(|x| x.abs() <= 3.0)),
-            detail: match heading {
-                Some(h) => format!(
-                    "{:.4} deg at sample {} ({:.2} s), truth {:.4}, error {:+.4} deg{}",
-                    h.heading_deg,
-                    h.sample,
-                    t_of(h.sample),
-                    h.truth_deg,
-                    h.error_deg,
-                    match (h.sigma_deg, h.in_sigmas()) {
-                        (Some(sg), Some(x)) => format!(" = {x:+.2} sigma ({sg:.4} deg)"),
-                        _ => ", no sigma sent (NAV_HGT's HeadingSigma)".into(),
-                    }
-                ),
-                None => "the device sent no heading (NAV_ATT) after north-finding".into(),
-            },
-        });
-    }
-    if s.drive.is_some() && !is_drill(s) && o.real_gps.is_some() {
-        not_judged.push("position along the drive: the real receiver's fixes steer it, and the bench has no truth for where that receiver was".into());
-    } else if s.drive.is_some() && !is_drill(s) {
-        checks.push(Check {
-            name: "navigation error within tolerance".into(),
-            pass: navigation.is_some_and(|n| n.last_m <= s.position_tolerance_m),
-            detail: match navigation {
-                Some(n) => format!(
-                    "at {:.1} s: horizontal {:.2} m (limit {} m); along the drive RMS {:.2} m, worst {:.2} m, velocity RMS {:.3} m/s over {} epochs; position NEES per dof {}",
-                    n.last_t_s,
-                    n.last_m,
-                    s.position_tolerance_m,
-                    n.rms_m,
-                    n.max_m,
-                    n.vel_rms_mps,
-                    n.epochs,
-                    n.nees.map_or("-- (no PosSigma sent)".into(), |x| format!("{x:.2}"))
-                ),
-                None => "the device sent no position (NAV_POS) while navigating".into(),
-            },
-        });
-    }
-    if is_drill(s) && s.drive.is_some() {
-        checks.push(Check {
-            name: "position at the drill's end within 3 of its sigmas of the site".into(),
-            pass: site_error
-                .is_some_and(|(d, sg)| d <= sg.map_or(s.position_tolerance_m, |x| 3.0 * x)),
-            detail: match site_error {
-                Some((d, sg)) => format!(
-                    "{d:.2} m from the site's surveyed position ({:.6}, {:.6}){}",
-                    s.site.lat_deg,
-                    s.site.lon_deg,
-                    sg.map_or(
-                        format!(", no PosSigma sent: limit {} m", s.position_tolerance_m),
-                        |x| format!(", PosSigma {x:.2} m ({:.2} sigma)", d / x)
-                    )
-                ),
-                None => "the device sent no position (NAV_POS) with its heading".into(),
-            },
-        });
-    }
-    if let Some((tau, n)) = offset {
-        checks.push(Check {
-            name: "time tags agree with the data".into(),
-            pass: tau.abs() <= 1.0 / 50.0,
-            detail: format!(
-                "its headings line up with the truth {:+.0} ms from the samples they name ({n} epochs while turning); limit one output period, 20 ms",
-                tau * 1e3
-            ),
-        });
-    }
-    let pass = behind.is_none() && checks.iter().all(|c| c.pass);
-    let mut real = Vec::new();
-    if o.real_turntable {
-        real.push(format!("turntable on {}", o.iface));
-    }
-    if let Some(p) = &o.real_gps {
-        real.push(format!("receiver on {}", p.display()));
-    }
-    FreeReport {
-        scenario: s.name.clone(),
-        interface: o.iface.clone(),
-        device: j.device,
-        device_exit: j.device_exit,
-        ended: j.ended,
-        wall_s: j.wall_s,
-        bench: j.stats,
-        bench_behind: behind,
-        real,
-        epochs: e.len() as u64,
-        latency,
-        unnamed_samples: unnamed,
-        rate,
-        heading,
-        navigation,
-        time_tag_offset: offset,
-        backwards,
-        outside_dbc: seen.outside_dbc.clone(),
-        commands: seen.commands,
-        receiver_bytes: seen.receiver_bytes,
-        site_error,
-        not_judged,
-        checks,
-        pass,
-    }
+pub(crate) struct Judged {
+    pub(crate) device: String,
+    pub(crate) device_exit: String,
+    pub(crate) ended: String,
+    pub(crate) wall_s: f64,
+    pub(crate) stats: Vec<FreeStats>,
+    pub(crate) tracks: Vec<SharedTrack>,
 }
 
 /// The result card.
