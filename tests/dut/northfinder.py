@@ -13,7 +13,9 @@ after) and NAV_HGT (its heading sigma).
 
 Faults on purpose, for the bench to catch:
   --delay S        every solution goes out S seconds late (its time tags stay honest);
-  --stamp-early S  every solution names the sample S seconds before the one its data reach.
+  --stamp-early S  every solution names the sample S seconds before the one its data reach;
+  --stray S        a frame outside the DBC (identifier 0x3FF) every S seconds;
+  --backwards      one NAV_TIME, 30 s in, names a sample 1000 before the one before it.
 """
 
 import argparse
@@ -40,6 +42,8 @@ def main():
     ap.add_argument("--dwell", type=float, default=15.0)
     ap.add_argument("--delay", type=float, default=0.0)
     ap.add_argument("--stamp-early", type=float, default=0.0)
+    ap.add_argument("--stray", type=float, default=0.0)
+    ap.add_argument("--backwards", action="store_true")
     a = ap.parse_args()
     cfg = tomllib.load(open(a.config, "rb"))
     imu = cfg.get("imu", {})
@@ -89,6 +93,8 @@ class NorthFinder:
         self.sigma = 6.5
         self.mode = 2  # NorthFinding
         self.out = collections.deque()
+        self.last_stray = time.monotonic()
+        self.first_sample = None
 
     # ---- the bus ----
     def send(self, msg, **signals):
@@ -119,6 +125,9 @@ class NorthFinder:
 
     def housekeeping(self):
         now = time.monotonic()
+        if self.a.stray > 0 and now - self.last_stray >= self.a.stray:
+            self.last_stray = now
+            self.bus.send(can.Message(arbitration_id=0x3FF, data=b"\x00" * 8, is_extended_id=False))
         if now - self.last_hb >= 0.1:
             self.last_hb = now
             self.command("Heartbeat")
@@ -153,6 +162,10 @@ class NorthFinder:
 
     def solution(self):
         named = self.sample - round(self.a.stamp_early * self.rate_hz)
+        if self.first_sample is None:
+            self.first_sample = self.sample
+        if self.a.backwards and self.sample - self.first_sample == round(30 * self.rate_hz):
+            named -= 1000 + 40
         if self.heading is None:
             # while indexing: the heading relative to the start, from the z gyro
             h = -math.degrees(self.count[2] * self.pulse_rad[2])

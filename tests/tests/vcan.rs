@@ -1643,7 +1643,7 @@ fn guest_python() -> Option<std::path::PathBuf> {
 /// method's honest tolerance), and its time tags agree with its data while the table turns.
 /// The same program with 50 ms added to its output fails a latency budget set 25 ms above what
 /// it showed honest, naming the figures; stamping its solutions 100 ms early is caught by the
-/// bench's estimate from the data.
+/// bench's estimate from the data, and so are its stray frames and a time tag that goes back.
 #[test]
 #[ignore = "needs vcan and the guest's Python: run ./run-tests"]
 fn an_independent_python_device_is_judged_by_the_same_checks() {
@@ -1717,14 +1717,22 @@ fn an_independent_python_device_is_judged_by_the_same_checks() {
         );
         assert!(check_named(&r, "time tags agree with the data").0);
     }
-    // solutions named 100 ms before the samples their data reach
-    let (r, code) = drill("early", "--stamp-early 0.1", 1000.0);
+    // solutions named 100 ms before the samples their data reach; a stray frame every 5 s;
+    // one NAV_TIME 30 s in naming an older sample
+    let (r, code) = drill("early", "--stamp-early 0.1 --stray 5 --backwards", 1000.0);
     if judged(&r, code) {
         assert_eq!(code, 1, "{r}");
         let (pass, detail) = check_named(&r, "time tags agree with the data");
         assert!(!pass, "{detail}");
         let tau = r["time_tag_offset"][0].as_f64().unwrap();
         assert!((tau + 0.1).abs() < 0.02, "{tau} s: {detail}");
+        let (pass, detail) = check_named(&r, "frames within the DBC");
+        assert!(
+            !pass && detail.contains("0x3FF: not in the DBC"),
+            "{detail}"
+        );
+        let (pass, detail) = check_named(&r, "time tags never go backwards");
+        assert!(!pass && detail.starts_with("1 of"), "{detail}");
     }
 }
 

@@ -201,7 +201,10 @@ fn device_checks(
             name: "time tags never go backwards".into(),
             pass: backwards == 0,
             detail: match first_back {
-                Some((a, b)) => format!("{backwards} times; first from sample {a} to {b}"),
+                Some((a, b)) => format!(
+                    "{backwards} of {} NAV_TIMEs named a sample before the one before them; the first from sample {a} to {b}",
+                    e.len()
+                ),
                 None => format!("{} NAV_TIMEs in order", e.len()),
             },
         },
@@ -242,8 +245,14 @@ fn truth_checks(
     } else if drive {
         checks.push(navigation_check(s, navigation));
     }
-    if is_drill(s) && s.drive.is_some() {
-        checks.push(site_check(s, site_error));
+    // a device that only finds north owes no position
+    match (is_drill(s) && s.drive.is_some(), site_error) {
+        (true, Some(err)) => checks.push(site_check(s, err)),
+        (true, None) => not_judged.push(
+            "the position at the drill's end: the device sent none (NAV_POS) with its heading"
+                .into(),
+        ),
+        _ => {}
     }
     match offset {
         Some((tau, n)) => checks.push(Check {
@@ -305,21 +314,18 @@ fn navigation_check(s: &Scenario, navigation: Option<DriveScore>) -> Check {
     }
 }
 
-fn site_check(s: &Scenario, site_error: Option<(f64, Option<f64>)>) -> Check {
+fn site_check(s: &Scenario, (d, sg): (f64, Option<f64>)) -> Check {
     Check {
         name: "position at the drill's end within 3 of its sigmas of the site".into(),
-        pass: site_error.is_some_and(|(d, sg)| d <= sg.map_or(s.position_tolerance_m, |x| 3.0 * x)),
-        detail: match site_error {
-            Some((d, sg)) => format!(
-                "{d:.2} m from the site's surveyed position ({:.6}, {:.6}){}",
-                s.site.lat_deg,
-                s.site.lon_deg,
-                sg.map_or(
-                    format!(", no PosSigma sent: limit {} m", s.position_tolerance_m),
-                    |x| format!(", PosSigma {x:.2} m ({:.2} sigma)", d / x)
-                )
-            ),
-            None => "the device sent no position (NAV_POS) with its heading".into(),
-        },
+        pass: d <= sg.map_or(s.position_tolerance_m, |x| 3.0 * x),
+        detail: format!(
+            "{d:.2} m from the site's surveyed position ({:.6}, {:.6}){}",
+            s.site.lat_deg,
+            s.site.lon_deg,
+            sg.map_or(
+                format!(", no PosSigma sent: limit {} m", s.position_tolerance_m),
+                |x| format!(", PosSigma {x:.2} m ({:.2} sigma)", d / x)
+            )
+        ),
     }
 }
