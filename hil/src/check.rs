@@ -13,3 +13,8 @@ pub struct Check {
     /// Measured value and limit, in words.
     pub detail: String,
 }
+
+/// A process's exit status as people read it: its code, or "none (killed by a signal)".
+pub fn exit_words(code: Option<i32>) -> String {
+    code.map_or_else(|| "none (killed by a signal)".into(), |c| c.to_string())
+}

@@ -622,13 +622,14 @@ impl Pipeline {
         self.imu_timeout = active;
         if active {
             self.timeouts += 1;
+            let last = self
+                .sums
+                .last
+                .map_or_else(|| "no sample yet".into(), |k| format!("last sample {k}"));
             if at_end {
-                tracing::debug!("the IMU stream ended (last sample {:?})", self.sums.last);
+                tracing::debug!("the IMU stream ended ({last})");
             } else {
-                warn!(
-                    "no IMU frame for {after_ms} ms (last sample {:?})",
-                    self.sums.last
-                );
+                warn!("no IMU frame for {after_ms} ms ({last})");
             }
             let json = format!("{{\"kind\":\"imu_timeout\",\"after_ms\":{after_ms}}}");
             self.json(JsonChannel::Event, self.sums.last.unwrap_or(0), json, out);

@@ -124,7 +124,7 @@ pub fn checks(
     out.push(Check {
         name: "nav exited cleanly".into(),
         pass: nav_exit == Some(0),
-        detail: format!("exit status {nav_exit:?}"),
+        detail: format!("exit status {}", crate::check::exit_words(nav_exit)),
     });
     if lockstep.enabled {
         // a fix that reached nav after its time was applied when it came: timing leaked in.

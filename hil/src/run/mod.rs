@@ -286,7 +286,10 @@ pub(crate) fn stop_nav(mut nav: NavProcess) -> Result<(Option<i32>, Vec<String>)
 /// the truth and the reference runs, `write_report`.
 pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunReport> {
     let mut setup = prepare(s, opts)?;
-    info!(interface = %opts.iface, account = ?opts.nav_account, "starting nav");
+    let account = opts
+        .nav_account
+        .map_or_else(|| "this user".into(), |(u, g)| format!("uid {u}, gid {g}"));
+    info!(interface = %opts.iface, account = %account, "starting nav");
     let mut phases = Phases::starting_now();
     let nav = start_nav(&opts.nav_bin, &setup.cfg_path, opts.nav_account)?;
     phases.end("nav start");
@@ -590,7 +593,7 @@ fn read_summary(
         }
         Err(e @ nav::summary::SummaryError::Read { .. }) => {
             return Err(anyhow::Error::new(e)
-                .context(format!("nav wrote no summary; exit status {nav_exit:?}")));
+                .context(format!("nav wrote no summary; exit status {}", crate::check::exit_words(nav_exit))));
         }
         Err(e) => return Err(e.into()),
     };
