@@ -390,8 +390,13 @@ pub fn replay_on_bus(mcap: &Path, cfg: &NavConfig, opts: &BusReplayOptions) -> R
             crate::status::line(l);
         }
     }
-    let summary = nav::summary::Summary::read(&opts.out.join("nav-summary.json"))
-        .with_context(|| format!("nav wrote no summary; exit status {}", crate::check::exit_words(nav_exit)))?;
+    let summary =
+        nav::summary::Summary::read(&opts.out.join("nav-summary.json")).with_context(|| {
+            format!(
+                "nav wrote no summary; exit status {}",
+                crate::check::exit_words(nav_exit)
+            )
+        })?;
     let (new, _) = Recording::read_timed(&opts.out.join("nav.mcap"))?;
     Ok(BusReplay {
         recording: mcap.display().to_string(),

@@ -592,8 +592,10 @@ fn read_summary(
             p.summary
         }
         Err(e @ nav::summary::SummaryError::Read { .. }) => {
-            return Err(anyhow::Error::new(e)
-                .context(format!("nav wrote no summary; exit status {}", crate::check::exit_words(nav_exit))));
+            return Err(anyhow::Error::new(e).context(format!(
+                "nav wrote no summary; exit status {}",
+                crate::check::exit_words(nav_exit)
+            )));
         }
         Err(e) => return Err(e.into()),
     };
