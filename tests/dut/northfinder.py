@@ -75,7 +75,12 @@ class NorthFinder:
             socket.CAN_RAW_FILTER,
             b"".join(struct.pack("=II", i, 0x7FF) for i in ids),
         )
-        self.rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+        # room for seconds of the stream when the interpreter stalls (SO_RCVBUFFORCE, 33,
+        # passes the system's limit where we may)
+        try:
+            self.rx.setsockopt(socket.SOL_SOCKET, 33, 4 << 20)
+        except OSError:
+            self.rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
         self.rx.bind((a.iface,))
         self.rx.setblocking(False)
         self.gyro_layout = layout(self.gyro)

@@ -1430,6 +1430,9 @@ fn a_real_turntable_stand_in_turns_the_emulated_imu_in_a_free_drill() {
         iface,
         "--duration",
         "400",
+        // a guest under load stalls for tenths of a second: the stand-in allows a second
+        "--max-late-ms",
+        "1000",
     ])
     .arg("--report")
     .arg(d.join("turntable.json"))
@@ -1442,6 +1445,8 @@ fn a_real_turntable_stand_in_turns_the_emulated_imu_in_a_free_drill() {
             "drill",
             "north-finding",
             "--free",
+            "--max-late-ms",
+            "1000",
             "--real",
             &real,
             "--heading",
@@ -1461,6 +1466,13 @@ fn a_real_turntable_stand_in_turns_the_emulated_imu_in_a_free_drill() {
     let t: Value =
         serde_json::from_slice(&std::fs::read(d.join("turntable.json")).unwrap()).unwrap();
     eprintln!("hil emulate turntable: {t}");
+    if !t["behind"].is_null() {
+        eprintln!(
+            "the turntable's stand-in could not keep real time: {}; no verdict on nav",
+            t["behind"]
+        );
+        return;
+    }
     if !judged(&r, code) {
         return;
     }

@@ -198,8 +198,8 @@ pub fn drill_over(epochs: &[Epoch]) -> bool {
         })
 }
 
-/// What the data say of the device's time tags: the offset (s) that best lines its headings up
-/// with the truth (to within a constant) while the truth turns (its headings belong to `offset` s before the samples
+/// What the data say of the device's time tags: the offset (s) that best lines its heading's
+/// changes up with the truth's while the truth turns (its headings belong to `offset` s before the samples
 /// they name: positive for a device that stamps its solutions late data as new), searched over
 /// ±0.5 s in 1 ms steps; with the number of epochs it rests on. None when fewer than 10 of its
 /// epochs carry an attitude while the truth turns (`truth_deg` at a time, s of the IMU's clock;
@@ -217,20 +217,26 @@ pub fn time_tag_offset(
     if turning.len() < 10 {
         return None;
     }
-    // a device may state its heading from where it started (it does not know north while it
-    // indexes): a constant offset, the differences' circular mean, is removed at each lag
+    // the heading's change from one epoch to the next against the truth's over the same
+    // interval, shifted: a device may state its heading from where it started (it does not
+    // know north while it indexes), and a change knows no offset. A change off by more than
+    // 1 deg (a time tag gone back, counters unwrapped wrong after lost frames) counts as 1 deg
+    // only: one bad epoch must not outweigh hundreds
+    let steps: Vec<(f64, f64, f64)> = turning
+        .windows(2)
+        .filter(|w| w[1].0 > w[0].0 && w[1].0 - w[0].0 < 0.1)
+        .map(|w| (w[0].0, w[1].0, wrap180(w[1].1 - w[0].1)))
+        .collect();
+    if steps.len() < 10 {
+        return None;
+    }
     let cost = |tau: f64| -> f64 {
-        let d: Vec<f64> = turning
+        steps
             .iter()
-            .map(|(t, h)| (h - truth_deg(t - tau)).to_radians())
-            .collect();
-        let c = d
-            .iter()
-            .map(|x| x.sin())
-            .sum::<f64>()
-            .atan2(d.iter().map(|x| x.cos()).sum());
-        d.iter()
-            .map(|x| wrap180((x - c).to_degrees()).powi(2))
+            .map(|&(t0, t1, dh)| {
+                let dt = wrap180(truth_deg(t1 - tau) - truth_deg(t0 - tau));
+                (dh - dt).powi(2).min(1.0)
+            })
             .sum()
     };
     let best = (-500..=500)
@@ -418,6 +424,14 @@ mod tests {
             })
             .collect();
         let (tau, _) = time_tag_offset(&early, truth, t_of).unwrap();
+        assert!((tau - 0.1).abs() < 0.0015, "{tau}");
+        // a burst of headings 18 deg off while the table turns (a device that lost frames and
+        // unwrapped its counters wrong) does not move the estimate
+        let mut burst = early.clone();
+        for e in &mut burst[100..130] {
+            e.att = e.att.map(|a| [(a[0] + 18.2).rem_euclid(360.0), 0.0, 0.0]);
+        }
+        let (tau, _) = time_tag_offset(&burst, truth, t_of).unwrap();
         assert!((tau - 0.1).abs() < 0.0015, "{tau}");
         // a heading stated from where the device started: the same lag
         let relative: Vec<Epoch> = early
