@@ -1675,7 +1675,7 @@ fn an_independent_python_device_is_judged_by_the_same_checks() {
     let dir = tempfile::tempdir().unwrap();
     let drill = |out: &str, extra: &str, budget: f64| {
         let dut = format!("{dut} {extra}");
-        let budget = budget.to_string();
+        let budget = format!("{budget:.0}");
         hil_json(
             &[
                 "drill",
