@@ -725,9 +725,10 @@ struct FreeArgs {
     #[arg(long, value_name = "DEVICE=PORT", requires = "free")]
     real: Vec<String>,
     /// With --free: the device's latency budget, ms: the 99th percentile of IMU sample on
-    /// the bus to the NAV_TIME naming it.
-    #[arg(long, default_value_t = 50.0, requires = "free")]
-    latency_budget_ms: f64,
+    /// the bus to the NAV_TIME naming it (default: the scenario's `[bus] latency_budget_ms`,
+    /// else 50).
+    #[arg(long, value_parser = hil::values::latency_budget_ms, requires = "free")]
+    latency_budget_ms: Option<f64>,
     /// With --free: the device must send its first NAV_TIME within this long, s.
     #[arg(long, value_parser = hil::values::duration_s, default_value_t = 15.0, requires = "free")]
     answer_within: f64,
@@ -744,8 +745,6 @@ impl FreeArgs {
         }
         let mut a = vec![
             "--free".into(),
-            "--latency-budget-ms".into(),
-            self.latency_budget_ms.to_string(),
             "--answer-within".into(),
             self.answer_within.to_string(),
             "--max-late-ms".into(),
@@ -754,14 +753,23 @@ impl FreeArgs {
         if let Some(d) = &self.dut {
             a.extend(["--dut".into(), d.clone()]);
         }
+        if let Some(b) = self.latency_budget_ms {
+            a.extend(["--latency-budget-ms".into(), b.to_string()]);
+        }
         for r in &self.real {
             a.extend(["--real".into(), r.clone()]);
         }
         a
     }
 
-    /// The run's options, on `iface` into `out`, our nav being `nav`.
-    fn options(&self, iface: &str, out: PathBuf, nav: PathBuf) -> Result<hil::free::FreeOptions> {
+    /// The run's options for scenario `s`, on `iface` into `out`, our nav being `nav`.
+    fn options(
+        &self,
+        s: &Scenario,
+        iface: &str,
+        out: PathBuf,
+        nav: PathBuf,
+    ) -> Result<hil::free::FreeOptions> {
         let mut o = hil::free::FreeOptions {
             iface: iface.into(),
             out,
@@ -772,7 +780,10 @@ impl FreeArgs {
             },
             real_turntable: false,
             real_gps: None,
-            latency_budget_ms: self.latency_budget_ms,
+            latency_budget_ms: self
+                .latency_budget_ms
+                .or(s.bus.latency_budget_ms)
+                .unwrap_or(50.0),
             answer_within_s: self.answer_within,
             max_late_ms: self.max_late_ms,
             progress: true,
@@ -787,10 +798,8 @@ impl FreeArgs {
                 _ => bail!("--real {r}: turntable=IFACE or gps=PORT"),
             }
         }
-        if !(0.0..=10_000.0).contains(&self.latency_budget_ms)
-            || !(0.0..=10_000.0).contains(&self.max_late_ms)
-        {
-            bail!("--latency-budget-ms and --max-late-ms: between 0 and 10000");
+        if !(0.0..=10_000.0).contains(&self.max_late_ms) {
+            bail!("--max-late-ms {}: between 0 and 10000", self.max_late_ms);
         }
         Ok(o)
     }

@@ -89,6 +89,9 @@ pub const MAX_SPEED: f64 = 100_000.0;
 /// Latitude, deg: -90 to 90.
 pub const LATITUDE: Kind = Kind::within("a latitude", "deg", -90.0, 90.0);
 /// Longitude, deg: -180 to 360 (east of Greenwich either way of writing it).
+/// A latency budget, ms: 0 to 10 s.
+pub const LATENCY_BUDGET: Kind = Kind::within("a latency budget", "ms", 0.0, 10_000.0);
+/// Longitude, deg.
 pub const LONGITUDE: Kind = Kind::within("a longitude", "deg", -180.0, 360.0);
 /// Height above the ellipsoid, m: from below the Dead Sea's shore to above any road.
 pub const HEIGHT: Kind = Kind::within("a height", "m", -1000.0, 10_000.0);
@@ -127,6 +130,11 @@ pub const OFFSET: Kind = Kind::within("an offset on the vehicle", "m", -100.0, 1
 /// Latitude, deg: -90 to 90.
 pub fn latitude_deg(s: &str) -> Result<f64, String> {
     LATITUDE.parse(s)
+}
+
+/// A latency budget, ms: 0 to 10,000.
+pub fn latency_budget_ms(s: &str) -> Result<f64, String> {
+    LATENCY_BUDGET.parse(s)
 }
 
 /// Longitude, deg: -180 to 360.

@@ -24,7 +24,7 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
             Some(n) => n.clone(),
             None => sibling_binary("nav")?,
         };
-        let r = hil::free::run_free(&s, &a.free.options(&a.bus.iface, out.clone(), nav_bin)?)?;
+        let r = hil::free::run_free(&s, &a.free.options(&s, &a.bus.iface, out.clone(), nav_bin)?)?;
         if a.bus.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
         } else {

@@ -136,6 +136,11 @@ pub struct BusSettings {
     /// off by default.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub log: bool,
+    /// In a free-running run, the device under test's latency budget, ms: the 99th percentile
+    /// of IMU sample on the bus to the NAV_TIME naming it (`--latency-budget-ms` wins; 50 when
+    /// neither says).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latency_budget_ms: Option<f64>,
 }
 
 /// How the bus's timing is modelled.
@@ -173,6 +178,7 @@ impl Default for BusSettings {
             bitrate_bps: default_bitrate(),
             timing: TimingModel::default(),
             tx_queue_frames: default_tx_queue(),
+            latency_budget_ms: None,
             faults: Default::default(),
             log: false,
         }
@@ -448,6 +454,9 @@ impl Scenario {
         };
         DURATION.field("duration_s", self.duration_s)?;
         crate::values::CLASSIC_BITRATE.field("bus.bitrate_bps", self.bus.bitrate_bps)?;
+        if let Some(b) = self.bus.latency_budget_ms {
+            crate::values::LATENCY_BUDGET.field("bus.latency_budget_ms", b)?;
+        }
         TOLERANCE.field("heading_tolerance_deg", self.heading_tolerance_deg)?;
         SIGMA.field("position_tolerance_m", self.position_tolerance_m)?;
         let site = &self.site;
@@ -671,6 +680,22 @@ mod tests {
         let mut s: Scenario = toml::from_str(&ok).unwrap();
         s.bus.timing = TimingModel::Ideal;
         assert!(format!("{:#}", s.check().unwrap_err()).contains("ideal"));
+    }
+
+    /// A free-running run's latency budget is the scenario's `[bus] latency_budget_ms`: read,
+    /// range-checked, and left out of a scenario that does not set it.
+    #[test]
+    fn the_latency_budget_is_read_and_checked() {
+        let b = Scenario::builtin_static();
+        let text = toml::to_string(&b).unwrap();
+        assert!(!text.contains("latency_budget_ms"), "{text}");
+        let with = text.replace("[bus]\n", "[bus]\nlatency_budget_ms = 20.0\n");
+        let s: Scenario = toml::from_str(&with).unwrap();
+        s.check().unwrap();
+        assert_eq!(s.bus.latency_budget_ms, Some(20.0));
+        let s: Scenario = toml::from_str(&with.replace("= 20.0", "= 1e9")).unwrap();
+        let e = format!("{:#}", s.check().unwrap_err());
+        assert!(e.contains("bus.latency_budget_ms"), "{e}");
     }
 
     #[test]
