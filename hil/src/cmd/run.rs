@@ -20,22 +20,7 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
     })?;
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
     if a.free.free && a.bus.here() {
-        let nav_bin = match &a.nav {
-            Some(n) => n.clone(),
-            None => sibling_binary("nav")?,
-        };
-        let r = hil::free::run_free(&s, &a.free.options(&s, &a.bus.iface, out.clone(), nav_bin)?)?;
-        if a.bus.json {
-            println!("{}", serde_json::to_string_pretty(&r)?);
-        } else {
-            print!("{}", hil::free::card(&r));
-            println!(" report: {}", out.join("report.json").display());
-        }
-        return Ok(match (&r.bench_behind, r.pass) {
-            (Some(_), _) => 3,
-            (None, true) => 0,
-            (None, false) => 1,
-        });
+        return run_free_here(&s, &a, &out);
     }
     if a.bus.here() {
         let nav_bin = match &a.nav {
@@ -111,6 +96,31 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
         vec![nav],
         a.bus.json.then_some("report.json"),
     )
+}
+
+/// A free-running run here, where vcan is: the card or the JSON, and the exit status (3: the
+/// bench could not keep real time, no verdict).
+fn run_free_here(s: &Scenario, a: &RunArgs, out: &Path) -> Result<i32> {
+    let nav_bin = match &a.nav {
+        Some(n) => n.clone(),
+        None => sibling_binary("nav")?,
+    };
+    let r = hil::free::run_free(
+        s,
+        &a.free
+            .options(s, &a.bus.iface, out.to_path_buf(), nav_bin)?,
+    )?;
+    if a.bus.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        print!("{}", hil::free::card(&r));
+        println!(" report: {}", out.join("report.json").display());
+    }
+    Ok(match (&r.bench_behind, r.pass) {
+        (Some(_), _) => 3,
+        (None, true) => 0,
+        (None, false) => 1,
+    })
 }
 
 /// An operator procedure's run folder (`out`, or `runs/<name>-<time>`), with the scenario
