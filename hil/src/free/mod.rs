@@ -163,7 +163,6 @@ pub(crate) fn is_drill(s: &Scenario) -> bool {
 /// The devices the bench runs, each in its thread.
 struct Bench {
     threads: Vec<(&'static str, JoinHandle<Result<FreeStats>>)>,
-    stop: Arc<AtomicBool>,
     progress: Arc<Progress>,
     tracks: Vec<SharedTrack>,
     sent: Arc<SentSamples>,
@@ -415,7 +414,6 @@ fn start_bench(
     }
     Ok(Bench {
         threads,
-        stop,
         progress,
         tracks,
         sent,
@@ -485,7 +483,6 @@ fn supervise(
                 s.duration_s
             ));
         }
-        let _ = &bench.stop;
     }
 }
 
