@@ -2,7 +2,8 @@
 # The end-to-end stage of ./run-tests, where vcan is (in the QEMU guest, or natively): first
 # the pace the bench reaches here (10 s of the GPS-aided drive through vcan, as fast as lockstep
 # with nav lets it go), printed so that a slow host shows at the start of the log; then the
-# end-to-end tests. Usage: guest-e2e.sh HIL_BINARY E2E_BINARY [test arguments...]
+# end-to-end tests, each in a process of its own, several at a time (tests/src/bin/suite.rs).
+# Usage: guest-e2e.sh HIL_BINARY [suite run arguments...]
 hil="$1"
 shift
 here=$(cd "$(dirname "$0")" && pwd)
@@ -17,4 +18,4 @@ else
   echo "== the bench's pace here: not measured (the probe run failed: $(tail -n 3 "$out/log" | tr '\n' ' '))"
 fi
 rm -rf "$out"
-exec "$@"
+exec "$(dirname "$hil")/suite" run "$@"

@@ -19,6 +19,7 @@ pub mod check;
 pub mod engine;
 pub mod experiments;
 pub mod free;
+pub mod junit;
 pub mod live;
 pub mod par;
 pub mod procedures;

@@ -17,7 +17,9 @@ use cmd::drill::drill_north_finding;
 use cmd::experiment::experiment;
 use cmd::faults::faults;
 use cmd::fuzz::fuzz;
-use cmd::guest::{absolute, default_out, rerun_in_guest, run_in_guest};
+use cmd::guest::{
+    absolute, default_out, junit_back, junit_through_guest, rerun_in_guest, run_in_guest,
+};
 use cmd::replay::{candump, replay, replay_bus, replay_live};
 use cmd::run::run;
 use cmd::validate::validate_turntable;
@@ -191,6 +193,10 @@ struct FaultsArgs {
     /// List the faults and exit.
     #[arg(long)]
     list: bool,
+    /// Also write the result as JUnit XML to FILE, for a CI server (GitLab, Jenkins, GitHub):
+    /// a test case per fault, failing with what was expected and observed.
+    #[arg(long, value_name = "FILE")]
+    junit: Option<PathBuf>,
     #[command(flatten)]
     bus: BusArgs,
 }
@@ -358,6 +364,10 @@ struct ValidateArgs {
     /// the pace only sets how fast an operator sees it (with --real, the mechanism's own time).
     #[arg(long, value_parser = hil::values::speed, default_value_t = 1.0)]
     speed: f64,
+    /// Also write the result as JUnit XML to FILE, for a CI server (GitLab, Jenkins, GitHub):
+    /// a test case per check, failing with the measured value, the limit and why.
+    #[arg(long, value_name = "FILE")]
+    junit: Option<PathBuf>,
     #[command(flatten)]
     bus: BusArgs,
 }
@@ -693,6 +703,10 @@ struct RunArgs {
     /// vehicle shares one receiver; needs gpsd (./run-tests installs it).
     #[arg(long)]
     gpsd: bool,
+    /// Also write the result as JUnit XML to FILE, for a CI server (GitLab, Jenkins, GitHub):
+    /// a test case per check of the result card, failing with its detail.
+    #[arg(long, value_name = "FILE")]
+    junit: Option<PathBuf>,
     #[command(flatten)]
     live: LiveArgs,
     #[command(flatten)]

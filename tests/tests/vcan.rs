@@ -193,8 +193,17 @@ fn static_30s_at_x10_every_frame_arrives_and_the_recording_reads_back() {
 #[ignore = "needs vcan: run ./run-tests"]
 fn the_fault_matrix_passes_every_row() {
     let dir = tempfile::tempdir().unwrap();
+    let junit = dir.path().join("junit").join("faults.xml");
     let (m, code) = hil_json(
-        &["faults", "--iface", "vcan-e2e1", "--json", "--out"],
+        &[
+            "faults",
+            "--iface",
+            "vcan-e2e1",
+            "--junit",
+            junit.to_str().unwrap(),
+            "--json",
+            "--out",
+        ],
         &[dir.path()],
     );
     let rows = m["rows"].as_array().expect("rows");
@@ -209,6 +218,12 @@ fn the_fault_matrix_passes_every_row() {
     let md = std::fs::read_to_string(dir.path().join("faults.md")).unwrap();
     assert!(md.contains("| imu-counter-jump |") && md.contains("| turntable-heartbeat-loss |"));
     assert!(dir.path().join("faults.json").is_file());
+    // every row a test case of its own for a CI server, in the report of ./run-tests too
+    let xml = std::fs::read_to_string(&junit).expect("hil faults --junit wrote its file");
+    let f = hil::junit::foreign(&xml, "faults.xml").unwrap();
+    assert_eq!((f.tests, f.failures), (rows.len(), 0), "{xml}");
+    assert_eq!(xml.matches("<testcase ").count(), rows.len(), "{xml}");
+    e2e::junit_for_ci(&junit);
     keep_report(dir.path(), "fault-matrix");
     // the bus model's log of the error-frame row, on the simulated clock (read back as Vector
     // ASC and BLF on the host: tests/tests/can_logs.rs)
@@ -694,6 +709,8 @@ fn turntable_validation_catches_every_injected_fault() {
             "vcan-e2e4",
             "--json",
         ])
+        .arg("--junit")
+        .arg(dir.path().join("junit.xml"))
         .arg("--out")
         .arg(dir.path());
         if let Some(f) = fault {
@@ -703,6 +720,17 @@ fn turntable_validation_catches_every_injected_fault() {
         let v: Value = serde_json::from_slice(&o.stdout)
             .unwrap_or_else(|e| panic!("no JSON ({e}): {}", String::from_utf8_lossy(&o.stderr)));
         assert!(dir.path().join("validation.json").is_file());
+        // for a CI server: a case per check, a failed check a failed case with its figures
+        let xml = std::fs::read_to_string(dir.path().join("junit.xml")).expect("--junit file");
+        let j = hil::junit::foreign(&xml, "junit.xml").unwrap();
+        let checks = v["checks"].as_array().unwrap();
+        let failing = checks.iter().filter(|c| c["pass"] == false).count();
+        assert_eq!((j.tests, j.failures), (checks.len(), failing), "{xml}");
+        assert_eq!(
+            xml.matches("<failure message=\"measured ").count(),
+            failing,
+            "{xml}"
+        );
         if fault.is_none() && speed == "5" {
             // the healthy run's report goes to the browser test
             keep_report(dir.path(), "turntable-validation");
@@ -767,7 +795,7 @@ fn turntable_validation_catches_every_injected_fault() {
 #[ignore = "needs vcan: run ./run-tests"]
 fn a_raw_socket_receives_again_after_the_interface_goes_down_and_up() {
     use socketcan::{CanFrame, CanSocket, EmbeddedFrame, Socket, StandardId};
-    let iface = "vcan-e2e9";
+    let iface = "vcan-e2e11";
     vcan_setup::ensure_vcan(iface).unwrap();
     let rx = CanSocket::open(iface).unwrap();
     rx.set_read_timeout(std::time::Duration::from_millis(300))
@@ -889,7 +917,7 @@ fn nav_sends(id: u16) -> bool {
 fn can_utils_watch_the_bus_and_play_our_logs() {
     use std::io::BufRead;
     use std::process::Stdio;
-    let (iface, other) = ("vcan-e2e5", "vcan-e2e6");
+    let (iface, other) = ("vcan-e2e5", "vcan-e2e14");
     vcan_setup::ensure_vcan(iface).unwrap();
     vcan_setup::ensure_vcan(other).unwrap();
     let dir = tempfile::tempdir().unwrap();
@@ -1087,7 +1115,7 @@ const CALIBRATE_ARGS: [&str; 9] = [
 fn the_rotating_imu_calibrates_itself_through_vcan() {
     let dir = tempfile::tempdir().unwrap();
     let mut args: Vec<&str> = CALIBRATE_ARGS.to_vec();
-    args.extend(["--speed", "20", "--iface", "vcan-e2e7", "--out"]);
+    args.extend(["--speed", "20", "--iface", "vcan-e2e10", "--out"]);
     let (r, code) = hil_json(&args, &[dir.path()]);
     for (name, pass, detail) in checks(&r) {
         eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
@@ -1117,7 +1145,7 @@ fn the_rotating_imu_calibrates_itself_through_vcan() {
     std::fs::write(
         &cfg,
         format!(
-            "[can]\ninterface = \"vcan-e2e7\"\n[calibration]\nimu = \"{unit}\"\nparameters = \"gyro-parameters.toml\"\n"
+            "[can]\ninterface = \"vcan-e2e10\"\n[calibration]\nimu = \"{unit}\"\nparameters = \"gyro-parameters.toml\"\n"
         ),
     )
     .unwrap();
@@ -1144,7 +1172,7 @@ fn the_rotating_imu_calibrates_itself_through_vcan() {
     let mut args: Vec<&str> = CALIBRATE_ARGS.to_vec();
     let file = file.to_str().unwrap().to_string();
     args.extend(["--parameters", &file]);
-    args.extend(["--speed", "20", "--iface", "vcan-e2e7", "--out"]);
+    args.extend(["--speed", "20", "--iface", "vcan-e2e10", "--out"]);
     let (r2, code) = hil_json(&args, &[again.path()]);
     for (name, pass, detail) in checks(&r2) {
         eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
@@ -1208,7 +1236,7 @@ fn the_redundant_unit_calibrates_and_each_failed_gyro_is_isolated_through_vcan()
         let dir = tempfile::tempdir().unwrap();
         let out = if from_file { dir.path() } else { first.path() };
         let mut args: Vec<&str> = TETRA_ARGS.to_vec();
-        args.extend([fail, "--speed", "20", "--iface", "vcan-e2e8"]);
+        args.extend([fail, "--speed", "20", "--iface", "vcan-e2e13"]);
         if from_file {
             args.extend(["--parameters", &file]);
         }
@@ -1263,7 +1291,7 @@ fn the_redundant_unit_calibrates_and_each_failed_gyro_is_isolated_through_vcan()
 fn canbusload_measures_the_bus_models_load() {
     use std::io::Read;
     use std::process::Stdio;
-    let iface = "vcan-e2e4";
+    let iface = "vcan-e2e12";
     vcan_setup::ensure_vcan(iface).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let base =
@@ -1326,7 +1354,7 @@ fn canbusload_measures_the_bus_models_load() {
         .read_to_string(&mut text)
         .unwrap();
     load.wait().unwrap();
-    // " vcan-e2e4@1000000  4102  456000  256000  45%"
+    // " vcan-e2e12@1000000  4102  456000  256000  45%"
     let lines: Vec<(u64, u64, u64)> = text
         .lines()
         .filter_map(|l| {

@@ -31,7 +31,10 @@ pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
         if !a.only.is_empty() {
             args.extend(["--only".into(), a.only.join(",")]);
         }
-        return rerun_in_guest(args, a.bus.json, &out, vec![], "faults.json");
+        let junit = junit_through_guest(&mut args, &out, a.junit.as_deref())?;
+        let code = rerun_in_guest(args, a.bus.json, &out, vec![], "faults.json")?;
+        junit_back(junit)?;
+        return Ok(code);
     }
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
     let o = FaultOptions {
@@ -43,6 +46,9 @@ pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
         progress: !a.bus.json,
     };
     let m = run_matrix(&o, if in_guest { "vm" } else { "native" })?;
+    if let Some(j) = &a.junit {
+        hil::junit::write(j, "hil faults", &[hil::suites::faults::junit(&m)])?;
+    }
     if a.bus.json {
         println!("{}", serde_json::to_string_pretty(&m)?);
     } else {

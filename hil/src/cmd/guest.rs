@@ -89,6 +89,40 @@ pub(crate) fn run_in_guest(
     Ok(o.status)
 }
 
+/// `--junit FILE` of a command re-run in the guest: the guest writes `junit.xml` into the
+/// shared output folder, and [`junit_back`] copies it to FILE once the guest is done.
+pub(crate) fn junit_through_guest(
+    args: &mut Vec<String>,
+    out: &Path,
+    junit: Option<&Path>,
+) -> Result<Option<(PathBuf, PathBuf)>> {
+    let Some(to) = junit else { return Ok(None) };
+    let from = out.join("junit.xml");
+    args.extend(["--junit".into(), from.to_string_lossy().into_owned()]);
+    Ok(Some((from, absolute(to)?)))
+}
+
+/// Copy the guest's JUnit XML to where `--junit` asked (see [`junit_through_guest`]).
+pub(crate) fn junit_back(pair: Option<(PathBuf, PathBuf)>) -> Result<()> {
+    let Some((from, to)) = pair else {
+        return Ok(());
+    };
+    if from == to {
+        return Ok(());
+    }
+    if let Some(d) = to.parent() {
+        std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
+    }
+    std::fs::copy(&from, &to).with_context(|| {
+        format!(
+            "the run in the guest wrote no JUnit XML ({}) to copy to {}",
+            from.display(),
+            to.display()
+        )
+    })?;
+    Ok(())
+}
+
 /// Drop shares that lie inside another share.
 pub(crate) fn dedupe_nested(mut shares: Vec<PathBuf>) -> Vec<PathBuf> {
     shares.retain(|p| !p.as_os_str().is_empty());

@@ -42,6 +42,17 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
             finish_view(v);
         }
         let r = r?;
+        if let Some(j) = &a.junit {
+            let suite = hil::junit::of_checks(
+                &format!("hil run {}", s.name),
+                &format!("hil run {}", s.name),
+                r.wall_seconds,
+                r.checks
+                    .iter()
+                    .map(|c| (c.name.as_str(), c.pass, c.detail.as_str())),
+            );
+            hil::junit::write(j, "hil run", &[suite])?;
+        }
         if a.bus.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
         } else {
@@ -89,13 +100,16 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
     }
     args.extend(a.live.to_args());
     args.extend(a.free.to_args());
-    run_in_guest(
+    let junit = junit_through_guest(&mut args, &out, a.junit.as_deref())?;
+    let code = run_in_guest(
         args,
         &out,
         extra,
         vec![nav],
         a.bus.json.then_some("report.json"),
-    )
+    )?;
+    junit_back(junit)?;
+    Ok(code)
 }
 
 /// A free-running run here, where vcan is: the card or the JSON, and the exit status (3: the
@@ -110,6 +124,21 @@ fn run_free_here(s: &Scenario, a: &RunArgs, out: &Path) -> Result<i32> {
         &a.free
             .options(s, &a.bus.iface, out.to_path_buf(), nav_bin)?,
     )?;
+    if let Some(j) = &a.junit {
+        let name = format!("hil run --free {}", s.name);
+        hil::junit::write(
+            j,
+            "hil run",
+            &[hil::junit::of_checks(
+                &name,
+                &name,
+                r.wall_s,
+                r.checks
+                    .iter()
+                    .map(|c| (c.name.as_str(), c.pass, c.detail.as_str())),
+            )],
+        )?;
+    }
     if a.bus.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
@@ -154,6 +183,7 @@ pub(crate) fn run_procedure(
         nav: None,
         no_reference: false,
         gpsd: false,
+        junit: None,
         live,
         bus: BusArgs {
             out: Some(out),

@@ -39,13 +39,16 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
         if a.bus.json {
             args.push("--json".into());
         }
-        return run_in_guest(
+        let junit = junit_through_guest(&mut args, &out, a.junit.as_deref())?;
+        let code = run_in_guest(
             args,
             &out,
             vec![],
             vec![],
             a.bus.json.then_some("validation.json"),
-        );
+        )?;
+        junit_back(junit)?;
+        return Ok(code);
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let emulator = if a.real {
@@ -81,11 +84,16 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
         },
         None => SuiteTime::Wall { speed: 1.0 },
     };
+    let started = std::time::Instant::now();
     let result = hil::suites::validate::run_suite(&a.bus.iface, a.axis, time, &Default::default());
     if let Some((tt, _)) = emulator {
         tt.join()?;
     }
     let v = result?;
+    if let Some(j) = &a.junit {
+        let suite = hil::suites::validate::junit(&v, started.elapsed().as_secs_f64());
+        hil::junit::write(j, "hil validate turntable", &[suite])?;
+    }
     std::fs::write(
         out.join("validation.json"),
         serde_json::to_string_pretty(&v)?,

@@ -767,6 +767,34 @@ fn acknowledged_check(c: &Client, out: &mut Vec<VCheck>) {
     );
 }
 
+/// The validation as a JUnit suite (`hil validate turntable --junit`): a case per check,
+/// failing with what was measured against its limit and why.
+pub fn junit(v: &Validation, time_s: f64) -> crate::junit::Suite {
+    let classname = format!("hil validate turntable (axis {})", v.axis);
+    let cases = v
+        .checks
+        .iter()
+        .map(|c| {
+            crate::junit::Case::judged(
+                &classname,
+                &c.name,
+                0.0,
+                c.pass,
+                format!("measured {}; limit {}", c.measured, c.limit),
+                format!(
+                    "measured: {}\nlimit: {}\nwhy: {}",
+                    c.measured, c.limit, c.reason
+                ),
+            )
+        })
+        .collect();
+    crate::junit::Suite::new(
+        &format!("turntable validation on {}", v.interface),
+        time_s,
+        cases,
+    )
+}
+
 /// The table printed at the end.
 pub fn table(v: &Validation) -> String {
     use std::fmt::Write;

@@ -406,6 +406,38 @@ pub fn markdown(m: &FaultMatrix) -> String {
     )
 }
 
+/// The matrix as a JUnit suite (`hil faults --junit`): a case per row with its run's wall
+/// time, failing with what was expected and what was observed.
+pub fn junit(m: &FaultMatrix) -> crate::junit::Suite {
+    let cases = m
+        .rows
+        .iter()
+        .map(|r| {
+            let latency = r
+                .verdict
+                .latency_s
+                .map_or("--".into(), |l| format!("{l:.3} s"));
+            crate::junit::Case::judged(
+                "hil faults",
+                &r.fault,
+                r.wall_seconds,
+                r.verdict.pass,
+                format!("expected: {}; observed: {}", r.expected, r.verdict.observed),
+                format!(
+                    "injected: {}\nexpected: {}\nobserved: {}\ndetection latency: {latency}\nnav's exit status: {}\nrun folder: {}",
+                    r.injected,
+                    r.expected,
+                    r.verdict.observed,
+                    crate::check::exit_words(r.nav_exit),
+                    r.run_dir
+                ),
+            )
+        })
+        .collect();
+    let time = m.rows.iter().map(|r| r.wall_seconds).sum();
+    crate::junit::Suite::new(&format!("fault matrix ({})", m.backend), time, cases)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
