@@ -193,6 +193,11 @@ struct FaultsArgs {
     /// List the faults and exit.
     #[arg(long)]
     list: bool,
+    /// Faults run side by side, each on an interface of its own (--iface, then IFACE-1,
+    /// IFACE-2, ...). Each run is in lockstep with its nav: the results are the same at any
+    /// number.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..=16))]
+    jobs: u16,
     /// Also write the result as JUnit XML to FILE, for a CI server (GitLab, Jenkins, GitHub):
     /// a test case per fault, failing with what was expected and observed.
     #[arg(long, value_name = "FILE")]

@@ -103,3 +103,37 @@ pub fn junit_for_ci(file: &Path) {
             .unwrap_or_else(|e| panic!("copying {} to {}: {e}", file.display(), to.display()));
     }
 }
+
+/// Run `hil` with `args` and then `paths` (its log shown); its JSON on stdout (which it must
+/// print) and its exit status.
+pub fn hil_json(args: &[&str], paths: &[&std::path::Path]) -> (serde_json::Value, i32) {
+    let o = std::process::Command::new(bin("hil"))
+        .args(args)
+        .args(paths)
+        .output()
+        .expect("hil runs");
+    eprintln!("{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!(
+            "hil {args:?} printed no JSON ({e}); stdout: {}",
+            String::from_utf8_lossy(&o.stdout)
+        )
+    });
+    (v, o.status.code().unwrap_or(-1))
+}
+
+/// A report's checks: (name, passed, detail).
+pub fn checks(r: &serde_json::Value) -> Vec<(String, bool, String)> {
+    r["checks"]
+        .as_array()
+        .expect("checks")
+        .iter()
+        .map(|c| {
+            (
+                c["name"].as_str().unwrap_or("").to_string(),
+                c["pass"].as_bool().unwrap_or(false),
+                c["detail"].as_str().unwrap_or("").to_string(),
+            )
+        })
+        .collect()
+}

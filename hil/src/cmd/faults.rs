@@ -25,6 +25,8 @@ pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
             a.speed.to_string(),
             "--iface".into(),
             a.bus.iface.clone(),
+            "--jobs".into(),
+            a.jobs.to_string(),
             "--out".into(),
             out.to_string_lossy().into_owned(),
         ];
@@ -44,6 +46,7 @@ pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
         only: a.only.clone(),
         speed: a.speed,
         progress: !a.bus.json,
+        jobs: usize::from(a.jobs),
     };
     let m = run_matrix(&o, if in_guest { "vm" } else { "native" })?;
     if let Some(j) = &a.junit {

@@ -169,6 +169,9 @@ fn reachable_by_others(dir: &Path) -> bool {
 
 static NAV_FOLDERS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
+/// Receiver links made by this process so far (each run's link has a name of its own).
+static GPS_LINKS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
 impl RunOptions {
     /// A run of `nav_bin` on `iface` writing to `out`: quiet, no reference checks, no bench
     /// actions.
@@ -402,7 +405,12 @@ fn prepare(s: &Scenario, opts: &RunOptions) -> Result<Setup> {
     let gps = match &s.gps {
         Some(_) => {
             let pty = GpsPty::open().context("GPS emulator")?;
-            let link = std::env::temp_dir().join(format!("hil-gps-{}", std::process::id()));
+            // one per run: runs of one process side by side (`hil faults --jobs`) each have one
+            let link = std::env::temp_dir().join(format!(
+                "hil-gps-{}-{}",
+                std::process::id(),
+                GPS_LINKS.fetch_add(1, Ordering::Relaxed)
+            ));
             relink(&link, pty.path()).context("GPS emulator")?;
             Some((pty, link))
         }

@@ -78,6 +78,10 @@ struct RunArgs {
     /// results file, when it is there).
     #[arg(long)]
     history: Option<PathBuf>,
+    /// Tests known to be slow, one name per line (`#` comments): started first, in that order,
+    /// when no previous run says how long they took (a fresh clone).
+    #[arg(long)]
+    slow_first: Option<PathBuf>,
     /// Folder for each test's output (default: beside the results, `<name>-logs`).
     #[arg(long)]
     logs: Option<PathBuf>,
@@ -280,6 +284,16 @@ fn run(a: &RunArgs) -> Result<i32> {
             .into_iter()
             .map(|r| ((r.binary, r.name), r.time_s))
             .collect();
+    let slow: Vec<String> = match &a.slow_first {
+        Some(p) => std::fs::read_to_string(p)
+            .with_context(|| format!("reading {}", p.display()))?
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty() && !l.starts_with('#'))
+            .map(str::to_string)
+            .collect(),
+        None => Vec::new(),
+    };
     let mut queue = Vec::new();
     for b in &bins {
         let ignored_ones = list(b, true)?;
@@ -292,14 +306,16 @@ fn run(a: &RunArgs) -> Result<i32> {
                 .collect()
         };
         for t in tests {
+            // the last run's time; else the list's rank; else first of all but the listed
             let prior = before
                 .get(&(b.name.clone(), t.clone()))
                 .copied()
-                .unwrap_or(f64::INFINITY);
+                .or_else(|| slow.iter().position(|n| n == &t).map(|k| 2e9 - k as f64))
+                .unwrap_or(1e9);
             queue.push((prior, b.clone(), t));
         }
     }
-    // slowest first (unknown ones first of all), else in the binaries' order
+    // slowest first, else in the binaries' order
     queue.sort_by(|x, y| y.0.total_cmp(&x.0));
     let jobs = a.jobs.unwrap_or_else(|| {
         std::thread::available_parallelism().map_or(2, std::num::NonZeroUsize::get)

@@ -286,6 +286,47 @@ pub struct FaultOptions {
     pub speed: f64,
     /// Print a line per case.
     pub progress: bool,
+    /// Cases run side by side, each on an interface of its own (`iface`, then `iface-1`,
+    /// `iface-2`, ...). Every case is in lockstep with its nav, so its result does not depend
+    /// on what runs beside it.
+    pub jobs: usize,
+}
+
+/// One case of the matrix on `iface`: its row (a failed row when the run could not be made).
+fn run_case(c: &FaultCase, o: &FaultOptions, iface: &str, backend: &str) -> FaultRow {
+    let dir = o.out.join(c.name);
+    let t0 = std::time::Instant::now();
+    let row = |verdict: Verdict, nav_exit: Option<i32>, wall_seconds: f64| FaultRow {
+        fault: c.name.into(),
+        base: c.base,
+        injected: c.injected.into(),
+        expected: c.expected.into(),
+        verdict,
+        nav_exit,
+        wall_seconds,
+        run_dir: dir.display().to_string(),
+    };
+    let run = || -> Result<RunReport> {
+        let mut s = base_scenario(c.base, c.name)?;
+        s.speed = o.speed;
+        let mut opts = RunOptions {
+            // the matrix's own table (faults.md) is the report of its runs
+            html: false,
+            ..RunOptions::new(iface, dir.clone(), o.nav_bin.clone())
+        };
+        (c.inject)(&mut s, &mut opts);
+        s.check()
+            .with_context(|| format!("the scenario of fault {}", c.name))?;
+        run_here(&s, &opts, backend)
+    };
+    match run() {
+        Ok(r) => row((c.judge)(&r, c.at_s), r.nav_exit, r.wall_seconds),
+        Err(e) => row(
+            verdict(false, format!("the run failed: {e:#}"), None),
+            None,
+            t0.elapsed().as_secs_f64(),
+        ),
+    }
 }
 
 /// Run the matrix here (the kernel must have CAN).
@@ -305,58 +346,62 @@ pub fn run_matrix(o: &FaultOptions, backend: &str) -> Result<FaultMatrix> {
         );
     }
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
-    let mut rows = Vec::new();
-    for (i, c) in cases.iter().enumerate() {
-        let mut s = base_scenario(c.base, c.name)?;
-        s.speed = o.speed;
-        let dir = o.out.join(c.name);
-        let mut opts = RunOptions {
-            // the matrix's own table (faults.md) is the report of its runs
-            html: false,
-            ..RunOptions::new(&o.iface, dir.clone(), o.nav_bin.clone())
-        };
-        (c.inject)(&mut s, &mut opts);
-        s.check()
-            .with_context(|| format!("the scenario of fault {}", c.name))?;
-        let t0 = std::time::Instant::now();
-        let row = match run_here(&s, &opts, backend) {
-            Ok(r) => {
-                let v = (c.judge)(&r, c.at_s);
-                FaultRow {
+    let jobs = o.jobs.clamp(1, cases.len());
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let slots: Vec<std::sync::Mutex<Option<FaultRow>>> =
+        cases.iter().map(|_| std::sync::Mutex::new(None)).collect();
+    std::thread::scope(|scope| {
+        for job in 0..jobs {
+            let iface = if job == 0 {
+                o.iface.clone()
+            } else {
+                format!("{}-{job}", o.iface)
+            };
+            let (cases, next, done, slots) = (&cases, &next, &done, &slots);
+            scope.spawn(move || {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some(c) = cases.get(i) else { break };
+                    let t0 = std::time::Instant::now();
+                    let row = run_case(c, o, &iface, backend);
+                    if o.progress {
+                        let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                        eprintln!(
+                            "hil faults: {n}/{} {} {} ({:.1} s): {}",
+                            cases.len(),
+                            if row.verdict.pass { "PASS" } else { "FAIL" },
+                            row.fault,
+                            t0.elapsed().as_secs_f64(),
+                            row.verdict.observed
+                        );
+                    }
+                    if let Ok(mut slot) = slots[i].lock() {
+                        *slot = Some(row);
+                    }
+                }
+            });
+        }
+    });
+    let rows: Vec<FaultRow> = slots
+        .into_iter()
+        .zip(&cases)
+        .map(|(slot, c)| {
+            slot.into_inner()
+                .ok()
+                .flatten()
+                .unwrap_or_else(|| FaultRow {
                     fault: c.name.into(),
                     base: c.base,
                     injected: c.injected.into(),
                     expected: c.expected.into(),
-                    verdict: v,
-                    nav_exit: r.nav_exit,
-                    wall_seconds: r.wall_seconds,
-                    run_dir: dir.display().to_string(),
-                }
-            }
-            Err(e) => FaultRow {
-                fault: c.name.into(),
-                base: c.base,
-                injected: c.injected.into(),
-                expected: c.expected.into(),
-                verdict: verdict(false, format!("the run failed: {e:#}"), None),
-                nav_exit: None,
-                wall_seconds: t0.elapsed().as_secs_f64(),
-                run_dir: dir.display().to_string(),
-            },
-        };
-        if o.progress {
-            eprintln!(
-                "hil faults: {}/{} {} {} ({:.1} s): {}",
-                i + 1,
-                cases.len(),
-                if row.verdict.pass { "PASS" } else { "FAIL" },
-                row.fault,
-                t0.elapsed().as_secs_f64(),
-                row.verdict.observed
-            );
-        }
-        rows.push(row);
-    }
+                    verdict: verdict(false, "the case's worker stopped before it".into(), None),
+                    nav_exit: None,
+                    wall_seconds: 0.0,
+                    run_dir: o.out.join(c.name).display().to_string(),
+                })
+        })
+        .collect();
     let m = FaultMatrix {
         backend: backend.into(),
         pass: rows.iter().all(|r| r.verdict.pass),
