@@ -2,10 +2,12 @@
 # The end-to-end stage of ./run-tests, where vcan is (in the QEMU guest, or natively):
 #  1. the pace the bench reaches here (10 s of the GPS-aided drive through vcan, as fast as
 #     lockstep with nav lets it go), printed so that a slow host shows at the start of the log;
-#  2. the lockstep tests (tests/tests/vcan.rs), several at a time: their results depend on
-#     their scenarios only, however loaded the machine (the host runs its own stages meanwhile);
-#  3. once the host says it is done (HOST_DONE appears, or after 30 minutes), the free-running
-#     tests (tests/tests/free.rs), whose verdicts need a machine that keeps real time.
+#  2. the lockstep tests (tests/tests/vcan.rs), several at a time and at the lowest CPU priority
+#     (nice 19): their results depend on their scenarios only, however loaded the machine, so
+#     they take whatever CPU the rest leaves (the host runs its own stages meanwhile);
+#  3. once the host says it is done (HOST_DONE appears, or after 30 minutes), beside the
+#     lockstep tests still running, the free-running tests (tests/tests/free.rs) at normal
+#     priority: their verdicts need a machine that keeps real time.
 # Each test runs in a process of its own (tests/src/bin/suite.rs); the results go to SUITE_DIR.
 # Usage: guest-e2e.sh HIL SUITE_DIR LOCKSTEP_BINARY FREE_BINARY LOCKSTEP_JOBS FREE_JOBS
 hil="$1" dir="$2" lockstep="$3" free="$4" jobs="$5" free_jobs="$6"
@@ -22,19 +24,20 @@ else
   echo "== the bench's pace here: not measured (the probe run failed: $(tail -n 3 "$out/log" | tr '\n' ' '))"
 fi
 rm -rf "$out"
-rc=0
 "$suite" run --binaries "e2e::vcan=$lockstep@$here" --name "end-to-end on vcan (lockstep)" \
-  --ignored --jobs "$jobs" --results "$dir/e2e.json" --history "$dir/previous/e2e.json" \
-  --slow-first "$here/e2e-slow-first" || rc=1
-: >"$dir/lockstep.done"
+  --ignored --jobs "$jobs" --nice 19 --results "$dir/e2e.json" --history "$dir/previous/e2e.json" \
+  --slow-first "$here/e2e-slow-first" &
+lockstep_pid=$!
 waited=0
 while [ ! -e "$dir/host.done" ] && [ "$waited" -lt 1800 ]; do
   sleep 1
   waited=$((waited + 1))
 done
 [ -e "$dir/host.done" ] || echo "== the host did not say it was done within 30 minutes: the free-running tests start anyway"
-echo "== the free-running tests (after $waited s waiting for the host to be idle)"
+echo "== the free-running tests start (the host done after $waited s)"
+rc=0
 "$suite" run --binaries "e2e::free=$free@$here" --name "end-to-end on vcan (free-running)" \
   --ignored --jobs "$free_jobs" --results "$dir/free.json" --history "$dir/previous/free.json" \
   --slow-first "$here/e2e-slow-first" || rc=1
+wait "$lockstep_pid" || rc=1
 exit $rc

@@ -322,20 +322,18 @@ fn exit_words(st: std::process::ExitStatus) -> String {
     }
 }
 
-/// Start the emulated devices, sharing one origin a little ahead.
+/// A device's run, waiting for its pacing.
+type DeviceRun = Box<dyn FnOnce(Pacing) -> Result<FreeStats> + Send>;
+
+/// Start the emulated devices, sharing one origin a little ahead: every model is built first
+/// (the receiver's whole drive among them, which takes a while on a slow machine), so that the
+/// clock starts when the devices can keep it, not while they are still being made.
 fn start_bench(
     s: &Scenario,
     o: &FreeOptions,
     pty: Option<GpsPty>,
     stop: Arc<AtomicBool>,
 ) -> Result<Bench> {
-    let origin = Instant::now() + Duration::from_millis(50);
-    let pacing = Pacing {
-        origin,
-        speed: 1.0,
-        until_s: s.duration_s,
-        max_late: Duration::from_secs_f64(o.max_late_ms * 1e-3),
-    };
     let progress = Arc::new(Progress::default());
     let sent = Arc::new(SentSamples::new((30.0 * s.imu.rate_hz) as usize));
     // the IMU rides the table, emulated or real, as its TT_STATUS reports it
@@ -343,27 +341,18 @@ fn start_bench(
     let tracks: Vec<SharedTrack> = (0..axes)
         .map(|_| Arc::new(Mutex::new(ReportedTrack::new(s.imu.rate_hz, 0.02))))
         .collect();
-    let mut threads: Vec<(&'static str, JoinHandle<Result<FreeStats>>)> = Vec::new();
-    let spawn = |name: &'static str, f: Box<dyn FnOnce() -> Result<FreeStats> + Send>| {
-        std::thread::Builder::new()
-            .name(name.into())
-            .spawn(f)
-            .with_context(|| format!("starting the {name} emulator"))
-    };
+    let mut devices: Vec<(&'static str, DeviceRun)> = Vec::new();
     if let (Some(tp), false) = (&s.turntable, o.real_turntable) {
         let mut tt = TtBus::new(emulators::turntable::Turntable::new(tp.clone()), 1000.0);
         let (iface, stop, progress) =
             (o.iface.clone(), stop.clone(), Arc::new(Progress::default()));
-        threads.push((
+        devices.push((
             "turntable",
-            spawn(
-                "turntable",
-                Box::new(move || {
-                    Ok(emulators::freerun::run_turntable(
-                        &iface, &mut tt, 1000.0, &pacing, &stop, &progress,
-                    )?)
-                }),
-            )?,
+            Box::new(move |pacing: Pacing| {
+                Ok(emulators::freerun::run_turntable(
+                    &iface, &mut tt, 1000.0, &pacing, &stop, &progress,
+                )?)
+            }),
         ));
     }
     {
@@ -376,41 +365,51 @@ fn start_bench(
             sent.clone(),
             tracks.clone(),
         );
-        threads.push((
+        devices.push((
             "imu",
-            spawn(
-                "imu",
-                Box::new(move || {
-                    Ok(emulators::freerun::run_imu(
-                        &iface,
-                        stream,
-                        &tracks,
-                        Some(&sent),
-                        &pacing,
-                        &stop,
-                        &progress,
-                    )?)
-                }),
-            )?,
+            Box::new(move |pacing: Pacing| {
+                Ok(emulators::freerun::run_imu(
+                    &iface,
+                    stream,
+                    &tracks,
+                    Some(&sent),
+                    &pacing,
+                    &stop,
+                    &progress,
+                )?)
+            }),
         ));
     }
     if let (Some(mut pty), Some(rx)) = (pty, &s.gps) {
         let Some(run) = crate::engine::inproc::gps_run(s, rx)? else {
             bail!("scenario {}: a receiver needs a [drive]", s.name);
         };
+        let mut rx = GpsReceiver::new(run);
         let (stop, progress) = (stop.clone(), Arc::new(Progress::default()));
-        threads.push((
+        devices.push((
             "gps",
-            spawn(
-                "gps",
-                Box::new(move || {
-                    let mut rx = GpsReceiver::new(run);
-                    Ok(emulators::freerun::run_gps(
-                        &mut pty, &mut rx, &pacing, &stop, &progress,
-                    )?)
-                }),
-            )?,
+            Box::new(move |pacing: Pacing| {
+                Ok(emulators::freerun::run_gps(
+                    &mut pty, &mut rx, &pacing, &stop, &progress,
+                )?)
+            }),
         ));
+    }
+    // the devices' threads start and open their sockets within this margin
+    let origin = Instant::now() + Duration::from_millis(200);
+    let pacing = Pacing {
+        origin,
+        speed: 1.0,
+        until_s: s.duration_s,
+        max_late: Duration::from_secs_f64(o.max_late_ms * 1e-3),
+    };
+    let mut threads: Vec<(&'static str, JoinHandle<Result<FreeStats>>)> = Vec::new();
+    for (name, run) in devices {
+        let t = std::thread::Builder::new()
+            .name(name.into())
+            .spawn(move || run(pacing))
+            .with_context(|| format!("starting the {name} emulator"))?;
+        threads.push((name, t));
     }
     Ok(Bench {
         threads,

@@ -68,6 +68,10 @@ struct RunArgs {
     /// Tests at a time (default: the CPUs here).
     #[arg(long)]
     jobs: Option<usize>,
+    /// Run the tests at this nice value (0-19): tests whose results do not depend on the
+    /// machine's load (lockstep) then take only the CPU that tests with deadlines leave.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(i32).range(0..=19))]
+    nice: i32,
     /// A test still running after this many seconds is killed and failed.
     #[arg(long, default_value_t = 1800)]
     timeout_s: u64,
@@ -343,11 +347,12 @@ fn run(a: &RunArgs) -> Result<i32> {
                 a.ignored,
                 Duration::from_secs(a.timeout_s),
             );
+            let nice = a.nice;
             std::thread::spawn(move || {
                 loop {
                     let next = queue.lock().map(|mut q| q.pop_front());
                     let Ok(Some((b, t))) = next else { break };
-                    let r = run_one(&name, &b, &t, &logs, ignored, timeout);
+                    let r = run_one(&name, &b, &t, &logs, (ignored, nice), timeout);
                     announce(&r);
                     if let Ok(mut rs) = results.lock() {
                         rs.push(r);
@@ -402,6 +407,9 @@ fn announce(r: &TestResult) {
         r.binary,
         r.name
     );
+    if r.outcome == "passed" && !r.message.is_empty() {
+        let _ = writeln!(e, "       ({})", r.message);
+    }
     if r.outcome != "passed" {
         let text = std::fs::read_to_string(&r.log).unwrap_or_default();
         let lines: Vec<&str> = text.lines().collect();
@@ -440,7 +448,7 @@ fn run_one(
     b: &Binary,
     test: &str,
     logs: &Path,
-    ignored: bool,
+    (ignored, nice): (bool, i32),
     timeout: Duration,
 ) -> TestResult {
     let base = file_name(&b.name, test);
@@ -488,6 +496,18 @@ fn run_one(
     if ignored {
         c.arg("--ignored");
     }
+    if nice > 0 {
+        // SAFETY: setpriority on the child itself between fork and exec (async-signal-safe);
+        // what it starts inherits it
+        unsafe {
+            c.pre_exec(move || {
+                if libc::setpriority(libc::PRIO_PROCESS, 0, nice) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+    }
     let start = Instant::now();
     let child = match c.spawn() {
         Ok(c) => c,
@@ -501,7 +521,17 @@ fn run_one(
     r.cpu_s = cpu;
     let text = std::fs::read_to_string(&log).unwrap_or_default();
     match status {
-        Some(0) if text.contains("test result: ok. 1 passed") => r.outcome = "passed".into(),
+        Some(0) if text.contains("test result: ok. 1 passed") => {
+            r.outcome = "passed".into();
+            // a free-running test whose host could not keep real time passes without judging
+            // (tests/tests/free.rs): said, so that a CI server shows what was not judged
+            let unjudged = text.matches("; no verdict on ").count();
+            if unjudged > 0 {
+                r.message = format!(
+                    "{unjudged} of its runs gave no verdict: the machine could not keep real time"
+                );
+            }
+        }
         Some(0) if text.contains(" 1 ignored") => {
             r.outcome = "skipped".into();
             r.message = "ignored".into();
@@ -685,7 +715,12 @@ fn junit_suites(results: &[TestResult], stages: &[Stage]) -> Result<(Vec<Suite>,
                 classname: r.binary.clone(),
                 time_s: r.time_s,
                 outcome,
-                output: String::new(),
+                // a pass with a remark (runs without a verdict) shows it beside the case
+                output: if r.outcome == "passed" {
+                    r.message.clone()
+                } else {
+                    String::new()
+                },
             });
             foreign.extend(foreign_of(r)?);
         }
@@ -741,7 +776,8 @@ fn table(results: &[TestResult], stages: &[Stage], total_s: Option<f64>) -> (Str
         time_s: r.time_s,
         cpu: (r.time_s > 0.0).then(|| r.cpu_s / r.time_s),
         outcome: match r.outcome.as_str() {
-            "passed" => "ok".into(),
+            "passed" if r.message.is_empty() => "ok".into(),
+            "passed" => format!("ok ({})", r.message),
             o => o.to_uppercase(),
         },
     }));
