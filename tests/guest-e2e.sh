@@ -5,12 +5,13 @@
 #  2. the lockstep tests (tests/tests/vcan.rs), several at a time and at the lowest CPU priority
 #     (nice 19): their results depend on their scenarios only, however loaded the machine, so
 #     they take whatever CPU the rest leaves (the host runs its own stages meanwhile);
-#  3. once the host says it is done (HOST_DONE appears, or after 30 minutes), beside the
-#     lockstep tests still running, the free-running tests (tests/tests/free.rs) at normal
-#     priority: their verdicts need a machine that keeps real time.
+#  3. beside them from the start (or, with WAIT_HOST=1, once the host says it is done:
+#     SUITE_DIR/host.done, or after 30 minutes), the free-running tests (tests/tests/free.rs)
+#     at normal priority, one at a time by default: their verdicts need a machine that keeps
+#     real time, and the lockstep tests only take what they leave.
 # Each test runs in a process of its own (tests/src/bin/suite.rs); the results go to SUITE_DIR.
-# Usage: guest-e2e.sh HIL SUITE_DIR LOCKSTEP_BINARY FREE_BINARY LOCKSTEP_JOBS FREE_JOBS
-hil="$1" dir="$2" lockstep="$3" free="$4" jobs="$5" free_jobs="$6"
+# Usage: guest-e2e.sh HIL SUITE_DIR LOCKSTEP_BINARY FREE_BINARY LOCKSTEP_JOBS FREE_JOBS WAIT_HOST
+hil="$1" dir="$2" lockstep="$3" free="$4" jobs="$5" free_jobs="$6" wait_host="$7"
 here=$(cd "$(dirname "$0")" && pwd)
 suite="$(dirname "$hil")/suite"
 out=$(mktemp -d)
@@ -28,13 +29,15 @@ rm -rf "$out"
   --ignored --jobs "$jobs" --nice 19 --results "$dir/e2e.json" --history "$dir/previous/e2e.json" \
   --slow-first "$here/e2e-slow-first" &
 lockstep_pid=$!
-waited=0
-while [ ! -e "$dir/host.done" ] && [ "$waited" -lt 1800 ]; do
-  sleep 1
-  waited=$((waited + 1))
-done
-[ -e "$dir/host.done" ] || echo "== the host did not say it was done within 30 minutes: the free-running tests start anyway"
-echo "== the free-running tests start (the host done after $waited s)"
+if [ "$wait_host" = 1 ]; then
+  waited=0
+  while [ ! -e "$dir/host.done" ] && [ "$waited" -lt 1800 ]; do
+    sleep 1
+    waited=$((waited + 1))
+  done
+  [ -e "$dir/host.done" ] || echo "== the host did not say it was done within 30 minutes: the free-running tests start anyway"
+  echo "== the free-running tests start (the host done after $waited s)"
+fi
 rc=0
 "$suite" run --binaries "e2e::free=$free@$here" --name "end-to-end on vcan (free-running)" \
   --ignored --jobs "$free_jobs" --results "$dir/free.json" --history "$dir/previous/free.json" \
