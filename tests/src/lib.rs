@@ -137,3 +137,17 @@ pub fn checks(r: &serde_json::Value) -> Vec<(String, bool, String)> {
         })
         .collect()
 }
+
+/// Run `c` at nice 0, whatever the test's own priority: for the field's tools that read or
+/// write a bus in real time (canbusload, canplayer) in tests `./run-tests` runs at nice 19
+/// (tests/guest-e2e.sh). Raising a priority takes root, which the end-to-end tests have in the
+/// guest; without it the child keeps the test's priority.
+pub fn normal_priority(c: &mut std::process::Command) {
+    // SAFETY: setpriority on the child itself, between fork and exec (async-signal-safe)
+    unsafe {
+        std::os::unix::process::CommandExt::pre_exec(c, || {
+            libc::setpriority(libc::PRIO_PROCESS, 0, 0);
+            Ok(())
+        });
+    }
+}

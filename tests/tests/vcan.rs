@@ -56,13 +56,38 @@ fn run_variant(
 #[ignore = "needs vcan: run ./run-tests"]
 fn static_30s_at_x10_every_frame_arrives_and_the_recording_reads_back() {
     let dir = tempfile::tempdir().unwrap();
+    let junit = dir.path().join("junit").join("run.xml");
     let (r, code) = hil_run(
-        &["--duration", "30", "--speed", "10", "--iface", "vcan-e2e0"],
+        &[
+            "--duration",
+            "30",
+            "--speed",
+            "10",
+            "--iface",
+            "vcan-e2e0",
+            "--junit",
+            junit.to_str().unwrap(),
+        ],
         dir.path(),
     );
     for (name, pass, detail) in checks(&r) {
         eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
         assert!(pass, "check failed: {name}: {detail}");
+    }
+    // the result card's checks as JUnit test cases, for a CI server
+    let xml = std::fs::read_to_string(&junit).expect("hil run --junit wrote its file");
+    let j = hil::junit::foreign(&xml, "run.xml").unwrap();
+    assert_eq!((j.tests, j.failures), (checks(&r).len(), 0), "{xml}");
+    for (name, _, _) in checks(&r) {
+        let attr = name
+            .replace('&', "&amp;")
+            .replace('"', "&quot;")
+            .replace('<', "&lt;")
+            .replace('>', "&gt;");
+        assert!(
+            xml.contains(&format!("<testcase name=\"{attr}\"")),
+            "{name}: {xml}"
+        );
     }
     assert_eq!(code, 0);
     assert_eq!(r["nav_exit"], 0, "nav exited cleanly on SIGTERM");
@@ -1033,6 +1058,7 @@ fn can_utils_watch_the_bus_and_play_our_logs() {
             Ok(())
         })
     };
+    e2e::normal_priority(&mut player);
     let st = player.status().expect("canplayer (can-utils) runs");
     assert!(st.success(), "canplayer: {st}");
     std::thread::sleep(std::time::Duration::from_millis(500));
@@ -1267,7 +1293,6 @@ fn the_redundant_unit_calibrates_and_each_failed_gyro_is_isolated_through_vcan()
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn canbusload_measures_the_bus_models_load() {
-    use std::io::Read;
     use std::process::Stdio;
     let iface = "vcan-e2e12";
     vcan_setup::ensure_vcan(iface).unwrap();
@@ -1310,42 +1335,56 @@ fn canbusload_measures_the_bus_models_load() {
         }
     }
     assert!(frames > 19_000, "{frames} frames in 5 s");
-    let mut load = Command::new("canbusload")
-        .args(["-e", &format!("{iface}@1000000")])
-        .stdout(Stdio::piped())
+    // both tools read and write in real time: at normal priority, whatever the test's own
+    // (./run-tests runs the lockstep tests at nice 19)
+    let mut load = Command::new("canbusload");
+    load.args(["-e", &format!("{iface}@1000000")])
+        .stdout(Stdio::piped());
+    e2e::normal_priority(&mut load);
+    let mut load = load
         .spawn()
         .expect("canbusload (can-utils) runs: ./run-tests installs it");
+    // its lines as they come: " vcan-e2e12@1000000  4102  456000  256000  45%"
+    let parsed = std::sync::Arc::new(std::sync::Mutex::new(Vec::<(u64, u64, u64)>::new()));
+    let reader = {
+        let (out, parsed, iface) = (
+            load.stdout.take().unwrap(),
+            parsed.clone(),
+            iface.to_string(),
+        );
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for l in std::io::BufReader::new(out).lines().map_while(Result::ok) {
+                let f: Vec<&str> = l.split_whitespace().collect();
+                if f.len() >= 5 && f[0].starts_with(&iface) {
+                    parsed.lock().unwrap().push((
+                        f[1].parse().unwrap_or(0),
+                        f[2].parse().unwrap_or(0),
+                        f[4].trim_end_matches('%').parse().unwrap_or(0),
+                    ));
+                }
+            }
+        })
+    };
     std::thread::sleep(std::time::Duration::from_millis(500));
-    let played = Command::new("canplayer")
-        .args(["-I", run.join("bus.log").to_str().unwrap()])
-        .status()
-        .expect("canplayer runs");
-    assert!(played.success());
-    // its last one-second line
-    std::thread::sleep(std::time::Duration::from_millis(1600));
+    let mut player = Command::new("canplayer");
+    player.args(["-I", run.join("bus.log").to_str().unwrap()]);
+    e2e::normal_priority(&mut player);
+    assert!(player.status().expect("canplayer runs").success());
+    // its one-second lines until they hold every frame played (at most 30 s: a liveness limit)
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    while parsed.lock().unwrap().iter().map(|l| l.0).sum::<u64>() < frames
+        && std::time::Instant::now() < deadline
+    {
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    // one more line: none may follow with frames the log did not hold
+    std::thread::sleep(std::time::Duration::from_millis(1100));
     // SAFETY: kill(2) on our own child.
     unsafe { libc::kill(load.id() as libc::pid_t, libc::SIGINT) };
-    let mut text = String::new();
-    load.stdout
-        .take()
-        .unwrap()
-        .read_to_string(&mut text)
-        .unwrap();
     load.wait().unwrap();
-    // " vcan-e2e12@1000000  4102  456000  256000  45%"
-    let lines: Vec<(u64, u64, u64)> = text
-        .lines()
-        .filter_map(|l| {
-            let f: Vec<&str> = l.split_whitespace().collect();
-            (f.len() >= 5 && f[0].starts_with(iface)).then(|| {
-                (
-                    f[1].parse().unwrap_or(0),
-                    f[2].parse().unwrap_or(0),
-                    f[4].trim_end_matches('%').parse().unwrap_or(0),
-                )
-            })
-        })
-        .collect();
+    reader.join().unwrap();
+    let lines = parsed.lock().unwrap().clone();
     eprintln!("canbusload, one line a second (frames, bits, %): {lines:?}");
     let (seen, bits): (u64, u64) = lines.iter().fold((0, 0), |a, l| (a.0 + l.0, a.1 + l.1));
     // the error frames in the log are not data frames: canbusload does not count them

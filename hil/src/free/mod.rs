@@ -192,13 +192,14 @@ pub fn run_free(s: &Scenario, o: &FreeOptions) -> Result<FreeReport> {
     std::fs::create_dir_all(&nav_dir)?;
     let cfg = nav_dir.join("nav.toml");
     crate::scenario::navconfig::write_nav_config(s, Some(&o.iface), gps_port.as_deref(), &cfg)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let prepared = prepare_bench(s, o, pty, stop.clone())?;
     let (mut child, device) = start_dut(o, &cfg, gps_port.as_deref(), &nav_dir)?;
     // a moment for the device to open its devices, as a vehicle's computer boots first
     std::thread::sleep(Duration::from_secs(1));
-    let stop = Arc::new(AtomicBool::new(false));
     let seen = Arc::new(Mutex::new(Observed::default()));
     let sock = observe::open(&o.iface)?;
-    let bench = start_bench(s, o, pty, stop.clone())?;
+    let bench = start_bench(s, o, prepared)?;
     let observer = observe::spawn(
         sock,
         bench.origin,
@@ -325,15 +326,23 @@ fn exit_words(st: std::process::ExitStatus) -> String {
 /// A device's run, waiting for its pacing.
 type DeviceRun = Box<dyn FnOnce(Pacing) -> Result<FreeStats> + Send>;
 
-/// Start the emulated devices, sharing one origin a little ahead: every model is built first
-/// (the receiver's whole drive among them, which takes a while on a slow machine), so that the
-/// clock starts when the devices can keep it, not while they are still being made.
-fn start_bench(
+/// The emulated devices, built and not yet started.
+struct Prepared {
+    devices: Vec<(&'static str, DeviceRun)>,
+    progress: Arc<Progress>,
+    tracks: Vec<SharedTrack>,
+    sent: Arc<SentSamples>,
+}
+
+/// Build every device's model (the receiver's whole drive among them, which takes a while on a
+/// slow machine) before the device under test starts, so that the clock starts when the
+/// devices can keep it and the device does not wait for a stream that is still being made.
+fn prepare_bench(
     s: &Scenario,
     o: &FreeOptions,
     pty: Option<GpsPty>,
     stop: Arc<AtomicBool>,
-) -> Result<Bench> {
+) -> Result<Prepared> {
     let progress = Arc::new(Progress::default());
     let sent = Arc::new(SentSamples::new((30.0 * s.imu.rate_hz) as usize));
     // the IMU rides the table, emulated or real, as its TT_STATUS reports it
@@ -395,6 +404,22 @@ fn start_bench(
             }),
         ));
     }
+    Ok(Prepared {
+        devices,
+        progress,
+        tracks,
+        sent,
+    })
+}
+
+/// Start the prepared devices, sharing one origin a little ahead.
+fn start_bench(s: &Scenario, o: &FreeOptions, p: Prepared) -> Result<Bench> {
+    let Prepared {
+        devices,
+        progress,
+        tracks,
+        sent,
+    } = p;
     // the devices' threads start and open their sockets within this margin
     let origin = Instant::now() + Duration::from_millis(200);
     let pacing = Pacing {
