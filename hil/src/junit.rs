@@ -245,34 +245,31 @@ fn xml_char(c: char) -> char {
     }
 }
 
-fn text_escape(s: &str) -> String {
+/// Text as XML carries it: in element content (`attribute` false) or in a quoted attribute,
+/// where line ends and tabs are kept as character references.
+fn escape(s: &str, attribute: bool) -> String {
     let mut o = String::with_capacity(s.len());
     for c in s.chars().map(xml_char) {
         match c {
             '&' => o.push_str("&amp;"),
             '<' => o.push_str("&lt;"),
             '>' => o.push_str("&gt;"),
+            '"' if attribute => o.push_str("&quot;"),
+            '\n' if attribute => o.push_str("&#10;"),
+            '\r' if attribute => o.push_str("&#13;"),
+            '\t' if attribute => o.push_str("&#9;"),
             c => o.push(c),
         }
     }
     o
 }
 
+fn text_escape(s: &str) -> String {
+    escape(s, false)
+}
+
 fn attr(s: &str) -> String {
-    let mut o = String::with_capacity(s.len());
-    for c in s.chars().map(xml_char) {
-        match c {
-            '&' => o.push_str("&amp;"),
-            '<' => o.push_str("&lt;"),
-            '>' => o.push_str("&gt;"),
-            '"' => o.push_str("&quot;"),
-            '\n' => o.push_str("&#10;"),
-            '\r' => o.push_str("&#13;"),
-            '\t' => o.push_str("&#9;"),
-            c => o.push(c),
-        }
-    }
-    o
+    escape(s, true)
 }
 
 fn hostname() -> String {

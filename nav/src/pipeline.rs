@@ -863,6 +863,12 @@ impl Pipeline {
     /// Step 6 for each procedure, at the IMU time it runs on (the processing chain's valid
     /// sample, or the end of the last sample); once one finishes, the parameter file it made.
     fn procedures_step(&mut self, out: &mut Vec<Output>) {
+        // a procedure runs on IMU time: before the first sample it has no clock to keep the
+        // mechanism's heartbeat on, so it commands nothing (a mechanism enabled then would time
+        // out waiting for the next heartbeat, however long the IMU takes to start)
+        if self.sums.last.is_none() {
+            return;
+        }
         let base = self.proc.baseline().map_or(0, |b| b as i64);
         let t_valid = self.proc.valid_sample().saturating_sub(base) as f64 / self.rate_hz;
         let t_last = self.last_sample_time();
@@ -1344,6 +1350,40 @@ mod tests {
             .collect();
         assert_eq!(events, ["{\"kind\":\"imu_back\"}"]);
         assert_eq!(p.summary().imu_timeouts, 1);
+    }
+
+    /// The mechanism's status before the IMU's first sample (a table powered before the IMU
+    /// streams): no command, since nothing would keep its heartbeat; the first sample starts
+    /// the procedure.
+    #[test]
+    fn no_command_goes_to_the_mechanism_before_the_first_imu_sample() {
+        let cfg = config("[north_finding]\nenabled = true\nlatitude_deg = -33.9\n");
+        let mut p = Pipeline::new(&cfg, false).unwrap();
+        let mut out = Vec::new();
+        let status = Message::TtStatus(wire::TtStatus {
+            angle_deg: 0.0,
+            rate_dps: 0.0,
+            state: wire::TtState::Disabled,
+            axis: 0,
+            faults: Default::default(),
+            ack_seq: 0,
+            counter: 0,
+        })
+        .encode()
+        .unwrap();
+        for _ in 0..50 {
+            p.on_frame(&status, &mut out);
+        }
+        assert!(
+            !out.iter().any(|o| matches!(o, Output::Command(_))),
+            "no IMU time yet, no command"
+        );
+        for k in 0..=40 {
+            for f in sample(k) {
+                p.on_frame(&f, &mut out);
+            }
+        }
+        assert!(out.iter().any(|o| matches!(o, Output::Command(_))));
     }
 
     #[test]

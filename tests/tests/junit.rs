@@ -19,6 +19,16 @@ fn schema() -> PathBuf {
     target.join("junit-10.xsd")
 }
 
+/// tests/junit-check.py on `xml`: the schema's verdict and what junitparser read.
+fn junit_check(xml: &std::path::Path) -> std::process::Output {
+    std::process::Command::new("python3")
+        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/junit-check.py"))
+        .arg(xml)
+        .arg(schema())
+        .output()
+        .expect("python3 runs")
+}
+
 #[test]
 #[ignore = "needs Python's junitparser and xmlschema and the schema: run ./run-tests"]
 fn a_failing_fault_row_is_a_failed_case_that_junitparser_reads_with_its_figures() {
@@ -46,12 +56,7 @@ fn a_failing_fault_row_is_a_failed_case_that_junitparser_reads_with_its_figures(
     let dir = tempfile::tempdir().unwrap();
     let xml = dir.path().join("faults.xml");
     hil::junit::write(&xml, "hil faults", &[hil::suites::faults::junit(&m)]).unwrap();
-    let o = std::process::Command::new("python3")
-        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/junit-check.py"))
-        .arg(&xml)
-        .arg(schema())
-        .output()
-        .expect("python3 runs");
+    let o = junit_check(&xml);
     assert!(
         o.status.success(),
         "{}\n{}",
@@ -90,12 +95,7 @@ fn the_checker_refuses_what_the_schema_refuses() {
         "<testsuites tests=\"1\"><testsuite name=\"s\"><testcase name=\"c\"/></testsuite></testsuites>",
     )
     .unwrap();
-    let o = std::process::Command::new("python3")
-        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/junit-check.py"))
-        .arg(&xml)
-        .arg(schema())
-        .output()
-        .expect("python3 runs");
+    let o = junit_check(&xml);
     assert_eq!(
         o.status.code(),
         Some(1),

@@ -69,6 +69,11 @@ pub(crate) struct EmulateArgs {
     /// time), ms.
     #[arg(long, default_value_t = 200.0)]
     max_late_ms: f64,
+    /// The IMU's frames go out in one write per this period, ms (two samples of a 2 kHz IMU at
+    /// 1 ms); 0: each sample's at its own time. Each write and each wake-up of a reader costs
+    /// tens of microseconds in an emulated guest.
+    #[arg(long, default_value_t = 1.0)]
+    imu_write_ms: f64,
     /// Write what the device did as JSON here when it stops.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -88,6 +93,9 @@ pub(crate) fn emulate(a: EmulateArgs) -> Result<i32> {
         ),
         None => hil::procedures::northfinding::scenario(30.0, 28.218157, 60.0, 1),
     };
+    if !(0.0..=100.0).contains(&a.imu_write_ms) {
+        bail!("--imu-write-ms {}: between 0 and 100", a.imu_write_ms);
+    }
     if !(0.0..=10_000.0).contains(&a.max_late_ms) {
         bail!("--max-late-ms {}: between 0 and 10000", a.max_late_ms);
     }
@@ -101,6 +109,7 @@ pub(crate) fn emulate(a: EmulateArgs) -> Result<i32> {
         speed: a.speed,
         until_s: a.duration.unwrap_or(f64::INFINITY),
         max_late: Duration::from_secs_f64(a.max_late_ms * 1e-3),
+        imu_write_period: Duration::from_secs_f64(a.imu_write_ms * 1e-3),
     };
     let stop = Arc::new(AtomicBool::new(false));
     stop_on_signals(stop.clone())?;

@@ -427,6 +427,7 @@ fn start_bench(s: &Scenario, o: &FreeOptions, p: Prepared) -> Result<Bench> {
         speed: 1.0,
         until_s: s.duration_s,
         max_late: Duration::from_secs_f64(o.max_late_ms * 1e-3),
+        imu_write_period: emulators::freerun::IMU_WRITE_PERIOD,
     };
     let mut threads: Vec<(&'static str, JoinHandle<Result<FreeStats>>)> = Vec::new();
     for (name, run) in devices {
