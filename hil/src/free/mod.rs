@@ -420,7 +420,22 @@ fn start_bench(s: &Scenario, o: &FreeOptions, p: Prepared) -> Result<Bench> {
         tracks,
         sent,
     } = p;
-    // the devices' threads start and open their sockets within this margin
+    // the threads first, each waiting for its pacing: their start is not the stream's
+    let mut threads: Vec<(&'static str, JoinHandle<Result<FreeStats>>)> = Vec::new();
+    let mut go = Vec::new();
+    for (name, run) in devices {
+        let (tx, rx) = std::sync::mpsc::channel::<Pacing>();
+        let t = std::thread::Builder::new()
+            .name(name.into())
+            .spawn(move || match rx.recv() {
+                Ok(pacing) => run(pacing),
+                Err(_) => bail!("the {name} emulator was never started"),
+            })
+            .with_context(|| format!("starting the {name} emulator"))?;
+        threads.push((name, t));
+        go.push(tx);
+    }
+    // the devices open their sockets within this margin
     let origin = Instant::now() + Duration::from_millis(200);
     let pacing = Pacing {
         origin,
@@ -429,13 +444,9 @@ fn start_bench(s: &Scenario, o: &FreeOptions, p: Prepared) -> Result<Bench> {
         max_late: Duration::from_secs_f64(o.max_late_ms * 1e-3),
         imu_write_period: emulators::freerun::IMU_WRITE_PERIOD,
     };
-    let mut threads: Vec<(&'static str, JoinHandle<Result<FreeStats>>)> = Vec::new();
-    for (name, run) in devices {
-        let t = std::thread::Builder::new()
-            .name(name.into())
-            .spawn(move || run(pacing))
-            .with_context(|| format!("starting the {name} emulator"))?;
-        threads.push((name, t));
+    for tx in go {
+        // a thread that has already ended says why when it is joined
+        let _ = tx.send(pacing);
     }
     Ok(Bench {
         threads,
