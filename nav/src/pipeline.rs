@@ -180,6 +180,8 @@ pub struct Pipeline {
     last_mode: Option<String>,
     frames: FrameCounters,
     sums: Sums,
+    /// An IMU frame has arrived: the procedures have a clock.
+    imu_heard: bool,
     imu_timeout: bool,
     timeouts: u64,
     fixes: u64,
@@ -264,6 +266,7 @@ impl Pipeline {
             last_mode: None,
             frames: FrameCounters::default(),
             sums: Sums::default(),
+            imu_heard: false,
             imu_timeout: false,
             timeouts: 0,
             fixes: 0,
@@ -398,6 +401,7 @@ impl Pipeline {
             }
         }
         // 3. the IMU front end
+        self.imu_heard |= matches!(m, Message::ImuGyro(_) | Message::ImuAccel(_));
         self.fe.on_message(&m, &mut self.samples, &mut self.events);
         // 4, 5. processing, north-finding and navigation
         self.process(out);
@@ -863,10 +867,10 @@ impl Pipeline {
     /// Step 6 for each procedure, at the IMU time it runs on (the processing chain's valid
     /// sample, or the end of the last sample); once one finishes, the parameter file it made.
     fn procedures_step(&mut self, out: &mut Vec<Output>) {
-        // a procedure runs on IMU time: before the first sample it has no clock to keep the
-        // mechanism's heartbeat on, so it commands nothing (a mechanism enabled then would time
-        // out waiting for the next heartbeat, however long the IMU takes to start)
-        if self.sums.last.is_none() {
+        // a procedure runs on IMU time: before the IMU's first frame it has no clock to keep
+        // the mechanism's heartbeat on, so it commands nothing (a mechanism enabled then would
+        // time out waiting for the next heartbeat, however long the IMU takes to start)
+        if !self.imu_heard {
             return;
         }
         let base = self.proc.baseline().map_or(0, |b| b as i64);
@@ -1352,11 +1356,11 @@ mod tests {
         assert_eq!(p.summary().imu_timeouts, 1);
     }
 
-    /// The mechanism's status before the IMU's first sample (a table powered before the IMU
-    /// streams): no command, since nothing would keep its heartbeat; the first sample starts
-    /// the procedure.
+    /// The mechanism's status before the IMU's first frame (a table powered before the IMU
+    /// streams): no command, since nothing would keep its heartbeat; the IMU's first frames
+    /// start the procedure.
     #[test]
-    fn no_command_goes_to_the_mechanism_before_the_first_imu_sample() {
+    fn no_command_goes_to_the_mechanism_before_the_imus_first_frame() {
         let cfg = config("[north_finding]\nenabled = true\nlatitude_deg = -33.9\n");
         let mut p = Pipeline::new(&cfg, false).unwrap();
         let mut out = Vec::new();

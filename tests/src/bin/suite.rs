@@ -1,6 +1,6 @@
 //! `suite`: the test runner of `./run-tests`. Runs every test of Rust test binaries in a process
 //! of its own, several at a time, and measures each one: its wall time and the CPU time of its
-//! process tree (what it spent running; the rest it spent waiting on a guest, a clock, a peer).
+//! process tree (what it spent running; the rest it spent waiting on a guest, a clock, a peer or a CPU).
 //! Then one report of everything `./run-tests` did: a table slowest first, and JUnit XML
 //! (`target/junit.xml`) with every test, every stage and every fault-matrix row as a test case.
 //!
@@ -799,7 +799,7 @@ fn table(results: &[TestResult], stages: &[Stage], total_s: Option<f64>) -> (Str
     let mut full = String::from(
         "Every test and stage of ./run-tests, slowest first. running: the CPU time of the test's \
          processes over its wall time (200 % = two CPUs busy); waiting: the rest of its wall time \
-         (a guest, a clock, a peer).\n\n",
+         (a guest, a clock, a peer, or a CPU busy with other tests).\n\n",
     );
     full.push_str(head);
     let mut short = String::from("\n== where the time went (slowest first)\n");
