@@ -118,18 +118,35 @@ pub fn rate(epochs: &[Epoch]) -> Rate {
 }
 
 /// NAV_TIMEs whose SampleCount went back from the one before (a wrap of the 32-bit count
-/// aside), and the first such pair.
-pub fn backwards(epochs: &[Epoch]) -> (u64, Option<(u32, u32)>) {
-    let mut n = 0;
-    let mut first = None;
-    for w in epochs.windows(2) {
-        let step = w[1].sample_count.wrapping_sub(w[0].sample_count);
-        if step > u32::MAX / 2 {
-            n += 1;
-            first = first.or(Some((w[0].sample_count, w[1].sample_count)));
+/// aside), and the first such pair; and the pairs of neighbours the bus swapped, not counted
+/// as going back: the later-sent one heard first, the earlier one filling the gap it left
+/// (vcan hands a sender's frames to the receive queue of the CPU the sender is on, so a device
+/// moving between CPUs can be heard out of order; a real controller keeps a sender's order).
+pub fn backwards(epochs: &[Epoch]) -> (u64, Option<(u32, u32)>, u64) {
+    let before = |a: u32, b: u32| b.wrapping_sub(a) < u32::MAX / 2 && a != b;
+    let (mut n, mut first, mut swapped) = (0, None, 0);
+    let mut i = 0;
+    while i + 1 < epochs.len() {
+        let (a, b) = (epochs[i].sample_count, epochs[i + 1].sample_count);
+        if before(a, b) {
+            i += 1;
+            continue;
         }
+        let prev_ok = i == 0 || before(epochs[i - 1].sample_count, b);
+        let next_ok = epochs.get(i + 2).is_none_or(|c| before(a, c.sample_count));
+        if a != b && prev_ok && next_ok {
+            swapped += 1;
+            // the swapped pair is one event: the next pair starts after it
+            i += 2;
+            continue;
+        }
+        if b.wrapping_sub(a) > u32::MAX / 2 {
+            n += 1;
+            first = first.or(Some((a, b)));
+        }
+        i += 1;
     }
-    (n, first)
+    (n, first, swapped)
 }
 
 /// A heading against truth.
@@ -356,10 +373,16 @@ mod tests {
             "{r:?}"
         );
         assert_eq!(r.step_samples, 40);
-        assert_eq!(backwards(&e), (0, None));
+        assert_eq!(backwards(&e), (0, None, 0));
+        // two neighbours swapped by the bus: heard out of order, not going back
+        e.swap(30, 31);
+        assert_eq!(backwards(&e), (0, None, 1));
+        e.swap(30, 31);
+        // a tag 1000 samples back (tests/dut/northfinder.py --backwards)
         e[70].sample_count = 10;
         assert_eq!(backwards(&e).0, 1);
         assert_eq!(backwards(&e).1, Some((70 * 40, 10)));
+        assert_eq!(backwards(&e).2, 0);
     }
 
     #[test]

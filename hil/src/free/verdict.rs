@@ -156,7 +156,7 @@ fn device_checks(
     (latency, unnamed): (score::Spread, u64),
 ) -> Vec<Check> {
     let e = &seen.epochs;
-    let (backwards, first_back) = score::backwards(e);
+    let (backwards, first_back, swapped) = score::backwards(e);
     vec![
         Check {
             name: "the device answered".into(),
@@ -203,6 +203,10 @@ fn device_checks(
             detail: match first_back {
                 Some((a, b)) => format!(
                     "{backwards} of {} NAV_TIMEs named a sample before the one before them; the first from sample {a} to {b}",
+                    e.len()
+                ),
+                None if swapped > 0 => format!(
+                    "{} NAV_TIMEs in order; {swapped} pair(s) of neighbours heard swapped, as vcan's per-CPU queues deliver a device's frames when it moves between CPUs (not counted)",
                     e.len()
                 ),
                 None => format!("{} NAV_TIMEs in order", e.len()),
