@@ -8,6 +8,19 @@ use e2e::{bin, checks, hil_json};
 use serde_json::Value;
 use std::process::Command;
 
+/// The free drill both drill tests run: our nav at the paper's site, 15 s dwells.
+const FREE_DRILL: [&str; 9] = [
+    "drill",
+    "north-finding",
+    "--free",
+    "--heading",
+    "137.5",
+    "--dwell",
+    "15",
+    "--seed",
+    "7",
+];
+
 /// A process of the test's, killed (SIGTERM, then SIGKILL after 10 s) if the test ends first.
 struct Child(std::process::Child);
 
@@ -67,32 +80,22 @@ fn a_real_turntable_stand_in_turns_the_emulated_imu_in_a_free_drill() {
     let mut tt = Child(tt.spawn().expect("hil emulate starts"));
     std::thread::sleep(std::time::Duration::from_millis(500));
     let real = format!("turntable={iface}");
-    let (r, code) = hil_json(
-        &[
-            "drill",
-            "north-finding",
-            "--free",
-            "--max-late-ms",
-            "1000",
-            // the budget is not what this run is about (a loaded guest is slow, not nav): as
-            // generous as in the free drill's test, where latency is judged
-            "--latency-budget-ms",
-            "1000",
-            "--real",
-            &real,
-            "--heading",
-            "137.5",
-            "--dwell",
-            "15",
-            "--seed",
-            "7",
-            "--iface",
-            iface,
-            "--json",
-            "--out",
-        ],
-        &[&d.join("run")],
-    );
+    let mut args = FREE_DRILL.to_vec();
+    args.extend([
+        "--max-late-ms",
+        "1000",
+        // the budget is not what this run is about (a loaded guest is slow, not nav): as
+        // generous as in the free drill's test, where latency is judged
+        "--latency-budget-ms",
+        "1000",
+        "--real",
+        &real,
+        "--iface",
+        iface,
+        "--json",
+        "--out",
+    ]);
+    let (r, code) = hil_json(&args, &[&d.join("run")]);
     let tt_exit = tt.stop();
     let t: Value =
         serde_json::from_slice(&std::fs::read(d.join("turntable.json")).unwrap()).unwrap();
@@ -169,20 +172,8 @@ fn check_named(r: &Value, name: &str) -> (bool, String) {
 fn a_free_running_drill_judges_the_device_by_the_dbc_and_names_its_failures() {
     let dir = tempfile::tempdir().unwrap();
     let drill = |out: &str, extra: &[&str]| {
-        let mut args = vec![
-            "drill",
-            "north-finding",
-            "--free",
-            "--heading",
-            "137.5",
-            "--dwell",
-            "15",
-            "--seed",
-            "7",
-            "--iface",
-            "vcan-free2",
-            "--json",
-        ];
+        let mut args = FREE_DRILL.to_vec();
+        args.extend(["--iface", "vcan-free2", "--json"]);
         args.extend_from_slice(extra);
         args.push("--out");
         hil_json(&args, &[&dir.path().join(out)])

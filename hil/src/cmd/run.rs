@@ -23,46 +23,7 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
         return run_free_here(&s, &a, &out);
     }
     if a.bus.here() {
-        let nav_bin = match &a.nav {
-            Some(n) => n.clone(),
-            None => sibling_binary("nav")?,
-        };
-        let (view, own_view) = a.live.view(s.duration_s)?;
-        let opts = RunOptions {
-            progress: true,
-            reference_checks: !a.no_reference,
-            gps_via_gpsd: a.gpsd,
-            live: view.clone(),
-            ..RunOptions::new(&a.bus.iface, out.clone(), nav_bin)
-        };
-        let backend = if in_guest { "vm" } else { "native" };
-        let r = run_here(&s, &opts, backend);
-        drop(opts);
-        if let (Some(v), true) = (view, own_view) {
-            finish_view(v);
-        }
-        let r = r?;
-        if let Some(j) = &a.junit {
-            let suite = hil::junit::of_checks(
-                &format!("hil run {}", s.name),
-                &format!("hil run {}", s.name),
-                r.wall_seconds,
-                r.checks
-                    .iter()
-                    .map(|c| (c.name.as_str(), c.pass, c.detail.as_str())),
-            );
-            hil::junit::write(j, "hil run", &[suite])?;
-        }
-        if a.bus.json {
-            println!("{}", serde_json::to_string_pretty(&r)?);
-        } else {
-            print!("{}", report::card(&r));
-            println!(
-                " report: {} (and report.md beside it)",
-                out.join("report.html").display()
-            );
-        }
-        return Ok(if r.pass { 0 } else { 1 });
+        return run_lockstep_here(&s, &a, &out, in_guest);
     }
     // No CAN here: run this same command inside the QEMU guest.
     let mut args: Vec<String> = vec!["run".into()];
@@ -112,6 +73,55 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
     Ok(code)
 }
 
+/// A lockstep run here, where vcan is: the card or the JSON, and the exit status.
+fn run_lockstep_here(s: &Scenario, a: &RunArgs, out: &Path, in_guest: bool) -> Result<i32> {
+    let nav_bin = match &a.nav {
+        Some(n) => n.clone(),
+        None => sibling_binary("nav")?,
+    };
+    let (view, own_view) = a.live.view(s.duration_s)?;
+    let opts = RunOptions {
+        progress: true,
+        reference_checks: !a.no_reference,
+        gps_via_gpsd: a.gpsd,
+        live: view.clone(),
+        ..RunOptions::new(&a.bus.iface, out.to_path_buf(), nav_bin)
+    };
+    let backend = if in_guest { "vm" } else { "native" };
+    let r = run_here(s, &opts, backend);
+    drop(opts);
+    if let (Some(v), true) = (view, own_view) {
+        finish_view(v);
+    }
+    let r = r?;
+    if let Some(j) = &a.junit {
+        write_junit(j, &format!("hil run {}", s.name), r.wall_seconds, &r.checks)?;
+    }
+    if a.bus.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        print!("{}", report::card(&r));
+        println!(
+            " report: {} (and report.md beside it)",
+            out.join("report.html").display()
+        );
+    }
+    Ok(if r.pass { 0 } else { 1 })
+}
+
+/// `--junit`: the run's checks, a test case each.
+fn write_junit(j: &Path, name: &str, wall_s: f64, checks: &[hil::check::Check]) -> Result<()> {
+    let suite = hil::junit::of_checks(
+        name,
+        name,
+        wall_s,
+        checks
+            .iter()
+            .map(|c| (c.name.as_str(), c.pass, c.detail.as_str())),
+    );
+    hil::junit::write(j, "hil run", &[suite])
+}
+
 /// A free-running run here, where vcan is: the card or the JSON, and the exit status (3: the
 /// bench could not keep real time, no verdict).
 fn run_free_here(s: &Scenario, a: &RunArgs, out: &Path) -> Result<i32> {
@@ -125,18 +135,11 @@ fn run_free_here(s: &Scenario, a: &RunArgs, out: &Path) -> Result<i32> {
             .options(s, &a.bus.iface, out.to_path_buf(), nav_bin)?,
     )?;
     if let Some(j) = &a.junit {
-        let name = format!("hil run --free {}", s.name);
-        hil::junit::write(
+        write_junit(
             j,
-            "hil run",
-            &[hil::junit::of_checks(
-                &name,
-                &name,
-                r.wall_s,
-                r.checks
-                    .iter()
-                    .map(|c| (c.name.as_str(), c.pass, c.detail.as_str())),
-            )],
+            &format!("hil run --free {}", s.name),
+            r.wall_s,
+            &r.checks,
         )?;
     }
     if a.bus.json {

@@ -3,7 +3,7 @@
 use crate::*;
 
 pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
-    use emulators::turntable::{Turntable, TurntableFaults, TurntableParams};
+    use emulators::turntable::{Turntable, TurntableParams};
     use hil::suites::validate::SuiteTime;
     if a.speed.is_nan() || a.speed <= 0.0 || a.speed > 100.0 {
         bail!("--speed must be in (0, 100]");
@@ -55,17 +55,7 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
         None
     } else {
         vcan_setup::ensure_vcan(&a.bus.iface)?;
-        let mut faults = TurntableFaults::default();
-        match a.fault {
-            Some(TtFault::Stall) => faults.stall_from_s = Some(0.0),
-            Some(TtFault::Lock) => faults.lock_fails = true,
-            Some(TtFault::EncoderGlitch) => {
-                faults.encoder_glitch_at_s = (0..400).map(|i| 0.5 + 0.25 * f64::from(i)).collect();
-            }
-            Some(TtFault::LostCommands) => faults.lost_command_seqs = vec![4],
-            Some(TtFault::DelayedCommands) => faults.command_delay_s = 0.2,
-            None => {}
-        }
+        let faults = injected(a.fault);
         let p = TurntableParams {
             axes: a.axis + 1,
             faults,
@@ -108,4 +98,20 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
         println!(" report: {}", out.join("validation.json").display());
     }
     Ok(if v.pass { 0 } else { 1 })
+}
+
+/// The emulated mechanism's faults for `--fault`.
+fn injected(f: Option<TtFault>) -> emulators::turntable::TurntableFaults {
+    let mut faults = emulators::turntable::TurntableFaults::default();
+    match f {
+        Some(TtFault::Stall) => faults.stall_from_s = Some(0.0),
+        Some(TtFault::Lock) => faults.lock_fails = true,
+        Some(TtFault::EncoderGlitch) => {
+            faults.encoder_glitch_at_s = (0..400).map(|i| 0.5 + 0.25 * f64::from(i)).collect();
+        }
+        Some(TtFault::LostCommands) => faults.lost_command_seqs = vec![4],
+        Some(TtFault::DelayedCommands) => faults.command_delay_s = 0.2,
+        None => {}
+    }
+    faults
 }

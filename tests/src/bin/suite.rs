@@ -272,13 +272,9 @@ fn list(b: &Binary, ignored: bool) -> Result<Vec<String>> {
         .collect())
 }
 
-fn run(a: &RunArgs) -> Result<i32> {
-    let bins = binaries(&a.binaries, &a.only)?;
-    let logs = a.logs.clone().unwrap_or_else(|| {
-        let stem = a.results.with_extension("");
-        PathBuf::from(format!("{}-logs", stem.display()))
-    });
-    std::fs::create_dir_all(&logs).with_context(|| format!("creating {}", logs.display()))?;
+/// Every test of `bins` to run, slowest first: by the last run's times, else by the
+/// `--slow-first` list, else in the binaries' order.
+fn ordered(a: &RunArgs, bins: &[Binary]) -> Result<Vec<(Binary, String)>> {
     // the previous run's times, to start the longest first
     let before: BTreeMap<(String, String), f64> =
         std::fs::read_to_string(a.history.as_ref().unwrap_or(&a.results))
@@ -299,7 +295,7 @@ fn run(a: &RunArgs) -> Result<i32> {
         None => Vec::new(),
     };
     let mut queue = Vec::new();
-    for b in &bins {
+    for b in bins {
         let ignored_ones = list(b, true)?;
         let tests = if a.ignored {
             ignored_ones
@@ -321,6 +317,17 @@ fn run(a: &RunArgs) -> Result<i32> {
     }
     // slowest first, else in the binaries' order
     queue.sort_by(|x, y| y.0.total_cmp(&x.0));
+    Ok(queue.into_iter().map(|(_, b, t)| (b, t)).collect())
+}
+
+fn run(a: &RunArgs) -> Result<i32> {
+    let bins = binaries(&a.binaries, &a.only)?;
+    let logs = a.logs.clone().unwrap_or_else(|| {
+        let stem = a.results.with_extension("");
+        PathBuf::from(format!("{}-logs", stem.display()))
+    });
+    std::fs::create_dir_all(&logs).with_context(|| format!("creating {}", logs.display()))?;
+    let queue = ordered(a, &bins)?;
     let jobs = a.jobs.unwrap_or_else(|| {
         std::thread::available_parallelism().map_or(2, std::num::NonZeroUsize::get)
     });
@@ -330,12 +337,7 @@ fn run(a: &RunArgs) -> Result<i32> {
         a.name,
         bins.len()
     );
-    let queue = Arc::new(Mutex::new(
-        queue
-            .into_iter()
-            .map(|(_, b, t)| (b, t))
-            .collect::<VecDeque<_>>(),
-    ));
+    let queue = Arc::new(Mutex::new(queue.into_iter().collect::<VecDeque<_>>()));
     let results = Arc::new(Mutex::new(Vec::new()));
     let started = Instant::now();
     let workers: Vec<_> = (0..jobs.max(1))
