@@ -155,6 +155,9 @@ enum Cmd {
     /// Operator drills on vcan (emulators + the production nav binary).
     #[command(subcommand)]
     Drill(Drill),
+    /// Plan a drill before it starts: what it will give, and how long it must last.
+    #[command(subcommand)]
+    Plan(cmd::plan::Plan),
     /// Calibration procedures on vcan (emulators + the production nav binary in its calibration
     /// mode).
     #[command(subcommand)]
@@ -509,9 +512,17 @@ struct NorthFindingArgs {
     /// Longitude, deg (the site's surveyed position, with --lat: where a real receiver is).
     #[arg(long, value_parser = hil::values::longitude_deg, allow_negative_numbers = true, default_value_t = 112.989583)]
     lon: f64,
-    /// Dwell per position, s.
-    #[arg(long, value_parser = hil::values::duration_s, default_value_t = 60.0)]
-    dwell: f64,
+    /// Dwell per position, s, or `auto`: the shortest that meets --tolerance at 3 sigma by the
+    /// drill's prediction (`hil plan north-finding`), else the one that comes closest.
+    #[arg(long, value_parser = cmd::drill::dwell, default_value = "60")]
+    dwell: cmd::drill::Dwell,
+    /// Positions: 2, 4 or 8, equally spaced (4: 0, 90, 180, 270, the paper's).
+    #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(["2", "4", "8"]))]
+    positions: Option<String>,
+    /// Visit the positions out and back (0, 90, 180, 270, 270, 180, 90, 0): a linear gyro
+    /// drift cancels; each visit is a dwell.
+    #[arg(long)]
+    out_and_back: bool,
     /// Speed factor (1 = real time, as on the vehicle).
     #[arg(long, value_parser = hil::values::speed, default_value_t = 1.0)]
     speed: f64,
@@ -853,6 +864,7 @@ fn real_main(cli: Cli) -> Result<i32> {
             live,
         } => demo(speed, dwell, out, live),
         Cmd::Drill(Drill::NorthFinding(a)) => drill_north_finding(a),
+        Cmd::Plan(p) => cmd::plan::plan_cmd(p),
         Cmd::Calibrate(Calibrate::RotatingImu(a)) => calibrate_rotating_imu(a),
         Cmd::Calibrate(Calibrate::Tetrahedral(a)) => calibrate_tetrahedral(a),
         Cmd::Validate(Validate::Turntable(a)) => validate_turntable(a),

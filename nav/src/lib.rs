@@ -19,6 +19,7 @@ pub mod kf;
 mod mission;
 pub mod navigator;
 pub mod northfind;
+pub mod northplan;
 pub mod output;
 pub mod params;
 pub mod pipeline;

@@ -84,6 +84,18 @@ fn real_main() -> Result<()> {
             cfg.imu.gyro_scale_factor_ppm
         );
     }
+    if cfg.north_finding.enabled {
+        match cfg.north_finding.check_plan() {
+            (_, Some(why)) => warn!("{why}"),
+            (p, None) => info!(
+                "north-finding: predicted heading sigma {:.4} deg ({:.0} s dwells at {} positions, latitude {:.4} deg)",
+                p.sigma_deg,
+                cfg.north_finding.dwell_s,
+                cfg.north_finding.positions_deg.len(),
+                cfg.north_finding.latitude_deg
+            ),
+        }
+    }
     if cli.check {
         println!(
             "nav: config {} is valid: gyro bias {:?} deg/h, scale factor {:?} ppm{}",

@@ -75,6 +75,8 @@ pub struct NorthFindingConfig {
     pub status_timeout_s: f64,
     /// Time allowed for the lock pin, s.
     pub lock_timeout_s: f64,
+    /// What the drill is expected to give, and must ([`crate::northplan`]).
+    pub plan: crate::northplan::PlanConfig,
 }
 
 impl Default for NorthFindingConfig {
@@ -98,6 +100,7 @@ impl Default for NorthFindingConfig {
             move_timeout_s: 30.0,
             status_timeout_s: 0.5,
             lock_timeout_s: 3.0,
+            plan: crate::northplan::PlanConfig::default(),
         }
     }
 }
@@ -147,7 +150,24 @@ impl NorthFindingConfig {
         if self.blocks < 2 {
             return bad("blocks", "must be 2 or more");
         }
-        Ok(())
+        self.plan.check()
+    }
+
+    /// The drill these settings make, for [`crate::northplan`].
+    pub fn drill_plan(&self) -> crate::northplan::DrillPlan {
+        crate::northplan::DrillPlan {
+            latitude_deg: self.latitude_deg,
+            positions_deg: self.positions_deg.clone(),
+            dwell_s: self.dwell_s,
+            index_time_s: self.plan.index_time_s,
+            noise: self.plan.gyro,
+        }
+    }
+
+    /// The drill's predicted sigma and, when it cannot meet `[north_finding.plan]`'s
+    /// tolerance, what nav says before it starts.
+    pub fn check_plan(&self) -> (crate::northplan::Prediction, Option<String>) {
+        crate::northplan::check_drill(&self.drill_plan(), &self.plan)
     }
 }
 

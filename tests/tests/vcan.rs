@@ -1335,12 +1335,13 @@ fn canbusload_measures_the_bus_models_load() {
         }
     }
     assert!(frames > 19_000, "{frames} frames in 5 s");
-    // both tools read and write in real time: at normal priority, whatever the test's own
-    // (./run-tests runs the lockstep tests at nice 19)
+    // both tools read and write in real time: the reader at a real-time priority, the player
+    // at normal priority, whatever the test's own (./run-tests runs the lockstep tests at
+    // nice 19)
     let mut load = Command::new("canbusload");
     load.args(["-e", &format!("{iface}@1000000")])
         .stdout(Stdio::piped());
-    e2e::normal_priority(&mut load);
+    e2e::realtime_reader(&mut load);
     let mut load = load
         .spawn()
         .expect("canbusload (can-utils) runs: ./run-tests installs it");

@@ -101,10 +101,14 @@ fn demo_parts(
         heading: None,
         lat: 28.218157,
         lon: 112.989583,
-        dwell,
+        dwell: super::drill::Dwell::Seconds(dwell),
+        positions: None,
+        out_and_back: false,
         speed,
         disturbances: None,
-        tolerance: 0.1,
+        // what 60 s dwells on the paper's IMU (its drift included) meet at 3 sigma at the
+        // paper's latitude: `hil plan north-finding` says 0.156 deg
+        tolerance: 0.2,
         seed,
         in_process: false,
         live: live.clone(),

@@ -11,6 +11,7 @@ pub(crate) mod experiment;
 pub(crate) mod faults;
 pub(crate) mod fuzz;
 pub(crate) mod guest;
+pub(crate) mod plan;
 pub(crate) mod replay;
 pub(crate) mod run;
 pub(crate) mod validate;

@@ -10,6 +10,7 @@
 
 pub mod northfinding;
 pub mod observe;
+pub mod plan;
 pub mod rotating;
 pub mod tetrahedral;
 

@@ -6,6 +6,7 @@ use crate::scenario::Scenario;
 use crate::stats::wrap180;
 use anyhow::{Result, bail};
 use nav::northfind::{NorthFinder, NorthFindingConfig, NorthResult, Progress};
+use nav::northplan::{self, DrillPlan, Prediction};
 use nav::procedure::Procedure;
 use serde::{Deserialize, Serialize};
 
@@ -26,6 +27,10 @@ pub struct DrillOutcome {
     pub repeats: u32,
     /// Why it was aborted, if it was.
     pub abort: Option<String>,
+    /// The sigma predicted before the drill from the IMU's and the table's figures
+    /// ([`nav::northplan`]), deg.
+    #[serde(default)]
+    pub predicted_sigma_deg: Option<f64>,
     /// The full result.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub result: Option<serde_json::Value>,
@@ -73,6 +78,37 @@ pub fn scenario(heading_deg: f64, lat_deg: f64, dwell_s: f64, seed: u64) -> Scen
     s
 }
 
+/// The drill `nf` on the scenario's IMU and mechanism at its site, as the prediction sees it:
+/// what nav's config says of it ([`crate::scenario::navconfig::nf_config`]).
+pub fn drill_plan(s: &Scenario, nf: &NorthFindingConfig) -> DrillPlan {
+    crate::scenario::navconfig::nf_config(s, nf).drill_plan()
+}
+
+/// The heading sigma the scenario's drill `nf` is predicted to give.
+pub fn predict(s: &Scenario, nf: &NorthFindingConfig) -> Prediction {
+    northplan::predict(&drill_plan(s, nf))
+}
+
+/// Give the scenario's drill these table positions in order (the emulated mechanism gets a
+/// detent at each, as the mechanism for such a drill has), and the simulated time their dwells
+/// and moves need.
+pub fn set_positions(s: &mut Scenario, positions_deg: Vec<f64>) {
+    let Some(nf) = s.north_finding.as_mut() else {
+        return;
+    };
+    if let Some(tt) = s.turntable.as_mut() {
+        for p in &positions_deg {
+            if !tt.detents_deg.iter().any(|d| (d - p).abs() < 1e-9) {
+                tt.detents_deg.push(*p);
+            }
+        }
+        tt.detents_deg.sort_by(f64::total_cmp);
+    }
+    let dwells = positions_deg.len() as f64;
+    s.duration_s = dwells * (nf.dwell_s + 10.0) + 80.0 + 2.0 * nf.dwell_s;
+    nf.positions_deg = positions_deg;
+}
+
 /// Score a result against truth.
 pub fn outcome(
     truth_deg: f64,
@@ -81,6 +117,7 @@ pub fn outcome(
     t: f64,
 ) -> DrillOutcome {
     DrillOutcome {
+        predicted_sigma_deg: None,
         truth_deg,
         heading_deg: r.map(|r| r.heading_deg),
         error_deg: r.map(|r| wrap180(r.heading_deg - truth_deg)),
@@ -146,12 +183,10 @@ pub fn run_in_process(
             t,
         ));
     }
-    Ok(outcome(
-        s.truth_heading_deg(),
-        finder.result(),
-        finder.abort(),
-        t,
-    ))
+    Ok(DrillOutcome {
+        predicted_sigma_deg: Some(predict(s, nf).sigma_deg),
+        ..outcome(s.truth_heading_deg(), finder.result(), finder.abort(), t)
+    })
 }
 
 /// The drill's verdict: finished, within tolerance, error against the estimated sigma.
@@ -179,6 +214,23 @@ fn checks(out: &mut Vec<Check>, s: &Scenario, o: &DrillOutcome) {
                 e.abs() / sig.max(1e-12)
             ),
         });
+        out.push(consistency(e, sig, o.predicted_sigma_deg));
+    }
+}
+
+/// Whatever the tolerance says, an error beyond 3 of nav's own sigmas means nav promised more
+/// than it found: its sigma cannot be trusted.
+fn consistency(e: f64, sig: f64, predicted: Option<f64>) -> Check {
+    let k = e.abs() / sig.max(1e-12);
+    let pred = predicted.map_or(String::new(), |p| format!("; predicted sigma {p:.4} deg"));
+    Check {
+        name: "heading within 3 of nav's sigmas".into(),
+        pass: k <= 3.0,
+        detail: if k <= 3.0 {
+            format!("error {e:+.4} deg = {k:.2} of nav's sigma {sig:.4} deg{pred}")
+        } else {
+            format!("inconsistent: error {e:+.4} deg = {k:.2} of nav's sigma {sig:.4} deg{pred}")
+        },
     }
 }
 
@@ -196,11 +248,22 @@ fn card(s: &Scenario, d: &DrillOutcome) -> String {
     );
     let _ = writeln!(
         c,
-        "  sigma         {:>10} deg    duration {:.1} s    dwells repeated {}    tolerance {} deg",
+        "  sigma         {:>10} deg    predicted {} deg    error in nav's sigmas {}{}",
         f(d.sigma_deg, 4),
-        d.duration_s,
-        d.repeats,
-        s.heading_tolerance_deg
+        f(d.predicted_sigma_deg, 4),
+        match (d.error_deg, d.sigma_deg) {
+            (Some(e), Some(sg)) => format!("{:.2}", e.abs() / sg.max(1e-12)),
+            _ => "--".into(),
+        },
+        match (d.error_deg, d.sigma_deg) {
+            (Some(e), Some(sg)) if e.abs() > 3.0 * sg => "  INCONSISTENT (beyond 3)",
+            _ => "",
+        }
+    );
+    let _ = writeln!(
+        c,
+        "  duration {:.1} s    dwells repeated {}    tolerance {} deg",
+        d.duration_s, d.repeats, s.heading_tolerance_deg
     );
     if let Some(why) = &d.abort {
         let _ = writeln!(c, "  ABORTED: {why}");
@@ -215,7 +278,8 @@ fn markdown(d: &DrillOutcome) -> String {
         "found heading",
         "truth",
         "error",
-        "sigma",
+        "nav's sigma",
+        "predicted sigma",
         "duration",
         "repeats",
     ]);
@@ -224,6 +288,7 @@ fn markdown(d: &DrillOutcome) -> String {
         format!("{:.4} deg", d.truth_deg),
         format!("{} deg", f(d.error_deg)),
         format!("{} deg", f(d.sigma_deg)),
+        format!("{} deg", f(d.predicted_sigma_deg)),
         format!("{:.1} s", d.duration_s),
         d.repeats.to_string(),
     ]);
@@ -245,6 +310,7 @@ fn html(d: &DrillOutcome, nav: &nav::summary::Summary) -> super::Section {
             ("truth, deg", format!("{:.4}", d.truth_deg)),
             ("error, deg", f(d.error_deg)),
             ("nav's sigma, deg", f(d.sigma_deg)),
+            ("predicted sigma, deg", f(d.predicted_sigma_deg)),
             ("duration, s", format!("{:.1}", d.duration_s)),
             ("dwells repeated", d.repeats.to_string()),
             ("aborted", d.abort.clone().unwrap_or_else(|| "no".into())),
@@ -281,12 +347,10 @@ impl super::BenchProcedure for NorthFinding {
             self.name(),
             nf.map(|n| (n.result.as_ref(), n.abort.as_deref())),
         );
-        o.north_finding = Some(outcome(
-            s.truth_heading_deg(),
-            result,
-            why.as_deref(),
-            sim_reached,
-        ));
+        o.north_finding = Some(DrillOutcome {
+            predicted_sigma_deg: s.north_finding.as_ref().map(|nf| predict(s, nf).sigma_deg),
+            ..outcome(s.truth_heading_deg(), result, why.as_deref(), sim_reached)
+        });
     }
     fn checks(
         &self,

@@ -10,6 +10,7 @@ use nav::imu::ImuCalibration;
 use nav::kf::FilterConfig;
 use nav::navigator::NavigationConfig;
 use nav::northfind::NorthFindingConfig;
+use nav::northplan::{GyroNoise, PlanConfig};
 use std::path::Path;
 
 /// nav's `[navigation]` for a scenario: enabled, the surveyed heading when north-finding does
@@ -156,7 +157,59 @@ pub fn nf_config(s: &Scenario, base: &NorthFindingConfig) -> NorthFindingConfig 
     NorthFindingConfig {
         enabled: true,
         latitude_deg: s.site.lat_deg,
+        plan: plan_config(s, base),
         ..base.clone()
+    }
+}
+
+/// The angle noise at each end of a dwell per arcsec of gyro pulse weight (quantization and the
+/// dither residue the end windows leave), arcsec: measured by the Monte Carlo with neither
+/// white noise nor drift (docs/north-finding.md, "The plan").
+pub const END_ANGLE_PER_PULSE: f64 = 0.085;
+
+/// The scenario's gyros and mechanism in the figures the drill's prediction takes.
+pub fn gyro_noise(s: &Scenario) -> GyroNoise {
+    let imu = &s.imu;
+    let pulse = imu.gyro_pulse_arcsec[0].max(imu.gyro_pulse_arcsec[1]);
+    // nav reads the table's angle from its status frames over the dwell: the encoder's noise
+    // averaged over a second's frames at least
+    let index = s.turntable.as_ref().map_or(0.0, |t| {
+        t.encoder_noise_arcsec / t.status_hz.max(1.0).sqrt()
+    });
+    GyroNoise {
+        arw_dpsh: imu.gyro_arw_dpsh,
+        drift_dph: imu.gyro_bias_instability_dph,
+        drift_tau_s: imu.gyro_bias_tau_s,
+        end_angle_arcsec: END_ANGLE_PER_PULSE * pulse,
+        index_arcsec: index,
+    }
+}
+
+/// What nav is told to expect of the drill `nf` (`[north_finding.plan]`): the scenario's
+/// tolerance, its gyros' figures, and the time between dwells on its mechanism (unlock, the
+/// largest step at its rate and acceleration limits, lock) with nav's settling wait.
+pub fn plan_config(s: &Scenario, nf: &NorthFindingConfig) -> PlanConfig {
+    let tt = s.turntable.clone().unwrap_or_default();
+    let step = nf
+        .positions_deg
+        .windows(2)
+        .map(|w| {
+            let d = (w[1] - w[0]).rem_euclid(360.0);
+            d.min(360.0 - d)
+        })
+        .fold(0.0, f64::max);
+    let (v, a) = (tt.max_rate_dps.max(1e-6), tt.max_accel_dps2.max(1e-6));
+    let travel = if step >= v * v / a {
+        step / v + v / a
+    } else {
+        2.0 * (step / a).sqrt()
+    };
+    PlanConfig {
+        tolerance_deg: s.heading_tolerance_deg,
+        confidence: nf.plan.confidence,
+        // unlock, travel, settle into the lock window, lock, nav's wait, the acknowledgements
+        index_time_s: 2.0 * tt.lock_time_s + travel + 0.3 + nf.settle_s,
+        gyro: gyro_noise(s),
     }
 }
 

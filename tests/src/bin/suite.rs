@@ -86,6 +86,11 @@ struct RunArgs {
     /// when no previous run says how long they took (a fresh clone).
     #[arg(long)]
     slow_first: Option<PathBuf>,
+    /// Tests that run with nothing else of this run beside them (a test whose verdict compares
+    /// two of its runs' latencies): first, one after another, before the others start
+    /// (comma-separated names, as listed: `module::test`).
+    #[arg(long, value_delimiter = ',')]
+    alone: Vec<String>,
     /// Folder for each test's output (default: beside the results, `<name>-logs`).
     #[arg(long)]
     logs: Option<PathBuf>,
@@ -337,9 +342,26 @@ fn run(a: &RunArgs) -> Result<i32> {
         a.name,
         bins.len()
     );
-    let queue = Arc::new(Mutex::new(queue.into_iter().collect::<VecDeque<_>>()));
-    let results = Arc::new(Mutex::new(Vec::new()));
     let started = Instant::now();
+    let (alone, queue): (Vec<_>, Vec<_>) = queue
+        .into_iter()
+        .partition(|(_, t)| a.alone.iter().any(|n| n == t));
+    let mut done = Vec::new();
+    for (b, t) in alone {
+        eprintln!("suite {}: {t} runs alone", a.name);
+        let r = run_one(
+            &a.name,
+            &b,
+            &t,
+            &logs,
+            (a.ignored, a.nice),
+            Duration::from_secs(a.timeout_s),
+        );
+        announce(&r);
+        done.push(r);
+    }
+    let queue = Arc::new(Mutex::new(queue.into_iter().collect::<VecDeque<_>>()));
+    let results = Arc::new(Mutex::new(done));
     let workers: Vec<_> = (0..jobs.max(1))
         .map(|_| {
             let (queue, results) = (queue.clone(), results.clone());
