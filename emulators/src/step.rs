@@ -169,7 +169,7 @@ impl Stepper {
     }
 
     /// End the stream when nav's procedure on the mechanism (north-finding, a calibration) is
-    /// over, as nav's NAV_TIME says it (its mode leaves north-finding, levelling and
+    /// over, as nav's NAV_TIME says it (its mode leaves north-finding, the gyrocompass, levelling and
     /// calibrating after it has shown one), `margin` samples after the sample that NAV_TIME
     /// names. The end is then a point of the data, not of the moment somebody read nav's
     /// report: with `margin` at least the lockstep's window the scheduler has never sent past
@@ -380,8 +380,10 @@ impl Stepper {
                 }
                 if let Some(p) = self.procedure_end.as_mut() {
                     use wire::NavMode as M;
-                    let running =
-                        matches!(nt.mode, M::NorthFinding | M::Levelling | M::Calibrating);
+                    let running = matches!(
+                        nt.mode,
+                        M::NorthFinding | M::Gyrocompass | M::Levelling | M::Calibrating
+                    );
                     p.seen |= running;
                     if p.seen && !running && p.last.is_none() {
                         p.last = Some(k + p.margin);

@@ -42,6 +42,10 @@ pub(crate) trait Mission: std::fmt::Debug {
     fn heading_deg(&self) -> Option<f64> {
         None
     }
+    /// Its sigma, deg.
+    fn heading_sigma_deg(&self) -> Option<f64> {
+        None
+    }
     /// It has just finished: the parameter file it made, and where its settings want it
     /// written (none: kept in the summary only).
     fn made(&mut self) -> Option<(Option<PathBuf>, ParameterFile)> {

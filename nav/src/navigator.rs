@@ -119,6 +119,8 @@ pub struct Navigator {
     cfg: NavigationConfig,
     phase: NavPhase,
     heading: Option<f64>,
+    /// The sigma of the heading handed over, deg.
+    heading_sigma_deg: Option<f64>,
     first_fix: Option<(f64, f64, f64)>,
     /// What the receiver said of the accuracy of the fix navigation starts at.
     first_fix_accuracy: crate::kf::StatedAccuracy,
@@ -245,6 +247,7 @@ impl Navigator {
     pub fn new(cfg: NavigationConfig) -> Self {
         Self {
             heading: cfg.initial_heading_deg.map(f64::to_radians),
+            heading_sigma_deg: None,
             integrity: crate::integrity::IntegrityMonitor::new(cfg.integrity.clone()),
             cfg,
             phase: NavPhase::Waiting,
@@ -366,8 +369,9 @@ impl Navigator {
     }
 
     /// North-finding's heading (deg) becomes available.
-    pub fn set_heading(&mut self, deg: f64) {
+    pub fn set_heading(&mut self, deg: f64, sigma_deg: Option<f64>) {
         self.heading = Some(deg.to_radians());
+        self.heading_sigma_deg = sigma_deg;
     }
 
     /// A PPS edge at IMU time `t`; false when it was rejected (see
@@ -477,7 +481,13 @@ impl Navigator {
             h,
         );
         self.kf = self.cfg.gps_aiding.then(|| {
-            let mut k = Kf::new(self.cfg.filter.clone(), lat);
+            // the filter starts no surer of the heading than what found it (a degraded
+            // north-finding's sigma is larger than the configured one)
+            let mut fc = self.cfg.filter.clone();
+            if let Some(s) = self.heading_sigma_deg {
+                fc.init_att_deg[2] = fc.init_att_deg[2].max(s);
+            }
+            let mut k = Kf::new(fc, lat);
             k.levelled(&st.q_nb, f.norm());
             if self.first_fix.is_some() {
                 k.started_at_fix(&self.first_fix_accuracy, &st);

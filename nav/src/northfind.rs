@@ -77,6 +77,12 @@ pub struct NorthFindingConfig {
     pub lock_timeout_s: f64,
     /// What the drill is expected to give, and must ([`crate::northplan`]).
     pub plan: crate::northplan::PlanConfig,
+    /// When the mechanism is lost mid-drill (its status frames stop, or it stalls), find north
+    /// by a static gyrocompass where the table stands: a dwell there, solved with the positions
+    /// measured before, the unknown gyro biases bounded by `plan.gyro.bias_dph`. The table's
+    /// angle is followed from its last status frame by the IMU's own vertical gyro. false:
+    /// abort, as on any other fault.
+    pub fallback: bool,
 }
 
 impl Default for NorthFindingConfig {
@@ -101,6 +107,7 @@ impl Default for NorthFindingConfig {
             status_timeout_s: 0.5,
             lock_timeout_s: 3.0,
             plan: crate::northplan::PlanConfig::default(),
+            fallback: true,
         }
     }
 }
@@ -193,6 +200,9 @@ pub enum Phase {
     Returning,
     /// Locking at zero.
     LockingZero,
+    /// The mechanism lost: waiting for the table to come to rest, for a static gyrocompass
+    /// where it stands.
+    TableLost,
     /// Finished: result available.
     Done,
     /// Given up: reason available.
@@ -273,7 +283,47 @@ pub struct NorthResult {
     pub repeats: u32,
     /// Per position.
     pub positions: Vec<PositionResult>,
+    /// Set when the mechanism was lost and the heading comes from a static gyrocompass where
+    /// the table stood: why.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub degraded: Option<String>,
+    /// The table's angle at the end, deg (0: returned to zero; else where it stood when lost).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub final_table_deg: f64,
 }
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
+}
+
+/// The mechanism lost mid-drill.
+#[derive(Debug, Clone)]
+struct Lost {
+    /// Why.
+    why: String,
+    /// The table's angle, followed by the IMU's vertical gyro, deg.
+    angle_deg: f64,
+    /// Its uncertainty: the table's rate at its last status frame times the frame's age
+    /// uncertainty, deg.
+    angle_sigma_deg: f64,
+    /// When it was lost, s (IMU time).
+    at: f64,
+    /// The table's rotation over the current rest window: (start time, angle at its start).
+    window: (f64, f64),
+    /// Since when the table has been at rest, s.
+    rest_since: Option<f64>,
+}
+
+/// A table turning slower than this is at rest, deg/s (the dither filter's residue is a few
+/// arcsec: over a rest window, a thousandth of a degree per second).
+const REST_RATE_DPS: f64 = 0.02;
+/// The window the table's rate is measured over for rest, s.
+const REST_WINDOW_S: f64 = 0.5;
+/// ... for this long before the gyrocompass dwell starts, s.
+const REST_S: f64 = 1.0;
+/// The uncertainty of a status frame's time against the IMU's updates (two samples at 2 kHz),
+/// s: the table's angle is carried on from it by the vertical gyro.
+const STATUS_AGE_S: f64 = 0.001;
 
 /// Accumulation of one dwell.
 #[derive(Debug, Clone, Default)]
@@ -307,6 +357,12 @@ pub struct NorthFinder {
     repeats: u32,
     results: Vec<PositionResult>,
     result: Option<NorthResult>,
+    /// The IMU's rotation about its vertical since the last status frame, deg, and the IMU time
+    /// that frame came at (updates valid before it are in its angle already).
+    z_since_status: (f64, f64),
+    /// The IMU time of the last update, s.
+    last_update: Option<f64>,
+    lost: Option<Lost>,
 }
 
 const DPH: f64 = earth::DEG_PER_HOUR_PER_RAD_S;
@@ -334,7 +390,51 @@ impl NorthFinder {
             repeats: 0,
             results: Vec::new(),
             result: None,
+            z_since_status: (0.0, 0.0),
+            last_update: None,
+            lost: None,
         })
+    }
+
+    /// Why the mechanism was lost, when it was and north-finding goes on without it.
+    pub fn lost(&self) -> Option<&str> {
+        self.lost.as_ref().map(|l| l.why.as_str())
+    }
+
+    /// The mechanism is lost for `why`: a static gyrocompass where the table stands, or (not
+    /// allowed, or never heard) give up.
+    fn lose(&mut self, why: String) {
+        if self.core.finished() || self.lost.is_some() {
+            return;
+        }
+        let Some(st) = self.core.link.status(self.cfg.axis).copied() else {
+            self.core.fail(why);
+            return;
+        };
+        if !self.cfg.fallback {
+            self.core.fail(why);
+            return;
+        }
+        let (z, since) = self.z_since_status;
+        let age = (self.last_update.unwrap_or(since) - since).max(1e-3);
+        let angle = st.angle_deg + z;
+        tracing::warn!(
+            "{why}: north-finding goes on by a static gyrocompass where the table stands (last reported at {:.4} deg, {:.4} deg now by the IMU)",
+            st.angle_deg,
+            angle
+        );
+        self.lost = Some(Lost {
+            why,
+            angle_deg: angle,
+            angle_sigma_deg: (z / age).abs() * STATUS_AGE_S,
+            at: self.core.t,
+            window: (self.core.t, angle),
+            rest_since: None,
+        });
+        // nothing more to the mechanism: no command, no heartbeat
+        self.core.link.clear();
+        self.dwell = Dwell::default();
+        self.enter(Phase::TableLost);
     }
 
     /// Phase.
@@ -353,7 +453,9 @@ impl NorthFinder {
     }
 
     fn where_(&self) -> String {
-        if self.returning {
+        if let Some(l) = &self.lost {
+            format!("a static gyrocompass at {:.3} deg", l.angle_deg)
+        } else if self.returning {
             "returning to zero".into()
         } else {
             format!(
@@ -365,14 +467,30 @@ impl NorthFinder {
         }
     }
 
+    /// A turntable status frame arrived at IMU time `t` (the end of the last sample nav has).
+    pub fn on_status_at(&mut self, t: f64, st: &TtStatus) {
+        if st.axis == self.cfg.axis && self.lost.is_none() {
+            self.z_since_status = (0.0, t);
+        }
+        self.on_status(st);
+    }
+
     /// A turntable status frame arrived.
     pub fn on_status(&mut self, st: &TtStatus) {
-        if st.axis != self.cfg.axis || self.core.finished() {
+        if st.axis != self.cfg.axis || self.core.finished() || self.lost.is_some() {
             return;
         }
         if let Some(names) = crate::procedure::faults_of(st) {
             let w = self.where_();
-            self.core.fail(format!("turntable fault at {w}: {names}"));
+            let why = format!("turntable fault at {w}: {names}");
+            // a stalled table stands where it stopped, its encoder still read: only the
+            // indexing is lost
+            if st.faults.stall && !st.faults.encoder {
+                self.core.link.on_status(self.core.t, st);
+                self.lose(why);
+            } else {
+                self.core.fail(why);
+            }
             return;
         }
         if st.state == TtState::Moving {
@@ -392,6 +510,9 @@ impl NorthFinder {
     pub fn poll(&mut self, t: f64) -> Option<TtCmd> {
         self.core.t = t;
         self.core.t_start.get_or_insert(t);
+        if self.lost.is_some() {
+            return None;
+        }
         crate::procedure::poll(self, t)
     }
 
@@ -489,7 +610,7 @@ impl NorthFinder {
                     self.start_dwell();
                 }
             }
-            Phase::Dwell | Phase::Disturbed => {}
+            Phase::Dwell | Phase::Disturbed | Phase::TableLost => {}
             Phase::Done | Phase::Aborted => {}
         }
     }
@@ -518,6 +639,22 @@ impl NorthFinder {
     /// rotation vector `phi` and velocity increment `dv` over the update interval.
     pub fn on_update(&mut self, t: f64, phi: [f64; 3], dv: [f64; 3]) {
         self.core.t = t;
+        // the table turns the IMU about its vertical (counter-clockwise positive, as the
+        // table's angle), the earth too: the table's turn followed between status frames (the
+        // updates valid after the last one's time), and after the mechanism is lost
+        let dt = self.last_update.map_or(0.0, |p| (t - p).max(0.0));
+        self.last_update = Some(t);
+        let earth_up = earth::OMEGA_IE * self.cfg.latitude_deg.to_radians().sin();
+        let dz = (phi[2] - earth_up * dt).to_degrees();
+        match self.lost.as_mut() {
+            Some(l) => l.angle_deg += dz,
+            None if t > self.z_since_status.1 => self.z_since_status.0 += dz,
+            None => {}
+        }
+        if self.core.phase == Phase::TableLost {
+            self.wait_for_rest(t);
+            return;
+        }
         match self.core.phase {
             Phase::Dwell => self.dwell_update(t, phi, dv),
             Phase::Disturbed => {
@@ -663,23 +800,39 @@ impl NorthFinder {
             .sum::<f64>()
             / (m - 1.0).max(1.0);
         let sigma = (var / m).sqrt();
-        let table = self.target()
-            + if d.enc_n > 0 {
-                d.enc_sum / f64::from(d.enc_n)
-            } else {
-                0.0
-            };
+        let (commanded, table) = match &self.lost {
+            Some(l) => (l.angle_deg, l.angle_deg),
+            None => (
+                self.target(),
+                self.target()
+                    + if d.enc_n > 0 {
+                        d.enc_sum / f64::from(d.enc_n)
+                    } else {
+                        0.0
+                    },
+            ),
+        };
         self.results.push(PositionResult {
-            commanded_deg: self.target(),
+            commanded_deg: commanded,
             table_deg: table,
             rate_dph: [w_l.x * DPH, w_l.y * DPH, w_l.z * DPH],
             sigma_dph: sigma * DPH,
             tilt_deg: [pitch.to_degrees(), roll.to_degrees()],
             repeats: self.repeats_here,
         });
+        if self.lost.is_some() {
+            self.finish_fallback();
+            return;
+        }
         self.k += 1;
         if self.k < self.cfg.positions_deg.len() {
-            self.begin_position();
+            if self.target() == self.results[self.results.len() - 1].commanded_deg {
+                // the same position again (out and back): the next dwell at once, still locked
+                self.repeats_here = 0;
+                self.start_dwell();
+            } else {
+                self.begin_position();
+            }
         } else {
             // back to zero and lock
             self.returning = true;
@@ -693,8 +846,26 @@ impl NorthFinder {
         if results.len() < 2 {
             return None;
         }
+        Self::solve_with(results, None)
+    }
+
+    /// Solve as [`Self::solve`], the horizontal biases bounded by a prior of `bias_dph` (1
+    /// sigma, deg/h) when given: then one position suffices (a static gyrocompass), its
+    /// sigma set by the prior.
+    pub fn solve_with(
+        results: &[PositionResult],
+        bias_dph: Option<f64>,
+    ) -> Option<HeadingSolution> {
+        if results.is_empty() {
+            return None;
+        }
         let mut ata = Matrix4::<f64>::zeros();
         let mut atb = Vector4::<f64>::zeros();
+        if let Some(b) = bias_dph {
+            let w = 1.0 / b.max(1e-6).powi(2);
+            ata[(2, 2)] += w;
+            ata[(3, 3)] += w;
+        }
         for r in results {
             let phi = r.table_deg.to_radians();
             let wgt = 1.0 / r.sigma_dph.max(1e-6).powi(2);
@@ -721,6 +892,74 @@ impl NorthFinder {
         })
     }
 
+    /// The mechanism lost: wait until the table is at rest (its rate by the IMU's vertical gyro
+    /// over [`REST_WINDOW_S`] windows below [`REST_RATE_DPS`] for [`REST_S`]), then dwell there.
+    fn wait_for_rest(&mut self, t: f64) {
+        let timeout = self.cfg.move_timeout_s;
+        let Some(l) = self.lost.as_mut() else {
+            return;
+        };
+        let (t0, a0) = l.window;
+        if t - t0 < REST_WINDOW_S {
+            return;
+        }
+        let rate = (l.angle_deg - a0) / (t - t0);
+        l.window = (t, l.angle_deg);
+        if rate.abs() > REST_RATE_DPS {
+            l.rest_since = None;
+        } else if l.rest_since.is_none() {
+            l.rest_since = Some(t0);
+        }
+        let (rested, at) = (l.rest_since.is_some_and(|r| t - r >= REST_S), l.at);
+        if rested {
+            self.repeats_here = 0;
+            self.start_dwell();
+        } else if t - at > timeout {
+            let why = format!(
+                "{}; the table did not come to rest within {timeout} s for a static gyrocompass",
+                l.why
+            );
+            self.core.fail(why);
+        }
+    }
+
+    /// The static gyrocompass's dwell done: the heading from it and the positions measured
+    /// before the loss, the biases bounded by the unit's figure.
+    fn finish_fallback(&mut self) {
+        let Some(l) = self.lost.clone() else {
+            return;
+        };
+        let Some(sol) = Self::solve_with(&self.results, Some(self.cfg.plan.gyro.bias_dph)) else {
+            self.core
+                .fail(format!("{}; the static gyrocompass found nothing", l.why));
+            return;
+        };
+        let expected = earth::OMEGA_IE * self.cfg.latitude_deg.to_radians().cos() * DPH;
+        let sigma = sol.sigma_deg.hypot(l.angle_sigma_deg);
+        tracing::warn!(
+            "north-finding degraded ({}): heading {:.4} deg, sigma {sigma:.4} deg from a static gyrocompass at {:.3} deg and {} position(s) before",
+            l.why,
+            sol.heading_deg,
+            l.angle_deg,
+            self.results.len() - 1
+        );
+        self.result = Some(NorthResult {
+            heading_deg: sol.heading_deg,
+            sigma_deg: sigma,
+            gyro_bias_dph: sol.gyro_bias_dph,
+            horizontal_earth_rate_dph: sol.horizontal_earth_rate_dph,
+            expected_earth_rate_dph: expected,
+            tilt_deg: self.results[0].tilt_deg,
+            dwell_total_s: self.cfg.dwell_s * self.results.len() as f64,
+            duration_s: self.core.elapsed(),
+            repeats: self.repeats,
+            positions: self.results.clone(),
+            degraded: Some(format!("static gyrocompass: {}", l.why)),
+            final_table_deg: l.angle_deg,
+        });
+        self.enter(Phase::Done);
+    }
+
     fn finish(&mut self) {
         let Some(HeadingSolution {
             heading_deg: heading,
@@ -744,6 +983,8 @@ impl NorthFinder {
             duration_s: self.core.elapsed(),
             repeats: self.repeats,
             positions: self.results.clone(),
+            degraded: None,
+            final_table_deg: 0.0,
         });
         self.enter(Phase::Done);
     }
@@ -790,6 +1031,15 @@ impl OnMechanism for NorthFinder {
     fn core(&mut self) -> &mut Core<Phase> {
         &mut self.core
     }
+    fn link_failed(&mut self, f: crate::ttlink::LinkFailure) {
+        let why = f.describe(&self.where_());
+        match f {
+            // the mechanism's status frames stopped (its controller, its bus): only the
+            // indexing is lost
+            crate::ttlink::LinkFailure::StatusLost { .. } => self.lose(why),
+            _ => self.core.fail(why),
+        }
+    }
     fn at(&self) -> String {
         self.where_()
     }
@@ -804,7 +1054,8 @@ impl Phases for Phase {
 }
 
 // north-finding stamps status frames with its own update time
-crate::procedure::procedure!(NorthFinder, "north-finding", |s, _t, st| s.on_status(st));
+crate::procedure::procedure!(NorthFinder, "north-finding", |s, t, st| s
+    .on_status_at(t, st));
 
 /// North-finding at exit.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -874,10 +1125,20 @@ impl Mission for NorthFinding {
         self.finder.on_update(t, phi, dv);
     }
     fn mode(&self) -> NavMode {
-        NavMode::NorthFinding
+        if self.finder.lost().is_some() {
+            NavMode::Gyrocompass
+        } else {
+            NavMode::NorthFinding
+        }
     }
     fn heading_deg(&self) -> Option<f64> {
-        self.finder.result().map(|r| r.heading_deg)
+        // the IMU's own heading: where the table stands turns it from the heading at zero
+        self.finder
+            .result()
+            .map(|r| (r.heading_deg - r.final_table_deg).rem_euclid(360.0))
+    }
+    fn heading_sigma_deg(&self) -> Option<f64> {
+        self.finder.result().map(|r| r.sigma_deg)
     }
     fn as_any(&self) -> &dyn Any {
         self

@@ -45,6 +45,9 @@ pub struct GyroNoise {
     pub end_angle_arcsec: f64,
     /// Error of the table angle used for each position, 1 sigma, arcsec.
     pub index_arcsec: f64,
+    /// The horizontal gyros' constant bias left after calibration, 1 sigma, deg/h: it cancels
+    /// between positions, but bounds a static gyrocompass when the mechanism is lost.
+    pub bias_dph: f64,
 }
 
 impl Default for GyroNoise {
@@ -57,6 +60,7 @@ impl Default for GyroNoise {
             drift_tau_s: 600.0,
             end_angle_arcsec: 0.085,
             index_arcsec: 0.05,
+            bias_dph: 0.1,
         }
     }
 }
@@ -114,6 +118,9 @@ impl PlanConfig {
         }
         if !(self.confidence.is_finite() && self.confidence > 0.0) {
             return bad("confidence", "must be a positive number of sigmas");
+        }
+        if !(g.bias_dph.is_finite() && g.bias_dph > 0.0) {
+            return bad("gyro.bias_dph", "must be a positive number of deg/h");
         }
         if !(g.drift_tau_s.is_finite() && g.drift_tau_s > 0.0) {
             return bad("gyro.drift_tau_s", "must be a positive number of seconds");

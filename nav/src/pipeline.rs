@@ -775,7 +775,7 @@ impl Pipeline {
             if !r.handed_over
                 && let Some(h) = r.m.heading_deg()
             {
-                n.set_heading(h);
+                n.set_heading(h, r.m.heading_sigma_deg());
                 r.handed_over = true;
             }
         }

@@ -123,6 +123,12 @@ pub(crate) trait OnMechanism {
     fn at(&self) -> String;
     /// Advance on the mechanism's state: nothing is in flight or queued.
     fn advance(&mut self);
+    /// The link failed: give up, saying where (unless the procedure can go on without the
+    /// mechanism).
+    fn link_failed(&mut self, f: crate::ttlink::LinkFailure) {
+        let w = self.at();
+        self.core().fail(f.describe(&w));
+    }
 }
 
 /// An acknowledgement: a refusal or a mismatch gives the procedure up, saying where it was.
@@ -141,8 +147,7 @@ pub(crate) fn poll<P: OnMechanism>(p: &mut P, t: f64) -> Option<TtCmd> {
     }
     match p.core().link.poll(t) {
         LinkPoll::Failed(f) => {
-            let w = p.at();
-            p.core().fail(f.describe(&w));
+            p.link_failed(f);
             return None;
         }
         LinkPoll::Send(c) => return Some(c),

@@ -173,17 +173,22 @@ impl HeadingScore {
     }
 }
 
+/// The device finds north (with the mechanism, or by a static gyrocompass without it).
+fn finding(m: NavMode) -> bool {
+    matches!(m, NavMode::NorthFinding | NavMode::Gyrocompass)
+}
+
 /// The heading at a drill's end: the first epoch with an attitude after the device's mode has
 /// left north-finding (having shown it), else the last epoch with an attitude. `truth_deg`: the
 /// true heading at an IMU sample.
 pub fn drill_heading(epochs: &[Epoch], truth_deg: impl Fn(u64) -> f64) -> Option<HeadingScore> {
     let found = epochs
         .iter()
-        .position(|e| e.mode == NavMode::NorthFinding)
+        .position(|e| finding(e.mode))
         .and_then(|i| {
             epochs[i..]
                 .iter()
-                .find(|e| e.mode != NavMode::NorthFinding && e.att.is_some() && e.sample.is_some())
+                .find(|e| !finding(e.mode) && e.att.is_some() && e.sample.is_some())
         })
         .or_else(|| {
             epochs
@@ -207,11 +212,11 @@ pub fn drill_heading(epochs: &[Epoch], truth_deg: impl Fn(u64) -> f64) -> Option
 pub fn drill_over(epochs: &[Epoch]) -> bool {
     epochs
         .iter()
-        .position(|e| e.mode == NavMode::NorthFinding)
+        .position(|e| finding(e.mode))
         .is_some_and(|i| {
             epochs[i..]
                 .iter()
-                .any(|e| e.mode != NavMode::NorthFinding && e.att.is_some())
+                .any(|e| !finding(e.mode) && e.att.is_some())
         })
 }
 

@@ -27,6 +27,9 @@ pub struct DrillOutcome {
     pub repeats: u32,
     /// Why it was aborted, if it was.
     pub abort: Option<String>,
+    /// Set when the mechanism was lost and nav found north by a static gyrocompass: why.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub degraded: Option<String>,
     /// The sigma predicted before the drill from the IMU's and the table's figures
     /// ([`nav::northplan`]), deg.
     #[serde(default)]
@@ -118,6 +121,7 @@ pub fn outcome(
 ) -> DrillOutcome {
     DrillOutcome {
         predicted_sigma_deg: None,
+        degraded: r.and_then(|r| r.degraded.clone()),
         truth_deg,
         heading_deg: r.map(|r| r.heading_deg),
         error_deg: r.map(|r| wrap180(r.heading_deg - truth_deg)),
@@ -265,6 +269,12 @@ fn card(s: &Scenario, d: &DrillOutcome) -> String {
         "  duration {:.1} s    dwells repeated {}    tolerance {} deg",
         d.duration_s, d.repeats, s.heading_tolerance_deg
     );
+    if let Some(why) = &d.degraded {
+        let _ = writeln!(
+            c,
+            "  DEGRADED: the mechanism lost, heading from a {why} (sigma above is its own)"
+        );
+    }
     if let Some(why) = &d.abort {
         let _ = writeln!(c, "  ABORTED: {why}");
     }
@@ -293,6 +303,9 @@ fn markdown(d: &DrillOutcome) -> String {
         d.repeats.to_string(),
     ]);
     let mut m = format!("## North-finding drill\n\n{}\n", t.finish());
+    if let Some(why) = &d.degraded {
+        m += &format!("**Degraded:** the mechanism lost, heading from a {why}\n\n");
+    }
     if let Some(why) = &d.abort {
         m += &format!("**Aborted:** {why}\n\n");
     }
@@ -313,6 +326,10 @@ fn html(d: &DrillOutcome, nav: &nav::summary::Summary) -> super::Section {
             ("predicted sigma, deg", f(d.predicted_sigma_deg)),
             ("duration, s", format!("{:.1}", d.duration_s)),
             ("dwells repeated", d.repeats.to_string()),
+            (
+                "degraded",
+                d.degraded.clone().unwrap_or_else(|| "no".into()),
+            ),
             ("aborted", d.abort.clone().unwrap_or_else(|| "no".into())),
         ],
         text: None,
@@ -438,6 +455,45 @@ mod tests {
         assert!(o.repeats >= 1, "the disturbed dwell was repeated");
         let e = o.error_deg.unwrap();
         assert!(e.abs() < 0.3, "{e}");
+    }
+
+    /// The fault matrix's drill (6 s dwells at 45 N): the mechanism's status frames stop at
+    /// 12 s, mid-move to 90 deg, or its motor stalls on the move after 5 s. nav goes on by a
+    /// static gyrocompass where the table comes to rest (followed by the IMU's vertical gyro),
+    /// and its heading is within 3 of its own, larger sigmas; without the fallback it aborts.
+    #[test]
+    fn a_table_lost_mid_drill_gives_a_degraded_heading_within_3_sigma() {
+        type Inject = fn(&mut TurntableFaults);
+        let cases: [(&str, Inject); 2] = [
+            ("heartbeat", |f| f.status_silent_s = vec![[12.0, 1e9]]),
+            ("stall", |f| f.stall_from_s = Some(5.0)),
+        ];
+        for (word, inject) in cases {
+            for seed in [7, 8, 9] {
+                let mut s = scenario(30.0 + 40.0 * seed as f64, 45.0, 6.0, seed);
+                s.duration_s = 45.0;
+                if let Some(t) = s.turntable.as_mut() {
+                    inject(&mut t.faults);
+                }
+                let nf = s.north_finding.clone().unwrap();
+                let o = run_in_process(&s, &nf, |_| {}).unwrap();
+                assert!(o.abort.is_none(), "{word}: {:?}", o.abort);
+                let why = o.degraded.clone().unwrap();
+                assert!(why.contains(word), "{why}");
+                let (e, sig) = (o.error_deg.unwrap(), o.sigma_deg.unwrap());
+                assert!(
+                    e.abs() <= 3.0 * sig,
+                    "{word} seed {seed}: error {e}, sigma {sig}"
+                );
+                assert!(sig > o.predicted_sigma_deg.unwrap(), "{sig}");
+                let off = NorthFindingConfig {
+                    fallback: false,
+                    ..nf.clone()
+                };
+                let o = run_in_process(&s, &off, |_| {}).unwrap();
+                assert!(o.abort.unwrap().contains(word));
+            }
+        }
     }
 
     #[test]

@@ -182,6 +182,11 @@ pub fn gyro_noise(s: &Scenario) -> GyroNoise {
         drift_tau_s: imu.gyro_bias_tau_s,
         end_angle_arcsec: END_ANGLE_PER_PULSE * pulse,
         index_arcsec: index,
+        // the horizontal gyros' bias (drawn at +- this per axis), nav told none
+        bias_dph: imu.gyro_bias_dph[0]
+            .abs()
+            .max(imu.gyro_bias_dph[1].abs())
+            .max(1e-3),
     }
 }
 

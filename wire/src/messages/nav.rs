@@ -133,6 +133,9 @@ u8_enum!(
         Fault = 6,
         /// Self-calibration: the mechanism turns the IMU to make its errors observable.
         Calibrating = 7,
+        /// North-finding without the mechanism (lost mid-drill): a static gyrocompass where
+        /// the table stands, its heading less sure.
+        Gyrocompass = 8,
     }
 );
 

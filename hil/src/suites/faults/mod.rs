@@ -243,6 +243,42 @@ fn nf_abort(r: &RunReport, at: f64, word: &str) -> Verdict {
     )
 }
 
+/// The mechanism lost mid-drill: north-finding went on by a static gyrocompass (`word` in its
+/// reason), NAV_TIME said so (mode Gyrocompass), its heading within 3 of its own (larger)
+/// sigmas of the truth, the turntable health bit set; latency from `at` to the mode.
+fn nf_degraded(r: &RunReport, at: f64, word: &str) -> Verdict {
+    let nf = r.procedures.north_finding.as_ref();
+    let why = nf.and_then(|o| o.degraded.clone());
+    let (err, sigma) = nf.map_or((None, None), |o| (o.error_deg, o.sigma_deg));
+    let within = matches!((err, sigma), (Some(e), Some(s)) if e.abs() <= 3.0 * s);
+    let mode = mode_latency(r, "Gyrocompass", at);
+    let bit = bit_latency(r, "turntable", at);
+    let pass = survived(r)
+        && why
+            .as_deref()
+            .is_some_and(|a| a.to_lowercase().contains(word))
+        && within
+        && mode.is_some()
+        && bit.is_some();
+    let f = |x: Option<f64>| x.map_or("--".to_string(), |v| format!("{v:+.4}"));
+    verdict(
+        pass,
+        format!(
+            "degraded: {}; heading error {} deg, sigma {} deg ({} sigma); NAV_TIME Gyrocompass after {}; turntable bit after {}",
+            why.as_deref().unwrap_or("no"),
+            f(err),
+            sigma.map_or("--".into(), |s| format!("{s:.4}")),
+            match (err, sigma) {
+                (Some(e), Some(s)) => format!("{:.2}", e.abs() / s.max(1e-12)),
+                _ => "--".into(),
+            },
+            lat_text(mode),
+            lat_text(bit)
+        ),
+        mode,
+    )
+}
+
 /// The scenario of base `b` for fault `name`.
 pub fn base_scenario(b: Base, name: &str) -> Result<Scenario> {
     let mut s = match b {
