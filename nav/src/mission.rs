@@ -46,6 +46,10 @@ pub(crate) trait Mission: std::fmt::Debug {
     fn heading_sigma_deg(&self) -> Option<f64> {
         None
     }
+    /// It goes on without the mechanism, which it lost.
+    fn mechanism_lost(&self) -> bool {
+        false
+    }
     /// It has just finished: the parameter file it made, and where its settings want it
     /// written (none: kept in the summary only).
     fn made(&mut self) -> Option<(Option<PathBuf>, ParameterFile)> {

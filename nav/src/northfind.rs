@@ -1140,6 +1140,9 @@ impl Mission for NorthFinding {
     fn heading_sigma_deg(&self) -> Option<f64> {
         self.finder.result().map(|r| r.sigma_deg)
     }
+    fn mechanism_lost(&self) -> bool {
+        self.finder.lost().is_some()
+    }
     fn as_any(&self) -> &dyn Any {
         self
     }

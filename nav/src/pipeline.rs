@@ -949,7 +949,7 @@ impl Pipeline {
             turntable: self
                 .procedures
                 .iter()
-                .any(|r| r.m.procedure_ref().abort().is_some()),
+                .any(|r| r.m.procedure_ref().abort().is_some() || r.m.mechanism_lost()),
             filter: self.proc.stats().invalid_since.is_some()
                 || nav.is_some_and(|n| {
                     n.filter().is_some_and(|k| k.stats().reanchors > 0)

@@ -313,6 +313,74 @@ fn replay_on_bus(run: &std::path::Path, speed: &str, iface: &str, out: &std::pat
     r
 }
 
+/// North-finding on 2, 4 and 8 positions visited out and back (0, 180, 180, 0; 0, 90, 180,
+/// 270, 270, 180, 90, 0; every 45 deg out and back), at the same total dwell (32 s), through
+/// vcan: nav indexes the mechanism through every position (the bench's emulated mechanism
+/// has a detent at each), dwells twice where the sequence turns back without a move, and each
+/// drill lands within 3 of nav's sigmas, with every check of the bench passing (the predicted
+/// sigma on its card).
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn two_four_and_eight_positions_out_and_back_land_within_3_sigma() {
+    for (n, dwell) in [(2usize, "8"), (4, "4"), (8, "2")] {
+        let dir = tempfile::tempdir().unwrap();
+        let positions = n.to_string();
+        let (r, code) = hil_json(
+            &[
+                "drill",
+                "north-finding",
+                "--heading",
+                "123.4",
+                "--seed",
+                "3",
+                "--positions",
+                &positions,
+                "--out-and-back",
+                "--dwell",
+                dwell,
+                // what is judged here is consistency (3 sigma), not a tolerance
+                "--tolerance",
+                "2",
+                "--speed",
+                "25",
+                "--iface",
+                "vcan-e2e15",
+                "--json",
+                "--out",
+            ],
+            &[dir.path()],
+        );
+        for (name, pass, detail) in checks(&r) {
+            eprintln!(
+                "{n} positions: [{}] {name}: {detail}",
+                if pass { "PASS" } else { "FAIL" }
+            );
+            assert!(pass, "{n} positions: {name}: {detail}");
+        }
+        assert_eq!(code, 0);
+        let d = &r["drill"];
+        let (e, sig) = (
+            d["error_deg"].as_f64().unwrap(),
+            d["sigma_deg"].as_f64().unwrap(),
+        );
+        assert!(
+            e.abs() <= 3.0 * sig,
+            "{n} positions: error {e} deg, sigma {sig} deg"
+        );
+        assert!(d["predicted_sigma_deg"].as_f64().unwrap() > 0.0);
+        let visited: Vec<f64> = r["nav"]["north_finding"]["result"]["positions"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p["commanded_deg"].as_f64().unwrap())
+            .collect();
+        let step = 360.0 / n as f64;
+        let out: Vec<f64> = (0..n).map(|k| k as f64 * step).collect();
+        let want: Vec<f64> = out.iter().chain(out.iter().rev()).copied().collect();
+        assert_eq!(visited, want, "{n} positions");
+    }
+}
+
 fn drill_at(speed: &str, iface: &str) -> Value {
     drill_in(speed, iface, &tempfile::tempdir().unwrap())
 }
