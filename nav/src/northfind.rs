@@ -265,8 +265,15 @@ pub struct HeadingSolution {
 pub struct NorthResult {
     /// Heading of the IMU at table zero (clockwise from true north), deg, [0, 360).
     pub heading_deg: f64,
-    /// Its sigma, deg.
+    /// Its sigma, deg: the two below, root sum square.
     pub sigma_deg: f64,
+    /// The part the dwells' own scatter measures (the gyros' white noise), deg.
+    #[serde(default)]
+    pub noise_sigma_deg: f64,
+    /// The part of the gyro drift between dwells, which no dwell's scatter shows, predicted
+    /// from the unit's figures ([`crate::northplan`]), deg.
+    #[serde(default)]
+    pub drift_sigma_deg: f64,
     /// Horizontal gyro biases x, y (level frame at table zero), deg/h.
     pub gyro_bias_dph: [f64; 2],
     /// Horizontal earth rate found, deg/h (expected `15.041 cos L`).
@@ -946,6 +953,8 @@ impl NorthFinder {
         self.result = Some(NorthResult {
             heading_deg: sol.heading_deg,
             sigma_deg: sigma,
+            noise_sigma_deg: sigma,
+            drift_sigma_deg: 0.0,
             gyro_bias_dph: sol.gyro_bias_dph,
             horizontal_earth_rate_dph: sol.horizontal_earth_rate_dph,
             expected_earth_rate_dph: expected,
@@ -972,9 +981,14 @@ impl NorthFinder {
             return;
         };
         let expected = earth::OMEGA_IE * self.cfg.latitude_deg.to_radians().cos() * DPH;
+        // the dwells' scatter measures the white noise; what the bias does between dwells it
+        // cannot see: that part comes from the unit's figures ([north_finding.plan.gyro])
+        let drift = crate::northplan::predict(&self.cfg.drill_plan()).drift_deg;
         self.result = Some(NorthResult {
             heading_deg: heading,
-            sigma_deg: sigma,
+            sigma_deg: sigma.hypot(drift),
+            noise_sigma_deg: sigma,
+            drift_sigma_deg: drift,
             gyro_bias_dph: bias,
             horizontal_earth_rate_dph: wn,
             expected_earth_rate_dph: expected,

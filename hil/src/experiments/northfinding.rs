@@ -267,14 +267,37 @@ pub const EXPERIMENT: &str = "north-finding";
 
 /// Run part `shard` of `shards` of the plan of `o` on `o.threads` threads.
 pub fn run_part(o: &McOptions, shard: usize, shards: usize) -> Result<McPart> {
+    run_part_with(o, shard, shards, false)
+}
+
+/// [`run_part`], saying on stderr how far it got (every tenth of its drills) when `progress`.
+pub fn run_part_with(
+    o: &McOptions,
+    shard: usize,
+    shards: usize,
+    progress: bool,
+) -> Result<McPart> {
     let cases = plan(o);
     let all = jobs(&cases);
     let total = all.len();
     let mine = crate::experiments::shard::select(all, shard, shards)?;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let started = std::time::Instant::now();
+    let n = mine.len();
     let results = crate::par::map(
         &mine,
         o.threads,
-        |(g, j)| run_job(&cases[j.case], j).map(|r| (*g, r)),
+        |(g, j)| {
+            let r = run_job(&cases[j.case], j).map(|r| (*g, r));
+            let k = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if progress && (k * 10 / n.max(1) != (k - 1) * 10 / n.max(1) || k == n) {
+                eprintln!(
+                    "montecarlo: {k} of {n} drills, {:.0} s",
+                    started.elapsed().as_secs_f64()
+                );
+            }
+            r
+        },
         || Err(anyhow::anyhow!("worker panicked")),
     );
     Ok(McPart {
@@ -384,7 +407,7 @@ pub fn merge(parts: &[McPart], out: &Path, progress: bool) -> Result<McReport> {
 /// Run the whole Monte Carlo here (one part of one, merged); print progress; write CSV and JSON
 /// to `out`.
 pub fn north_finding(o: &McOptions, out: &Path, progress: bool) -> Result<McReport> {
-    let part = run_part(o, 0, 1)?;
+    let part = run_part_with(o, 0, 1, progress)?;
     merge(&[part], out, progress)
 }
 
@@ -513,8 +536,8 @@ impl crate::experiments::Experiment for NorthFindingMc {
     type Options = McOptions;
     type Run = DrillOutcome;
     type Report = McReport;
-    fn part(o: &McOptions, k: usize, n: usize, _progress: bool) -> Result<McPart> {
-        run_part(o, k, n)
+    fn part(o: &McOptions, k: usize, n: usize, progress: bool) -> Result<McPart> {
+        run_part_with(o, k, n, progress)
     }
     fn merge(parts: &[McPart], out: &Path, progress: bool) -> Result<McReport> {
         merge(parts, out, progress)
