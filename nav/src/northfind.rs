@@ -941,7 +941,6 @@ impl NorthFinder {
                 .fail(format!("{}; the static gyrocompass found nothing", l.why));
             return;
         };
-        let expected = earth::OMEGA_IE * self.cfg.latitude_deg.to_radians().cos() * DPH;
         let sigma = sol.sigma_deg.hypot(l.angle_sigma_deg);
         tracing::warn!(
             "north-finding degraded ({}): heading {:.4} deg, sigma {sigma:.4} deg from a static gyrocompass at {:.3} deg and {} position(s) before",
@@ -950,11 +949,29 @@ impl NorthFinder {
             l.angle_deg,
             self.results.len() - 1
         );
+        self.conclude(
+            &sol,
+            (sigma, 0.0),
+            Some(format!("static gyrocompass: {}", l.why)),
+            l.angle_deg,
+        );
+    }
+
+    /// The result of solution `sol` with its sigma's parts (the scatter's or the fit's, the
+    /// drift's), done.
+    fn conclude(
+        &mut self,
+        sol: &HeadingSolution,
+        (noise, drift): (f64, f64),
+        degraded: Option<String>,
+        final_table_deg: f64,
+    ) {
+        let expected = earth::OMEGA_IE * self.cfg.latitude_deg.to_radians().cos() * DPH;
         self.result = Some(NorthResult {
             heading_deg: sol.heading_deg,
-            sigma_deg: sigma,
-            noise_sigma_deg: sigma,
-            drift_sigma_deg: 0.0,
+            sigma_deg: noise.hypot(drift),
+            noise_sigma_deg: noise,
+            drift_sigma_deg: drift,
             gyro_bias_dph: sol.gyro_bias_dph,
             horizontal_earth_rate_dph: sol.horizontal_earth_rate_dph,
             expected_earth_rate_dph: expected,
@@ -963,44 +980,21 @@ impl NorthFinder {
             duration_s: self.core.elapsed(),
             repeats: self.repeats,
             positions: self.results.clone(),
-            degraded: Some(format!("static gyrocompass: {}", l.why)),
-            final_table_deg: l.angle_deg,
+            degraded,
+            final_table_deg,
         });
         self.enter(Phase::Done);
     }
 
     fn finish(&mut self) {
-        let Some(HeadingSolution {
-            heading_deg: heading,
-            sigma_deg: sigma,
-            gyro_bias_dph: bias,
-            horizontal_earth_rate_dph: wn,
-        }) = Self::solve(&self.results)
-        else {
+        let Some(sol) = Self::solve(&self.results) else {
             self.core.fail("too few positions measured to solve".into());
             return;
         };
-        let expected = earth::OMEGA_IE * self.cfg.latitude_deg.to_radians().cos() * DPH;
         // the dwells' scatter measures the white noise; what the bias does between dwells it
         // cannot see: that part comes from the unit's figures ([north_finding.plan.gyro])
         let drift = crate::northplan::predict(&self.cfg.drill_plan()).drift_deg;
-        self.result = Some(NorthResult {
-            heading_deg: heading,
-            sigma_deg: sigma.hypot(drift),
-            noise_sigma_deg: sigma,
-            drift_sigma_deg: drift,
-            gyro_bias_dph: bias,
-            horizontal_earth_rate_dph: wn,
-            expected_earth_rate_dph: expected,
-            tilt_deg: self.results[0].tilt_deg,
-            dwell_total_s: self.cfg.dwell_s * self.results.len() as f64,
-            duration_s: self.core.elapsed(),
-            repeats: self.repeats,
-            positions: self.results.clone(),
-            degraded: None,
-            final_table_deg: 0.0,
-        });
-        self.enter(Phase::Done);
+        self.conclude(&sol, (sol.sigma_deg, drift), None, 0.0);
     }
 
     /// Phase and position (1-based): cheap, for deciding when to report progress.

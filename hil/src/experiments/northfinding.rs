@@ -271,12 +271,7 @@ pub fn run_part(o: &McOptions, shard: usize, shards: usize) -> Result<McPart> {
 }
 
 /// [`run_part`], saying on stderr how far it got (every tenth of its drills) when `progress`.
-pub fn run_part_with(
-    o: &McOptions,
-    shard: usize,
-    shards: usize,
-    progress: bool,
-) -> Result<McPart> {
+pub fn run_part_with(o: &McOptions, shard: usize, shards: usize, progress: bool) -> Result<McPart> {
     let cases = plan(o);
     let all = jobs(&cases);
     let total = all.len();
