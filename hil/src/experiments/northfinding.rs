@@ -591,33 +591,47 @@ mod tests {
     /// within 25 % of its prediction.
     #[test]
     fn the_prediction_holds_against_a_small_monte_carlo_at_two_latitudes() {
-        let o = McOptions {
-            runs: 60,
+        let case = |name: &str, lat: f64, drift: f64, seed: u64| CaseSpec {
+            name: name.into(),
+            latitude_deg: lat,
             dwell_s: 10.0,
-            other_latitudes_deg: vec![-50.0],
-            dwell_table_s: vec![],
-            sequence_dwells_s: vec![],
-            threads: 2,
-            ..McOptions::default()
+            gyro_bias_dph: 0.1,
+            gyro_drift_dph: drift,
+            runs: 60,
+            seed,
+            positions_deg: Vec::new(),
         };
-        let dir = tempfile::tempdir().unwrap();
-        let r = north_finding(&o, dir.path(), false).unwrap();
-        for name in ["main (bias 0.1 deg/h)", "latitude -50"] {
-            let c = r.cases.iter().find(|c| c.spec.name == name).unwrap();
-            assert_eq!(c.aborted, 0, "{name}");
+        let cases = [
+            case("28.2 N", 28.2, 0.0, 1000),
+            case("50 S", -50.0, 0.05, 1007),
+        ];
+        let all = jobs(&cases);
+        let outs = crate::par::map(
+            &all,
+            2,
+            |j| run_job(&cases[j.case], j).unwrap(),
+            || panic!("a drill panicked"),
+        );
+        let stats: Vec<Case> = cases
+            .iter()
+            .enumerate()
+            .map(|(i, c)| case_stats(c, &outs[i * 60..(i + 1) * 60]))
+            .collect();
+        for c in &stats {
+            assert_eq!(c.aborted, 0, "{}", c.spec.name);
             assert!(
                 (c.vs_predicted - 1.0).abs() < 0.25,
-                "{name}: RMS {:.4} deg, predicted {:.4} deg",
+                "{}: RMS {:.4} deg, predicted {:.4} deg",
+                c.spec.name,
                 c.rms_deg,
                 c.predicted_deg
             );
         }
         // the drift counts at 50 S: the prediction is larger than white noise's bound
-        let south = r
-            .cases
-            .iter()
-            .find(|c| c.spec.name == "latitude -50")
-            .unwrap();
-        assert!(south.predicted_deg > 1.05 * south.bound_deg, "{south:?}");
+        assert!(
+            stats[1].predicted_deg > 1.05 * stats[1].bound_deg,
+            "{:?}",
+            stats[1]
+        );
     }
 }
