@@ -32,11 +32,12 @@ pub(crate) struct PlanArgs {
     /// Dwell per position to predict, s (default: the scenario's, else 60).
     #[arg(long, value_parser = hil::values::duration_s)]
     dwell: Option<f64>,
-    /// Positions: 4 (0, 90, 180, 270, the paper's), or 2, 4 or 8 visited out and back
-    /// (0, 90, 180, 270, 270, 180, 90, 0: a linear drift cancels) with --out-and-back.
+    /// Positions: 2, 4 or 8, equally spaced (4: 0, 90, 180, 270, the paper's; default: the
+    /// scenario's).
     #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(["2", "4", "8"]))]
     positions: Option<String>,
-    /// Visit the positions out and back.
+    /// Visit the positions out and back (0, 90, 180, 270, 270, 180, 90, 0): a linear gyro drift
+    /// cancels; each visit is a dwell.
     #[arg(long)]
     out_and_back: bool,
     /// The scenario whose IMU ([imu]), mechanism ([turntable]), site and drill
