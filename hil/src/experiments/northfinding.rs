@@ -66,7 +66,7 @@ pub struct Case {
     pub max_deg: f64,
     /// Mean of nav's own sigma, deg.
     pub mean_sigma_deg: f64,
-    /// The noise bound ARW / (W_ie cos L sqrt(4 dwell)), deg.
+    /// The noise bound ARW / (W_ie cos L sqrt(T)), T the total dwell, deg.
     pub bound_deg: f64,
     /// rms / bound.
     pub ratio: f64,
@@ -310,7 +310,12 @@ fn case_stats(c: &CaseSpec, outs: &[DrillOutcome]) -> Case {
     let n = errs.len().max(1) as f64;
     let rms = (errs.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
     let arw = emulators::imu::ImuParams::default().gyro_arw_dpsh;
-    let b = bound_deg(arw, c.latitude_deg, 4.0 * c.dwell_s);
+    let dwells = if c.positions_deg.is_empty() {
+        4
+    } else {
+        c.positions_deg.len()
+    };
+    let b = bound_deg(arw, c.latitude_deg, dwells as f64 * c.dwell_s);
     let predicted = outs
         .iter()
         .find_map(|o| o.predicted_sigma_deg)
