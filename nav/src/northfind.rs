@@ -369,6 +369,8 @@ pub struct NorthFinder {
     z_since_status: (f64, f64),
     /// The IMU time of the last update, s.
     last_update: Option<f64>,
+    /// The earth's rate about the vertical at the site, rad/s.
+    earth_up: f64,
     lost: Option<Lost>,
 }
 
@@ -383,6 +385,7 @@ impl NorthFinder {
     /// A sequence with these settings (checked).
     pub fn new(cfg: NorthFindingConfig) -> Result<Self, NorthFindingConfigError> {
         cfg.check()?;
+        let earth_up = earth::OMEGA_IE * cfg.latitude_deg.to_radians().sin();
         let mut link = TtLink::new(cfg.timing(), &[cfg.axis]);
         link.push(TtCommand::Enable, cfg.axis, 0.0);
         Ok(Self {
@@ -399,6 +402,7 @@ impl NorthFinder {
             result: None,
             z_since_status: (0.0, 0.0),
             last_update: None,
+            earth_up,
             lost: None,
         })
     }
@@ -651,8 +655,7 @@ impl NorthFinder {
         // updates valid after the last one's time), and after the mechanism is lost
         let dt = self.last_update.map_or(0.0, |p| (t - p).max(0.0));
         self.last_update = Some(t);
-        let earth_up = earth::OMEGA_IE * self.cfg.latitude_deg.to_radians().sin();
-        let dz = (phi[2] - earth_up * dt).to_degrees();
+        let dz = (phi[2] - self.earth_up * dt).to_degrees();
         match self.lost.as_mut() {
             Some(l) => l.angle_deg += dz,
             None if t > self.z_since_status.1 => self.z_since_status.0 += dz,

@@ -153,6 +153,40 @@ pub fn auto_dwell(p: &PlanReport) -> f64 {
     }
 }
 
+/// The plan's table of dwells from 10 s to 300 s: what each gives and whether it meets the
+/// tolerance.
+fn dwell_table(p: &PlanReport) -> String {
+    let k = p.confidence;
+    let mut t = crate::table::Table::left(&[
+        "dwell s",
+        "drill s",
+        "sigma deg",
+        "k sigma",
+        "ARW",
+        "drift",
+        "end",
+        "meets",
+    ]);
+    for r in &p.table {
+        let pr = &r.prediction;
+        t.row([
+            format!("{:.0}", r.dwell_s),
+            format!("{:.0}", r.drill_s),
+            format!("{:.4}", pr.sigma_deg),
+            format!("{:.3}", k * pr.sigma_deg),
+            format!("{:.4}", pr.arw_deg),
+            format!("{:.4}", pr.drift_deg),
+            format!("{:.4}", pr.end_angle_deg),
+            if k * pr.sigma_deg <= p.tolerance_deg {
+                "yes".into()
+            } else {
+                "no".into()
+            },
+        ]);
+    }
+    t.finish()
+}
+
 /// The plan as an operator reads it.
 pub fn text(p: &PlanReport) -> String {
     let mut s = String::new();
@@ -231,34 +265,7 @@ pub fn text(p: &PlanReport) -> String {
             "  not met at any latitude by any dwell with these gyros: the drift during the drill sets the floor"
         ),
     };
-    let mut t = crate::table::Table::left(&[
-        "dwell s",
-        "drill s",
-        "sigma deg",
-        "k sigma",
-        "ARW",
-        "drift",
-        "end",
-        "meets",
-    ]);
-    for r in &p.table {
-        let pr = &r.prediction;
-        t.row([
-            format!("{:.0}", r.dwell_s),
-            format!("{:.0}", r.drill_s),
-            format!("{:.4}", pr.sigma_deg),
-            format!("{:.3}", k * pr.sigma_deg),
-            format!("{:.4}", pr.arw_deg),
-            format!("{:.4}", pr.drift_deg),
-            format!("{:.4}", pr.end_angle_deg),
-            if k * pr.sigma_deg <= p.tolerance_deg {
-                "yes".into()
-            } else {
-                "no".into()
-            },
-        ]);
-    }
-    let _ = write!(s, "\n{}", t.finish());
+    let _ = write!(s, "\n{}", dwell_table(p));
     s
 }
 
