@@ -416,9 +416,14 @@ pub fn check_drill(plan: &DrillPlan, cfg: &PlanConfig) -> (Prediction, Option<St
 /// drill's middle, so a bias drifting linearly cancels like a constant one. The repeated middle
 /// position is one dwell after another without a move.
 pub fn out_and_back(n: usize) -> Vec<f64> {
-    let step = 360.0 / n.max(1) as f64;
-    let out: Vec<f64> = (0..n).map(|k| k as f64 * step).collect();
+    let out = equally_spaced(n);
     out.iter().chain(out.iter().rev()).copied().collect()
+}
+
+/// `n` table positions equally spaced from 0 deg (0, 90, 180, 270 for four).
+pub fn equally_spaced(n: usize) -> Vec<f64> {
+    let step = 360.0 / n.max(1) as f64;
+    (0..n).map(|k| k as f64 * step).collect()
 }
 
 #[cfg(test)]

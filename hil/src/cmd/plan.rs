@@ -88,7 +88,7 @@ pub(crate) fn positions(n: Option<&str>, out_and_back: bool) -> Option<Vec<f64>>
     if out_and_back {
         Some(nav::northplan::out_and_back(n))
     } else if n != 4 {
-        Some((0..n).map(|k| k as f64 * 360.0 / n as f64).collect())
+        Some(nav::northplan::equally_spaced(n))
     } else {
         None
     }
