@@ -425,6 +425,10 @@ ip link set lo up
 {net}# nav runs unprivileged: the socket buffer it asks for is capped by rmem_max (set-up's job, as
 # on a vehicle's image)
 echo 16777216 > /proc/sys/net/core/rmem_max
+# the field's tools (candump, canbusload) take the default buffer: 8 MiB holds some 2 s of a
+# 4,000-frame/s bus, so a reader an emulated CPU leaves unscheduled for a moment loses nothing
+# (212,992 bytes, the kernel's default, is some 50 ms: canbusload lost 27 of 20,297 frames so)
+echo 8388608 > /proc/sys/net/core/rmem_default
 mount -t 9p -o trans=virtio,version=9p2000.L,msize=512000 ctl /run/vcan-setup
 {mounts}echo "{READY} $(cut -d' ' -f1 /proc/uptime) s"
 sh /run/vcan-setup/cmd.sh
