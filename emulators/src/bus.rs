@@ -373,27 +373,14 @@ impl Outbox {
     }
 }
 
-/// Keep the calling thread on the CPU it runs on. vcan hands each frame written to the receive
-/// backlog of the CPU the writer runs on; a writer that migrates between CPUs can have its
-/// frames delivered out of order (seen in an hour-long soak under load: IMU frames reordered by
-/// up to 41 samples, three times). A real CAN controller receives on one CPU and keeps order.
+/// Keep the calling thread on the first CPU it may run on ([`wire::pin_to_one_cpu`]: vcan keeps
+/// a writer's order only while the writer stays on one CPU; nav, started by the bench, takes
+/// the last).
 pub(crate) fn pin_to_this_cpu(iface: &str) {
-    // SAFETY: sched_getcpu has no preconditions; the cpu_set_t is zeroed plain data, filled
-    // with CPU_SET and passed with its size for the calling thread (pid 0).
-    let r = unsafe {
-        let cpu = libc::sched_getcpu();
-        if cpu < 0 {
-            return;
-        }
-        let mut set: libc::cpu_set_t = std::mem::zeroed();
-        libc::CPU_SET(cpu as usize, &mut set);
-        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set)
-    };
-    if r != 0 {
+    if let Err(e) = wire::pin_to_one_cpu(wire::CpuPick::First) {
         tracing::warn!(
             interface = iface,
-            "cannot pin the bus thread to its CPU ({}): frames may reach readers out of order",
-            std::io::Error::last_os_error()
+            "cannot pin the bus thread to its CPU ({e}): frames may reach readers out of order"
         );
     }
 }

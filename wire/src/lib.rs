@@ -20,8 +20,8 @@ pub use codec::{DecodeError, EncodeError, MessageSpec, RawFrame, SignalSpec};
 pub use messages::*;
 #[cfg(feature = "socketcan")]
 pub use sock::{
-    BATCH, FrameConvError, from_can_frame, recv_batch, recv_batch_stamped, send_batch,
-    send_error_frame, set_error_filter, set_rcvbuf, socket_drops, to_can_frame,
+    BATCH, CpuPick, FrameConvError, from_can_frame, pin_to_one_cpu, recv_batch, recv_batch_stamped,
+    send_batch, send_error_frame, set_error_filter, set_rcvbuf, socket_drops, to_can_frame,
 };
 
 /// The DBC file text, embedded so tools can print or ship it.

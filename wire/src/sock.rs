@@ -348,3 +348,47 @@ pub fn socket_drops(fd: std::os::fd::RawFd) -> std::io::Result<u64> {
     }
     Ok(u64::from(info[libc::SK_MEMINFO_DROPS as usize]))
 }
+
+/// Which of the CPUs a thread may run on [`pin_to_one_cpu`] keeps it on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CpuPick {
+    /// The lowest-numbered CPU allowed.
+    First,
+    /// The highest-numbered CPU allowed.
+    Last,
+}
+
+/// Keep the calling thread (between `fork` and `exec`: the process to be) on one of the CPUs
+/// it may run on, and return that CPU. vcan hands each frame written to the receive backlog of
+/// the CPU its writer runs on, so a writer that moves between CPUs can have its frames
+/// delivered out of order (IMU frames reordered by up to 41 samples in an hour's soak under
+/// load; nav's NAV_TIME and TT_CMD frames reordered with two CPU hogs beside a drill). A real
+/// controller keeps a sender's order. Two writers that talk to each other (the bench's bus
+/// thread and nav) take different ends, so that on two CPUs or more they do not share one.
+/// Async-signal-safe: two system calls.
+pub fn pin_to_one_cpu(pick: CpuPick) -> std::io::Result<usize> {
+    // SAFETY: the cpu_set_t are zeroed plain data, read and written by the kernel with their
+    // size, for the calling thread (pid 0); CPU_ISSET/CPU_SET index within CPU_SETSIZE.
+    unsafe {
+        let mut allowed: libc::cpu_set_t = std::mem::zeroed();
+        let size = std::mem::size_of::<libc::cpu_set_t>();
+        if libc::sched_getaffinity(0, size, &mut allowed) != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        let n = libc::CPU_SETSIZE as usize;
+        let mut cpus = (0..n).filter(|&c| libc::CPU_ISSET(c, &allowed));
+        let cpu = match pick {
+            CpuPick::First => cpus.next(),
+            CpuPick::Last => cpus.next_back(),
+        };
+        let Some(cpu) = cpu else {
+            return Err(std::io::Error::from_raw_os_error(libc::EINVAL));
+        };
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        libc::CPU_SET(cpu, &mut set);
+        if libc::sched_setaffinity(0, size, &set) != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        Ok(cpu)
+    }
+}

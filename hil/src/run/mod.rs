@@ -228,6 +228,18 @@ pub(crate) fn start_nav(
         // std drops the supplementary groups too when root changes the user
         cmd.uid(uid).gid(gid);
     }
+    // nav on one CPU, the last it may run on, as the bench's bus thread is on the first: on vcan a writer that moves between CPUs can
+    // have its frames delivered out of order (seen with two CPU hogs: a NAV_TIME after the
+    // one that followed it, so the frames it placed went on the bus model late, and the
+    // model's figures differed between two paces of one drill); a real controller keeps
+    // a sender's order. Failing to pin changes nothing else (the run reports any reordering).
+    // SAFETY: pin_to_one_cpu makes two async-signal-safe system calls between fork and exec.
+    unsafe {
+        cmd.pre_exec(|| {
+            let _ = wire::pin_to_one_cpu(wire::CpuPick::Last);
+            Ok(())
+        });
+    }
     let mut child = cmd.spawn().with_context(|| {
         format!(
             "starting {}{}",
