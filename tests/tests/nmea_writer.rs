@@ -18,7 +18,8 @@ fn sentences_decode_in_nav_with_the_applied_error() {
         let (s, e) = w.fix(f64::from(i), 4.0 * 3600.0, (21, 11, 2026), &truth);
         assert!(s.ends_with("\r\n"));
         dec.push_bytes(s.as_bytes(), &mut fixes);
-        let e = e.unwrap();
+        let (e, sigma) = e.unwrap();
+        assert!(sigma.iter().all(|s| *s > 0.0), "{sigma:?}");
         let f = fixes.iter().rev().find(|f| f.sentence == "GGA").unwrap();
         let (rm, _) = emulators::geodesy::radii(truth.lat_deg.to_radians());
         let north = (f.lat_deg - truth.lat_deg).to_radians() * rm;

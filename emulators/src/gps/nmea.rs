@@ -3,6 +3,10 @@
 
 use super::{AntennaTruth, GpsError, ReceiverParams};
 
+/// A fix's position error and the receiver's own 1-sigma of it (east, north, up), m: truth
+/// for the bench's scoring, never on the wire.
+pub type ErrorAndSigma = ([f64; 3], [f64; 3]);
+
 /// Writes NMEA-0183 sentences for fixes.
 pub struct NmeaWriter {
     p: ReceiverParams,
@@ -40,15 +44,15 @@ impl NmeaWriter {
     }
 
     /// The sentences of the fix at `t` (s since the start; `utc0_s` is the UTC second of the
-    /// day at t = 0, `date` is (day, month, year)), and the position error applied (E, N, U, m;
-    /// none when there is no fix).
+    /// day at t = 0, `date` is (day, month, year)), and the position error applied with the
+    /// receiver's own sigma of it (E, N, U, m; none when there is no fix).
     pub fn fix(
         &mut self,
         t: f64,
         utc0_s: f64,
         date: (u32, u32, u32),
         truth: &AntennaTruth,
-    ) -> (String, Option<[f64; 3]>) {
+    ) -> (String, Option<ErrorAndSigma>) {
         use rand_distr::{Distribution, Normal};
         let n = Normal::new(0.0, 1.0).expect("unit normal");
         let in_outage = self.p.outages.iter().any(|o| t >= o[0] && t < o[1]);
@@ -183,6 +187,6 @@ impl NmeaWriter {
             ));
         }
         out += &with_checksum(&format!("{tk}ZDA,{time},{dd:02},{mo:02},{yy:04},00,00"));
-        (out, valid.then_some(e))
+        (out, valid.then_some((e, sample.sigma_enu)))
     }
 }

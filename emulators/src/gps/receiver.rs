@@ -92,6 +92,11 @@ pub struct Epoch {
     /// The receiver's position error in it (east, north, up), m (none without a fix): truth
     /// for the bench's scoring, never on the wire.
     pub error_enu: Option<[f64; 3]>,
+    /// The receiver's own 1-sigma of that error (east, north, up), m: what its GST states, or
+    /// would state for a receiver that sends none (none without a fix). Truth for the bench's
+    /// scoring: a fix whose error is within 3 of these is a good fix, which no filter may
+    /// refuse.
+    pub sigma_enu: Option<[f64; 3]>,
     /// The receiver's device is gone at this epoch (which of its `port_drops`).
     pub port_drop: Option<usize>,
 }
@@ -142,7 +147,8 @@ impl GpsReceiver {
             edge,
             text,
             valid: err.is_some(),
-            error_enu: err,
+            error_enu: err.map(|e| e.0),
+            sigma_enu: err.map(|e| e.1),
             port_drop,
         })
     }

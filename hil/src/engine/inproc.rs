@@ -65,6 +65,24 @@ pub fn gps_run(s: &Scenario, rx: &emulators::gps::ReceiverParams) -> Result<Opti
     }))
 }
 
+/// A fix the receiver sent, as the truth side knows it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReceiverFix {
+    /// Its PPS edge, s.
+    pub edge: f64,
+    /// Its position error (east, north, up), m.
+    pub error_enu: [f64; 3],
+    /// The receiver's own 1-sigma of that error (east, north, up), m.
+    pub sigma_enu: [f64; 3],
+}
+
+impl ReceiverFix {
+    /// Its error is within 3 of the receiver's own sigma on every axis.
+    pub fn good(&self) -> bool {
+        (0..3).all(|i| self.error_enu[i].abs() <= 3.0 * self.sigma_enu[i])
+    }
+}
+
 /// The scenario's devices driving nav's pipeline, one IMU sample at a time.
 pub struct InProcessBench {
     step: Stepper,
@@ -74,7 +92,9 @@ pub struct InProcessBench {
     t_first: Option<f64>,
     sent: Option<Vec<RawFrame>>,
     bad_from_nav: u64,
-    receiver_errors: Vec<(f64, [f64; 3])>,
+    receiver_errors: Vec<ReceiverFix>,
+    /// IMU times (nav's, s) of the fixes the filter's gate refused (its `fix_rejected` events).
+    refused: Vec<f64>,
     port_gone: bool,
     imu_timeout_ms: u64,
 }
@@ -98,6 +118,7 @@ impl InProcessBench {
             sent: None,
             bad_from_nav: 0,
             receiver_errors: Vec::new(),
+            refused: Vec::new(),
             port_gone: false,
             imu_timeout_ms: cfg.watchdog.imu_timeout_ms,
         })
@@ -191,8 +212,12 @@ impl InProcessBench {
             }
             if e.port_drop.is_none() && !e.text.is_empty() {
                 self.pipeline.on_gps_bytes(e.text.as_bytes(), &mut self.out);
-                if let Some(err) = e.error_enu {
-                    self.receiver_errors.push((e.edge, err));
+                if let (Some(error_enu), Some(sigma_enu)) = (e.error_enu, e.sigma_enu) {
+                    self.receiver_errors.push(ReceiverFix {
+                        edge: e.edge,
+                        error_enu,
+                        sigma_enu,
+                    });
                 }
             }
             self.act();
@@ -201,9 +226,27 @@ impl InProcessBench {
         t
     }
 
-    /// The receiver's error (east, north, up, m) in each fix nav was sent, by PPS edge (s).
-    pub fn receiver_errors(&self) -> &[(f64, [f64; 3])] {
+    /// Each fix nav was sent: its PPS edge, its error and the receiver's own sigma of it.
+    pub fn receiver_errors(&self) -> &[ReceiverFix] {
         &self.receiver_errors
+    }
+
+    /// The fixes the filter's gate refused whose error was within 3 of the receiver's own
+    /// sigma on every axis: good fixes no filter may refuse. Each refused fix is matched to
+    /// the fix sent at its PPS edge.
+    pub fn good_fixes_refused(&self) -> u64 {
+        let mut n = 0;
+        for &t_nav in &self.refused {
+            let t = self.sim_time(t_nav);
+            let nearest = self
+                .receiver_errors
+                .iter()
+                .min_by(|a, b| (a.edge - t).abs().total_cmp(&(b.edge - t).abs()));
+            if nearest.is_some_and(ReceiverFix::good) {
+                n += 1;
+            }
+        }
+        n
     }
 
     /// The end of the stream: nav's watchdog reports it (as the bus holds the stream's end until
@@ -223,6 +266,19 @@ impl InProcessBench {
         for o in self.out.drain(..) {
             let f = match o {
                 Output::Command(f) | Output::Solution(f) => f,
+                Output::Json {
+                    channel: nav::channels::JsonChannel::Event,
+                    json,
+                    ..
+                } if json.contains("\"fix_rejected\"") => {
+                    if let Some(t) = serde_json::from_str::<serde_json::Value>(&json)
+                        .ok()
+                        .and_then(|v| v["t_s"].as_f64())
+                    {
+                        self.refused.push(t);
+                    }
+                    continue;
+                }
                 _ => continue,
             };
             if let Some(s) = self.sent.as_mut() {

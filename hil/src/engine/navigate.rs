@@ -337,6 +337,10 @@ pub struct NavRun {
     /// the receiver's PPS reaches the IMU.
     #[serde(default)]
     pub untied_fixes: u64,
+    /// Fixes the filter's gate refused although their error was within 3 of the receiver's
+    /// own sigma on every axis (none may be).
+    #[serde(default)]
+    pub good_fixes_refused: u64,
     /// The run second by second.
     #[serde(skip)]
     pub series: Vec<NavSample>,
@@ -480,8 +484,8 @@ pub fn navigate(
     let tail: Vec<[f64; 3]> = bench
         .receiver_errors()
         .iter()
-        .filter(|(t, _)| *t > last_t - 60.0)
-        .map(|x| x.1)
+        .filter(|f| f.edge > last_t - 60.0)
+        .map(|f| f.error_enu)
         .collect();
     let end_receiver_wander_m = (!tail.is_empty()).then(|| {
         let k = tail.len() as f64;
@@ -506,6 +510,7 @@ pub fn navigate(
         started_at_s: navigator.summary().started_at_s,
         integrity: navigator.integrity().stats(),
         untied_fixes: navigator.summary().untied_fixes,
+        good_fixes_refused: bench.good_fixes_refused(),
         series,
     })
 }

@@ -1,6 +1,6 @@
 //! The papers' tables, reproduced in process with the same emulators and nav code as the bench:
 //! coning ([`coning`]), north-finding Monte Carlo ([`northfinding`]), navigation ([`navigation`])
-//! and its routes ([`routes`]), calibration ([`calibration`], [`tetrahedral`]); each can run in
+//! and its routes ([`routes`], judged window by window: [`windows`]), calibration ([`calibration`], [`tetrahedral`]); each can run in
 //! parts ([`shard`]).
 
 pub mod calibration;
@@ -10,6 +10,7 @@ pub mod northfinding;
 pub mod routes;
 pub mod shard;
 pub mod tetrahedral;
+pub mod windows;
 
 use anyhow::Result;
 use serde::{Serialize, de::DeserializeOwned};
