@@ -449,7 +449,11 @@ impl Pipeline {
     /// linear range: a `filter` event in the recording (the log has the filter's warning).
     /// Each fix the filter's gate refused, in the recording (`fix_rejected`): where it was,
     /// for the report's track.
+    /// Without a recording they stay with the navigator ([`Pipeline::take_rejected_fixes`]).
     fn rejected_fixes(&mut self, out: &mut Vec<Output>) {
+        if !self.record {
+            return;
+        }
         let Some(n) = self.navigator.as_mut() else {
             return;
         };
@@ -1078,6 +1082,16 @@ impl Pipeline {
     /// The processing chain.
     pub fn processor(&self) -> &ImuProcessor {
         &self.proc
+    }
+
+    /// The fixes the filter's gate refused since the last call, for an in-process run that
+    /// scores them (a pipeline that records puts them in its recording instead; the
+    /// navigator keeps the latest few dozen).
+    pub fn take_rejected_fixes(&mut self) -> Vec<crate::navigator::RejectedFix> {
+        self.navigator
+            .as_mut()
+            .map(Navigator::take_rejected)
+            .unwrap_or_default()
     }
 
     /// The north-finder (when enabled).

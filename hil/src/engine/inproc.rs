@@ -93,7 +93,7 @@ pub struct InProcessBench {
     sent: Option<Vec<RawFrame>>,
     bad_from_nav: u64,
     receiver_errors: Vec<ReceiverFix>,
-    /// IMU times (nav's, s) of the fixes the filter's gate refused (its `fix_rejected` events).
+    /// IMU times (nav's, s) of the fixes the filter's gate refused.
     refused: Vec<f64>,
     port_gone: bool,
     imu_timeout_ms: u64,
@@ -223,6 +223,12 @@ impl InProcessBench {
             self.act();
         }
         self.st.epochs = epochs;
+        self.refused.extend(
+            self.pipeline
+                .take_rejected_fixes()
+                .into_iter()
+                .map(|r| r.t_s),
+        );
         t
     }
 
@@ -266,19 +272,6 @@ impl InProcessBench {
         for o in self.out.drain(..) {
             let f = match o {
                 Output::Command(f) | Output::Solution(f) => f,
-                Output::Json {
-                    channel: nav::channels::JsonChannel::Event,
-                    json,
-                    ..
-                } if json.contains("\"fix_rejected\"") => {
-                    if let Some(t) = serde_json::from_str::<serde_json::Value>(&json)
-                        .ok()
-                        .and_then(|v| v["t_s"].as_f64())
-                    {
-                        self.refused.push(t);
-                    }
-                    continue;
-                }
                 _ => continue,
             };
             if let Some(s) = self.sent.as_mut() {

@@ -631,6 +631,56 @@ mod tests {
         }
     }
 
+    /// A fast, precise receiver below sea level (the Dead Sea road at -430 m, a sub-metre
+    /// receiver at 10 Hz stating GST): no filter refuses a good fix (its error within 3 of
+    /// the receiver's own sigma), in its first minute or after. The count does see them: a
+    /// gate far too tight refuses good fixes and says so.
+    #[test]
+    fn a_fast_precise_receiver_below_sea_level_has_every_good_fix_taken() {
+        let mut s = Scenario::load(std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../scenarios/route-dead-sea-tunnels.toml"
+        )))
+        .unwrap();
+        s.duration_s = 100.0;
+        let mut rx = s.gps.clone().unwrap();
+        rx.rate_hz = 10.0;
+        rx.errors.gm_sigma_m = 0.4;
+        rx.errors.gm_tau_s = 60.0;
+        rx.errors.white_sigma_m = 0.2;
+        use nav::kf::FilterKind::*;
+        for kind in [Standard, Fading, Adaptive] {
+            let f = FilterConfig {
+                kind,
+                ..FilterConfig::default()
+            };
+            let r = navigate(&s, Some(&f), &rx, 0.0).unwrap();
+            let st = r.filter.unwrap();
+            eprintln!(
+                "{kind:?}: {st:?}, good fixes refused {}",
+                r.good_fixes_refused
+            );
+            assert!(st.updates > 900, "{st:?}");
+            assert_eq!(st.rejected_first_minute, 0, "{kind:?}: {st:?}");
+            assert_eq!(r.good_fixes_refused, 0, "{kind:?}");
+        }
+        let tight = FilterConfig {
+            kind: Standard,
+            gate_nis: 0.5,
+            reanchor_after: 0,
+            ..FilterConfig::default()
+        };
+        let r = navigate(&s, Some(&tight), &rx, 0.0).unwrap();
+        let st = r.filter.unwrap();
+        assert!(st.rejected > 50, "{st:?}");
+        assert!(
+            r.good_fixes_refused > st.rejected / 2,
+            "{} of {} refused fixes were good",
+            r.good_fixes_refused,
+            st.rejected
+        );
+    }
+
     /// The campus loop's sequence, shortened (8 s dwells, one lap): nav's north-finder drives the
     /// emulated turntable, its heading goes to the navigator, which levels and navigates with
     /// the filter while the vehicle drives off.
