@@ -12,7 +12,7 @@
 use crate::engine::navigate::{NavRun, NavSample};
 use crate::experiments::navigation::filter;
 use crate::experiments::windows::{Stretch, Windowed};
-use crate::report::plot::{LogChart, Series};
+use crate::report::plot::{BandChart, Panel};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
 use nav::kf::FilterKind;
@@ -319,50 +319,46 @@ fn series_csv(runs: &[&(usize, FilterKind, Vec<NavSample>)]) -> String {
     c
 }
 
-/// Each filter's error on one route against its own sigma (first run).
+/// Each filter's error on one route against its own 3-sigma bound (first run), a panel per
+/// filter, the receiver's outages shaded.
 fn sigma_chart(
     s: &Scenario,
     runs: &[&(usize, FilterKind, Vec<NavSample>)],
     position: bool,
 ) -> String {
     const COLORS: [&str; 4] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"];
-    let mut series = Vec::new();
-    for (i, (_, kind, samples)) in runs.iter().enumerate() {
-        let color = COLORS[i % COLORS.len()];
-        type Points = Vec<(f64, f64)>;
-        let (err, sig): (Points, Points) = samples
-            .iter()
-            .map(|x| {
-                if position {
-                    (
-                        (x.t_s, x.position_error_m),
-                        (x.t_s, 3.0 * x.position_sigma_m.unwrap_or(f64::NAN)),
-                    )
-                } else {
-                    let v = x.velocity_error_mps;
-                    (
-                        (x.t_s, (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()),
-                        (x.t_s, 3.0 * x.velocity_sigma_mps.unwrap_or(f64::NAN)),
-                    )
-                }
-            })
-            .unzip();
-        series.push(Series {
-            name: format!("{kind:?} error"),
-            color,
-            points: err,
-            markers: false,
-        });
-        series.push(Series {
-            name: format!("{kind:?} 3 sigma"),
-            color,
-            points: sig,
-            markers: true,
-        });
-    }
-    LogChart {
+    let panels = runs
+        .iter()
+        .enumerate()
+        .map(|(i, (_, kind, samples))| {
+            let (error, bound) = samples
+                .iter()
+                .map(|x| {
+                    if position {
+                        (
+                            (x.t_s, x.position_error_m),
+                            (x.t_s, 3.0 * x.position_sigma_m.unwrap_or(f64::NAN)),
+                        )
+                    } else {
+                        let v = x.velocity_error_mps;
+                        (
+                            (x.t_s, (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()),
+                            (x.t_s, 3.0 * x.velocity_sigma_mps.unwrap_or(f64::NAN)),
+                        )
+                    }
+                })
+                .unzip();
+            Panel {
+                name: format!("{kind:?}"),
+                color: COLORS[i % COLORS.len()],
+                error,
+                bound,
+            }
+        })
+        .collect();
+    BandChart {
         title: format!(
-            "{}: {} error against the filter's 3-sigma bound",
+            "{}: {} error against each filter's 3-sigma bound",
             s.name,
             if position {
                 "horizontal position"
@@ -372,7 +368,10 @@ fn sigma_chart(
         ),
         x_label: "time, s".into(),
         y_label: if position { "m" } else { "m/s" }.into(),
-        series,
+        band_label: "3 sigma".into(),
+        panels,
+        spans: s.gps.as_ref().map_or_else(Vec::new, |g| g.outages.clone()),
+        span_label: "receiver outage".into(),
     }
     .svg()
 }
