@@ -394,8 +394,10 @@ impl BandChart {
 pub fn decimate(points: &[(f64, f64)], x0: f64, x1: f64, columns: usize) -> Vec<(f64, f64)> {
     let width = (x1 - x0) / columns.max(1) as f64;
     let mut out = Vec::new();
-    let mut column: Option<(i64, (f64, f64), (f64, f64))> = None;
-    let flush = |c: (i64, (f64, f64), (f64, f64)), out: &mut Vec<(f64, f64)>| {
+    /// A column: its index, its lowest and its highest point.
+    type Column = (i64, (f64, f64), (f64, f64));
+    let mut column: Option<Column> = None;
+    let flush = |c: Column, out: &mut Vec<(f64, f64)>| {
         let (lo, hi) = (c.1, c.2);
         if lo == hi {
             out.push(lo);
