@@ -14,18 +14,18 @@
 //! later than the limit), the device stops and says so ([`FreeStats::behind`]) rather than
 //! feed a device under test a stream whose timing is the host's fault.
 //!
-//! The models are the same pure ones the lockstep bench steps ([`crate::stream::BusStream`],
-//! [`crate::ttbus::TtBus`], [`crate::gps::GpsReceiver`]); only the pacing and the transport are
+//! The models are the same pure ones the lockstep bench steps ([`crate::imu::stream::BusStream`],
+//! [`crate::turntable::ttbus::TtBus`], [`crate::gps::GpsReceiver`]); only the pacing and the transport are
 //! here. An IMU on a table the bench does not model follows the table's reports
 //! ([`crate::reported`]).
 
-use crate::bus::{bench_socket, drain};
-use crate::can::{CanTxError, Progress, write_all};
+use crate::bus::scheduler::{bench_socket, drain};
+use crate::bus::transport::{CanTxError, Progress, write_all};
 use crate::clock::SimClock;
 use crate::gps::{GpsPty, GpsReceiver, PtyError};
+use crate::imu::stream::{BusStream, TxStats};
 use crate::reported::{ReportStats, SharedTrack};
-use crate::stream::{BusStream, TxStats};
-use crate::ttbus::{TtBus, TurntableTxStats};
+use crate::turntable::ttbus::{TtBus, TurntableTxStats};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};

@@ -17,8 +17,8 @@
 //! there until nav's watchdog has fired again (a NAV_TIME with the imu_timeout bit), at most
 //! `silence` of wall time, so that it fires at the same place in the stream.
 
-use crate::bus::{BusError, Lockstep, LockstepStats};
-use crate::can::{Progress, write_all};
+use crate::bus::scheduler::{BusError, Lockstep, LockstepStats};
+use crate::bus::transport::{Progress, write_all};
 use crate::clock::SimClock;
 use crate::gps::{GpsPty, PtyError};
 use serde::{Deserialize, Serialize};
@@ -114,7 +114,7 @@ pub fn play(
 ) -> Result<PlayStats, BusError> {
     // what nav says: its solution header (NAV_TIME) only; its turntable commands go unanswered
     // (the recording holds the turntable's answers)
-    let sock = crate::bus::bench_socket(iface, &[wire::nav_time::SPEC.id])?;
+    let sock = crate::bus::scheduler::bench_socket(iface, &[wire::nav_time::SPEC.id])?;
     let mut st = PlayStats {
         lockstep: LockstepStats {
             enabled: opts.lockstep.is_some(),
@@ -227,7 +227,7 @@ pub fn play(
                     && since.elapsed() < opts.silence
                     && !stop.load(Ordering::Relaxed)
                 {
-                    crate::bus::wait_readable(&sock, Duration::from_millis(2));
+                    crate::bus::scheduler::wait_readable(&sock, Duration::from_millis(2));
                     read_nav(&sock, iface, &mut follow, &mut st.lockstep)?;
                 }
                 // what follows is paced from here, not caught up at once
@@ -268,7 +268,7 @@ fn wait_for_nav(
             st.lockstep.wait_ms += since.elapsed().as_millis() as u64;
             return Ok(false);
         }
-        crate::bus::wait_readable(sock, Duration::from_millis(2));
+        crate::bus::scheduler::wait_readable(sock, Duration::from_millis(2));
     }
     if let Some(w) = waited {
         st.lockstep.wait_ms += w.elapsed().as_millis() as u64;
@@ -283,7 +283,7 @@ fn read_nav(
     follow: &mut Follow,
     ls: &mut LockstepStats,
 ) -> Result<(), BusError> {
-    crate::bus::drain(sock, iface, |f| {
+    crate::bus::scheduler::drain(sock, iface, |f| {
         if let Some(Ok(Message::NavTime(nt))) = f.map(|f| Message::decode(&f)) {
             follow.timeout_seen |= nt.health.imu_timeout;
             follow.on_nav_time(nt.sample_count, ls);

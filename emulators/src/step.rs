@@ -1,11 +1,11 @@
 //! The order in which the bench's devices act, written once: each IMU sample's frames and the
-//! turntable's frames due after that sample, through the bus model ([`crate::canbus`]: on the
+//! turntable's frames due after that sample, through the bus model ([`crate::bus::model`]: on the
 //! ideal bus in that order, on the modelled bus in the order they complete, nav's frames taking
 //! bus time among them), then the GPS receiver's epochs due by the sample's end; and what the
 //! devices make of nav's frames (NAV_TIME places the frames nav sent before it on the bus; a
 //! turntable command reaches the mechanism when it is over). Pure: no I/O, no wall time.
 //!
-//! The bus scheduler ([`crate::bus::run`]) puts each [`Step`] on vcan and the pty; the
+//! The bus scheduler ([`crate::bus::scheduler::run`]) puts each [`Step`] on vcan and the pty; the
 //! in-process runs feed it to nav's pipeline directly. Both call [`Stepper::step`] and
 //! [`Stepper::from_nav`], so the order nav meets its inputs in is the same on both, by
 //! construction.
@@ -16,10 +16,10 @@
 //! received before bytes it has read (`nav`'s event loop). In process they go into the
 //! pipeline right after the sample's frames.
 
-use crate::canbus::{BusStats, CanBus, Delivered, RoundTrip, ns};
+use crate::bus::model::{BusStats, CanBus, Delivered, RoundTrip, ns};
 use crate::gps::{Epoch, GpsReceiver};
-use crate::stream::BusStream;
-use crate::ttbus::TtBus;
+use crate::imu::stream::BusStream;
+use crate::turntable::ttbus::TtBus;
 use std::collections::{BTreeMap, VecDeque};
 use wire::{Message, RawFrame};
 

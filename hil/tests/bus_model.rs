@@ -10,7 +10,7 @@
 //! (a few hundred µs); the IMU on the table senses the moves that much later, and the heading
 //! nav finds moves by far less than its sigma.
 
-use emulators::canbus::BusTiming;
+use emulators::bus::model::BusTiming;
 use hil::engine::inproc::InProcessBench;
 use hil::scenario::{Scenario, TimingModel};
 

@@ -32,13 +32,13 @@ fn truth_and_nav_earth_models_agree_everywhere() {
     }
 }
 
-/// The redundant IMU's gyro layout, written apart in the emulator (`emulators::mems::triad`)
+/// The redundant IMU's gyro layout, written apart in the emulator (`emulators::imu::mems::triad`)
 /// and in nav's calibration (`nav::calib::tetra_triad`), is the same: each gyro's sensitive axis
 /// and the two axes of its mounting angles.
 #[test]
 fn truth_and_nav_agree_on_the_redundant_imus_layout() {
     for i in 0..nav::calib::TETRA_GYROS {
-        let (p, rj, rk) = emulators::mems::triad(i);
+        let (p, rj, rk) = emulators::imu::mems::triad(i);
         let [q, sj, sk] = nav::calib::tetra_triad(i);
         for (a, b, what) in [(p, q, "P"), (rj, sj, "R_j"), (rk, sk, "R_k")] {
             assert!(

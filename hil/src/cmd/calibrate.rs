@@ -54,8 +54,8 @@ pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
 
 /// `--fail` of `hil calibrate tetrahedral`: `stuck:G`, `bias-jump:G:DPS` or `noise:G:DPS`
 /// (gyro 1-4) at `at_s`.
-fn parse_failure(text: &str, at_s: f64) -> Result<emulators::mems::GyroFailure> {
-    use emulators::mems::GyroFailure;
+fn parse_failure(text: &str, at_s: f64) -> Result<emulators::imu::mems::GyroFailure> {
+    use emulators::imu::mems::GyroFailure;
     let parts: Vec<&str> = text.split(':').collect();
     let gyro = |p: &str| -> Result<usize> {
         match p.parse::<usize>() {

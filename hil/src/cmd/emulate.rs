@@ -3,12 +3,12 @@
 //! device under test.
 
 use anyhow::{Context, Result, bail};
-use emulators::can::{BusStream, Progress};
+use emulators::bus::transport::{BusStream, Progress};
 use emulators::freerun::{FreeStats, Pacing};
 use emulators::gps::{GpsPty, GpsReceiver, relink};
 use emulators::imu::ImuEmulator;
 use emulators::reported::{ReportedTrack, SharedTrack};
-use emulators::ttbus::TtBus;
+use emulators::turntable::ttbus::TtBus;
 use hil::scenario::Scenario;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};

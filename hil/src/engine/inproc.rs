@@ -11,8 +11,8 @@
 
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
-use emulators::bus::{Lockstep, TtBus};
-use emulators::can::BusStream;
+use emulators::bus::scheduler::{Lockstep, TtBus};
+use emulators::bus::transport::BusStream;
 use emulators::drive::Drive;
 use emulators::gps::{GpsReceiver, GpsRun, NmeaWriter};
 use emulators::imu::ImuEmulator;
@@ -41,7 +41,7 @@ pub fn stepper(
         tt.map(|t| TtBus::new(t, s.imu.rate_hz)),
         gps.map(GpsReceiver::new),
         duration_s,
-        emulators::canbus::CanBus::new(s.bus.timing()),
+        emulators::bus::model::CanBus::new(s.bus.timing()),
         latency,
     );
     if s.ends_with_procedure() {
@@ -319,7 +319,7 @@ impl InProcessBench {
     }
 
     /// What the bus model did so far: load, each identifier's delays, the command round trip.
-    pub fn bus_stats(&self) -> emulators::canbus::BusStats {
+    pub fn bus_stats(&self) -> emulators::bus::model::BusStats {
         self.step.bus_stats()
     }
 

@@ -48,7 +48,7 @@ pub struct InProcess {
     pub sent_hash: String,
     /// The bus model: load, each identifier's delays, the command round trip.
     #[serde(default)]
-    pub bus: emulators::canbus::BusStats,
+    pub bus: emulators::bus::model::BusStats,
 }
 
 /// Error of an integrated attitude `q` (body at `t1` relative to body at `t0`, inertial)

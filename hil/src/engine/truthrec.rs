@@ -93,7 +93,7 @@ pub fn write(
     site: &Static,
     duration_s: f64,
     clock: &[(f64, u64)],
-    turntable: &[emulators::bus::TtTruth],
+    turntable: &[emulators::bus::scheduler::TtTruth],
     faults: &[crate::engine::faultlog::FaultEvent],
 ) -> Result<u64> {
     let path = out.join("truth.mcap");

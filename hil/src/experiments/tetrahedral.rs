@@ -4,7 +4,7 @@
 //!
 //! The table (the scenario's three-axis mechanism: outer z, then x, then y) runs the paper's
 //! profile on a level base at latitude 45 deg: rest, x at 20 deg/s for 75 s, then y, then z,
-//! then rest, 360 s at 100 Hz; the emulated gyros ([`emulators::mems`]) read the true body rate.
+//! then rest, 360 s at 100 Hz; the emulated gyros ([`emulators::imu::mems`]) read the true body rate.
 //! Before the data is used, the table's rates are checked against the commanded profile. nav's
 //! 16-state filter ([`nav::calib::TetraKf`], the paper's `P0 = I`, `R = 1e-3 I`) takes each
 //! sample's outputs and the rate the table's encoders give ([`nav::calib::table_rate`]). The
@@ -15,7 +15,7 @@ pub use crate::procedures::tetrahedral::{TetraErrors, errors};
 use crate::stats::median;
 use crate::table::Table;
 use anyhow::{Result, bail};
-use emulators::mems::{TetraGyros, TetraParams};
+use emulators::imu::mems::{TetraGyros, TetraParams};
 use emulators::truth::{AxisAngle, Composed, Indexer, Motion, RateWindows, Static};
 use nalgebra::{UnitQuaternion, Vector3};
 use nav::calib::{GyroCoefficients, TETRA_GYROS, TetraKf, six_position, table_rate};
@@ -214,7 +214,7 @@ pub fn run(noise_dps: f64, seed: u64) -> Result<TetraRun> {
 #[derive(Debug, Clone, Serialize)]
 pub struct FailureRow {
     /// The failure.
-    pub failure: emulators::mems::GyroFailure,
+    pub failure: emulators::imu::mems::GyroFailure,
     /// With the table's rate as the reference.
     pub with_reference: bool,
     /// The monitor's state at the end.
@@ -231,7 +231,7 @@ pub struct FailureRow {
 /// Each failure at 150 s on the paper's table profile with MEMS noise 0.005 deg/s, calibrated
 /// gyros, with and without the table's rate as the reference.
 pub fn failures(seed: u64) -> Vec<FailureRow> {
-    use emulators::mems::{FailureInjector, GyroFailure};
+    use emulators::imu::mems::{FailureInjector, GyroFailure};
     let at_s = 150.0;
     let cases = [
         GyroFailure::Stuck { gyro: 1, at_s },
@@ -467,7 +467,7 @@ mod tests {
         for r in &rows {
             // a stuck output shows when the motion next changes (210 s), the others at once
             let due = match r.failure {
-                emulators::mems::GyroFailure::Stuck { .. } => 60.0,
+                emulators::imu::mems::GyroFailure::Stuck { .. } => 60.0,
                 _ => 0.0,
             };
             assert!(
@@ -480,7 +480,7 @@ mod tests {
                 (Status::DetectedNotIsolated { .. }, false) => {
                     assert!(matches!(
                         r.failure,
-                        emulators::mems::GyroFailure::BiasJump { .. }
+                        emulators::imu::mems::GyroFailure::BiasJump { .. }
                     ))
                 }
                 _ => panic!("{r:?}"),

@@ -3,7 +3,7 @@
 
 use super::{Ch, View};
 use crate::scenario::Scenario;
-use emulators::bus::TtTruth;
+use emulators::bus::scheduler::TtTruth;
 use emulators::drive::Drive;
 use emulators::step::{Step, Stepper, Traced};
 use nav::foxglove::{LOG_INFO, LOG_WARNING};
@@ -121,7 +121,7 @@ impl BenchRun {
     }
 
     /// The scheduler's watcher for scenario `s`.
-    pub fn watcher(&self, s: &Scenario) -> emulators::bus::Watch {
+    pub fn watcher(&self, s: &Scenario) -> emulators::bus::scheduler::Watch {
         let mut w = self.frame_watcher(
             s.imu.gyro_pulse_arcsec,
             s.imu.accel_pulse_mps,
@@ -160,7 +160,7 @@ impl BenchRun {
     }
 
     /// The view's pause for the scheduler.
-    pub fn hold(&self) -> emulators::bus::Hold {
+    pub fn hold(&self) -> emulators::bus::scheduler::Hold {
         self.view.hold()
     }
 

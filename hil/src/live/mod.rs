@@ -20,7 +20,7 @@
 //! channel, so one layout (`docs/foxglove-layout.json`) serves both. Times are simulated time,
 //! as in the recordings; the server sends it as the Time capability's time.
 //!
-//! A viewer's pause holds the scheduler ([`emulators::bus::Hold`]): nav confirms every sample
+//! A viewer's pause holds the scheduler ([`emulators::bus::scheduler::Hold`]): nav confirms every sample
 //! sent, then is stopped (SIGSTOP) until the viewer plays again; the stream's next frames are
 //! written before nav goes on (SIGCONT). nav's result does not change (the e2e live test
 //! pauses a drill and checks it against the in-process reference).
@@ -295,10 +295,10 @@ impl View {
 
     /// The pause a viewer may ask for, for the scheduler; it stops and continues the process
     /// [`View::set_nav_pid`] names.
-    pub(crate) fn hold(self: &Arc<Self>) -> emulators::bus::Hold {
+    pub(crate) fn hold(self: &Arc<Self>) -> emulators::bus::scheduler::Hold {
         let pid = self.nav_pid.clone();
         let view = Arc::downgrade(self);
-        emulators::bus::Hold {
+        emulators::bus::scheduler::Hold {
             paused: self.paused.clone(),
             notify: Box::new(move |stand| {
                 let p = pid.load(Ordering::Relaxed);

@@ -6,7 +6,7 @@ use super::rotating::{fog_bench, until_finished};
 use crate::check::Check;
 use crate::scenario::Scenario;
 use anyhow::{Result, bail};
-use emulators::mems::TetraParams;
+use emulators::imu::mems::TetraParams;
 use nav::calib::{GyroCoefficients, TETRA_GYROS};
 use nav::procedure::Procedure;
 use serde::{Deserialize, Serialize};
@@ -67,7 +67,7 @@ pub struct TetraOptions {
     /// Run the profile again with the parity monitor.
     pub monitor: bool,
     /// A failure of one gyro (times from the start of the run).
-    pub failure: Option<emulators::mems::GyroFailure>,
+    pub failure: Option<emulators::imu::mems::GyroFailure>,
     /// Start from this parameter file of the unit (an earlier run's): no calibration, the
     /// profile once with the parity monitor.
     pub parameters: Option<std::path::PathBuf>,
@@ -108,8 +108,8 @@ pub fn tetra_scenario(o: &TetraOptions) -> Scenario {
     // the rate's range for the table's 20 deg/s: 16-bit counters of 0.1 arcsec at 100 Hz
     s.imu.gyro_pulse_arcsec = [0.1; 3];
     s.imu.gyro_range_dps = 90.0;
-    s.imu.tetra = Some(emulators::mems::TetraUnit {
-        gyros: emulators::mems::TetraParams {
+    s.imu.tetra = Some(emulators::imu::mems::TetraUnit {
+        gyros: emulators::imu::mems::TetraParams {
             noise_dps: o.noise_dps,
             seed: o.seed,
             ..Default::default()
@@ -155,7 +155,7 @@ pub fn tetra_scenario(o: &TetraOptions) -> Scenario {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TetraOutcome {
     /// The unit's true coefficients.
-    pub truth: emulators::mems::TetraParams,
+    pub truth: emulators::imu::mems::TetraParams,
     /// nav's result.
     pub result: Option<nav::tetracal::TetraCalibrationResult>,
     /// Largest errors and the mean relative error.
@@ -163,7 +163,7 @@ pub struct TetraOutcome {
     /// Largest |error| / sigma over the 16 coefficients.
     pub worst_sigma_ratio: Option<f64>,
     /// The failure injected, if any.
-    pub failure: Option<emulators::mems::GyroFailure>,
+    pub failure: Option<emulators::imu::mems::GyroFailure>,
     /// Why it did not finish.
     pub abort: Option<String>,
     /// Simulated time at the end, s.
@@ -358,9 +358,9 @@ fn checks(out: &mut Vec<Check>, o: &TetraOutcome, nav: &nav::summary::Summary) {
     }
     if let (Some(f), Some(r)) = (&o.failure, &o.result) {
         let gyro = match *f {
-            emulators::mems::GyroFailure::Stuck { gyro, .. }
-            | emulators::mems::GyroFailure::BiasJump { gyro, .. }
-            | emulators::mems::GyroFailure::NoiseBurst { gyro, .. } => gyro,
+            emulators::imu::mems::GyroFailure::Stuck { gyro, .. }
+            | emulators::imu::mems::GyroFailure::BiasJump { gyro, .. }
+            | emulators::imu::mems::GyroFailure::NoiseBurst { gyro, .. } => gyro,
         };
         let m = r.monitor;
         out.push(Check {
@@ -445,7 +445,7 @@ mod tetra_tests {
         let pass = s.tetra_calibration.as_ref().expect("set").profile_s();
         // a jump of gyro 3 halfway through the second pass (the run's start is a few tenths
         // of a second before the profile's)
-        o.failure = Some(emulators::mems::GyroFailure::BiasJump {
+        o.failure = Some(emulators::imu::mems::GyroFailure::BiasJump {
             gyro: 2,
             at_s: 1.5 * pass,
             jump_dps: 0.5,

@@ -4,7 +4,7 @@
 
 use crate::report::page::esc;
 use crate::table::Table;
-use emulators::canbus::BusStats;
+use emulators::bus::model::BusStats;
 use std::fmt::Write;
 
 /// The rows of the per-identifier table: id, message, sender, frames, load %, p50, p99, worst.

@@ -8,7 +8,7 @@ pub mod plot;
 use crate::engine::reference::InProcess;
 use crate::scenario::Scenario;
 use crate::table::Table;
-use emulators::can::TxStats;
+use emulators::bus::transport::TxStats;
 use nalgebra::Vector3;
 use nav::summary::Summary;
 use serde::{Deserialize, Serialize};
@@ -32,18 +32,18 @@ pub struct RunReport {
     /// watchdog to report an IMU stop or the stream's end left out).
     pub pace_reached: f64,
     /// How the emulators followed nav (lockstep).
-    pub lockstep: emulators::bus::LockstepStats,
+    pub lockstep: emulators::bus::scheduler::LockstepStats,
     /// The bus model: load, each identifier's queueing delays, the turntable command round
     /// trip, each node's queue.
     #[serde(default)]
-    pub bus: emulators::canbus::BusStats,
+    pub bus: emulators::bus::model::BusStats,
     /// What the emulator sent.
     pub tx: TxStats,
     /// The same scenario run in process (no bus): the reference nav must reproduce (none for
     /// runs with a turntable, which moves on nav's own commands).
     pub in_process: Option<InProcess>,
     /// What the turntable emulator did (runs with a turntable).
-    pub turntable: Option<emulators::can::TurntableTxStats>,
+    pub turntable: Option<emulators::bus::transport::TurntableTxStats>,
     /// The outcomes of the procedures the scenario ran, scored against its truth (in the JSON:
     /// `drill`, `calibration`, `tetra_calibration`).
     #[serde(flatten)]
@@ -83,11 +83,11 @@ pub struct BenchSide<'a> {
     /// The IMU's frames.
     pub tx: &'a TxStats,
     /// The lockstep with nav.
-    pub lockstep: &'a emulators::bus::LockstepStats,
+    pub lockstep: &'a emulators::bus::scheduler::LockstepStats,
     /// The bus model.
-    pub bus: &'a emulators::canbus::BusStats,
+    pub bus: &'a emulators::bus::model::BusStats,
     /// The turntable's frames, when there is one.
-    pub turntable: Option<&'a emulators::can::TurntableTxStats>,
+    pub turntable: Option<&'a emulators::bus::transport::TurntableTxStats>,
     /// The receiver reached nav through gpsd.
     pub gps_via_gpsd: bool,
 }
@@ -239,7 +239,7 @@ pub fn checks(
 }
 
 /// nav counted every error frame the bus model raised for its controller (runs with any).
-fn error_frame_check(bus: &emulators::canbus::BusStats, nav: &Summary) -> Option<Check> {
+fn error_frame_check(bus: &emulators::bus::model::BusStats, nav: &Summary) -> Option<Check> {
     let c = &nav.can_bus;
     (bus.nav_error_frames > 0 || c.error_frames > 0).then(|| Check {
         name: "every error frame of nav's controller reached nav".into(),
@@ -261,7 +261,7 @@ fn error_frame_check(bus: &emulators::canbus::BusStats, nav: &Summary) -> Option
 fn frame_kind_checks(
     out: &mut Vec<Check>,
     s: &Scenario,
-    bus: &emulators::canbus::BusStats,
+    bus: &emulators::bus::model::BusStats,
     nav: &Summary,
 ) {
     let foreign: u64 = bus

@@ -352,6 +352,15 @@ impl BandChart {
                 esc(&self.y_label)
             );
         }
+        self.footer(&mut s, h, &px, (x0, x1));
+        s.push_str("</svg>\n");
+        s
+    }
+
+    /// Below the panels: the spans' legend, the x axis's ticks and label (`h` the chart's
+    /// height, `px` the x axis's mapping over `xs`).
+    fn footer(&self, s: &mut String, h: f64, px: &dyn Fn(f64) -> f64, xs: (f64, f64)) {
+        let (x0, x1) = xs;
         let bottom = h - B;
         if !self.spans.is_empty() {
             let _ = writeln!(
@@ -383,8 +392,6 @@ impl BandChart {
             h - 15.0,
             esc(&self.x_label)
         );
-        s.push_str("</svg>\n");
-        s
     }
 }
 

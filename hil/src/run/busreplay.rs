@@ -338,9 +338,11 @@ pub fn replay_on_bus(mcap: &Path, cfg: &NavConfig, opts: &BusReplayOptions) -> R
         imu_rate_hz: cfg.imu.rate_hz,
         // well past nav's watchdog, so that it fires where it fired
         silence: Duration::from_millis(cfg.watchdog.imu_timeout_ms * 3 + 100),
-        lockstep: Some(emulators::bus::Lockstep::at_rate(cfg.imu.rate_hz)),
+        lockstep: Some(emulators::bus::scheduler::Lockstep::at_rate(
+            cfg.imu.rate_hz,
+        )),
     };
-    let progress = emulators::can::Progress::default();
+    let progress = emulators::bus::transport::Progress::default();
     let stop = AtomicBool::new(false);
     let duration_s = rec
         .items

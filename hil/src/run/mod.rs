@@ -508,7 +508,7 @@ fn supervise(
     s: &Scenario,
     opts: &RunOptions,
     nav: &NavProcess,
-    devices: &crate::engine::devices::Running<emulators::bus::BusOutcome>,
+    devices: &crate::engine::devices::Running<emulators::bus::scheduler::BusOutcome>,
     live: Option<&crate::live::bench::BenchRun>,
 ) -> Supervised {
     let mut drill = DrillWatch::default();
@@ -630,7 +630,7 @@ fn read_summary(
 
 /// A run whose devices and nav have stopped: what the bus, nav and the bench's watchers said.
 struct Ended {
-    bus: emulators::bus::BusOutcome,
+    bus: emulators::bus::scheduler::BusOutcome,
     sim_reached: f64,
     wall: f64,
     nav_exit: Option<i32>,

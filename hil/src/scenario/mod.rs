@@ -5,7 +5,7 @@ pub mod fogunit;
 pub mod navconfig;
 
 use anyhow::{Context, Result, bail};
-use emulators::can::BusFaults;
+use emulators::bus::transport::BusFaults;
 use emulators::drive::{Drive, DriveSpec};
 use emulators::gps::ReceiverParams;
 use emulators::imu::ImuParams;
@@ -127,9 +127,9 @@ pub struct BusSettings {
     /// (error-passive, bus-off and recovery; `node = "NAV"`: nav's own controller).
     #[serde(
         default,
-        skip_serializing_if = "emulators::canbus::PhysicalFaults::is_empty"
+        skip_serializing_if = "emulators::bus::model::PhysicalFaults::is_empty"
     )]
-    pub faults: emulators::canbus::PhysicalFaults,
+    pub faults: emulators::bus::model::PhysicalFaults,
     /// Write the bus model's log (`bus.log` in the run folder, `candump -l` form): every frame
     /// on the modelled bus, nav's included, and the error frames of nav's controller, stamped
     /// with simulated time. About 35 bytes a frame (4,000 frames per second of a 2 kHz IMU):
@@ -156,8 +156,8 @@ pub enum TimingModel {
 
 impl BusSettings {
     /// The bus model of these settings.
-    pub fn timing(&self) -> emulators::canbus::BusTiming {
-        emulators::canbus::BusTiming {
+    pub fn timing(&self) -> emulators::bus::model::BusTiming {
+        emulators::bus::model::BusTiming {
             bitrate_bps: self.bitrate_bps,
             ideal: self.timing == TimingModel::Ideal,
             tx_queue: self.tx_queue_frames,
@@ -167,7 +167,7 @@ impl BusSettings {
 }
 
 fn default_tx_queue() -> usize {
-    emulators::canbus::DEFAULT_TX_QUEUE
+    emulators::bus::model::DEFAULT_TX_QUEUE
 }
 
 impl Default for BusSettings {

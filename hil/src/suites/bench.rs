@@ -5,7 +5,7 @@
 use crate::scenario::Scenario;
 use crate::table::{Align, Table};
 use anyhow::{Context, Result};
-use emulators::can::BusStream;
+use emulators::bus::transport::BusStream;
 use emulators::imu::{ImuEmulator, ImuParams};
 use emulators::truth::Coning;
 use nav::pipeline::Pipeline;

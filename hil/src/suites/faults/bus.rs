@@ -62,7 +62,7 @@ pub(super) fn interface() -> Vec<FaultCase> {
                     .bus
                     .nodes
                     .iter()
-                    .find(|n| n.name == emulators::canbus::FOREIGN)
+                    .find(|n| n.name == emulators::bus::model::FOREIGN)
                     .map_or(0, |n| n.overflow);
                 let seen = r.nav.unknown_id_frames;
                 let pass = survived(r)

@@ -1,10 +1,10 @@
 //! The fault matrix's rows on the physical layer: faults the bus model injects
-//! ([`emulators::canbus::PhysicalFaults`]), which nav meets as a Linux CAN controller shows them:
+//! ([`emulators::bus::model::PhysicalFaults`]), which nav meets as a Linux CAN controller shows them:
 //! error frames (`CAN_RAW_ERR_FILTER`), frames that never come, frames of a node it does not
 //! know.
 
 use super::*;
-use emulators::canbus::{NodeTiming, PhysicalFaults, TxFault};
+use emulators::bus::model::{NodeTiming, PhysicalFaults, TxFault};
 
 /// A node of the bus model's statistics.
 fn node<'a>(r: &'a RunReport, name: &str) -> Option<&'a NodeTiming> {

@@ -259,7 +259,7 @@ pub struct TetraStream {
     unit: TetraUnit,
     gyros: TetraGyros,
     failure: Option<FailureInjector>,
-    counters: [crate::pulse::PulseCounter; GYROS],
+    counters: [crate::imu::pulse::PulseCounter; GYROS],
 }
 
 impl TetraStream {

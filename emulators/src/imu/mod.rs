@@ -23,7 +23,11 @@
 //! the pulse count after N samples differs from the true accumulated angle by less than one
 //! pulse, whatever N.
 
-pub use crate::pulse::PulseCounter;
+pub mod mems;
+pub mod pulse;
+pub mod stream;
+
+pub use crate::imu::pulse::PulseCounter;
 use crate::truth::Motion;
 use nalgebra::{Matrix3, Vector3};
 use rand::SeedableRng;
@@ -104,7 +108,7 @@ pub struct ImuParams {
     pub counter_jumps: Vec<[u64; 2]>,
     /// A redundant MEMS gyro unit riding with this IMU (paper 001), sampled on its strobe.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub tetra: Option<crate::mems::TetraUnit>,
+    pub tetra: Option<crate::imu::mems::TetraUnit>,
 }
 
 impl Default for ImuParams {
@@ -231,11 +235,11 @@ impl ImuParams {
             }
             if let Some(f) = &t.failure {
                 let g = match *f {
-                    crate::mems::GyroFailure::Stuck { gyro, .. }
-                    | crate::mems::GyroFailure::BiasJump { gyro, .. }
-                    | crate::mems::GyroFailure::NoiseBurst { gyro, .. } => gyro,
+                    crate::imu::mems::GyroFailure::Stuck { gyro, .. }
+                    | crate::imu::mems::GyroFailure::BiasJump { gyro, .. }
+                    | crate::imu::mems::GyroFailure::NoiseBurst { gyro, .. } => gyro,
                 };
-                if g >= crate::mems::GYROS {
+                if g >= crate::imu::mems::GYROS {
                     return Err(crate::ParamError::new(
                         "imu.tetra.failure",
                         format!("gyro {g} does not exist: gyros are 0 to 3"),
@@ -317,7 +321,7 @@ pub struct ImuEmulator {
     rng: StdRng,
     arw_sigma: f64,
     vrw_sigma: f64,
-    tetra: Option<crate::mems::TetraStream>,
+    tetra: Option<crate::imu::mems::TetraStream>,
 }
 
 /// Frames of one sample.
@@ -365,7 +369,7 @@ impl ImuEmulator {
         };
         Self {
             motion,
-            tetra: p.tetra.clone().map(crate::mems::TetraStream::new),
+            tetra: p.tetra.clone().map(crate::imu::mems::TetraStream::new),
             arw_sigma: p.gyro_arw_dpsh.to_radians() / 60.0 * dt.sqrt(),
             vrw_sigma: p.accel_vrw_mpss * dt.sqrt(),
             drift_drive: sigma * (1.0 - drift_phi * drift_phi).sqrt(),

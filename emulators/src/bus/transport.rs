@@ -8,8 +8,8 @@ use std::time::{Duration, Instant};
 use thiserror::Error;
 use wire::RawFrame;
 
-pub use crate::stream::{BusFaults, BusStream, TxStats};
-pub use crate::ttbus::TurntableTxStats;
+pub use crate::imu::stream::{BusFaults, BusStream, TxStats};
+pub use crate::turntable::ttbus::TurntableTxStats;
 
 /// Transport failures.
 #[derive(Debug, Error)]

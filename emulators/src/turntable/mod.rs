@@ -11,6 +11,8 @@
 //! sign of the approach direction) and repeatability (random, a few arcsec). The lock pin engages
 //! only within `lock_window_deg` of a detent and takes `lock_time_s`.
 
+pub mod ttbus;
+
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};

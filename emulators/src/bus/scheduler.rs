@@ -28,11 +28,11 @@
 //! scheduler waits [`Lockstep::stall`] of wall time, then counts a stall and runs on at its
 //! pace: the run goes on, and its report says it was not reproducible.
 
-use crate::can::{CanTxError, Progress, SentLog, TurntableTxStats, TxStats, write_all};
+use crate::bus::transport::{CanTxError, Progress, SentLog, TurntableTxStats, TxStats, write_all};
 use crate::clock::SimClock;
 use crate::gps::{GpsDevice, GpsTxStats, PtyError};
 use crate::step::{FromNav, Step, Stepper};
-pub use crate::ttbus::{TT_TRUTH_HZ, TtBus, TtTruth};
+pub use crate::turntable::ttbus::{TT_TRUTH_HZ, TtBus, TtTruth};
 use serde::{Deserialize, Serialize};
 use socketcan::{CanSocket, Socket, SocketOptions};
 use std::collections::VecDeque;
@@ -263,7 +263,7 @@ pub struct BusOutcome {
     /// Lines in the bus model's log ([`Devices::bus_log`]).
     pub bus_logged: Option<u64>,
     /// The bus model: load, each identifier's delays, the command round trip.
-    pub bus: crate::canbus::BusStats,
+    pub bus: crate::bus::model::BusStats,
     /// Error frames of nav's controller written to the bus.
     pub error_frames: u64,
 }
