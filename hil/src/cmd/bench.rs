@@ -1,7 +1,37 @@
 //! `hil bench`: the benchmark suite, where vcan is (natively, or all of it in the guest).
 
-use crate::*;
+use crate::cmd::args::BusArgs;
+use crate::cmd::guest::{absolute, default_out, rerun_in_guest};
+use anyhow::{Context, Result, bail};
+use hil::run::{run_here, sibling_binary};
+use hil::scenario::Scenario;
 use hil::suites::bench::{BusPace, Suite};
+use std::path::{Path, PathBuf};
+use vcan_setup::GUEST_ENV;
+
+#[derive(clap::Args, Clone)]
+pub(crate) struct BenchArgs {
+    /// Seconds of 2 kHz IMU data per pass of the in-process figures.
+    #[arg(long, value_parser = hil::values::duration_s, default_value_t = 120.0)]
+    pub(crate) seconds: f64,
+    /// Passes of nav's front end (the best is reported).
+    #[arg(long, default_value_t = 3)]
+    pub(crate) passes: u32,
+    /// Scenario files (default: the shipped ones under scenarios/; the bus part adds the drill).
+    #[arg(long)]
+    pub(crate) scenario: Vec<PathBuf>,
+    /// Simulated seconds of each scenario through the bus (its first seconds).
+    #[arg(long, value_parser = hil::values::duration_s, default_value_t = 30.0)]
+    pub(crate) bus_seconds: f64,
+    /// Frames per raw vcan measurement.
+    #[arg(long, default_value_t = 200_000)]
+    pub(crate) raw_frames: u64,
+    /// In-process figures only: no bus, no guest.
+    #[arg(long)]
+    pub(crate) no_bus: bool,
+    #[command(flatten)]
+    pub(crate) bus: BusArgs,
+}
 
 pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
     if a.seconds.is_nan() || a.seconds <= 0.1 || a.bus_seconds.is_nan() || a.bus_seconds < 1.0 {

@@ -1,7 +1,9 @@
 //! `hil busload`: the bus load of the wire contract, or of a scenario's traffic at its bit rate,
 //! and with `--measure` what the bus model measured when the scenario ran in process.
 
-use crate::*;
+use anyhow::{Context, Result, bail};
+use hil::scenario::Scenario;
+use std::path::PathBuf;
 
 pub(crate) fn busload(bitrates: &[f64], scenario: Option<PathBuf>, measure: bool) -> Result<i32> {
     if let Some(b) = bitrates.iter().find(|b| **b > 1_000_000.0) {

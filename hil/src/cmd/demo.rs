@@ -1,7 +1,14 @@
 //! `hil demo`: the main job (a drill, then a GPS-aided drive).
 
-use crate::*;
-use cmd::run::run_procedure;
+use crate::cmd::args::{BusArgs, FreeArgs, LiveArgs, finish_view};
+use crate::cmd::drill::{NorthFindingArgs, drill_north_finding};
+use crate::cmd::guest::{absolute, default_out, run_in_guest};
+use crate::cmd::run::run_procedure;
+use anyhow::{Context, Result};
+use hil::run::sibling_binary;
+use hil::scenario::Scenario;
+use std::path::{Path, PathBuf};
+use vcan_setup::{CanSupport, GUEST_ENV};
 
 /// The built-in GPS-aided drive of the demo.
 pub(crate) const DRIVE_GPS: &str = include_str!("../../../scenarios/drive-gps.toml");

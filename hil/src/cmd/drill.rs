@@ -1,7 +1,64 @@
 //! `hil drill north-finding`: the operator drill, on the bus or in process.
 
-use crate::*;
-use cmd::run::{procedure_folder, run_procedure};
+use crate::cmd::args::{BusArgs, FreeArgs, LiveArgs};
+use crate::cmd::run::{procedure_folder, run_procedure};
+use anyhow::{Context, Result};
+use clap::Subcommand;
+use std::path::PathBuf;
+
+#[derive(Subcommand)]
+pub(crate) enum Drill {
+    /// Four-position north-finding: the vehicle is parked at a given or random heading; nav
+    /// indexes the IMU through 0/90/180/270 deg on the turntable, finds north, returns to zero
+    /// and locks. Live progress, then a result card; the run is saved with its report.
+    NorthFinding(NorthFindingArgs),
+}
+
+#[derive(clap::Args, Clone)]
+pub(crate) struct NorthFindingArgs {
+    /// True heading of the vehicle, deg (default: random).
+    #[arg(long, value_parser = hil::values::heading_deg, allow_negative_numbers = true)]
+    pub(crate) heading: Option<f64>,
+    /// Latitude, deg.
+    #[arg(long, value_parser = hil::values::latitude_deg, allow_negative_numbers = true, default_value_t = 28.218157)]
+    pub(crate) lat: f64,
+    /// Longitude, deg (the site's surveyed position, with --lat: where a real receiver is).
+    #[arg(long, value_parser = hil::values::longitude_deg, allow_negative_numbers = true, default_value_t = 112.989583)]
+    pub(crate) lon: f64,
+    /// Dwell per position, s, or `auto`: the shortest that meets --tolerance at 3 sigma by the
+    /// drill's prediction (`hil plan north-finding`), else the one that comes closest.
+    #[arg(long, value_parser = crate::cmd::drill::dwell, default_value = "60")]
+    pub(crate) dwell: crate::cmd::drill::Dwell,
+    /// Positions: 2, 4 or 8, equally spaced (4: 0, 90, 180, 270, the paper's).
+    #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(["2", "4", "8"]))]
+    pub(crate) positions: Option<String>,
+    /// Visit the positions out and back (0, 90, 180, 270, 270, 180, 90, 0): a linear gyro
+    /// drift cancels; each visit is a dwell.
+    #[arg(long)]
+    pub(crate) out_and_back: bool,
+    /// Speed factor (1 = real time, as on the vehicle).
+    #[arg(long, value_parser = hil::values::speed, default_value_t = 1.0)]
+    pub(crate) speed: f64,
+    /// Disturbance script: TOML file with [[disturbance]] entries (door_slam, climb_in, wind).
+    #[arg(long)]
+    pub(crate) disturbances: Option<PathBuf>,
+    /// Pass when the heading error is within this, deg.
+    #[arg(long, value_parser = hil::values::tolerance_deg, default_value_t = 0.1)]
+    pub(crate) tolerance: f64,
+    /// Random seed (sensor errors, random heading).
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Run the same drill in process (no bus, no nav process: the same emulators and nav code,
+    /// stepped in the order the bench delivers the frames); its result equals the bench's.
+    #[arg(long)]
+    pub(crate) in_process: bool,
+    #[command(flatten)]
+    pub(crate) live: LiveArgs,
+    #[command(flatten)]
+    pub(crate) bus: BusArgs,
+    #[command(flatten)]
+    pub(crate) free: FreeArgs,
+}
 
 /// Disturbance script file: `[[disturbance]]` entries.
 #[derive(serde::Deserialize)]
@@ -40,7 +97,7 @@ fn drill_scenario(
     s.speed = a.speed;
     s.site.lon_deg = a.lon;
     s.heading_tolerance_deg = a.tolerance;
-    if let Some(p) = cmd::plan::positions(a.positions.as_deref(), a.out_and_back) {
+    if let Some(p) = crate::cmd::plan::positions(a.positions.as_deref(), a.out_and_back) {
         hil::procedures::northfinding::set_positions(&mut s, p);
     }
     if let Some(p) = &a.disturbances {

@@ -1,11 +1,164 @@
 //! `hil experiment`: the papers' tables in process.
 
-use crate::*;
+use crate::cmd::guest::default_out;
+use anyhow::{Result, bail};
+use clap::Subcommand;
 use hil::experiments::Experiment as Exp;
 use hil::experiments::coning::ConingTables;
 use hil::experiments::navigation::Navigation;
 use hil::experiments::northfinding::NorthFindingMc;
 use hil::experiments::routes::Routes;
+use hil::scenario::Scenario;
+use std::path::{Path, PathBuf};
+
+#[derive(Subcommand)]
+pub(crate) enum Experiment {
+    /// Monte Carlo of four-position north-finding in process: heading error RMS against the
+    /// bound ARW / (W_ie cos L sqrt(T)), gyro bias effect, other latitudes, drill time against
+    /// accuracy. Writes runs.csv, report.json and report.md.
+    NorthFinding {
+        /// Runs of the main cases (the other cases run a third as many).
+        #[arg(long, value_parser = hil::values::count, default_value_t = 100)]
+        runs: usize,
+        /// Dwell per position of the main cases, s.
+        #[arg(long, value_parser = hil::values::duration_s, default_value_t = 60.0)]
+        dwell: f64,
+        /// Main latitude, deg.
+        #[arg(long, value_parser = hil::values::latitude_deg, allow_negative_numbers = true, default_value_t = 28.2)]
+        lat: f64,
+        /// Base seed.
+        #[arg(long, default_value_t = 1000)]
+        seed: u64,
+        /// Run only part K of N (0-based, `K/N`): the drills whose place in the plan is K modulo
+        /// N. Writes part-K-of-N.json to the output folder; `hil experiment merge` makes the
+        /// report of all parts (e.g. the tasks of a Slurm array or a Kubernetes indexed Job).
+        #[arg(long, value_parser = hil::experiments::shard::parse)]
+        shard: Option<(usize, usize)>,
+        /// Output folder (default runs/experiment-north-finding-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Merge the parts of an experiment run in parts (`--shard K/N`) into its report: the same
+    /// tables a single run gives.
+    Merge {
+        /// The part files (part-K-of-N.json), every K once.
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
+        /// Output folder (default runs/experiment-<name>-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Paper 003, Table 4 in process: the campus loop (north-finding first, then six laps of
+    /// about 1 km, 1342 s) with pure INS, the standard and the fading-memory filter; the filters
+    /// with a mis-specified GPS noise; 60 s outages every 180 s with the drift at the end of each;
+    /// NEES. Writes report.md/json, series.csv and SVG plots. Use a release build (about a
+    /// minute per run and core).
+    Navigation {
+        /// Scenario (a drive with a [gps]).
+        #[arg(long, default_value = "scenarios/campus-loop.toml")]
+        scenario: PathBuf,
+        /// Runs per case with other IMU and GPS seeds (results are averaged).
+        #[arg(long, value_parser = hil::values::count, default_value_t = 1)]
+        runs: usize,
+        /// GPS noise the mis-specified filters assume, m (comma-separated).
+        #[arg(long, value_parser = hil::values::sigma_m, value_delimiter = ',', default_value = "5,100")]
+        misspecified: Vec<f64>,
+        /// Surroundings of the mis-modelled receiver: `paper-003` (paper 003's campus: the
+        /// satellites used change, multipath bursts), `urban` or `open-sky`.
+        #[arg(long, default_value = "paper-003")]
+        environment: String,
+        /// Run only part K of N (0-based, `K/N`): the runs whose place in the plan is K modulo
+        /// N. Writes part-K-of-N.json to the output folder; `hil experiment merge` makes the
+        /// report of all parts.
+        #[arg(long, value_parser = hil::experiments::shard::parse)]
+        shard: Option<(usize, usize)>,
+        /// Output folder (default runs/experiment-navigation-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// The filters over a set of routes in process, with nav's default config: end and RMS
+    /// position and velocity error, NEES per degree of freedom (target [0.5, 2]), NIS, rejected
+    /// fixes (none may be in a filter's first minute) and integrity alarms per route and filter
+    /// kind; plots of the errors against the filters' 3-sigma bounds. Writes report.md/json and
+    /// SVGs; exit status 1 when a target is missed. Use a release build (the 11 shipped routes,
+    /// 8 runs each: about 4.5 minutes on 2 cores).
+    Routes {
+        /// Route scenarios (drives with a [gps]); default: every shipped one under scenarios/.
+        #[arg(long)]
+        scenario: Vec<PathBuf>,
+        /// Runs per route and filter with other IMU and receiver seeds (results are averaged).
+        #[arg(long, value_parser = hil::values::count, default_value_t = 1)]
+        runs: usize,
+        /// Filter kinds (comma-separated).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "standard,fading,adaptive"
+        )]
+        filters: Vec<String>,
+        /// Run only part K of N (0-based, `K/N`); `hil experiment merge` makes the report.
+        #[arg(long, value_parser = hil::experiments::shard::parse)]
+        shard: Option<(usize, usize)>,
+        /// Output folder (default runs/experiment-routes-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Paper 004 in process: online self-calibration of the gyros of a dual-axis rotating IMU
+    /// (fibre-optic gyros, 100 Hz, both axes at 5 deg/s reversing every turn) by the paper's
+    /// decoupled recursive least squares against a 14-state alignment Kalman filter: mean
+    /// absolute bias and scale-factor errors over the second half, the ratio of the two methods
+    /// beside the paper's, median over the runs. Then paper 001: a redundant MEMS IMU (four gyros,
+    /// tetrahedral) on a three-axis table, its 16-state Kalman calibration against the
+    /// six-position method, at the paper's and at realistic noise. Writes report.md/json/html
+    /// and gyro-parameters.toml. Exit status 0 when both papers' targets are met. Use a release
+    /// build.
+    Calibration {
+        /// Runs (seeds).
+        #[arg(long, value_parser = hil::values::count, default_value_t = 20)]
+        runs: usize,
+        /// First seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Run length, s (errors are averaged over its second half).
+        #[arg(long, value_parser = hil::values::duration_s, default_value_t = 900.0)]
+        duration: f64,
+        /// Latitude, deg.
+        #[arg(long, value_parser = hil::values::latitude_deg, default_value_t = 30.0, allow_negative_numbers = true)]
+        lat: f64,
+        /// True heading, deg (the estimators are given it less 0.06 deg).
+        #[arg(long, value_parser = hil::values::heading_deg, default_value_t = 30.06, allow_negative_numbers = true)]
+        heading: f64,
+        /// Start the inner axis this long after the outer, s. The paper does not say how its
+        /// axes are phased: a quarter turn (18 s at 5 deg/s, the default) averages the coarse
+        /// tilt out of the z gyro's bias; 0 turns them in step.
+        #[arg(long, value_parser = hil::values::pause_s, default_value_t = 18.0)]
+        inner_delay: f64,
+        /// Output folder (default runs/experiment-calibration-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Paper 000, Tables 1-3: coning drift of the classical, Taylor-tuned and fitted
+    /// algorithms on filtered data; writes CSV, JSON, Markdown and an SVG plot.
+    Coning {
+        /// Output folder (default runs/experiment-coning-<unix time>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Run length for the tables, s.
+        #[arg(long, value_parser = hil::values::duration_s, default_value_t = 60.0)]
+        duration: f64,
+        /// Step of the simulated frequency sweep, Hz.
+        #[arg(long, value_parser = hil::values::step_hz, default_value_t = 2.0)]
+        sweep_step: f64,
+        /// Seed of the emulated IMU (Table 3 analogue).
+        #[arg(long, default_value_t = 7)]
+        seed: u64,
+        /// Run only part K of N (0-based, `K/N`): the table rows whose place in the plan is K
+        /// modulo N. Writes part-K-of-N.json to the output folder; `hil experiment merge`
+        /// makes the report of all parts.
+        #[arg(long, value_parser = hil::experiments::shard::parse)]
+        shard: Option<(usize, usize)>,
+    },
+}
 
 pub(crate) fn experiment(e: Experiment) -> Result<i32> {
     match e {

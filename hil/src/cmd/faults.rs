@@ -1,7 +1,36 @@
 //! `hil faults`: the fault matrix, where vcan is (natively, or all of it in the guest).
 
-use crate::*;
+use crate::cmd::args::BusArgs;
+use crate::cmd::guest::{absolute, default_out, junit_back, junit_through_guest, rerun_in_guest};
+use anyhow::{Result, bail};
+use hil::run::sibling_binary;
 use hil::suites::faults::{FaultOptions, matrix, run_matrix};
+use std::path::PathBuf;
+use vcan_setup::GUEST_ENV;
+
+#[derive(clap::Args, Clone)]
+pub(crate) struct FaultsArgs {
+    /// Only these faults (comma-separated names, as in the table).
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) only: Vec<String>,
+    /// Speed factor of every run.
+    #[arg(long, value_parser = hil::values::speed, default_value_t = 10.0)]
+    pub(crate) speed: f64,
+    /// List the faults and exit.
+    #[arg(long)]
+    pub(crate) list: bool,
+    /// Faults run side by side, each on an interface of its own (--iface, then IFACE-1,
+    /// IFACE-2, ...). Each run is in lockstep with its nav: the results are the same at any
+    /// number.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..=16))]
+    pub(crate) jobs: u16,
+    /// Also write the result as JUnit XML to FILE, for a CI server (GitLab, Jenkins, GitHub):
+    /// a test case per fault, failing with what was expected and observed.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) junit: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) bus: BusArgs,
+}
 
 pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
     if a.list {

@@ -1,7 +1,9 @@
 //! `hil fuzz`: hostile input for nav's decoders and the bench's parsers.
 
-use crate::*;
+use crate::cmd::guest::{absolute, default_out};
+use anyhow::{Context, Result, bail};
 use hil::suites::fuzz::Target;
+use std::path::PathBuf;
 
 pub(crate) fn fuzz(
     targets: Vec<Target>,

@@ -1,6 +1,8 @@
 //! Running a command inside the QEMU guest where this kernel has no CAN, and the output folders.
 
-use crate::*;
+use anyhow::{Context, Result, bail};
+use std::path::{Path, PathBuf};
+use vcan_setup::{GUEST_ENV, VmOptions};
 
 pub(crate) fn default_out(name: &str) -> PathBuf {
     let secs = std::time::SystemTime::now()

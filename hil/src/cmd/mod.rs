@@ -1,6 +1,8 @@
-//! The commands of `hil`, one module each (the argument types and the dispatch are in
-//! `main.rs`; the work is in the `hil` library).
+//! The commands of `hil`, one module each with its arguments and its run function (`main.rs`
+//! only dispatches; the work is in the `hil` library); [`args`] holds the arguments several
+//! commands share.
 
+pub(crate) mod args;
 pub(crate) mod bench;
 pub(crate) mod busload;
 pub(crate) mod calibrate;

@@ -1,6 +1,11 @@
 //! `hil replay`: a recording through nav's pipeline.
 
-use crate::*;
+use crate::cmd::args::BusArgs;
+use crate::cmd::guest::{absolute, default_out, run_in_guest};
+use anyhow::{Context, Result, bail};
+use hil::run::sibling_binary;
+use hil::scenario::Scenario;
+use std::path::{Path, PathBuf};
 
 /// The recording's MCAP file and nav's config for it (loaded).
 fn recording_and_config(

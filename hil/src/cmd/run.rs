@@ -1,6 +1,48 @@
 //! `hil run`: one scenario through the bench.
 
-use crate::*;
+use crate::cmd::args::{BusArgs, FreeArgs, LiveArgs, finish_view};
+use crate::cmd::guest::{absolute, default_out, junit_back, junit_through_guest, run_in_guest};
+use anyhow::{Context, Result};
+use hil::report;
+use hil::run::{RunOptions, run_here, sibling_binary};
+use hil::scenario::Scenario;
+use std::path::{Path, PathBuf};
+use vcan_setup::GUEST_ENV;
+
+#[derive(clap::Args, Clone)]
+pub(crate) struct RunArgs {
+    /// Scenario file (TOML); default: the built-in static scenario.
+    #[arg(long)]
+    pub(crate) scenario: Option<PathBuf>,
+    /// Override the simulated duration, s.
+    #[arg(long, value_parser = hil::values::duration_s)]
+    pub(crate) duration: Option<f64>,
+    /// Override the speed factor (1 = real time).
+    #[arg(long, value_parser = hil::values::speed)]
+    pub(crate) speed: Option<f64>,
+    /// The nav binary (default: next to hil).
+    #[arg(long)]
+    pub(crate) nav: Option<PathBuf>,
+    /// Skip the checks that re-run the scenario in process and read nav's recording back (the
+    /// reference run, the replay, the navigation scoring): for soaks, whose recording is too
+    /// large to read back in the guest. Frame accounting, nav's exit and memory stay.
+    #[arg(long)]
+    pub(crate) no_reference: bool,
+    /// Put gpsd between the GPS emulator's port and nav (nav's `[gps] source = "gpsd"`), as a
+    /// vehicle shares one receiver; needs gpsd (./run-tests installs it).
+    #[arg(long)]
+    pub(crate) gpsd: bool,
+    /// Also write the result as JUnit XML to FILE, for a CI server (GitLab, Jenkins, GitHub):
+    /// a test case per check of the result card, failing with its detail.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) junit: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) live: LiveArgs,
+    #[command(flatten)]
+    pub(crate) bus: BusArgs,
+    #[command(flatten)]
+    pub(crate) free: FreeArgs,
+}
 
 pub(crate) fn run(a: RunArgs) -> Result<i32> {
     let mut s = match &a.scenario {

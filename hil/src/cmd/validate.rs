@@ -1,6 +1,57 @@
 //! `hil validate turntable`: the validation suite against the mechanism on a bus.
 
-use crate::*;
+use crate::cmd::args::BusArgs;
+use crate::cmd::guest::{absolute, default_out, junit_back, junit_through_guest, run_in_guest};
+use anyhow::{Context, Result, bail};
+use clap::Subcommand;
+use std::path::PathBuf;
+
+#[derive(Subcommand)]
+pub(crate) enum Validate {
+    /// The indexing mechanism: index accuracy and settle time at each detent, lock engagement,
+    /// zero return, rate-mode accuracy and stability, rejection of invalid commands, heartbeat
+    /// timeout stop, emergency stop. Prints a pass/fail table and writes validation.json.
+    Turntable(ValidateArgs),
+}
+
+/// Faults the emulated mechanism can be given for validation.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub(crate) enum TtFault {
+    /// The motor stalls on the first move.
+    Stall,
+    /// The lock pin never engages.
+    Lock,
+    /// The encoder reports glitched angles now and then.
+    EncoderGlitch,
+    /// The enable command is lost.
+    LostCommands,
+    /// Every command takes 0.2 s to act and be acknowledged.
+    DelayedCommands,
+}
+
+#[derive(clap::Args, Clone)]
+pub(crate) struct ValidateArgs {
+    /// Axis to test.
+    #[arg(long, default_value_t = 0)]
+    pub(crate) axis: u8,
+    /// Test real hardware on --iface: do not start the emulator.
+    #[arg(long)]
+    pub(crate) real: bool,
+    /// Inject a fault into the emulated mechanism (the suite must catch it).
+    #[arg(long, value_enum)]
+    pub(crate) fault: Option<TtFault>,
+    /// Pace of the emulated mechanism: its seconds per wall second at most. The suite runs in
+    /// lockstep with the emulator, so the result is the same at any pace and on a loaded host;
+    /// the pace only sets how fast an operator sees it (with --real, the mechanism's own time).
+    #[arg(long, value_parser = hil::values::speed, default_value_t = 1.0)]
+    pub(crate) speed: f64,
+    /// Also write the result as JUnit XML to FILE, for a CI server (GitLab, Jenkins, GitHub):
+    /// a test case per check, failing with the measured value, the limit and why.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) junit: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) bus: BusArgs,
+}
 
 pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
     use emulators::turntable::{Turntable, TurntableParams};
