@@ -173,7 +173,10 @@ fn no_module_imports_its_crate_root_whole() {
             read += 1;
             for line in without_tests(t).lines() {
                 let l = line.trim_start();
-                let l = l.strip_prefix("pub(crate) ").or(l.strip_prefix("pub ")).unwrap_or(l);
+                let l = l
+                    .strip_prefix("pub(crate) ")
+                    .or(l.strip_prefix("pub "))
+                    .unwrap_or(l);
                 if l.starts_with("use crate::*") || l.starts_with("use crate::{*") {
                     found.push(format!("{}: {}", p.display(), line.trim()));
                 }
@@ -181,7 +184,11 @@ fn no_module_imports_its_crate_root_whole() {
         }
     }
     assert!(read > 50, "{read} files read");
-    assert!(found.is_empty(), "glob imports of a crate root:\n{}", found.join("\n"));
+    assert!(
+        found.is_empty(),
+        "glob imports of a crate root:\n{}",
+        found.join("\n")
+    );
 }
 
 #[test]

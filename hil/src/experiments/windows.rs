@@ -1,6 +1,7 @@
 //! A filter's consistency where it breaks, not only on average: NEES per degree of freedom in
-//! each ten-minute window of a drive, inside each receiver outage and in the minute after it,
-//! pooled over the runs of a route. An average over an hour hides a filter that grows sure of
+//! each ten-minute window of a drive (within [0.5, 2]), inside each receiver outage and in the
+//! minute after it (at most 2: the drift within the sigmas promised), pooled over the runs of a
+//! route. An average over an hour hides a filter that grows sure of
 //! itself after forty minutes, or one that promises too much as it leaves a tunnel.
 
 use crate::engine::navigate::NavSample;
@@ -111,29 +112,41 @@ impl Windowed {
         Self { windows, outages }
     }
 
-    /// Every stretch: the windows, then each outage's inside and after.
-    pub fn stretches(&self) -> impl Iterator<Item = &Stretch> {
-        self.windows
-            .iter()
-            .chain(self.outages.iter().flat_map(|o| [&o.inside, &o.after]))
-    }
-
     /// The window farthest outside `bounds` (the first of equals).
     pub fn worst_window(&self, bounds: [f64; 2]) -> Option<&Stretch> {
         worst(self.windows.iter(), bounds)
     }
 
-    /// The outage stretch (inside or after) farthest outside `bounds`.
-    pub fn worst_outage(&self, bounds: [f64; 2]) -> Option<&Stretch> {
-        worst(
-            self.outages.iter().flat_map(|o| [&o.inside, &o.after]),
-            bounds,
-        )
+    /// The outage stretch (inside or after) that promises most: its larger figure the
+    /// largest.
+    pub fn worst_outage(&self) -> Option<&Stretch> {
+        let top = |s: &Stretch| {
+            s.nees_per_dof
+                .iter()
+                .copied()
+                .filter(|x| x.is_finite())
+                .fold(0.0, f64::max)
+        };
+        self.outages
+            .iter()
+            .flat_map(|o| [&o.inside, &o.after])
+            .fold(None, |w: Option<&Stretch>, s| match w {
+                Some(w) if top(w) >= top(s) => Some(w),
+                _ => Some(s),
+            })
     }
 
-    /// Every window and every outage stretch within `bounds`.
+    /// Every window within `bounds`, and the drift inside every outage and in the minute after
+    /// it within the sigmas promised: NEES per dof at most `bounds[1]` there. (Inside a tunnel a
+    /// filter that coasts on sigmas larger than its drift breaks no promise; one whose drift
+    /// outgrows them does.)
     pub fn within(&self, bounds: [f64; 2]) -> bool {
-        self.stretches().all(|s| s.within(bounds))
+        self.windows.iter().all(|s| s.within(bounds))
+            && self
+                .outages
+                .iter()
+                .flat_map(|o| [&o.inside, &o.after])
+                .all(|s| s.within([0.0, bounds[1]]))
     }
 }
 
@@ -211,6 +224,14 @@ mod tests {
         assert_eq!(w.outages[0].inside.from_s, 1000.0);
         assert_eq!(w.outages[0].after.to_s, 1100.0 + AFTER_OUTAGE_S);
         assert!(w.outages[0].inside.within([0.5, 2.0]));
+        // a tunnel coasted on generous sigmas passes; one whose drift outgrows them does not
+        let mut coast = w.clone();
+        coast.windows.clear();
+        coast.outages[0].inside.nees_per_dof = [0.2, 0.3];
+        assert!(coast.within([0.5, 2.0]));
+        coast.outages[0].after.nees_per_dof = [2.5, 0.3];
+        assert!(!coast.within([0.5, 2.0]));
+        assert_eq!(coast.worst_outage().unwrap().nees_per_dof, [2.5, 0.3]);
         let mean: f64 = run
             .iter()
             .map(|x| x.nees_position.unwrap() / 3.0)
