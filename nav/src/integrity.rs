@@ -91,6 +91,18 @@ pub enum Symptom {
     Covariance,
 }
 
+impl std::fmt::Display for Symptom {
+    /// What went wrong, in words.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Innovations => "the innovations are too large for the covariance",
+            Self::Rejections => "a run of rejected fixes",
+            Self::Velocity => "the velocity disagrees with the receiver's",
+            Self::Covariance => "the position sigma has grown beyond its limit",
+        })
+    }
+}
+
 /// The monitor.
 #[derive(Debug, Clone, Default)]
 pub struct IntegrityMonitor {

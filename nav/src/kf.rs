@@ -213,6 +213,17 @@ pub enum FilterKind {
     Adaptive,
 }
 
+impl std::fmt::Display for FilterKind {
+    /// Its name in nav's config (`standard`, `fading`, `adaptive`).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Standard => "standard",
+            Self::Fading => "fading",
+            Self::Adaptive => "adaptive",
+        })
+    }
+}
+
 /// How estimates are applied.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]

@@ -428,7 +428,7 @@ impl Pipeline {
         self.integrity = now;
         let t = self.navigator.as_ref().map_or(0.0, |n| n.time());
         match now {
-            Some(s) => warn!("navigation integrity alarm at {t:.1} s: {s:?}"),
+            Some(s) => warn!("navigation integrity alarm at {t:.1} s: {s}"),
             None => info!("navigation integrity alarm cleared at {t:.1} s"),
         }
         let json = serde_json::json!({

@@ -162,7 +162,7 @@ pub fn run_part(
             let Some(rx) = &s.gps else {
                 bail!("{}: no [gps]", s.name);
             };
-            let label = format!("{} {:?}", s.name, j.kind);
+            let label = format!("{} {}", s.name, j.kind);
             let r = crate::experiments::navigation::seeded_run(
                 s,
                 Some(&filter(j.kind, None)),
@@ -305,7 +305,7 @@ fn series_csv(runs: &[&(usize, FilterKind, Vec<NavSample>)]) -> String {
             let v = x.velocity_error_mps;
             let _ = writeln!(
                 c,
-                "{kind:?},{:.3},{:.3},{},{:.4},{},{},{}",
+                "{kind},{:.3},{:.3},{},{:.4},{},{},{}",
                 x.t_s,
                 x.position_error_m,
                 o(x.position_sigma_m),
@@ -349,7 +349,7 @@ fn sigma_chart(
                 })
                 .unzip();
             Panel {
-                name: format!("{kind:?}"),
+                name: kind.to_string(),
                 color: COLORS[i % COLORS.len()],
                 error,
                 bound,
@@ -401,7 +401,7 @@ pub fn markdown(r: &RoutesReport) -> String {
     for x in &r.rows {
         t.row([
             x.route.clone(),
-            format!("{:?}", x.filter),
+            x.filter.to_string(),
             x.runs.to_string(),
             format!("{:.0}", x.navigated_s),
             format!("{:.1}", x.end_position_error_m),

@@ -443,8 +443,15 @@ fn attitude_checks(out: &mut Vec<Check>, reference: &InProcess, nav: &Summary, s
             name: "attitude equals the in-process run".into(),
             pass: d <= 1e-9 && valid == Some(reference.valid_sample),
             detail: format!(
-                "nav [{:.9}, {:.9}, {:.9}] deg at sample {valid:?}, in-process [{:.9}, {:.9}, {:.9}] at {}; differ by {d:.1e} deg (limit 1e-9)",
-                rv.x, rv.y, rv.z, r.x, r.y, r.z, reference.valid_sample
+                "nav [{:.9}, {:.9}, {:.9}] deg at {}, in-process [{:.9}, {:.9}, {:.9}] at sample {}; differ by {d:.1e} deg (limit 1e-9)",
+                rv.x,
+                rv.y,
+                rv.z,
+                valid.map_or_else(|| "no valid sample".to_string(), |k| format!("sample {k}")),
+                r.x,
+                r.y,
+                r.z,
+                reference.valid_sample
             ),
         });
     } else {
