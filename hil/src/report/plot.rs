@@ -67,18 +67,7 @@ impl LogChart {
         let x1 = if x1 > x0 { x1 } else { x0 + 1.0 };
         let px = |x: f64| L + (x - x0) / (x1 - x0) * (W - L - R);
         let py = |y: f64| T + (y1 - fy(y)) / (y1 - y0) * (H - T - B);
-        let mut s = String::new();
-        let _ = writeln!(
-            s,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" font-family="sans-serif" font-size="12">"#
-        );
-        let _ = writeln!(s, r#"<rect width="{W}" height="{H}" fill="white"/>"#);
-        let _ = writeln!(
-            s,
-            r#"<text x="{}" y="25" font-size="15" text-anchor="middle">{}</text>"#,
-            (L + W - R) / 2.0,
-            esc(&self.title)
-        );
+        let mut s = svg_start(H, &self.title);
         // grid: decades or even steps
         for (v, label) in &ticks {
             let y = T + (y1 - v) / (y1 - y0) * (H - T - B);
@@ -251,18 +240,7 @@ impl BandChart {
         let x1 = if x1 > x0 { x1 } else { x0 + 1.0 };
         let pw = W - L - R;
         let px = |x: f64| L + (x - x0) / (x1 - x0) * pw;
-        let mut s = String::new();
-        let _ = writeln!(
-            s,
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{h}" font-family="sans-serif" font-size="12">"#
-        );
-        let _ = writeln!(s, r#"<rect width="{W}" height="{h}" fill="white"/>"#);
-        let _ = writeln!(
-            s,
-            r#"<text x="{}" y="25" font-size="15" text-anchor="middle">{}</text>"#,
-            (L + W - R) / 2.0,
-            esc(&self.title)
-        );
+        let mut s = svg_start(h, &self.title);
         for (k, p) in self.panels.iter().enumerate() {
             let top = T + k as f64 * (PH + GAP);
             let err = decimate(&p.error, x0, x1, BAND_COLUMNS);
@@ -438,6 +416,24 @@ pub fn decimate(points: &[(f64, f64)], x0: f64, x1: f64, columns: usize) -> Vec<
         flush(c, &mut out);
     }
     out
+}
+
+/// An SVG document's opening: its size (the charts' width, `h` high), a white ground and the
+/// title over the plot area.
+fn svg_start(h: f64, title: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{h}" font-family="sans-serif" font-size="12">"#
+    );
+    let _ = writeln!(s, r#"<rect width="{W}" height="{h}" fill="white"/>"#);
+    let _ = writeln!(
+        s,
+        r#"<text x="{}" y="25" font-size="15" text-anchor="middle">{}</text>"#,
+        (L + W - R) / 2.0,
+        esc(title)
+    );
+    s
 }
 
 /// The y axis from `y0` to `y1` (log10 values when `log`): log, whole decades; linear, from
