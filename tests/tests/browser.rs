@@ -133,3 +133,72 @@ fn every_report_renders_in_a_headless_browser_without_console_messages() {
         );
     }
 }
+
+/// The routes experiment's plots in the browser: one route with a tunnel, two filters. Its
+/// report page renders with no console message; each plot (position, velocity) has a panel per
+/// filter (a shaded 3-sigma band and an error line each) and the tunnel shaded; each SVG is
+/// small; a screenshot of the page is left to look at.
+#[test]
+#[ignore = "needs a headless browser: run ./run-tests"]
+fn the_routes_plots_render_with_a_band_per_filter_and_the_tunnel_shaded() {
+    let out = tempfile::tempdir().unwrap();
+    let scenario =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/route-perth-tunnel.toml");
+    let st = Command::new(e2e::bin("hil"))
+        .args([
+            "experiment",
+            "routes",
+            "--runs",
+            "1",
+            "--filters",
+            "standard,fading",
+        ])
+        .arg("--scenario")
+        .arg(&scenario)
+        .arg("--out")
+        .arg(out.path())
+        .output()
+        .expect("hil runs");
+    // exit 1 is a target missed (one seed scatters), not a failure to draw
+    assert!(
+        matches!(st.status.code(), Some(0 | 1)),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    for plot in ["position", "velocity"] {
+        let f = out.path().join(format!("route-perth-tunnel-{plot}.svg"));
+        let svg = std::fs::read_to_string(&f).unwrap();
+        assert!(svg.len() < 200_000, "{plot}: {} bytes", svg.len());
+        assert_eq!(
+            svg.matches("<polygon").count(),
+            2,
+            "{plot}: a band per filter"
+        );
+        assert_eq!(
+            svg.matches("<polyline").count(),
+            2,
+            "{plot}: a line per filter"
+        );
+        assert!(
+            svg.contains("receiver outage") && svg.contains(">fading<"),
+            "{plot}"
+        );
+    }
+    let page = out.path().join("report.html");
+    let (dom, log) = chromium(&page, &["--dump-dom"]);
+    let console: Vec<&str> = log.lines().filter(|l| l.contains("CONSOLE")).collect();
+    assert!(console.is_empty(), "console messages: {console:#?}");
+    assert_eq!(dom.matches("<svg").count(), 2, "both plots inline");
+    assert_eq!(dom.matches("<polygon").count(), 4);
+    let shot = e2e::reports_dir().join("routes-plots.png");
+    let _ = std::fs::create_dir_all(e2e::reports_dir());
+    let _ = std::fs::remove_file(&shot);
+    chromium(&page, &[&format!("--screenshot={}", shot.display())]);
+    let png = std::fs::read(&shot).expect("the screenshot was written");
+    assert!(
+        png.starts_with(b"\x89PNG") && png.len() > 20_000,
+        "{} bytes",
+        png.len()
+    );
+    eprintln!("routes plots rendered; screenshot {}", shot.display());
+}
