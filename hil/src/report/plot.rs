@@ -216,14 +216,16 @@ pub struct BandChart {
     pub span_label: String,
 }
 
+/// A [`BandChart`] panel's height, and the gap between two.
+const PH: f64 = 170.0;
+const GAP: f64 = 28.0;
+
 /// Columns a [`BandChart`]'s series are decimated to.
 pub const BAND_COLUMNS: usize = 700;
 
 impl BandChart {
     /// Render as SVG text.
     pub fn svg(&self) -> String {
-        const PH: f64 = 170.0;
-        const GAP: f64 = 28.0;
         let n = self.panels.len().max(1) as f64;
         let h = T + n * (PH + GAP) - GAP + B;
         let finite = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite();
@@ -242,97 +244,104 @@ impl BandChart {
         let px = |x: f64| L + (x - x0) / (x1 - x0) * pw;
         let mut s = svg_start(h, &self.title);
         for (k, p) in self.panels.iter().enumerate() {
-            let top = T + k as f64 * (PH + GAP);
-            let err = decimate(&p.error, x0, x1, BAND_COLUMNS);
-            let bound = decimate(&p.bound, x0, x1, BAND_COLUMNS);
-            let ymax = err.iter().chain(&bound).map(|q| q.1).fold(0.0, f64::max);
-            let (_, b, ticks) = y_axis(false, 0.0, ymax.max(1e-9));
-            let py = |y: f64| top + (b - y) / b * PH;
-            // the spans under everything
-            for sp in &self.spans {
-                let (a, z) = (px(sp[0].max(x0)), px(sp[1].min(x1)));
-                if z > a {
-                    let _ = writeln!(
-                        s,
-                        r##"<rect x="{a:.1}" y="{top:.1}" width="{:.1}" height="{PH}" fill="#e8e8e8"/>"##,
-                        z - a
-                    );
-                }
-            }
-            for (v, label) in &ticks {
-                let _ = writeln!(
-                    s,
-                    r##"<line x1="{L}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"##,
-                    W - R,
-                    L - 6.0,
-                    py(*v) + 4.0,
-                    esc(label),
-                    y = py(*v)
-                );
-            }
-            if !bound.is_empty() {
-                let mut path = format!("{:.1},{:.1}", px(bound[0].0), py(0.0));
-                for &(x, y) in &bound {
-                    let _ = write!(path, " {:.1},{:.1}", px(x), py(y));
-                }
-                let _ = write!(path, " {:.1},{:.1}", px(bound[bound.len() - 1].0), py(0.0));
-                let _ = writeln!(
-                    s,
-                    r#"<polygon points="{path}" fill="{}" fill-opacity="0.18" stroke="{}" stroke-opacity="0.5" stroke-width="0.8"/>"#,
-                    p.color, p.color
-                );
-            }
-            if !err.is_empty() {
-                let path: Vec<String> = err
-                    .iter()
-                    .map(|&(x, y)| format!("{:.1},{:.1}", px(x), py(y)))
-                    .collect();
-                let _ = writeln!(
-                    s,
-                    r#"<polyline points="{}" fill="none" stroke="{}" stroke-width="1.2"/>"#,
-                    path.join(" "),
-                    p.color
-                );
-            }
-            let _ = writeln!(
-                s,
-                r#"<rect x="{L}" y="{top:.1}" width="{pw:.1}" height="{PH}" fill="none" stroke="black"/>"#
-            );
-            let _ = writeln!(
-                s,
-                r#"<text x="{:.1}" y="{:.1}" font-weight="bold">{}</text>"#,
-                W - R + 12.0,
-                top + 16.0,
-                esc(&p.name)
-            );
-            for (i, (what, opacity, width)) in
-                [("error", 1.0, 2.0), (self.band_label.as_str(), 0.18, 10.0)]
-                    .into_iter()
-                    .enumerate()
-            {
-                let ly = top + 38.0 + 20.0 * i as f64;
-                let _ = writeln!(
-                    s,
-                    r#"<line x1="{:.1}" y1="{ly:.1}" x2="{:.1}" y2="{ly:.1}" stroke="{}" stroke-opacity="{opacity}" stroke-width="{width}"/><text x="{:.1}" y="{:.1}">{}</text>"#,
-                    W - R + 12.0,
-                    W - R + 32.0,
-                    p.color,
-                    W - R + 38.0,
-                    ly + 4.0,
-                    esc(what)
-                );
-            }
-            let _ = writeln!(
-                s,
-                r#"<text x="18" y="{:.1}" text-anchor="middle" transform="rotate(-90 18 {:.1})">{}</text>"#,
-                top + PH / 2.0,
-                top + PH / 2.0,
-                esc(&self.y_label)
-            );
+            self.panel(&mut s, p, T + k as f64 * (PH + GAP), &px, (x0, x1));
         }
         self.footer(&mut s, h, &px, (x0, x1));
         s.push_str("</svg>\n");
         s
+    }
+
+    /// Panel `p` with its top at `top`: its spans, grid, band, error line and legend (`px` the
+    /// x axis's mapping over `xs`).
+    fn panel(&self, s: &mut String, p: &Panel, top: f64, px: &dyn Fn(f64) -> f64, xs: (f64, f64)) {
+        let (x0, x1) = xs;
+        let pw = W - L - R;
+        let err = decimate(&p.error, x0, x1, BAND_COLUMNS);
+        let bound = decimate(&p.bound, x0, x1, BAND_COLUMNS);
+        let ymax = err.iter().chain(&bound).map(|q| q.1).fold(0.0, f64::max);
+        let (_, b, ticks) = y_axis(false, 0.0, ymax.max(1e-9));
+        let py = |y: f64| top + (b - y) / b * PH;
+        // the spans under everything
+        for sp in &self.spans {
+            let (a, z) = (px(sp[0].max(x0)), px(sp[1].min(x1)));
+            if z > a {
+                let _ = writeln!(
+                    s,
+                    r##"<rect x="{a:.1}" y="{top:.1}" width="{:.1}" height="{PH}" fill="#e8e8e8"/>"##,
+                    z - a
+                );
+            }
+        }
+        for (v, label) in &ticks {
+            let _ = writeln!(
+                s,
+                r##"<line x1="{L}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"##,
+                W - R,
+                L - 6.0,
+                py(*v) + 4.0,
+                esc(label),
+                y = py(*v)
+            );
+        }
+        if !bound.is_empty() {
+            let mut path = format!("{:.1},{:.1}", px(bound[0].0), py(0.0));
+            for &(x, y) in &bound {
+                let _ = write!(path, " {:.1},{:.1}", px(x), py(y));
+            }
+            let _ = write!(path, " {:.1},{:.1}", px(bound[bound.len() - 1].0), py(0.0));
+            let _ = writeln!(
+                s,
+                r#"<polygon points="{path}" fill="{}" fill-opacity="0.18" stroke="{}" stroke-opacity="0.5" stroke-width="0.8"/>"#,
+                p.color, p.color
+            );
+        }
+        if !err.is_empty() {
+            let path: Vec<String> = err
+                .iter()
+                .map(|&(x, y)| format!("{:.1},{:.1}", px(x), py(y)))
+                .collect();
+            let _ = writeln!(
+                s,
+                r#"<polyline points="{}" fill="none" stroke="{}" stroke-width="1.2"/>"#,
+                path.join(" "),
+                p.color
+            );
+        }
+        let _ = writeln!(
+            s,
+            r#"<rect x="{L}" y="{top:.1}" width="{pw:.1}" height="{PH}" fill="none" stroke="black"/>"#
+        );
+        let _ = writeln!(
+            s,
+            r#"<text x="{:.1}" y="{:.1}" font-weight="bold">{}</text>"#,
+            W - R + 12.0,
+            top + 16.0,
+            esc(&p.name)
+        );
+        for (i, (what, opacity, width)) in
+            [("error", 1.0, 2.0), (self.band_label.as_str(), 0.18, 10.0)]
+                .into_iter()
+                .enumerate()
+        {
+            let ly = top + 38.0 + 20.0 * i as f64;
+            let _ = writeln!(
+                s,
+                r#"<line x1="{:.1}" y1="{ly:.1}" x2="{:.1}" y2="{ly:.1}" stroke="{}" stroke-opacity="{opacity}" stroke-width="{width}"/><text x="{:.1}" y="{:.1}">{}</text>"#,
+                W - R + 12.0,
+                W - R + 32.0,
+                p.color,
+                W - R + 38.0,
+                ly + 4.0,
+                esc(what)
+            );
+        }
+        let _ = writeln!(
+            s,
+            r#"<text x="18" y="{:.1}" text-anchor="middle" transform="rotate(-90 18 {:.1})">{}</text>"#,
+            top + PH / 2.0,
+            top + PH / 2.0,
+            esc(&self.y_label)
+        );
     }
 
     /// Below the panels: the spans' legend, the x axis's ticks and label (`h` the chart's
