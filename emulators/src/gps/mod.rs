@@ -1,6 +1,6 @@
 //! GPS receiver emulation, layered as the rest of the emulators: truth ([`truth`]: the antenna on
 //! the drive) -> receiver errors ([`errors`]) -> the receiver (its epochs, outages and time to
-//! first fix: [`receiver`], [`nmea`]) -> NMEA-0183 encoding ([`nmea`]) -> transport ([`pty`]: a
+//! first fix, multipath: [`receiver`]) -> NMEA-0183 encoding ([`nmea`]) -> transport ([`pty`]: a
 //! pty that nav opens exactly as it opens `/dev/ttyUSB0`, stepped on the IMU clock, or a recorded
 //! log replayed at its own pace). Everything but the transport is pure.
 
@@ -16,5 +16,5 @@ pub use pty::{
     Delivered, GpsDevice, GpsPty, GpsTxStats, LogLine, PtyError, TAKE_WAIT, parse_log, relink,
     replay,
 };
-pub use receiver::{Epoch, GpsReceiver, GpsRun, ReceiverParams};
+pub use receiver::{Epoch, GpsReceiver, GpsRun, Observation, ReceiverModel, ReceiverParams};
 pub use truth::{AntennaTruth, antenna_truth};

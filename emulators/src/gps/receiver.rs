@@ -1,7 +1,7 @@
 //! The receiver model: its parameters, and its epochs as the IMU clock passes their PPS edges
 //! (pure: no I/O).
 
-use super::{GpsErrorParams, NmeaWriter, antenna_truth};
+use super::{AntennaTruth, GpsError, GpsErrorParams, NmeaWriter, antenna_truth};
 
 /// What the emulated receiver does (the `[gps]` table of a scenario).
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize, PartialEq)]
@@ -56,6 +56,109 @@ impl Default for ReceiverParams {
             garbage_at_s: Vec::new(),
             gst: true,
         }
+    }
+}
+
+/// What the receiver decided for one epoch, which the NMEA encoder ([`super::nmea::encode`])
+/// writes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    /// The UTC time of day it states, s (a step back where the receiver's clock steps back).
+    pub time_of_day_s: f64,
+    /// It carries a valid fix (not before the first fix, not in a void outage).
+    pub valid: bool,
+    /// Measured latitude and longitude, deg, and height above the ellipsoid, m.
+    pub lat_deg: f64,
+    /// Measured longitude, deg.
+    pub lon_deg: f64,
+    /// Measured height above the ellipsoid, m.
+    pub h_m: f64,
+    /// Measured velocity east and north, m/s.
+    pub vel_en_mps: [f64; 2],
+    /// Satellites used (0 without a fix).
+    pub satellites: u32,
+    /// Horizontal dilution of precision (99.9 without a fix).
+    pub hdop: f64,
+    /// The geoid's height above the ellipsoid at the antenna, m.
+    pub geoid_m: f64,
+    /// The position error applied (east, north, up), m: truth, never on the wire.
+    pub error_enu: [f64; 3],
+    /// The receiver's own 1-sigma of that error (east, north, up), m.
+    pub sigma_enu: [f64; 3],
+    /// Line noise and a line of binary bytes come before this epoch's sentences.
+    pub garbage: bool,
+}
+
+/// The receiver's model without its encoding: its errors, outages, time to first fix,
+/// multipath, clock steps and line noise decide each epoch.
+pub struct ReceiverModel {
+    p: ReceiverParams,
+    err: GpsError,
+    rng: rand::rngs::StdRng,
+}
+
+impl ReceiverModel {
+    /// A receiver with these parameters.
+    pub fn new(p: ReceiverParams) -> Self {
+        use rand::SeedableRng;
+        Self {
+            err: GpsError::new(p.errors.clone()),
+            rng: rand::rngs::StdRng::seed_from_u64(p.errors.seed ^ 0x5eed),
+            p,
+        }
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &ReceiverParams {
+        &self.p
+    }
+
+    /// The epoch at `t` (s since the start; `utc0_s` is the UTC second of the day at t = 0)
+    /// for the antenna at `truth`; none when the receiver is silent (an outage without void
+    /// sentences).
+    pub fn observe(&mut self, t: f64, utc0_s: f64, truth: &AntennaTruth) -> Option<Observation> {
+        use rand_distr::{Distribution, Normal};
+        let n = Normal::new(0.0, 1.0).expect("unit normal");
+        let in_outage = self.p.outages.iter().any(|o| t >= o[0] && t < o[1]);
+        if in_outage && !self.p.outage_void {
+            return None;
+        }
+        let valid = t >= self.p.ttff_s && !in_outage;
+        let sample = self.err.sample(t);
+        let mut e = sample.enu;
+        for m in &self.p.multipath {
+            if t >= m[0] && t < m[0] + m[1] {
+                e[1] += m[2];
+            }
+        }
+        let (rm, rn) = crate::geodesy::radii(truth.lat_deg.to_radians());
+        let ve = truth.vel_enu[0] + self.p.velocity_sigma_mps * n.sample(&mut self.rng);
+        let vn = truth.vel_enu[1] + self.p.velocity_sigma_mps * n.sample(&mut self.rng);
+        let at = |times: &[f64]| times.iter().any(|x| (t - x.floor()).abs() < 0.5);
+        let back = if at(&self.p.time_backwards_at_s) {
+            10.0
+        } else {
+            0.0
+        };
+        // GGA's altitude is above the geoid, with the geoid's separation from the ellipsoid
+        // beside it (EGM2008, a coarse grid: the receiver's own model is no finer)
+        let geoid_m = egm2008::geoid_height(truth.lat_deg as f32, truth.lon_deg as f32)
+            .map_or(0.0, f64::from);
+        Some(Observation {
+            time_of_day_s: (utc0_s + t - back).rem_euclid(86_400.0),
+            valid,
+            lat_deg: truth.lat_deg + (e[1] / rm).to_degrees(),
+            lon_deg: truth.lon_deg + (e[0] / (rn * truth.lat_deg.to_radians().cos())).to_degrees(),
+            h_m: truth.h_m + e[2],
+            vel_en_mps: [ve, vn],
+            // the satellites used and the HDOP of the error model's geometry
+            satellites: if valid { sample.satellites } else { 0 },
+            hdop: if valid { sample.hdop } else { 99.9 },
+            geoid_m,
+            error_enu: e,
+            sigma_enu: sample.sigma_enu,
+            garbage: at(&self.p.garbage_at_s),
+        })
     }
 }
 
