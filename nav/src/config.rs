@@ -230,100 +230,108 @@ impl NavConfig {
             path: path.into(),
             source,
         })?;
-        let invalid = |what: String| ConfigError::Invalid {
+        cfg.check().map_err(|what| ConfigError::Invalid {
             path: path.into(),
             what,
-        };
-        if cfg.can.as_ref().is_some_and(|c| c.interface.is_empty()) {
-            return Err(invalid("can.interface is empty".into()));
+        })?;
+        cfg.load_files(path)?;
+        Ok(cfg)
+    }
+
+    /// The keys' values make sense together (what is wrong, when they do not).
+    fn check(&self) -> Result<(), String> {
+        if self.can.as_ref().is_some_and(|c| c.interface.is_empty()) {
+            return Err("can.interface is empty".into());
         }
-        if cfg.can.is_none() && cfg.gps.is_none() {
-            return Err(invalid("names no device: give [can] and/or [gps]".into()));
+        if self.can.is_none() && self.gps.is_none() {
+            return Err("names no device: give [can] and/or [gps]".into());
         }
-        if let Some(g) = &cfg.gps {
+        if let Some(g) = &self.gps {
             match g.source {
                 GpsSource::Serial if g.port.as_os_str().is_empty() => {
-                    return Err(invalid(
+                    return Err(
                         "gps.port is missing (the receiver's serial device; or source = \"gpsd\")"
                             .into(),
-                    ));
+                    );
                 }
                 GpsSource::Gpsd if !g.gpsd.contains(':') => {
-                    return Err(invalid(format!(
+                    return Err(format!(
                         "gps.gpsd ({:?}) must be host:port, e.g. \"127.0.0.1:2947\"",
                         g.gpsd
-                    )));
+                    ));
                 }
                 _ => {}
             }
         }
-        let c = &cfg.imu;
+        let c = &self.imu;
         if c.gyro_pulse_arcsec
             .iter()
             .chain(&c.accel_pulse_mps)
             .any(|w| !(w.is_finite() && *w > 0.0))
         {
-            return Err(invalid("imu pulse weights must be positive".into()));
+            return Err("imu pulse weights must be positive".into());
         }
         if !(c.rate_hz > 0.0 && c.gyro_range_dps > 0.0 && c.accel_range_mps2 > 0.0) {
-            return Err(invalid(
-                "imu.rate_hz, gyro_range_dps and accel_range_mps2 must be positive".into(),
+            return Err("imu.rate_hz, gyro_range_dps and accel_range_mps2 must be positive".into());
+        }
+        if (self.processing.fir.fs_hz - c.rate_hz).abs() > 1e-9 {
+            return Err(format!(
+                "processing.fir.fs_hz ({}) must equal imu.rate_hz ({})",
+                self.processing.fir.fs_hz, c.rate_hz
             ));
         }
-        if (cfg.processing.fir.fs_hz - c.rate_hz).abs() > 1e-9 {
-            return Err(invalid(format!(
-                "processing.fir.fs_hz ({}) must equal imu.rate_hz ({})",
-                cfg.processing.fir.fs_hz, c.rate_hz
-            )));
+        if let Err(e) = self.north_finding.check() {
+            return Err(e.to_string());
         }
-        if let Err(e) = cfg.north_finding.check() {
-            return Err(invalid(e.to_string()));
-        }
-        if cfg.self_calibration.enabled {
-            if let Err(e) = cfg.self_calibration.check() {
-                return Err(invalid(e.to_string()));
+        if self.self_calibration.enabled {
+            if let Err(e) = self.self_calibration.check() {
+                return Err(e.to_string());
             }
-            if cfg.north_finding.enabled {
-                return Err(invalid(
-                    "self_calibration and north_finding both command the mechanism at start: enable one".into(),
-                ));
+            if self.north_finding.enabled {
+                return Err(
+                    "self_calibration and north_finding both command the mechanism at start: enable one".into());
             }
-            if cfg.self_calibration.rate_dps >= cfg.imu.gyro_range_dps {
-                return Err(invalid(format!(
+            if self.self_calibration.rate_dps >= self.imu.gyro_range_dps {
+                return Err(format!(
                     "self_calibration.rate_dps ({}) must stay below the gyros' range, imu.gyro_range_dps ({})",
-                    cfg.self_calibration.rate_dps, cfg.imu.gyro_range_dps
-                )));
-            }
-        }
-        if cfg.tetra_calibration.enabled {
-            if let Err(e) = cfg.tetra_calibration.check() {
-                return Err(invalid(e.to_string()));
-            }
-            if cfg.north_finding.enabled || cfg.self_calibration.enabled {
-                return Err(invalid(
-                    "tetra_calibration commands the table at start: north_finding and self_calibration must be off".into(),
+                    self.self_calibration.rate_dps, self.imu.gyro_range_dps
                 ));
             }
         }
-        if let Err(e) = cfg.navigation.filter.check() {
-            return Err(invalid(format!("navigation.{e}")));
+        if self.tetra_calibration.enabled {
+            if let Err(e) = self.tetra_calibration.check() {
+                return Err(e.to_string());
+            }
+            if self.north_finding.enabled || self.self_calibration.enabled {
+                return Err(
+                    "tetra_calibration commands the table at start: north_finding and self_calibration must be off".into());
+            }
         }
-        let tol = cfg.navigation.pps_tolerance_s;
+        if let Err(e) = self.navigation.filter.check() {
+            return Err(format!("navigation.{e}"));
+        }
+        let tol = self.navigation.pps_tolerance_s;
         if !(tol > 0.0 && tol < 0.5) {
-            return Err(invalid(format!(
+            return Err(format!(
                 "navigation.pps_tolerance_s ({tol}) must lie in (0, 0.5) s"
-            )));
+            ));
         }
-        if let Err(e) = ImuProcessor::new(&cfg.processing) {
-            return Err(invalid(format!("processing: {e}")));
+        if let Err(e) = ImuProcessor::new(&self.processing) {
+            return Err(format!("processing: {e}"));
         }
+        Ok(())
+    }
+
+    /// Paths relative to the config file at `path` made absolute, and the parameter files it
+    /// names loaded into it.
+    fn load_files(&mut self, path: &Path) -> Result<(), ConfigError> {
         let base = path.parent().unwrap_or(Path::new("."));
-        if let Some(c) = cfg.calibration.as_mut() {
+        if let Some(c) = self.calibration.as_mut() {
             if c.parameters.is_relative() {
                 c.parameters = base.join(&c.parameters);
             }
             let p = crate::params::ImuParameters::load(&c.parameters, &c.imu)?;
-            let imu = &mut cfg.imu;
+            let imu = &mut self.imu;
             let zero = [0.0; 3];
             for (inline, from_file, name) in [
                 (&mut imu.gyro_bias_dph, p.gyro.bias_dph, "gyro_bias_dph"),
@@ -334,16 +342,19 @@ impl NavConfig {
                 ),
             ] {
                 if *inline != zero && *inline != from_file {
-                    return Err(invalid(format!(
-                        "imu.{name} is given here and, differently, in the parameter file {}: keep one",
-                        c.parameters.display()
-                    )));
+                    return Err(ConfigError::Invalid {
+                        path: path.into(),
+                        what: format!(
+                            "imu.{name} is given here and, differently, in the parameter file {}: keep one",
+                            c.parameters.display()
+                        ),
+                    });
                 }
                 *inline = from_file;
             }
         }
         // the redundant unit's parameter file, when the procedure starts from one
-        let t = &mut cfg.tetra_calibration;
+        let t = &mut self.tetra_calibration;
         if t.enabled
             && let Some(p) = t.parameters.as_mut()
         {
@@ -353,12 +364,12 @@ impl NavConfig {
             let f = crate::params::RedundantParameters::load(p, &t.imu)?;
             t.coefficients = Some(f.coefficients());
         }
-        let gps_export = cfg.gps.as_mut().and_then(|g| g.fixes_jsonl.as_mut());
+        let gps_export = self.gps.as_mut().and_then(|g| g.fixes_jsonl.as_mut());
         for p in [
-            &mut cfg.record.mcap,
-            &mut cfg.record.summary,
-            &mut cfg.self_calibration.parameters_out,
-            &mut cfg.tetra_calibration.parameters_out,
+            &mut self.record.mcap,
+            &mut self.record.summary,
+            &mut self.self_calibration.parameters_out,
+            &mut self.tetra_calibration.parameters_out,
         ]
         .into_iter()
         .flatten()
@@ -368,7 +379,7 @@ impl NavConfig {
                 *p = base.join(&*p);
             }
         }
-        Ok(cfg)
+        Ok(())
     }
 
     /// Serialize (the bench writes configs with this).

@@ -23,6 +23,35 @@ use emulators::truth::Static;
 use std::collections::BTreeMap;
 use std::path::Path;
 
+/// A run's truth, planned once when the run starts: the vehicle's drive (none when parked),
+/// its site, and the faults the bench injects. The live view shows it, the scoring judges nav
+/// against it, and [`write`] records it.
+#[derive(Debug, Clone)]
+pub struct RunTruth {
+    /// The drive, when the scenario has one.
+    pub drive: Option<Drive>,
+    /// The site (where a drive starts, or where the vehicle is parked).
+    pub site: Static,
+    /// The faults the bench injects, in time order.
+    pub faults: Vec<crate::engine::faultlog::FaultEvent>,
+}
+
+impl RunTruth {
+    /// The truth of scenario `s`, with the bench's own faults: the interface taken down
+    /// (`link_downs`) and nav killed (`kill_nav_at_s`).
+    pub fn of(
+        s: &crate::scenario::Scenario,
+        link_downs: &[[f64; 2]],
+        kill_nav_at_s: Option<f64>,
+    ) -> Result<Self> {
+        Ok(Self {
+            drive: s.drive.as_ref().map(Drive::plan).transpose()?,
+            site: s.site,
+            faults: crate::engine::faultlog::schedule(s, link_downs, kill_nav_at_s),
+        })
+    }
+}
+
 /// Rate of the truth channels, Hz.
 pub const TRUTH_HZ: f64 = 10.0;
 

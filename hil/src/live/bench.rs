@@ -69,30 +69,21 @@ pub struct RunViewStats {
 }
 
 impl BenchRun {
-    /// Begin run `name` on `view`, with the truth of scenario `truth` when known and its
-    /// `faults`; `new_run`: after the view's last run on its timeline (else on the same
+    /// Begin run `name` on `view`, with the run's truth (its drive, site and faults) when
+    /// known; `new_run`: after the view's last run on its timeline (else on the same
     /// timeline, from the start: a replay seeking back).
     pub fn begin(
         view: &Arc<View>,
         name: &str,
-        truth: Option<&Scenario>,
-        faults: Vec<crate::engine::faultlog::FaultEvent>,
+        truth: Option<&crate::engine::truthrec::RunTruth>,
         new_run: bool,
     ) -> anyhow::Result<Self> {
         if new_run {
             view.begin_run(name);
         }
         let (tx, rx) = sync_channel(QUEUE);
-        let truth = match truth {
-            Some(s) => Some((
-                match &s.drive {
-                    Some(d) => Some(Drive::plan(d)?),
-                    None => None,
-                },
-                s.site,
-            )),
-            None => None,
-        };
+        let faults = truth.map(|t| t.faults.clone()).unwrap_or_default();
+        let truth = truth.map(|t| (t.drive.clone(), t.site));
         let thread = {
             let view = view.clone();
             std::thread::Builder::new()

@@ -72,9 +72,9 @@ fn play(
     let rate = cfg.imu.rate_hz;
     let (tx, rx) = mpsc::channel();
     view.controls_to(tx);
-    let faults = scenario
-        .map(|s| crate::engine::faultlog::schedule(s, &[], None))
-        .unwrap_or_default();
+    let truth = scenario
+        .map(|s| crate::engine::truthrec::RunTruth::of(s, &[], None))
+        .transpose()?;
     let name = mcap.display().to_string();
     let mut wanted = Wanted {
         playing: true,
@@ -84,7 +84,7 @@ fn play(
     let mut first = true;
     loop {
         let show_from = wanted.seek.take().unwrap_or(0);
-        let run = BenchRun::begin(view, &name, scenario, faults.clone(), first)?;
+        let run = BenchRun::begin(view, &name, truth.as_ref(), first)?;
         first = false;
         let mut w = run.frame_watcher(cfg.imu.gyro_pulse_arcsec, cfg.imu.accel_pulse_mps, rate);
         let mut r = Replayer::with_records(cfg, true)?;

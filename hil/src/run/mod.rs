@@ -3,14 +3,16 @@
 //! stop `nav` with SIGTERM, check and report.
 
 pub mod busreplay;
+mod judge;
 
+use crate::engine::truthrec::RunTruth;
 use crate::procedures::observe::{DrillWatch, solution_socket, watch_solution};
 use crate::report::{self, RunReport};
 use crate::report::{KillOutcome, NavMemory, cpu_seconds};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
-use emulators::drive::Drive;
 use emulators::gps::{GpsDevice, GpsPty, relink};
+use judge::{Ended, judge, write_evidence};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -297,10 +299,12 @@ pub(crate) fn stop_nav(mut nav: NavProcess) -> Result<(Option<i32>, Vec<String>)
 
 /// Run a scenario here (the kernel must have CAN). Returns the report; files go to `opts.out`.
 /// The stages: `prepare` the devices' pty and nav's config, start nav and the devices,
-/// `supervise` them to the stream's end, stop them, `read_summary`, `score` nav against
-/// the truth and the reference runs, `write_report`.
+/// `supervise` them to the stream's end, stop them, `read_summary`, `judge` nav against the
+/// run's truth (planned once, before nav starts) and the reference runs, `write_evidence` and
+/// `write_report`.
 pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunReport> {
     let mut setup = prepare(s, opts)?;
+    let truth = RunTruth::of(s, &opts.link_downs, opts.kill_nav_at_s)?;
     let account = opts
         .nav_account
         .map_or_else(|| "this user".into(), |(u, g)| format!("uid {u}, gid {g}"));
@@ -310,8 +314,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     phases.end("nav start");
     let live = match &opts.live {
         Some(v) => {
-            let faults = crate::engine::faultlog::schedule(s, &opts.link_downs, opts.kill_nav_at_s);
-            let l = crate::live::bench::BenchRun::begin(v, &s.name, Some(s), faults, true)?;
+            let l = crate::live::bench::BenchRun::begin(v, &s.name, Some(&truth), true)?;
             l.set_nav_pid(nav.child.id());
             Some(l)
         }
@@ -386,7 +389,17 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
         memory,
         solution,
     };
-    let mut r = score(s, opts, &setup.nav_cfg, backend, ended, &mut phases)?;
+    let (mut r, evidence) = judge(s, opts, &truth, &setup.nav_cfg, backend, ended, &mut phases)?;
+    write_evidence(s, opts, &truth, &evidence)?;
+    phases.end("files");
+    info!(
+        "run phases: {phases} CPU: nav {:.1} s, bench {:.1} s",
+        r.nav_memory
+            .as_ref()
+            .and_then(|m| m.cpu_s)
+            .unwrap_or(f64::NAN),
+        cpu_seconds("/proc/self/stat").unwrap_or(f64::NAN)
+    );
     if let Some(l) = live {
         let j = serde_json::to_value(&r)?;
         r.live = Some(l.end(j, crate::report::card(&r)));
@@ -628,209 +641,6 @@ fn read_summary(
     Ok((nav_json, killed))
 }
 
-/// A run whose devices and nav have stopped: what the bus, nav and the bench's watchers said.
-struct Ended {
-    bus: emulators::bus::scheduler::BusOutcome,
-    sim_reached: f64,
-    wall: f64,
-    nav_exit: Option<i32>,
-    nav: nav::summary::Summary,
-    killed: Option<KillOutcome>,
-    memory: NavMemory,
-    solution: crate::procedures::observe::SolutionWatch,
-}
-
-/// Check and score a run: the in-process reference run, nav's recording replayed through its
-/// pipeline and scored against truth (side by side), the procedures' outcomes, the checks; the
-/// truth recording beside nav's.
-fn score(
-    s: &Scenario,
-    opts: &RunOptions,
-    nav_cfg: &nav::config::NavConfig,
-    backend: &str,
-    e: Ended,
-    phases: &mut Phases,
-) -> Result<RunReport> {
-    let Ended {
-        bus,
-        sim_reached,
-        wall,
-        nav_exit,
-        nav: nav_json,
-        killed,
-        memory,
-        solution,
-    } = e;
-    let (tx, tt_stats, lockstep_stats, bus_stats) = (bus.imu, bus.turntable, bus.lockstep, bus.bus);
-    let turntable_truth = bus.turntable_truth;
-    // the receiver's device stayed until nav had stopped
-    let gps_stats = bus.gps.map(|(st, _pty)| st);
-    // the checks that recompute things (the in-process reference run, the replay of nav's
-    // recording through its pipeline, the scoring of its recording against truth) are
-    // independent: they run side by side
-    let drive = match (&s.navigation, &s.drive) {
-        (Some(_), Some(d)) if opts.reference_checks => Some(Drive::plan(d)?),
-        _ => None,
-    };
-    let t_first = 1.0 / s.imu.rate_hz;
-    let mcap_path = opts.out.join("nav.mcap");
-    let (reference, replayed, scored) = std::thread::scope(|sc| {
-        // (through gpsd, nav gets only the sentences gpsd keeps: not the receiver's bytes)
-        let reference = sc.spawn(|| match s.turntable {
-            None if opts.reference_checks && !opts.gps_via_gpsd => Some(
-                crate::engine::reference::run_in_process(s).context("in-process reference run"),
-            ),
-            _ => None,
-        });
-        let replayed = sc.spawn(|| {
-            opts.reference_checks
-                .then(|| crate::engine::recording::replay(&mcap_path, nav_cfg))
-        });
-        let scored = drive
-            .as_ref()
-            .map(|d| crate::engine::navigate::score_recording(d, &mcap_path, t_first));
-        let join = |what: &str| anyhow::anyhow!("the {what} panicked");
-        Ok::<_, anyhow::Error>((
-            reference
-                .join()
-                .map_err(|_| join("in-process reference run"))?,
-            replayed.join().map_err(|_| join("replay check"))?,
-            scored,
-        ))
-    })?;
-    let reference = reference.transpose()?;
-    phases.end("reference, replay and scoring");
-    let bench = report::BenchSide {
-        tx: &tx,
-        lockstep: &lockstep_stats,
-        bus: &bus_stats,
-        turntable: tt_stats.as_ref(),
-        gps_via_gpsd: opts.gps_via_gpsd,
-    };
-    let (mut checks, lost) = report::checks(s, bench, reference.as_ref(), &nav_json, nav_exit);
-    let procedures = crate::procedures::Outcomes::of(s, &nav_json, sim_reached);
-    report::procedure_checks(&mut checks, s, &procedures, &nav_json);
-    report::solution_checks(&mut checks, &solution, &nav_json);
-    // nav's binary is a shell around its pipeline: from its own recording, the pipeline in
-    // process must send exactly what nav sent
-    if let Some(replayed) = replayed {
-        checks.push(report::replay_check(replayed.as_ref()));
-    }
-    // sim time -> the wall time nav logged it at, for the truth recording below
-    let clock: Vec<(f64, u64)> = match &scored {
-        Some(Ok((scores, _))) => scores
-            .iter()
-            .filter_map(|x| Some((x.t_s, x.logged_wall_ns?)))
-            .collect(),
-        _ => Vec::new(),
-    };
-    let (navigation, navigation_series) = score_navigation(
-        s,
-        opts,
-        drive,
-        scored,
-        &nav_json,
-        gps_stats.as_ref(),
-        &mut checks,
-    )?;
-    // the bench's own side: the truth (the vehicle's, the turntable's) and the faults injected,
-    // beside nav's recording, on nav's logged wall clock
-    let truth_drive = match &s.drive {
-        Some(d) => Some(Drive::plan(d)?),
-        None => None,
-    };
-    let faults = crate::engine::faultlog::schedule(s, &opts.link_downs, opts.kill_nav_at_s);
-    if let Err(e) = crate::engine::truthrec::write(
-        &opts.out,
-        truth_drive.as_ref(),
-        &s.site,
-        sim_reached.min(s.duration_s),
-        &clock,
-        &turntable_truth,
-        &faults,
-    ) {
-        tracing::warn!("truth.mcap: {e:#}");
-    }
-    phases.end("checks");
-    info!(
-        "run phases: {phases} CPU: nav {:.1} s, bench {:.1} s",
-        memory.cpu_s.unwrap_or(f64::NAN),
-        cpu_seconds("/proc/self/stat").unwrap_or(f64::NAN)
-    );
-    let pass = checks.iter().all(|c| c.pass);
-    let r = RunReport {
-        scenario: s.clone(),
-        backend: backend.into(),
-        interface: opts.iface.clone(),
-        wall_seconds: wall,
-        frames_per_wall_second: tx.frames as f64 / wall.max(1e-9),
-        pace_reached: sim_reached
-            / (wall - lockstep_stats.watchdog_wait_ms as f64 * 1e-3).max(1e-9),
-        lockstep: lockstep_stats,
-        bus: bus_stats,
-        tx,
-        in_process: reference,
-        turntable: tt_stats,
-        procedures,
-        gps: gps_stats,
-        navigation,
-        navigation_series,
-        solution,
-        nav_exit,
-        nav: nav_json,
-        killed,
-        nav_memory: Some(memory),
-        bus_lost_frames: lost,
-        checks,
-        pass,
-        live: None,
-    };
-    Ok(r)
-}
-
-/// Navigation scored against truth: from nav's summary, and second by second from its
-/// recording (statistics, navigation.csv, fixes.csv); the navigation checks.
-fn score_navigation(
-    s: &Scenario,
-    opts: &RunOptions,
-    drive: Option<Drive>,
-    scored: Option<Result<(Vec<crate::engine::navigate::NavScore>, u64)>>,
-    nav_json: &nav::summary::Summary,
-    gps_stats: Option<&emulators::gps::GpsTxStats>,
-    checks: &mut Vec<report::Check>,
-) -> Result<(
-    Option<crate::engine::navigate::NavScore>,
-    Option<crate::engine::navigate::SeriesStats>,
-)> {
-    let t_first = 1.0 / s.imu.rate_hz;
-    let mcap_path = opts.out.join("nav.mcap");
-    let mut navigation_series = None;
-    let navigation = match (drive, scored) {
-        (Some(drive), Some(scored)) => {
-            let o = crate::engine::navigate::score_summary(&drive, nav_json, t_first);
-            // second by second from nav's recording: statistics, CSV and a plot
-            match scored {
-                Ok((scores, bad)) if !scores.is_empty() => {
-                    navigation_series =
-                        Some(crate::engine::navigate::SeriesStats::of(&scores, bad));
-                    write_navigation_series(&opts.out, &s.name, &scores)?;
-                    // the receiver's fixes nav took, for the track
-                    match crate::engine::navigate::recorded_fixes(&drive, &mcap_path) {
-                        Ok(f) => write_fixes(&opts.out, &f)?,
-                        Err(e) => tracing::warn!("nav's recording, fixes: {e:#}"),
-                    }
-                }
-                Ok(_) => {}
-                Err(e) => tracing::warn!("nav's recording: {e:#}"),
-            }
-            report::navigation_checks(checks, s, o.as_ref(), nav_json, gps_stats);
-            o
-        }
-        _ => None,
-    };
-    Ok((navigation, navigation_series))
-}
-
 /// The run's report.json, report.md and, when asked, report.html.
 fn write_report(r: &RunReport, opts: &RunOptions) -> Result<()> {
     std::fs::write(
@@ -844,86 +654,6 @@ fn write_report(r: &RunReport, opts: &RunOptions) -> Result<()> {
             crate::report::html::run_report(r, &opts.out),
         )?;
     }
-    Ok(())
-}
-
-/// The receiver's fixes nav took (east, north of the drive's start, m) and what became of them:
-/// `fixes.csv` (fate: valid, void or rejected).
-fn write_fixes(
-    out: &Path,
-    fixes: &[(f64, [f64; 2], crate::engine::navigate::FixFate)],
-) -> Result<()> {
-    use crate::engine::navigate::FixFate;
-    let mut csv = String::from("t_s,east_m,north_m,fate\n");
-    for (t, [e, n], fate) in fixes {
-        let fate = match fate {
-            FixFate::Valid => "valid",
-            FixFate::Void => "void",
-            FixFate::Rejected => "rejected",
-        };
-        csv += &format!("{t:.3},{e:.3},{n:.3},{fate}\n");
-    }
-    std::fs::write(out.join("fixes.csv"), csv)?;
-    Ok(())
-}
-
-/// nav's navigation error second by second: `navigation.csv` and `navigation-error.svg`.
-fn write_navigation_series(
-    out: &Path,
-    name: &str,
-    scores: &[crate::engine::navigate::NavScore],
-) -> Result<()> {
-    let mut csv = String::from(
-        "t_s,position_error_m,velocity_error_mps,heading_error_deg,position_sigma_m,heading_sigma_deg,\
-         nav_east_m,nav_north_m,truth_east_m,truth_north_m,\
-         vel_error_east_mps,vel_error_north_mps,vel_error_up_mps,\
-         vel_sigma_east_mps,vel_sigma_north_mps,vel_sigma_up_mps,\
-         pitch_error_deg,roll_error_deg,tilt_sigma_deg,nees_position,nees_velocity\n",
-    );
-    let opt = |v: Option<f64>, p: usize| v.map_or(String::new(), |v| format!("{v:.p$}"));
-    for x in scores {
-        let tr = x.track_en_m;
-        let ve = x.velocity_error_enu_mps;
-        let vs = x.velocity_sigma_enu_mps;
-        let tilt = x.tilt_error_deg;
-        csv += &format!(
-            "{:.3},{:.3},{:.4},{:.5},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
-            x.t_s,
-            x.position_error_m,
-            x.velocity_error_mps,
-            x.heading_error_deg,
-            opt(x.position_sigma_m, 3),
-            opt(x.heading_sigma_deg, 5),
-            opt(tr.map(|t| t[0][0]), 3),
-            opt(tr.map(|t| t[0][1]), 3),
-            opt(tr.map(|t| t[1][0]), 3),
-            opt(tr.map(|t| t[1][1]), 3),
-            opt(ve.map(|v| v[0]), 4),
-            opt(ve.map(|v| v[1]), 4),
-            opt(ve.map(|v| v[2]), 4),
-            opt(vs.map(|v| v[0]), 4),
-            opt(vs.map(|v| v[1]), 4),
-            opt(vs.map(|v| v[2]), 4),
-            opt(tilt.map(|t| t[0]), 5),
-            opt(tilt.map(|t| t[1]), 5),
-            opt(x.tilt_sigma_deg, 5),
-            opt(x.nees.map(|n| n[0]), 3),
-            opt(x.nees.map(|n| n[1]), 3),
-        );
-    }
-    std::fs::write(out.join("navigation.csv"), csv)?;
-    let chart = crate::report::plot::LogChart {
-        title: format!("{name}: nav's horizontal position error (from its recording)"),
-        x_label: "time, s".into(),
-        y_label: "m".into(),
-        series: vec![crate::report::plot::Series {
-            name: "nav".into(),
-            color: "#1f77b4",
-            points: scores.iter().map(|x| (x.t_s, x.position_error_m)).collect(),
-            markers: false,
-        }],
-    };
-    std::fs::write(out.join("navigation-error.svg"), chart.svg())?;
     Ok(())
 }
 
