@@ -779,30 +779,7 @@ impl Kf {
                 r_m2[i] * white[i] * white[i] / (m_per[i] * m_per[i])
             }))
         };
-        if self.cfg.kind == FilterKind::Fading {
-            // fading discounts what the filter learnt of its own horizontal navigation and IMU
-            // states; the receiver's error (a model of the receiver, not of the INS) keeps its
-            // memory, and so does the vertical channel, which would otherwise follow each fix's
-            // white height noise with nothing to check its velocity against: P <- D P D with
-            // D = sqrt(s) on those states, 1 on the others (stays positive). The fading may not push a variance over its cap, but never
-            // takes back what the propagation put there (after an outage the position variance
-            // is rightly large).
-            let before = self.p.diagonal();
-            let f = self.cfg.fading_factor.powf(per_s).sqrt();
-            let d = VecN::from_fn(|i, _| {
-                if i >= B || i == 5 || i == 8 {
-                    return 1.0;
-                }
-                let v = self.p[(i, i)] * f * f;
-                let limit = self.cap[i].max(before[i]);
-                if v > limit { f * (limit / v).sqrt() } else { f }
-            });
-            for i in 0..N {
-                for j in 0..N {
-                    self.p[(i, j)] *= d[i] * d[j];
-                }
-            }
-        }
+        self.fade(per_s);
         // H = [0 0 I 0 0 -I]: the INS's position error less the receiver's
         let mut h_mat = SMatrix::<f64, 3, N>::zeros();
         for i in 0..3 {
@@ -870,6 +847,43 @@ impl Kf {
         self.stats.updates += 1;
         self.nis_sum += nis;
         self.stats.mean_nis = self.nis_sum / self.stats.updates as f64;
+        self.correct(s);
+        true
+    }
+
+    /// The fading filter's discount of what it learnt, for the share `per_s` of a second since
+    /// the last fix (nothing for the other kinds).
+    fn fade(&mut self, per_s: f64) {
+        if self.cfg.kind != FilterKind::Fading {
+            return;
+        }
+        // fading discounts what the filter learnt of its own horizontal navigation and IMU
+        // states; the receiver's error (a model of the receiver, not of the INS) keeps its
+        // memory, and so does the vertical channel, which would otherwise follow each fix's
+        // white height noise with nothing to check its velocity against: P <- D P D with
+        // D = sqrt(s) on those states, 1 on the others (stays positive). The fading may not
+        // push a variance over its cap, but never takes back what the propagation put there
+        // (after an outage the position variance is rightly large).
+        let before = self.p.diagonal();
+        let f = self.cfg.fading_factor.powf(per_s).sqrt();
+        let d = VecN::from_fn(|i, _| {
+            if i >= B || i == 5 || i == 8 {
+                return 1.0;
+            }
+            let v = self.p[(i, i)] * f * f;
+            let limit = self.cap[i].max(before[i]);
+            if v > limit { f * (limit / v).sqrt() } else { f }
+        });
+        for i in 0..N {
+            for j in 0..N {
+                self.p[(i, j)] *= d[i] * d[j];
+            }
+        }
+    }
+
+    /// The estimate applied to the navigation state: fed back each fix, or (output correction)
+    /// once the free INS has left the error model's linear range.
+    fn correct(&mut self, s: &mut NavState) {
         match self.cfg.correction {
             Correction::Feedback => self.feedback(s),
             Correction::Output if self.beyond_linear_range() => {
@@ -889,7 +903,6 @@ impl Kf {
             }
             Correction::Output => {}
         }
-        true
     }
 
     /// The open-loop error estimate is too large for the linear error model: an attitude error

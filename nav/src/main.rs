@@ -165,13 +165,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         None => None,
     };
     let mut gps = cfg.gps.as_ref().map(nav::gpsport::GpsPort::new);
-    let export = match cfg.gps.as_ref().and_then(|g| g.fixes_jsonl.as_ref()) {
-        Some(p) => Some(std::io::BufWriter::new(
-            std::fs::File::create(p)
-                .with_context(|| format!("cannot create the GPS fix export {}", p.display()))?,
-        )),
-        None => None,
-    };
+    let export = open_export(cfg)?;
     let recorder = match &cfg.record.mcap {
         Some(p) => Some(Recorder::start(p)?),
         None => None,
@@ -193,10 +187,11 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let mut batch = Vec::with_capacity(wire::BATCH);
     let mut read_errors = 0u64;
     let start = Instant::now();
-    let mut last_imu = Instant::now();
-    let mut gyro_frames = 0u64;
-    let timeout = Duration::from_millis(cfg.watchdog.imu_timeout_ms);
-    let timeout_ms = cfg.watchdog.imu_timeout_ms;
+    let mut watch = ImuWatch {
+        gyro_frames: 0,
+        last: Instant::now(),
+        timeout_ms: cfg.watchdog.imu_timeout_ms,
+    };
     let mut tick = tokio::time::interval(Duration::from_millis(100));
     info!(interface = iface, "receiving");
     match &cfg.gps {
@@ -238,38 +233,9 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                         }
                     }
                 };
-                // every frame already waiting comes in the same system call (recvmmsg)
-                batch.push((wire::from_can_frame(&f), stamps.socket.and_then(epoch_ns)));
-                if let Some(s) = &shell.sock
-                    && let Err(e) =
-                        wire::recv_batch_stamped(s.as_raw_fd(), &mut batch, wire::BATCH - 1)
-                {
-                    // the frame already read still goes through; the error is counted
-                    read_errors += 1;
-                    warn!(interface = iface, "read error: {e}");
-                }
-                take_frames(&mut batch, &mut pipeline, &mut shell, &mut out).await?;
-                if let Some(r) = shell.recorder {
-                    r.ship();
-                }
-                if pipeline.gyro_frames() > gyro_frames {
-                    gyro_frames = pipeline.gyro_frames();
-                    last_imu = Instant::now();
-                    pipeline.set_imu_timeout(false, timeout_ms, &mut out);
-                    shell.act(&mut out).await?;
-                }
+                read_errors += on_frame(f, stamps.socket.and_then(epoch_ns), &mut watch, &mut batch, &mut pipeline, &mut shell, &mut out).await?;
             }
-            _ = tick.tick() => {
-                // an IMU frame waiting in the socket means the loop is late (a loaded computer,
-                // a process stopped and continued), not that the IMU is silent
-                if gyro_frames > 0
-                    && last_imu.elapsed() > timeout
-                    && !shell.sock.as_ref().is_some_and(|s| imu_frame_waiting(s.as_raw_fd()))
-                {
-                    pipeline.set_imu_timeout(true, timeout_ms, &mut out);
-                    shell.act(&mut out).await?;
-                }
-            }
+            _ = tick.tick() => watch.check(&mut pipeline, &mut shell, &mut out).await?,
         }
     }
     let ended = Ended {
@@ -281,6 +247,82 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     drop(shell);
     write_summary(cfg, recorder, &mut summary)?;
     Ok(summary)
+}
+
+/// The GPS fix export (a JSON line per decoded fix), when the config asks for one.
+fn open_export(cfg: &NavConfig) -> Result<Option<std::io::BufWriter<std::fs::File>>> {
+    match cfg.gps.as_ref().and_then(|g| g.fixes_jsonl.as_ref()) {
+        Some(p) => Ok(Some(std::io::BufWriter::new(
+            std::fs::File::create(p)
+                .with_context(|| format!("cannot create the GPS fix export {}", p.display()))?,
+        ))),
+        None => Ok(None),
+    }
+}
+
+/// The IMU watchdog: how many gyro frames nav has taken, and when the last came.
+struct ImuWatch {
+    gyro_frames: u64,
+    last: Instant,
+    timeout_ms: u64,
+}
+
+impl ImuWatch {
+    /// Once a tick: the IMU is silent when no gyro frame came within the timeout.
+    async fn check(
+        &mut self,
+        pipeline: &mut Pipeline,
+        shell: &mut Shell<'_>,
+        out: &mut Vec<Output>,
+    ) -> Result<()> {
+        // an IMU frame waiting in the socket means the loop is late (a loaded computer, a
+        // process stopped and continued), not that the IMU is silent
+        if self.gyro_frames > 0
+            && self.last.elapsed() > Duration::from_millis(self.timeout_ms)
+            && !shell
+                .sock
+                .as_ref()
+                .is_some_and(|s| imu_frame_waiting(s.as_raw_fd()))
+        {
+            pipeline.set_imu_timeout(true, self.timeout_ms, out);
+            shell.act(out).await?;
+        }
+        Ok(())
+    }
+}
+
+/// A CAN frame read: it and every frame already waiting go through the pipeline. Returns the
+/// read errors met on the way.
+async fn on_frame(
+    f: socketcan::CanFrame,
+    stamp_ns: Option<u64>,
+    watch: &mut ImuWatch,
+    batch: &mut Vec<Received>,
+    pipeline: &mut Pipeline,
+    shell: &mut Shell<'_>,
+    out: &mut Vec<Output>,
+) -> Result<u64> {
+    let mut read_errors = 0;
+    // every frame already waiting comes in the same system call (recvmmsg)
+    batch.push((wire::from_can_frame(&f), stamp_ns));
+    if let Some(s) = &shell.sock
+        && let Err(e) = wire::recv_batch_stamped(s.as_raw_fd(), batch, wire::BATCH - 1)
+    {
+        // the frame already read still goes through; the error is counted
+        read_errors += 1;
+        warn!(interface = shell.iface, "read error: {e}");
+    }
+    take_frames(batch, pipeline, shell, out).await?;
+    if let Some(r) = shell.recorder {
+        r.ship();
+    }
+    if pipeline.gyro_frames() > watch.gyro_frames {
+        watch.gyro_frames = pipeline.gyro_frames();
+        watch.last = Instant::now();
+        pipeline.set_imu_timeout(false, watch.timeout_ms, out);
+        shell.act(out).await?;
+    }
+    Ok(read_errors)
 }
 
 /// What the receive loop leaves for the end of the run.

@@ -143,9 +143,7 @@ impl Recorder {
             .spawn(move || -> Result<u64, RecordError> {
                 let mut seq: BTreeMap<u16, u32> = BTreeMap::new();
                 let mut n = 0u64;
-                let mut buf: [u8; rawmsg::CAN_FRAME_BYTES];
-                let mut bytes_msg = Vec::new();
-                let mut text: String;
+                let mut scratch = Scratch::default();
                 let mut last_flush = Instant::now();
                 let mut views = crate::foxglove::Views::default();
                 let (mut chunks, mut chunk_bytes, mut part) = (0u64, 0u64, 0u32);
@@ -158,45 +156,7 @@ impl Recorder {
                             Err(mpsc::RecvTimeoutError::Disconnected) => break,
                         };
                     for r in batch {
-                        let (ch_id, log, publish, data): (u16, u64, u64, &[u8]) = match &r {
-                            Record::Frame { t_ns, frame } | Record::Sent { t_ns, frame } => {
-                                buf = rawmsg::encode_frame(frame, *t_ns);
-                                let c = if matches!(r, Record::Sent { .. }) {
-                                    ch.sent
-                                } else {
-                                    ch.raw
-                                };
-                                (c, *t_ns, *t_ns, &buf)
-                            }
-                            Record::ErrorFrame { t_ns, frame } => {
-                                buf = rawmsg::encode_error_frame(frame, *t_ns);
-                                (ch.raw, *t_ns, *t_ns, &buf)
-                            }
-                            Record::GpsBytes { t_ns, bytes } => {
-                                rawmsg::encode_serial(*t_ns, bytes, &mut bytes_msg);
-                                (ch.gps, *t_ns, *t_ns, &bytes_msg)
-                            }
-                            Record::Sample {
-                                t_ns,
-                                publish_ns,
-                                sample,
-                            } => {
-                                text = serde_json::to_string(sample).unwrap_or_default();
-                                (
-                                    ch.json[&JsonChannel::ImuSample],
-                                    *t_ns,
-                                    *publish_ns,
-                                    text.as_bytes(),
-                                )
-                            }
-                            Record::Json {
-                                channel,
-                                t_ns,
-                                publish_ns,
-                                json: j,
-                            } => (ch.json[channel], *t_ns, *publish_ns, j.as_bytes()),
-                        };
-                        let c = ch_id;
+                        let (c, log, publish, data) = scratch.encode(&r, &ch);
                         let mut put = |id: u16, data: &[u8]| {
                             let s = seq.entry(id).or_insert(0);
                             *s += 1;
@@ -300,6 +260,67 @@ struct Channels {
     sent: u16,
     gps: u16,
     json: BTreeMap<JsonChannel, u16>,
+}
+
+/// The writer's buffers for one record's bytes, reused from record to record.
+struct Scratch {
+    frame: [u8; rawmsg::CAN_FRAME_BYTES],
+    serial: Vec<u8>,
+    text: String,
+}
+
+impl Default for Scratch {
+    fn default() -> Self {
+        Self {
+            frame: [0; rawmsg::CAN_FRAME_BYTES],
+            serial: Vec::new(),
+            text: String::new(),
+        }
+    }
+}
+
+impl Scratch {
+    /// Record `r` as its channel, log time, publish time and bytes.
+    fn encode<'a>(&'a mut self, r: &'a Record, ch: &Channels) -> (u16, u64, u64, &'a [u8]) {
+        match r {
+            Record::Frame { t_ns, frame } | Record::Sent { t_ns, frame } => {
+                self.frame = rawmsg::encode_frame(frame, *t_ns);
+                let c = if matches!(r, Record::Sent { .. }) {
+                    ch.sent
+                } else {
+                    ch.raw
+                };
+                (c, *t_ns, *t_ns, &self.frame)
+            }
+            Record::ErrorFrame { t_ns, frame } => {
+                self.frame = rawmsg::encode_error_frame(frame, *t_ns);
+                (ch.raw, *t_ns, *t_ns, &self.frame)
+            }
+            Record::GpsBytes { t_ns, bytes } => {
+                rawmsg::encode_serial(*t_ns, bytes, &mut self.serial);
+                (ch.gps, *t_ns, *t_ns, &self.serial)
+            }
+            Record::Sample {
+                t_ns,
+                publish_ns,
+                sample,
+            } => {
+                self.text = serde_json::to_string(sample).unwrap_or_default();
+                (
+                    ch.json[&JsonChannel::ImuSample],
+                    *t_ns,
+                    *publish_ns,
+                    self.text.as_bytes(),
+                )
+            }
+            Record::Json {
+                channel,
+                t_ns,
+                publish_ns,
+                json: j,
+            } => (ch.json[channel], *t_ns, *publish_ns, j.as_bytes()),
+        }
+    }
 }
 
 type Writer = mcap::Writer<BufWriter<File>>;

@@ -292,7 +292,7 @@ fn no_function_reaches_150_lines_outside_tests() {
                 };
                 counted += 1;
                 let n = end - i + 1;
-                if n >= 150 {
+                if n > 100 {
                     long.push(format!("{}: {name}, {n} lines", p.display()));
                 }
             }
