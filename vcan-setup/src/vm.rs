@@ -462,33 +462,8 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
         wanted.extend(NET_MODULES);
     }
     let mods = module_files(&pre.kernel_version, &wanted)?;
-    let mut shares: Vec<PathBuf> = Vec::new();
-    for s in &opts.shares {
-        let c = s
-            .canonicalize()
-            .map_err(io_ctx(format!("share {}", s.display())))?;
-        if !shares.contains(&c) {
-            shares.push(c);
-        }
-    }
-    // parents before children so nested shares mount on top
-    shares.sort_by_key(|p| p.components().count());
-    let mut execs = opts.libs_for.clone();
-    let prog_path = PathBuf::from(prog);
-    let prog_path = if prog_path.is_file() {
-        prog_path
-    } else {
-        which(prog).unwrap_or(prog_path)
-    };
-    execs.extend(sibling_executables(&prog_path));
-    execs.push(prog_path);
-    // a wrapper (a shell script) names the programs it runs among its arguments: theirs too
-    for a in cmd.iter().skip(1).map(Path::new).filter(|p| p.is_file()) {
-        execs.extend(sibling_executables(a));
-        execs.push(a.to_path_buf());
-    }
-    execs.sort();
-    execs.dedup();
+    let shares = guest_shares(opts)?;
+    let execs = guest_executables(cmd, prog, opts);
 
     let ctl = tempfile::Builder::new()
         .prefix("vcan-setup-")
@@ -498,41 +473,7 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     let net = !opts.forward_tcp.is_empty();
     std::fs::write(&initrd, build_initramfs(&pre, &mods, &execs, &shares, net)?)
         .map_err(io_ctx("writing the initramfs"))?;
-    let cwd = opts
-        .cwd
-        .clone()
-        .or_else(|| {
-            std::env::current_dir()
-                .ok()
-                .filter(|d| shares.iter().any(|s| d.starts_with(s)))
-        })
-        .or_else(|| shares.first().cloned())
-        .unwrap_or_else(|| "/".into());
-    let mut script = format!(
-        "cd {} || exit 126\nexport HOME=/root TMPDIR=/tmp {GUEST_ENV}=1\n",
-        sh_quote(&cwd.to_string_lossy())
-    );
-    for k in PASS_ENV {
-        if let Ok(v) = std::env::var(k) {
-            script.push_str(&format!("export {k}={}\n", sh_quote(&v)));
-        }
-    }
-    if std::env::var_os("NO_COLOR").is_none()
-        && !std::io::IsTerminal::is_terminal(&std::io::stderr())
-    {
-        // the guest's console is a terminal, the host's log is not (a file, a pipe, CI): no
-        // colour codes in it
-        script.push_str("export NO_COLOR=1\n");
-    }
-    for (k, v) in &opts.env {
-        script.push_str(&format!("export {k}={}\n", sh_quote(v)));
-    }
-    script.push_str("exec");
-    for a in cmd {
-        script.push(' ');
-        script.push_str(&sh_quote(a));
-    }
-    script.push_str(" 2>&1\n");
+    let script = guest_script(cmd, opts, &shares);
     std::fs::write(ctl.path().join("cmd.sh"), script)
         .map_err(io_ctx("writing the guest command"))?;
 
@@ -597,6 +538,85 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
         boot_secs: boot_secs.unwrap_or(0.0),
         total_secs: start.elapsed().as_secs_f64(),
     })
+}
+
+/// The host folders the guest mounts, each once, parents before children (nested shares mount
+/// on top).
+fn guest_shares(opts: &VmOptions) -> Result<Vec<PathBuf>> {
+    let mut shares: Vec<PathBuf> = Vec::new();
+    for s in &opts.shares {
+        let c = s
+            .canonicalize()
+            .map_err(io_ctx(format!("share {}", s.display())))?;
+        if !shares.contains(&c) {
+            shares.push(c);
+        }
+    }
+    shares.sort_by_key(|p| p.components().count());
+    Ok(shares)
+}
+
+/// The executables the guest needs with their libraries: the command's program, its siblings,
+/// the programs a wrapper names among its arguments, and `opts.libs_for`.
+fn guest_executables(cmd: &[String], prog: &str, opts: &VmOptions) -> Vec<PathBuf> {
+    let mut execs = opts.libs_for.clone();
+    let prog_path = PathBuf::from(prog);
+    let prog_path = if prog_path.is_file() {
+        prog_path
+    } else {
+        which(prog).unwrap_or(prog_path)
+    };
+    execs.extend(sibling_executables(&prog_path));
+    execs.push(prog_path);
+    // a wrapper (a shell script) names the programs it runs among its arguments: theirs too
+    for a in cmd.iter().skip(1).map(Path::new).filter(|p| p.is_file()) {
+        execs.extend(sibling_executables(a));
+        execs.push(a.to_path_buf());
+    }
+    execs.sort();
+    execs.dedup();
+    execs
+}
+
+/// The guest's command script: into the working folder (one under a share), the environment
+/// passed through, then the command.
+fn guest_script(cmd: &[String], opts: &VmOptions, shares: &[PathBuf]) -> String {
+    let cwd = opts
+        .cwd
+        .clone()
+        .or_else(|| {
+            std::env::current_dir()
+                .ok()
+                .filter(|d| shares.iter().any(|s| d.starts_with(s)))
+        })
+        .or_else(|| shares.first().cloned())
+        .unwrap_or_else(|| "/".into());
+    let mut script = format!(
+        "cd {} || exit 126\nexport HOME=/root TMPDIR=/tmp {GUEST_ENV}=1\n",
+        sh_quote(&cwd.to_string_lossy())
+    );
+    for k in PASS_ENV {
+        if let Ok(v) = std::env::var(k) {
+            script.push_str(&format!("export {k}={}\n", sh_quote(&v)));
+        }
+    }
+    if std::env::var_os("NO_COLOR").is_none()
+        && !std::io::IsTerminal::is_terminal(&std::io::stderr())
+    {
+        // the guest's console is a terminal, the host's log is not (a file, a pipe, CI): no
+        // colour codes in it
+        script.push_str("export NO_COLOR=1\n");
+    }
+    for (k, v) in &opts.env {
+        script.push_str(&format!("export {k}={}\n", sh_quote(v)));
+    }
+    script.push_str("exec");
+    for a in cmd {
+        script.push(' ');
+        script.push_str(&sh_quote(a));
+    }
+    script.push_str(" 2>&1\n");
+    script
 }
 
 /// How long a KVM guest may take to come up before the probe gives up on KVM (a KVM guest is
@@ -776,28 +796,7 @@ fn launch(l: &Launch<'_>) -> Result<Launched> {
         .stderr(Stdio::piped())
         .spawn()
         .map_err(io_ctx(format!("starting {}", pre.qemu.display())))?;
-    let (tx, rx) = mpsc::channel::<String>();
-    let out = child.stdout.take();
-    let err = child.stderr.take();
-    let tx2 = tx.clone();
-    let t1 = std::thread::spawn(move || {
-        if let Some(o) = out {
-            for line in BufReader::new(o).split(b'\n').map_while(|l| l.ok()) {
-                let _ = tx.send(
-                    String::from_utf8_lossy(&line)
-                        .trim_end_matches('\r')
-                        .to_string(),
-                );
-            }
-        }
-    });
-    let t2 = std::thread::spawn(move || {
-        if let Some(e) = err {
-            for line in BufReader::new(e).lines().map_while(|l| l.ok()) {
-                let _ = tx2.send(format!("qemu: {line}"));
-            }
-        }
-    });
+    let (rx, readers) = read_lines(&mut child);
     let mut output = String::new();
     let mut preboot: Vec<String> = Vec::new();
     let mut boot_secs = None;
@@ -862,14 +861,45 @@ fn launch(l: &Launch<'_>) -> Result<Launched> {
             }
         }
     }
-    let _ = t1.join();
-    let _ = t2.join();
+    for r in readers {
+        let _ = r.join();
+    }
     let _ = child.wait();
     Ok(Launched::Done {
         output,
         preboot: preboot.join("\n"),
         boot_secs,
     })
+}
+
+/// QEMU's output as lines on one channel: its standard output (the guest's console) as it is,
+/// its standard error prefixed `qemu: `; with the threads reading them.
+fn read_lines(
+    child: &mut std::process::Child,
+) -> (mpsc::Receiver<String>, [std::thread::JoinHandle<()>; 2]) {
+    let (tx, rx) = mpsc::channel::<String>();
+    let out = child.stdout.take();
+    let err = child.stderr.take();
+    let tx2 = tx.clone();
+    let t1 = std::thread::spawn(move || {
+        if let Some(o) = out {
+            for line in BufReader::new(o).split(b'\n').map_while(|l| l.ok()) {
+                let _ = tx.send(
+                    String::from_utf8_lossy(&line)
+                        .trim_end_matches('\r')
+                        .to_string(),
+                );
+            }
+        }
+    });
+    let t2 = std::thread::spawn(move || {
+        if let Some(e) = err {
+            for line in BufReader::new(e).lines().map_while(|l| l.ok()) {
+                let _ = tx2.send(format!("qemu: {line}"));
+            }
+        }
+    });
+    (rx, [t1, t2])
 }
 
 #[cfg(test)]
