@@ -126,37 +126,7 @@ pub fn checks(
         pass: nav_exit == Some(0),
         detail: format!("exit status {}", crate::check::exit_words(nav_exit)),
     });
-    if lockstep.enabled {
-        // a fix that reached nav after its time was applied when it came: timing leaked in.
-        // Through gpsd a fix reaches nav when gpsd passes it on (its wall time): such a run
-        // makes no claim to repeat (it has no reference run), so late fixes are counted only
-        let late = nav.navigation.as_ref().map_or(0, |n| n.late_fixes);
-        let late_fails = late > 0 && !gps_via_gpsd;
-        out.push(Check {
-            name: "reproducible: the emulators stayed in lockstep with nav".into(),
-            pass: lockstep.stalls == 0
-                && lockstep.receiver_stalls == 0
-                && lockstep.nav_times > 0
-                && !late_fails,
-            detail: format!(
-                "{} NAV_TIME frames followed, {} waits ({} ms; {} for the receiver's device or bytes, {} of them past the limit), {} stalls, {} turntable commands placed, {late} GPS fixes late{}; frame-in to NAV_TIME-out {:.1} ms median, {:.1} ms p99",
-                lockstep.nav_times,
-                lockstep.waits,
-                lockstep.wait_ms,
-                lockstep.receiver_waits,
-                lockstep.receiver_stalls,
-                lockstep.stalls,
-                lockstep.placed_commands,
-                if gps_via_gpsd {
-                    " (through gpsd: its timing, counted, not failed)"
-                } else {
-                    ""
-                },
-                lockstep.latency_p50_ms,
-                lockstep.latency_p99_ms
-            ),
-        });
-    }
+    out.extend(lockstep_check(lockstep, nav, gps_via_gpsd));
     let rx_gyro = nav.imu.gyro_frames as i64;
     let dup = s.faults.duplicate_samples.len() as i64;
     let lost = tx.gyro_frames as i64 + dup - rx_gyro;
@@ -194,7 +164,62 @@ pub fn checks(
     let Some(reference) = reference else {
         return (out, lost);
     };
-    attitude_checks(&mut out, reference, nav, lost == 0);
+    reference_checks(&mut out, s, bench, reference, nav, lost);
+    (out, lost)
+}
+
+/// The lockstep held: no stall, no fix late (lockstep runs only).
+fn lockstep_check(
+    lockstep: &emulators::bus::scheduler::LockstepStats,
+    nav: &Summary,
+    gps_via_gpsd: bool,
+) -> Option<Check> {
+    if !lockstep.enabled {
+        return None;
+    }
+    // a fix that reached nav after its time was applied when it came: timing leaked in.
+    // Through gpsd a fix reaches nav when gpsd passes it on (its wall time): such a run
+    // makes no claim to repeat (it has no reference run), so late fixes are counted only
+    let late = nav.navigation.as_ref().map_or(0, |n| n.late_fixes);
+    let late_fails = late > 0 && !gps_via_gpsd;
+    Some(Check {
+        name: "reproducible: the emulators stayed in lockstep with nav".into(),
+        pass: lockstep.stalls == 0
+            && lockstep.receiver_stalls == 0
+            && lockstep.nav_times > 0
+            && !late_fails,
+        detail: format!(
+            "{} NAV_TIME frames followed, {} waits ({} ms; {} for the receiver's device or bytes, {} of them past the limit), {} stalls, {} turntable commands placed, {late} GPS fixes late{}; frame-in to NAV_TIME-out {:.1} ms median, {:.1} ms p99",
+            lockstep.nav_times,
+            lockstep.waits,
+            lockstep.wait_ms,
+            lockstep.receiver_waits,
+            lockstep.receiver_stalls,
+            lockstep.stalls,
+            lockstep.placed_commands,
+            if gps_via_gpsd {
+                " (through gpsd: its timing, counted, not failed)"
+            } else {
+                ""
+            },
+            lockstep.latency_p50_ms,
+            lockstep.latency_p99_ms
+        ),
+    })
+}
+
+/// nav against the in-process reference run of the same scenario: attitude, the frames sent
+/// and the bus model, and the static checks where the truth is a parked vehicle.
+fn reference_checks(
+    out: &mut Vec<Check>,
+    s: &Scenario,
+    bench: BenchSide<'_>,
+    reference: &InProcess,
+    nav: &Summary,
+    lost: i64,
+) {
+    let (bus, lockstep) = (bench.bus, bench.lockstep);
+    attitude_checks(out, reference, nav, lost == 0);
     // the same stream in, the same frames out at the same samples: nothing the host's pace
     // decides reaches what nav sends (docs/pace.md)
     if lost == 0 {
@@ -227,7 +252,7 @@ pub fn checks(
         reference.expected_specific_force_mps2,
     ) {
         static_checks(
-            &mut out,
+            out,
             s,
             reference,
             Vector3::from(w_truth),
@@ -235,7 +260,6 @@ pub fn checks(
             nav,
         );
     }
-    (out, lost)
 }
 
 /// nav counted every error frame the bus model raised for its controller (runs with any).

@@ -321,6 +321,66 @@ impl Scenario {
             );
         }
         self.imu.check()?;
+        self.check_procedures()?;
+        if let Some(d) = &self.drive {
+            Drive::plan(d)?;
+            if self.coning.is_some() {
+                bail!("a scenario has either [coning] or [drive], not both");
+            }
+        }
+        if let Some(c) = &self.coning
+            && !(c.half_angle_deg.abs() <= 10.0 && c.frequency_hz >= 0.0 && c.frequency_hz < 500.0)
+        {
+            bail!("coning: half_angle_deg must be within 10 deg and frequency_hz in [0, 500)");
+        }
+        if self.gps.is_some() && self.drive.is_none() {
+            bail!("[gps] needs a [drive]: the antenna rides on the vehicle's route");
+        }
+        self.check_bus_faults()?;
+        if !(1..=4096).contains(&self.bus.tx_queue_frames) {
+            bail!(
+                "bus.tx_queue_frames {} is not in [1, 4096]",
+                self.bus.tx_queue_frames
+            );
+        }
+        if let Some(g) = &self.gps
+            && !(1.0..=10.0).contains(&g.rate_hz)
+        {
+            bail!("gps.rate_hz must be in [1, 10]");
+        }
+        if self.navigation.is_some() && self.gps.is_none() {
+            bail!("[navigation] needs a [gps]: nav takes its start position from the first fix");
+        }
+        if let Some(d) = &self.drive
+            && (self.turntable.is_some() || self.north_finding.is_some())
+            && ((d.lat_deg - self.site.lat_deg).abs() > 1e-6
+                || (d.lon_deg - self.site.lon_deg).abs() > 1e-6)
+        {
+            bail!(
+                "drive starts at {} N {} E but the site is {} N {} E: north-finding uses the site's latitude, so they must agree",
+                d.lat_deg,
+                d.lon_deg,
+                self.site.lat_deg,
+                self.site.lon_deg
+            );
+        }
+        nav::attitude::ImuProcessor::new(&self.processing)
+            .map_err(|e| anyhow::anyhow!("processing: {e}"))?;
+        let r = self.imu.rate_hz;
+        if (self.processing.fir.fs_hz - r).abs() > 1e-9 {
+            bail!(
+                "processing.fir.fs_hz ({}) must equal imu.rate_hz ({r}) (for a 100 Hz IMU, e.g. fs_hz = 100, passband_hz = 20, stopband_hz = 45, order = 16)",
+                self.processing.fir.fs_hz
+            );
+        }
+        // last: the devices' own checks first say what is wrong with a rate
+        busload::fits(self)?;
+        Ok(())
+    }
+
+    /// The turntable and the procedures on it (north-finding, the calibrations): each its own
+    /// check, and they fit the unit and each other.
+    fn check_procedures(&self) -> Result<()> {
         if let Some(t) = &self.turntable {
             t.check()?;
         }
@@ -388,59 +448,6 @@ impl Scenario {
                 );
             }
         }
-        if let Some(d) = &self.drive {
-            Drive::plan(d)?;
-            if self.coning.is_some() {
-                bail!("a scenario has either [coning] or [drive], not both");
-            }
-        }
-        if let Some(c) = &self.coning
-            && !(c.half_angle_deg.abs() <= 10.0 && c.frequency_hz >= 0.0 && c.frequency_hz < 500.0)
-        {
-            bail!("coning: half_angle_deg must be within 10 deg and frequency_hz in [0, 500)");
-        }
-        if self.gps.is_some() && self.drive.is_none() {
-            bail!("[gps] needs a [drive]: the antenna rides on the vehicle's route");
-        }
-        self.check_bus_faults()?;
-        if !(1..=4096).contains(&self.bus.tx_queue_frames) {
-            bail!(
-                "bus.tx_queue_frames {} is not in [1, 4096]",
-                self.bus.tx_queue_frames
-            );
-        }
-        if let Some(g) = &self.gps
-            && !(1.0..=10.0).contains(&g.rate_hz)
-        {
-            bail!("gps.rate_hz must be in [1, 10]");
-        }
-        if self.navigation.is_some() && self.gps.is_none() {
-            bail!("[navigation] needs a [gps]: nav takes its start position from the first fix");
-        }
-        if let Some(d) = &self.drive
-            && (self.turntable.is_some() || self.north_finding.is_some())
-            && ((d.lat_deg - self.site.lat_deg).abs() > 1e-6
-                || (d.lon_deg - self.site.lon_deg).abs() > 1e-6)
-        {
-            bail!(
-                "drive starts at {} N {} E but the site is {} N {} E: north-finding uses the site's latitude, so they must agree",
-                d.lat_deg,
-                d.lon_deg,
-                self.site.lat_deg,
-                self.site.lon_deg
-            );
-        }
-        nav::attitude::ImuProcessor::new(&self.processing)
-            .map_err(|e| anyhow::anyhow!("processing: {e}"))?;
-        let r = self.imu.rate_hz;
-        if (self.processing.fir.fs_hz - r).abs() > 1e-9 {
-            bail!(
-                "processing.fir.fs_hz ({}) must equal imu.rate_hz ({r}) (for a 100 Hz IMU, e.g. fs_hz = 100, passband_hz = 20, stopband_hz = 45, order = 16)",
-                self.processing.fir.fs_hz
-            );
-        }
-        // last: the devices' own checks first say what is wrong with a rate
-        busload::fits(self)?;
         Ok(())
     }
 
