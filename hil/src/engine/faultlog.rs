@@ -79,14 +79,38 @@ impl Device<'_> {
 /// SIGKILL of nav at `kill_at_s`, in time order.
 pub fn schedule(s: &Scenario, link_downs: &[[f64; 2]], kill_at_s: Option<f64>) -> Vec<FaultEvent> {
     let mut ev = Vec::new();
-    let rate = s.imu.rate_hz.max(1e-9);
-    let at_sample = |k: u64| k as f64 / rate;
-    // the IMU and its frames on the bus
-    let i = &s.imu;
-    let mut imu = Device {
-        name: "imu",
+    imu_events(s, &mut ev);
+    bus_events(s, &mut ev);
+    if let Some(g) = &s.gps {
+        gps_events(g, &mut ev);
+    }
+    if let Some(tt) = &s.turntable {
+        turntable_events(tt, &mut ev);
+    }
+    // the bench's own actions
+    let mut bench = Device {
+        name: "bench",
         ev: &mut ev,
     };
+    for [down, up] in link_downs {
+        bench.push(*down, "link_downs", "starts", "CAN interface down".into());
+        bench.push(*up, "link_downs", "ends", "CAN interface back up".into());
+    }
+    bench.at(
+        "kill_nav_at_s",
+        kill_at_s.as_slice(),
+        "nav killed (SIGKILL)",
+    );
+    ev.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    ev
+}
+
+/// The IMU's own faults.
+fn imu_events(s: &Scenario, ev: &mut Vec<FaultEvent>) {
+    let rate = s.imu.rate_hz.max(1e-9);
+    let at_sample = |k: u64| k as f64 / rate;
+    let i = &s.imu;
+    let mut imu = Device { name: "imu", ev };
     imu.from(
         "bit_fail_from_s",
         i.bit_fail_from_s,
@@ -108,11 +132,14 @@ pub fn schedule(s: &Scenario, link_downs: &[[f64; 2]], kill_at_s: Option<f64>) -
         let detail = format!("sample {k}: counter +{jump}");
         imu.push(at_sample(*k), "counter_jumps", "at", detail);
     }
+}
+
+/// The IMU's frames on the bus: dropped, duplicated, held back, foreign frames.
+fn bus_events(s: &Scenario, ev: &mut Vec<FaultEvent>) {
+    let rate = s.imu.rate_hz.max(1e-9);
+    let at_sample = |k: u64| k as f64 / rate;
     let f = &s.faults;
-    let mut bus = Device {
-        name: "bus",
-        ev: &mut ev,
-    };
+    let mut bus = Device { name: "bus", ev };
     for (samples, fault, what) in [
         (&f.drop_samples, "drop_samples", "frames not sent"),
         (
@@ -149,73 +176,58 @@ pub fn schedule(s: &Scenario, link_downs: &[[f64; 2]], kill_at_s: Option<f64>) -
         let extra = format!(", {} foreign frames per sample", w[2]);
         bus.windows("flood_s", &[*w], &extra);
     }
+}
+
+/// The receiver's.
+fn gps_events(g: &emulators::gps::ReceiverParams, ev: &mut Vec<FaultEvent>) {
     // the receiver
-    if let Some(g) = &s.gps {
-        let mut gps = Device {
-            name: "gps",
-            ev: &mut ev,
-        };
-        let kind = if g.outage_void {
-            ", void fixes"
-        } else {
-            ", silent"
-        };
-        gps.windows("outages", &g.outages, kind);
-        for m in &g.multipath {
-            gps.windows(
-                "multipath",
-                &[[m[0], m[0] + m[1]]],
-                &format!(", {} m north", m[2]),
-            );
-        }
-        gps.windows("port_drops", &g.port_drops, ": the device is gone");
-        gps.at(
-            "time_backwards_at_s",
-            &g.time_backwards_at_s,
-            "UTC 10 s back",
-        );
-        gps.at(
-            "garbage_at_s",
-            &g.garbage_at_s,
-            "line noise and binary bytes",
-        );
-    }
-    // the turntable
-    if let Some(tt) = &s.turntable {
-        let f = &tt.faults;
-        let mut table = Device {
-            name: "turntable",
-            ev: &mut ev,
-        };
-        table.from("stall_from_s", f.stall_from_s, "the axis stalls");
-        table.throughout("lock_fails", f.lock_fails, "the lock never engages".into());
-        table.at(
-            "encoder_glitch_at_s",
-            &f.encoder_glitch_at_s,
-            "an encoder glitch",
-        );
-        let lost = format!("commands {:?} lost", f.lost_command_seqs);
-        table.throughout("lost_command_seqs", !f.lost_command_seqs.is_empty(), lost);
-        let late = format!("acknowledgements {} s late", f.command_delay_s);
-        table.throughout("command_delay_s", f.command_delay_s > 0.0, late);
-        table.windows("status_silent_s", &f.status_silent_s, ": no heartbeat");
-    }
-    // the bench's own actions
-    let mut bench = Device {
-        name: "bench",
-        ev: &mut ev,
+    let mut gps = Device { name: "gps", ev };
+    let kind = if g.outage_void {
+        ", void fixes"
+    } else {
+        ", silent"
     };
-    for [down, up] in link_downs {
-        bench.push(*down, "link_downs", "starts", "CAN interface down".into());
-        bench.push(*up, "link_downs", "ends", "CAN interface back up".into());
+    gps.windows("outages", &g.outages, kind);
+    for m in &g.multipath {
+        gps.windows(
+            "multipath",
+            &[[m[0], m[0] + m[1]]],
+            &format!(", {} m north", m[2]),
+        );
     }
-    bench.at(
-        "kill_nav_at_s",
-        kill_at_s.as_slice(),
-        "nav killed (SIGKILL)",
+    gps.windows("port_drops", &g.port_drops, ": the device is gone");
+    gps.at(
+        "time_backwards_at_s",
+        &g.time_backwards_at_s,
+        "UTC 10 s back",
     );
-    ev.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
-    ev
+    gps.at(
+        "garbage_at_s",
+        &g.garbage_at_s,
+        "line noise and binary bytes",
+    );
+}
+
+/// The turntable's.
+fn turntable_events(tt: &emulators::turntable::TurntableParams, ev: &mut Vec<FaultEvent>) {
+    // the turntable
+    let f = &tt.faults;
+    let mut table = Device {
+        name: "turntable",
+        ev,
+    };
+    table.from("stall_from_s", f.stall_from_s, "the axis stalls");
+    table.throughout("lock_fails", f.lock_fails, "the lock never engages".into());
+    table.at(
+        "encoder_glitch_at_s",
+        &f.encoder_glitch_at_s,
+        "an encoder glitch",
+    );
+    let lost = format!("commands {:?} lost", f.lost_command_seqs);
+    table.throughout("lost_command_seqs", !f.lost_command_seqs.is_empty(), lost);
+    let late = format!("acknowledgements {} s late", f.command_delay_s);
+    table.throughout("command_delay_s", f.command_delay_s > 0.0, late);
+    table.windows("status_silent_s", &f.status_silent_s, ": no heartbeat");
 }
 
 #[cfg(test)]
