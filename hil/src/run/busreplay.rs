@@ -310,24 +310,7 @@ pub fn replay_on_bus(mcap: &Path, cfg: &NavConfig, opts: &BusReplayOptions) -> R
     }
     let _link_guard = RemoveOnDrop(link.clone());
     let mut folder = NavFolder::new(&opts.out, account)?;
-    let mut c = cfg.clone();
-    if let Some(can) = c.can.as_mut() {
-        can.interface = opts.iface.clone();
-    } else {
-        bail!("the recording's config has no [can] table: nav did not listen to a bus");
-    }
-    c.gps = if gps {
-        cfg.gps.clone().map(|mut g| {
-            g.source = GpsSource::Serial;
-            g.port = link.clone();
-            g.fixes_jsonl = g.fixes_jsonl.as_ref().map(|_| "gps-fixes.jsonl".into());
-            g
-        })
-    } else {
-        None
-    };
-    c.record.mcap = Some("nav.mcap".into());
-    c.record.summary = Some("nav-summary.json".into());
+    let c = replay_config(cfg, opts, gps, &link)?;
     let cfg_path = folder.dir.join("nav.toml");
     std::fs::write(&cfg_path, c.to_toml())
         .with_context(|| format!("writing {}", cfg_path.display()))?;
@@ -342,43 +325,7 @@ pub fn replay_on_bus(mcap: &Path, cfg: &NavConfig, opts: &BusReplayOptions) -> R
             cfg.imu.rate_hz,
         )),
     };
-    let progress = emulators::bus::transport::Progress::default();
-    let stop = AtomicBool::new(false);
-    let duration_s = rec
-        .items
-        .iter()
-        .filter(|i| matches!(i, Recorded::Frame(f) if f.id == wire::imu_gyro::SPEC.id))
-        .count() as f64
-        / cfg.imu.rate_hz;
-    let played = std::thread::scope(|sc| {
-        let (done_tx, done) = std::sync::mpsc::channel::<()>();
-        let player = sc.spawn(|| {
-            let r = emulators::player::play(
-                &opts.iface,
-                rec.items.iter().cloned(),
-                pty.as_mut(),
-                &play_opts,
-                &stop,
-                &progress,
-            );
-            drop(done_tx);
-            r
-        });
-        // nav is told to stop as soon as the last frame is out: a pause longer than its
-        // watchdog would add a timeout the recording does not have
-        while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) =
-            done.recv_timeout(Duration::from_millis(200))
-        {
-            if opts.progress {
-                let t = progress.now();
-                crate::status::show(&format!(
-                    "{} replay {t:.1} / {duration_s:.1} s of IMU time",
-                    crate::status::bar_of(t / duration_s.max(1e-9), 30)
-                ));
-            }
-        }
-        player.join()
-    });
+    let played = play_showing_progress(&rec.items, pty.as_mut(), opts, &play_opts, cfg.imu.rate_hz);
     crate::status::finish();
     // nav takes what is still in its socket when told to stop
     let (nav_exit, lines) = stop_nav(nav)?;
@@ -412,6 +359,82 @@ pub fn replay_on_bus(mcap: &Path, cfg: &NavConfig, opts: &BusReplayOptions) -> R
         nav_exit,
         wall_s: start.elapsed().as_secs_f64(),
         summary,
+    })
+}
+
+/// nav's config for the replay: the recording's, on the replay's interface, the receiver (when
+/// replayed) on the port behind `link`, recording into its own folder.
+fn replay_config(
+    cfg: &NavConfig,
+    opts: &BusReplayOptions,
+    gps: bool,
+    link: &Path,
+) -> Result<NavConfig> {
+    let mut c = cfg.clone();
+    if let Some(can) = c.can.as_mut() {
+        can.interface = opts.iface.clone();
+    } else {
+        bail!("the recording's config has no [can] table: nav did not listen to a bus");
+    }
+    c.gps = if gps {
+        cfg.gps.clone().map(|mut g| {
+            g.source = GpsSource::Serial;
+            g.port = link.to_path_buf();
+            g.fixes_jsonl = g.fixes_jsonl.as_ref().map(|_| "gps-fixes.jsonl".into());
+            g
+        })
+    } else {
+        None
+    };
+    c.record.mcap = Some("nav.mcap".into());
+    c.record.summary = Some("nav-summary.json".into());
+    Ok(c)
+}
+
+/// Play the recorded `items` onto the bus (and the receiver's bytes onto `pty`), showing the
+/// IMU time reached while it plays.
+fn play_showing_progress(
+    items: &[Recorded],
+    pty: Option<&mut GpsPty>,
+    opts: &BusReplayOptions,
+    play_opts: &PlayOptions,
+    imu_rate_hz: f64,
+) -> std::thread::Result<Result<PlayStats, emulators::bus::scheduler::BusError>> {
+    let progress = emulators::bus::transport::Progress::default();
+    let stop = AtomicBool::new(false);
+    let duration_s = items
+        .iter()
+        .filter(|i| matches!(i, Recorded::Frame(f) if f.id == wire::imu_gyro::SPEC.id))
+        .count() as f64
+        / imu_rate_hz;
+    std::thread::scope(|sc| {
+        let (done_tx, done) = std::sync::mpsc::channel::<()>();
+        let player = sc.spawn(|| {
+            let r = emulators::player::play(
+                &opts.iface,
+                items.iter().cloned(),
+                pty,
+                play_opts,
+                &stop,
+                &progress,
+            );
+            drop(done_tx);
+            r
+        });
+        // nav is told to stop as soon as the last frame is out: a pause longer than its
+        // watchdog would add a timeout the recording does not have
+        while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) =
+            done.recv_timeout(Duration::from_millis(200))
+        {
+            if opts.progress {
+                let t = progress.now();
+                crate::status::show(&format!(
+                    "{} replay {t:.1} / {duration_s:.1} s of IMU time",
+                    crate::status::bar_of(t / duration_s.max(1e-9), 30)
+                ));
+            }
+        }
+        player.join()
     })
 }
 
