@@ -402,6 +402,53 @@ struct NavSide {
 }
 
 impl NavSide {
+    /// nav's side before the first sample, following nav's NAV_TIME when `lockstep` is given.
+    fn following(lockstep: Option<Lockstep>) -> Self {
+        Self {
+            follow: lockstep,
+            confirmed: None,
+            gps_rx: None,
+            timeout_seen: false,
+            owed: None,
+            ls: LockstepStats {
+                enabled: lockstep.is_some(),
+                ..Default::default()
+            },
+            bad: 0,
+            latency: Latency::default(),
+        }
+    }
+
+    /// Sample `k` (at `t`) as nav cannot confirm it: its frames lost on the bus model, or not
+    /// sent on purpose (a silence starts then, and lasts its paced wall time).
+    fn unconfirmable(
+        &mut self,
+        st: &Step,
+        k: u64,
+        t: f64,
+        clock: &mut SimClock,
+        silent: &mut bool,
+    ) {
+        if st.lost {
+            // frames lost on the bus model (a full queue, a bus-off): nav cannot confirm
+            // their samples
+            self.confirmed = Some(self.confirmed.map_or(k, |c| c.max(k)));
+        }
+        if st.dropped {
+            // a sample deliberately not sent (a fault): nav cannot confirm it, so the lockstep
+            // does not wait for it (an IMU that stops for seconds is then paced by the clock)
+            self.confirmed = Some(self.confirmed.map_or(k, |c| c.max(k)));
+            if !*silent {
+                // a silence starts: it lasts its paced wall time even when the stream ran
+                // behind the clock (else a stop of seconds would pass in no time at all and
+                // nav's watchdog would never see it)
+                clock.catch_up(t);
+                *silent = true;
+            }
+        } else {
+            *silent = false;
+        }
+    }
     /// Read what nav sent so far, without blocking.
     fn read(
         &mut self,
@@ -466,6 +513,25 @@ struct Port<'a> {
     outbox: Outbox,
     /// Error frames written.
     error_frames: u64,
+}
+
+impl<'a> Port<'a> {
+    /// The bench's port on `sock` (interface `iface`), every frame it writes logged to `log`.
+    fn on(sock: &'a CanSocket, iface: &'a str, log: Option<SentLog>) -> Self {
+        Self {
+            sock,
+            iface,
+            error_frames: 0,
+            outbox: Outbox {
+                frames: Vec::with_capacity(wire::BATCH),
+                last: None,
+                written: 0,
+                retries: 0,
+                lost_down: 0,
+                log,
+            },
+        }
+    }
 }
 
 impl Port<'_> {
@@ -658,34 +724,10 @@ pub fn run(
         .map(|m| m.id)
         .collect();
     let sock = bench_socket(iface, &from_nav)?;
-    let mut nav = NavSide {
-        follow: lockstep,
-        confirmed: None,
-        gps_rx: None,
-        timeout_seen: false,
-        owed: None,
-        ls: LockstepStats {
-            enabled: lockstep.is_some(),
-            ..Default::default()
-        },
-        bad: 0,
-        latency: Latency::default(),
-    };
+    let mut nav = NavSide::following(lockstep);
     let mut st = Step::default();
     // frames go out in batches of a few samples: one system call instead of one per frame
-    let mut port = Port {
-        sock: &sock,
-        iface,
-        error_frames: 0,
-        outbox: Outbox {
-            frames: Vec::with_capacity(wire::BATCH),
-            last: None,
-            written: 0,
-            retries: 0,
-            lost_down: 0,
-            log: dev.sent_log.take(),
-        },
-    };
+    let mut port = Port::on(&sock, iface, dev.sent_log.take());
     let batch_samples = 16u64;
     let mut max_lag_ms = 0u64;
     let mut silent = false;
@@ -719,25 +761,7 @@ pub fn run(
             hold_for_watchdog(&mut port, &mut nav, &mut dev.step, l.stall, stop)?;
             silent = true;
         }
-        if st.lost {
-            // frames lost on the bus model (a full queue, a bus-off): nav cannot confirm
-            // their samples
-            nav.confirmed = Some(nav.confirmed.map_or(k, |c| c.max(k)));
-        }
-        if st.dropped {
-            // a sample deliberately not sent (a fault): nav cannot confirm it, so the lockstep
-            // does not wait for it (an IMU that stops for seconds is then paced by the clock)
-            nav.confirmed = Some(nav.confirmed.map_or(k, |c| c.max(k)));
-            if !silent {
-                // a silence starts: it lasts its paced wall time even when the stream ran
-                // behind the clock (else a stop of seconds would pass in no time at all and
-                // nav's watchdog would never see it)
-                clock.catch_up(t);
-                silent = true;
-            }
-        } else {
-            silent = false;
-        }
+        nav.unconfirmable(&st, k, t, &mut clock, &mut silent);
         port.outbox.last = Some(k);
         port.take(&st, &mut nav)?;
         if let Some(w) = dev.watch.as_mut() {
