@@ -192,44 +192,11 @@ pub fn play(
             Recorded::Gps(bytes) => {
                 flush(&mut outbox, &mut st)?;
                 let p = pty.as_deref_mut().ok_or(BusError::NoGpsPort)?;
-                // in lockstep nav's reader has as long as nav has to confirm a sample
-                let limit = lockstep.map_or(crate::gps::TAKE_WAIT, |l| l.stall);
-                // nav re-opening the device after a drop: the bytes wait for it
-                if !p.reader_attached() && !p.wait_reader_until(limit, stop) {
-                    st.gps_slow_reads += 1;
-                }
-                match p.write(&bytes) {
-                    Ok(()) => {
-                        st.gps_bytes += bytes.len() as u64;
-                        st.gps_writes += 1;
-                        // nav reads them (and takes the frames before them first) before the
-                        // IMU stream goes on
-                        if !p.wait_taken_until(limit, stop) {
-                            st.gps_slow_reads += 1;
-                        }
-                    }
-                    Err(PtyError::Write { source, .. })
-                        if source.kind() == std::io::ErrorKind::TimedOut =>
-                    {
-                        st.gps_unread += 1;
-                        p.clear();
-                    }
-                    Err(e) => return Err(e.into()),
-                }
+                put_gps(p, &bytes, lockstep, stop, &mut st)?;
             }
             Recorded::Silence => {
                 flush(&mut outbox, &mut st)?;
-                st.silences += 1;
-                // nav's watchdog fires again here: nothing more goes out until it has
-                follow.timeout_seen = false;
-                let since = Instant::now();
-                while !follow.timeout_seen
-                    && since.elapsed() < opts.silence
-                    && !stop.load(Ordering::Relaxed)
-                {
-                    crate::bus::scheduler::wait_readable(&sock, Duration::from_millis(2));
-                    read_nav(&sock, iface, &mut follow, &mut st.lockstep)?;
-                }
+                hold_silence(&sock, iface, &mut follow, opts.silence, stop, &mut st)?;
                 // what follows is paced from here, not caught up at once
                 clock.catch_up(k as f64 * period);
             }
@@ -239,6 +206,61 @@ pub fn play(
     read_nav(&sock, iface, &mut follow, &mut st.lockstep)?;
     progress.set(k as f64 * period);
     Ok(st)
+}
+
+/// The receiver's recorded bytes onto its pty, once nav's reader is there; nav takes them
+/// before the IMU stream goes on.
+fn put_gps(
+    p: &mut GpsPty,
+    bytes: &[u8],
+    lockstep: Option<Lockstep>,
+    stop: &AtomicBool,
+    st: &mut PlayStats,
+) -> Result<(), BusError> {
+    // in lockstep nav's reader has as long as nav has to confirm a sample
+    let limit = lockstep.map_or(crate::gps::TAKE_WAIT, |l| l.stall);
+    // nav re-opening the device after a drop: the bytes wait for it
+    if !p.reader_attached() && !p.wait_reader_until(limit, stop) {
+        st.gps_slow_reads += 1;
+    }
+    match p.write(bytes) {
+        Ok(()) => {
+            st.gps_bytes += bytes.len() as u64;
+            st.gps_writes += 1;
+            // nav reads them (and takes the frames before them first) before the
+            // IMU stream goes on
+            if !p.wait_taken_until(limit, stop) {
+                st.gps_slow_reads += 1;
+            }
+        }
+        Err(PtyError::Write { source, .. }) if source.kind() == std::io::ErrorKind::TimedOut => {
+            st.gps_unread += 1;
+            p.clear();
+        }
+        Err(e) => return Err(e.into()),
+    }
+    Ok(())
+}
+
+/// A recorded silence of the IMU: nothing goes out until nav's watchdog has fired again (at
+/// most `silence`).
+fn hold_silence(
+    sock: &CanSocket,
+    iface: &str,
+    follow: &mut Follow,
+    silence: Duration,
+    stop: &AtomicBool,
+    st: &mut PlayStats,
+) -> Result<(), BusError> {
+    st.silences += 1;
+    // nav's watchdog fires again here: nothing more goes out until it has
+    follow.timeout_seen = false;
+    let since = Instant::now();
+    while !follow.timeout_seen && since.elapsed() < silence && !stop.load(Ordering::Relaxed) {
+        crate::bus::scheduler::wait_readable(sock, Duration::from_millis(2));
+        read_nav(sock, iface, follow, &mut st.lockstep)?;
+    }
+    Ok(())
 }
 
 /// Read nav's NAV_TIME frames until it has confirmed within the window of sample `k`; false
