@@ -397,23 +397,7 @@ pub fn navigate(
     let (motion, tt) = s.build();
     let finds_north = s.north_finding.is_some() && tt.is_some();
     let gps = crate::engine::inproc::gps_run(s, rx)?;
-    let mut cfg =
-        crate::scenario::navconfig::nav_config(s, None, Some(std::path::Path::new("(in process)")));
-    let fix_delay = NavigationConfig::default().fix_delay_s;
-    cfg.navigation = NavigationConfig {
-        enabled: true,
-        initial_heading_deg: (!finds_north)
-            .then(|| drive.heading(0.0).to_degrees() + heading_err_deg),
-        gps_aiding: filter.is_some(),
-        filter: filter
-            .map(|f| crate::scenario::navconfig::with_lever_arm(f, rx))
-            .unwrap_or_default(),
-        ..s.navigation.clone().unwrap_or_else(|| NavigationConfig {
-            // the first fix comes at about 1 s and is applied `fix_delay_s` after its edge
-            level_s: (spec.start_wait_s - 1.2 - fix_delay).clamp(0.2, 2.0),
-            ..NavigationConfig::default()
-        })
-    };
+    let cfg = run_config(s, spec, &drive, filter, rx, heading_err_deg, finds_north);
     let level_s = cfg.navigation.level_s;
     let mut bench = crate::engine::inproc::InProcessBench::new(s, &cfg, motion, tt, gps)?;
     let mut series = Vec::new();
@@ -441,25 +425,7 @@ pub fn navigate(
     let Some(navigator) = p.navigator() else {
         bail!("navigation is not enabled");
     };
-    let nf_result = match p.finder() {
-        Some(f) => {
-            let Some(r) = f.result() else {
-                bail!(
-                    "north-finding did not finish: {}",
-                    f.abort().unwrap_or("out of time")
-                );
-            };
-            if r.duration_s + level_s >= spec.start_wait_s {
-                bail!(
-                    "north-finding ended at {:.1} s: with {level_s} s of levelling the vehicle must wait longer than {} s before it drives off",
-                    r.duration_s,
-                    spec.start_wait_s
-                );
-            }
-            Some(r.clone())
-        }
-        None => None,
-    };
+    let nf_result = north_finding_result(p.finder(), level_s, spec.start_wait_s)?;
     let last_t = bench.sim_time(navigator.time());
     let Some(end) = score(navigator, &drive, last_t) else {
         bail!("navigation never started (no heading or no fix)");
@@ -479,20 +445,7 @@ pub fn navigate(
         (Some(p), Some(v)) => Some([p, v]),
         _ => None,
     };
-    // the receiver's slow error at the end: its horizontal error averaged over the last 60 s of
-    // fixes (the white noise and short bursts average out, the wander of minutes does not)
-    let tail: Vec<[f64; 3]> = bench
-        .receiver_errors()
-        .iter()
-        .filter(|f| f.edge > last_t - 60.0)
-        .map(|f| f.error_enu)
-        .collect();
-    let end_receiver_wander_m = (!tail.is_empty()).then(|| {
-        let k = tail.len() as f64;
-        let e = tail.iter().map(|x| x[0]).sum::<f64>() / k;
-        let n = tail.iter().map(|x| x[1]).sum::<f64>() / k;
-        e.hypot(n)
-    });
+    let end_receiver_wander_m = receiver_wander(bench.receiver_errors(), last_t);
     Ok(NavRun {
         end_receiver_wander_m,
         duration_s: last_t,
@@ -512,6 +465,82 @@ pub fn navigate(
         untied_fixes: navigator.summary().untied_fixes,
         good_fixes_refused: bench.good_fixes_refused(),
         series,
+    })
+}
+
+/// nav's config for an in-process drive: the scenario's, with the filter (none: the INS
+/// alone) and, without north-finding, a start heading `heading_err_deg` off the truth.
+fn run_config(
+    s: &Scenario,
+    spec: &emulators::drive::DriveSpec,
+    drive: &Drive,
+    filter: Option<&FilterConfig>,
+    rx: &ReceiverParams,
+    heading_err_deg: f64,
+    finds_north: bool,
+) -> nav::config::NavConfig {
+    let mut cfg =
+        crate::scenario::navconfig::nav_config(s, None, Some(std::path::Path::new("(in process)")));
+    let fix_delay = NavigationConfig::default().fix_delay_s;
+    cfg.navigation = NavigationConfig {
+        enabled: true,
+        initial_heading_deg: (!finds_north)
+            .then(|| drive.heading(0.0).to_degrees() + heading_err_deg),
+        gps_aiding: filter.is_some(),
+        filter: filter
+            .map(|f| crate::scenario::navconfig::with_lever_arm(f, rx))
+            .unwrap_or_default(),
+        ..s.navigation.clone().unwrap_or_else(|| NavigationConfig {
+            // the first fix comes at about 1 s and is applied `fix_delay_s` after its edge
+            level_s: (spec.start_wait_s - 1.2 - fix_delay).clamp(0.2, 2.0),
+            ..NavigationConfig::default()
+        })
+    };
+    cfg
+}
+
+/// North-finding's result before the drive: it must have finished, with the levelling, before
+/// the vehicle drives off at `start_wait_s`.
+fn north_finding_result(
+    finder: Option<&nav::northfind::NorthFinder>,
+    level_s: f64,
+    start_wait_s: f64,
+) -> Result<Option<nav::northfind::NorthResult>> {
+    Ok(match finder {
+        Some(f) => {
+            let Some(r) = f.result() else {
+                bail!(
+                    "north-finding did not finish: {}",
+                    f.abort().unwrap_or("out of time")
+                );
+            };
+            if r.duration_s + level_s >= start_wait_s {
+                bail!(
+                    "north-finding ended at {:.1} s: with {level_s} s of levelling the vehicle must wait longer than {} s before it drives off",
+                    r.duration_s,
+                    start_wait_s
+                );
+            }
+            Some(r.clone())
+        }
+        None => None,
+    })
+}
+
+/// The receiver's slow error at the end of a drive at `last_t`.
+fn receiver_wander(errors: &[crate::engine::inproc::ReceiverFix], last_t: f64) -> Option<f64> {
+    // the receiver's slow error at the end: its horizontal error averaged over the last 60 s of
+    // fixes (the white noise and short bursts average out, the wander of minutes does not)
+    let tail: Vec<[f64; 3]> = errors
+        .iter()
+        .filter(|f| f.edge > last_t - 60.0)
+        .map(|f| f.error_enu)
+        .collect();
+    (!tail.is_empty()).then(|| {
+        let k = tail.len() as f64;
+        let e = tail.iter().map(|x| x[0]).sum::<f64>() / k;
+        let n = tail.iter().map(|x| x[1]).sum::<f64>() / k;
+        e.hypot(n)
     })
 }
 
