@@ -395,11 +395,6 @@ fn files_section(out: &Path) -> String {
 /// bounds.
 fn navigation_plots(out: &Path, col: &dyn Fn(usize) -> Vec<(f64, f64)>) -> String {
     let mut plots = String::new();
-    let finite = |v: Vec<(f64, f64)>| -> Vec<(f64, f64)> {
-        v.into_iter()
-            .filter(|(x, y)| x.is_finite() && y.is_finite())
-            .collect()
-    };
     let pair = |a: usize, b: usize| -> Vec<(f64, f64)> {
         finite(
             col(a)
@@ -408,24 +403,6 @@ fn navigation_plots(out: &Path, col: &dyn Fn(usize) -> Vec<(f64, f64)>) -> Strin
                 .map(|((_, x), (_, y))| (x, y))
                 .collect(),
         )
-    };
-    let line = |name: &str, color: &'static str, points: Vec<(f64, f64)>, markers: bool| Series {
-        name: name.into(),
-        color,
-        points,
-        markers,
-    };
-    let scaled = |v: Vec<(f64, f64)>, k: f64| -> Vec<(f64, f64)> {
-        finite(v.into_iter().map(|(t, y)| (t, k * y)).collect())
-    };
-    let chart = |title: &str, x: &str, y: &str, series: Vec<Series>| {
-        LogChart {
-            title: title.into(),
-            x_label: x.into(),
-            y_label: y.into(),
-            series,
-        }
-        .svg_linear()
     };
     // the track: truth, nav, and the receiver's fixes (an outage is where they stop)
     let nav_track = pair(6, 7);
@@ -520,6 +497,39 @@ fn navigation_plots(out: &Path, col: &dyn Fn(usize) -> Vec<(f64, f64)>) -> Strin
         );
     }
     plots
+}
+
+/// The points whose both coordinates are finite.
+fn finite(v: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    v.into_iter()
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .collect()
+}
+
+/// A series of a chart.
+fn line(name: &str, color: &'static str, points: Vec<(f64, f64)>, markers: bool) -> Series {
+    Series {
+        name: name.into(),
+        color,
+        points,
+        markers,
+    }
+}
+
+/// The points with their values times `k`.
+fn scaled(v: Vec<(f64, f64)>, k: f64) -> Vec<(f64, f64)> {
+    finite(v.into_iter().map(|(t, y)| (t, k * y)).collect())
+}
+
+/// A chart on linear axes.
+fn chart(title: &str, x: &str, y: &str, series: Vec<Series>) -> String {
+    LogChart {
+        title: title.into(),
+        x_label: x.into(),
+        y_label: y.into(),
+        series,
+    }
+    .svg_linear()
 }
 
 /// The two-sided 95 % bounds of a chi-square variable with 3 degrees of freedom.
