@@ -460,40 +460,7 @@ pub fn merge(parts: &[NavPart], out: Option<&Path>) -> Result<NavExperiment> {
     for (j, r) in jobs.iter().zip(results) {
         per_case[j.case].push(r?);
     }
-    let summarize = |i: usize| -> CaseResult {
-        let runs = per_case[i].clone();
-        let m = |f: &dyn Fn(&NavRun) -> f64| runs.iter().map(f).sum::<f64>() / runs.len() as f64;
-        let nees: Vec<[f64; 2]> = runs.iter().filter_map(|r| r.mean_nees_per_dof).collect();
-        let drift: Vec<f64> = runs
-            .iter()
-            .flat_map(|r| r.outage_end_errors_m.iter().copied())
-            .collect();
-        CaseResult {
-            name: names[i].clone(),
-            end_position_error_m: m(&|r| r.end_position_error_m),
-            end_velocity_error_mps: m(&|r| r.end_velocity_error_mps),
-            rms_position_error_m: m(&|r| r.rms_position_error_m),
-            rms_velocity_error_mps: m(&|r| r.rms_velocity_error_mps),
-            mean_nees_per_dof: (!nees.is_empty()).then(|| {
-                let k = nees.len() as f64;
-                [
-                    nees.iter().map(|x| x[0]).sum::<f64>() / k,
-                    nees.iter().map(|x| x[1]).sum::<f64>() / k,
-                ]
-            }),
-            outage_drift_m: (!drift.is_empty()).then(|| {
-                let rms = (drift.iter().map(|x| x * x).sum::<f64>() / drift.len() as f64).sqrt();
-                (rms, drift.iter().copied().fold(0.0, f64::max))
-            }),
-            integrity_alarms: runs.iter().map(|r| r.integrity.alarms).sum(),
-            end_receiver_wander_m: runs
-                .iter()
-                .map(|r| r.end_receiver_wander_m)
-                .sum::<Option<f64>>()
-                .map(|x| x / runs.len() as f64),
-            runs,
-        }
-    };
+    let summarize = |i: usize| CaseResult::of(names[i].clone(), per_case[i].clone());
     let group = |g: Group| -> Vec<CaseResult> {
         (0..groups.len())
             .filter(|&i| groups[i] == g)
@@ -549,6 +516,43 @@ pub fn merge(parts: &[NavPart], out: Option<&Path>) -> Result<NavExperiment> {
         write_files(&r, dir)?;
     }
     Ok(r)
+}
+
+impl CaseResult {
+    /// The case `name` from its runs: their means, NEES, drift in outages and alarms.
+    fn of(name: String, runs: Vec<NavRun>) -> Self {
+        let m = |f: &dyn Fn(&NavRun) -> f64| runs.iter().map(f).sum::<f64>() / runs.len() as f64;
+        let nees: Vec<[f64; 2]> = runs.iter().filter_map(|r| r.mean_nees_per_dof).collect();
+        let drift: Vec<f64> = runs
+            .iter()
+            .flat_map(|r| r.outage_end_errors_m.iter().copied())
+            .collect();
+        CaseResult {
+            name,
+            end_position_error_m: m(&|r| r.end_position_error_m),
+            end_velocity_error_mps: m(&|r| r.end_velocity_error_mps),
+            rms_position_error_m: m(&|r| r.rms_position_error_m),
+            rms_velocity_error_mps: m(&|r| r.rms_velocity_error_mps),
+            mean_nees_per_dof: (!nees.is_empty()).then(|| {
+                let k = nees.len() as f64;
+                [
+                    nees.iter().map(|x| x[0]).sum::<f64>() / k,
+                    nees.iter().map(|x| x[1]).sum::<f64>() / k,
+                ]
+            }),
+            outage_drift_m: (!drift.is_empty()).then(|| {
+                let rms = (drift.iter().map(|x| x * x).sum::<f64>() / drift.len() as f64).sqrt();
+                (rms, drift.iter().copied().fold(0.0, f64::max))
+            }),
+            integrity_alarms: runs.iter().map(|r| r.integrity.alarms).sum(),
+            end_receiver_wander_m: runs
+                .iter()
+                .map(|r| r.end_receiver_wander_m)
+                .sum::<Option<f64>>()
+                .map(|x| x / runs.len() as f64),
+            runs,
+        }
+    }
 }
 
 fn write_files(r: &NavExperiment, dir: &Path) -> Result<()> {
@@ -710,6 +714,15 @@ pub fn markdown(r: &NavExperiment) -> String {
         yes(r.fading_no_worse_overstated),
         yes(r.fading_no_worse_understated)
     );
+    s += &outages_markdown(r);
+    s += &mis_modelled_markdown(r);
+    s
+}
+
+/// The sections on outages, and on feedback against output correction.
+fn outages_markdown(r: &NavExperiment) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
     let _ = writeln!(
         s,
         "## 60 s outages every 180 s ({} outages per run)\n",
@@ -757,7 +770,6 @@ pub fn markdown(r: &NavExperiment) -> String {
         s,
         "\nWith output correction the INS runs free (kilometres off after 20 minutes, like the pure INS) and the filter's linear error model has to describe that whole error.\n"
     );
-    s += &mis_modelled_markdown(r);
     s
 }
 
