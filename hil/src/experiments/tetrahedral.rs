@@ -158,8 +158,20 @@ pub fn run(noise_dps: f64, seed: u64) -> Result<TetraRun> {
         .take_while(|(_, c)| settled(c))
         .last()
         .map_or(f64::NAN, |(t, _)| *t);
+    let six = six_position_method(&truth, lat)?;
+    let (kf_e, six_e) = (errors(&est, &truth), errors(&six, &truth));
+    Ok(TetraRun {
+        noise_dps,
+        kf: kf_e,
+        six: six_e,
+        converged_s,
+        gain: 1.0 - kf_e.relative / six_e.relative,
+    })
+}
 
-    // the six-position method: +-20 deg/s about x, y, z, 60 s each, means over the held rate
+/// The six-position method on the same unit: +-20 deg/s about x, y, z, 60 s each, the gyros'
+/// means over the held rate.
+fn six_position_method(truth: &TetraParams, lat: f64) -> Result<[GyroCoefficients; TETRA_GYROS]> {
     let mut gyros = TetraGyros::new(truth.clone());
     let plan: [(usize, f64); 6] = [
         (0, RATE_DPS),
@@ -200,14 +212,7 @@ pub fn run(noise_dps: f64, seed: u64) -> Result<TetraRun> {
     let Some(six) = six_position(&means, RATE_DPS) else {
         bail!("the six-position system is singular");
     };
-    let (kf_e, six_e) = (errors(&est, &truth), errors(&six, &truth));
-    Ok(TetraRun {
-        noise_dps,
-        kf: kf_e,
-        six: six_e,
-        converged_s,
-        gain: 1.0 - kf_e.relative / six_e.relative,
-    })
+    Ok(six)
 }
 
 /// One failure injected on the table run, and what nav's parity monitor made of it.
