@@ -96,33 +96,7 @@ pub struct CalibReport {
 /// One run of both estimators.
 pub fn run_one(o: &CalibOptions, seed: u64) -> Result<CalibRun> {
     let lat = o.lat_deg.to_radians();
-    let site = Static {
-        lat_deg: o.lat_deg,
-        lon_deg: 0.0,
-        height_m: 0.0,
-        heading_deg: o.heading_deg,
-        pitch_deg: o.tilt_deg,
-        roll_deg: o.tilt_deg,
-    };
-    let axis = Reversing {
-        rate: o.axis_rate_dps.to_radians(),
-        accel: o.axis_rate_dps.to_radians(), // a second to reverse
-    };
-    let inner = Delayed {
-        axis,
-        delay_s: o.inner_delay_s,
-    };
-    let motion = Composed {
-        base: Box::new(site.site()),
-        relative: vec![
-            Box::new(Indexer::azimuth(axis)),
-            Box::new(Indexer {
-                about: Vector3::x_axis(),
-                axis: inner,
-            }),
-        ],
-        linear: None,
-    };
+    let (site, axis, inner, motion) = rig(o);
     let p = fog_params(o, seed);
     let mut imu = ImuEmulator::new(Box::new(motion), p.clone());
     let true_bias = Vector3::from(imu.gyro_bias_dph()) * DEG_H;
@@ -141,16 +115,7 @@ pub fn run_one(o: &CalibOptions, seed: u64) -> Result<CalibRun> {
     // the coarse attitude: heading known roughly, levelled
     let q_nb =
         UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -o.coarse_heading_deg.to_radians());
-    let kf_cfg = AlignKfConfig {
-        attitude0: [0.1f64.to_radians(), 1f64.to_radians()],
-        velocity0: 0.1,
-        accel_bias0: o.accel_bias_g * G0,
-        gyro_bias0: o.gyro_bias_dph * DEG_H,
-        gyro_sf0: o.gyro_sf_ppm * 1e-6,
-        gyro_noise: noise,
-        accel_noise: o.accel_noise_g * G0,
-        velocity_noise: 1e-4,
-    };
+    let kf_cfg = align_config(o);
     // the filter starts with the first sample nav's front end gives (the second on the wire:
     // the first only sets the counters), at the mechanism's angles then
     let mut kf: Option<AlignKf> = None;
@@ -211,6 +176,53 @@ pub fn run_one(o: &CalibOptions, seed: u64) -> Result<CalibRun> {
         rls_bias_dph: (rls.bias() / DEG_H).into(),
         rls_sf_ppm: (rls.scale_factor() * 1e6).into(),
     })
+}
+
+/// The calibration rig: the unit at the site on an azimuth axis reversing at the options' rate
+/// and an inner (x) axis doing the same after its delay.
+fn rig(o: &CalibOptions) -> (Static, Reversing, Delayed, Composed) {
+    let site = Static {
+        lat_deg: o.lat_deg,
+        lon_deg: 0.0,
+        height_m: 0.0,
+        heading_deg: o.heading_deg,
+        pitch_deg: o.tilt_deg,
+        roll_deg: o.tilt_deg,
+    };
+    let axis = Reversing {
+        rate: o.axis_rate_dps.to_radians(),
+        accel: o.axis_rate_dps.to_radians(), // a second to reverse
+    };
+    let inner = Delayed {
+        axis,
+        delay_s: o.inner_delay_s,
+    };
+    let motion = Composed {
+        base: Box::new(site.site()),
+        relative: vec![
+            Box::new(Indexer::azimuth(axis)),
+            Box::new(Indexer {
+                about: Vector3::x_axis(),
+                axis: inner,
+            }),
+        ],
+        linear: None,
+    };
+    (site, axis, inner, motion)
+}
+
+/// The alignment filter's start: its uncertainties and noises from the options.
+fn align_config(o: &CalibOptions) -> AlignKfConfig {
+    AlignKfConfig {
+        attitude0: [0.1f64.to_radians(), 1f64.to_radians()],
+        velocity0: 0.1,
+        accel_bias0: o.accel_bias_g * G0,
+        gyro_bias0: o.gyro_bias_dph * DEG_H,
+        gyro_sf0: o.gyro_sf_ppm * 1e-6,
+        gyro_noise: o.gyro_noise_dph * DEG_H,
+        accel_noise: o.accel_noise_g * G0,
+        velocity_noise: 1e-4,
+    }
 }
 
 /// An axis that starts later.
