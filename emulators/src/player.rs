@@ -89,6 +89,15 @@ struct Follow {
 }
 
 impl Follow {
+    /// Nothing sent, nothing confirmed yet.
+    fn new() -> Self {
+        Self {
+            sent: VecDeque::with_capacity(4096),
+            confirmed: None,
+            timeout_seen: false,
+        }
+    }
+
     /// The sample a NAV_TIME names: the newest sent whose counter its count matches.
     fn on_nav_time(&mut self, sample_count: u32, ls: &mut LockstepStats) {
         ls.nav_times += 1;
@@ -115,20 +124,11 @@ pub fn play(
     // what nav says: its solution header (NAV_TIME) only; its turntable commands go unanswered
     // (the recording holds the turntable's answers)
     let sock = crate::bus::scheduler::bench_socket(iface, &[wire::nav_time::SPEC.id])?;
-    let mut st = PlayStats {
-        lockstep: LockstepStats {
-            enabled: opts.lockstep.is_some(),
-            ..Default::default()
-        },
-        ..Default::default()
-    };
+    let mut st = PlayStats::default();
+    st.lockstep.enabled = opts.lockstep.is_some();
     let period = 1.0 / opts.imu_rate_hz.max(1e-9);
     let mut clock = SimClock::start(opts.speed);
-    let mut follow = Follow {
-        sent: VecDeque::with_capacity(4096),
-        confirmed: None,
-        timeout_seen: false,
-    };
+    let mut follow = Follow::new();
     let mut lockstep = opts.lockstep;
     let mut outbox: Vec<RawFrame> = Vec::with_capacity(wire::BATCH);
     let flush = |outbox: &mut Vec<RawFrame>, st: &mut PlayStats| -> Result<(), BusError> {

@@ -392,14 +392,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     let (mut r, evidence) = judge(s, opts, &truth, &setup.nav_cfg, backend, ended, &mut phases)?;
     write_evidence(s, opts, &truth, &evidence)?;
     phases.end("files");
-    info!(
-        "run phases: {phases} CPU: nav {:.1} s, bench {:.1} s",
-        r.nav_memory
-            .as_ref()
-            .and_then(|m| m.cpu_s)
-            .unwrap_or(f64::NAN),
-        cpu_seconds("/proc/self/stat").unwrap_or(f64::NAN)
-    );
+    phases.log(r.nav_memory.as_ref().and_then(|m| m.cpu_s));
     if let Some(l) = live {
         let j = serde_json::to_value(&r)?;
         r.live = Some(l.end(j, crate::report::card(&r)));
@@ -665,6 +658,15 @@ struct Phases {
 }
 
 impl Phases {
+    /// Log the phases, with the CPU time nav (`nav_cpu_s`) and the bench took.
+    fn log(&self, nav_cpu_s: Option<f64>) {
+        info!(
+            "run phases: {self} CPU: nav {:.1} s, bench {:.1} s",
+            nav_cpu_s.unwrap_or(f64::NAN),
+            cpu_seconds("/proc/self/stat").unwrap_or(f64::NAN)
+        );
+    }
+
     /// The first phase begins now.
     fn starting_now() -> Self {
         Self {
