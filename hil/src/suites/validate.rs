@@ -502,9 +502,26 @@ fn command_checks(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> Result
     Ok(())
 }
 
+/// The turntable indexed through its detents and locked at each: the worst figures met.
+struct DetentTour {
+    worst_err: f64,
+    worst_settle: f64,
+    worst_lock: f64,
+    idx_fail: String,
+    lock_fail: String,
+    jump: f64,
+}
+
 /// Index through the four detents: accuracy, settle time, the lock at each, the encoder while
 /// idle, a move refused while locked.
 fn detent_checks(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> Result<()> {
+    let tour = tour_detents(c, out, lim)?;
+    detent_verdicts(out, lim, &tour);
+    Ok(())
+}
+
+/// Index to each detent, lock, try to move while locked, unlock.
+fn tour_detents(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> Result<DetentTour> {
     // unlock if a pin is in, then index through the detents
     c.cmd(TtCommand::Unlock, 0.0)?;
     c.wait_state(TtState::Idle, 2.0)?;
@@ -564,6 +581,28 @@ fn detent_checks(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> Result<
         c.cmd(TtCommand::Unlock, 0.0)?;
         c.wait_state(TtState::Idle, lim.lock_s * 3.0)?;
     }
+    Ok(DetentTour {
+        worst_err,
+        worst_settle,
+        worst_lock,
+        idx_fail,
+        lock_fail,
+        jump,
+    })
+}
+
+/// The detent checks from the tour's figures.
+fn detent_verdicts(out: &mut Vec<VCheck>, lim: &Limits, tour: &DetentTour) {
+    let DetentTour {
+        worst_err,
+        worst_settle,
+        worst_lock,
+        idx_fail,
+        lock_fail,
+        jump,
+    } = tour;
+    let (worst_err, worst_settle, worst_lock, jump) =
+        (*worst_err, *worst_settle, *worst_lock, *jump);
     check(
         out,
         "index accuracy at the detents",
@@ -610,7 +649,6 @@ fn detent_checks(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> Result<
         format!("<= {} deg", lim.encoder_jump_deg),
         format!("the idle angle jumped {jump:.4} deg between two frames (encoder glitch)"),
     );
-    Ok(())
 }
 
 /// A lock refused away from a detent, the return to zero, rate mode's accuracy and stability.
