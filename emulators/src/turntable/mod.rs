@@ -333,6 +333,55 @@ fn wrap360(deg: f64) -> f64 {
     if w >= 360.0 { 0.0 } else { w }
 }
 
+/// A move's acceleration, cruise (when there is one) and deceleration from angle `a0` (rad)
+/// at `t` (s) in direction `dir`: the profile's pieces, and the angle and time it ends at.
+fn trapezoid(
+    t: f64,
+    a0: f64,
+    dir: f64,
+    amax: f64,
+    v: f64,
+    t_acc: f64,
+    t_cruise: f64,
+) -> (Vec<Seg>, f64, f64) {
+    let mut pieces = Vec::new();
+    let mut tt = t;
+    let mut a = a0;
+    pieces.push(Seg {
+        t0: tt,
+        piece: Piece::Poly {
+            a0: a,
+            w0: 0.0,
+            alpha: dir * amax,
+        },
+    });
+    a += dir * 0.5 * amax * t_acc * t_acc;
+    tt += t_acc;
+    if t_cruise > 0.0 {
+        pieces.push(Seg {
+            t0: tt,
+            piece: Piece::Poly {
+                a0: a,
+                w0: dir * v,
+                alpha: 0.0,
+            },
+        });
+        a += dir * v * t_cruise;
+        tt += t_cruise;
+    }
+    pieces.push(Seg {
+        t0: tt,
+        piece: Piece::Poly {
+            a0: a,
+            w0: dir * v,
+            alpha: -dir * amax,
+        },
+    });
+    a += dir * 0.5 * amax * t_acc * t_acc;
+    tt += t_acc;
+    (pieces, a, tt)
+}
+
 impl Turntable {
     /// A mechanism at rest at zero, drive off.
     pub fn new(p: TurntableParams) -> Self {
@@ -490,41 +539,52 @@ impl Turntable {
                 }
                 TtResult::Accepted
             }
-            C::Home | C::IndexAbs | C::MoveRel | C::Rate => {
-                if st == TtState::Locked || self.axes[i].pin != Pin::Out {
-                    return TtResult::Locked;
+            C::Home | C::IndexAbs | C::MoveRel | C::Rate => self.decide_motion(i, t, code, cmd, st),
+        }
+    }
+
+    /// A motion command (home, index, move, rate) on axis `i` in state `st`: refused while
+    /// locked, busy or out of range, else planned.
+    fn decide_motion(
+        &mut self,
+        i: usize,
+        t: f64,
+        code: TtCommand,
+        cmd: &TtCmd,
+        st: TtState,
+    ) -> TtResult {
+        use TtCommand as C;
+        if st == TtState::Locked || self.axes[i].pin != Pin::Out {
+            return TtResult::Locked;
+        }
+        let rate_change = code == C::Rate && self.axes[i].rate_mode;
+        if matches!(st, TtState::Moving | TtState::Settling) && !rate_change {
+            return TtResult::Busy;
+        }
+        match code {
+            C::Rate => {
+                if cmd.arg.is_nan() || cmd.arg.abs() > self.p.max_rate_dps {
+                    return TtResult::OutOfRange;
                 }
-                let rate_change = code == C::Rate && self.axes[i].rate_mode;
-                if matches!(st, TtState::Moving | TtState::Settling) && !rate_change {
-                    return TtResult::Busy;
+                self.plan_rate(i, t, cmd.arg);
+            }
+            C::Home => self.plan_abs(i, t, 0.0),
+            C::IndexAbs => {
+                if !(0.0..360.0).contains(&cmd.arg) {
+                    return TtResult::OutOfRange;
                 }
-                match code {
-                    C::Rate => {
-                        if cmd.arg.is_nan() || cmd.arg.abs() > self.p.max_rate_dps {
-                            return TtResult::OutOfRange;
-                        }
-                        self.plan_rate(i, t, cmd.arg);
-                    }
-                    C::Home => self.plan_abs(i, t, 0.0),
-                    C::IndexAbs => {
-                        if !(0.0..360.0).contains(&cmd.arg) {
-                            return TtResult::OutOfRange;
-                        }
-                        self.plan_abs(i, t, cmd.arg);
-                    }
-                    _ => {
-                        if cmd.arg.is_nan() || cmd.arg.abs() > self.p.max_move_deg || cmd.arg == 0.0
-                        {
-                            return TtResult::OutOfRange;
-                        }
-                        let (ang, _) = self.true_angle(i, t);
-                        let base = self.axes[i].target.map_or(ang, |x| x / DEG);
-                        self.plan_move(i, t, base + cmd.arg);
-                    }
+                self.plan_abs(i, t, cmd.arg);
+            }
+            _ => {
+                if cmd.arg.is_nan() || cmd.arg.abs() > self.p.max_move_deg || cmd.arg == 0.0 {
+                    return TtResult::OutOfRange;
                 }
-                TtResult::Accepted
+                let (ang, _) = self.true_angle(i, t);
+                let base = self.axes[i].target.map_or(ang, |x| x / DEG);
+                self.plan_move(i, t, base + cmd.arg);
             }
         }
+        TtResult::Accepted
     }
 
     fn near_detent(&self, angle_deg: f64) -> bool {
@@ -569,41 +629,7 @@ impl Turntable {
             / 3600.0
             * DEG;
         let final_angle = goal_deg * DEG + err;
-        let mut pieces = Vec::new();
-        let mut tt = t;
-        let mut a = a0;
-        pieces.push(Seg {
-            t0: tt,
-            piece: Piece::Poly {
-                a0: a,
-                w0: 0.0,
-                alpha: dir * amax,
-            },
-        });
-        a += dir * 0.5 * amax * t_acc * t_acc;
-        tt += t_acc;
-        if t_cruise > 0.0 {
-            pieces.push(Seg {
-                t0: tt,
-                piece: Piece::Poly {
-                    a0: a,
-                    w0: dir * v,
-                    alpha: 0.0,
-                },
-            });
-            a += dir * v * t_cruise;
-            tt += t_cruise;
-        }
-        pieces.push(Seg {
-            t0: tt,
-            piece: Piece::Poly {
-                a0: a,
-                w0: dir * v,
-                alpha: -dir * amax,
-            },
-        });
-        a += dir * 0.5 * amax * t_acc * t_acc;
-        tt += t_acc;
+        let (mut pieces, a, tt) = trapezoid(t, a0, dir, amax, v, t_acc, t_cruise);
         // settle from where the profile ends (the commanded goal) onto the final angle
         let e0 = a - final_angle;
         let tau = self.p.settle_tau_s;
