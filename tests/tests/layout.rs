@@ -3,7 +3,7 @@
 //! - no circle of module imports in any crate of the workspace;
 //! - hil's folders import only from those before them (scenario, engine, procedures, report,
 //!   run, experiments, suites), and its top-level helpers import nothing of the crate;
-//! - no function of 150 lines or more outside tests;
+//! - no function over 100 lines outside tests, but for the tables of data in [`DATA_TABLES`];
 //! - no module imports its crate's root whole (`use crate::*`).
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -256,10 +256,24 @@ fn fn_start(line: &str) -> Option<(usize, String)> {
     Some((indent, name))
 }
 
+/// The functions that are tables of data, not steps (file, function): each fault matrix row
+/// with its injection and verdict, and the wire contract's decoding, one arm per message. They
+/// may pass 100 lines, never 150.
+const DATA_TABLES: [(&str, &str); 7] = [
+    ("wire/src/messages/mod.rs", "decode"),
+    ("hil/src/suites/faults/bus.rs", "interface"),
+    ("hil/src/suites/faults/physical.rs", "bus_off"),
+    ("hil/src/suites/faults/physical.rs", "disturbances"),
+    ("hil/src/suites/faults/gps.rs", "stream"),
+    ("hil/src/suites/faults/imu.rs", "sensor"),
+    ("hil/src/suites/faults/imu.rs", "frames"),
+];
+
 #[test]
-fn no_function_reaches_150_lines_outside_tests() {
+fn no_function_passes_100_lines_outside_tests_and_tables_of_data() {
     let mut long = Vec::new();
     let mut counted = 0;
+    let mut tables_seen = BTreeSet::new();
     for k in CRATES {
         let root = src(k);
         let mut fs = Vec::new();
@@ -292,8 +306,17 @@ fn no_function_reaches_150_lines_outside_tests() {
                 };
                 counted += 1;
                 let n = end - i + 1;
-                if n > 100 {
-                    long.push(format!("{}: {name}, {n} lines", p.display()));
+                let rel = p
+                    .strip_prefix(&root)
+                    .map_or(p.clone(), |r| Path::new(k).join("src").join(r));
+                let table = DATA_TABLES
+                    .iter()
+                    .any(|(f, n)| Path::new(f) == rel && *n == name);
+                if table {
+                    tables_seen.insert((rel.display().to_string(), name.clone()));
+                }
+                if n > 100 && !(table && n < 150) {
+                    long.push(format!("{}: {name}, {n} lines", rel.display()));
                 }
             }
         }
@@ -301,7 +324,13 @@ fn no_function_reaches_150_lines_outside_tests() {
     assert!(counted > 500, "{counted} functions measured");
     assert!(
         long.is_empty(),
-        "functions of 150 lines or more:\n{}",
+        "functions over 100 lines (split where a function does two things):\n{}",
         long.join("\n")
+    );
+    // the list names functions that are there (a renamed table must not leave a stale entry)
+    assert_eq!(
+        tables_seen.len(),
+        DATA_TABLES.len(),
+        "tables of data found: {tables_seen:?}"
     );
 }

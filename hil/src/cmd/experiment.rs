@@ -205,30 +205,7 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
             environment,
             shard,
             out,
-        } => {
-            let s = Scenario::load(&scenario)?;
-            let preset: emulators::gps::errors::EnvironmentPreset = serde_json::from_value(
-                serde_json::Value::String(environment.clone()),
-            )
-            .map_err(|_| {
-                anyhow::anyhow!(
-                    "--environment: `{environment}` is not a preset (paper-003, urban, open-sky)"
-                )
-            })?;
-            if runs == 0 || misspecified.iter().any(|x| x.is_nan() || *x <= 0.0) {
-                bail!("--runs must be positive and every --misspecified sigma positive");
-            }
-            let out = out.unwrap_or_else(|| default_out("experiment-navigation"));
-            let o = hil::experiments::navigation::NavExpOptions {
-                scenario: s,
-                runs,
-                misspecified_sigma_m: misspecified,
-                outage_s: (60.0, 180.0),
-                environment: emulators::gps::errors::Environment::preset(preset),
-                threads: hil::par::threads(),
-            };
-            run_or_part::<Navigation>(&o, shard, &out)
-        }
+        } => navigation(&scenario, runs, misspecified, &environment, shard, out),
         Experiment::Routes {
             scenario,
             runs,
@@ -269,6 +246,39 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
             run_or_part::<ConingTables>(&opts, shard, &out)
         }
     }
+}
+
+/// `hil experiment navigation`: paper 003's vehicle test in process.
+fn navigation(
+    scenario: &Path,
+    runs: usize,
+    misspecified: Vec<f64>,
+    environment: &str,
+    shard: Option<(usize, usize)>,
+    out: Option<PathBuf>,
+) -> Result<i32> {
+    let s = Scenario::load(scenario)?;
+    let preset: emulators::gps::errors::EnvironmentPreset = serde_json::from_value(
+        serde_json::Value::String(environment.to_string()),
+    )
+    .map_err(|_| {
+        anyhow::anyhow!(
+            "--environment: `{environment}` is not a preset (paper-003, urban, open-sky)"
+        )
+    })?;
+    if runs == 0 || misspecified.iter().any(|x| x.is_nan() || *x <= 0.0) {
+        bail!("--runs must be positive and every --misspecified sigma positive");
+    }
+    let out = out.unwrap_or_else(|| default_out("experiment-navigation"));
+    let o = hil::experiments::navigation::NavExpOptions {
+        scenario: s,
+        runs,
+        misspecified_sigma_m: misspecified,
+        outage_s: (60.0, 180.0),
+        environment: emulators::gps::errors::Environment::preset(preset),
+        threads: hil::par::threads(),
+    };
+    run_or_part::<Navigation>(&o, shard, &out)
 }
 
 /// `hil experiment calibration`: papers 004 and 001 in process.

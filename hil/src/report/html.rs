@@ -472,31 +472,36 @@ fn navigation_plots(out: &Path, col: &dyn Fn(usize) -> Vec<(f64, f64)>) -> Strin
             "A drive is level: the truth's pitch and roll are 0. The bound is nav's tilt sigma (the mean of its east and north ones), three times, either side.",
         );
     }
-    let (np, nv) = (finite(col(19)), finite(col(20)));
-    if !np.is_empty() {
-        let span = (np.first().map(|p| p.0), np.last().map(|p| p.0));
-        let at = |k: f64| -> Vec<(f64, f64)> {
-            match span {
-                (Some(a), Some(b)) => vec![(a, k), (b, k)],
-                _ => Vec::new(),
-            }
-        };
-        plots += &figure(
-            &chart(
-                "NEES over time against its chi-square bounds",
-                "IMU time, s",
-                "NEES (3 degrees of freedom)",
-                vec![
-                    line("position", "#1f77b4", np, false),
-                    line("velocity", "#ff7f0e", nv, false),
-                    line("95 % bounds (0.22, 9.35)", "#d62728", at(CHI2_3_LOW), false),
-                    line("", "#d62728", at(CHI2_3_HIGH), false),
-                ],
-            ),
-            "Each second's error against nav's own covariance: a filter whose sigmas are right stays between the bounds 95 % of the time, and averages 3.",
-        );
-    }
+    plots += &nees_plot(finite(col(19)), finite(col(20)));
     plots
+}
+
+/// Each second's NEES of position and velocity against the chi-square bounds.
+fn nees_plot(np: Vec<(f64, f64)>, nv: Vec<(f64, f64)>) -> String {
+    if np.is_empty() {
+        return String::new();
+    }
+    let span = (np.first().map(|p| p.0), np.last().map(|p| p.0));
+    let at = |k: f64| -> Vec<(f64, f64)> {
+        match span {
+            (Some(a), Some(b)) => vec![(a, k), (b, k)],
+            _ => Vec::new(),
+        }
+    };
+    figure(
+        &chart(
+            "NEES over time against its chi-square bounds",
+            "IMU time, s",
+            "NEES (3 degrees of freedom)",
+            vec![
+                line("position", "#1f77b4", np, false),
+                line("velocity", "#ff7f0e", nv, false),
+                line("95 % bounds (0.22, 9.35)", "#d62728", at(CHI2_3_LOW), false),
+                line("", "#d62728", at(CHI2_3_HIGH), false),
+            ],
+        ),
+        "Each second's error against nav's own covariance: a filter whose sigmas are right stays between the bounds 95 % of the time, and averages 3.",
+    )
 }
 
 /// The points whose both coordinates are finite.
