@@ -42,29 +42,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
     let here = a.no_bus || a.bus.here();
     if !here {
-        let mut args: Vec<String> = vec![
-            "bench".into(),
-            "--seconds".into(),
-            a.seconds.to_string(),
-            "--passes".into(),
-            a.passes.to_string(),
-            "--bus-seconds".into(),
-            a.bus_seconds.to_string(),
-            "--raw-frames".into(),
-            a.raw_frames.to_string(),
-            "--iface".into(),
-            a.bus.iface.clone(),
-            "--out".into(),
-            out.to_string_lossy().into_owned(),
-        ];
-        let mut extra = vec![];
-        // the scenarios asked for (none: the shipped ones and the drill, chosen in the guest)
-        for f in &a.scenario {
-            let f = absolute(f)?;
-            extra.push(f.parent().map(Path::to_path_buf).unwrap_or_default());
-            args.extend(["--scenario".into(), f.to_string_lossy().into_owned()]);
-        }
-        return rerun_in_guest(args, a.bus.json, &out, extra, "bench.json");
+        return bench_in_guest(&a, &out);
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let scenarios = files
@@ -147,6 +125,33 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
         println!(" files: {}", out.join("bench.md").display());
     }
     Ok(0)
+}
+
+/// The whole benchmark again inside the QEMU guest, with the same arguments.
+fn bench_in_guest(a: &BenchArgs, out: &Path) -> Result<i32> {
+    let mut args: Vec<String> = vec![
+        "bench".into(),
+        "--seconds".into(),
+        a.seconds.to_string(),
+        "--passes".into(),
+        a.passes.to_string(),
+        "--bus-seconds".into(),
+        a.bus_seconds.to_string(),
+        "--raw-frames".into(),
+        a.raw_frames.to_string(),
+        "--iface".into(),
+        a.bus.iface.clone(),
+        "--out".into(),
+        out.to_string_lossy().into_owned(),
+    ];
+    let mut extra = vec![];
+    // the scenarios asked for (none: the shipped ones and the drill, chosen in the guest)
+    for f in &a.scenario {
+        let f = absolute(f)?;
+        extra.push(f.parent().map(Path::to_path_buf).unwrap_or_default());
+        args.extend(["--scenario".into(), f.to_string_lossy().into_owned()]);
+    }
+    rerun_in_guest(args, a.bus.json, out, extra, "bench.json")
 }
 
 /// The scenario files given, or the shipped ones under scenarios/.
