@@ -130,6 +130,53 @@ const DEFAULT_TAPS: [u64; 23] = [
     0x3F783E83E984C712,
 ];
 
+/// The design's spec is one a filter can meet: an even order, and the bands in order below
+/// the Nyquist frequency.
+fn check_spec(spec: &FirSpec) -> Result<(), FirError> {
+    if spec.order == 0 || !spec.order.is_multiple_of(2) || spec.order > 400 {
+        return Err(FirError::BadSpec(format!(
+            "order must be even and in 2..=400, got {}",
+            spec.order
+        )));
+    }
+    let nyq = spec.fs_hz / 2.0;
+    if !(spec.fs_hz > 0.0
+        && spec.passband_hz > 0.0
+        && spec.passband_hz < spec.stopband_hz
+        && spec.stopband_hz < nyq)
+    {
+        return Err(FirError::BadSpec(format!(
+            "need 0 < passband ({} Hz) < stopband ({} Hz) < fs/2 ({nyq} Hz)",
+            spec.passband_hz, spec.stopband_hz
+        )));
+    }
+    Ok(())
+}
+
+/// The design's grid over the pass and stop bands (the transition band is free): (frequency,
+/// rad/sample; desired gain; base weight).
+fn band_grid(spec: &FirSpec) -> Vec<(f64, f64, f64)> {
+    let nyq = spec.fs_hz / 2.0;
+    let wp = std::f64::consts::PI * spec.passband_hz / nyq;
+    let ws = std::f64::consts::PI * spec.stopband_hz / nyq;
+    // grid over the pass and stop bands (the transition band is free)
+    let mut pts: Vec<(f64, f64, f64)> = Vec::with_capacity(GRID);
+    let np = GRID / 3;
+    for i in 0..=np {
+        pts.push((wp * i as f64 / np as f64, 1.0, 1.0));
+    }
+    let ns = GRID - np;
+    // the stopband tolerance is ~10x looser than the passband one in linear terms
+    let dp = 1.0 - 10f64.powf(-spec.ripple_db / 20.0);
+    let ds = 10f64.powf(-spec.attenuation_db / 20.0);
+    let ws_weight = dp / ds;
+    for i in 0..=ns {
+        let w = ws + (std::f64::consts::PI - ws) * i as f64 / ns as f64;
+        pts.push((w, 0.0, ws_weight));
+    }
+    pts
+}
+
 impl Fir {
     /// Design the filter and check it against its specification. Designs are remembered per
     /// specification for the life of the process (a design costs tens of milliseconds, and
@@ -156,41 +203,9 @@ impl Fir {
     }
 
     fn design_uncached(spec: FirSpec) -> Result<Self, FirError> {
-        if spec.order == 0 || !spec.order.is_multiple_of(2) || spec.order > 400 {
-            return Err(FirError::BadSpec(format!(
-                "order must be even and in 2..=400, got {}",
-                spec.order
-            )));
-        }
-        let nyq = spec.fs_hz / 2.0;
-        if !(spec.fs_hz > 0.0
-            && spec.passband_hz > 0.0
-            && spec.passband_hz < spec.stopband_hz
-            && spec.stopband_hz < nyq)
-        {
-            return Err(FirError::BadSpec(format!(
-                "need 0 < passband ({} Hz) < stopband ({} Hz) < fs/2 ({nyq} Hz)",
-                spec.passband_hz, spec.stopband_hz
-            )));
-        }
+        check_spec(&spec)?;
         let m = spec.order / 2;
-        let wp = std::f64::consts::PI * spec.passband_hz / nyq;
-        let ws = std::f64::consts::PI * spec.stopband_hz / nyq;
-        // grid over the pass and stop bands (the transition band is free)
-        let mut pts: Vec<(f64, f64, f64)> = Vec::with_capacity(GRID); // (w, desired, base weight)
-        let np = GRID / 3;
-        for i in 0..=np {
-            pts.push((wp * i as f64 / np as f64, 1.0, 1.0));
-        }
-        let ns = GRID - np;
-        // the stopband tolerance is ~10x looser than the passband one in linear terms
-        let dp = 1.0 - 10f64.powf(-spec.ripple_db / 20.0);
-        let ds = 10f64.powf(-spec.attenuation_db / 20.0);
-        let ws_weight = dp / ds;
-        for i in 0..=ns {
-            let w = ws + (std::f64::consts::PI - ws) * i as f64 / ns as f64;
-            pts.push((w, 0.0, ws_weight));
-        }
+        let pts = band_grid(&spec);
         // A(w) = 1 + sum_{k=1..m} a_k (cos(k w) - 1): the DC gain is exactly 1 by construction,
         // which keeps the filter from creating or losing angle.
         let basis = |w: f64, k: usize| ((k + 1) as f64 * w).cos() - 1.0;
