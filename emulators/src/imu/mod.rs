@@ -484,6 +484,43 @@ impl ImuEmulator {
             * (2.0 * PI * self.p.dither_hz[i] * t + self.dither_phase[i]).sin()
     }
 
+    /// Where a PPS edge falls inside the sample (t0, t1], in 1/256 of a sample before its end:
+    /// the edge of whole seconds plus phase and jitter unless it is missing, or a spurious one.
+    fn pps_offset(&self, t0: f64, t1: f64) -> Option<u8> {
+        let within = |w: &[[f64; 2]], t: f64| w.iter().any(|p| t >= p[0] && t < p[1]);
+        let edge = self
+            .pps_edge_in(t0, t1)
+            .filter(|e| !within(&self.p.pps_missing_s, *e))
+            .or_else(|| {
+                self.p
+                    .pps_spurious_at_s
+                    .iter()
+                    .copied()
+                    .find(|e| *e > t0 && *e <= t1)
+            });
+        edge.map(|edge| (((t1 - edge) / self.dt) * 256.0).floor().clamp(0.0, 255.0) as u8)
+    }
+
+    /// The housekeeping frame, at 10 Hz of samples (none between).
+    fn housekeeping(&self, sample_counter: u16, bit_fail: bool) -> Option<wire::RawFrame> {
+        if !self
+            .k
+            .is_multiple_of((self.p.rate_hz / 10.0).round().max(1.0) as u64)
+        {
+            return None;
+        }
+        let hk = ImuHk {
+            sample_counter,
+            temp_gyro_c: self.p.temp_c,
+            temp_accel_c: self.p.temp_c - 1.5,
+            bit: BitFlags {
+                gyro: [bit_fail; 3],
+                ..BitFlags::default()
+            },
+        };
+        Message::ImuHk(hk).encode().ok()
+    }
+
     /// Produce the next sample's frames.
     pub fn next_sample(&mut self) -> SampleFrames {
         let (t0, t1) = (self.k as f64 * self.dt, (self.k + 1) as f64 * self.dt);
@@ -527,18 +564,7 @@ impl ImuEmulator {
         // PPS: an edge (whole seconds + phase + jitter, or a spurious one) inside (t0, t1]?
         let within = |w: &[[f64; 2]], t: f64| w.iter().any(|p| t >= p[0] && t < p[1]);
         saturated |= within(&self.p.saturated_s, t1);
-        let edge = self
-            .pps_edge_in(t0, t1)
-            .filter(|e| !within(&self.p.pps_missing_s, *e))
-            .or_else(|| {
-                self.p
-                    .pps_spurious_at_s
-                    .iter()
-                    .copied()
-                    .find(|e| *e > t0 && *e <= t1)
-            });
-        let pps_offset =
-            edge.map(|edge| (((t1 - edge) / self.dt) * 256.0).floor().clamp(0.0, 255.0) as u8);
+        let pps_offset = self.pps_offset(t0, t1);
         let gf = ImuGyro {
             counts: [
                 self.gyro[0].wire(),
@@ -566,23 +592,7 @@ impl ImuEmulator {
             .tetra
             .as_mut()
             .map(|u| u.frame(t1, self.dt, &inc.dtheta, sample_counter));
-        if self
-            .k
-            .is_multiple_of((self.p.rate_hz / 10.0).round().max(1.0) as u64)
-        {
-            let hk = ImuHk {
-                sample_counter,
-                temp_gyro_c: self.p.temp_c,
-                temp_accel_c: self.p.temp_c - 1.5,
-                bit: BitFlags {
-                    gyro: [bit_fail; 3],
-                    ..BitFlags::default()
-                },
-            };
-            if let Ok(f) = Message::ImuHk(hk).encode() {
-                frames.push(f);
-            }
-        }
+        frames.extend(self.housekeeping(sample_counter, bit_fail));
         if let Some(m) = tetra
             && let Ok(f) = Message::MemsGyro(m).encode()
         {

@@ -99,21 +99,8 @@ fn play(
             let showing = t_ns >= show_from;
             if showing {
                 // the viewer's requests, a pause, the pace
-                loop {
-                    while let Ok(c) = rx.try_recv() {
-                        answer(view, &mut wanted, &c, t_ns);
-                    }
-                    if wanted.seek.is_some_and(|s| s < t_ns) {
-                        restart = true;
-                        break;
-                    }
-                    if wanted.seek.is_some() || wanted.playing {
-                        break;
-                    }
-                    origin = None;
-                    std::thread::sleep(Duration::from_millis(20));
-                }
-                if restart {
+                if viewer_wants_back(view, &rx, &mut wanted, &mut origin, t_ns) {
+                    restart = true;
                     break;
                 }
                 if let Some(s) = wanted.seek {
@@ -171,6 +158,30 @@ fn play(
             true => continue,
             false => return Ok(pb),
         }
+    }
+}
+
+/// Take the viewer's requests at IMU time `t_ns`, holding while it pauses: true when it seeks
+/// back (the replay starts again from the start).
+fn viewer_wants_back(
+    view: &View,
+    rx: &mpsc::Receiver<Control>,
+    wanted: &mut Wanted,
+    origin: &mut Option<(Instant, f64)>,
+    t_ns: u64,
+) -> bool {
+    loop {
+        while let Ok(c) = rx.try_recv() {
+            answer(view, wanted, &c, t_ns);
+        }
+        if wanted.seek.is_some_and(|s| s < t_ns) {
+            return true;
+        }
+        if wanted.seek.is_some() || wanted.playing {
+            return false;
+        }
+        *origin = None;
+        std::thread::sleep(Duration::from_millis(20));
     }
 }
 
