@@ -4,7 +4,8 @@
 //! - hil's folders import only from those before them (scenario, engine, procedures, report,
 //!   run, experiments, suites), and its top-level helpers import nothing of the crate;
 //! - no function over 100 lines outside tests, but for the tables of data in [`DATA_TABLES`];
-//! - no module imports its crate's root whole (`use crate::*`).
+//! - no module imports its crate's root whole (`use crate::*`);
+//! - the README and the docs record no dated results.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -333,4 +334,52 @@ fn no_function_passes_100_lines_outside_tests_and_tables_of_data() {
         DATA_TABLES.len(),
         "tables of data found: {tables_seen:?}"
     );
+}
+
+/// A date (`YYYY-MM-DD`) in `line`, if it has one.
+fn date_in(line: &str) -> Option<&str> {
+    let b = line.as_bytes();
+    (0..b.len().saturating_sub(9)).find_map(|i| {
+        let w = &b[i..i + 10];
+        let digits = |r: std::ops::Range<usize>| w[r].iter().all(u8::is_ascii_digit);
+        let bounded = i == 0 || !b[i - 1].is_ascii_alphanumeric();
+        (bounded && digits(0..4) && w[4] == b'-' && digits(5..7) && w[7] == b'-' && digits(8..10))
+            .then(|| &line[i..i + 10])
+    })
+}
+
+/// The README and the docs record no dated results (history is in git): no date outside a
+/// code block (where a file format's own date field may stand as an example).
+#[test]
+fn no_document_records_dated_results() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut docs = vec![root.join("README.md")];
+    for e in std::fs::read_dir(root.join("docs")).expect("docs/") {
+        let p = e.expect("a directory entry").path();
+        if p.extension().is_some_and(|x| x == "md") {
+            docs.push(p);
+        }
+    }
+    let mut dated = Vec::new();
+    for p in &docs {
+        let text = std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        let mut in_code = false;
+        for (n, l) in text.lines().enumerate() {
+            if l.trim_start().starts_with("```") {
+                in_code = !in_code;
+                continue;
+            }
+            if let Some(d) = date_in(l).filter(|_| !in_code) {
+                dated.push(format!("{}:{}: {d}", p.display(), n + 1));
+            }
+        }
+    }
+    assert!(docs.len() > 10, "{} documents read", docs.len());
+    assert!(
+        dated.is_empty(),
+        "dated results in the docs (put the figure beside its command; history is in git):\n{}",
+        dated.join("\n")
+    );
+    assert_eq!(date_in("re-measured 2026-11-23: x"), Some("2026-11-23"));
+    assert_eq!(date_in("version 12026-11-23"), None);
 }
