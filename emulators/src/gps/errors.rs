@@ -93,6 +93,17 @@ pub enum EnvironmentPreset {
     Urban,
 }
 
+impl std::fmt::Display for EnvironmentPreset {
+    /// Its name in a scenario and on the command line (`open-sky`, `paper-003`, ...).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::OpenSky => "open-sky",
+            Self::Paper003 => "paper-003",
+            Self::Urban => "urban",
+        })
+    }
+}
+
 /// What the surroundings add to a receiver's steady error (`[gps.errors.environment]`): take a
 /// `preset` and change any field.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize, PartialEq)]
@@ -441,6 +452,18 @@ impl GpsError {
 #[cfg(test)]
 mod error_tests {
     use super::*;
+
+    #[test]
+    fn a_preset_is_written_by_its_name_in_a_scenario() {
+        for p in [
+            EnvironmentPreset::OpenSky,
+            EnvironmentPreset::Paper003,
+            EnvironmentPreset::Urban,
+        ] {
+            let name = serde_json::to_value(p).expect("a preset serializes");
+            assert_eq!(name, serde_json::Value::String(p.to_string()));
+        }
+    }
 
     #[test]
     fn the_25_m_class_has_the_stated_size_and_wanders_slowly() {

@@ -780,7 +780,7 @@ fn mis_modelled_markdown(r: &NavExperiment) -> String {
     let e = &r.environment;
     let _ = writeln!(
         s,
-        "## A receiver the filters do not model ({:?} surroundings)\n\nThe same 25 m class receiver, plus: the satellites used change every {:.0} s on average (the solution steps by {:.0} m per axis, 1 sigma, and the HDOP follows the number used: nominal {:.1}), and multipath bursts of {:.0}-{:.0} s add a {:.0} m error (correlated over {:.0} s) every {:.0} s on average. HDOP-scaled: the filter scales its white noise by the fix's HDOP over the nominal.\n",
+        "## A receiver the filters do not model ({} surroundings)\n\nThe same 25 m class receiver, plus: the satellites used change every {:.0} s on average (the solution steps by {:.0} m per axis, 1 sigma, and the HDOP follows the number used: nominal {:.1}), and multipath bursts of {:.0}-{:.0} s add a {:.0} m error (correlated over {:.0} s) every {:.0} s on average. HDOP-scaled: the filter scales its white noise by the fix's HDOP over the nominal.\n",
         e.preset,
         e.constellation_change_every_s,
         e.constellation_step_sigma_m,

@@ -534,7 +534,11 @@ fn tour_detents(c: &mut Client, out: &mut Vec<VCheck>, lim: &Limits) -> Result<D
     for target in [90.0, 180.0, 270.0, 0.0] {
         let a = c.cmd(TtCommand::IndexAbs, target)?;
         if a.ack.map(|a| a.result) != Some(TtResult::Accepted) {
-            idx_fail = format!("index to {target} deg: {:?}", a.ack.map(|a| a.result));
+            idx_fail = format!(
+                "index to {target} deg: {}",
+                a.ack
+                    .map_or("no acknowledgement".into(), |a| format!("{:?}", a.result))
+            );
             break;
         }
         // moving, then idle
