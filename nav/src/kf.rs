@@ -807,7 +807,7 @@ impl Kf {
             return false;
         };
         self.last_nis = Some(nis);
-        if nis > self.cfg.gate_nis {
+        if nis > self.cfg.gate_nis && self.beyond_stated(&innov, &h_mat, &r, &white, &m_per) {
             self.rejected_in_a_row += 1;
             if self.cfg.reanchor_after == 0 || self.rejected_in_a_row < self.cfg.reanchor_after {
                 self.stats.rejected += 1;
@@ -902,6 +902,38 @@ impl Kf {
                 self.feedback(s);
             }
             Correction::Output => {}
+        }
+    }
+
+    /// The innovation `innov` is beyond what the receiver's own stated accuracy allows, on
+    /// top of the filter's uncertainty: its NIS over the gate with each axis's innovation
+    /// variance at least the receiver's whole stated (or learnt) variance, `white` times the
+    /// configured total (white and wander). The filter's own innovation covariance may be
+    /// smaller, once it has learnt part of the receiver's wander; gating on it alone refused
+    /// fixes whose error was within three of the receiver's stated sigma (a good fix, which no
+    /// filter may refuse). A jump of many stated sigmas is still refused.
+    fn beyond_stated(
+        &self,
+        innov: &Vector3<f64>,
+        h_mat: &SMatrix<f64, 3, N>,
+        r: &SMatrix<f64, 3, 3>,
+        white: &[f64; 3],
+        m_per: &[f64; 3],
+    ) -> bool {
+        let c = &self.cfg;
+        let total = [
+            c.gps_sigma_m.hypot(c.gps_gm_sigma_m),
+            c.gps_sigma_m.hypot(c.gps_gm_sigma_m),
+            c.gps_sigma_h_m.hypot(c.gps_gm_sigma_h_m),
+        ];
+        let mut s_mat = h_mat * self.p * h_mat.transpose() + r;
+        for i in 0..3 {
+            let stated = (white[i] * total[i] / m_per[i]).powi(2);
+            s_mat[(i, i)] = s_mat[(i, i)].max(stated);
+        }
+        match s_mat.try_inverse() {
+            Some(s_inv) => (innov.transpose() * s_inv * innov)[(0, 0)] > c.gate_nis,
+            None => true,
         }
     }
 
@@ -1064,6 +1096,60 @@ mod tests {
                 "{kind:?}: gated out"
             );
             assert!(((st.lat - lat0) * rm - 600.0).abs() < 100.0, "{kind:?}");
+        }
+    }
+
+    /// A fix within 3 of the receiver's stated sigma on every axis is taken, however sure the
+    /// filter has become of the receiver's wander; one many sigmas off is still refused.
+    #[test]
+    fn a_good_fix_is_never_refused_and_a_jump_still_is() {
+        for kind in [
+            FilterKind::Standard,
+            FilterKind::Fading,
+            FilterKind::Adaptive,
+        ] {
+            let mut st = parked();
+            let cfg = FilterConfig {
+                kind,
+                ..FilterConfig::default()
+            };
+            let total_h = cfg.gps_sigma_m.hypot(cfg.gps_gm_sigma_m);
+            let total_v = cfg.gps_sigma_h_m.hypot(cfg.gps_gm_sigma_h_m);
+            let mut k = Kf::new(cfg, st.lat);
+            let f = Vector3::new(0.0, 0.0, 9.79);
+            // the receiver states its accuracy (GST): what a good fix is measured against
+            let acc = StatedAccuracy {
+                gst: Some(([total_h, total_h], Some(total_v))),
+                hdop: None,
+            };
+            // ten minutes of fixes on the spot: the filter learns the (zero) wander
+            for _ in 0..600 {
+                k.propagate(&st, &f, 1.0);
+                let (lat, lon, h) = (st.lat, st.lon, st.h);
+                k.update(&mut st, lat, lon, h, &acc);
+            }
+            let (rm, rn) = earth::radii(st.lat);
+            let off = |n: f64, e: f64, u: f64, st: &NavState| {
+                (st.lat + n / rm, st.lon + e / (rn * st.lat.cos()), st.h + u)
+            };
+            k.propagate(&st, &f, 1.0);
+            let (lat, lon, h) = off(2.9 * total_h, -2.9 * total_h, 2.9 * total_v, &st);
+            assert!(
+                k.last_nis.is_some() && k.update(&mut st, lat, lon, h, &acc),
+                "{kind:?}: a fix 2.9 sigma off on every axis refused (NIS {:?})",
+                k.last_nis
+            );
+            assert!(
+                k.last_nis.is_some_and(|n| n > k.config().gate_nis),
+                "{kind:?}: the filter's own NIS {:?} would not have refused it: the test proves nothing",
+                k.last_nis
+            );
+            k.propagate(&st, &f, 1.0);
+            let (lat, lon, h) = off(50.0 * total_h, 0.0, 0.0, &st);
+            assert!(
+                !k.update(&mut st, lat, lon, h, &acc),
+                "{kind:?}: a 50 sigma jump taken"
+            );
         }
     }
 
