@@ -494,21 +494,57 @@ mod tests {
         }
     }
 
+    /// Channel `c`'s schema, parsed: an object, titled by its topic or its name.
+    fn parsed(c: JsonChannel) -> serde_json::Value {
+        let (name, text) = c.schema();
+        let s: serde_json::Value =
+            serde_json::from_str(text).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(s["type"], "object", "{name}");
+        assert!(
+            s["title"]
+                .as_str()
+                .is_some_and(|t| t.starts_with(c.topic()) || t == name),
+            "{name}"
+        );
+        s
+    }
+
+    /// A receiver's fix as nav records it.
+    fn a_fix() -> crate::gps::GpsFix {
+        crate::gps::GpsFix {
+            sentence: "GGA".into(),
+            date: None,
+            time: Some("12:00:01.000".into()),
+            time_of_day_s: Some(43201.0),
+            lat_deg: -33.9,
+            lon_deg: 18.4,
+            alt_m: Some(12.0),
+            geoid_sep_m: Some(32.5),
+            quality: 1,
+            satellites: Some(9),
+            hdop: Some(0.9),
+            speed_mps: None,
+            track_deg: None,
+            valid: true,
+            time_backwards: false,
+            seq: 3,
+        }
+    }
+
+    /// A solution as nav records it, without its position covariance.
+    fn a_solution() -> serde_json::Value {
+        let o = crate::strapdown::NavOutput {
+            lat_deg: 28.2,
+            lon_deg: 112.9,
+            h_m: 0.0,
+            vel_enu_mps: [1.0, 2.0, 0.0],
+            hpr_deg: [359.0, 0.1, -0.2],
+        };
+        serde_json::json!({"t_s": 1.0, "mode": "GpsAided", "output": o, "pos_sigma_m": 3.2, "heading_sigma_deg": 0.1})
+    }
+
     #[test]
     fn every_json_channel_has_a_schema_its_messages_follow() {
-        let parsed = |c: JsonChannel| -> serde_json::Value {
-            let (name, text) = c.schema();
-            let s: serde_json::Value =
-                serde_json::from_str(text).unwrap_or_else(|e| panic!("{name}: {e}"));
-            assert_eq!(s["type"], "object", "{name}");
-            assert!(
-                s["title"]
-                    .as_str()
-                    .is_some_and(|t| t.starts_with(c.topic()) || t == name),
-                "{name}"
-            );
-            s
-        };
         for c in JsonChannel::ALL {
             parsed(c);
         }
@@ -531,50 +567,29 @@ mod tests {
         sample.accel_missing = true;
         sample.ambiguous = true;
         conforms(&s, &serde_json::to_value(sample).unwrap(), "flagged sample");
-        let fix = crate::gps::GpsFix {
-            sentence: "GGA".into(),
-            date: None,
-            time: Some("12:00:01.000".into()),
-            time_of_day_s: Some(43201.0),
-            lat_deg: -33.9,
-            lon_deg: 18.4,
-            alt_m: Some(12.0),
-            geoid_sep_m: Some(32.5),
-            quality: 1,
-            satellites: Some(9),
-            hdop: Some(0.9),
-            speed_mps: None,
-            track_deg: None,
-            valid: true,
-            time_backwards: false,
-            seq: 3,
-        };
         conforms(
             &parsed(JsonChannel::Gps),
-            &serde_json::to_value(&fix).unwrap(),
+            &serde_json::to_value(a_fix()).unwrap(),
             "fix",
         );
-        let o = crate::strapdown::NavOutput {
-            lat_deg: 28.2,
-            lon_deg: 112.9,
-            h_m: 0.0,
-            vel_enu_mps: [1.0, 2.0, 0.0],
-            hpr_deg: [359.0, 0.1, -0.2],
-        };
-        let sol = serde_json::json!({"t_s": 1.0, "mode": "GpsAided", "output": o, "pos_sigma_m": 3.2, "heading_sigma_deg": 0.1});
+        let mut sol = a_solution();
         conforms(&parsed(JsonChannel::Solution), &sol, "solution");
-        let mut sol = sol;
         sol["pos_cov_enu_m2"] = serde_json::json!([4.0, 0.1, 0.0, 0.1, 5.0, 0.0, 0.0, 0.0, 9.0]);
         conforms(
             &parsed(JsonChannel::Solution),
             &sol,
             "solution with covariance",
         );
-        // the Foxglove views follow Foxglove's schemas
+    }
+
+    #[test]
+    fn the_foxglove_views_follow_foxgloves_schemas() {
+        let mut sol = a_solution();
+        sol["pos_cov_enu_m2"] = serde_json::json!([4.0, 0.1, 0.0, 0.1, 5.0, 0.0, 0.0, 0.0, 9.0]);
         let mut views = crate::foxglove::Views::default();
         let mut derived = Vec::new();
         views.derive(JsonChannel::Solution, 7, &sol.to_string(), &mut derived);
-        let fix_json = serde_json::to_string(&fix).unwrap();
+        let fix_json = serde_json::to_string(&a_fix()).unwrap();
         views.derive(JsonChannel::Gps, 7, &fix_json, &mut derived);
         let event = "{\"kind\":\"imu_timeout\",\"after_ms\":100}";
         views.derive(JsonChannel::Event, 7, event, &mut derived);
@@ -592,7 +607,10 @@ mod tests {
             let v: serde_json::Value = serde_json::from_str(m).unwrap();
             conforms(&parsed(*c), &v, c.topic());
         }
-        // and a schema does catch a message that is not its kind
+    }
+
+    #[test]
+    fn a_schema_catches_a_message_not_of_its_kind() {
         let caught = std::panic::catch_unwind(|| {
             conforms(
                 &parsed(JsonChannel::Solution),
