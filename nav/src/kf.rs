@@ -129,6 +129,15 @@ pub struct FilterConfig {
 }
 
 impl FilterConfig {
+    /// The receiver's whole assumed error (white and wander), 1 sigma per axis, m: horizontal
+    /// and vertical.
+    pub fn gps_total_sigma_m(&self) -> (f64, f64) {
+        (
+            self.gps_sigma_m.hypot(self.gps_gm_sigma_m),
+            self.gps_sigma_h_m.hypot(self.gps_gm_sigma_h_m),
+        )
+    }
+
     /// Refuse settings the filter cannot run with, naming the field.
     pub fn check(&self) -> Result<(), String> {
         let positive = [
@@ -625,8 +634,7 @@ impl Kf {
     /// from: GST, else HDOP times `gps_uere_m`, else the configured noise (scale 1).
     fn stated_scale(&self, acc: &StatedAccuracy) -> ([f64; 3], SizedBy) {
         let c = &self.cfg;
-        let total_h = c.gps_sigma_m.hypot(c.gps_gm_sigma_m);
-        let total_v = c.gps_sigma_h_m.hypot(c.gps_gm_sigma_h_m);
+        let (total_h, total_v) = c.gps_total_sigma_m();
         let bound = |v: f64| v.clamp(1e-3, 1e3);
         if c.use_gst
             && let Some(([n, e], u)) = acc.gst
@@ -920,19 +928,15 @@ impl Kf {
         white: &[f64; 3],
         m_per: &[f64; 3],
     ) -> bool {
-        let c = &self.cfg;
-        let total = [
-            c.gps_sigma_m.hypot(c.gps_gm_sigma_m),
-            c.gps_sigma_m.hypot(c.gps_gm_sigma_m),
-            c.gps_sigma_h_m.hypot(c.gps_gm_sigma_h_m),
-        ];
+        let (total_h, total_v) = self.cfg.gps_total_sigma_m();
+        let total = [total_h, total_h, total_v];
         let mut s_mat = h_mat * self.p * h_mat.transpose() + r;
         for i in 0..3 {
             let stated = (white[i] * total[i] / m_per[i]).powi(2);
             s_mat[(i, i)] = s_mat[(i, i)].max(stated);
         }
         match s_mat.try_inverse() {
-            Some(s_inv) => (innov.transpose() * s_inv * innov)[(0, 0)] > c.gate_nis,
+            Some(s_inv) => (innov.transpose() * s_inv * innov)[(0, 0)] > self.cfg.gate_nis,
             None => true,
         }
     }
@@ -1113,8 +1117,7 @@ mod tests {
                 kind,
                 ..FilterConfig::default()
             };
-            let total_h = cfg.gps_sigma_m.hypot(cfg.gps_gm_sigma_m);
-            let total_v = cfg.gps_sigma_h_m.hypot(cfg.gps_gm_sigma_h_m);
+            let (total_h, total_v) = cfg.gps_total_sigma_m();
             let mut k = Kf::new(cfg, st.lat);
             let f = Vector3::new(0.0, 0.0, 9.79);
             // the receiver states its accuracy (GST): what a good fix is measured against
