@@ -422,12 +422,20 @@ pub fn markdown(r: &RoutesReport) -> String {
     let mut m = format!("# The filters over the routes\n\n{}", t.finish());
     let _ = write!(
         m,
-        "\nNEES per degree of freedom within [{}, {}] over each drive and in each {}-minute window, and at most the upper bound inside each outage and in the {} s after it (pooled over the runs): {}\n\nNo fix rejected in any filter's first minute: {}\n\nNo good fix (its error within 3 of the receiver's own sigma) refused by any filter: {}\n\nNo run ends with a velocity error above {} m/s that nav did not flag: {}\n",
+        "\nNEES per degree of freedom within [{}, {}] over each drive and in each {}-minute window, and at most the upper bound inside each outage and in the {} s after it (pooled over the runs): {}\n\nThe same, each stretch allowed its ± (the 95 % interval of its figure from the scatter between the runs, Student's t over their own figures): {}. A figure past its bound by less than its ± is within what these runs can tell apart; more runs decide it.\n\nNo fix rejected in any filter's first minute: {}\n\nNo good fix (its error within 3 of the receiver's own sigma) refused by any filter: {}\n\nNo run ends with a velocity error above {} m/s that nav did not flag: {}\n",
         NEES_BOUNDS[0],
         NEES_BOUNDS[1],
         crate::experiments::windows::WINDOW_S / 60.0,
         crate::experiments::windows::AFTER_OUTAGE_S,
         if r.all_consistent { "MET" } else { "NOT MET" },
+        if r.rows
+            .iter()
+            .all(|x| x.windowed.within_scatter(NEES_BOUNDS))
+        {
+            "MET"
+        } else {
+            "NOT MET"
+        },
         if r.rows.iter().all(|x| x.rejected_first_minute == 0) {
             "MET"
         } else {
@@ -457,11 +465,18 @@ fn stretch_cell(s: Option<&Stretch>) -> String {
             "-".into()
         }
     };
+    // with the runs' scatter: "1.07±0.21 / 2.05±0.93"
+    let pm = |i: usize| match s.and_then(|s| s.interval_per_dof) {
+        Some(h) if h[i].is_finite() => format!("±{:.2}", h[i]),
+        _ => String::new(),
+    };
     s.map_or("-".into(), |s| {
         format!(
-            "{} / {} at {:.0}-{:.0} s",
+            "{}{} / {}{} at {:.0}-{:.0} s",
             f(s.nees_per_dof[0]),
+            pm(0),
             f(s.nees_per_dof[1]),
+            pm(1),
             s.from_s,
             s.to_s
         )

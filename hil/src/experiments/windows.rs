@@ -25,6 +25,12 @@ pub struct Stretch {
     pub to_s: f64,
     /// Position and velocity NEES per degree of freedom (NaN where no sample fell in it).
     pub nees_per_dof: [f64; 2],
+    /// The half-width of each figure's 95 % interval from the scatter between the runs:
+    /// Student's t over the runs' own figures in the stretch, which holds however correlated
+    /// a run's samples are in time (none with fewer than two runs). A figure past its bound by
+    /// less than this is within what the runs can tell apart.
+    #[serde(default)]
+    pub interval_per_dof: Option<[f64; 2]>,
 }
 
 impl Stretch {
@@ -51,6 +57,16 @@ impl Stretch {
         self.nees_per_dof
             .iter()
             .all(|x| !x.is_finite() || (bounds[0]..=bounds[1]).contains(x))
+    }
+
+    /// Both figures within `bounds` or past them by less than their 95 % interval: the runs
+    /// cannot tell them from a figure within (without an interval, as [`Stretch::within`]).
+    pub fn within_scatter(&self, bounds: [f64; 2]) -> bool {
+        let half = self.interval_per_dof.unwrap_or([0.0; 2]);
+        self.nees_per_dof
+            .iter()
+            .zip(half)
+            .all(|(x, h)| !x.is_finite() || (bounds[0] - h..=bounds[1] + h).contains(x))
     }
 }
 
@@ -141,12 +157,22 @@ impl Windowed {
     /// filter that coasts on sigmas larger than its drift breaks no promise; one whose drift
     /// outgrows them does.)
     pub fn within(&self, bounds: [f64; 2]) -> bool {
-        self.windows.iter().all(|s| s.within(bounds))
+        self.all(&|s, b| s.within(b), bounds)
+    }
+
+    /// As [`Windowed::within`], each stretch allowed its 95 % interval between the runs: no
+    /// stretch is outside by more than the runs' own scatter.
+    pub fn within_scatter(&self, bounds: [f64; 2]) -> bool {
+        self.all(&|s, b| s.within_scatter(b), bounds)
+    }
+
+    fn all(&self, ok: &dyn Fn(&Stretch, [f64; 2]) -> bool, bounds: [f64; 2]) -> bool {
+        self.windows.iter().all(|s| ok(s, bounds))
             && self
                 .outages
                 .iter()
                 .flat_map(|o| [&o.inside, &o.after])
-                .all(|s| s.within([0.0, bounds[1]]))
+                .all(|s| ok(s, [0.0, bounds[1]]))
     }
 }
 
@@ -157,17 +183,28 @@ fn worst<'a>(it: impl Iterator<Item = &'a Stretch>, bounds: [f64; 2]) -> Option<
     })
 }
 
-/// NEES per dof of every run's samples in [from, to), pooled.
+/// NEES per dof of every run's samples in [from, to), pooled, with the 95 % interval of each
+/// figure from the scatter of the runs' own figures.
 fn stretch(runs: &[&[NavSample]], from: f64, to: f64) -> Stretch {
     let mut sum = [0.0; 2];
     let mut n = [0usize; 2];
+    // each run's own figure (per dof), for the scatter between runs
+    let mut per_run: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
     for r in runs {
+        let mut own = [(0.0, 0usize); 2];
         for x in r.iter().filter(|x| x.t_s >= from && x.t_s < to) {
             for (i, v) in [x.nees_position, x.nees_velocity].into_iter().enumerate() {
                 if let Some(v) = v.filter(|v| v.is_finite()) {
                     sum[i] += v;
                     n[i] += 1;
+                    own[i].0 += v;
+                    own[i].1 += 1;
                 }
+            }
+        }
+        for (i, (s, k)) in own.into_iter().enumerate() {
+            if k > 0 {
+                per_run[i].push(s / k as f64 / 3.0);
             }
         }
     }
@@ -182,7 +219,39 @@ fn stretch(runs: &[&[NavSample]], from: f64, to: f64) -> Stretch {
         from_s: from,
         to_s: to,
         nees_per_dof: [per_dof(0), per_dof(1)],
+        interval_per_dof: half_width(&per_run[0])
+            .zip(half_width(&per_run[1]))
+            .map(|(a, b)| [a, b]),
     }
+}
+
+/// The half-width of the 95 % interval of the mean of `x` (Student's t, `n - 1` degrees of
+/// freedom); none for fewer than two values.
+fn half_width(x: &[f64]) -> Option<f64> {
+    let n = x.len();
+    if n < 2 {
+        return None;
+    }
+    let m = x.iter().sum::<f64>() / n as f64;
+    let var = x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1) as f64;
+    Some(t_975(n - 1) * (var / n as f64).sqrt())
+}
+
+/// Student's t at 0.975 for `df` degrees of freedom: the table to 30, then the Cornish-Fisher
+/// expansion about the normal quantile (within 0.001 beyond 30).
+fn t_975(df: usize) -> f64 {
+    const TABLE: [f64; 30] = [
+        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160,
+        2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056,
+        2.052, 2.048, 2.045, 2.042,
+    ];
+    if (1..=30).contains(&df) {
+        return TABLE[df - 1];
+    }
+    let z: f64 = 1.959_964;
+    let v = df.max(1) as f64;
+    z + (z.powi(3) + z) / (4.0 * v)
+        + (5.0 * z.powi(5) + 16.0 * z.powi(3) + 3.0 * z) / (96.0 * v * v)
 }
 
 #[cfg(test)]
@@ -254,7 +323,50 @@ mod tests {
             from_s: 0.0,
             to_s: 1.0,
             nees_per_dof: [0.25, 1.0],
+            interval_per_dof: None,
         };
         assert!((low.excess([0.5, 2.0]) - 2.0).abs() < 1e-12);
+    }
+
+    /// Each stretch carries the 95 % interval of its figure from the scatter between runs:
+    /// runs that disagree widely leave a figure over the bound within what they can tell
+    /// apart; runs that agree do not. One run has no interval.
+    #[test]
+    fn the_scatter_between_runs_bounds_what_a_figure_can_tell() {
+        let run = |v: f64| -> Vec<NavSample> {
+            (0..60)
+                .map(|t| NavSample {
+                    nees_velocity: Some(3.0 * v),
+                    ..sample(t as f64, 1.0)
+                })
+                .collect()
+        };
+        // eight runs: four at 0.6, four at 4.0 (mean 2.3 per dof, past the bound of 2)
+        let scattered: Vec<Vec<NavSample>> = (0..8)
+            .map(|i| run(if i % 2 == 0 { 0.6 } else { 4.0 }))
+            .collect();
+        let refs: Vec<&[NavSample]> = scattered.iter().map(|r| r.as_slice()).collect();
+        let w = Windowed::of(&refs, &[]);
+        let s = &w.windows[0];
+        assert!((s.nees_per_dof[1] - 2.3).abs() < 1e-12);
+        // sd 1.817 over 8 runs, t(7) = 2.365: +-1.52; the position runs all agree: +-0
+        let h = s.interval_per_dof.unwrap();
+        let sd = (8.0 * 1.7f64.powi(2) / 7.0).sqrt();
+        assert!((h[1] - 2.365 * sd / 8f64.sqrt()).abs() < 1e-9, "{h:?}");
+        assert!(h[0].abs() < 1e-12);
+        assert!(!w.within([0.5, 2.0]));
+        assert!(w.within_scatter([0.5, 2.0]));
+        // the same mean from runs that agree is past the bound by more than they scatter
+        let agreed: Vec<Vec<NavSample>> = (0..8).map(|i| run(2.2 + 0.2 * (i % 2) as f64)).collect();
+        let refs: Vec<&[NavSample]> = agreed.iter().map(|r| r.as_slice()).collect();
+        let w = Windowed::of(&refs, &[]);
+        assert!((w.windows[0].nees_per_dof[1] - 2.3).abs() < 1e-12);
+        assert!(!w.within_scatter([0.5, 2.0]));
+        // one run: no interval, and the verdict is the figure's own
+        let one = Windowed::of(&refs[..1], &[]);
+        assert_eq!(one.windows[0].interval_per_dof, None);
+        assert_eq!(one.within_scatter([0.5, 2.0]), one.within([0.5, 2.0]));
+        // the t quantile past the table joins it
+        assert!((t_975(31) - 2.0395).abs() < 2e-3 && (t_975(1000) - 1.962).abs() < 1e-3);
     }
 }
