@@ -365,12 +365,6 @@ fn run_case(c: &FaultCase, o: &FaultOptions, iface: &str, backend: &str) -> Faul
     }
 }
 
-/// Rows judged on the wall clock (run at real-time pace: nav killed, and what its recorder had
-/// flushed by then). They run first: the rest of the matrix is lockstep, indifferent to load,
-/// while `./run-tests` starts its free-running tests in the guest a few minutes into the
-/// matrix at a higher priority; once, starved by them, nav's recorder flushed 1.25 s late.
-const WALL_CLOCK_ROWS: [&str; 1] = ["nav-killed"];
-
 /// Run the matrix here (the kernel must have CAN).
 pub fn run_matrix(o: &FaultOptions, backend: &str) -> Result<FaultMatrix> {
     let cases: Vec<FaultCase> = matrix()
@@ -393,12 +387,6 @@ pub fn run_matrix(o: &FaultOptions, backend: &str) -> Result<FaultMatrix> {
     let done = std::sync::atomic::AtomicUsize::new(0);
     let slots: Vec<std::sync::Mutex<Option<FaultRow>>> =
         cases.iter().map(|_| std::sync::Mutex::new(None)).collect();
-    // the rows judged on the wall clock start first; the results keep the table's order
-    let wall = |i: &usize| WALL_CLOCK_ROWS.contains(&cases[*i].name);
-    let order: Vec<usize> = (0..cases.len())
-        .filter(wall)
-        .chain((0..cases.len()).filter(|i| !wall(i)))
-        .collect();
     std::thread::scope(|scope| {
         for job in 0..jobs {
             let iface = if job == 0 {
@@ -406,12 +394,11 @@ pub fn run_matrix(o: &FaultOptions, backend: &str) -> Result<FaultMatrix> {
             } else {
                 format!("{}-{job}", o.iface)
             };
-            let (cases, next, done, slots, order) = (&cases, &next, &done, &slots, &order);
+            let (cases, next, done, slots) = (&cases, &next, &done, &slots);
             scope.spawn(move || {
                 loop {
-                    let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    let Some(&i) = order.get(k) else { break };
-                    let c = &cases[i];
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some(c) = cases.get(i) else { break };
                     let t0 = std::time::Instant::now();
                     let row = run_case(c, o, &iface, backend);
                     if o.progress {
@@ -535,15 +522,6 @@ pub fn junit(m: &FaultMatrix) -> crate::junit::Suite {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// The rows started first for the wall clock are rows of the matrix (a renamed row would
-    /// silently lose its place).
-    #[test]
-    fn the_wall_clock_rows_are_rows_of_the_matrix() {
-        for n in WALL_CLOCK_ROWS {
-            assert!(matrix().iter().any(|c| c.name == n), "{n}");
-        }
-    }
 
     /// The matrix covers at least 16 faults, each name once, and every case's scenario passes
     /// its checks with the fault in it.
