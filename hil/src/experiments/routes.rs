@@ -465,7 +465,7 @@ fn stretch_cell(s: Option<&Stretch>) -> String {
             "-".into()
         }
     };
-    // with the runs' scatter: "1.07±0.21 / 2.05±0.93"
+    // with the runs' scatter: "1.07±0.53 / 2.05±1.39"
     let pm = |i: usize| match s.and_then(|s| s.interval_per_dof) {
         Some(h) if h[i].is_finite() => format!("±{:.2}", h[i]),
         _ => String::new(),
