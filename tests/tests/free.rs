@@ -1,7 +1,8 @@
 //! End-to-end tests of the bench free-running on the host's clock at x1 (`--free`, `hil
 //! emulate`), judging a device under test the bench does not pace. Their verdicts need a guest
-//! that keeps real time, so `./run-tests` runs them apart from the lockstep tests (`vcan.rs`),
-//! which a loaded guest cannot disturb: after those, with nothing else running beside them.
+//! that keeps real time, so `./run-tests` starts them once the host's own stages are done, at
+//! normal priority beside the lockstep tests (`vcan.rs`, at nice 19: a loaded guest cannot move
+//! their results), the Python device's two tests alone (`tests/guest-e2e.sh`).
 //! Like `vcan.rs` they need a kernel with CAN and are ignored by a plain `cargo test`.
 
 use e2e::{bin, checks, hil_json};
