@@ -34,6 +34,10 @@ pub struct SolutionWatch {
     /// Every change of mode: (mode, IMU sample count of the first NAV_TIME in it).
     #[serde(default)]
     pub modes: Vec<(String, u64)>,
+    /// The IMU sample count of the latest NAV_TIME (as sent: the low 32 bits): how far nav
+    /// had got when its output stopped.
+    #[serde(default)]
+    pub last_sample: Option<u64>,
 }
 
 impl SolutionWatch {
@@ -109,6 +113,7 @@ pub fn watch_solution(
                 last_seq = Some(t.seq);
                 let mode = format!("{:?}", t.mode);
                 let k = u64::from(t.sample_count);
+                w.last_sample = Some(k);
                 if w.last_mode.as_deref() != Some(mode.as_str()) {
                     w.modes.push((mode.clone(), k));
                 }

@@ -684,6 +684,16 @@ pub struct KillOutcome {
     pub recorded_until_s: f64,
     /// IMU data lost: the kill's time less the last recorded sample's, s.
     pub lost_s: f64,
+    /// IMU time of nav's last NAV_TIME on the bus before it died: how far nav had got, s
+    /// (none when it sent none).
+    #[serde(default)]
+    pub nav_reached_s: Option<f64>,
+    /// Of `lost_s`, what nav had processed (and published) but its recording lost: the
+    /// recorder's own loss, s. The rest, `at_s - nav_reached_s`, was still in nav's socket
+    /// when it died (how far nav lagged the stream depends on the machine's load, not on
+    /// the recorder).
+    #[serde(default)]
+    pub unrecorded_s: Option<f64>,
     /// Records that could not be read (the cut end).
     pub bad_records: u64,
 }

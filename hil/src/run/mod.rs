@@ -377,7 +377,13 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             crate::status::line(l);
         }
     }
-    let (nav_json, killed) = read_summary(s, opts, &setup.nav_cfg, killed_at, nav_exit)?;
+    let (nav_json, killed) = read_summary(
+        s,
+        opts,
+        &setup.nav_cfg,
+        killed_at.map(|at| (at, solution.last_sample)),
+        nav_exit,
+    )?;
     phases.end("summary");
     let ended = Ended {
         bus,
@@ -584,35 +590,48 @@ fn supervise(
     }
 }
 
-/// nav's summary file; for a nav killed outright, rebuilt by nav's pipeline from its recording
-/// (and what the kill cost). Paths nav wrote in its own folder point into the run folder.
+/// nav's summary file; for a nav killed outright (`kill`: the stream's time at the kill and
+/// the IMU sample count of nav's last NAV_TIME the bench saw), rebuilt by nav's pipeline from
+/// its recording, and what the kill cost. Paths nav wrote in its own folder point into the run
+/// folder.
 fn read_summary(
     s: &Scenario,
     opts: &RunOptions,
     nav_cfg: &nav::config::NavConfig,
-    killed_at: Option<f64>,
+    kill: Option<(f64, Option<u64>)>,
     nav_exit: Option<i32>,
 ) -> Result<(nav::summary::Summary, Option<KillOutcome>)> {
     let summary_path = opts.out.join("nav-summary.json");
     let mut killed = None;
     let mut nav_json = match nav::summary::Summary::read(&summary_path) {
         Ok(s) => s,
-        Err(nav::summary::SummaryError::Read { .. }) if killed_at.is_some() => {
+        Err(nav::summary::SummaryError::Read { .. }) if kill.is_some() => {
             // killed outright: what it recorded is all there is; nav's pipeline rebuilds the
             // summary from it
             let p = crate::engine::recording::replay(&opts.out.join("nav.mcap"), nav_cfg)
                 .context("reading back the recording of the killed nav")?;
-            let at_s = killed_at.unwrap_or(0.0);
+            let (at_s, nav_last) = kill.unwrap_or((0.0, None));
             let sm = &p.summary;
             let recorded_until_s = match (sm.first_sample, sm.last_sample) {
                 (Some(a), Some(b)) => (b.saturating_sub(a) + 1) as f64 / s.imu.rate_hz,
                 _ => 0.0,
+            };
+            // NAV_TIME carries the count's low 32 bits: measured from the recording's first
+            // sample the same way
+            let nav_reached_s = match (sm.first_sample, nav_last) {
+                (Some(a), Some(k)) => {
+                    Some((f64::from((k as u32).wrapping_sub(a as u32)) + 1.0) / s.imu.rate_hz)
+                }
+                (None, Some(k)) => Some((k + 1) as f64 / s.imu.rate_hz),
+                (_, None) => None,
             };
             killed = Some(KillOutcome {
                 at_s,
                 recorded_frames: p.frames_in,
                 recorded_until_s,
                 lost_s: at_s - recorded_until_s,
+                nav_reached_s,
+                unrecorded_s: nav_reached_s.map(|n| n - recorded_until_s),
                 bad_records: p.bad_records,
             });
             p.summary
