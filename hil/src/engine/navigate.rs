@@ -166,56 +166,119 @@ fn cov3(v: &serde_json::Value) -> Option<nalgebra::Matrix3<f64>> {
     Some(nalgebra::Matrix3::from_row_slice(&x))
 }
 
-/// nav's recorded solution (`/nav/solution` in its MCAP, 1 Hz) against the drive: one score per
-/// second (nav's time plus `t_first`). Unreadable records are skipped and counted.
-pub fn score_recording(
-    drive: &Drive,
-    mcap_path: &std::path::Path,
+/// nav's recording read against a drive, message by message ([`RecordingScorer::message`]),
+/// so that one reading of the recording serves the replay and the scoring alike.
+pub struct RecordingScorer<'a> {
+    drive: &'a Drive,
     t_first: f64,
-) -> Result<(Vec<NavScore>, u64)> {
-    let mut out = Vec::new();
-    let mut bad = 0u64;
-    let cut = crate::engine::recording::each_message(mcap_path, "scoring", |m| {
-        if m.channel.topic != "/nav/solution" {
-            return;
+    origin: (f64, f64, f64),
+    scored: ScoredRecording,
+}
+
+/// What [`RecordingScorer`] found in nav's recording.
+#[derive(Debug, Default)]
+pub struct ScoredRecording {
+    /// nav's recorded solution (`/nav/solution`, 1 Hz) against the drive: one score per second
+    /// (nav's time plus the first sample's).
+    pub scores: Vec<NavScore>,
+    /// Solution records that could not be read, and one more when the recording was cut
+    /// short.
+    pub bad: u64,
+    /// The receiver's fixes nav took (`/gps/fix`, GGA) and those its filter refused
+    /// (`/nav/event` `fix_rejected`): IMU time of the record (s), east and north of the
+    /// drive's start (m), and their fate.
+    pub fixes: Vec<(f64, [f64; 2], FixFate)>,
+}
+
+impl<'a> RecordingScorer<'a> {
+    /// A scorer of nav's recording against `drive`; `t_first`: the first sample's time, s.
+    pub fn new(drive: &'a Drive, t_first: f64) -> Self {
+        Self {
+            drive,
+            t_first,
+            origin: drive.position(0.0),
+            scored: ScoredRecording::default(),
         }
+    }
+
+    /// Take the recording's next message.
+    pub fn message(&mut self, m: &mcap::Message) {
+        match m.channel.topic.as_str() {
+            "/nav/solution" => self.solution(m),
+            "/gps/fix" => {
+                let Ok(f) = serde_json::from_slice::<nav::gps::GpsFix>(&m.data) else {
+                    return;
+                };
+                if f.sentence == "GGA" {
+                    let fate = if f.valid {
+                        FixFate::Valid
+                    } else {
+                        FixFate::Void
+                    };
+                    self.fix(m, f.lat_deg, f.lon_deg, fate);
+                }
+            }
+            "/nav/event" => {
+                let Ok(e) = serde_json::from_slice::<serde_json::Value>(&m.data) else {
+                    return;
+                };
+                if e["kind"] == "fix_rejected"
+                    && let (Some(lat), Some(lon)) = (e["lat_deg"].as_f64(), e["lon_deg"].as_f64())
+                {
+                    self.fix(m, lat, lon, FixFate::Rejected);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn fix(&mut self, m: &mcap::Message, lat_deg: f64, lon_deg: f64, fate: FixFate) {
+        let o = self.origin;
+        let x = enu_offset(o, (lat_deg.to_radians(), lon_deg.to_radians(), o.2));
+        let t = m.publish_time as f64 * 1e-9;
+        self.scored.fixes.push((t, [x[0], x[1]], fate));
+    }
+
+    fn solution(&mut self, m: &mcap::Message) {
         let j: Option<serde_json::Value> = serde_json::from_slice(&m.data).ok();
         let parsed = j.as_ref().and_then(|j| {
             let o: nav::strapdown::NavOutput = serde_json::from_value(j["output"].clone()).ok()?;
             Some((j["t_s"].as_f64()?, o))
         });
-        match parsed {
-            Some((t, o)) => {
-                // the sigmas nav sent with the solution (zero: not yet known)
-                let sigma = |k: &str| j.as_ref().and_then(|j| j[k].as_f64()).filter(|v| *v > 0.0);
-                let cov = |k: &str| j.as_ref().and_then(|j| cov3(&j[k]));
-                let sc = score_output(drive, t + t_first, &o);
-                let (pc, vc) = (cov("pos_cov_enu_m2"), cov("vel_cov_enu_m2s2"));
-                let nees = match (pc, vc, sc.position_error_enu_m, sc.velocity_error_enu_mps) {
-                    (Some(pc), Some(vc), Some(e), Some(dv)) => nees(&e, &pc).zip(nees(&dv, &vc)),
-                    _ => None,
-                };
-                let tilt = j.as_ref().and_then(|j| {
-                    let a = j["att_sigma_enu_deg"].as_array()?;
-                    Some(0.5 * (a.first()?.as_f64()? + a.get(1)?.as_f64()?))
-                });
-                out.push(NavScore {
-                    position_sigma_m: sigma("pos_sigma_m"),
-                    heading_sigma_deg: sigma("heading_sigma_deg"),
-                    logged_wall_ns: Some(m.log_time),
-                    velocity_sigma_enu_mps: vc
-                        .map(|c| std::array::from_fn(|i| c[(i, i)].max(0.0).sqrt())),
-                    tilt_sigma_deg: tilt,
-                    nees: nees.map(|(a, b)| [a, b]),
-                    ..sc
-                })
-            }
-            None => bad += 1,
-        }
-    })?;
-    // a recording cut short still gives what it has
-    bad += u64::from(cut);
-    Ok((out, bad))
+        let Some((t, o)) = parsed else {
+            self.scored.bad += 1;
+            return;
+        };
+        // the sigmas nav sent with the solution (zero: not yet known)
+        let sigma = |k: &str| j.as_ref().and_then(|j| j[k].as_f64()).filter(|v| *v > 0.0);
+        let cov = |k: &str| j.as_ref().and_then(|j| cov3(&j[k]));
+        let sc = score_output(self.drive, t + self.t_first, &o);
+        let (pc, vc) = (cov("pos_cov_enu_m2"), cov("vel_cov_enu_m2s2"));
+        let nees = match (pc, vc, sc.position_error_enu_m, sc.velocity_error_enu_mps) {
+            (Some(pc), Some(vc), Some(e), Some(dv)) => nees(&e, &pc).zip(nees(&dv, &vc)),
+            _ => None,
+        };
+        let tilt = j.as_ref().and_then(|j| {
+            let a = j["att_sigma_enu_deg"].as_array()?;
+            Some(0.5 * (a.first()?.as_f64()? + a.get(1)?.as_f64()?))
+        });
+        self.scored.scores.push(NavScore {
+            position_sigma_m: sigma("pos_sigma_m"),
+            heading_sigma_deg: sigma("heading_sigma_deg"),
+            logged_wall_ns: Some(m.log_time),
+            velocity_sigma_enu_mps: vc.map(|c| std::array::from_fn(|i| c[(i, i)].max(0.0).sqrt())),
+            tilt_sigma_deg: tilt,
+            nees: nees.map(|(a, b)| [a, b]),
+            ..sc
+        });
+    }
+
+    /// What was found; `cut`: the recording ended cut short (a recording cut short still
+    /// gives what it has).
+    pub fn finish(mut self, cut: bool) -> ScoredRecording {
+        self.scored.bad += u64::from(cut);
+        self.scored
+    }
 }
 
 /// What became of a fix nav took.
@@ -227,51 +290,6 @@ pub enum FixFate {
     Valid,
     /// The filter's gate refused it (`fix_rejected` in nav's events).
     Rejected,
-}
-
-/// The receiver's fixes nav took (`/gps/fix` in its recording, GGA) and those its filter
-/// refused (`/nav/event` `fix_rejected`): IMU time of the record (s), east and north of the
-/// drive's start (m), and their fate.
-pub fn recorded_fixes(
-    drive: &Drive,
-    mcap_path: &std::path::Path,
-) -> Result<Vec<(f64, [f64; 2], FixFate)>> {
-    let origin = drive.position(0.0);
-    let en = |lat: f64, lon: f64| {
-        let x = enu_offset(origin, (lat.to_radians(), lon.to_radians(), origin.2));
-        [x[0], x[1]]
-    };
-    let mut out = Vec::new();
-    crate::engine::recording::each_message(mcap_path, "fixes", |m| {
-        let t = m.publish_time as f64 * 1e-9;
-        match m.channel.topic.as_str() {
-            "/gps/fix" => {
-                let Ok(f) = serde_json::from_slice::<nav::gps::GpsFix>(&m.data) else {
-                    return;
-                };
-                if f.sentence == "GGA" {
-                    let fate = if f.valid {
-                        FixFate::Valid
-                    } else {
-                        FixFate::Void
-                    };
-                    out.push((t, en(f.lat_deg, f.lon_deg), fate));
-                }
-            }
-            "/nav/event" => {
-                let Ok(e) = serde_json::from_slice::<serde_json::Value>(&m.data) else {
-                    return;
-                };
-                if e["kind"] == "fix_rejected"
-                    && let (Some(lat), Some(lon)) = (e["lat_deg"].as_f64(), e["lon_deg"].as_f64())
-                {
-                    out.push((t, en(lat, lon), FixFate::Rejected));
-                }
-            }
-            _ => {}
-        }
-    })?;
-    Ok(out)
 }
 
 /// One second of a navigation run against truth.

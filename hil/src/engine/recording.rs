@@ -214,17 +214,29 @@ pub fn each_message(path: &Path, doing: &str, mut f: impl FnMut(&mcap::Message))
 
 /// Replay the recording `mcap` through the pipeline of config `cfg`.
 pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
+    replay_and(mcap_path, cfg, |_| {}).map(|(p, _)| p)
+}
+
+/// Replay the recording `mcap` through the pipeline of config `cfg`, and hand each of its
+/// messages to `also` as well: one reading (and decompression) of the recording for the replay
+/// and whatever else reads it. Returns the playback and whether the recording was cut short.
+pub fn replay_and(
+    mcap_path: &Path,
+    cfg: &NavConfig,
+    mut also: impl FnMut(&mcap::Message),
+) -> Result<(Playback, bool)> {
     let mut r = Replayer::new(cfg)?;
     let cut = each_message(mcap_path, "replaying", |m| {
         if let Some(input) = input_of(m) {
             r.feed(input);
         }
+        also(m);
     })?;
     if cut {
         // a recording cut short still replays what it has
         r.feed(Input::Bad);
     }
-    Ok(r.finish(&mcap_path.display().to_string()))
+    Ok((r.finish(&mcap_path.display().to_string()), cut))
 }
 
 /// What a message of nav's recording gives its pipeline on replay (none: nothing).

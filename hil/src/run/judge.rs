@@ -5,7 +5,7 @@
 //! the report.
 
 use super::{Phases, RunOptions};
-use crate::engine::navigate::{FixFate, NavScore, SeriesStats};
+use crate::engine::navigate::{FixFate, NavScore, RecordingScorer, ScoredRecording, SeriesStats};
 use crate::engine::recording::Playback;
 use crate::engine::reference::InProcess;
 use crate::engine::truthrec::RunTruth;
@@ -44,12 +44,13 @@ pub(super) struct Evidence {
     end_s: f64,
 }
 
-/// The checks that recompute things, side by side: the in-process reference run, the replay of
-/// nav's recording through its pipeline, the scoring of that recording against truth.
+/// The checks that recompute things, side by side: the in-process reference run, and the
+/// replay of nav's recording through its pipeline with the scoring of that recording against
+/// truth (one reading of the recording for both).
 struct Recomputed {
     reference: Option<InProcess>,
     replayed: Option<Result<Playback>>,
-    scored: Option<Result<(Vec<NavScore>, u64)>>,
+    scored: Option<Result<ScoredRecording>>,
 }
 
 fn recompute(
@@ -60,7 +61,7 @@ fn recompute(
 ) -> Result<Recomputed> {
     let t_first = 1.0 / s.imu.rate_hz;
     let mcap_path = opts.out.join("nav.mcap");
-    let (reference, replayed, scored) = std::thread::scope(|sc| {
+    let (reference, read) = std::thread::scope(|sc| {
         // (through gpsd, nav gets only the sentences gpsd keeps: not the receiver's bytes)
         let reference = sc.spawn(|| match s.turntable {
             None if opts.reference_checks && !opts.gps_via_gpsd => Some(
@@ -68,21 +69,31 @@ fn recompute(
             ),
             _ => None,
         });
-        let replayed = sc.spawn(|| {
-            opts.reference_checks
-                .then(|| crate::engine::recording::replay(&mcap_path, nav_cfg))
+        let read = opts.reference_checks.then(|| {
+            let mut scorer = drive.map(|d| RecordingScorer::new(d, t_first));
+            let r = crate::engine::recording::replay_and(&mcap_path, nav_cfg, |m| {
+                if let Some(sc) = scorer.as_mut() {
+                    sc.message(m);
+                }
+            });
+            (r, scorer)
         });
-        let scored =
-            drive.map(|d| crate::engine::navigate::score_recording(d, &mcap_path, t_first));
-        let join = |what: &str| anyhow::anyhow!("the {what} panicked");
-        Ok::<_, anyhow::Error>((
-            reference
-                .join()
-                .map_err(|_| join("in-process reference run"))?,
-            replayed.join().map_err(|_| join("replay check"))?,
-            scored,
-        ))
+        let reference = reference
+            .join()
+            .map_err(|_| anyhow::anyhow!("the in-process reference run panicked"))?;
+        Ok::<_, anyhow::Error>((reference, read))
     })?;
+    let (replayed, scored) = match read {
+        None => (None, None),
+        Some((Ok((playback, cut)), scorer)) => {
+            (Some(Ok(playback)), scorer.map(|sc| Ok(sc.finish(cut))))
+        }
+        // the recording could not be read: both say so
+        Some((Err(e), scorer)) => {
+            let scored = scorer.map(|_| Err(anyhow::anyhow!("{e:#}")));
+            (Some(Err(e)), scored)
+        }
+    };
     Ok(Recomputed {
         reference: reference.transpose()?,
         replayed,
@@ -144,7 +155,6 @@ pub(super) fn judge(
     };
     let (navigation, navigation_series) = score_navigation(
         s,
-        opts,
         drive,
         rc.scored,
         &nav_json,
@@ -186,12 +196,10 @@ pub(super) fn judge(
 
 /// Navigation scored against truth: from nav's summary, and second by second from its
 /// recording (statistics, and the series and fixes for the files); the navigation checks.
-#[allow(clippy::too_many_arguments)]
 fn score_navigation(
     s: &Scenario,
-    opts: &RunOptions,
     drive: Option<&Drive>,
-    scored: Option<Result<(Vec<NavScore>, u64)>>,
+    scored: Option<Result<ScoredRecording>>,
     nav_json: &nav::summary::Summary,
     gps_stats: Option<&emulators::gps::GpsTxStats>,
     checks: &mut Vec<report::Check>,
@@ -204,19 +212,17 @@ fn score_navigation(
     let o = crate::engine::navigate::score_summary(drive, nav_json, t_first);
     let mut navigation_series = None;
     match scored {
-        Ok((scores, bad)) if !scores.is_empty() => {
-            navigation_series = Some(SeriesStats::of(&scores, bad));
+        Ok(sc) if !sc.scores.is_empty() => {
+            navigation_series = Some(SeriesStats::of(&sc.scores, sc.bad));
             // sim time -> the wall time nav logged it at, for the truth recording
-            evidence.clock = scores
+            evidence.clock = sc
+                .scores
                 .iter()
                 .filter_map(|x| Some((x.t_s, x.logged_wall_ns?)))
                 .collect();
             // the receiver's fixes nav took, for the track
-            match crate::engine::navigate::recorded_fixes(drive, &opts.out.join("nav.mcap")) {
-                Ok(f) => evidence.fixes = Some(f),
-                Err(e) => tracing::warn!("nav's recording, fixes: {e:#}"),
-            }
-            evidence.scores = scores;
+            evidence.fixes = Some(sc.fixes);
+            evidence.scores = sc.scores;
         }
         Ok(_) => {}
         Err(e) => tracing::warn!("nav's recording: {e:#}"),
