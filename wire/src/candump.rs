@@ -44,33 +44,64 @@ pub struct LogError {
 
 /// The log line of `frame` received on `iface` at `t_us` microseconds.
 pub fn format_line(t_us: u64, iface: &str, frame: &RawFrame) -> String {
-    use std::fmt::Write;
-    let mut s = format!(
-        "({}.{:06}) {iface} {:03X}#",
-        t_us / 1_000_000,
-        t_us % 1_000_000,
-        frame.id
-    );
-    for b in frame.payload() {
-        let _ = write!(s, "{b:02X}");
-    }
+    let mut s = String::with_capacity(48);
+    push_line(&mut s, t_us, iface, frame);
     s
+}
+
+/// [`format_line`] appended to `out`, without its own allocation: a log of a million frames
+/// is written through one buffer.
+pub fn push_line(out: &mut String, t_us: u64, iface: &str, frame: &RawFrame) {
+    push_head(out, t_us, iface);
+    push_hex(out, u64::from(frame.id), 3);
+    out.push('#');
+    for &b in frame.payload() {
+        push_hex(out, u64::from(b), 2);
+    }
 }
 
 /// An error frame as `candump -l` writes it: its identifier with `CAN_ERR_FLAG` in eight hex
 /// digits, its eight data bytes.
 pub fn format_error_line(t_us: u64, iface: &str, e: &crate::errframe::ErrorFrame) -> String {
-    use std::fmt::Write;
-    let mut s = format!(
-        "({}.{:06}) {iface} {:08X}#",
-        t_us / 1_000_000,
-        t_us % 1_000_000,
-        e.can_id()
-    );
+    let mut s = String::with_capacity(56);
+    push_head(&mut s, t_us, iface);
+    push_hex(&mut s, u64::from(e.can_id()), 8);
+    s.push('#');
     for b in e.data {
-        let _ = write!(s, "{b:02X}");
+        push_hex(&mut s, u64::from(b), 2);
     }
     s
+}
+
+/// `(SECONDS.MICROS) IFACE ` of a line.
+fn push_head(out: &mut String, t_us: u64, iface: &str) {
+    out.push('(');
+    push_decimal(out, t_us / 1_000_000, 1);
+    out.push('.');
+    push_decimal(out, t_us % 1_000_000, 6);
+    out.push_str(") ");
+    out.push_str(iface);
+    out.push(' ');
+}
+
+/// `v` in decimal, zero-padded to at least `width` digits.
+fn push_decimal(out: &mut String, mut v: u64, width: usize) {
+    let mut d = [b'0'; 20];
+    let mut i = d.len();
+    while v > 0 || d.len() - i < width {
+        i -= 1;
+        d[i] = b'0' + (v % 10) as u8;
+        v /= 10;
+    }
+    out.extend(d[i..].iter().map(|&c| char::from(c)));
+}
+
+/// The `digits` low hex digits of `v`, upper case.
+fn push_hex(out: &mut String, v: u64, digits: u32) {
+    const HEX: &[u8; 16] = b"0123456789ABCDEF";
+    for k in (0..digits).rev() {
+        out.push(char::from(HEX[((v >> (4 * k)) & 0xF) as usize]));
+    }
 }
 
 /// Parse line number `line` (from 1) of a log; `Ok(None)` for a blank line.
@@ -178,6 +209,33 @@ mod tests {
         };
         let l = format_line(5, "can0", &empty);
         assert_eq!(l, "(0.000005) can0 7FF#");
+        // as the standard formatter writes them, over times and identifiers
+        for (t, id) in [
+            (0, 0),
+            (999_999, 0x1),
+            (1_000_000, 0x7FF),
+            (u64::MAX, 0x123),
+        ] {
+            let f = RawFrame {
+                id,
+                len: 2,
+                data: [0x0F, 0xF0, 0, 0, 0, 0, 0, 0],
+            };
+            let std = format!(
+                "({}.{:06}) vcan9 {id:03X}#0FF0",
+                t / 1_000_000,
+                t % 1_000_000
+            );
+            assert_eq!(format_line(t, "vcan9", &f), std);
+        }
+        let e = crate::errframe::ErrorFrame {
+            class: 0x44,
+            data: [0, 0x08, 0, 0, 0, 0, 0x80, 0x7F],
+        };
+        assert_eq!(
+            format_error_line(1_000_001, "can0", &e),
+            "(1.000001) can0 20000044#000800000000807F"
+        );
         assert!(
             matches!(parse_line(&l, 1), Ok(Some(LogEntry::Frame { frame, .. })) if frame == empty)
         );

@@ -22,6 +22,7 @@ pub use messages::*;
 pub use sock::{
     BATCH, CpuPick, FrameConvError, from_can_frame, pin_to_one_cpu, recv_batch, recv_batch_stamped,
     send_batch, send_error_frame, set_error_filter, set_rcvbuf, socket_drops, to_can_frame,
+    wait_readable,
 };
 
 /// The DBC file text, embedded so tools can print or ship it.

@@ -216,6 +216,20 @@ pub fn send_batch(fd: std::os::fd::RawFd, frames: &[RawFrame]) -> std::io::Resul
     mmsg_call(k, None, |h, n| unsafe { libc::sendmmsg(fd, h, n, 0) })
 }
 
+/// Wait until the socket `fd` has something to read, or `timeout` passes (a signal ends the
+/// wait early too): one `poll`, so a reader takes what came in one [`recv_batch`] rather than
+/// a system call per frame.
+pub fn wait_readable(fd: std::os::fd::RawFd, timeout: std::time::Duration) {
+    let mut p = libc::pollfd {
+        fd,
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    let ms = libc::c_int::try_from(timeout.as_millis()).unwrap_or(libc::c_int::MAX);
+    // SAFETY: one valid pollfd for the duration of the call.
+    unsafe { libc::poll(&mut p, 1, ms) };
+}
+
 /// Receive up to `max` (at most [`BATCH`]) waiting frames from the CAN raw socket `fd` without
 /// blocking (`recvmmsg`), each as a data frame or the reason it is not one. Returns how many were
 /// appended to `out`: 0 when none was waiting.

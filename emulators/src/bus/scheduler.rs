@@ -848,11 +848,5 @@ fn outcome(
 /// Wait until `sock` has a frame to read, or `timeout`.
 pub(crate) fn wait_readable(sock: &CanSocket, timeout: Duration) {
     use std::os::fd::AsRawFd;
-    let mut p = libc::pollfd {
-        fd: sock.as_raw_fd(),
-        events: libc::POLLIN,
-        revents: 0,
-    };
-    // SAFETY: one valid pollfd for the duration of the call.
-    unsafe { libc::poll(&mut p, 1, timeout.as_millis() as libc::c_int) };
+    wire::wait_readable(sock.as_raw_fd(), timeout);
 }

@@ -179,27 +179,30 @@ impl SentLog {
         let text = std::fs::File::create(&self.path).map_err(|e| self.err(e))?;
         let mut text = std::io::BufWriter::with_capacity(1 << 16, text);
         let mut rec = [0u8; SENT_RECORD];
+        let mut line = String::with_capacity(64);
         for _ in 0..self.lines {
             raw.read_exact(&mut rec).map_err(|e| self.err(e))?;
             let mut data = [0u8; 8];
             data.copy_from_slice(&rec[13..]);
             let can_id = u32::from_le_bytes([rec[8], rec[9], rec[10], rec[11]]);
             let t_us = u64::from_le_bytes(rec[..8].try_into().unwrap_or([0; 8]));
-            let line = if can_id & wire::errframe::CAN_ERR_FLAG != 0 {
+            line.clear();
+            if can_id & wire::errframe::CAN_ERR_FLAG != 0 {
                 let e = wire::errframe::ErrorFrame {
                     class: can_id & wire::errframe::CAN_ERR_MASK,
                     data,
                 };
-                wire::candump::format_error_line(t_us, &self.iface, &e)
+                line.push_str(&wire::candump::format_error_line(t_us, &self.iface, &e));
             } else {
                 let f = RawFrame {
                     id: (can_id & 0x7FF) as u16,
                     len: rec[12],
                     data,
                 };
-                wire::candump::format_line(t_us, &self.iface, &f)
-            };
-            writeln!(text, "{line}").map_err(|e| self.err(e))?;
+                wire::candump::push_line(&mut line, t_us, &self.iface, &f);
+            }
+            line.push('\n');
+            text.write_all(line.as_bytes()).map_err(|e| self.err(e))?;
         }
         text.flush().map_err(|e| self.err(e))?;
         let _ = std::fs::remove_file(&self.raw);

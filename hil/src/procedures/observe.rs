@@ -68,78 +68,77 @@ pub fn solution_socket(iface: &str) -> Result<socketcan::CanSocket> {
     Ok(sock)
 }
 
-/// Listen to nav's NAV_* frames on `sock` until `stop`.
+/// Listen to nav's NAV_* frames on `sock` until `stop`: a wake-up per burst of frames (an
+/// epoch's), each burst taken in one `recvmmsg`.
 pub fn watch_solution(
     sock: socketcan::CanSocket,
     iface: &str,
     stop: &AtomicBool,
 ) -> Result<SolutionWatch> {
-    use socketcan::Socket;
+    use std::os::fd::AsRawFd;
     let mut w = SolutionWatch::default();
     let mut last_seq: Option<u8> = None;
+    let fd = sock.as_raw_fd();
+    let mut got = Vec::with_capacity(wire::BATCH);
     while !stop.load(Ordering::Relaxed) {
-        let f = match sock.read_frame_timeout(Duration::from_millis(50)) {
-            Ok(f) => f,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock
-                ) =>
-            {
-                continue;
-            }
+        wire::wait_readable(fd, Duration::from_millis(50));
+        got.clear();
+        match wire::recv_batch(fd, &mut got, wire::BATCH) {
+            Ok(_) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
             // the interface was taken down (a fault of the matrix): reported once, go on
-            Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => {
-                w.link_down_errors += 1;
-                continue;
-            }
+            Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => w.link_down_errors += 1,
             Err(e) => return Err(e).with_context(|| format!("reading NAV frames on {iface}")),
-        };
-        w.frames += 1;
-        match wire::from_can_frame(&f)
-            .ok()
-            .and_then(|r| wire::Message::decode(&r).ok())
-        {
-            Some(wire::Message::NavTime(t)) => {
-                w.epochs += 1;
-                let step = last_seq.map_or(1, |p| t.seq.wrapping_sub(p) as i8);
-                if step <= 0 {
-                    // an epoch after a later one: it fills the gap that one left
-                    w.reordered += 1;
-                    w.seq_gaps = w.seq_gaps.saturating_sub(1);
-                    continue;
-                }
-                w.seq_gaps += u64::from(step as u8 - 1);
-                last_seq = Some(t.seq);
-                let mode = format!("{:?}", t.mode);
-                let k = u64::from(t.sample_count);
-                w.last_sample = Some(k);
-                if w.last_mode.as_deref() != Some(mode.as_str()) {
-                    w.modes.push((mode.clone(), k));
-                }
-                w.last_mode = Some(mode);
-                let h = t.health;
-                for (bit, on) in [
-                    ("imu_timeout", h.imu_timeout),
-                    ("imu_gaps", h.imu_gaps),
-                    ("imu_bit", h.imu_bit),
-                    ("gps_stale", h.gps_stale),
-                    ("turntable", h.turntable),
-                    ("filter", h.filter),
-                    ("gps_data", h.gps_data),
-                    ("can_bus", h.can_bus),
-                ] {
-                    if on && !w.health_first.iter().any(|(b, _)| b == bit) {
-                        w.health_first.push((bit.to_string(), k));
-                    }
-                }
-            }
-            Some(wire::Message::NavPos(p)) => w.last_position_deg = Some([p.lat_deg, p.lon_deg]),
-            Some(_) => {}
-            None => w.bad_frames += 1,
+        }
+        for f in got.drain(..) {
+            w.frames += 1;
+            watch_frame(&mut w, &mut last_seq, f.ok());
         }
     }
     Ok(w)
+}
+
+/// One of nav's frames (none: not a data frame) into what the bench saw.
+fn watch_frame(w: &mut SolutionWatch, last_seq: &mut Option<u8>, f: Option<wire::RawFrame>) {
+    match f.and_then(|r| wire::Message::decode(&r).ok()) {
+        Some(wire::Message::NavTime(t)) => {
+            w.epochs += 1;
+            let step = last_seq.map_or(1, |p| t.seq.wrapping_sub(p) as i8);
+            if step <= 0 {
+                // an epoch after a later one: it fills the gap that one left
+                w.reordered += 1;
+                w.seq_gaps = w.seq_gaps.saturating_sub(1);
+                return;
+            }
+            w.seq_gaps += u64::from(step as u8 - 1);
+            *last_seq = Some(t.seq);
+            let mode = format!("{:?}", t.mode);
+            let k = u64::from(t.sample_count);
+            w.last_sample = Some(k);
+            if w.last_mode.as_deref() != Some(mode.as_str()) {
+                w.modes.push((mode.clone(), k));
+            }
+            w.last_mode = Some(mode);
+            let h = t.health;
+            for (bit, on) in [
+                ("imu_timeout", h.imu_timeout),
+                ("imu_gaps", h.imu_gaps),
+                ("imu_bit", h.imu_bit),
+                ("gps_stale", h.gps_stale),
+                ("turntable", h.turntable),
+                ("filter", h.filter),
+                ("gps_data", h.gps_data),
+                ("can_bus", h.can_bus),
+            ] {
+                if on && !w.health_first.iter().any(|(b, _)| b == bit) {
+                    w.health_first.push((bit.to_string(), k));
+                }
+            }
+        }
+        Some(wire::Message::NavPos(p)) => w.last_position_deg = Some([p.lat_deg, p.lon_deg]),
+        Some(_) => {}
+        None => w.bad_frames += 1,
+    }
 }
 
 /// Follows the lines of nav's start-up procedure (north-finding, self-calibration) during a

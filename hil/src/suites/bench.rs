@@ -162,13 +162,7 @@ pub fn raw_vcan(iface: &str, frames: u64, per_write: usize) -> Result<RawVcan> {
             let (mut n, mut last) = (0u64, Instant::now());
             let mut buf = Vec::with_capacity(wire::BATCH);
             loop {
-                let mut p = libc::pollfd {
-                    fd,
-                    events: libc::POLLIN,
-                    revents: 0,
-                };
-                // SAFETY: one live pollfd.
-                unsafe { libc::poll(&mut p, 1, 50) };
+                wire::wait_readable(fd, Duration::from_millis(50));
                 buf.clear();
                 let k = wire::recv_batch(fd, &mut buf, wire::BATCH)? as u64;
                 if k > 0 {
