@@ -43,25 +43,36 @@ pub fn frame_bits_exact(frame: &crate::RawFrame) -> u32 {
     }
     let crc = crc15(bits.word, bits.n);
     bits.push(u64::from(crc), 15);
-    let mut stuffed = 0u32;
-    let mut last = None;
-    let mut run = 0u32;
-    for i in (0..bits.n).rev() {
-        let b = (bits.word >> i) & 1 == 1;
-        if last == Some(b) {
-            run += 1;
+    bits.n + stuff_bits(bits.word, bits.n) + 13
+}
+
+/// The stuff bits CAN puts in the `n` low bits of `word` (sent highest first): one of the
+/// other value after five equal bits, which begins the next run. Counted run by run: a run of
+/// `len` equal bits that starts `carry` bits into a run (1 when a stuff bit of its value came
+/// just before) holds `(carry + len) / 5` of them.
+fn stuff_bits(word: u128, n: u32) -> u32 {
+    let (mut stuffed, mut carry) = (0, 0);
+    let mut left = n;
+    while left > 0 {
+        let top = left - 1;
+        let b = (word >> top) & 1 == 1;
+        let below = if left >= 128 {
+            u128::MAX
         } else {
-            last = Some(b);
-            run = 1;
-        }
-        if run == 5 {
-            // the stuff bit has the other value and begins the next run
-            stuffed += 1;
-            last = Some(!b);
-            run = 1;
-        }
+            (1u128 << left) - 1
+        };
+        // the bits of the other value from `top` down; the run ends at the highest of them
+        let other = (if b { !word } else { word }) & below;
+        let len = if other == 0 {
+            left
+        } else {
+            top - (127 - other.leading_zeros())
+        };
+        stuffed += (carry + len) / 5;
+        carry = u32::from((carry + len) % 5 == 0);
+        left -= len;
     }
-    bits.n + stuffed + 13
+    stuffed
 }
 
 /// Up to 128 bits in the order sent, the first in the highest place of `word`'s `n` low bits.
@@ -79,18 +90,45 @@ impl Bits {
     }
 }
 
-/// CAN's CRC-15 (polynomial 0x4599) over the `n` low bits of `word`, the highest first.
+/// CAN's CRC-15 (polynomial 0x4599) over the `n` low bits of `word`, the highest first: the
+/// bits above a whole number of bytes one by one, then a byte at a time ([`CRC15_TABLE`]).
 fn crc15(word: u128, n: u32) -> u16 {
     let mut crc = 0u16;
-    for i in (0..n).rev() {
+    let lead = n % 8;
+    for i in (n - lead..n).rev() {
         let next = ((word >> i) & 1 == 1) ^ ((crc >> 14) & 1 == 1);
         crc = (crc << 1) & 0x7FFF;
         if next {
             crc ^= 0x4599;
         }
     }
+    for k in (0..(n - lead) / 8).rev() {
+        let byte = ((word >> (8 * k)) & 0xFF) as u16;
+        crc = ((crc << 8) & 0x7FFF) ^ CRC15_TABLE[usize::from(((crc >> 7) ^ byte) & 0xFF)];
+    }
     crc
 }
+
+/// The CRC-15 of each byte value, for [`crc15`]'s byte steps.
+const CRC15_TABLE: [u16; 256] = {
+    let mut t = [0u16; 256];
+    let mut v = 0;
+    while v < 256 {
+        let mut crc = (v as u16) << 7;
+        let mut i = 0;
+        while i < 8 {
+            crc = if crc & 0x4000 != 0 {
+                ((crc << 1) ^ 0x4599) & 0x7FFF
+            } else {
+                (crc << 1) & 0x7FFF
+            };
+            i += 1;
+        }
+        t[v] = crc;
+        v += 1;
+    }
+    t
+};
 
 /// Load of one message type.
 #[derive(Debug, Clone, Copy)]
@@ -227,6 +265,30 @@ mod tests {
             data: [0xFF; 8],
         };
         assert!(frame_bits_exact(&ones) > frame_bits_nominal(8) + 12);
+    }
+
+    #[test]
+    fn the_byte_wise_crc_is_the_bit_by_bit_one() {
+        // the shift register of the specification, one bit at a time
+        let by_bits = |word: u128, n: u32| {
+            let mut crc = 0u16;
+            for i in (0..n).rev() {
+                let next = ((word >> i) & 1 == 1) ^ ((crc >> 14) & 1 == 1);
+                crc = (crc << 1) & 0x7FFF;
+                if next {
+                    crc ^= 0x4599;
+                }
+            }
+            crc
+        };
+        let mut x = 0x9E37_79B9_7F4A_7C15_u64;
+        for n in 0..=113 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let word = (u128::from(x) << 64 | u128::from(x.rotate_left(29))) & ((1u128 << n) - 1);
+            assert_eq!(crc15(word, n), by_bits(word, n), "{n} bits of {word:#x}");
+        }
     }
 
     #[test]

@@ -58,6 +58,9 @@ impl SolutionWatch {
     }
 }
 
+/// How often the solution watcher takes the frames queued for it.
+pub const WATCH_EVERY: Duration = Duration::from_millis(10);
+
 /// A socket on `iface` that receives nav's NAV_* frames only.
 pub fn solution_socket(iface: &str) -> Result<socketcan::CanSocket> {
     use socketcan::{CanSocket, Socket, SocketOptions};
@@ -68,8 +71,9 @@ pub fn solution_socket(iface: &str) -> Result<socketcan::CanSocket> {
     Ok(sock)
 }
 
-/// Listen to nav's NAV_* frames on `sock` until `stop`: a wake-up per burst of frames (an
-/// epoch's), each burst taken in one `recvmmsg`.
+/// Listen to nav's NAV_* frames on `sock` until `stop`. Nothing here needs a frame the moment
+/// it comes (every figure is on nav's sample count): the watcher takes what has queued every
+/// [`WATCH_EVERY`] in `recvmmsg` batches, in a socket buffer large enough for many times that.
 pub fn watch_solution(
     sock: socketcan::CanSocket,
     iface: &str,
@@ -79,21 +83,36 @@ pub fn watch_solution(
     let mut w = SolutionWatch::default();
     let mut last_seq: Option<u8> = None;
     let fd = sock.as_raw_fd();
+    if let Err(e) = wire::set_rcvbuf(fd, 1 << 20) {
+        tracing::warn!(interface = iface, "the solution watcher's receive buffer: {e}");
+    }
     let mut got = Vec::with_capacity(wire::BATCH);
-    while !stop.load(Ordering::Relaxed) {
+    // (a last reading once told to stop: what nav sent before it stopped)
+    let mut last = false;
+    while !last {
+        last = stop.load(Ordering::Relaxed);
         wire::wait_readable(fd, Duration::from_millis(50));
-        got.clear();
-        match wire::recv_batch(fd, &mut got, wire::BATCH) {
-            Ok(_) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            // the interface was taken down (a fault of the matrix): reported once, go on
-            Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => w.link_down_errors += 1,
-            Err(e) => return Err(e).with_context(|| format!("reading NAV frames on {iface}")),
+        loop {
+            got.clear();
+            let n = match wire::recv_batch(fd, &mut got, wire::BATCH) {
+                Ok(n) => n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                // the interface was taken down (a fault of the matrix): reported once, go on
+                Err(e) if e.raw_os_error() == Some(libc::ENETDOWN) => {
+                    w.link_down_errors += 1;
+                    0
+                }
+                Err(e) => return Err(e).with_context(|| format!("reading NAV frames on {iface}")),
+            };
+            for f in got.drain(..) {
+                w.frames += 1;
+                watch_frame(&mut w, &mut last_seq, f.ok());
+            }
+            if n < wire::BATCH {
+                break;
+            }
         }
-        for f in got.drain(..) {
-            w.frames += 1;
-            watch_frame(&mut w, &mut last_seq, f.ok());
-        }
+        std::thread::sleep(WATCH_EVERY);
     }
     Ok(w)
 }
