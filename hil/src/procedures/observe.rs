@@ -84,7 +84,10 @@ pub fn watch_solution(
     let mut last_seq: Option<u8> = None;
     let fd = sock.as_raw_fd();
     if let Err(e) = wire::set_rcvbuf(fd, 1 << 20) {
-        tracing::warn!(interface = iface, "the solution watcher's receive buffer: {e}");
+        tracing::warn!(
+            interface = iface,
+            "the solution watcher's receive buffer: {e}"
+        );
     }
     let mut got = Vec::with_capacity(wire::BATCH);
     // (a last reading once told to stop: what nav sent before it stopped)

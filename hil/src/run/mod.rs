@@ -377,13 +377,8 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
             crate::status::line(l);
         }
     }
-    let (nav_json, killed) = read_summary(
-        s,
-        opts,
-        &setup.nav_cfg,
-        killed_at.map(|at| (at, solution.last_sample)),
-        nav_exit,
-    )?;
+    let kill = killed_at.map(|at| (at, solution.last_sample));
+    let (nav_json, killed) = read_summary(s, opts, &setup.nav_cfg, kill, nav_exit)?;
     phases.end("summary");
     let ended = Ended {
         bus,
