@@ -73,7 +73,7 @@ pub fn solution_socket(iface: &str) -> Result<socketcan::CanSocket> {
 
 /// Listen to nav's NAV_* frames on `sock` until `stop`. Nothing here needs a frame the moment
 /// it comes (every figure is on nav's sample count): the watcher takes what has queued every
-/// [`WATCH_EVERY`] in `recvmmsg` batches, in a socket buffer large enough for many times that.
+/// [`WATCH_EVERY`] in `recvmmsg` batches, from a socket buffer of 8 MiB (seconds of frames).
 pub fn watch_solution(
     sock: socketcan::CanSocket,
     iface: &str,
@@ -83,7 +83,7 @@ pub fn watch_solution(
     let mut w = SolutionWatch::default();
     let mut last_seq: Option<u8> = None;
     let fd = sock.as_raw_fd();
-    if let Err(e) = wire::set_rcvbuf(fd, 1 << 20) {
+    if let Err(e) = wire::set_rcvbuf(fd, 8 << 20) {
         tracing::warn!(
             interface = iface,
             "the solution watcher's receive buffer: {e}"
