@@ -2,27 +2,26 @@
 
 use super::*;
 
-/// The CAN interface and its traffic: the link down and up, a flood of foreign frames, an overloaded bus, frames of a bad length.
+/// The CAN interface: the link down and up.
 pub(super) fn interface() -> Vec<FaultCase> {
-    vec![
-        FaultCase {
-            name: "can-interface-down-up",
-            base: Base::Imu,
-            injected: "the CAN interface taken down at 3 s of simulated time and brought back up at 4 s (the scheduler switches it between two samples: the frames of that second are written to a downed interface)",
-            expected: "nav keeps running through it: the interface error counted (on a read or a send), exactly the outage's samples counted missing, every frame the emulator lost among them, data taken again when it is back",
-            at_s: 3.0,
-            inject: |s, o| {
-                // long enough to see the data come back
-                s.duration_s = 10.0;
-                o.link_downs = vec![[3.0, 4.0]];
-            },
-            judge: |r, _| {
-                let i = &r.nav.imu;
-                let lost = r.tx.lost_iface_down;
-                // the samples due in [3 s, 4 s) (one either way: where a sample's time falls
-                // on the window's edges)
-                let due = r.scenario.imu.rate_hz;
-                let pass = survived(r)
+    vec![FaultCase {
+        name: "can-interface-down-up",
+        base: Base::Imu,
+        injected: "the CAN interface taken down at 3 s of simulated time and brought back up at 4 s (the scheduler switches it between two samples: the frames of that second are written to a downed interface)",
+        expected: "nav keeps running through it: the interface error counted (on a read or a send), exactly the outage's samples counted missing, every frame the emulator lost among them, data taken again when it is back",
+        at_s: 3.0,
+        inject: |s, o| {
+            // long enough to see the data come back
+            s.duration_s = 10.0;
+            o.link_downs = vec![[3.0, 4.0]];
+        },
+        judge: |r, _| {
+            let i = &r.nav.imu;
+            let lost = r.tx.lost_iface_down;
+            // the samples due in [3 s, 4 s) (one either way: where a sample's time falls
+            // on the window's edges)
+            let due = r.scenario.imu.rate_hz;
+            let pass = survived(r)
                     && (i.missing_samples as f64 - due).abs() <= 1.0
                     && lost >= i.missing_samples
                     // the socket reports the outage once, to a read or to a send, whichever
@@ -30,19 +29,24 @@ pub(super) fn interface() -> Vec<FaultCase> {
                     && r.nav.read_errors + r.nav.solution.send_errors + r.nav.command_send_errors
                         >= 1
                     && ran_to_end(r);
-                verdict(
-                    pass,
-                    format!(
-                        "frames lost while down {lost}, samples missing {} (due in the outage {due}), read errors {}, solution send errors {}, last sample at {:.2} s",
-                        i.missing_samples,
-                        r.nav.read_errors,
-                        r.nav.solution.send_errors,
-                        r.nav.last_sample.map_or(0.0, |k| imu_time(r, k))
-                    ),
-                    None,
-                )
-            },
+            verdict(
+                pass,
+                format!(
+                    "frames lost while down {lost}, samples missing {} (due in the outage {due}), read errors {}, solution send errors {}, last sample at {:.2} s",
+                    i.missing_samples,
+                    r.nav.read_errors,
+                    r.nav.solution.send_errors,
+                    r.nav.last_sample.map_or(0.0, |k| imu_time(r, k))
+                ),
+                None,
+            )
         },
+    }]
+}
+
+/// The bus's traffic: a flood of foreign frames, an overloaded bus, frames of a bad length.
+pub(super) fn traffic() -> Vec<FaultCase> {
+    vec![
         FaultCase {
             name: "foreign-frame-flood",
             base: Base::Imu,

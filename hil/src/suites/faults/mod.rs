@@ -143,10 +143,11 @@ const COUNTER_JUMP: u64 = 30_000;
 
 /// The matrix, in table order.
 pub fn matrix() -> Vec<FaultCase> {
-    let groups: [fn() -> Vec<FaultCase>; 8] = [
+    let groups: [fn() -> Vec<FaultCase>; 9] = [
         imu::frames,
         imu::sensor,
         bus::interface,
+        bus::traffic,
         physical::cases,
         bus::nav_process,
         gps::stream,
