@@ -235,7 +235,12 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                 };
                 read_errors += on_frame(f, stamps.socket.and_then(epoch_ns), &mut watch, &mut batch, &mut pipeline, &mut shell, &mut out).await?;
             }
-            _ = tick.tick() => watch.check(&mut pipeline, &mut shell, &mut out).await?,
+            _ = tick.tick() => {
+                watch.check(&mut pipeline, &mut shell, &mut out).await?;
+                if let Some(r) = shell.recorder {
+                    r.ship_due();
+                }
+            }
         }
     }
     let ended = Ended {
@@ -314,7 +319,7 @@ async fn on_frame(
     }
     take_frames(batch, pipeline, shell, out).await?;
     if let Some(r) = shell.recorder {
-        r.ship();
+        r.ship_due();
     }
     if pipeline.gyro_frames() > watch.gyro_frames {
         watch.gyro_frames = pipeline.gyro_frames();

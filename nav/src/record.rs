@@ -111,11 +111,12 @@ pub enum RecordError {
 }
 
 /// Handle to the recorder thread. Records queue up on the caller's side and go to the writer
-/// thread in batches ([`Recorder::ship`]): one hand-over (and at most one wake-up of the
-/// writer) per batch of received frames rather than per record.
+/// thread in batches ([`Recorder::ship_due`], [`Recorder::ship`]): one hand-over (and at most
+/// one wake-up of the writer) every [`SHIP_AFTER`] rather than per record or per batch of
+/// received frames (a bench free-running at x1 hands nav a batch every millisecond).
 pub struct Recorder {
     tx: Option<mpsc::Sender<Vec<Record>>>,
-    pending: std::sync::Mutex<Vec<Record>>,
+    pending: std::sync::Mutex<Pending>,
     handle: Option<JoinHandle<Result<u64, RecordError>>>,
     path: PathBuf,
 }
@@ -214,29 +215,49 @@ impl Recorder {
             })?;
         Ok(Self {
             tx: Some(tx),
-            pending: std::sync::Mutex::new(Vec::with_capacity(SHIP_EVERY)),
+            pending: std::sync::Mutex::new(Pending {
+                records: Vec::with_capacity(SHIP_EVERY),
+                since: None,
+            }),
             handle: Some(handle),
             path: path.into(),
         })
     }
 
     /// Queue a record (never blocks the caller); it goes to the writer with the next
-    /// [`Recorder::ship`], or when [`SHIP_EVERY`] records are waiting.
+    /// [`Recorder::ship`] or [`Recorder::ship_due`], or when [`SHIP_EVERY`] records are waiting.
     pub fn send(&self, r: Record) {
         let full = {
             let mut p = self.pending.lock().unwrap_or_else(|e| e.into_inner());
-            p.push(r);
-            p.len() >= SHIP_EVERY
+            p.since.get_or_insert_with(Instant::now);
+            p.records.push(r);
+            p.records.len() >= SHIP_EVERY
         };
         if full {
             self.ship();
         }
     }
 
-    /// Hand the queued records to the writer thread (the caller does this once per batch of
-    /// work; never blocks).
+    /// Hand the queued records to the writer thread once the oldest has waited [`SHIP_AFTER`]
+    /// (the caller does this once per batch of work, and on a timer when work may stop; never
+    /// blocks).
+    pub fn ship_due(&self) {
+        let due = {
+            let p = self.pending.lock().unwrap_or_else(|e| e.into_inner());
+            p.since.is_some_and(|t| t.elapsed() >= SHIP_AFTER)
+        };
+        if due {
+            self.ship();
+        }
+    }
+
+    /// Hand the queued records to the writer thread now (never blocks).
     pub fn ship(&self) {
-        let batch = std::mem::take(&mut *self.pending.lock().unwrap_or_else(|e| e.into_inner()));
+        let batch = {
+            let mut p = self.pending.lock().unwrap_or_else(|e| e.into_inner());
+            p.since = None;
+            std::mem::take(&mut p.records)
+        };
         if let (false, Some(tx)) = (batch.is_empty(), &self.tx) {
             let _ = tx.send(batch);
         }
@@ -252,6 +273,12 @@ impl Recorder {
             None => Ok(0),
         }
     }
+}
+
+/// Records queued on the caller's side, and since when the oldest has waited.
+struct Pending {
+    records: Vec<Record>,
+    since: Option<Instant>,
 }
 
 /// The channel ids of one part of a recording.
@@ -430,6 +457,13 @@ pub const ROTATE_CHUNKS: u64 = 4096;
 /// Records queued on the caller's side before they go to the writer without waiting for
 /// [`Recorder::ship`].
 pub const SHIP_EVERY: usize = 1024;
+
+/// How long a record may wait on the caller's side before [`Recorder::ship_due`] hands it to
+/// the writer: in a software-emulated guest each wake-up of the writer costs tens of
+/// microseconds, and one per millisecond took a quarter of a free-running drill's CPU. What a
+/// nav killed outright loses grows by at most this much (nav's loop ships on its 100 ms tick
+/// too, when no frame comes).
+pub const SHIP_AFTER: std::time::Duration = std::time::Duration::from_millis(50);
 
 /// How often the writer closes its chunk and writes it out (wall time): what a nav killed
 /// outright (SIGKILL, power loss) loses from its recording.

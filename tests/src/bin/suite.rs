@@ -139,6 +139,10 @@ struct TestResult {
     outcome: String,
     /// Wall time, s.
     time_s: f64,
+    /// When it started (s since the Unix epoch, by the clock of the machine it ran on): the
+    /// suite's timeline, which tests ran beside which.
+    #[serde(default)]
+    started_unix_s: f64,
     /// CPU time of its process and every child it waited for, s.
     cpu_s: f64,
     /// Its output.
@@ -484,6 +488,7 @@ fn run_one(
         name: test.into(),
         outcome: "failed".into(),
         time_s: 0.0,
+        started_unix_s: 0.0,
         cpu_s: 0.0,
         log: log.clone(),
         message: String::new(),
@@ -533,6 +538,9 @@ fn run_one(
         }
     }
     let start = Instant::now();
+    r.started_unix_s = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64());
     let child = match c.spawn() {
         Ok(c) => c,
         Err(e) => {
