@@ -172,9 +172,9 @@ fn free_drill(iface: &str, out: &std::path::Path, extra: &[&str]) -> (Value, i32
 /// `hil drill north-finding --free`: the bench free-running at x1, judging the device under
 /// test by what it sends on the bus, by the DBC only. Our nav (the default device) lands within
 /// 3 of the sigma it sends (NAV_HGT) at the sample its NAV_TIME names, its latency from that
-/// sample on the bus is measured, every frame is within the DBC, its tags go forward. A free
-/// drive is scored against truth along the lap. Should the host not keep real time, the bench
-/// says so (exit 3) and the test does not judge the device.
+/// sample on the bus is measured, every frame is within the DBC, its tags go forward. Should
+/// the host not keep real time, the bench says so (exit 3) and the test does not judge the
+/// device.
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn a_free_running_drill_judges_the_device_by_the_dbc() {
@@ -210,8 +210,16 @@ fn a_free_running_drill_judges_the_device_by_the_dbc() {
         assert_eq!(bench, ["turntable", "imu", "gps"]);
         assert!(r["commands"].as_u64().unwrap() >= 8);
     }
-    // a free drive: scored against truth at the samples its NAV_TIMEs name, and its time
-    // tags against its headings through the lap's turns
+}
+
+/// `hil run --free`: a drive free-running at x1, our nav scored against truth at the samples
+/// its NAV_TIMEs name, and its time tags against its headings through the lap's turns. Should
+/// the host not keep real time, the bench says so (exit 3) and the test does not judge the
+/// device.
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn a_free_running_drive_is_scored_against_truth_at_the_samples_nav_names() {
+    let dir = tempfile::tempdir().unwrap();
     let (r, code) = hil_json(
         &[
             "run",
@@ -223,7 +231,7 @@ fn a_free_running_drill_judges_the_device_by_the_dbc() {
             "--latency-budget-ms",
             "1000",
             "--iface",
-            "vcan-free2",
+            "vcan-free4",
             "--json",
             "--out",
         ],

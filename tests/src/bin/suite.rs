@@ -425,20 +425,20 @@ fn announce(r: &TestResult) {
     let _ = writeln!(
         e,
         "{:<6} {:>7.1} s {:>5.0} % CPU  {}::{}",
-        if r.outcome == "passed" {
-            "ok"
-        } else {
-            "FAILED"
+        match r.outcome.as_str() {
+            "passed" => "ok",
+            "skipped" => "SKIP",
+            _ => "FAILED",
         },
         r.time_s,
         cpu,
         r.binary,
         r.name
     );
-    if r.outcome == "passed" && !r.message.is_empty() {
+    if r.outcome != "failed" && !r.message.is_empty() {
         let _ = writeln!(e, "       ({})", r.message);
     }
-    if r.outcome != "passed" {
+    if r.outcome == "failed" {
         let text = std::fs::read_to_string(&r.log).unwrap_or_default();
         let lines: Vec<&str> = text.lines().collect();
         let from = lines.len().saturating_sub(80);
@@ -553,6 +553,12 @@ fn run_one(
     r.cpu_s = cpu;
     let text = std::fs::read_to_string(&log).unwrap_or_default();
     match status {
+        // a test that found what it needs absent (../shared's captures, the guest's Python)
+        // returns early saying so: skipped, with its reason, not passed
+        Some(0) if text.contains("test result: ok. 1 passed") && skip_reason(&text).is_some() => {
+            r.outcome = "skipped".into();
+            r.message = skip_reason(&text).unwrap_or_default();
+        }
         Some(0) if text.contains("test result: ok. 1 passed") => {
             r.outcome = "passed".into();
             // a free-running test whose host could not keep real time passes without judging
@@ -573,6 +579,14 @@ fn run_one(
         Some(code) => r.message = failure_line(&text, code),
     }
     r
+}
+
+/// Why a test that passed skipped its work: the rest of its first line with `SKIPPED: `.
+fn skip_reason(text: &str) -> Option<String> {
+    text.lines().find_map(|l| {
+        l.split_once("SKIPPED: ")
+            .map(|(_, why)| why.trim().to_string())
+    })
 }
 
 /// The line that says why a test failed: its panic's message, else its exit status.
@@ -890,5 +904,15 @@ mod tests {
         );
         assert_eq!(failure_line("", 137), "killed by signal 9");
         assert_eq!(failure_line("", 1), "exit status 1");
+    }
+
+    #[test]
+    fn a_test_that_says_it_skipped_has_its_reason() {
+        let t = "running 1 test\ntest free::x ... SKIPPED: ../shared/testdata is absent\nok\n\ntest result: ok. 1 passed; 0 failed\n";
+        assert_eq!(
+            skip_reason(t).as_deref(),
+            Some("../shared/testdata is absent")
+        );
+        assert_eq!(skip_reason("test result: ok. 1 passed"), None);
     }
 }
