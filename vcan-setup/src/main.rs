@@ -36,6 +36,11 @@ enum Cmd {
         /// Host folder to mount in the guest at the same path (repeatable); default: the current folder.
         #[arg(long = "share")]
         shares: Vec<PathBuf>,
+        /// Host folder to mount in the guest at the same path read-only, its files cached in
+        /// the guest (repeatable): what does not change while the command runs, such as an
+        /// interpreter and its packages. Natively: nothing to do.
+        #[arg(long = "share-ro")]
+        shares_ro: Vec<PathBuf>,
         /// Always use the QEMU guest, even where the host kernel has CAN.
         #[arg(long)]
         vm: bool,
@@ -152,6 +157,7 @@ fn real_main() -> Result<()> {
         }
         Cmd::Run {
             shares,
+            shares_ro,
             vm,
             memory_mb,
             timeout_s,
@@ -171,6 +177,7 @@ fn real_main() -> Result<()> {
             };
             let opts = VmOptions {
                 shares,
+                shares_ro,
                 memory_mb,
                 timeout: Duration::from_secs(timeout_s),
                 forward_tcp: forward,

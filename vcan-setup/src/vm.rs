@@ -55,6 +55,11 @@ const READY: &str = "vcan-setup-guest: ready";
 pub struct VmOptions {
     /// Host folders mounted in the guest at the same paths (read-write).
     pub shares: Vec<PathBuf>,
+    /// Host folders mounted in the guest at the same paths read-only, their files cached in
+    /// the guest (9p `cache=loose`): what does not change while the command runs, such as an
+    /// interpreter and its packages, which it then opens without a round trip to this machine
+    /// for every file.
+    pub shares_ro: Vec<PathBuf>,
     /// Working directory of the command (must be inside a share); default the first share.
     pub cwd: Option<PathBuf>,
     /// Extra environment for the command.
@@ -80,6 +85,7 @@ impl Default for VmOptions {
     fn default() -> Self {
         Self {
             shares: Vec::new(),
+            shares_ro: Vec::new(),
             cwd: None,
             env: Vec::new(),
             memory_mb: 2048,
@@ -355,7 +361,7 @@ fn build_initramfs(
     pre: &VmPrereqs,
     mods: &[PathBuf],
     execs: &[PathBuf],
-    shares: &[PathBuf],
+    shares: &[Share],
     net: bool,
 ) -> Result<Vec<u8>> {
     let mut a = Archive::default();
@@ -409,9 +415,10 @@ fn build_initramfs(
     }
     let mut mounts = String::new();
     for (i, s) in shares.iter().enumerate() {
-        let p = sh_quote(&s.to_string_lossy());
+        let p = sh_quote(&s.path.to_string_lossy());
+        let how = if s.ro { "ro,cache=loose" } else { "cache=none" };
         mounts.push_str(&format!(
-            "mkdir -p {p} && mount -t 9p -o trans=virtio,version=9p2000.L,msize=512000,cache=none share{i} {p} || echo 'vcan-setup-guest: cannot mount share {i}'\n"
+            "mkdir -p {p} && mount -t 9p -o trans=virtio,version=9p2000.L,msize=512000,{how} share{i} {p} || echo 'vcan-setup-guest: cannot mount share {i}'\n"
         ));
     }
     let init = format!(
@@ -540,19 +547,31 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
     })
 }
 
-/// The host folders the guest mounts, each once, parents before children (nested shares mount
-/// on top).
-fn guest_shares(opts: &VmOptions) -> Result<Vec<PathBuf>> {
-    let mut shares: Vec<PathBuf> = Vec::new();
-    for s in &opts.shares {
+/// A host folder the guest mounts.
+struct Share {
+    path: PathBuf,
+    /// Read-only, its files cached in the guest ([`VmOptions::shares_ro`]).
+    ro: bool,
+}
+
+/// The host folders the guest mounts, each once (read-write where it is given both ways),
+/// parents before children (nested shares mount on top).
+fn guest_shares(opts: &VmOptions) -> Result<Vec<Share>> {
+    let mut shares: Vec<Share> = Vec::new();
+    for (s, ro) in opts
+        .shares
+        .iter()
+        .map(|s| (s, false))
+        .chain(opts.shares_ro.iter().map(|s| (s, true)))
+    {
         let c = s
             .canonicalize()
             .map_err(io_ctx(format!("share {}", s.display())))?;
-        if !shares.contains(&c) {
-            shares.push(c);
+        if !shares.iter().any(|x| x.path == c) {
+            shares.push(Share { path: c, ro });
         }
     }
-    shares.sort_by_key(|p| p.components().count());
+    shares.sort_by_key(|s| s.path.components().count());
     Ok(shares)
 }
 
@@ -580,16 +599,16 @@ fn guest_executables(cmd: &[String], prog: &str, opts: &VmOptions) -> Vec<PathBu
 
 /// The guest's command script: into the working folder (one under a share), the environment
 /// passed through, then the command.
-fn guest_script(cmd: &[String], opts: &VmOptions, shares: &[PathBuf]) -> String {
+fn guest_script(cmd: &[String], opts: &VmOptions, shares: &[Share]) -> String {
     let cwd = opts
         .cwd
         .clone()
         .or_else(|| {
             std::env::current_dir()
                 .ok()
-                .filter(|d| shares.iter().any(|s| d.starts_with(s)))
+                .filter(|d| shares.iter().any(|s| d.starts_with(&s.path)))
         })
-        .or_else(|| shares.first().cloned())
+        .or_else(|| shares.first().map(|s| s.path.clone()))
         .unwrap_or_else(|| "/".into());
     let mut script = format!(
         "cd {} || exit 126\nexport HOME=/root TMPDIR=/tmp {GUEST_ENV}=1\n",
@@ -689,7 +708,7 @@ struct Launch<'a> {
     pre: &'a VmPrereqs,
     ctl: &'a Path,
     initrd: &'a Path,
-    shares: &'a [PathBuf],
+    shares: &'a [Share],
     opts: &'a VmOptions,
     kvm: bool,
     /// Give up (kill QEMU, `Launched::NoBoot`) when the guest is not up by then.
@@ -758,8 +777,9 @@ fn qemu_command(l: &Launch<'_>) -> Command {
     ));
     for (i, s) in shares.iter().enumerate() {
         q.arg("-virtfs").arg(format!(
-            "local,path={},mount_tag=share{i},security_model=none",
-            s.display()
+            "local,path={},mount_tag=share{i},security_model=none{}",
+            s.path.display(),
+            if s.ro { ",readonly=on" } else { "" }
         ));
     }
     if !opts.forward_tcp.is_empty() {
