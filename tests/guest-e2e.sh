@@ -7,7 +7,7 @@
 #     they take whatever CPU the rest leaves (the host runs its own stages meanwhile);
 #  3. beside them from the start (or, with WAIT_HOST=1, once the host says it is done:
 #     SUITE_DIR/host.done, or after 30 minutes), the free-running tests (tests/tests/free.rs)
-#     at normal priority, three at a time by default: their verdicts need a machine that keeps
+#     at normal priority, two at a time by default: their verdicts need a machine that keeps
 #     real time, and the lockstep tests only take what they leave. The Python device's two
 #     tests run first, alone, one after the other: one judges a latency budget set from its
 #     own first run, which a neighbour's load would move, and a Python device (the costliest
