@@ -552,33 +552,43 @@ fn run_one(
     r.time_s = start.elapsed().as_secs_f64();
     r.cpu_s = cpu;
     let text = std::fs::read_to_string(&log).unwrap_or_default();
+    classify(&mut r, status, &text, timeout);
+    r
+}
+
+/// A test's outcome and its line of explanation from its exit `status` (none: killed after
+/// `timeout`) and its output `text`.
+fn classify(r: &mut TestResult, status: Option<i32>, text: &str, timeout: Duration) {
+    let ran = text.contains("test result: ok. 1 passed");
     match status {
         // a test that found what it needs absent (../shared's captures, the guest's Python)
         // returns early saying so: skipped, with its reason, not passed
-        Some(0) if text.contains("test result: ok. 1 passed") && skip_reason(&text).is_some() => {
-            r.outcome = "skipped".into();
-            r.message = skip_reason(&text).unwrap_or_default();
-        }
-        Some(0) if text.contains("test result: ok. 1 passed") => {
-            r.outcome = "passed".into();
-            // a free-running test whose host could not keep real time passes without judging
-            // (tests/tests/free.rs): said, so that a CI server shows what was not judged
-            let unjudged = text.matches("; no verdict on ").count();
-            if unjudged > 0 {
-                r.message = format!(
-                    "{unjudged} of its runs gave no verdict: the machine could not keep real time"
-                );
+        Some(0) if ran => match skip_reason(text) {
+            Some(why) => {
+                r.outcome = "skipped".into();
+                r.message = why;
             }
-        }
+            None => {
+                r.outcome = "passed".into();
+                // a free-running test whose host could not keep real time passes without
+                // judging (tests/tests/free.rs): said, so that a CI server shows what was not
+                // judged
+                let unjudged = text.matches("; no verdict on ").count();
+                if unjudged > 0 {
+                    r.message = format!(
+                        "{unjudged} of its runs gave no verdict: the machine could not keep real time"
+                    );
+                }
+            }
+        },
         Some(0) if text.contains(" 1 ignored") => {
             r.outcome = "skipped".into();
             r.message = "ignored".into();
         }
         Some(0) => r.message = "the test binary ran no test of that name".into(),
         None => r.message = format!("still running after {} s: killed", timeout.as_secs()),
-        Some(code) => r.message = failure_line(&text, code),
+        Some(code) => r.message = failure_line(text, code),
     }
-    r
 }
 
 /// Why a test that passed skipped its work: the rest of its first line with `SKIPPED: `.
@@ -914,5 +924,30 @@ mod tests {
             Some("../shared/testdata is absent")
         );
         assert_eq!(skip_reason("test result: ok. 1 passed"), None);
+        // and the runner reports it so, not as passed
+        let mut r = TestResult {
+            suite: "s".into(),
+            binary: "b".into(),
+            name: "x".into(),
+            outcome: "failed".into(),
+            time_s: 0.0,
+            started_unix_s: 0.0,
+            cpu_s: 0.0,
+            log: PathBuf::new(),
+            message: String::new(),
+            junit_dir: PathBuf::new(),
+        };
+        classify(&mut r, Some(0), t, Duration::from_secs(1));
+        assert_eq!(
+            (r.outcome.as_str(), r.message.as_str()),
+            ("skipped", "../shared/testdata is absent")
+        );
+        classify(
+            &mut r,
+            Some(0),
+            "test result: ok. 1 passed",
+            Duration::from_secs(1),
+        );
+        assert_eq!(r.outcome, "passed");
     }
 }
