@@ -20,19 +20,38 @@ fn browser() -> PathBuf {
 }
 
 /// Run the browser on `page` with `args`; returns (stdout, stderr).
+/// A browser that crashed (killed by a signal: Chromium segfaulted once on a loaded host) is
+/// run once more on the same page; a page that crashes it twice fails.
 fn chromium(page: &Path, args: &[&str]) -> (String, String) {
-    let o = Command::new(browser())
-        .args([
-            "--no-sandbox",
-            "--disable-gpu",
-            "--enable-logging=stderr",
-            "--v=0",
-            "--window-size=1100,2600",
-        ])
-        .args(args)
-        .arg(format!("file://{}", page.display()))
-        .output()
-        .expect("the browser runs");
+    let run = || {
+        Command::new(browser())
+            .args([
+                "--no-sandbox",
+                "--disable-gpu",
+                "--enable-logging=stderr",
+                "--v=0",
+                "--window-size=1100,2600",
+            ])
+            .args(args)
+            .arg(format!("file://{}", page.display()))
+            .output()
+            .expect("the browser runs")
+    };
+    let mut o = run();
+    if o.status.code().is_none()
+        || String::from_utf8_lossy(&o.stderr).contains("Segmentation fault")
+    {
+        eprintln!(
+            "{}: the browser crashed ({}), run once more: {}",
+            page.display(),
+            o.status,
+            String::from_utf8_lossy(&o.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+        );
+        o = run();
+    }
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     (
         String::from_utf8_lossy(&o.stdout).into_owned(),

@@ -371,6 +371,16 @@ fn an_independent_python_device_is_judged_by_the_same_checks() {
     let (pass, detail) = check_named(&r, "time tags agree with the data");
     assert!(pass, "{detail}");
     let p99 = r["latency"]["p99_ms"].as_f64().unwrap();
+    let p50 = r["latency"]["p50_ms"].as_f64().unwrap();
+    // the budget half judges 50 ms more on every solution: where the honest run's own tail is
+    // wider than that (a slow or loaded host: p50 3.5 ms, p99 170 ms seen in the guest at x1.6),
+    // its p99 measures the machine, not the device, and a second run's can land 50 ms lower
+    if p99 - p50 > 50.0 {
+        eprintln!(
+            "the honest run's latency tail is wider than the 50 ms to detect (p50 {p50:.1} ms, p99 {p99:.1} ms); no verdict on the latency budget"
+        );
+        return;
+    }
     // 50 ms more on every solution, against a budget 25 ms above the honest p99
     let budget = (p99 + 25.0).max(30.0);
     let Some((r, code)) = python_drill("vcan-py", "--delay 0.05", budget) else {
