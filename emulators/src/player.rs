@@ -86,21 +86,40 @@ struct Follow {
     confirmed: Option<u64>,
     /// A NAV_TIME with the imu_timeout bit came since this was last cleared.
     timeout_seen: bool,
+    /// In lockstep: a watchdog report no silence called for is counted as starvation.
+    following: bool,
+    /// Watchdog reports the silences call for and nav has not yet sent.
+    timeouts_owed: u64,
 }
 
 impl Follow {
-    /// Nothing sent, nothing confirmed yet.
-    fn new() -> Self {
+    /// Nothing sent, nothing confirmed yet; `following` nav in lockstep.
+    fn new(following: bool) -> Self {
         Self {
             sent: VecDeque::with_capacity(4096),
             confirmed: None,
             timeout_seen: false,
+            following,
+            timeouts_owed: 0,
         }
     }
 
-    /// The sample a NAV_TIME names: the newest sent whose counter its count matches.
-    fn on_nav_time(&mut self, sample_count: u32, ls: &mut LockstepStats) {
+    /// The sample a NAV_TIME names: the newest sent whose counter its count matches. Its
+    /// imu_timeout bit where no silence called for it (in lockstep) is counted as
+    /// [`LockstepStats::starved`].
+    fn on_nav_time(&mut self, sample_count: u32, imu_timeout: bool, ls: &mut LockstepStats) {
         ls.nav_times += 1;
+        if imu_timeout {
+            self.timeout_seen = true;
+            if self.timeouts_owed > 0 {
+                self.timeouts_owed -= 1;
+            } else if self.following {
+                ls.starved += 1;
+                tracing::warn!(
+                    "nav's watchdog reported an IMU stop where the recording has none: the player was starved of CPU for longer than the watchdog, and the replay is no longer reproducible"
+                );
+            }
+        }
         let c = sample_count as u16;
         if let Some(&(k, _)) = self.sent.iter().rev().find(|s| s.1 == c)
             && self.confirmed.is_none_or(|p| k > p)
@@ -128,7 +147,7 @@ pub fn play(
     st.lockstep.enabled = opts.lockstep.is_some();
     let period = 1.0 / opts.imu_rate_hz.max(1e-9);
     let mut clock = SimClock::start(opts.speed);
-    let mut follow = Follow::new();
+    let mut follow = Follow::new(opts.lockstep.is_some());
     let mut lockstep = opts.lockstep;
     let mut outbox: Vec<RawFrame> = Vec::with_capacity(wire::BATCH);
     let flush = |outbox: &mut Vec<RawFrame>, st: &mut PlayStats| -> Result<(), BusError> {
@@ -162,6 +181,7 @@ pub fn play(
                             if !ok {
                                 st.lockstep.stalls += 1;
                                 lockstep = None;
+                                follow.following = false;
                                 tracing::warn!(
                                     interface = iface,
                                     "nav confirmed no IMU sample past {:?} for {} s: lockstep off, the replay is no longer reproducible",
@@ -255,6 +275,7 @@ fn hold_silence(
     st.silences += 1;
     // nav's watchdog fires again here: nothing more goes out until it has
     follow.timeout_seen = false;
+    follow.timeouts_owed += 1;
     let since = Instant::now();
     while !follow.timeout_seen && since.elapsed() < silence && !stop.load(Ordering::Relaxed) {
         crate::bus::scheduler::wait_readable(sock, Duration::from_millis(2));
@@ -307,8 +328,7 @@ fn read_nav(
 ) -> Result<(), BusError> {
     crate::bus::scheduler::drain(sock, iface, |f| {
         if let Some(Ok(Message::NavTime(nt))) = f.map(|f| Message::decode(&f)) {
-            follow.timeout_seen |= nt.health.imu_timeout;
-            follow.on_nav_time(nt.sample_count, ls);
+            follow.on_nav_time(nt.sample_count, nt.health.imu_timeout, ls);
         }
     })?;
     Ok(())
@@ -322,22 +342,36 @@ mod tests {
     /// older or unknown count changes nothing.
     #[test]
     fn nav_time_confirms_the_newest_sample_with_its_counter() {
-        let mut f = Follow {
-            sent: VecDeque::with_capacity(8),
-            confirmed: None,
-            timeout_seen: false,
-        };
+        let mut f = Follow::new(true);
         let mut ls = LockstepStats::default();
         for (k, c) in [(0u64, 65534u16), (1, 65535), (2, 0), (3, 1)] {
             f.sent.push_back((k, c));
         }
-        f.on_nav_time(0x0001_0000, &mut ls);
+        f.on_nav_time(0x0001_0000, false, &mut ls);
         assert_eq!(f.confirmed, Some(2));
-        f.on_nav_time(65535, &mut ls);
+        f.on_nav_time(65535, false, &mut ls);
         assert_eq!(f.confirmed, Some(2), "an older sample does not go back");
-        f.on_nav_time(7, &mut ls);
+        f.on_nav_time(7, false, &mut ls);
         assert_eq!(f.confirmed, Some(2), "a count never sent is ignored");
-        f.on_nav_time(0x0001_0001, &mut ls);
+        f.on_nav_time(0x0001_0001, false, &mut ls);
         assert_eq!((f.confirmed, ls.nav_times), (Some(3), 4));
+    }
+
+    /// nav's watchdog report where the recording has a silence is the one owed; one where it
+    /// has none, in lockstep, is starvation; without lockstep the pace is the clock's and
+    /// nothing is counted.
+    #[test]
+    fn a_watchdog_report_no_silence_called_for_counts_as_starvation() {
+        let mut f = Follow::new(true);
+        let mut ls = LockstepStats::default();
+        f.timeouts_owed += 1;
+        f.on_nav_time(5, true, &mut ls);
+        assert_eq!((ls.starved, f.timeouts_owed, f.timeout_seen), (0, 0, true));
+        f.on_nav_time(6, false, &mut ls);
+        f.on_nav_time(7, true, &mut ls);
+        assert_eq!(ls.starved, 1, "a report no silence owed");
+        let mut free = Follow::new(false);
+        free.on_nav_time(7, true, &mut ls);
+        assert_eq!(ls.starved, 1, "not counted without lockstep");
     }
 }

@@ -90,6 +90,13 @@ pub struct LockstepStats {
     pub watchdog_wait_ms: u64,
     /// Times nav did not confirm within the stall limit (the run went on without lockstep).
     pub stalls: u64,
+    /// NAV_TIMEs with the imu_timeout bit where the stream had not stopped: nav's watchdog
+    /// fired because no frame reached it for its timeout of wall time while the bench was
+    /// sending (the bench or the kernel starved of CPU, not an IMU stop). The liveness event
+    /// takes a NAV_TIME of its own, so the run went on but no longer as its scenario alone
+    /// decides.
+    #[serde(default)]
+    pub starved: u64,
     /// Turntable commands placed in time by a NAV_TIME.
     pub placed_commands: u64,
     /// Turntable commands that arrived while lockstep was off (applied at the next sample).
@@ -393,6 +400,8 @@ struct NavSide {
     gps_rx: Option<u16>,
     /// A NAV_TIME with the imu_timeout bit came (since this was last cleared).
     timeout_seen: bool,
+    /// Watchdog reports the stream's stops call for and nav has not yet sent (one per hold).
+    timeouts_owed: u64,
     /// The receiver's bytes written so far, and the sample of the last epoch, until nav has
     /// confirmed them on the bus.
     owed: Option<(u64, u64)>,
@@ -409,6 +418,7 @@ impl NavSide {
             confirmed: None,
             gps_rx: None,
             timeout_seen: false,
+            timeouts_owed: 0,
             owed: None,
             ls: LockstepStats {
                 enabled: lockstep.is_some(),
@@ -471,6 +481,12 @@ impl NavSide {
                     placed,
                 } => {
                     self.ls.nav_times += 1;
+                    if imu_timeout && self.unowed_timeout() {
+                        tracing::warn!(
+                            interface = iface,
+                            "nav's watchdog reported an IMU stop after sample {sample}, where the stream had not stopped: the bench was starved of CPU for longer than the watchdog, and the run is no longer reproducible"
+                        );
+                    }
                     self.timeout_seen |= imu_timeout;
                     self.gps_rx = Some(gps_rx_bytes);
                     self.ls.placed_commands += placed;
@@ -486,6 +502,20 @@ impl NavSide {
                 FromNav::Unexpected => self.bad += 1,
             }
         })
+    }
+
+    /// A NAV_TIME with the imu_timeout bit came: true (and counted as [`LockstepStats::starved`])
+    /// when, in lockstep, no stop of the stream called for it.
+    fn unowed_timeout(&mut self) -> bool {
+        if self.follow.is_none() {
+            return false;
+        }
+        if self.timeouts_owed > 0 {
+            self.timeouts_owed -= 1;
+            return false;
+        }
+        self.ls.starved += 1;
+        true
     }
 
     /// nav has confirmed the receiver's bytes up to `written` (12 bits, as NAV_TIME carries
@@ -646,6 +676,7 @@ fn hold_for_watchdog(
 ) -> Result<(), CanTxError> {
     port.flush(nav)?;
     nav.timeout_seen = false;
+    nav.timeouts_owed += 1;
     let since = Instant::now();
     while !nav.timeout_seen && !stop.load(Ordering::Relaxed) {
         if since.elapsed() > stall {
@@ -849,4 +880,24 @@ fn outcome(
 pub(crate) fn wait_readable(sock: &CanSocket, timeout: Duration) {
     use std::os::fd::AsRawFd;
     wire::wait_readable(sock.as_raw_fd(), timeout);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each hold for nav's watchdog owes one report with the imu_timeout bit; a report beyond
+    /// those, in lockstep, is starvation (nav's watchdog saw no frame for its wall time while
+    /// the stream went on); without lockstep the clock paces the stream and nothing is counted.
+    #[test]
+    fn a_watchdog_report_no_stop_called_for_counts_as_starvation() {
+        let mut nav = NavSide::following(Some(Lockstep::default()));
+        nav.timeouts_owed += 1;
+        assert!(!nav.unowed_timeout(), "the stop's own report");
+        assert!(nav.unowed_timeout(), "one more");
+        assert_eq!((nav.ls.starved, nav.timeouts_owed), (1, 0));
+        let mut free = NavSide::following(None);
+        assert!(!free.unowed_timeout());
+        assert_eq!(free.ls.starved, 0);
+    }
 }

@@ -243,7 +243,7 @@ impl BusReplay {
     pub fn text(&self) -> String {
         let p = &self.play;
         let mut s = format!(
-            "put back {} frames ({} IMU samples) and {} GPS bytes in {} writes, {} silences, in {:.1} s (lockstep: {} waits, {} stalls)\n",
+            "put back {} frames ({} IMU samples) and {} GPS bytes in {} writes, {} silences, in {:.1} s (lockstep: {} waits, {} stalls{})\n",
             p.frames,
             p.samples,
             p.gps_bytes,
@@ -251,7 +251,8 @@ impl BusReplay {
             p.silences,
             self.wall_s,
             p.lockstep.waits,
-            p.lockstep.stalls
+            p.lockstep.stalls,
+            crate::report::starved_text(p.lockstep.starved)
         );
         s += &format!(
             "nav sent {} frames in the recording, {} on the replay: {}\n",

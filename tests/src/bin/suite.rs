@@ -580,6 +580,16 @@ fn classify(r: &mut TestResult, status: Option<i32>, text: &str, timeout: Durati
                         "{unjudged} of its runs gave no verdict: the machine could not keep real time"
                     );
                 }
+                // a lockstep run whose bench was starved past nav's watchdog, run again
+                let again = text.matches(e2e::STARVED_RERUN).count();
+                if again > 0 {
+                    if !r.message.is_empty() {
+                        r.message += "; ";
+                    }
+                    r.message += &format!(
+                        "{again} of its runs ran once more: the bench was starved of CPU past nav's watchdog"
+                    );
+                }
             }
         },
         Some(0) if text.contains(" 1 ignored") => {
@@ -951,5 +961,17 @@ mod tests {
         );
         // and nothing of the earlier verdict stays
         assert_eq!((r.outcome.as_str(), r.message.as_str()), ("passed", ""));
+        // a run done again because its bench was starved is said
+        let again = format!(
+            "1 watchdog report(s); {}: [..]\ntest result: ok. 1 passed",
+            e2e::STARVED_RERUN
+        );
+        classify(&mut r, Some(0), &again, Duration::from_secs(1));
+        assert_eq!(r.outcome, "passed");
+        assert!(
+            r.message.starts_with("1 of its runs ran once more"),
+            "{}",
+            r.message
+        );
     }
 }
