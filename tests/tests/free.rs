@@ -148,7 +148,59 @@ fn judged(r: &Value, code: i32) -> bool {
     for (name, pass, detail) in checks(r) {
         eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
     }
+    // a device started on this machine that fell seconds behind its data while the bench's own
+    // devices missed their times by tens of ms: the machine could not run it at real time (the
+    // guest below x1 beside two CPU hogs: the Python device's NAV_TIMEs 6.8 s late, the IMU
+    // emulator's p99 lateness 100 ms). On a machine that keeps its times, such a lag is judged.
+    let lag = r["latency"]["p50_ms"].as_f64().unwrap_or(0.0);
+    let late = bench_lateness_p99_ms(r);
+    eprintln!(
+        "the device's latency {lag:.1} ms (median); the bench's own lateness {late:.1} ms (p99)"
+    );
+    if lag > MACHINE_LAG_MS && late >= BENCH_LATE_MS {
+        eprintln!(
+            "the device's solutions {lag:.0} ms behind its data (median) while the bench's own devices were {late:.0} ms late (p99): this machine could not run it at real time; no verdict on the device"
+        );
+        return false;
+    }
     true
+}
+
+/// A device's median latency past which it has fallen behind real time, not merely answered
+/// late, ms.
+const MACHINE_LAG_MS: f64 = 1000.0;
+/// The bench's own lateness (p99 over its devices) from which the machine, not only the
+/// device, misses real time, ms.
+const BENCH_LATE_MS: f64 = 50.0;
+
+/// The largest p99 lateness of the bench's own devices in a free-running report, ms.
+fn bench_lateness_p99_ms(r: &Value) -> f64 {
+    r["bench"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|b| b["lateness"]["p99_ms"].as_f64())
+        .fold(0.0, f64::max)
+}
+
+/// The machine-lag rule of [`judged`] on the report of a red two-hog run (the guest below x1)
+/// and on one where the bench kept its times.
+#[test]
+fn a_device_run_late_on_a_late_machine_gets_no_verdict() {
+    let report = |lag: f64, late: f64| {
+        serde_json::json!({
+            "latency": {"p50_ms": lag},
+            "bench": [{"lateness": {"p99_ms": 29.6}}, {"lateness": {"p99_ms": late}}],
+            "checks": [],
+        })
+    };
+    assert!(!judged(&report(6788.2, 100.0), 1), "the machine was late");
+    assert!(
+        judged(&report(6788.2, 4.0), 1),
+        "the bench kept its times: judged"
+    );
+    assert!(judged(&report(3.5, 100.0), 0), "the device kept up: judged");
+    assert_eq!(bench_lateness_p99_ms(&report(0.0, 100.0)), 100.0);
 }
 
 /// The check named `name` of a report: (pass, detail).
