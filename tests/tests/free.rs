@@ -135,8 +135,9 @@ fn a_real_turntable_stand_in_turns_the_emulated_imu_in_a_free_drill() {
     assert_eq!(t["bad_frames"].as_u64(), Some(0), "{t}");
 }
 
-/// A free-running run's report: false (and why, said) when the host could not keep real time
-/// and the bench gave no verdict (exit 3); else its checks are shown and true.
+/// A free-running run's report: false (and why, said) when the host could not keep real time:
+/// the bench gave no verdict (exit 3), or the device fell behind on a machine late itself
+/// ([`machine_could_not`]); else its checks are shown and true.
 fn judged(r: &Value, code: i32) -> bool {
     if code == 3 {
         eprintln!(
@@ -148,27 +149,35 @@ fn judged(r: &Value, code: i32) -> bool {
     for (name, pass, detail) in checks(r) {
         eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
     }
-    // a device started on this machine that fell seconds behind its data while the bench's own
-    // devices missed their times by tens of ms: the machine could not run it at real time (the
-    // guest below x1 beside two CPU hogs: the Python device's NAV_TIMEs 6.8 s late, the IMU
-    // emulator's p99 lateness 100 ms). On a machine that keeps its times, such a lag is judged.
-    let lag = r["latency"]["p50_ms"].as_f64().unwrap_or(0.0);
-    let late = bench_lateness_p99_ms(r);
-    eprintln!(
-        "the device's latency {lag:.1} ms (median); the bench's own lateness {late:.1} ms (p99)"
-    );
-    if lag > MACHINE_LAG_MS && late >= BENCH_LATE_MS {
-        eprintln!(
-            "the device's solutions {lag:.0} ms behind its data (median) while the bench's own devices were {late:.0} ms late (p99): this machine could not run it at real time; no verdict on the device"
-        );
+    if let Some(why) = machine_could_not(r) {
+        eprintln!("{why}; no verdict on the device");
         return false;
     }
     true
 }
 
-/// A device's median latency past which it has fallen behind real time, not merely answered
-/// late, ms.
-const MACHINE_LAG_MS: f64 = 1000.0;
+/// Why a device started on this machine was not judged, if so: its solutions' tail fell
+/// behind (p99 past [`MACHINE_LAG_MS`]) while the bench's own devices were [`BENCH_LATE_MS`]
+/// or more late (p99): the machine could not run it at real time, so its latency is the
+/// machine's. Seen with two CPU hogs, the guest at x0.8-1.1: the Python device's NAV_TIMEs
+/// p99 2.8-10 s late with the bench's emulators 60-100 ms late (p99); in an idle guest its p99
+/// is 14-24 ms. On a machine that keeps its times, a device that falls behind is judged.
+fn machine_could_not(r: &Value) -> Option<String> {
+    let lag = r["latency"]["p99_ms"].as_f64().unwrap_or(0.0);
+    let late = bench_lateness_p99_ms(r);
+    eprintln!(
+        "the device's latency {lag:.1} ms (p99); the bench's own lateness {late:.1} ms (p99)"
+    );
+    (lag > MACHINE_LAG_MS && late >= BENCH_LATE_MS).then(|| {
+        format!(
+            "the device's solutions {lag:.0} ms behind its data (p99) while the bench's own devices were {late:.0} ms late (p99): this machine could not run it at real time"
+        )
+    })
+}
+
+/// A device's p99 latency past which, on a machine late itself, it has fallen behind real
+/// time, ms (the Python device's honest budget).
+const MACHINE_LAG_MS: f64 = 200.0;
 /// The bench's own lateness (p99 over its devices) from which the machine, not only the
 /// device, misses real time, ms.
 const BENCH_LATE_MS: f64 = 50.0;
@@ -183,23 +192,26 @@ fn bench_lateness_p99_ms(r: &Value) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// The machine-lag rule of [`judged`] on the report of a red two-hog run (the guest below x1)
-/// and on one where the bench kept its times.
+/// The machine-lag rule of [`judged`] on the figures of the two red two-hog runs (the guest
+/// at x0.8-1.1) and of runs where the bench or the device kept its times.
 #[test]
-fn a_device_run_late_on_a_late_machine_gets_no_verdict() {
+fn a_device_run_late_on_a_late_machine_is_not_judged() {
     let report = |lag: f64, late: f64| {
         serde_json::json!({
-            "latency": {"p50_ms": lag},
+            "latency": {"p99_ms": lag},
             "bench": [{"lateness": {"p99_ms": 29.6}}, {"lateness": {"p99_ms": late}}],
-            "checks": [],
         })
     };
-    assert!(!judged(&report(6788.2, 100.0), 1), "the machine was late");
+    assert!(machine_could_not(&report(10117.7, 100.0)).is_some());
+    assert!(machine_could_not(&report(2778.3, 59.8)).is_some());
     assert!(
-        judged(&report(6788.2, 4.0), 1),
-        "the bench kept its times: judged"
+        machine_could_not(&report(2778.3, 4.0)).is_none(),
+        "the bench kept its times"
     );
-    assert!(judged(&report(3.5, 100.0), 0), "the device kept up: judged");
+    assert!(
+        machine_could_not(&report(14.5, 100.0)).is_none(),
+        "the device kept up"
+    );
     assert_eq!(bench_lateness_p99_ms(&report(0.0, 100.0)), 100.0);
 }
 
