@@ -17,7 +17,7 @@
 //! there until nav's watchdog has fired again (a NAV_TIME with the imu_timeout bit), at most
 //! `silence` of wall time, so that it fires at the same place in the stream.
 
-use crate::bus::scheduler::{BusError, Lockstep, LockstepStats};
+use crate::bus::scheduler::{BusError, Lockstep, LockstepStats, WatchdogReports};
 use crate::bus::transport::{Progress, write_all};
 use crate::clock::SimClock;
 use crate::gps::{GpsPty, PtyError};
@@ -84,12 +84,8 @@ struct Follow {
     /// (sample index, 16-bit counter) of the IMU_GYRO frames sent, newest last.
     sent: VecDeque<(u64, u16)>,
     confirmed: Option<u64>,
-    /// A NAV_TIME with the imu_timeout bit came since this was last cleared.
-    timeout_seen: bool,
-    /// In lockstep: a watchdog report no silence called for is counted as starvation.
-    following: bool,
-    /// Watchdog reports the silences call for and nav has not yet sent.
-    timeouts_owed: u64,
+    /// nav's watchdog reports, owed by the recording's silences (one per silence) or not.
+    watchdog: WatchdogReports,
 }
 
 impl Follow {
@@ -98,27 +94,26 @@ impl Follow {
         Self {
             sent: VecDeque::with_capacity(4096),
             confirmed: None,
-            timeout_seen: false,
-            following,
-            timeouts_owed: 0,
+            watchdog: WatchdogReports::new(following),
         }
     }
 
     /// The sample a NAV_TIME names: the newest sent whose counter its count matches. Its
     /// imu_timeout bit where no silence called for it (in lockstep) is counted as
     /// [`LockstepStats::starved`].
-    fn on_nav_time(&mut self, sample_count: u32, imu_timeout: bool, ls: &mut LockstepStats) {
+    fn on_nav_time(
+        &mut self,
+        iface: &str,
+        sample_count: u32,
+        imu_timeout: bool,
+        ls: &mut LockstepStats,
+    ) {
         ls.nav_times += 1;
-        if imu_timeout {
-            self.timeout_seen = true;
-            if self.timeouts_owed > 0 {
-                self.timeouts_owed -= 1;
-            } else if self.following {
-                ls.starved += 1;
-                tracing::warn!(
-                    "nav's watchdog reported an IMU stop where the recording has none: the player was starved of CPU for longer than the watchdog, and the replay is no longer reproducible"
-                );
-            }
+        if imu_timeout && self.watchdog.report(ls) {
+            tracing::warn!(
+                interface = iface,
+                "nav's watchdog reported an IMU stop where the recording has none: the player was starved of CPU for longer than the watchdog, and the replay is no longer reproducible"
+            );
         }
         let c = sample_count as u16;
         if let Some(&(k, _)) = self.sent.iter().rev().find(|s| s.1 == c)
@@ -181,7 +176,7 @@ pub fn play(
                             if !ok {
                                 st.lockstep.stalls += 1;
                                 lockstep = None;
-                                follow.following = false;
+                                follow.watchdog.unfollow();
                                 tracing::warn!(
                                     interface = iface,
                                     "nav confirmed no IMU sample past {:?} for {} s: lockstep off, the replay is no longer reproducible",
@@ -274,10 +269,9 @@ fn hold_silence(
 ) -> Result<(), BusError> {
     st.silences += 1;
     // nav's watchdog fires again here: nothing more goes out until it has
-    follow.timeout_seen = false;
-    follow.timeouts_owed += 1;
+    follow.watchdog.hold();
     let since = Instant::now();
-    while !follow.timeout_seen && since.elapsed() < silence && !stop.load(Ordering::Relaxed) {
+    while !follow.watchdog.seen() && since.elapsed() < silence && !stop.load(Ordering::Relaxed) {
         crate::bus::scheduler::wait_readable(sock, Duration::from_millis(2));
         read_nav(sock, iface, follow, &mut st.lockstep)?;
     }
@@ -328,7 +322,7 @@ fn read_nav(
 ) -> Result<(), BusError> {
     crate::bus::scheduler::drain(sock, iface, |f| {
         if let Some(Ok(Message::NavTime(nt))) = f.map(|f| Message::decode(&f)) {
-            follow.on_nav_time(nt.sample_count, nt.health.imu_timeout, ls);
+            follow.on_nav_time(iface, nt.sample_count, nt.health.imu_timeout, ls);
         }
     })?;
     Ok(())
@@ -347,13 +341,13 @@ mod tests {
         for (k, c) in [(0u64, 65534u16), (1, 65535), (2, 0), (3, 1)] {
             f.sent.push_back((k, c));
         }
-        f.on_nav_time(0x0001_0000, false, &mut ls);
+        f.on_nav_time("vcan0", 0x0001_0000, false, &mut ls);
         assert_eq!(f.confirmed, Some(2));
-        f.on_nav_time(65535, false, &mut ls);
+        f.on_nav_time("vcan0", 65535, false, &mut ls);
         assert_eq!(f.confirmed, Some(2), "an older sample does not go back");
-        f.on_nav_time(7, false, &mut ls);
+        f.on_nav_time("vcan0", 7, false, &mut ls);
         assert_eq!(f.confirmed, Some(2), "a count never sent is ignored");
-        f.on_nav_time(0x0001_0001, false, &mut ls);
+        f.on_nav_time("vcan0", 0x0001_0001, false, &mut ls);
         assert_eq!((f.confirmed, ls.nav_times), (Some(3), 4));
     }
 
@@ -364,14 +358,15 @@ mod tests {
     fn a_watchdog_report_no_silence_called_for_counts_as_starvation() {
         let mut f = Follow::new(true);
         let mut ls = LockstepStats::default();
-        f.timeouts_owed += 1;
-        f.on_nav_time(5, true, &mut ls);
-        assert_eq!((ls.starved, f.timeouts_owed, f.timeout_seen), (0, 0, true));
-        f.on_nav_time(6, false, &mut ls);
-        f.on_nav_time(7, true, &mut ls);
+        f.watchdog.hold();
+        f.on_nav_time("vcan0", 5, true, &mut ls);
+        assert_eq!(ls.starved, 0, "the silence's own report");
+        assert!(f.watchdog.seen());
+        f.on_nav_time("vcan0", 6, false, &mut ls);
+        f.on_nav_time("vcan0", 7, true, &mut ls);
         assert_eq!(ls.starved, 1, "a report no silence owed");
         let mut free = Follow::new(false);
-        free.on_nav_time(7, true, &mut ls);
+        free.on_nav_time("vcan0", 7, true, &mut ls);
         assert_eq!(ls.starved, 1, "not counted without lockstep");
     }
 }

@@ -149,6 +149,11 @@ fn judged(r: &Value, code: i32) -> bool {
     for (name, pass, detail) in checks(r) {
         eprintln!("[{}] {name}: {detail}", if pass { "PASS" } else { "FAIL" });
     }
+    eprintln!(
+        "the device's latency {:.1} ms (p99); the bench's own lateness {:.1} ms (p99)",
+        r["latency"]["p99_ms"].as_f64().unwrap_or(0.0),
+        bench_lateness_p99_ms(r)
+    );
     if let Some(why) = machine_could_not(r) {
         eprintln!("{why}; no verdict on the device");
         return false;
@@ -165,9 +170,6 @@ fn judged(r: &Value, code: i32) -> bool {
 fn machine_could_not(r: &Value) -> Option<String> {
     let lag = r["latency"]["p99_ms"].as_f64().unwrap_or(0.0);
     let late = bench_lateness_p99_ms(r);
-    eprintln!(
-        "the device's latency {lag:.1} ms (p99); the bench's own lateness {late:.1} ms (p99)"
-    );
     (lag > MACHINE_LAG_MS && late >= BENCH_LATE_MS).then(|| {
         format!(
             "the device's solutions {lag:.0} ms behind its data (p99) while the bench's own devices were {late:.0} ms late (p99): this machine could not run it at real time"

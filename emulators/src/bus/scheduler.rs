@@ -392,16 +392,72 @@ pub(crate) fn pin_to_this_cpu(iface: &str) {
     }
 }
 
+/// nav's watchdog reports (NAV_TIMEs with the imu_timeout bit) as a sender of the IMU stream
+/// counts them: each stop of the stream it holds for owes one; a report beyond those, in
+/// lockstep, means nav saw no frame for its watchdog's wall time while the stream went on (the
+/// sender starved of CPU), counted as [`LockstepStats::starved`]. The bus scheduler and the
+/// replay's player both keep one.
+#[derive(Debug, Default)]
+pub(crate) struct WatchdogReports {
+    /// In lockstep: only then is a report beyond those owed starvation (off lockstep the clock
+    /// paces the stream, and a late sender is not counted).
+    following: bool,
+    /// Reports the holds so far call for and nav has not yet sent.
+    owed: u64,
+    /// A report came since the last hold began.
+    seen: bool,
+}
+
+impl WatchdogReports {
+    /// None owed, none seen; `following` nav in lockstep.
+    pub(crate) fn new(following: bool) -> Self {
+        Self {
+            following,
+            ..Self::default()
+        }
+    }
+
+    /// The stream stops here and holds until nav's watchdog has reported it: one report more
+    /// is owed, and none has come for this hold yet.
+    pub(crate) fn hold(&mut self) {
+        self.owed += 1;
+        self.seen = false;
+    }
+
+    /// Whether a report came since the last [`hold`](Self::hold) began.
+    pub(crate) fn seen(&self) -> bool {
+        self.seen
+    }
+
+    /// Lockstep is off (nav stalled): reports are no longer counted.
+    pub(crate) fn unfollow(&mut self) {
+        self.following = false;
+    }
+
+    /// A report came: true (and counted in `ls.starved`) when, in lockstep, no hold called
+    /// for it.
+    pub(crate) fn report(&mut self, ls: &mut LockstepStats) -> bool {
+        self.seen = true;
+        if self.owed > 0 {
+            self.owed -= 1;
+            return false;
+        }
+        if !self.following {
+            return false;
+        }
+        ls.starved += 1;
+        true
+    }
+}
+
 /// What nav has said, as the scheduler follows it.
 struct NavSide {
     follow: Option<Lockstep>,
     confirmed: Option<u64>,
     /// NAV_TIME's latest `GpsRxBytes`.
     gps_rx: Option<u16>,
-    /// A NAV_TIME with the imu_timeout bit came (since this was last cleared).
-    timeout_seen: bool,
-    /// Watchdog reports the stream's stops call for and nav has not yet sent (one per hold).
-    timeouts_owed: u64,
+    /// nav's watchdog reports, owed by the stream's stops (one per hold) or not.
+    watchdog: WatchdogReports,
     /// The receiver's bytes written so far, and the sample of the last epoch, until nav has
     /// confirmed them on the bus.
     owed: Option<(u64, u64)>,
@@ -417,8 +473,7 @@ impl NavSide {
             follow: lockstep,
             confirmed: None,
             gps_rx: None,
-            timeout_seen: false,
-            timeouts_owed: 0,
+            watchdog: WatchdogReports::new(lockstep.is_some()),
             owed: None,
             ls: LockstepStats {
                 enabled: lockstep.is_some(),
@@ -481,13 +536,12 @@ impl NavSide {
                     placed,
                 } => {
                     self.ls.nav_times += 1;
-                    if imu_timeout && self.unowed_timeout() {
+                    if imu_timeout && self.watchdog.report(&mut self.ls) {
                         tracing::warn!(
                             interface = iface,
                             "nav's watchdog reported an IMU stop after sample {sample}, where the stream had not stopped: the bench was starved of CPU for longer than the watchdog, and the run is no longer reproducible"
                         );
                     }
-                    self.timeout_seen |= imu_timeout;
                     self.gps_rx = Some(gps_rx_bytes);
                     self.ls.placed_commands += placed;
                     if self.confirmed.is_none_or(|c| sample > c) {
@@ -502,20 +556,6 @@ impl NavSide {
                 FromNav::Unexpected => self.bad += 1,
             }
         })
-    }
-
-    /// A NAV_TIME with the imu_timeout bit came: true (and counted as [`LockstepStats::starved`])
-    /// when, in lockstep, no stop of the stream called for it.
-    fn unowed_timeout(&mut self) -> bool {
-        if self.follow.is_none() {
-            return false;
-        }
-        if self.timeouts_owed > 0 {
-            self.timeouts_owed -= 1;
-            return false;
-        }
-        self.ls.starved += 1;
-        true
     }
 
     /// nav has confirmed the receiver's bytes up to `written` (12 bits, as NAV_TIME carries
@@ -647,6 +687,7 @@ fn wait_for_nav(
         if since.elapsed() > stall {
             nav.ls.stalls += 1;
             nav.follow = None;
+            nav.watchdog.unfollow();
             tracing::warn!(
                 interface = port.iface,
                 "nav confirmed no IMU sample past {:?} (receiver bytes {:?} of {:?}) for {} s: lockstep off, the run is no longer reproducible",
@@ -675,10 +716,9 @@ fn hold_for_watchdog(
     stop: &AtomicBool,
 ) -> Result<(), CanTxError> {
     port.flush(nav)?;
-    nav.timeout_seen = false;
-    nav.timeouts_owed += 1;
+    nav.watchdog.hold();
     let since = Instant::now();
-    while !nav.timeout_seen && !stop.load(Ordering::Relaxed) {
+    while !nav.watchdog.seen() && !stop.load(Ordering::Relaxed) {
         if since.elapsed() > stall {
             nav.ls.stalls += 1;
             tracing::warn!(
@@ -891,13 +931,27 @@ mod tests {
     /// the stream went on); without lockstep the clock paces the stream and nothing is counted.
     #[test]
     fn a_watchdog_report_no_stop_called_for_counts_as_starvation() {
-        let mut nav = NavSide::following(Some(Lockstep::default()));
-        nav.timeouts_owed += 1;
-        assert!(!nav.unowed_timeout(), "the stop's own report");
-        assert!(nav.unowed_timeout(), "one more");
-        assert_eq!((nav.ls.starved, nav.timeouts_owed), (1, 0));
-        let mut free = NavSide::following(None);
-        assert!(!free.unowed_timeout());
-        assert_eq!(free.ls.starved, 0);
+        let mut ls = LockstepStats::default();
+        let mut w = WatchdogReports::new(true);
+        w.hold();
+        assert!(!w.seen());
+        assert!(!w.report(&mut ls), "the stop's own report");
+        assert!(w.seen());
+        assert!(w.report(&mut ls), "one more");
+        assert_eq!((ls.starved, w.owed), (1, 0));
+        w.hold();
+        assert!(!w.seen(), "a new hold waits for a report of its own");
+        assert!(!w.report(&mut ls), "owed by the second hold");
+        assert_eq!(ls.starved, 1);
+        w.unfollow();
+        assert!(!w.report(&mut ls), "lockstep off: not counted");
+        let mut free = WatchdogReports::new(false);
+        assert!(!free.report(&mut ls));
+        assert!(free.seen());
+        assert_eq!(ls.starved, 1, "not counted without lockstep");
+        // the scheduler's side counts what nav's NAV_TIMEs say through it
+        let nav = NavSide::following(Some(Lockstep::default()));
+        assert!(nav.watchdog.following);
+        assert!(!NavSide::following(None).watchdog.following);
     }
 }
