@@ -86,6 +86,8 @@ struct Follow {
     confirmed: Option<u64>,
     /// nav's watchdog reports, owed by the recording's silences (one per silence) or not.
     watchdog: WatchdogReports,
+    /// In lockstep: a watchdog report no silence called for is counted as starvation.
+    following: bool,
 }
 
 impl Follow {
@@ -94,7 +96,8 @@ impl Follow {
         Self {
             sent: VecDeque::with_capacity(4096),
             confirmed: None,
-            watchdog: WatchdogReports::new(following),
+            watchdog: WatchdogReports::default(),
+            following,
         }
     }
 
@@ -109,7 +112,7 @@ impl Follow {
         ls: &mut LockstepStats,
     ) {
         ls.nav_times += 1;
-        if imu_timeout && self.watchdog.report(ls) {
+        if imu_timeout && self.watchdog.report(self.following, ls) {
             tracing::warn!(
                 interface = iface,
                 "nav's watchdog reported an IMU stop where the recording has none: the player was starved of CPU for longer than the watchdog, and the replay is no longer reproducible"
@@ -176,7 +179,7 @@ pub fn play(
                             if !ok {
                                 st.lockstep.stalls += 1;
                                 lockstep = None;
-                                follow.watchdog.unfollow();
+                                follow.following = false;
                                 tracing::warn!(
                                     interface = iface,
                                     "nav confirmed no IMU sample past {:?} for {} s: lockstep off, the replay is no longer reproducible",

@@ -399,9 +399,6 @@ pub(crate) fn pin_to_this_cpu(iface: &str) {
 /// replay's player both keep one.
 #[derive(Debug, Default)]
 pub(crate) struct WatchdogReports {
-    /// In lockstep: only then is a report beyond those owed starvation (off lockstep the clock
-    /// paces the stream, and a late sender is not counted).
-    following: bool,
     /// Reports the holds so far call for and nav has not yet sent.
     owed: u64,
     /// A report came since the last hold began.
@@ -409,14 +406,6 @@ pub(crate) struct WatchdogReports {
 }
 
 impl WatchdogReports {
-    /// None owed, none seen; `following` nav in lockstep.
-    pub(crate) fn new(following: bool) -> Self {
-        Self {
-            following,
-            ..Self::default()
-        }
-    }
-
     /// The stream stops here and holds until nav's watchdog has reported it: one report more
     /// is owed, and none has come for this hold yet.
     pub(crate) fn hold(&mut self) {
@@ -429,20 +418,16 @@ impl WatchdogReports {
         self.seen
     }
 
-    /// Lockstep is off (nav stalled): reports are no longer counted.
-    pub(crate) fn unfollow(&mut self) {
-        self.following = false;
-    }
-
-    /// A report came: true (and counted in `ls.starved`) when, in lockstep, no hold called
-    /// for it.
-    pub(crate) fn report(&mut self, ls: &mut LockstepStats) -> bool {
+    /// A report came: true (and counted in `ls.starved`) when no hold called for it and the
+    /// sender is `following` nav in lockstep (off lockstep the clock paces the stream, and a
+    /// late sender is not counted).
+    pub(crate) fn report(&mut self, following: bool, ls: &mut LockstepStats) -> bool {
         self.seen = true;
         if self.owed > 0 {
             self.owed -= 1;
             return false;
         }
-        if !self.following {
+        if !following {
             return false;
         }
         ls.starved += 1;
@@ -473,7 +458,7 @@ impl NavSide {
             follow: lockstep,
             confirmed: None,
             gps_rx: None,
-            watchdog: WatchdogReports::new(lockstep.is_some()),
+            watchdog: WatchdogReports::default(),
             owed: None,
             ls: LockstepStats {
                 enabled: lockstep.is_some(),
@@ -536,7 +521,7 @@ impl NavSide {
                     placed,
                 } => {
                     self.ls.nav_times += 1;
-                    if imu_timeout && self.watchdog.report(&mut self.ls) {
+                    if imu_timeout && self.watchdog.report(self.follow.is_some(), &mut self.ls) {
                         tracing::warn!(
                             interface = iface,
                             "nav's watchdog reported an IMU stop after sample {sample}, where the stream had not stopped: the bench was starved of CPU for longer than the watchdog, and the run is no longer reproducible"
@@ -687,7 +672,6 @@ fn wait_for_nav(
         if since.elapsed() > stall {
             nav.ls.stalls += 1;
             nav.follow = None;
-            nav.watchdog.unfollow();
             tracing::warn!(
                 interface = port.iface,
                 "nav confirmed no IMU sample past {:?} (receiver bytes {:?} of {:?}) for {} s: lockstep off, the run is no longer reproducible",
@@ -932,26 +916,19 @@ mod tests {
     #[test]
     fn a_watchdog_report_no_stop_called_for_counts_as_starvation() {
         let mut ls = LockstepStats::default();
-        let mut w = WatchdogReports::new(true);
+        let mut w = WatchdogReports::default();
         w.hold();
         assert!(!w.seen());
-        assert!(!w.report(&mut ls), "the stop's own report");
+        assert!(!w.report(true, &mut ls), "the stop's own report");
         assert!(w.seen());
-        assert!(w.report(&mut ls), "one more");
+        assert!(w.report(true, &mut ls), "one more");
         assert_eq!((ls.starved, w.owed), (1, 0));
         w.hold();
         assert!(!w.seen(), "a new hold waits for a report of its own");
-        assert!(!w.report(&mut ls), "owed by the second hold");
+        assert!(!w.report(true, &mut ls), "owed by the second hold");
         assert_eq!(ls.starved, 1);
-        w.unfollow();
-        assert!(!w.report(&mut ls), "lockstep off: not counted");
-        let mut free = WatchdogReports::new(false);
-        assert!(!free.report(&mut ls));
-        assert!(free.seen());
+        assert!(!w.report(false, &mut ls), "lockstep off: not counted");
+        assert!(w.seen());
         assert_eq!(ls.starved, 1, "not counted without lockstep");
-        // the scheduler's side counts what nav's NAV_TIMEs say through it
-        let nav = NavSide::following(Some(Lockstep::default()));
-        assert!(nav.watchdog.following);
-        assert!(!NavSide::following(None).watchdog.following);
     }
 }
