@@ -59,8 +59,10 @@ pub(crate) fn run_in_guest(
     let (args, forward_tcp) = live_through_guest(args)?;
     full.extend(args);
     let shares = dedupe_nested(vcan_setup::default_shares(&exe, &extra));
+    let shares_ro = programs_cached(&exe, &shares);
     let mut opts = VmOptions {
         shares,
+        shares_ro,
         libs_for,
         forward_tcp,
         ..VmOptions::default()
@@ -125,6 +127,17 @@ pub(crate) fn junit_back(pair: Option<(PathBuf, PathBuf)>) -> Result<()> {
     Ok(())
 }
 
+/// The folder of this program (and nav beside it) as a read-only share cached in the guest:
+/// on a read-write share every start of a program reads its pages from this machine again
+/// (nav 0.2 s, hil 0.6 s in the guest, against 0.06 and 0.1 s cached). Not where a read-write
+/// share is that folder or lies inside it (the run writes there).
+pub(crate) fn programs_cached(exe: &Path, shares: &[PathBuf]) -> Vec<PathBuf> {
+    match exe.parent() {
+        Some(d) if !shares.iter().any(|s| s.starts_with(d)) => vec![d.to_path_buf()],
+        _ => Vec::new(),
+    }
+}
+
 /// Drop shares that lie inside another share.
 pub(crate) fn dedupe_nested(mut shares: Vec<PathBuf>) -> Vec<PathBuf> {
     shares.retain(|p| !p.as_os_str().is_empty());
@@ -160,4 +173,24 @@ pub(crate) fn live_through_guest(mut args: Vec<String>) -> Result<(Vec<String>, 
         );
     }
     Ok((args, forward))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_programs_folder_is_cached_unless_a_run_writes_inside_it() {
+        let exe = Path::new("/w/target/debug/hil");
+        let ws = PathBuf::from("/w");
+        // the workspace and an output folder elsewhere: the programs' folder read-only, cached
+        assert_eq!(
+            programs_cached(exe, &[ws.clone(), "/tmp/run".into()]),
+            vec![PathBuf::from("/w/target/debug")]
+        );
+        // an output folder inside it, or the folder itself shared (no workspace around the
+        // program): left read-write
+        assert!(programs_cached(exe, &[ws, "/w/target/debug/runs/a".into()]).is_empty());
+        assert!(programs_cached(exe, &["/w/target/debug".into()]).is_empty());
+    }
 }
