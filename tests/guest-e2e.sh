@@ -28,6 +28,20 @@ else
   echo "== the bench's pace here: not measured (the probe run failed: $(tail -n 3 "$out/log" | tr '\n' ' '))"
 fi
 rm -rf "$out"
+# the memory while the tests run (the guest's, or natively this machine's): its lowest available memory and the major page faults
+# (pages read again from a file, the shares' over 9p), printed at the end: a guest short of
+# memory re-reads its programs' pages from this machine and stalls the runs that wait for them
+mem_watch=$(mktemp)
+faults0=$(awk '$1 == "pgmajfault" { print $2 }' /proc/vmstat)
+(
+  low=
+  while :; do
+    a=$(awk '$1 == "MemAvailable:" { print int($2 / 1024) }' /proc/meminfo)
+    if [ -z "$low" ] || [ "$a" -lt "$low" ]; then low=$a; echo "$low" >"$mem_watch"; fi
+    sleep 1
+  done
+) &
+mem_pid=$!
 "$suite" run --binaries "e2e::vcan=$lockstep@$here" --name "end-to-end on vcan (lockstep)" \
   --ignored --jobs "$jobs" --nice 19 --results "$dir/e2e.json" --history "$dir/previous/e2e.json" \
   --slow-first "$here/e2e-slow-first" &
@@ -47,4 +61,8 @@ rc=0
   --alone an_independent_python_device_is_judged_by_the_same_checks,an_independent_python_device_that_lies_about_time_is_caught \
   --slow-first "$here/e2e-slow-first" || rc=1
 wait "$lockstep_pid" || rc=1
+kill "$mem_pid" 2>/dev/null
+faults=$(($(awk '$1 == "pgmajfault" { print $2 }' /proc/vmstat) - faults0))
+echo "== memory where the end-to-end tests ran (the guest, or this machine): $(awk '$1 == "MemTotal:" { print int($2 / 1024) }' /proc/meminfo) MiB, at least $(cat "$mem_watch") MiB available throughout; $faults major page faults"
+rm -f "$mem_watch"
 exit $rc
