@@ -570,26 +570,38 @@ fn classify(r: &mut TestResult, status: Option<i32>, text: &str, timeout: Durati
                 r.message = why;
             }
             None => {
-                r.outcome = "passed".into();
-                // a free-running test whose host could not keep real time passes without
-                // judging (tests/tests/free.rs): said, so that a CI server shows what was not
-                // judged
-                let unjudged = text.matches("; no verdict on ").count();
-                if unjudged > 0 {
-                    r.message = format!(
-                        "{unjudged} of its runs gave no verdict: the machine could not keep real time"
-                    );
-                }
+                let mut notes = Vec::new();
                 // a lockstep run whose bench was starved past nav's watchdog, run again
                 let again = text.matches(e2e::STARVED_RERUN).count();
                 if again > 0 {
-                    if !r.message.is_empty() {
-                        r.message += "; ";
-                    }
-                    r.message += &format!(
+                    notes.push(format!(
                         "{again} of its runs ran once more: the bench was starved of CPU past nav's watchdog"
-                    );
+                    ));
                 }
+                // a free-running run the bench stopped (the machine behind real time), run again
+                let again = text.matches(e2e::FREE_RERUN).count();
+                if again > 0 {
+                    notes.push(format!(
+                        "{again} of its runs ran once more: the machine did not keep real time"
+                    ));
+                }
+                // a free-running test whose host could not keep real time returns without
+                // judging (tests/tests/free.rs): not all it claims was checked, so skipped,
+                // with the reason, not passed
+                let unjudged = text.matches("; no verdict on ").count();
+                r.outcome = if unjudged > 0 {
+                    notes.insert(
+                        0,
+                        format!(
+                            "{unjudged} of its runs gave no verdict: the machine could not keep real time"
+                        ),
+                    );
+                    "skipped"
+                } else {
+                    "passed"
+                }
+                .into();
+                r.message = notes.join("; ");
             }
         },
         Some(0) if text.contains(" 1 ignored") => {
@@ -694,6 +706,14 @@ fn report(a: &ReportArgs) -> Result<()> {
         std::fs::write(t, &full).with_context(|| format!("writing {}", t.display()))?;
     }
     print!("{short}");
+    // what was not checked, and why: a green run names its skipped tests
+    let skipped: Vec<&TestResult> = results.iter().filter(|r| r.outcome == "skipped").collect();
+    if !skipped.is_empty() {
+        println!("skipped ({}):", skipped.len());
+        for r in skipped {
+            println!("  {}::{}: {}", r.binary, r.name, r.message);
+        }
+    }
     let cases: usize = suites.iter().map(|s| s.cases.len()).sum::<usize>()
         + foreign.iter().map(|f| f.tests).sum::<usize>();
     println!(
@@ -970,6 +990,31 @@ mod tests {
         assert_eq!(r.outcome, "passed");
         assert!(
             r.message.starts_with("1 of its runs ran once more"),
+            "{}",
+            r.message
+        );
+        // a free-running run the bench stopped, run again and judged: passed, and said
+        let again = format!(
+            "the bench stopped: \"late\"; {}: [..]\ntest result: ok. 1 passed",
+            e2e::FREE_RERUN
+        );
+        classify(&mut r, Some(0), &again, Duration::from_secs(1));
+        assert_eq!(
+            (r.outcome.as_str(), r.message.as_str()),
+            (
+                "passed",
+                "1 of its runs ran once more: the machine did not keep real time"
+            )
+        );
+        // and again without a verdict: not passed, skipped with the reason
+        let none = format!(
+            "{again}\nthe host could not keep real time: \"late\"; no verdict on the device\ntest result: ok. 1 passed"
+        );
+        classify(&mut r, Some(0), &none, Duration::from_secs(1));
+        assert_eq!(r.outcome, "skipped");
+        assert!(
+            r.message
+                .starts_with("1 of its runs gave no verdict: the machine could not keep real time; 1 of its runs ran once more"),
             "{}",
             r.message
         );
