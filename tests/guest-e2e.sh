@@ -13,8 +13,11 @@
 #     own first run, which a neighbour's load would move, and a Python device (the costliest
 #     of them to run at x1) beside another free-running test lost its verdict under load.
 # Each test runs in a process of its own (tests/src/bin/suite.rs); the results go to SUITE_DIR.
-# Usage: guest-e2e.sh HIL SUITE_DIR LOCKSTEP_BINARY FREE_BINARY LOCKSTEP_JOBS FREE_JOBS WAIT_HOST
+# With JUDGE_DIR, the runs hand their in-process reference, replay and scoring to the judge
+# server watching that folder (hil judge-server, on the host: hil::run::offload).
+# Usage: guest-e2e.sh HIL SUITE_DIR LOCKSTEP_BINARY FREE_BINARY LOCKSTEP_JOBS FREE_JOBS WAIT_HOST [JUDGE_DIR]
 hil="$1" dir="$2" lockstep="$3" free="$4" jobs="$5" free_jobs="$6" wait_host="$7"
+[ -n "$8" ] && export HIL_JUDGE_SERVER="$8"
 here=$(cd "$(dirname "$0")" && pwd)
 suite="$(dirname "$hil")/suite"
 out=$(mktemp -d)

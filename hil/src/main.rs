@@ -178,6 +178,14 @@ enum Cmd {
     /// faults.json (fault, expected, observed, detection latency, pass/fail) and one run folder
     /// per fault. Exit status 1 when a row fails.
     Faults(FaultsArgs),
+    /// Judge the runs of a bench on another machine: where the devices run on a slow computer
+    /// (a software-emulated guest, a small box beside the CAN hardware), its runs hand their
+    /// in-process reference run, the replay of nav's recording and its scoring to this
+    /// command through a folder both share (`HIL_JUDGE_SERVER=FOLDER` on the runs' side).
+    /// Only for the same build of hil on a CPU of the same floating-point features (otherwise
+    /// it declines and the run judges itself); a result does not depend on where it was
+    /// computed. Runs until SIGINT or SIGTERM.
+    JudgeServer(cmd::judge::JudgeServerArgs),
 }
 
 fn main() {
@@ -187,7 +195,9 @@ fn main() {
     // input are the expected answer, counted by the fuzzer, not logged a million times
     // log lines clear the status line a terminal may be showing (hil::status)
     nav::cli::init_tracing_on(
-        if matches!(cli.cmd, Cmd::Fuzz { .. }) {
+        // (a judge server replays other runs' recordings: nav's warnings are theirs, and go in
+        // their reports)
+        if matches!(cli.cmd, Cmd::Fuzz { .. } | Cmd::JudgeServer(_)) {
             "info,nav=off"
         } else {
             "info,nav=warn"
@@ -265,5 +275,6 @@ fn real_main(cli: Cli) -> Result<i32> {
         Cmd::Experiment(e) => experiment(e),
         Cmd::Bench(a) => bench(a),
         Cmd::Faults(a) => faults(a),
+        Cmd::JudgeServer(a) => cmd::judge::judge_server(a),
     }
 }

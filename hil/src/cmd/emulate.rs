@@ -186,7 +186,7 @@ fn origin(t0: Option<f64>) -> Result<Instant> {
 }
 
 /// Set `stop` on SIGINT or SIGTERM.
-fn stop_on_signals(stop: Arc<AtomicBool>) -> Result<()> {
+pub(crate) fn stop_on_signals(stop: Arc<AtomicBool>) -> Result<()> {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()

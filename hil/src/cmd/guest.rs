@@ -75,7 +75,12 @@ pub(crate) fn run_in_guest(
             .context("HIL_GUEST_TIMEOUT_S must be a whole number of seconds")?;
         opts.timeout = std::time::Duration::from_secs(s);
     }
-    let o = vcan_setup::run_in_vm(&full, &opts)?;
+    // the run's reference, replay and scoring are judged here, on this machine's CPU, not
+    // under the guest's emulation (hil::run::offload), unless HIL_JUDGE_SERVER=off
+    let judge = JudgeHere::start(out, &mut opts);
+    let o = vcan_setup::run_in_vm(&full, &opts);
+    judge.stop();
+    let o = o?;
     if let Some(name) = json {
         // the guest's console mixes its stdout and stderr: the JSON comes from the file the run
         // wrote in the shared output folder, so stdout carries the JSON alone
@@ -173,6 +178,46 @@ pub(crate) fn live_through_guest(mut args: Vec<String>) -> Result<(Vec<String>, 
         );
     }
     Ok((args, forward))
+}
+
+/// A judge server on this machine for the runs of a command in the guest, in a folder of the
+/// shared output folder (`hil::run::offload`).
+struct JudgeHere {
+    dir: PathBuf,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    server: Option<std::thread::JoinHandle<Result<hil::run::offload::Served>>>,
+}
+
+impl JudgeHere {
+    fn start(out: &Path, opts: &mut VmOptions) -> Self {
+        use hil::run::offload::{ENV, serve};
+        let dir = out.join(".judge-server");
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let mut me = Self {
+            dir: dir.clone(),
+            stop: std::sync::Arc::clone(&stop),
+            server: None,
+        };
+        if std::env::var(ENV).is_ok_and(|v| v == "off") {
+            return me;
+        }
+        me.server = Some(std::thread::spawn(move || serve(&dir, 2, &stop)));
+        opts.env
+            .push((ENV.into(), me.dir.to_string_lossy().into_owned()));
+        me
+    }
+
+    fn stop(self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(h) = self.server {
+            match h.join() {
+                Ok(Ok(_)) => {}
+                Ok(Err(e)) => eprintln!("hil: the judge server for the guest: {e:#}"),
+                Err(_) => eprintln!("hil: the judge server for the guest panicked"),
+            }
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
 }
 
 #[cfg(test)]

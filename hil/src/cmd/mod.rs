@@ -13,6 +13,7 @@ pub(crate) mod experiment;
 pub(crate) mod faults;
 pub(crate) mod fuzz;
 pub(crate) mod guest;
+pub(crate) mod judge;
 pub(crate) mod plan;
 pub(crate) mod replay;
 pub(crate) mod run;

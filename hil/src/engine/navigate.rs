@@ -176,7 +176,7 @@ pub struct RecordingScorer<'a> {
 }
 
 /// What [`RecordingScorer`] found in nav's recording.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Serialize, serde::Deserialize)]
 pub struct ScoredRecording {
     /// nav's recorded solution (`/nav/solution`, 1 Hz) against the drive: one score per second
     /// (nav's time plus the first sample's).
@@ -282,7 +282,7 @@ impl<'a> RecordingScorer<'a> {
 }
 
 /// What became of a fix nav took.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 pub enum FixFate {
     /// The receiver said it had no fix (quality 0, status V).
     Void,

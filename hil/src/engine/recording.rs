@@ -15,7 +15,7 @@ use std::path::Path;
 use wire::RawFrame;
 
 /// What a replay found.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct Playback {
     /// Frames fed in.
     pub frames_in: u64,
@@ -214,7 +214,8 @@ pub fn each_message(path: &Path, doing: &str, mut f: impl FnMut(&mcap::Message))
 
 /// Replay the recording `mcap` through the pipeline of config `cfg`.
 pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
-    replay_and(mcap_path, cfg, |_| {}).map(|(p, _)| p)
+    let what = mcap_path.display().to_string();
+    replay_and(mcap_path, &what, cfg, |_| {}).map(|(p, _)| p)
 }
 
 /// Replay the recording `mcap` through the pipeline of config `cfg`, and hand each of its
@@ -222,6 +223,7 @@ pub fn replay(mcap_path: &Path, cfg: &NavConfig) -> Result<Playback> {
 /// and whatever else reads it. Returns the playback and whether the recording was cut short.
 pub fn replay_and(
     mcap_path: &Path,
+    what: &str,
     cfg: &NavConfig,
     mut also: impl FnMut(&mcap::Message),
 ) -> Result<(Playback, bool)> {
@@ -236,7 +238,7 @@ pub fn replay_and(
         // a recording cut short still replays what it has
         r.feed(Input::Bad);
     }
-    Ok((r.finish(&mcap_path.display().to_string()), cut))
+    Ok((r.finish(what), cut))
 }
 
 /// What a message of nav's recording gives its pipeline on replay (none: nothing).

@@ -4,14 +4,13 @@
 //! writes what it found (nav's error second by second, the fixes, the truth recording) beside
 //! the report.
 
+use super::offload::{self, Recomputed};
 use super::{Phases, RunOptions};
-use crate::engine::navigate::{FixFate, NavScore, RecordingScorer, ScoredRecording, SeriesStats};
-use crate::engine::recording::Playback;
-use crate::engine::reference::InProcess;
+use crate::engine::navigate::{FixFate, NavScore, ScoredRecording, SeriesStats};
 use crate::engine::truthrec::RunTruth;
 use crate::report::{self, KillOutcome, NavMemory, RunReport};
 use crate::scenario::Scenario;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use emulators::bus::scheduler::TtTruth;
 use emulators::drive::Drive;
 use std::path::Path;
@@ -46,59 +45,40 @@ pub(super) struct Evidence {
 
 /// The checks that recompute things, side by side: the in-process reference run, and the
 /// replay of nav's recording through its pipeline with the scoring of that recording against
-/// truth (one reading of the recording for both).
-struct Recomputed {
-    reference: Option<InProcess>,
-    replayed: Option<Result<Playback>>,
-    scored: Option<Result<ScoredRecording>>,
-}
-
+/// truth (one reading of the recording for both); by a judge server when the environment names
+/// one ([`offload::ENV`]) and it takes the work, otherwise here.
 fn recompute(
     s: &Scenario,
     opts: &RunOptions,
     nav_cfg: &nav::config::NavConfig,
     drive: Option<&Drive>,
 ) -> Result<Recomputed> {
-    let t_first = 1.0 / s.imu.rate_hz;
-    let mcap_path = opts.out.join("nav.mcap");
-    let (reference, read) = std::thread::scope(|sc| {
+    let mcap = opts.out.join("nav.mcap");
+    let w = offload::Work {
+        scenario: s,
+        nav_cfg,
         // (through gpsd, nav gets only the sentences gpsd keeps: not the receiver's bytes)
-        let reference = sc.spawn(|| match s.turntable {
-            None if opts.reference_checks && !opts.gps_via_gpsd => Some(
-                crate::engine::reference::run_in_process(s).context("in-process reference run"),
-            ),
-            _ => None,
-        });
-        let read = opts.reference_checks.then(|| {
-            let mut scorer = drive.map(|d| RecordingScorer::new(d, t_first));
-            let r = crate::engine::recording::replay_and(&mcap_path, nav_cfg, |m| {
-                if let Some(sc) = scorer.as_mut() {
-                    sc.message(m);
-                }
-            });
-            (r, scorer)
-        });
-        let reference = reference
-            .join()
-            .map_err(|_| anyhow::anyhow!("the in-process reference run panicked"))?;
-        Ok::<_, anyhow::Error>((reference, read))
-    })?;
-    let (replayed, scored) = match read {
-        None => (None, None),
-        Some((Ok((playback, cut)), scorer)) => {
-            (Some(Ok(playback)), scorer.map(|sc| Ok(sc.finish(cut))))
-        }
-        // the recording could not be read: both say so
-        Some((Err(e), scorer)) => {
-            let scored = scorer.map(|_| Err(anyhow::anyhow!("{e:#}")));
-            (Some(Err(e)), scored)
-        }
+        reference: s.turntable.is_none() && opts.reference_checks && !opts.gps_via_gpsd,
+        replay: opts.reference_checks,
+        drive: drive.filter(|_| opts.reference_checks),
+        mcap: &mcap,
     };
-    Ok(Recomputed {
-        reference: reference.transpose()?,
-        replayed,
-        scored,
-    })
+    if !w.reference && !w.replay {
+        return Ok(Recomputed {
+            reference: None,
+            replayed: None,
+            scored: None,
+            by_server: false,
+        });
+    }
+    if let Some(dir) = std::env::var_os(offload::ENV).filter(|d| !d.is_empty()) {
+        match offload::ask(Path::new(&dir), &w) {
+            Ok(Some(r)) => return Ok(r),
+            Ok(None) => {}
+            Err(e) => tracing::warn!("the judge server ({}): {e:#}; judging here", offload::ENV),
+        }
+    }
+    offload::compute(&w, &mcap.display().to_string())
 }
 
 /// Check and score a run against `truth`: the recomputations, the procedures' outcomes, the
@@ -130,8 +110,13 @@ pub(super) fn judge(
         (Some(_), Some(d)) if opts.reference_checks => Some(d),
         _ => None,
     };
-    let rc = recompute(s, opts, nav_cfg, drive)?;
-    phases.end("reference, replay and scoring");
+    let mut rc = recompute(s, opts, nav_cfg, drive)?;
+    let reference = rc.reference.take().transpose()?;
+    phases.end(if rc.by_server {
+        "reference, replay and scoring (by the judge server)"
+    } else {
+        "reference, replay and scoring"
+    });
     let bench = report::BenchSide {
         tx: &tx,
         lockstep: &lockstep_stats,
@@ -139,7 +124,7 @@ pub(super) fn judge(
         turntable: tt_stats.as_ref(),
         gps_via_gpsd: opts.gps_via_gpsd,
     };
-    let (mut checks, lost) = report::checks(s, bench, rc.reference.as_ref(), &nav_json, nav_exit);
+    let (mut checks, lost) = report::checks(s, bench, reference.as_ref(), &nav_json, nav_exit);
     let procedures = crate::procedures::Outcomes::of(s, &nav_json, sim_reached);
     report::procedure_checks(&mut checks, s, &procedures, &nav_json);
     report::solution_checks(&mut checks, &solution, &nav_json);
@@ -175,7 +160,7 @@ pub(super) fn judge(
         lockstep: lockstep_stats,
         bus: bus_stats,
         tx,
-        in_process: rc.reference,
+        in_process: reference,
         turntable: tt_stats,
         procedures,
         gps: gps_stats,

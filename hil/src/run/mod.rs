@@ -4,6 +4,7 @@
 
 pub mod busreplay;
 mod judge;
+pub mod offload;
 
 use crate::engine::truthrec::RunTruth;
 use crate::procedures::observe::{DrillWatch, solution_socket, watch_solution};
