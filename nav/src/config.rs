@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use thiserror::Error;
 
 /// Whole configuration.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct NavConfig {
     /// CAN bus (IMU, turntable). Without it nav runs on the GPS alone (a receiver bring-up).
@@ -66,7 +66,7 @@ pub struct CalibrationConfig {
 }
 
 /// CAN bus settings.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct CanConfig {
     /// Interface name (`can0`, `vcan0`).
@@ -77,7 +77,7 @@ pub struct CanConfig {
 }
 
 /// GPS receiver settings.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct GpsConfig {
     /// Where the receiver's sentences come from: its serial port (the default) or gpsd, the
@@ -141,7 +141,7 @@ fn default_rcvbuf() -> usize {
 }
 
 /// Watchdog settings (wall time: liveness only, never navigation time).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct WatchdogConfig {
     /// Report an IMU timeout after this long without IMU frames.
@@ -157,7 +157,7 @@ impl Default for WatchdogConfig {
 }
 
 /// Recording settings. Relative paths are relative to the config file's folder.
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct RecordConfig {
     /// MCAP file of raw frames, decoded samples and events.
@@ -325,6 +325,31 @@ impl NavConfig {
     /// Paths relative to the config file at `path` made absolute, and the parameter files it
     /// names loaded into it.
     fn load_files(&mut self, path: &Path) -> Result<(), ConfigError> {
+        self.load_input_files(path)?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        let gps_export = self.gps.as_mut().and_then(|g| g.fixes_jsonl.as_mut());
+        for p in [
+            &mut self.record.mcap,
+            &mut self.record.summary,
+            &mut self.self_calibration.parameters_out,
+            &mut self.tetra_calibration.parameters_out,
+        ]
+        .into_iter()
+        .flatten()
+        .chain(gps_export)
+        {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+        }
+        Ok(())
+    }
+
+    /// The parameter files the config names ([`NavConfig::input_files_mut`]), relative to the
+    /// config file at `path`, loaded into it: what [`NavConfig::load`] does with them after
+    /// parsing, for a config that came another way (deserialized: what it held of them is not
+    /// serialized). Output paths are left as they are.
+    pub fn load_input_files(&mut self, path: &Path) -> Result<(), ConfigError> {
         let base = path.parent().unwrap_or(Path::new("."));
         if let Some(c) = self.calibration.as_mut() {
             if c.parameters.is_relative() {
@@ -363,21 +388,6 @@ impl NavConfig {
             }
             let f = crate::params::RedundantParameters::load(p, &t.imu)?;
             t.coefficients = Some(f.coefficients());
-        }
-        let gps_export = self.gps.as_mut().and_then(|g| g.fixes_jsonl.as_mut());
-        for p in [
-            &mut self.record.mcap,
-            &mut self.record.summary,
-            &mut self.self_calibration.parameters_out,
-            &mut self.tetra_calibration.parameters_out,
-        ]
-        .into_iter()
-        .flatten()
-        .chain(gps_export)
-        {
-            if p.is_relative() {
-                *p = base.join(&*p);
-            }
         }
         Ok(())
     }

@@ -21,7 +21,7 @@ use crate::engine::navigate::{RecordingScorer, ScoredRecording};
 use crate::engine::recording::Playback;
 use crate::engine::reference::InProcess;
 use crate::scenario::Scenario;
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Context, Result, anyhow, bail};
 use emulators::drive::Drive;
 use nav::config::NavConfig;
 use serde::{Deserialize, Serialize};
@@ -183,6 +183,40 @@ fn cpu_features() -> Vec<String> {
     f.into_iter().map(String::from).collect()
 }
 
+/// nav's config `cfg` as a server gets it: the parameter files it names (relative to the
+/// run's folder `run`) copied into `folder`
+/// and named relative to it, for the server to load ([`NavConfig::load_input_files`]: what a config
+/// loaded holds of them is not serialized). Checked here: `cfg` and what the server will
+/// rebuild from the copies must be equal but for the files' paths, as must the scenario
+/// serialized and read back, or the work stays here.
+fn config_beside(cfg: &NavConfig, run: &Path, folder: &Path) -> Result<NavConfig> {
+    let mut sent = cfg.clone();
+    for (path, name) in sent.input_files_mut() {
+        // (relative: to nav's config, in the run's folder beside its recording)
+        let from = run.join(&*path);
+        std::fs::copy(&from, folder.join(name))
+            .with_context(|| format!("copying nav's {}", from.display()))?;
+        *path = PathBuf::from(name);
+    }
+    let mut back: NavConfig = cbor_round_trip(&sent)?;
+    back.load_input_files(&folder.join("nav.toml"))
+        .map_err(|e| anyhow!("nav's config as the server would read it: {e}"))?;
+    let mut original = cfg.clone();
+    for ((p, _), (q, _)) in back.input_files_mut().zip(original.input_files_mut()) {
+        *p = q.clone();
+    }
+    if back != original {
+        bail!("nav's config does not survive the way to the server (serialized, read back)");
+    }
+    Ok(sent)
+}
+
+fn cbor_round_trip<T: Serialize + for<'de> Deserialize<'de>>(v: &T) -> Result<T> {
+    let mut buf = Vec::new();
+    ciborium::into_writer(v, &mut buf).map_err(|e| anyhow!("encoding: {e}"))?;
+    ciborium::from_reader(buf.as_slice()).map_err(|e| anyhow!("decoding: {e}"))
+}
+
 #[derive(Serialize, Deserialize)]
 struct Request {
     program: Program,
@@ -242,7 +276,7 @@ pub(crate) fn ask(dir: &Path, w: &Work) -> Result<Option<Recomputed>> {
 }
 
 fn ask_as(dir: &Path, w: &Work, program: Program) -> Result<Option<Recomputed>> {
-    let Some(mut mark) = alive_mark(dir) else {
+    let Some(mark) = alive_mark(dir) else {
         tracing::info!(
             "no judge server in {} ({ALIVE} missing): judging here",
             dir.display()
@@ -263,42 +297,14 @@ fn ask_as(dir: &Path, w: &Work, program: Program) -> Result<Option<Recomputed>> 
     let req = dir.join(format!("{id}.req"));
     let taken = dir.join(format!("{id}.taken"));
     std::fs::create_dir(&part).with_context(|| format!("creating {}", part.display()))?;
-    let send = || -> Result<()> {
-        let mut parts = nav::record::parts(w.mcap);
-        if parts.is_empty() && w.mcap.exists() {
-            parts.push(w.mcap.to_path_buf());
-        }
-        for p in &parts {
-            let name = p.file_name().context("a recording part without a name")?;
-            std::fs::copy(p, part.join(name))
-                .with_context(|| format!("copying {} to {}", p.display(), part.display()))?;
-        }
-        let r = Request {
-            program,
-            scenario: w.scenario.clone(),
-            nav_cfg: w.nav_cfg.clone(),
-            reference: w.reference,
-            replay: w.replay,
-            score: w.drive.is_some(),
-            mcap: w
-                .mcap
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-            what: w.mcap.display().to_string(),
-        };
-        write_cbor(&part.join("request.cbor"), &r)?;
+    if let Err(e) = submit(&part, w, program).and_then(|()| {
         std::fs::rename(&part, &req).with_context(|| format!("renaming {}", part.display()))
-    };
-    if let Err(e) = send() {
+    }) {
         let _ = std::fs::remove_dir_all(&part);
         return Err(e);
     }
     let asked = Instant::now();
-    let mut heard = Instant::now();
-    let mut last_check = Instant::now();
-    let reply = taken.join("reply.cbor");
-    let give_up = |why: String| -> Result<Option<Recomputed>> {
+    if let Err(why) = await_reply(dir, &req, &taken, mark) {
         // take the request back if it is still there, or clear what the server left
         let back = dir.join(format!("{id}.gone"));
         if std::fs::rename(&req, &back).is_ok() {
@@ -307,38 +313,9 @@ fn ask_as(dir: &Path, w: &Work, program: Program) -> Result<Option<Recomputed>> 
             let _ = std::fs::remove_dir_all(&taken);
         }
         tracing::warn!("judge server in {}: {why}; judging here", dir.display());
-        Ok(None)
-    };
-    loop {
-        if reply.is_file() {
-            break;
-        }
-        if req.exists() && asked.elapsed() > PICKUP {
-            return give_up(format!(
-                "the work was not taken within {} s",
-                PICKUP.as_secs()
-            ));
-        }
-        if last_check.elapsed() > Duration::from_secs(2) {
-            last_check = Instant::now();
-            match alive_mark(dir) {
-                Some(m) if m != mark => {
-                    mark = m;
-                    heard = Instant::now();
-                }
-                None => return give_up("the server stopped".into()),
-                _ => {}
-            }
-            if heard.elapsed() > SILENCE {
-                return give_up(format!(
-                    "the server has not said it was alive for {} s",
-                    SILENCE.as_secs()
-                ));
-            }
-        }
-        std::thread::sleep(Duration::from_millis(50));
+        return Ok(None);
     }
-    let r: Result<Reply> = read_cbor(&reply);
+    let r: Result<Reply> = read_cbor(&taken.join("reply.cbor"));
     let _ = std::fs::remove_dir_all(&taken);
     match r? {
         Reply::Declined(why) => {
@@ -364,6 +341,73 @@ fn ask_as(dir: &Path, w: &Work, program: Program) -> Result<Option<Recomputed>> 
             }))
         }
     }
+}
+
+/// Write the request for `w` into `part`: the recording's parts, nav's config and its files.
+fn submit(part: &Path, w: &Work, program: Program) -> Result<()> {
+    let mut parts = nav::record::parts(w.mcap);
+    if parts.is_empty() && w.mcap.exists() {
+        parts.push(w.mcap.to_path_buf());
+    }
+    for p in &parts {
+        let name = p.file_name().context("a recording part without a name")?;
+        std::fs::copy(p, part.join(name))
+            .with_context(|| format!("copying {} to {}", p.display(), part.display()))?;
+    }
+    if cbor_round_trip(w.scenario)? != *w.scenario {
+        bail!("the scenario does not survive the way to the server (serialized, read back)");
+    }
+    let r = Request {
+        program,
+        scenario: w.scenario.clone(),
+        nav_cfg: config_beside(w.nav_cfg, w.mcap.parent().unwrap_or(Path::new(".")), part)?,
+        reference: w.reference,
+        replay: w.replay,
+        score: w.drive.is_some(),
+        mcap: w
+            .mcap
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        what: w.mcap.display().to_string(),
+    };
+    write_cbor(&part.join("request.cbor"), &r)
+}
+
+/// Wait for the server's reply in `taken`; why not, when the server did not take the request
+/// (`req`) in time or stopped saying it was alive (`mark`: the last word it wrote).
+fn await_reply(dir: &Path, req: &Path, taken: &Path, mut mark: String) -> Result<(), String> {
+    let asked = Instant::now();
+    let mut heard = Instant::now();
+    let mut last_check = Instant::now();
+    let reply = taken.join("reply.cbor");
+    while !reply.is_file() {
+        if req.exists() && asked.elapsed() > PICKUP {
+            return Err(format!(
+                "the work was not taken within {} s",
+                PICKUP.as_secs()
+            ));
+        }
+        if last_check.elapsed() > Duration::from_secs(2) {
+            last_check = Instant::now();
+            match alive_mark(dir) {
+                Some(m) if m != mark => {
+                    mark = m;
+                    heard = Instant::now();
+                }
+                None => return Err("the server stopped".into()),
+                _ => {}
+            }
+            if heard.elapsed() > SILENCE {
+                return Err(format!(
+                    "the server has not said it was alive for {} s",
+                    SILENCE.as_secs()
+                ));
+            }
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Ok(())
 }
 
 /// What a server did.
@@ -406,37 +450,50 @@ pub fn serve(dir: &Path, jobs: usize, stop: &AtomicBool) -> Result<Served> {
                 }
             });
         }
-        let mut count = 0u64;
-        let mut beat = Instant::now() - Duration::from_secs(2);
-        while !stop.load(Ordering::Relaxed) {
-            if beat.elapsed() >= Duration::from_secs(1) {
-                beat = Instant::now();
-                count += 1;
-                let tmp = dir.join(format!("{ALIVE}.tmp"));
-                std::fs::write(&tmp, format!("{} {count}\n", std::process::id()))
-                    .and_then(|_| std::fs::rename(&tmp, &alive))
-                    .with_context(|| format!("writing {}", alive.display()))?;
-            }
-            let entries = std::fs::read_dir(dir).with_context(|| format!("{}", dir.display()))?;
-            for e in entries.flatten() {
-                let name = e.file_name().to_string_lossy().into_owned();
-                let Some(id) = name.strip_suffix(".req") else {
-                    continue;
-                };
-                let taken = dir.join(format!("{id}.taken"));
-                // the run may have taken it back meanwhile
-                if std::fs::rename(e.path(), &taken).is_ok() {
-                    let _ = tx.send(taken);
-                }
-            }
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        // the workers end when the claims end, however they end
+        let r = claim(dir, &alive, stop, &tx);
         drop(tx);
-        Ok::<_, anyhow::Error>(())
+        r
     });
     let _ = std::fs::remove_file(&alive);
     r?;
     Ok(served.into_inner().unwrap_or_default())
+}
+
+/// Until `stop`: say the server is alive (`alive`, every second) and claim each request in
+/// `dir`, handing it to the workers (`tx`).
+fn claim(
+    dir: &Path,
+    alive: &Path,
+    stop: &AtomicBool,
+    tx: &std::sync::mpsc::Sender<PathBuf>,
+) -> Result<()> {
+    let mut count = 0u64;
+    let mut beat = Instant::now() - Duration::from_secs(2);
+    while !stop.load(Ordering::Relaxed) {
+        if beat.elapsed() >= Duration::from_secs(1) {
+            beat = Instant::now();
+            count += 1;
+            let tmp = dir.join(format!("{ALIVE}.tmp"));
+            std::fs::write(&tmp, format!("{} {count}\n", std::process::id()))
+                .and_then(|_| std::fs::rename(&tmp, alive))
+                .with_context(|| format!("writing {}", alive.display()))?;
+        }
+        let entries = std::fs::read_dir(dir).with_context(|| format!("{}", dir.display()))?;
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let Some(id) = name.strip_suffix(".req") else {
+                continue;
+            };
+            let taken = dir.join(format!("{id}.taken"));
+            // the run may have taken it back meanwhile
+            if std::fs::rename(e.path(), &taken).is_ok() {
+                let _ = tx.send(taken);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Ok(())
 }
 
 /// Recompute the request in `folder` and write its reply; whether it was declined.
@@ -446,7 +503,14 @@ fn serve_one(folder: &Path, me: &Program) -> bool {
         Err(e) => (Reply::Declined(format!("{e:#}")), String::new()),
         Ok(req) => match me.declines(&req.program) {
             Some(why) => (Reply::Declined(why), req.scenario.name.clone()),
-            None => (recompute(folder, &req), req.scenario.name.clone()),
+            None => {
+                // a panic declines the work (the run then judges itself) and ends nothing else
+                let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    recompute(folder, &req)
+                }));
+                let r = r.unwrap_or_else(|_| Reply::Declined("the recomputation panicked".into()));
+                (r, req.scenario.name.clone())
+            }
         },
     };
     let declined = matches!(reply, Reply::Declined(_));
@@ -472,10 +536,14 @@ fn recompute(folder: &Path, req: &Request) -> Reply {
         },
         _ => None,
     };
+    let mut nav_cfg = req.nav_cfg.clone();
+    if let Err(e) = nav_cfg.load_input_files(&folder.join("nav.toml")) {
+        return Reply::Declined(format!("nav's config: {e}"));
+    }
     let mcap = folder.join(&req.mcap);
     let w = Work {
         scenario: &req.scenario,
-        nav_cfg: &req.nav_cfg,
+        nav_cfg: &nav_cfg,
         reference: req.reference,
         replay: req.replay,
         drive: drive.as_ref(),
@@ -559,15 +627,20 @@ mod tests {
             while !served.path().join(ALIVE).exists() {
                 std::thread::sleep(Duration::from_millis(10));
             }
-            let there = ask(served.path(), &w).expect("ask").map(Ok);
+            let there = ask(served.path(), &w);
             let mut another = Program::this().expect("program");
             another.exe_bytes += 1;
-            let other = ask_as(served.path(), &w, another).expect("ask");
+            let other = ask_as(served.path(), &w, another);
+            // (stopped before any assertion: the scope waits for the server)
             stop.store(true, Ordering::Relaxed);
             let stats = server.join().expect("server").expect("served");
             (there, other, stats)
         });
-        let there = there.expect("the server judged the run");
+        let there = there
+            .expect("ask")
+            .map(Ok)
+            .expect("the server judged the run");
+        let other = other.expect("ask");
         let replayed = there.as_ref().ok().and_then(|r| r.replayed.as_ref());
         let p = replayed.expect("a replay").as_ref().expect("replayed");
         assert!(p.frames_in > 1000, "{} frames replayed", p.frames_in);
@@ -585,6 +658,55 @@ mod tests {
         // the server cleared its mark, and the runs their folders
         let left: Vec<_> = std::fs::read_dir(served.path()).expect("dir").collect();
         assert!(left.is_empty(), "{left:?}");
+    }
+
+    /// What a loaded config holds of its parameter files is not serialized (the redundant
+    /// unit's coefficients): the server loads them from copies and gets the run's config.
+    #[test]
+    fn the_parameter_files_nav_ran_with_go_to_the_server_and_load_there_as_here() {
+        let g = nav::params::RedundantGyro {
+            bias_dps: 0.05,
+            scale_factor: 2e-3,
+            sigma_j_deg: 0.1,
+            sigma_k_deg: -0.1,
+        };
+        let p = nav::params::RedundantParameters {
+            format: nav::params::REDUNDANT_FORMAT.into(),
+            imu: "MEMS-1".into(),
+            procedure: "test".into(),
+            date: "2026-11-24T01:00:00Z".into(),
+            gyro: vec![g; 4],
+        };
+        let run = tempfile::tempdir().expect("tempdir");
+        std::fs::write(run.path().join("tetra.toml"), p.to_toml()).expect("write");
+        let path = run.path().join("nav.toml");
+        std::fs::write(
+            &path,
+            "[can]\ninterface = \"can0\"\n[tetra_calibration]\nenabled = true\nimu = \"MEMS-1\"\nparameters = \"tetra.toml\"\n",
+        )
+        .expect("write");
+        let mut cfg = NavConfig::load(&path).expect("config");
+        assert!(cfg.tetra_calibration.coefficients.is_some());
+        // as a run has it: the file copied beside nav's config and named relative to it
+        crate::scenario::navconfig::copy_inputs_beside(&mut cfg, run.path()).expect("copy");
+        let folder = tempfile::tempdir().expect("tempdir");
+        let sent = config_beside(&cfg, run.path(), folder.path()).expect("sent");
+        // as the server reads it: the coefficients from the copy, the same but for the path
+        let mut there: NavConfig = cbor_round_trip(&sent).expect("cbor");
+        assert!(there.tetra_calibration.coefficients.is_none());
+        there
+            .load_input_files(&folder.path().join("nav.toml"))
+            .expect("load");
+        assert_eq!(
+            there.tetra_calibration.coefficients,
+            cfg.tetra_calibration.coefficients
+        );
+        assert_eq!(
+            there.tetra_calibration.parameters,
+            Some(folder.path().join("nav-tetra-parameters.toml"))
+        );
+        there.tetra_calibration.parameters = cfg.tetra_calibration.parameters.clone();
+        assert_eq!(there, cfg);
     }
 
     #[test]
