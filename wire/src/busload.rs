@@ -47,33 +47,69 @@ pub fn frame_bits_exact(frame: &crate::RawFrame) -> u32 {
 }
 
 /// The stuff bits CAN puts in the `n` low bits of `word` (sent highest first): one of the
-/// other value after five equal bits, which begins the next run. Counted run by run: a run of
-/// `len` equal bits that starts `carry` bits into a run (1 when a stuff bit of its value came
-/// just before) holds `(carry + len) / 5` of them.
+/// other value after five equal bits, which begins the next run. Counted a byte at a time
+/// through [`STUFF_TABLE`] (the bus model asks this of every frame it carries).
 fn stuff_bits(word: u128, n: u32) -> u32 {
-    let (mut stuffed, mut carry) = (0, 0);
-    let mut left = n;
+    if n == 0 {
+        return 0;
+    }
+    // the first bit begins a run of one
+    let mut state = (((word >> (n - 1)) & 1) as u8) * 4;
+    let mut left = n - 1;
+    let mut stuffed = 0;
+    while left >= 8 {
+        let byte = ((word >> (left - 8)) & 0xFF) as usize;
+        let (next, count) = STUFF_TABLE[usize::from(state)][byte];
+        state = next;
+        stuffed += u32::from(count);
+        left -= 8;
+    }
     while left > 0 {
-        let top = left - 1;
-        let b = (word >> top) & 1 == 1;
-        let below = if left >= 128 {
-            u128::MAX
-        } else {
-            (1u128 << left) - 1
-        };
-        // the bits of the other value from `top` down; the run ends at the highest of them
-        let other = (if b { !word } else { word }) & below;
-        let len = if other == 0 {
-            left
-        } else {
-            top - (127 - other.leading_zeros())
-        };
-        stuffed += (carry + len) / 5;
-        carry = u32::from((carry + len) % 5 == 0);
-        left -= len;
+        left -= 1;
+        let (next, count) = stuff_step(state, ((word >> left) & 1) as u8);
+        state = next;
+        stuffed += u32::from(count);
     }
     stuffed
 }
+
+/// One bit through the stuffing rule. The state is the current run's value and length (1 to
+/// 4), `value * 4 + length - 1`; a fifth equal bit brings a stuff bit of the other value,
+/// which begins a run of that value. Returns the next state and the stuff bits added (0 or 1).
+const fn stuff_step(state: u8, bit: u8) -> (u8, u8) {
+    let (value, len) = (state / 4, state % 4 + 1);
+    if bit != value {
+        (bit * 4, 0)
+    } else if len == 4 {
+        ((1 - value) * 4, 1)
+    } else {
+        (value * 4 + len, 0)
+    }
+}
+
+/// For each stuffing state and each byte (sent highest bit first): the state after the byte
+/// and the stuff bits it brought.
+const STUFF_TABLE: [[(u8, u8); 256]; 8] = {
+    let mut t = [[(0u8, 0u8); 256]; 8];
+    let mut state = 0;
+    while state < 8 {
+        let mut byte = 0;
+        while byte < 256 {
+            let (mut s, mut count) = (state as u8, 0u8);
+            let mut i = 8;
+            while i > 0 {
+                i -= 1;
+                let (next, c) = stuff_step(s, ((byte >> i) & 1) as u8);
+                s = next;
+                count += c;
+            }
+            t[state][byte] = (s, count);
+            byte += 1;
+        }
+        state += 1;
+    }
+    t
+};
 
 /// Up to 128 bits in the order sent, the first in the highest place of `word`'s `n` low bits.
 #[derive(Default)]
@@ -265,6 +301,49 @@ mod tests {
             data: [0xFF; 8],
         };
         assert!(frame_bits_exact(&ones) > frame_bits_nominal(8) + 12);
+    }
+
+    #[test]
+    fn the_byte_wise_stuff_count_is_the_bit_by_bit_one() {
+        // the rule of the specification, one bit at a time: after five equal bits (a stuff
+        // bit counting as one of them) one of the other value
+        let by_bits = |word: u128, n: u32| {
+            let (mut stuffed, mut last, mut run) = (0, 2u8, 0);
+            for i in (0..n).rev() {
+                let b = ((word >> i) & 1) as u8;
+                if b == last {
+                    run += 1;
+                } else {
+                    (last, run) = (b, 1);
+                }
+                if run == 5 {
+                    stuffed += 1;
+                    (last, run) = (1 - b, 1);
+                }
+            }
+            stuffed
+        };
+        let mut x = 0x2545_F491_4F6C_DD1D_u64;
+        for n in 0..=113 {
+            for pattern in 0..4 {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                // random bits, then long runs: sparse ones, sparse zeros, all equal
+                let r = u128::from(x) << 64 | u128::from(x.rotate_left(29));
+                let word = match pattern {
+                    0 => r,
+                    1 => r & (r >> 3) & (r >> 7),
+                    2 => !(r & (r >> 3) & (r >> 7)),
+                    _ => u128::MAX * u128::from(x & 1),
+                } & ((1u128 << n) - 1);
+                assert_eq!(
+                    stuff_bits(word, n),
+                    by_bits(word, n),
+                    "{n} bits of {word:#x}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -142,6 +142,9 @@ struct Pending {
     frame: RawFrame,
     queued_ns: u64,
     seq: u64,
+    /// Its length on the wire with its stuff bits (counted once, as it is queued: a frame
+    /// waits through many calls of [`CanBus::run`]).
+    bits: u32,
 }
 
 #[derive(Debug, Default)]
@@ -306,6 +309,7 @@ impl CanBus {
             frame,
             queued_ns: t_ns,
             seq: self.seq,
+            bits: wire::busload::frame_bits_exact(&frame),
         });
         self.seq += 1;
         node.deepest = node.deepest.max(node.queue.len());
@@ -363,7 +367,7 @@ impl CanBus {
             let Some(p) = self.nodes[i].queue.front().copied() else {
                 break;
             };
-            let bits = wire::busload::frame_bits_exact(&p.frame);
+            let bits = p.bits;
             let end = start + self.bits_ns(bits);
             if (complete_by && end > limit_ns) || (!complete_by && start >= limit_ns) {
                 self.recover(limit_ns.min(start), &mut events);
