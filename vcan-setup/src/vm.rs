@@ -773,14 +773,19 @@ fn qemu_command(l: &Launch<'_>) -> Command {
     .arg(&pre.kernel)
     .arg("-initrd")
     .arg(initrd)
+    // VCAN_SETUP_APPEND: more kernel arguments, for measuring (docs/pace.md: `mitigations=off`
+    // measured no faster).
     // norandmaps: every start of a program maps its code at the same addresses. QEMU's
     // translator keys its translations by virtual address, so with address-space
     // randomisation each start of nav or hil translated its code afresh (the translations of
     // seven short end-to-end tests: 408 MB of the 1 GiB code buffer, 127 MB without; 45-48 s
     // against 42-43 s). A throwaway test guest loses nothing by it.
     .args([
-        "-append",
-        "console=ttyS0 quiet loglevel=3 panic=-1 clocksource=tsc tsc=reliable norandmaps",
+        "-append".to_string(),
+        format!(
+            "console=ttyS0 quiet loglevel=3 panic=-1 clocksource=tsc tsc=reliable norandmaps {}",
+            std::env::var("VCAN_SETUP_APPEND").unwrap_or_default()
+        ),
     ])
     .arg("-virtfs")
     .arg(format!(
