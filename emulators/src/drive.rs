@@ -86,6 +86,8 @@ pub struct Drive {
     spec: DriveSpec,
     segs: Vec<Segment>,
     lat0: f64,
+    /// `lat0.cos()`, asked at every quadrature node.
+    cos_lat0: f64,
     lon0: f64,
     rm: f64,
     rn: f64,
@@ -122,6 +124,7 @@ impl Drive {
             spec: spec.clone(),
             segs,
             lat0,
+            cos_lat0: lat0.cos(),
             lon0: spec.lon_deg.to_radians(),
             rm: rm + spec.height_m,
             rn: rn + spec.height_m,
@@ -190,7 +193,7 @@ impl Drive {
         let (.., p) = self.kinematics(t);
         (
             self.lat0 + p[1] / self.rm,
-            self.lon0 + p[0] / (self.rn * self.lat0.cos()),
+            self.lon0 + p[0] / (self.rn * self.cos_lat0),
             self.spec.height_m,
         )
     }
@@ -225,22 +228,28 @@ impl Segment {
 impl Drive {
     /// Everything rate and force have in common at `t`, each from one trajectory lookup:
     /// the body-from-ENU rotation, earth and transport rate, and the kinematics.
+    /// Each sine and cosine is taken once (they were the truth's largest cost in an emulated
+    /// guest, where floating point is slow): the same values as computed apart.
     fn frame(&self, t: f64) -> DriveFrame {
         let (speed, psi, accel, rate, p) = self.kinematics(t);
         let lat = self.lat0 + p[1] / self.rm;
-        let v = Vector3::new(speed * psi.sin(), speed * psi.cos(), 0.0);
-        let lon_rate = v.x / (self.rn * self.lat0.cos());
+        let (sin_psi, cos_psi) = psi.sin_cos();
+        let (sin_lat, cos_lat) = lat.sin_cos();
+        let v = Vector3::new(speed * sin_psi, speed * cos_psi, 0.0);
+        let lon_rate = v.x / (self.rn * self.cos_lat0);
         DriveFrame {
             speed,
-            psi,
+            sin_psi,
+            cos_psi,
             accel,
             rate,
-            lat,
+            sin_lat,
+            cos_lat,
             v,
             // c_b_n(psi, 0, 0): the zero pitch and roll rotations are exact identities
             cnb: nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), -psi).inverse(),
-            wie: Vector3::from(earth::earth_rate_enu(lat)),
-            wen: Vector3::new(-v.y / self.rm, lon_rate * lat.cos(), lon_rate * lat.sin()),
+            wie: Vector3::from(earth::earth_rate_enu_sc(sin_lat, cos_lat)),
+            wen: Vector3::new(-v.y / self.rm, lon_rate * cos_lat, lon_rate * sin_lat),
         }
     }
 
@@ -249,13 +258,17 @@ impl Drive {
     }
 
     fn force_of(&self, fr: &DriveFrame) -> Vector3<f64> {
-        let (s, psi) = (fr.speed, fr.psi);
+        let (s, sin_psi, cos_psi) = (fr.speed, fr.sin_psi, fr.cos_psi);
         let a = Vector3::new(
-            fr.accel * psi.sin() + s * fr.rate * psi.cos(),
-            fr.accel * psi.cos() - s * fr.rate * psi.sin(),
+            fr.accel * sin_psi + s * fr.rate * cos_psi,
+            fr.accel * cos_psi - s * fr.rate * sin_psi,
             0.0,
         );
-        let g = Vector3::new(0.0, 0.0, -earth::gravity(fr.lat, self.spec.height_m));
+        let g = Vector3::new(
+            0.0,
+            0.0,
+            -earth::gravity_sc(fr.sin_lat, fr.cos_lat, self.spec.height_m),
+        );
         fr.cnb * (a + (2.0 * fr.wie + fr.wen).cross(&fr.v) - g)
     }
 }
@@ -263,10 +276,12 @@ impl Drive {
 /// See [`Drive::frame`].
 struct DriveFrame {
     speed: f64,
-    psi: f64,
+    sin_psi: f64,
+    cos_psi: f64,
     accel: f64,
     rate: f64,
-    lat: f64,
+    sin_lat: f64,
+    cos_lat: f64,
     v: Vector3<f64>,
     cnb: nalgebra::Rotation3<f64>,
     wie: Vector3<f64>,

@@ -29,6 +29,12 @@ pub fn radii(lat: f64) -> (f64, f64) {
 /// closed form on the ellipsoid, then the second-order free-air reduction.
 pub fn gravity(lat: f64, h: f64) -> f64 {
     let (s, c) = lat.sin_cos();
+    gravity_sc(s, c, h)
+}
+
+/// [`gravity`] from the latitude's sine and cosine (a caller that has them saves computing
+/// them again: the same operations, so the same bits).
+pub fn gravity_sc(s: f64, c: f64, h: f64) -> f64 {
     let g0 = (A * GAMMA_EQUATOR * c * c + B * GAMMA_POLE * s * s)
         / ((A * c).powi(2) + (B * s).powi(2)).sqrt();
     let f = (A - B) / A;
@@ -39,6 +45,11 @@ pub fn gravity(lat: f64, h: f64) -> f64 {
 /// The earth's rotation in ENU axes at latitude `lat` (rad), rad/s.
 pub fn earth_rate_enu(lat: f64) -> [f64; 3] {
     let (s, c) = lat.sin_cos();
+    earth_rate_enu_sc(s, c)
+}
+
+/// [`earth_rate_enu`] from the latitude's sine and cosine.
+pub fn earth_rate_enu_sc(s: f64, c: f64) -> [f64; 3] {
     [0.0, OMEGA * c, OMEGA * s]
 }
 
