@@ -77,6 +77,10 @@ struct Segment {
     s0: f64,
     accel: f64,
     psi0: f64,
+    /// `psi0.sin()` and `psi0.cos()`, kept from the plan: a segment's start heading is asked
+    /// for its sine and cosine at every quadrature node.
+    sin_psi0: f64,
+    cos_psi0: f64,
     rate: f64,
 }
 
@@ -142,28 +146,19 @@ impl Drive {
             Some(s) if t <= s.t0 + s.dur => (*s, (t - s.t0).max(0.0)),
             Some(s) => {
                 // after the end (or in a rounding gap): standing where the segment ended
-                let p = s.position(s.dur);
-                let st = Segment {
-                    t0: s.t0 + s.dur,
-                    dur: f64::INFINITY,
-                    p0: p,
-                    s0: (s.s0 + s.accel * s.dur).max(0.0),
-                    accel: 0.0,
-                    psi0: wrap(s.psi0 + s.rate * s.dur),
-                    rate: 0.0,
-                };
+                let st = Segment::new(
+                    s.t0 + s.dur,
+                    f64::INFINITY,
+                    s.position(s.dur),
+                    (s.s0 + s.accel * s.dur).max(0.0),
+                    0.0,
+                    wrap(s.psi0 + s.rate * s.dur),
+                    0.0,
+                );
                 (st, t - st.t0)
             }
             None => (
-                Segment {
-                    t0: 0.0,
-                    dur: f64::INFINITY,
-                    p0: [0.0, 0.0],
-                    s0: 0.0,
-                    accel: 0.0,
-                    psi0: 0.0,
-                    rate: 0.0,
-                },
+                Segment::new(0.0, f64::INFINITY, [0.0, 0.0], 0.0, 0.0, 0.0, 0.0),
                 t,
             ),
         }
@@ -171,21 +166,29 @@ impl Drive {
 
     /// Speed (m/s), heading (rad), their rates, and the horizontal position (m east, north).
     pub fn kinematics(&self, t: f64) -> (f64, f64, f64, f64, [f64; 2]) {
+        let k = self.state(t);
+        (k.speed, k.psi, k.accel, k.rate, k.p)
+    }
+
+    /// The kinematics at `t` with the heading's sine and cosine.
+    fn state(&self, t: f64) -> State {
         let (s, tau) = self.seg(t);
-        let speed = s.s0 + s.accel * tau;
-        (
-            speed,
-            s.psi0 + s.rate * tau,
-            s.accel,
-            s.rate,
-            s.position(tau),
-        )
+        let (psi, sin_psi, cos_psi, p) = s.at(tau);
+        State {
+            speed: s.s0 + s.accel * tau,
+            psi,
+            sin_psi,
+            cos_psi,
+            accel: s.accel,
+            rate: s.rate,
+            p,
+        }
     }
 
     /// Velocity in ENU, m/s.
     pub fn velocity(&self, t: f64) -> Vector3<f64> {
-        let (s, psi, ..) = self.kinematics(t);
-        Vector3::new(s * psi.sin(), s * psi.cos(), 0.0)
+        let k = self.state(t);
+        Vector3::new(k.speed * k.sin_psi, k.speed * k.cos_psi, 0.0)
     }
 
     /// Latitude, longitude (rad) and height (m).
@@ -204,23 +207,64 @@ impl Drive {
     }
 }
 
+/// See [`Drive::state`].
+struct State {
+    speed: f64,
+    psi: f64,
+    sin_psi: f64,
+    cos_psi: f64,
+    accel: f64,
+    rate: f64,
+    p: [f64; 2],
+}
+
 impl Segment {
+    fn new(t0: f64, dur: f64, p0: [f64; 2], s0: f64, accel: f64, psi0: f64, rate: f64) -> Self {
+        let (sin_psi0, cos_psi0) = psi0.sin_cos();
+        Self {
+            t0,
+            dur,
+            p0,
+            s0,
+            accel,
+            psi0,
+            sin_psi0,
+            cos_psi0,
+            rate,
+        }
+    }
+
     /// Position after `tau` seconds in the segment.
     fn position(&self, tau: f64) -> [f64; 2] {
+        self.at(tau).3
+    }
+
+    /// Heading, its sine and cosine, and position after `tau` seconds in the segment; each
+    /// sine and cosine taken once (on a straight leg none: the start's, kept from the plan).
+    fn at(&self, tau: f64) -> (f64, f64, f64, [f64; 2]) {
+        let psi = self.psi0 + self.rate * tau;
         let dist = self.s0 * tau + 0.5 * self.accel * tau * tau;
         if self.rate.abs() < 1e-12 {
-            [
-                self.p0[0] + dist * self.psi0.sin(),
-                self.p0[1] + dist * self.psi0.cos(),
-            ]
+            let p = [
+                self.p0[0] + dist * self.sin_psi0,
+                self.p0[1] + dist * self.cos_psi0,
+            ];
+            if psi.to_bits() == self.psi0.to_bits() {
+                // a straight leg (psi0 + 0 * tau, which is psi0 but for the sign of a zero)
+                (psi, self.sin_psi0, self.cos_psi0, p)
+            } else {
+                let (sin_psi, cos_psi) = psi.sin_cos();
+                (psi, sin_psi, cos_psi, p)
+            }
         } else {
             // constant speed on an arc (turns are planned at constant speed)
             let r = self.s0 / self.rate;
-            let psi = self.psi0 + self.rate * tau;
-            [
-                self.p0[0] + r * (self.psi0.cos() - psi.cos()),
-                self.p0[1] + r * (psi.sin() - self.psi0.sin()),
-            ]
+            let (sin_psi, cos_psi) = psi.sin_cos();
+            let p = [
+                self.p0[0] + r * (self.cos_psi0 - cos_psi),
+                self.p0[1] + r * (sin_psi - self.sin_psi0),
+            ];
+            (psi, sin_psi, cos_psi, p)
         }
     }
 }
@@ -231,9 +275,16 @@ impl Drive {
     /// Each sine and cosine is taken once (they were the truth's largest cost in an emulated
     /// guest, where floating point is slow): the same values as computed apart.
     fn frame(&self, t: f64) -> DriveFrame {
-        let (speed, psi, accel, rate, p) = self.kinematics(t);
+        let State {
+            speed,
+            psi,
+            sin_psi,
+            cos_psi,
+            accel,
+            rate,
+            p,
+        } = self.state(t);
         let lat = self.lat0 + p[1] / self.rm;
-        let (sin_psi, cos_psi) = psi.sin_cos();
         let (sin_lat, cos_lat) = lat.sin_cos();
         let v = Vector3::new(speed * sin_psi, speed * cos_psi, 0.0);
         let lon_rate = v.x / (self.rn * self.cos_lat0);
@@ -246,8 +297,7 @@ impl Drive {
             sin_lat,
             cos_lat,
             v,
-            // c_b_n(psi, 0, 0): the zero pitch and roll rotations are exact identities
-            cnb: nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), -psi).inverse(),
+            cnb: c_b_n_heading(psi, sin_psi, cos_psi),
             wie: Vector3::from(earth::earth_rate_enu_sc(sin_lat, cos_lat)),
             wen: Vector3::new(-v.y / self.rm, lon_rate * cos_lat, lon_rate * sin_lat),
         }
@@ -271,6 +321,34 @@ impl Drive {
         );
         fr.cnb * (a + (2.0 * fr.wie + fr.wen).cross(&fr.v) - g)
     }
+}
+
+/// `c_b_n(psi, 0, 0)` (the zero pitch and roll rotations are exact identities), i.e.
+/// `Rotation3::from_axis_angle(&Vector3::z_axis(), -psi).inverse()`, from the heading's sine and
+/// cosine: nalgebra's formula for an axis and angle term by term, with `sin(-psi) = -sin(psi)`
+/// and `cos(-psi) = cos(psi)` (glibc's `sin` is odd and its `cos` even to the bit), so the same
+/// bits without a third sine and cosine per quadrature node.
+fn c_b_n_heading(psi: f64, sin_psi: f64, cos_psi: f64) -> nalgebra::Rotation3<f64> {
+    let angle = -psi;
+    if angle == 0.0 {
+        return nalgebra::Rotation3::identity();
+    }
+    let (ux, uy, uz) = (0.0_f64, 0.0_f64, 1.0_f64);
+    let (sqx, sqy, sqz) = (ux * ux, uy * uy, uz * uz);
+    let (sin, cos) = (-sin_psi, cos_psi);
+    let one_m_cos = 1.0 - cos;
+    nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::new(
+        sqx + (1.0 - sqx) * cos,
+        ux * uy * one_m_cos - uz * sin,
+        ux * uz * one_m_cos + uy * sin,
+        ux * uy * one_m_cos + uz * sin,
+        sqy + (1.0 - sqy) * cos,
+        uy * uz * one_m_cos - ux * sin,
+        ux * uz * one_m_cos - uy * sin,
+        uy * uz * one_m_cos + ux * sin,
+        sqz + (1.0 - sqz) * cos,
+    ))
+    .inverse()
 }
 
 /// See [`Drive::frame`].
@@ -462,15 +540,7 @@ impl Segments {
         if dur <= 0.0 {
             return;
         }
-        let seg = Segment {
-            t0: self.t,
-            dur,
-            p0: self.p,
-            s0,
-            accel,
-            psi0: self.psi,
-            rate,
-        };
+        let seg = Segment::new(self.t, dur, self.p, s0, accel, self.psi, rate);
         self.p = seg.position(dur);
         self.psi = wrap(self.psi + rate * dur);
         self.t += dur;
