@@ -56,6 +56,38 @@ fn read(p: &Path) -> Value {
         .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
+/// The drill at x10 with `--live`, watched by client a (which pauses it at 12 s of simulated
+/// time for 5 s of wall time: longer than nav's watchdog, 2 s, which must not see it) and
+/// client b, writing into `out`, `a` and `b`: the exit status of hil and of each client.
+fn watched_drill(
+    out: &Path,
+    a: &Path,
+    b: &Path,
+) -> (
+    std::process::ExitStatus,
+    std::process::ExitStatus,
+    std::process::ExitStatus,
+) {
+    let port = free_port();
+    let url = format!("ws://127.0.0.1:{port}");
+    let mut hil = Command::new(bin("hil"))
+        .args(DRILL)
+        .args(["--speed", "10", "--live"])
+        .arg(format!("127.0.0.1:{port}"))
+        .args(["--live-wait", "2", "--out"])
+        .arg(out)
+        .stdout(Stdio::inherit())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("hil runs");
+    let mut ca = client(&url, a, &["--pause-at", "12", "--pause-for", "5000"]);
+    let mut cb = client(&url, b, &[]);
+    let status = wait(&mut hil, "hil drill --live", Duration::from_secs(1500));
+    let sa = wait(&mut ca, "client a", Duration::from_secs(60));
+    let sb = wait(&mut cb, "client b", Duration::from_secs(60));
+    (status, sa, sb)
+}
+
 #[test]
 #[ignore = "boots the QEMU guest where this kernel has no CAN and needs node with tests/live's packages: run ./run-tests"]
 fn a_drill_is_watched_live_by_foxglove_clients_and_a_pause_changes_nothing() {
@@ -67,26 +99,26 @@ fn a_drill_is_watched_live_by_foxglove_clients_and_a_pause_changes_nothing() {
     );
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("drill");
-    let port = free_port();
-    let url = format!("ws://127.0.0.1:{port}");
-    let mut hil = Command::new(bin("hil"))
-        .args(DRILL)
-        .args(["--speed", "10", "--live"])
-        .arg(format!("127.0.0.1:{port}"))
-        .args(["--live-wait", "2", "--out"])
-        .arg(&out)
-        .stdout(Stdio::inherit())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("hil runs");
     let (a, b) = (dir.path().join("a.json"), dir.path().join("b.json"));
-    // client a pauses the run at 12 s of simulated time for 5 s of wall time: longer than nav's
-    // watchdog (2 s), which must not see it
-    let mut ca = client(&url, &a, &["--pause-at", "12", "--pause-for", "5000"]);
-    let mut cb = client(&url, &b, &[]);
-    let status = wait(&mut hil, "hil drill --live", Duration::from_secs(1500));
-    let sa = wait(&mut ca, "client a", Duration::from_secs(60));
-    let sb = wait(&mut cb, "client b", Duration::from_secs(60));
+    let (mut status, mut sa, mut sb) = watched_drill(&out, &a, &b);
+    // a run whose bench was starved of CPU past nav's watchdog (a loaded host) says nothing of
+    // the live view: once more from an empty folder, as every lockstep run of the suite
+    // (e2e::hil_json), and a second such run fails as it stands
+    let n = std::fs::read(out.join("report.json"))
+        .ok()
+        .and_then(|b| serde_json::from_slice::<Value>(&b).ok())
+        .map_or(0, |r| e2e::starved(&r));
+    if !status.success() && n > 0 {
+        eprintln!(
+            "{n} watchdog report(s) no stop of the stream called for; {}: the live drill",
+            e2e::STARVED_RERUN
+        );
+        for p in [&a, &b] {
+            let _ = std::fs::remove_file(p);
+        }
+        std::fs::remove_dir_all(&out).expect("emptying the run folder");
+        (status, sa, sb) = watched_drill(&out, &a, &b);
+    }
     keep_report(&out, "drill-live");
     assert!(status.success(), "the drill failed: {status}");
     let report = read(&out.join("report.json"));
