@@ -765,4 +765,43 @@ mod tests {
                 .contains("positive")
         );
     }
+
+    /// The heading's rotation built from its sine and cosine is nalgebra's from the angle, to
+    /// the bit (this libm's `sin` odd and `cos` even): headings in every quadrant, either sign,
+    /// zeros, multiples of pi/2, large angles and random ones.
+    #[test]
+    fn the_heading_rotation_from_its_sine_and_cosine_is_nalgebras_to_the_bit() {
+        let mut angles = vec![
+            0.0,
+            -0.0,
+            PI,
+            -PI,
+            PI / 2.0,
+            -PI / 2.0,
+            1e-300,
+            -1e-300,
+            1e6,
+            -1e6,
+        ];
+        let mut x = 0x9e37_79b9_7f4a_7c15_u64;
+        for k in 0..20_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let u = (x >> 11) as f64 / (1u64 << 53) as f64;
+            angles.push((u - 0.5) * if k % 2 == 0 { 2.0 * PI } else { 1e4 });
+        }
+        for psi in angles {
+            let (sin_psi, cos_psi) = psi.sin_cos();
+            let ours = c_b_n_heading(psi, sin_psi, cos_psi);
+            let theirs = nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), -psi).inverse();
+            for (a, b) in ours.matrix().iter().zip(theirs.matrix().iter()) {
+                assert_eq!(
+                    a.to_bits(),
+                    b.to_bits(),
+                    "psi {psi:e}: {ours} against {theirs}"
+                );
+            }
+        }
+    }
 }
