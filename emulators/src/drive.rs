@@ -89,6 +89,9 @@ struct Segment {
 pub struct Drive {
     spec: DriveSpec,
     segs: Vec<Segment>,
+    /// For each segment, standing still where it ends (after the plan's end, or in a rounding
+    /// gap between two segments), built once here rather than at every quadrature node.
+    after: Vec<Segment>,
     lat0: f64,
     /// `lat0.cos()`, asked at every quadrature node.
     cos_lat0: f64,
@@ -122,11 +125,13 @@ impl Drive {
         out.push(spec.start_wait_s, 0.0, 0.0, 0.0);
         drive_legs(spec, &mut out, rate, r, &legs, &turns, &tangent)?;
         let segs = out.segs;
+        let after = segs.iter().map(Segment::standing_after).collect();
         let lat0 = spec.lat_deg.to_radians();
         let (rm, rn) = earth::radii(lat0);
         Ok(Self {
             spec: spec.clone(),
             segs,
+            after,
             lat0,
             cos_lat0: lat0.cos(),
             lon0: spec.lon_deg.to_radians(),
@@ -144,17 +149,8 @@ impl Drive {
         let i = self.segs.partition_point(|s| s.t0 <= t).saturating_sub(1);
         match self.segs.get(i) {
             Some(s) if t <= s.t0 + s.dur => (*s, (t - s.t0).max(0.0)),
-            Some(s) => {
-                // after the end (or in a rounding gap): standing where the segment ended
-                let st = Segment::new(
-                    s.t0 + s.dur,
-                    f64::INFINITY,
-                    s.position(s.dur),
-                    (s.s0 + s.accel * s.dur).max(0.0),
-                    0.0,
-                    wrap(s.psi0 + s.rate * s.dur),
-                    0.0,
-                );
+            Some(_) => {
+                let st = self.after[i];
                 (st, t - st.t0)
             }
             None => (
@@ -232,6 +228,19 @@ impl Segment {
             cos_psi0,
             rate,
         }
+    }
+
+    /// Standing still, for good, where this segment ends.
+    fn standing_after(&self) -> Self {
+        Self::new(
+            self.t0 + self.dur,
+            f64::INFINITY,
+            self.position(self.dur),
+            (self.s0 + self.accel * self.dur).max(0.0),
+            0.0,
+            wrap(self.psi0 + self.rate * self.dur),
+            0.0,
+        )
     }
 
     /// Position after `tau` seconds in the segment.
@@ -670,6 +679,21 @@ mod tests {
         let (s, _, _, _, p) = d.kinematics(end + 1.0);
         assert!(s.abs() < 1e-9);
         assert!(p[0].hypot(p[1]) < 30.0, "ends near the start: {p:?}");
+        // and stays where and as it ended, an hour on
+        let (_, psi_end, ..) = d.kinematics(end);
+        let (.., p_end) = d.kinematics(end);
+        for dt in [1e-9, 1.0, 3600.0] {
+            let (s, psi, a, w, p) = d.kinematics(end + dt);
+            assert!(s.abs() < 1e-9 && a == 0.0 && w == 0.0, "{dt}: {s} {a} {w}");
+            assert!(
+                wrap(psi - psi_end).abs() < 1e-12,
+                "{dt}: {psi} vs {psi_end}"
+            );
+            assert!(
+                (p[0] - p_end[0]).hypot(p[1] - p_end[1]) < 1e-6,
+                "{dt}: {p:?}"
+            );
+        }
         let mut t = 0.0;
         while t < end {
             let (s, _, a, w, _) = d.kinematics(t);
