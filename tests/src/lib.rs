@@ -112,27 +112,46 @@ pub fn junit_for_ci(file: &Path) {
 /// verdict is given of a run the machine could carry, not waived for a stall.
 pub fn hil_json(args: &[&str], paths: &[&std::path::Path]) -> (serde_json::Value, i32) {
     let (v, code) = hil_json_once(args, paths);
-    let n = starved(&v);
     let why = if code == 3 {
         // a free-running run the bench stopped rather than feed the device a late stream
         // (an IMU sample past its lateness limit): the machine stalled, mostly for a moment at
         // the start; once more, and a second such run gives no verdict as it stands
         format!("the bench stopped: {}; {FREE_RERUN}", v["bench_behind"])
-    } else if code != 0 && n > 0 {
+    } else if let Some(why) = starved_rerun(&v, code != 0) {
         // nav's watchdog fired where the stream had not stopped: the bench was starved of CPU
         // past it (a loaded host), and the run says nothing of the scenario; once more, and a
         // second starved run fails as it stands
-        format!("{n} watchdog report(s) no stop of the stream called for; {STARVED_RERUN}")
+        why
     } else {
         return (v, code);
     };
     eprintln!("{why}: {args:?}");
     // from an empty output folder
-    if let Some(out) = paths.first().filter(|p| p.is_dir()) {
-        std::fs::remove_dir_all(out).expect("emptying the run folder");
-        std::fs::create_dir_all(out).expect("the run folder again");
+    if let Some(out) = paths.first() {
+        empty_run_folder(out);
     }
     hil_json_once(args, paths)
+}
+
+/// Why a lockstep run is to run once more, if it is: it `failed` and its JSON (the run's
+/// output or its report.json) counts watchdog reports no stop of the stream called for
+/// ([`starved`]): the bench was starved of CPU past nav's watchdog, and the run says nothing
+/// of the scenario. The text ends with [`STARVED_RERUN`], which `./run-tests`'s table counts.
+pub fn starved_rerun(v: &serde_json::Value, failed: bool) -> Option<String> {
+    let n = starved(v);
+    (failed && n > 0).then(|| {
+        format!("{n} watchdog report(s) no stop of the stream called for; {STARVED_RERUN}")
+    })
+}
+
+/// Empty a run's output folder (where it is one) for the run's second go.
+pub fn empty_run_folder(out: &Path) {
+    if out.is_dir() {
+        std::fs::remove_dir_all(out)
+            .unwrap_or_else(|e| panic!("emptying the run folder {}: {e}", out.display()));
+        std::fs::create_dir_all(out)
+            .unwrap_or_else(|e| panic!("the run folder {} again: {e}", out.display()));
+    }
 }
 
 /// What a test prints when it runs a lockstep run once more because the bench was starved
@@ -239,5 +258,15 @@ mod tests {
             super::starved(&serde_json::json!({"lockstep": {"stalls": 4}})),
             0
         );
+        // once more only for a failed run that counts some
+        let why = super::starved_rerun(&v, true).expect("a failed starved run runs again");
+        assert!(
+            why.starts_with("6 ") && why.ends_with(super::STARVED_RERUN),
+            "{why}"
+        );
+        assert_eq!(super::starved_rerun(&v, false), None);
+        let fed = serde_json::json!({"lockstep": {"starved": 0}});
+        assert_eq!(super::starved_rerun(&fed, true), None);
+        assert_eq!(super::starved_rerun(&serde_json::Value::Null, true), None);
     }
 }

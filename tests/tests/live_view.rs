@@ -104,19 +104,16 @@ fn a_drill_is_watched_live_by_foxglove_clients_and_a_pause_changes_nothing() {
     // a run whose bench was starved of CPU past nav's watchdog (a loaded host) says nothing of
     // the live view: once more from an empty folder, as every lockstep run of the suite
     // (e2e::hil_json), and a second such run fails as it stands
-    let n = std::fs::read(out.join("report.json"))
+    let first = std::fs::read(out.join("report.json"))
         .ok()
         .and_then(|b| serde_json::from_slice::<Value>(&b).ok())
-        .map_or(0, |r| e2e::starved(&r));
-    if !status.success() && n > 0 {
-        eprintln!(
-            "{n} watchdog report(s) no stop of the stream called for; {}: the live drill",
-            e2e::STARVED_RERUN
-        );
+        .unwrap_or(Value::Null);
+    if let Some(why) = e2e::starved_rerun(&first, !status.success()) {
+        eprintln!("{why}: the live drill");
         for p in [&a, &b] {
             let _ = std::fs::remove_file(p);
         }
-        std::fs::remove_dir_all(&out).expect("emptying the run folder");
+        e2e::empty_run_folder(&out);
         (status, sa, sb) = watched_drill(&out, &a, &b);
     }
     keep_report(&out, "drill-live");
