@@ -2,6 +2,7 @@
 //! recording. The `nav` binary is the production program; it opens the devices named in its
 //! config file and knows nothing of emulators.
 
+pub mod arrival;
 pub mod attitude;
 pub mod calib;
 pub mod channels;

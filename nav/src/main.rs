@@ -123,18 +123,24 @@ fn real_main() -> Result<()> {
     Ok(())
 }
 
-/// Open the CAN socket of `c` with its receive buffer.
-fn open_can(c: &nav::config::CanConfig) -> Result<socketcan::tokio::CanSocket> {
+/// Open the CAN socket of `c` with its receive buffer; whether it gives each frame's kernel
+/// receive time.
+fn open_can(c: &nav::config::CanConfig) -> Result<(socketcan::tokio::CanSocket, bool)> {
     let iface = c.interface.as_str();
     let sock = socketcan::tokio::CanSocket::open(iface)
         .map_err(|e| anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e)))?;
     // the kernel's receive time of every frame, for the recording (candump's time stamps)
-    if let Err(e) = socketcan::SocketOptions::set_recv_timestamp(&sock, true) {
-        warn!(
-            interface = iface,
-            "no kernel receive times (SO_TIMESTAMPNS: {e}): frames are recorded at read time"
-        );
-    }
+    // and the order of the receiver's bytes among the frames (nav::arrival)
+    let stamped = match socketcan::SocketOptions::set_recv_timestamp(&sock, true) {
+        Ok(()) => true,
+        Err(e) => {
+            warn!(
+                interface = iface,
+                "no kernel receive times (SO_TIMESTAMPNS: {e}): frames are recorded at read time, and the receiver's bytes go in as they are read"
+            );
+            false
+        }
+    };
     // the controller's error frames (bus errors, error-passive, bus-off, restarts): counted,
     // reported, a health bit
     if let Err(e) = wire::set_error_filter(sock.as_raw_fd(), wire::errframe::CAN_ERR_MASK) {
@@ -155,14 +161,17 @@ fn open_can(c: &nav::config::CanConfig) -> Result<socketcan::tokio::CanSocket> {
             "cannot enlarge the receive buffer to {} bytes: {e}", c.rcvbuf_bytes
         ),
     }
-    Ok(sock)
+    Ok((sock, stamped))
 }
 
 async fn run(cfg: &NavConfig) -> Result<Summary> {
     let iface = cfg.can.as_ref().map_or("none", |c| c.interface.as_str());
-    let sock = match &cfg.can {
-        Some(c) => Some(open_can(c)?),
-        None => None,
+    let (sock, stamped) = match &cfg.can {
+        Some(c) => {
+            let (s, stamped) = open_can(c)?;
+            (Some(s), stamped)
+        }
+        None => (None, false),
     };
     let mut gps = cfg.gps.as_ref().map(nav::gpsport::GpsPort::new);
     let export = open_export(cfg)?;
@@ -173,16 +182,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let mut pipeline = Pipeline::new(cfg, recorder.is_some())?;
     let mut sigint = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;
     let mut sigterm = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
-    let mut shell = Shell {
-        iface,
-        sock,
-        command_errors: 0,
-        recorder: recorder.as_ref(),
-        frames_sent: 0,
-        send_errors: 0,
-        parameters: Vec::new(),
-        export,
-    };
+    let mut shell = Shell::new(iface, sock, stamped, recorder.as_ref(), export);
     let mut out = Vec::new();
     let mut batch = Vec::with_capacity(wire::BATCH);
     let mut read_errors = 0u64;
@@ -234,6 +234,12 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                     }
                 };
                 read_errors += on_frame(f, stamps.socket.and_then(epoch_ns), &mut watch, &mut batch, &mut pipeline, &mut shell, &mut out).await?;
+            }
+            // the receiver's bytes that waited as long as they may for a later frame
+            _ = until(shell.waiting.deadline()) => {
+                read_errors += drain_can(&mut batch, &shell);
+                let release = nav::arrival::Release::Expired(Instant::now());
+                take_in_order(&mut batch, release, &mut pipeline, &mut shell, &mut out).await?;
             }
             _ = tick.tick() => {
                 watch.check(&mut pipeline, &mut shell, &mut out).await?;
@@ -317,7 +323,7 @@ async fn on_frame(
         read_errors += 1;
         warn!(interface = shell.iface, "read error: {e}");
     }
-    take_frames(batch, pipeline, shell, out).await?;
+    take_in_order(batch, nav::arrival::Release::Ordered, pipeline, shell, out).await?;
     if let Some(r) = shell.recorder {
         r.ship_due();
     }
@@ -355,8 +361,8 @@ async fn finish(
     let iface = shell.iface;
     // what reached the socket and the port before the signal is processed, not left unread:
     // every frame on the bus is then either received or in the kernel's drop count
-    let mut later = Vec::new();
-    read_errors += drain_can(batch, None, &mut later, pipeline, shell, out).await?;
+    read_errors += drain_can(batch, shell);
+    take_in_order(batch, nav::arrival::Release::All, pipeline, shell, out).await?;
     if let Some(g) = gps.as_mut() {
         while let Some(bytes) = g.try_read() {
             shell.gps_bytes(wall_ns(), bytes, pipeline, out).await?;
@@ -439,17 +445,45 @@ async fn on_gps_event(
     match ev {
         GpsEvent::Bytes { bytes, t_ns } => {
             // the frames received before the bytes were read go through first, those after
-            // them after: the bytes take their place in the order things arrived
-            let mut later = Vec::new();
-            read_errors = drain_can(batch, Some(t_ns), &mut later, pipeline, shell, out).await?;
-            shell.gps_bytes(t_ns, bytes, pipeline, out).await?;
-            take_frames(&mut later, pipeline, shell, out).await?;
+            // them after: the bytes take their place in the order things arrived, once a
+            // frame received after them says that none before them is still on its way
+            // (nav::arrival)
+            shell.waiting.push(t_ns, bytes, Instant::now());
+            read_errors = drain_can(batch, shell);
+            let release = if shell.stamped {
+                nav::arrival::Release::Ordered
+            } else {
+                nav::arrival::Release::All
+            };
+            take_in_order(batch, release, pipeline, shell, out).await?;
         }
-        GpsEvent::Opened => pipeline.on_gps_port(true, "", out),
-        GpsEvent::Closed(why) => pipeline.on_gps_port(false, &why, out),
+        GpsEvent::Opened | GpsEvent::Closed(_) if !shell.waiting.is_empty() => {
+            // the bytes read before the port opened or closed go in before it
+            read_errors = drain_can(batch, shell);
+            take_in_order(batch, nav::arrival::Release::All, pipeline, shell, out).await?;
+            port_event(ev, pipeline, out);
+        }
+        _ => port_event(ev, pipeline, out),
     }
     shell.act(out).await?;
     Ok(read_errors)
+}
+
+/// Until `deadline`, or for ever without one.
+async fn until(deadline: Option<Instant>) {
+    match deadline {
+        Some(t) => tokio::time::sleep_until(t.into()).await,
+        None => std::future::pending().await,
+    }
+}
+
+/// The receiver's port opened or closed, to the pipeline.
+fn port_event(ev: GpsEvent, pipeline: &mut Pipeline, out: &mut Vec<Output>) {
+    match ev {
+        GpsEvent::Opened => pipeline.on_gps_port(true, "", out),
+        GpsEvent::Closed(why) => pipeline.on_gps_port(false, &why, out),
+        GpsEvent::Bytes { .. } => {}
+    }
 }
 
 /// Write `text` to `path` through a temporary file beside it and a rename: whoever reads the
@@ -509,43 +543,52 @@ async fn take_frames(
     Ok(())
 }
 
-/// Every frame already waiting on the CAN socket, without waiting, through the pipeline (the
-/// read errors met); with `before` (ns since the epoch), only the frames received before it,
-/// those after it (in order) to `later`.
-async fn drain_can(
-    batch: &mut Vec<Received>,
-    before: Option<u64>,
-    later: &mut Vec<Received>,
-    pipeline: &mut Pipeline,
-    shell: &mut Shell<'_>,
-    out: &mut Vec<Output>,
-) -> Result<u64> {
+/// Every frame already waiting on the CAN socket, without waiting, after those in `batch`;
+/// the read errors met.
+fn drain_can(batch: &mut Vec<Received>, shell: &Shell<'_>) -> u64 {
     let Some(fd) = shell.sock.as_ref().map(|s| s.as_raw_fd()) else {
-        return Ok(0);
+        return 0;
     };
     loop {
-        batch.clear();
         match wire::recv_batch_stamped(fd, batch, wire::BATCH) {
-            Ok(0) => return Ok(0),
-            Ok(_) => {
-                let cut =
-                    before.and_then(|t| batch.iter().position(|r| r.1.is_some_and(|s| s > t)));
-                if let Some(i) = cut {
-                    later.extend(batch.drain(i..));
-                }
-                take_frames(batch, pipeline, shell, out).await?;
-                if cut.is_some() {
-                    // what is still in the socket came later still
-                    return Ok(0);
-                }
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return Ok(0),
+            Ok(0) => return 0,
+            Ok(_) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return 0,
             Err(e) => {
                 warn!(interface = shell.iface, "read error while draining: {e}");
-                return Ok(1);
+                return 1;
             }
         }
     }
+}
+
+/// The frames in `batch` and the receiver's bytes that wait, through the pipeline in the
+/// order they arrived (`nav::arrival`), with the waiting bytes `release` lets go after them.
+async fn take_in_order(
+    batch: &mut Vec<Received>,
+    release: nav::arrival::Release,
+    pipeline: &mut Pipeline,
+    shell: &mut Shell<'_>,
+    out: &mut Vec<Output>,
+) -> Result<()> {
+    if shell.waiting.is_empty() {
+        return take_frames(batch, pipeline, shell, out).await;
+    }
+    let steps = shell.waiting.order(batch.iter().map(|r| r.1), release);
+    let mut frames = std::mem::take(batch);
+    for step in steps {
+        match step {
+            nav::arrival::Step::Frames(r) => {
+                batch.extend(frames.drain(..r.len()));
+                take_frames(batch, pipeline, shell, out).await?;
+            }
+            nav::arrival::Step::Bytes(b) => shell.gps_bytes(b.t_ns, b.bytes, pipeline, out).await?,
+        }
+    }
+    // the batch's buffer back for the next read
+    frames.clear();
+    *batch = frames;
+    Ok(())
 }
 
 /// The devices the pipeline's outputs go to.
@@ -562,9 +605,36 @@ struct Shell<'a> {
     parameters: Vec<(Option<std::path::PathBuf>, nav::params::ParameterFile)>,
     /// Where every decoded fix goes as a JSON line, when asked for.
     export: Option<std::io::BufWriter<std::fs::File>>,
+    /// The socket gives each frame's kernel receive time.
+    stamped: bool,
+    /// The receiver's bytes read and waiting for the frames sent before them.
+    waiting: nav::arrival::Waiting,
 }
 
-impl Shell<'_> {
+impl<'a> Shell<'a> {
+    /// The shell of a run on `iface` (its socket, none without CAN; `stamped`: the socket
+    /// gives receive times), recording to `recorder`, exporting fixes to `export`.
+    fn new(
+        iface: &'a str,
+        sock: Option<socketcan::tokio::CanSocket>,
+        stamped: bool,
+        recorder: Option<&'a Recorder>,
+        export: Option<std::io::BufWriter<std::fs::File>>,
+    ) -> Self {
+        Shell {
+            iface,
+            sock,
+            command_errors: 0,
+            recorder,
+            frames_sent: 0,
+            send_errors: 0,
+            parameters: Vec::new(),
+            export,
+            stamped,
+            waiting: nav::arrival::Waiting::default(),
+        }
+    }
+
     /// The receiver's bytes, read at `t_ns`: recorded, then through the pipeline.
     async fn gps_bytes(
         &mut self,
