@@ -158,7 +158,7 @@ pub fn starved_rerun(v: &serde_json::Value, failed: bool) -> Option<String> {
     })
 }
 
-/// Empty a run's output folder (where it is one) for the run's second go.
+/// Empty a run's output folder (where it is one) for the run's next go.
 pub fn empty_run_folder(out: &Path) {
     if out.is_dir() {
         std::fs::remove_dir_all(out)
