@@ -109,6 +109,24 @@ impl SentSamples {
         (c == counter).then_some((k, at))
     }
 
+    /// Where the sample whose counter is `counter` stands: `(index, Some(instant it went on
+    /// the bus))` for one sent and kept, `(index, None)` for one not sent yet (ahead of the
+    /// newest by less than half the counter's period). A counter is read as the nearer of the
+    /// two: behind the newest by less than half the period (32,768 samples), else ahead of it.
+    /// None before any sample, or for one behind by more than is kept.
+    pub fn place(&self, counter: u16) -> Option<(u64, Option<Instant>)> {
+        let r = self.ring.lock().unwrap_or_else(|e| e.into_inner());
+        let &(newest_k, newest, _) = r.back()?;
+        let back = newest.wrapping_sub(counter);
+        if back >= 0x8000 {
+            let ahead = counter.wrapping_sub(newest);
+            return Some((newest_k + u64::from(ahead), None));
+        }
+        let i = r.len().checked_sub(1 + usize::from(back))?;
+        let (k, c, at) = r[i];
+        (c == counter).then_some((k, Some(at)))
+    }
+
     /// The newest sample sent: its index and counter.
     pub fn newest(&self) -> Option<(u64, u16)> {
         let r = self.ring.lock().unwrap_or_else(|e| e.into_inner());
@@ -508,6 +526,15 @@ mod tests {
         assert_eq!(s.find(200).map(|x| x.0), Some(236));
         // older than what is kept
         assert_eq!(s.find(100), None);
+        // placed: kept, not sent yet (ahead of the newest), or behind what is kept
+        assert_eq!(s.place(200).map(|x| x.0), Some(236));
+        assert!(s.place(200).is_some_and(|x| x.1.is_some()));
+        assert_eq!(s.place(263 + 5), Some((304, None)));
+        assert_eq!(
+            s.place(263u16.wrapping_add(0x7FFF)),
+            Some((299 + 0x7FFF, None))
+        );
+        assert_eq!(s.place(100), None);
     }
 
     #[test]

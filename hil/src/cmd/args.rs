@@ -143,6 +143,10 @@ pub(crate) struct FreeArgs {
     /// With --free: the bench's own lateness beyond which it stops, ms.
     #[arg(long, default_value_t = 200.0, requires = "free")]
     pub(crate) max_late_ms: f64,
+    /// With --free: how far ahead of the IMU's stream a NAV_TIME may name a sample (a device
+    /// that states predictions), ms (default: one of the device's output periods).
+    #[arg(long, value_parser = hil::values::latency_budget_ms, requires = "free")]
+    pub(crate) lead_allowance_ms: Option<f64>,
 }
 
 impl FreeArgs {
@@ -163,6 +167,9 @@ impl FreeArgs {
         }
         if let Some(b) = self.latency_budget_ms {
             a.extend(["--latency-budget-ms".into(), b.to_string()]);
+        }
+        if let Some(b) = self.lead_allowance_ms {
+            a.extend(["--lead-allowance-ms".into(), b.to_string()]);
         }
         for r in &self.real {
             a.extend(["--real".into(), r.clone()]);
@@ -194,6 +201,7 @@ impl FreeArgs {
                 .unwrap_or(50.0),
             answer_within_s: self.answer_within,
             max_late_ms: self.max_late_ms,
+            lead_allowance_ms: self.lead_allowance_ms,
             progress: true,
         };
         for r in &self.real {

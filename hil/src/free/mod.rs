@@ -12,7 +12,9 @@
 //! The bench measures its own lateness apart from the device's; when it cannot keep real time
 //! it stops and says so, and gives no verdict on the device.
 
+pub mod clock;
 pub mod observe;
+pub mod probe;
 pub mod score;
 mod verdict;
 
@@ -67,6 +69,9 @@ pub struct FreeOptions {
     pub answer_within_s: f64,
     /// The bench's own lateness beyond which it stops, ms.
     pub max_late_ms: f64,
+    /// How far ahead of the stream a NAV_TIME may name a sample (a device that states its
+    /// solution as a prediction), ms; none: one of its output periods.
+    pub lead_allowance_ms: Option<f64>,
     /// Progress on the terminal.
     pub progress: bool,
 }
@@ -94,19 +99,31 @@ pub struct FreeReport {
     pub real: Vec<String>,
     /// The device's solution epochs.
     pub epochs: u64,
-    /// Its stated latency: IMU sample on the bus to the NAV_TIME naming it.
+    /// Its stated latency: IMU sample on the bus to the NAV_TIME naming it (negative for a
+    /// sample named before it went out).
     pub latency: score::Spread,
-    /// NAV_TIMEs naming no sample the bench sent.
+    /// The same less what the host held a thread beside the device of each ([`probe`]).
+    pub latency_own: score::Spread,
+    /// NAV_TIMEs naming no sample the bench could place (older than it keeps).
     pub unnamed_samples: u64,
+    /// NAV_TIMEs naming samples ahead of the stream.
+    pub lead: clock::Lead,
+    /// The device's clock against the IMU's.
+    pub clock: Option<clock::ClockFit>,
+    /// The host's scheduling delays beside the device, as the probe saw them.
+    pub host: emulators::freerun::LatenessSummary,
+    /// Where the frames' times come from, in words.
+    pub stamps: String,
+    /// Frames heard out of their stamps' order, put back in it.
+    pub reordered: u64,
     /// Its output rate.
     pub rate: score::Rate,
     /// The heading at the drill's end, against truth.
     pub heading: Option<score::HeadingScore>,
     /// Navigation along the drive, against truth.
     pub navigation: Option<score::DriveScore>,
-    /// The offset of its time tags the data show (s) and the epochs it rests on; none when
-    /// the data cannot tell.
-    pub time_tag_offset: Option<(f64, usize)>,
+    /// How old its data are against its tags, turn by turn; none when the data cannot tell.
+    pub data_offset: Option<clock::DataOffset>,
     /// NAV_TIMEs whose sample count went back.
     pub backwards: u64,
     /// Frames outside the DBC, by what they were.
@@ -203,12 +220,15 @@ pub fn run_free(s: &Scenario, o: &FreeOptions) -> Result<FreeReport> {
     let observer = observe::spawn(
         sock,
         bench.origin,
+        s.imu.rate_hz,
         bench.sent.clone(),
         seen.clone(),
         stop.clone(),
     )?;
+    let probe = probe::Probe::start(bench.origin, stop.clone())?;
     let ended = supervise(s, o, &bench, &seen, child.as_mut());
     stop.store(true, Ordering::Relaxed);
+    let host = probe.finish();
     let device_exit = stop_dut(child);
     let wall_s = bench.origin.elapsed().as_secs_f64();
     let tracks = bench.tracks.clone();
@@ -231,6 +251,7 @@ pub fn run_free(s: &Scenario, o: &FreeOptions) -> Result<FreeReport> {
         wall_s,
         stats,
         tracks,
+        host,
     };
     let r = verdict::judge(s, o, ctx, seen);
     std::fs::write(o.out.join("report.json"), serde_json::to_string_pretty(&r)?)?;
@@ -530,6 +551,7 @@ pub(crate) struct Judged {
     pub(crate) wall_s: f64,
     pub(crate) stats: Vec<FreeStats>,
     pub(crate) tracks: Vec<SharedTrack>,
+    pub(crate) host: probe::HostDelays,
 }
 
 /// The result card.
@@ -559,6 +581,60 @@ pub fn card(r: &FreeReport) -> String {
         out += &format!(" real     {x}\n");
     }
     out += &format!(
+        " host     a thread beside the device woke late by median {:.2} ms, p99 {:.2} ms, worst {:.1} ms ({} wake-ups every {} ms)\n",
+        r.host.p50_ms,
+        r.host.p99_ms,
+        r.host.max_ms,
+        r.host.count,
+        probe::PERIOD.as_millis()
+    );
+    out += &format!(
+        " times    {}{}\n",
+        r.stamps,
+        if r.reordered > 0 {
+            format!(
+                "; {} frames heard out of their stamps' order, put back in it",
+                r.reordered
+            )
+        } else {
+            String::new()
+        }
+    );
+    match &r.clock {
+        Some(c) => {
+            out += &format!(
+                " clock    latency {} at the start, {} at the end ({:.0} s): the device's clock {} against the IMU's; line residual RMS {:.2} ms, worst {:.1} ms, over {} epochs\n",
+                c.start_ms.words(2, "ms"),
+                c.end_ms.words(2, "ms"),
+                c.span_s,
+                c.drift_ppm.words(1, "ppm"),
+                c.residual_rms_ms,
+                c.residual_max_ms,
+                c.epochs
+            )
+        }
+        None => {
+            out += " clock    not estimated: fewer than 30 epochs named a sample the bench placed\n"
+        }
+    }
+    if let Some(d) = &r.data_offset {
+        out += &format!(
+            " data     its headings are {} older than their tags over {} turns ({} epochs){}: {}\n",
+            d.offset_ms.words(1, "ms"),
+            d.turns.len(),
+            d.epochs,
+            d.drift_ppm.map_or(String::new(), |x| format!(
+                ", drifting {}",
+                x.words(0, "ppm")
+            )),
+            d.turns
+                .iter()
+                .map(|t| format!("{:.1} s {}", t.t_s, t.offset_ms.words(1, "ms")))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    out += &format!(
         " output   {} epochs, {:.1} Hz by the host's clock, every {} samples, jitter {:.2} ms rms, longest gap {:.1} ms; {} turntable commands; {} bytes taken from the receiver\n",
         r.epochs,
         r.rate.hz,
@@ -577,7 +653,7 @@ pub fn card(r: &FreeReport) -> String {
         );
     }
     for n in &r.not_judged {
-        out += &format!(" [----] not judged: {n}\n");
+        out += &format!(" [NOT JUDGED] {n}\n");
     }
     match &r.bench_behind {
         Some(why) => out += &format!(" RESULT: NO VERDICT: {why}\n"),

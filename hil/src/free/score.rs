@@ -21,9 +21,13 @@ pub struct Epoch {
     pub health: Vec<String>,
     /// When NAV_TIME arrived, s.
     pub rx_s: f64,
-    /// The IMU sample it names (its index) and when that sample went on the bus, s; none when
-    /// it names no sample the bench sent (or one older than the bench keeps).
+    /// The IMU sample it names (its index) and when that sample went on the bus, s (when it
+    /// is due, for one not sent yet: `scheduled`); none when the bench cannot place it (one
+    /// older than the bench keeps).
     pub sample: Option<(u64, f64)>,
+    /// The named sample had not gone on the bus when the bench placed it: its time is when it
+    /// was due.
+    pub scheduled: bool,
     /// NAV_ATT of the same Seq: heading, pitch, roll, deg.
     pub att: Option<[f64; 3]>,
     /// NAV_VEL: east, north, up, m/s.
@@ -150,7 +154,7 @@ pub fn backwards(epochs: &[Epoch]) -> (u64, Option<(u32, u32)>, u64) {
 }
 
 /// A heading against truth.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HeadingScore {
     /// The IMU sample its NAV_TIME names.
     pub sample: u64,
@@ -162,6 +166,22 @@ pub struct HeadingScore {
     pub error_deg: f64,
     /// The device's sigma (NAV_HGT's HeadingSigma), deg; none when it sent none.
     pub sigma_deg: Option<f64>,
+    /// The epoch it was taken at: its place in the device's stream (0 the first NAV_TIME).
+    #[serde(default)]
+    pub epoch: u64,
+    /// That epoch's NAV_TIME Seq.
+    #[serde(default)]
+    pub seq: u8,
+    /// That epoch's mode.
+    #[serde(default)]
+    pub mode: String,
+    /// When it came, s since the stream's start.
+    #[serde(default)]
+    pub rx_s: f64,
+    /// Taken at the first epoch after the device's mode left north-finding (false: the device
+    /// never said it was finding north, and its last heading was taken).
+    #[serde(default)]
+    pub after_finding: bool,
 }
 
 impl HeadingScore {
@@ -178,24 +198,22 @@ fn finding(m: NavMode) -> bool {
     matches!(m, NavMode::NorthFinding | NavMode::Gyrocompass)
 }
 
-/// The heading at a drill's end: the first epoch with an attitude after the device's mode has
-/// left north-finding (having shown it), else the last epoch with an attitude. `truth_deg`: the
-/// true heading at an IMU sample.
+/// The heading at a drill's end: the first epoch with an attitude and a placed sample after
+/// the device's mode has left north-finding (having shown it); for a device that never says
+/// it finds north, its last epoch with an attitude. None for a device still finding north
+/// (its headings then are not its answer). `truth_deg`: the true heading at an IMU sample.
 pub fn drill_heading(epochs: &[Epoch], truth_deg: impl Fn(u64) -> f64) -> Option<HeadingScore> {
-    let found = epochs
-        .iter()
-        .position(|e| finding(e.mode))
-        .and_then(|i| {
-            epochs[i..]
+    let usable = |e: &Epoch| e.att.is_some() && e.sample.is_some();
+    let (i, after_finding) = match epochs.iter().position(|e| finding(e.mode)) {
+        Some(f) => (
+            f + epochs[f..]
                 .iter()
-                .find(|e| !finding(e.mode) && e.att.is_some() && e.sample.is_some())
-        })
-        .or_else(|| {
-            epochs
-                .iter()
-                .rev()
-                .find(|e| e.att.is_some() && e.sample.is_some())
-        })?;
+                .position(|e| !finding(e.mode) && usable(e))?,
+            true,
+        ),
+        None => (epochs.iter().rposition(usable)?, false),
+    };
+    let found = &epochs[i];
     let (k, _) = found.sample?;
     let heading = found.att?[0];
     let truth = truth_deg(k);
@@ -205,6 +223,11 @@ pub fn drill_heading(epochs: &[Epoch], truth_deg: impl Fn(u64) -> f64) -> Option
         truth_deg: truth.rem_euclid(360.0),
         error_deg: wrap180(heading - truth),
         sigma_deg: found.hgt.map(|h| h[2]),
+        epoch: i as u64,
+        seq: found.seq,
+        mode: format!("{:?}", found.mode),
+        rx_s: found.rx_s,
+        after_finding,
     })
 }
 
@@ -218,53 +241,6 @@ pub fn drill_over(epochs: &[Epoch]) -> bool {
                 .iter()
                 .any(|e| !finding(e.mode) && e.att.is_some())
         })
-}
-
-/// What the data say of the device's time tags: the offset (s) that best lines its heading's
-/// changes up with the truth's while the truth turns (its headings belong to `offset` s before the samples
-/// they name: positive for a device that stamps its solutions late data as new), searched over
-/// ±0.5 s in 1 ms steps; with the number of epochs it rests on. None when fewer than 10 of its
-/// epochs carry an attitude while the truth turns (`truth_deg` at a time, s of the IMU's clock;
-/// `t_of`: the time of a sample).
-pub fn time_tag_offset(
-    epochs: &[Epoch],
-    truth_deg: impl Fn(f64) -> f64,
-    t_of: impl Fn(u64) -> f64,
-) -> Option<(f64, usize)> {
-    let turning: Vec<(f64, f64)> = epochs
-        .iter()
-        .filter_map(|e| Some((t_of(e.sample?.0), e.att?[0])))
-        .filter(|(t, _)| wrap180(truth_deg(t + 0.5) - truth_deg(t - 0.5)).abs() > 0.5)
-        .collect();
-    if turning.len() < 10 {
-        return None;
-    }
-    // the heading's change from one epoch to the next against the truth's over the same
-    // interval, shifted: a device may state its heading from where it started (it does not
-    // know north while it indexes), and a change knows no offset. A change off by more than
-    // 1 deg (a time tag gone back, counters unwrapped wrong after lost frames) counts as 1 deg
-    // only: one bad epoch must not outweigh hundreds
-    let steps: Vec<(f64, f64, f64)> = turning
-        .windows(2)
-        .filter(|w| w[1].0 > w[0].0 && w[1].0 - w[0].0 < 0.1)
-        .map(|w| (w[0].0, w[1].0, wrap180(w[1].1 - w[0].1)))
-        .collect();
-    if steps.len() < 10 {
-        return None;
-    }
-    let cost = |tau: f64| -> f64 {
-        steps
-            .iter()
-            .map(|&(t0, t1, dh)| {
-                let dt = wrap180(truth_deg(t1 - tau) - truth_deg(t0 - tau));
-                (dh - dt).powi(2).min(1.0)
-            })
-            .sum()
-    };
-    let best = (-500..=500)
-        .map(|ms| f64::from(ms) * 1e-3)
-        .min_by(|a, b| cost(*a).total_cmp(&cost(*b)))?;
-    Some((best, turning.len()))
 }
 
 /// Navigation along a drive, against truth at the sample each epoch names.
@@ -350,16 +326,12 @@ mod tests {
             health: Vec::new(),
             rx_s: t + lag_s,
             sample: Some((k, t)),
+            scheduled: false,
             att: None,
             vel: None,
             pos: None,
             hgt: None,
         }
-    }
-
-    /// A table turning at 10 deg/s for 9 s from t = 1 s.
-    fn table_deg(t: f64) -> f64 {
-        10.0 * (t - 1.0).clamp(0.0, 9.0)
     }
 
     #[test]
@@ -420,58 +392,25 @@ mod tests {
         e[9].att = Some([99.0, 0.0, 0.0]);
         assert!(drill_over(&e));
         let h = drill_heading(&e, |_| 30.0).unwrap();
-        assert_eq!(h.sample, 320);
+        assert_eq!((h.sample, h.epoch, h.seq), (320, 7, 8));
+        assert!(h.after_finding && h.mode == "Navigation", "{h:?}");
         assert!((h.error_deg - 0.2).abs() < 1e-9 && (h.in_sigmas().unwrap() - 2.0).abs() < 1e-9);
         // across north
         e[7].att = Some([0.2, 0.0, 0.0]);
         let h = drill_heading(&e, |_| 359.9).unwrap();
         assert!((h.error_deg - 0.3).abs() < 1e-9, "{h:?}");
-    }
-
-    /// A device whose headings belong to 100 ms before the samples it names is caught; an
-    /// honest one is found honest; without turns there is nothing to tell.
-    #[test]
-    fn the_data_tell_a_time_tag_that_lies() {
-        let truth = |t: f64| 30.0 - table_deg(t);
-        let t_of = |k: u64| k as f64 / 2000.0;
-        let honest: Vec<Epoch> = (1..=600)
-            .map(|i| {
-                let mut e = epoch(i * 40, 2000.0, 0.002);
-                e.att = Some([truth(t_of(i * 40)).rem_euclid(360.0), 0.0, 0.0]);
-                e
-            })
-            .collect();
-        let (tau, n) = time_tag_offset(&honest, truth, t_of).unwrap();
-        assert!(tau.abs() < 0.0015 && n > 300, "{tau} {n}");
-        let early: Vec<Epoch> = honest
-            .iter()
-            .map(|e| {
-                let mut e = e.clone();
-                e.att = Some([truth(t_of(e.sample.unwrap().0) - 0.1), 0.0, 0.0]);
-                e
-            })
-            .collect();
-        let (tau, _) = time_tag_offset(&early, truth, t_of).unwrap();
-        assert!((tau - 0.1).abs() < 0.0015, "{tau}");
-        // a burst of headings 18 deg off while the table turns (a device that lost frames and
-        // unwrapped its counters wrong) does not move the estimate
-        let mut burst = early.clone();
-        for e in &mut burst[100..130] {
-            e.att = e.att.map(|a| [(a[0] + 18.2).rem_euclid(360.0), 0.0, 0.0]);
+        // still finding north: its headings are not its answer
+        let mut still = e.clone();
+        for x in &mut still {
+            x.mode = NavMode::NorthFinding;
         }
-        let (tau, _) = time_tag_offset(&burst, truth, t_of).unwrap();
-        assert!((tau - 0.1).abs() < 0.0015, "{tau}");
-        // a heading stated from where the device started: the same lag
-        let relative: Vec<Epoch> = early
-            .iter()
-            .map(|e| {
-                let mut e = e.clone();
-                e.att = e.att.map(|a| [(a[0] - 137.0).rem_euclid(360.0), 0.0, 0.0]);
-                e
-            })
-            .collect();
-        let (tau, _) = time_tag_offset(&relative, truth, t_of).unwrap();
-        assert!((tau - 0.1).abs() < 0.0015, "{tau}");
-        assert_eq!(time_tag_offset(&honest, |_| 30.0, t_of), None);
+        assert_eq!(drill_heading(&still, |_| 30.0), None);
+        // a device that never says it finds north: its last heading
+        let mut plain = e.clone();
+        for x in &mut plain {
+            x.mode = NavMode::Navigation;
+        }
+        let h = drill_heading(&plain, |_| 99.0).unwrap();
+        assert!(h.epoch == 9 && !h.after_finding, "{h:?}");
     }
 }

@@ -3,8 +3,9 @@
 //! could not judge.
 
 use crate::check::Check;
+use crate::free::clock::{self, DataOffset, Lead};
 use crate::free::observe::Observed;
-use crate::free::score::{self, DriveScore, Epoch, HeadingScore};
+use crate::free::score::{self, DriveScore, Epoch, HeadingScore, Spread};
 use crate::free::{FreeOptions, FreeReport, Judged, is_drill};
 use crate::scenario::Scenario;
 use emulators::drive::Drive;
@@ -78,39 +79,91 @@ impl<'a> Truth<'a> {
     }
 }
 
+/// The device's timing: its latency (and what of it the host could explain), its samples
+/// named ahead, its output period, s.
+struct Timing {
+    latency: Spread,
+    own: Spread,
+    unnamed: u64,
+    lead: Lead,
+    period_s: f64,
+}
+
+impl Timing {
+    fn of(
+        s: &Scenario,
+        o: &FreeOptions,
+        e: &[Epoch],
+        host: &crate::free::probe::HostDelays,
+    ) -> Self {
+        let (latency, unnamed) = score::stated_latency(e);
+        let lat: Vec<(f64, f64)> = e
+            .iter()
+            .filter_map(|x| x.sample.map(|(_, at)| (x.rx_s, x.rx_s - at)))
+            .collect();
+        let own = Spread::of(host.unexplained_ms(&lat, o.latency_budget_ms * 1e-3));
+        let step = score::rate(e).step_samples;
+        let period_s = if step > 0 && step < 1 << 16 {
+            f64::from(step) / s.imu.rate_hz
+        } else {
+            0.02
+        };
+        Self {
+            latency,
+            own,
+            unnamed,
+            lead: clock::lead(e),
+            period_s,
+        }
+    }
+}
+
 /// The verdict: the device's figures against truth and its budget, unless the bench fell
 /// behind real time.
 pub(crate) fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) -> FreeReport {
     let truth = Truth::new(s, &j.tracks);
     let e = &seen.epochs;
-    let (latency, unnamed) = score::stated_latency(e);
+    let timing = Timing::of(s, o, e, &j.host);
     let heading = s
         .north_finding
         .as_ref()
         .and_then(|_| score::drill_heading(e, |k| truth.heading_deg(truth.t_of(k))));
-    let offset = score::time_tag_offset(e, |t| truth.heading_deg(t), |k| truth.t_of(k));
+    let offset = clock::data_offset(e, |t| truth.heading_deg(t), |k| truth.t_of(k));
     let navigation = match (&truth.plan, is_drill(s), &o.real_gps) {
         (Some(plan), false, None) => {
             score::drive(e, |t, p| Truth::drive_error(plan, t, p), |k| truth.t_of(k))
         }
         _ => None,
     };
-    let site_error = heading.and_then(|h| {
+    let site_error = heading.as_ref().and_then(|h| {
         let at = e
             .iter()
             .find(|x| x.sample.is_some_and(|(k, _)| k == h.sample))?;
         truth.site_error(at)
     });
-    let mut checks = device_checks(o, &j, &seen, (latency, unnamed));
     let mut not_judged = Vec::new();
+    let mut checks = device_checks(o, &j, &seen, &timing, &mut not_judged);
     let scores = Scores {
-        heading,
+        heading: heading.clone(),
         navigation,
         site_error,
-        offset,
+        offset: offset.clone(),
+        period_s: timing.period_s,
     };
     truth_checks(s, o, &truth, &scores, &mut checks, &mut not_judged);
-    let behind = j.stats.iter().find_map(|st| st.behind.clone());
+    let behind = j.stats.iter().find_map(|st| st.behind.clone()).or_else(|| {
+        // a device stopped at its limit says so; one late beyond it at its last write (as it
+        // stopped) is late all the same
+        j.stats
+            .iter()
+            .find(|st| st.lateness.max_ms > o.max_late_ms)
+            .map(|st| {
+                format!(
+                    "the bench's {} was {:.1} ms late at worst (limit {:.0} ms): the host could not keep real time",
+                    st.device, st.lateness.max_ms, o.max_late_ms
+                )
+            })
+    });
     let pass = behind.is_none() && checks.iter().all(|c| c.pass);
     let mut real = Vec::new();
     if o.real_turntable {
@@ -130,12 +183,18 @@ pub(crate) fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) ->
         bench_behind: behind,
         real,
         epochs: e.len() as u64,
-        latency,
-        unnamed_samples: unnamed,
+        latency: timing.latency,
+        latency_own: timing.own,
+        unnamed_samples: timing.unnamed,
+        lead: timing.lead,
+        clock: clock::clock_fit(e, 1.0 / s.imu.rate_hz),
+        host: j.host.summary,
+        stamps: seen.stamps.words().into(),
+        reordered: seen.reordered,
         rate: score::rate(e),
         heading,
         navigation,
-        time_tag_offset: offset,
+        data_offset: offset,
         backwards: score::backwards(e).0,
         outside_dbc: seen.outside_dbc.clone(),
         commands: seen.commands,
@@ -148,16 +207,18 @@ pub(crate) fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) ->
 }
 
 /// What the device did, whatever the truth: it answered, it ran to the end, its latency, its
-/// frames, its time tags' order.
+/// samples named ahead, its frames, its time tags' order. A check the run cannot decide goes
+/// to `not_judged`, with why.
 fn device_checks(
     o: &FreeOptions,
     j: &Judged,
     seen: &Observed,
-    (latency, unnamed): (score::Spread, u64),
+    t: &Timing,
+    not_judged: &mut Vec<String>,
 ) -> Vec<Check> {
     let e = &seen.epochs;
     let (backwards, first_back, swapped) = score::backwards(e);
-    vec![
+    let mut checks = vec![
         Check {
             name: "the device answered".into(),
             pass: !e.is_empty(),
@@ -176,52 +237,130 @@ fn device_checks(
                 && !j.device_exit.starts_with("ended before"),
             detail: format!("{}; the device {}", j.ended, j.device_exit),
         },
-        Check {
-            name: "latency within the budget".into(),
-            pass: latency.count > 0 && latency.p99_ms <= o.latency_budget_ms,
-            detail: format!(
-                "IMU sample on the bus to the NAV_TIME naming it: median {:.1} ms, p99 {:.1} ms, worst {:.1} ms over {} epochs ({unnamed} named no sample sent); budget p99 {} ms",
-                latency.p50_ms, latency.p99_ms, latency.max_ms, latency.count, o.latency_budget_ms
+    ];
+    checks.extend(latency_check(o, j, t, not_judged));
+    checks.extend(lead_check(o, t, e.is_empty()));
+    checks.push(Check {
+        name: "frames within the DBC".into(),
+        pass: seen.outside_count() == 0,
+        detail: if seen.outside_dbc.is_empty() {
+            "every frame heard is defined by wire/bench.dbc".into()
+        } else {
+            seen.outside_dbc
+                .iter()
+                .map(|(w, n)| format!("{n} x {w}"))
+                .collect::<Vec<_>>()
+                .join("; ")
+        },
+    });
+    checks.push(Check {
+        name: "time tags never go backwards".into(),
+        pass: backwards == 0,
+        detail: match first_back {
+            Some((a, b)) => format!(
+                "{backwards} of {} NAV_TIMEs named a sample before the one before them; the first from sample {a} to {b}",
+                e.len()
+            ),
+            None if swapped > 0 => format!(
+                "{} NAV_TIMEs in order; {swapped} pair(s) of neighbours heard swapped (not counted)",
+                e.len()
+            ),
+            None => format!("{} NAV_TIMEs in order", e.len()),
+        },
+    });
+    checks
+}
+
+/// The latency check: none (said in `not_judged`) where no epoch could be judged, or where the
+/// host's delays beside the device explain its excess over the budget.
+fn latency_check(
+    o: &FreeOptions,
+    j: &Judged,
+    t: &Timing,
+    not_judged: &mut Vec<String>,
+) -> Option<Check> {
+    let (l, own) = (&t.latency, &t.own);
+    let name = "latency within the budget";
+    let over = format!(
+        "IMU sample on the bus to the NAV_TIME naming it: median {:.1} ms, p99 {:.1} ms, worst {:.1} ms over {} epochs ({} named samples ahead of the stream, {} named none the bench could place); budget p99 {} ms",
+        l.p50_ms, l.p99_ms, l.max_ms, l.count, t.lead.epochs, t.unnamed, o.latency_budget_ms
+    );
+    if l.count == 0 {
+        if !j.ended.contains("no NAV_TIME") && t.unnamed > 0 {
+            not_judged.push(format!(
+                "{name}: none of the {} NAV_TIMEs named a sample the bench could place (older than the half counter period it keeps)",
+                t.unnamed
+            ));
+            return None;
+        }
+        return Some(Check {
+            name: name.into(),
+            pass: false,
+            detail: over,
+        });
+    }
+    if l.p99_ms > o.latency_budget_ms && own.p99_ms <= o.latency_budget_ms {
+        let h = &j.host.summary;
+        not_judged.push(format!(
+            "{name}: {over}; but a thread beside it was held by the host up to {:.1} ms (p99 {:.2} ms), and less what the host held it of each epoch its p99 is {:.1} ms: the host could explain it",
+            h.max_ms, h.p99_ms, own.p99_ms
+        ));
+        return None;
+    }
+    Some(Check {
+        name: name.into(),
+        pass: l.p99_ms <= o.latency_budget_ms,
+        detail: if l.p99_ms > o.latency_budget_ms {
+            format!(
+                "{over}; less what the host held it of each (its own share) p99 {:.1} ms",
+                own.p99_ms
+            )
+        } else {
+            over
+        },
+    })
+}
+
+/// NAV_TIMEs that named samples the bench had not sent: within the device's allowance (by
+/// default one output period), or a failure with the figures.
+fn lead_check(o: &FreeOptions, t: &Timing, silent: bool) -> Option<Check> {
+    if silent {
+        return None;
+    }
+    let allow = o.lead_allowance_ms.unwrap_or(t.period_s * 1e3);
+    let l = &t.lead;
+    Some(Check {
+        name: "no sample named ahead of the stream beyond the allowance".into(),
+        pass: l.max_ms <= allow,
+        detail: match l.first_at_s {
+            None => format!(
+                "none of {} epochs named a sample before it went on the bus; allowance {allow:.1} ms",
+                l.of
+            ),
+            Some(first) => format!(
+                "{} of {} epochs named a sample before it went on the bus (scored as predictions), the first at {first:.2} s, the farthest {:.1} ms ahead at {:.2} s; allowance {allow:.1} ms{}",
+                l.epochs,
+                l.of,
+                l.max_ms,
+                l.max_at_s,
+                if o.lead_allowance_ms.is_none() {
+                    " (one output period)"
+                } else {
+                    ""
+                }
             ),
         },
-        Check {
-            name: "frames within the DBC".into(),
-            pass: seen.outside_count() == 0,
-            detail: if seen.outside_dbc.is_empty() {
-                "every frame heard is defined by wire/bench.dbc".into()
-            } else {
-                seen.outside_dbc
-                    .iter()
-                    .map(|(w, n)| format!("{n} x {w}"))
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            },
-        },
-        Check {
-            name: "time tags never go backwards".into(),
-            pass: backwards == 0,
-            detail: match first_back {
-                Some((a, b)) => format!(
-                    "{backwards} of {} NAV_TIMEs named a sample before the one before them; the first from sample {a} to {b}",
-                    e.len()
-                ),
-                None if swapped > 0 => format!(
-                    "{} NAV_TIMEs in order; {swapped} pair(s) of neighbours heard swapped, as vcan's per-CPU queues deliver a device's frames when it moves between CPUs (not counted)",
-                    e.len()
-                ),
-                None => format!("{} NAV_TIMEs in order", e.len()),
-            },
-        },
-    ]
+    })
 }
 
 /// The device's solution scored against the truth.
-#[derive(Clone, Copy)]
 struct Scores {
     heading: Option<HeadingScore>,
     navigation: Option<DriveScore>,
     site_error: Option<(f64, Option<f64>)>,
-    offset: Option<(f64, usize)>,
+    offset: Option<DataOffset>,
+    /// The device's output period, s.
+    period_s: f64,
 }
 
 /// What the device's solution says against the truth: the drill's heading and position, the
@@ -239,10 +378,12 @@ fn truth_checks(
         navigation,
         site_error,
         offset,
-    } = *sc;
+        period_s,
+    } = sc;
+    let (navigation, site_error) = (*navigation, *site_error);
     let drive = s.drive.is_some() && !is_drill(s);
     if s.north_finding.is_some() {
-        checks.push(heading_check(heading, |k| truth.t_of(k)));
+        checks.push(heading_check(heading.as_ref(), |k| truth.t_of(k)));
     }
     if drive && o.real_gps.is_some() {
         not_judged.push("position along the drive: the real receiver's fixes steer it, and the bench has no truth for where that receiver was".into());
@@ -258,32 +399,83 @@ fn truth_checks(
         ),
         _ => {}
     }
-    match offset {
-        Some((tau, n)) => checks.push(Check {
-            name: "time tags agree with the data".into(),
-            pass: tau.abs() <= 1.0 / 50.0,
-            detail: format!(
-                "its headings line up with the truth {:+.0} ms from the samples they name ({n} epochs while turning); limit one output period, 20 ms",
-                tau * 1e3
-            ),
-        }),
-        None => not_judged.push("the device's latency from its data: it sent no attitude while the table or the vehicle turned (fewer than 10 epochs)".into()),
+    match data_check(offset.as_ref(), *period_s) {
+        Ok(c) => checks.push(c),
+        Err(why) => not_judged.push(format!("time tags agree with the data: {why}")),
     }
     if o.real_gps.is_some() {
         not_judged.push("the real receiver's fixes themselves: the bench's only truth for them is the site's surveyed position".into());
     }
 }
 
-fn heading_check(heading: Option<HeadingScore>, t_of: impl Fn(u64) -> f64) -> Check {
+/// The device's data against its tags, turn by turn: each turn's offset within one output
+/// period; a turn whose offset is uncertain by more than half of it is not judged. Why not, as
+/// the error.
+fn data_check(offset: Option<&DataOffset>, period_s: f64) -> Result<Check, String> {
+    let limit = period_s * 1e3;
+    let Some(d) = offset else {
+        return Err("it sent no attitude while the table or the vehicle turned (no turn of 10 epochs with 5 turning)".into());
+    };
+    let (judged, vague): (Vec<&clock::Turn>, Vec<&clock::Turn>) = d
+        .turns
+        .iter()
+        .partition(|t| t.offset_ms.sigma <= 0.5 * limit);
+    let Some(worst) = judged
+        .iter()
+        .max_by(|a, b| a.offset_ms.value.abs().total_cmp(&b.offset_ms.value.abs()))
+    else {
+        return Err(format!(
+            "no turn tells its offset to within half an output period ({:.1} ms): {}",
+            0.5 * limit,
+            d.turns
+                .iter()
+                .map(|t| format!("{:.1} s {}", t.t_s, t.offset_ms.words(1, "ms")))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    };
+    Ok(Check {
+        name: "time tags agree with the data".into(),
+        pass: worst.offset_ms.value.abs() <= limit,
+        detail: format!(
+            "its headings belong to {} before the samples they name over {} turns ({} epochs){}; the farthest {} at {:.1} s; {}limit one output period, {limit:.0} ms",
+            d.offset_ms.words(1, "ms"),
+            judged.len(),
+            d.epochs,
+            d.drift_ppm.map_or(String::new(), |x| format!(
+                ", drifting {} against them",
+                x.words(0, "ppm")
+            )),
+            worst.offset_ms.words(1, "ms"),
+            worst.t_s,
+            if vague.is_empty() {
+                String::new()
+            } else {
+                format!("{} turns too uncertain to judge; ", vague.len())
+            }
+        ),
+    })
+}
+
+fn heading_check(heading: Option<&HeadingScore>, t_of: impl Fn(u64) -> f64) -> Check {
     Check {
         name: "heading at the drill's end within 3 of the device's sigmas".into(),
         pass: heading.is_some_and(|h| h.in_sigmas().is_some_and(|x| x.abs() <= 3.0)),
         detail: match heading {
             Some(h) => format!(
-                "{:.4} deg at sample {} ({:.2} s), truth {:.4}, error {:+.4} deg{}",
+                "{:.4} deg at sample {} ({:.2} s; epoch {}, Seq {}, mode {}, {}, heard {:.2} s in), truth {:.4}, error {:+.4} deg{}",
                 h.heading_deg,
                 h.sample,
                 t_of(h.sample),
+                h.epoch,
+                h.seq,
+                h.mode,
+                if h.after_finding {
+                    "the first after north-finding"
+                } else {
+                    "its last: it never said it was finding north"
+                },
+                h.rx_s,
                 h.truth_deg,
                 h.error_deg,
                 match (h.sigma_deg, h.in_sigmas()) {
@@ -291,7 +483,7 @@ fn heading_check(heading: Option<HeadingScore>, t_of: impl Fn(u64) -> f64) -> Ch
                     _ => ", no sigma sent (NAV_HGT's HeadingSigma)".into(),
                 }
             ),
-            None => "the device sent no heading (NAV_ATT) after north-finding".into(),
+            None => "the device sent no heading (NAV_ATT) with a sample the bench could place after its mode left north-finding".into(),
         },
     }
 }
