@@ -31,12 +31,27 @@ pub struct SolutionEncoder {
     pub epochs: u64,
     /// Frames that could not be encoded (a NaN in the solution): counted, never silent.
     pub encode_errors: u64,
+    /// Solutions not sent because they named an earlier sample than the last one sent: nav's
+    /// time tags never go back on the bus (none is expected: the pipeline's sample count only
+    /// grows; counted, never silent).
+    pub backwards: u64,
+    last_sample: Option<u64>,
 }
 
 impl SolutionEncoder {
     /// The frames of `s` (NAV_TIME first), appended to `out`. Values outside a signal's range
     /// are clamped to it (a sigma beyond the field's range reads as the largest value).
     pub fn encode(&mut self, s: &Solution, out: &mut Vec<RawFrame>) {
+        if self.last_sample.is_some_and(|k| s.sample_count < k) {
+            self.backwards += 1;
+            tracing::error!(
+                "a solution of sample {} after one of sample {:?}: not sent (time tags never go back)",
+                s.sample_count,
+                self.last_sample
+            );
+            return;
+        }
+        self.last_sample = Some(s.sample_count);
         let seq = self.seq;
         self.seq = self.seq.wrapping_add(1);
         self.epochs += 1;
@@ -144,5 +159,18 @@ mod tests {
         );
         assert_eq!(frames.len(), 1);
         assert_eq!(enc.epochs, 2);
+        // a solution of an earlier sample never goes out; the same sample again may
+        frames.clear();
+        enc.encode(
+            &Solution {
+                sample_count: 123_416,
+                ..s
+            },
+            &mut frames,
+        );
+        assert!(frames.is_empty());
+        assert_eq!((enc.backwards, enc.epochs), (1, 2));
+        enc.encode(&s, &mut frames);
+        assert_eq!((frames.len(), enc.epochs), (5, 3));
     }
 }

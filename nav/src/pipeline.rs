@@ -1239,6 +1239,7 @@ impl Pipeline {
                 send_errors: 0,
                 last_mode: self.last_mode.clone(),
                 sent_hash: self.sent_hash(),
+                backwards: self.encoder.backwards,
             },
             encode_errors: self.encode_errors + self.encoder.encode_errors,
             mcap: None,

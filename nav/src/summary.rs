@@ -123,6 +123,10 @@ pub struct SolutionSummary {
     /// same frames at the same samples.
     #[serde(default)]
     pub sent_hash: String,
+    /// Solutions not sent because they named an earlier sample than one already sent (none
+    /// expected; [`crate::output::SolutionEncoder::backwards`]).
+    #[serde(default)]
+    pub backwards: u64,
 }
 
 /// The GPS receiver at exit.

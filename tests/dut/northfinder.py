@@ -15,7 +15,13 @@ Faults on purpose, for the bench to catch:
   --delay S        every solution goes out S seconds late (its time tags stay honest);
   --stamp-early S  every solution names the sample S seconds before the one its data reach;
   --stray S        a frame outside the DBC (identifier 0x3FF) every S seconds;
-  --backwards      one NAV_TIME, 30 s in, names a sample 1000 before the one before it.
+  --backwards      one NAV_TIME, 30 s in, names a sample 1000 before the one before it;
+  --drift-ppm P    its clock runs P ppm fast against the IMU's: the sample it names runs ahead
+                   of the one its data reach by P ppm of the time since its first (a device
+                   that counts time on its own crystal, or with a mis-set sample rate);
+  --stale S        its data are S seconds older than its tags: the solution of sample k is
+                   named k + S * rate and sent when that sample has come (a device that stamps
+                   with the newest sample, not the one its solution is of).
 """
 
 import argparse
@@ -46,6 +52,8 @@ def main():
     ap.add_argument("--stamp-early", type=float, default=0.0)
     ap.add_argument("--stray", type=float, default=0.0)
     ap.add_argument("--backwards", action="store_true")
+    ap.add_argument("--drift-ppm", type=float, default=0.0)
+    ap.add_argument("--stale", type=float, default=0.0)
     a = ap.parse_args()
     cfg = tomllib.load(open(a.config, "rb"))
     imu = cfg.get("imu", {})
@@ -106,6 +114,7 @@ class NorthFinder:
         self.sigma = 6.5
         self.mode = 2  # NorthFinding
         self.out = collections.deque()
+        self.stale = collections.deque()  # (the sample it waits for, frames)
         self.last_stray = time.monotonic()
         self.first_sample = None
 
@@ -168,6 +177,8 @@ class NorthFinder:
                 self.fit.add(sample, self.count[0], self.count[1])
             if sample % 40 == 0:
                 self.solution()
+            while self.stale and self.stale[0][0] <= sample:
+                self.out.append((time.monotonic() + self.a.delay, self.stale.popleft()[1]))
             return
         data = f[8 : 8 + dlc]
         if can_id == self.status_id:
@@ -180,9 +191,12 @@ class NorthFinder:
                 sys.exit(f"northfinder: the table refused command {d['Command']}: result {d['Result']}")
 
     def solution(self):
-        named = self.sample - round(self.a.stamp_early * self.rate_hz)
         if self.first_sample is None:
             self.first_sample = self.sample
+        since = self.sample - self.first_sample
+        stale = round(self.a.stale * self.rate_hz)
+        named = (self.sample + stale + round(since * self.a.drift_ppm * 1e-6)
+                 - round(self.a.stamp_early * self.rate_hz))
         if self.a.backwards and self.sample - self.first_sample == round(30 * self.rate_hz):
             named -= 1000 + 40
         if self.heading is None:
@@ -200,7 +214,10 @@ class NorthFinder:
             (self.nav_att, dict(Seq=s, Heading=h % 360.0, Pitch=0.0, Roll=0.0)),
             (self.nav_hgt, dict(Seq=s, Height=0.0, PosSigma=655.35, HeadingSigma=min(self.sigma, 6.5))),
         ]
-        self.out.append((time.monotonic() + self.a.delay, frames))
+        if stale > 0:
+            self.stale.append((self.sample + stale, frames))
+        else:
+            self.out.append((time.monotonic() + self.a.delay, frames))
 
     # ---- the procedure ----
     def wait(self, what, cond, limit=60.0):

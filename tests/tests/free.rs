@@ -217,6 +217,47 @@ fn a_device_run_late_on_a_late_machine_is_not_judged() {
     assert_eq!(bench_lateness_p99_ms(&report(0.0, 100.0)), 100.0);
 }
 
+/// The report's NOT JUDGED entry that starts with `prefix` (a check's name and a colon).
+fn not_judged(r: &Value, prefix: &str) -> String {
+    r["not_judged"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|n| n.as_str())
+        .find(|n| n.starts_with(prefix))
+        .unwrap_or_else(|| panic!("no check and nothing not judged for {prefix:?} in {r}"))
+        .to_string()
+}
+
+/// The latency check of a report: (pass, detail); none when the bench did not judge it
+/// because the host could explain the device's latency (said, and checked to be said so).
+fn latency_verdict(r: &Value) -> Option<(bool, String)> {
+    match checks(r)
+        .into_iter()
+        .find(|c| c.0 == "latency within the budget")
+    {
+        Some((_, pass, detail)) => Some((pass, detail)),
+        None => {
+            let why = not_judged(r, "latency within the budget: ");
+            assert!(why.contains("the host could explain it"), "{why}");
+            eprintln!("NOT JUDGED: {why}");
+            None
+        }
+    }
+}
+
+/// A figure with its uncertainty in a report, `[value, sigma]`.
+fn estimate(v: &Value) -> (f64, f64) {
+    (
+        v["value"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("no value in {v}")),
+        v["sigma"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("no sigma in {v}")),
+    )
+}
+
 /// The check named `name` of a report: (pass, detail).
 fn check_named(r: &Value, name: &str) -> (bool, String) {
     checks(r)
@@ -349,8 +390,10 @@ fn a_free_running_device_that_fails_gets_a_verdict_not_a_hang() {
                 && (detail.contains("137") || detail.contains("signal 9")),
             "{detail}"
         );
-        let (pass, detail) = check_named(&r, "latency within the budget");
-        assert!(!pass && detail.contains("budget p99 0.05 ms"), "{detail}");
+        // too late for the budget, unless the host's own delays beside it explain it
+        if let Some((pass, detail)) = latency_verdict(&r) {
+            assert!(!pass && detail.contains("budget p99 0.05 ms"), "{detail}")
+        }
         assert!(check_named(&r, "the device answered").0);
     }
 }
@@ -368,6 +411,16 @@ fn guest_python() -> Option<std::path::PathBuf> {
 /// `extra` on its command line, free-running on `iface` under a latency budget of `budget_ms`:
 /// the bench's report and exit status, or none (said on stderr) where the guest has no Python.
 fn python_drill(iface: &str, extra: &str, budget_ms: f64) -> Option<(Value, i32)> {
+    python_drill_dwelling(iface, extra, budget_ms, 10)
+}
+
+/// [`python_drill`] with dwells of `dwell_s` (the device's and the drill's).
+fn python_drill_dwelling(
+    iface: &str,
+    extra: &str,
+    budget_ms: f64,
+    dwell_s: u32,
+) -> Option<(Value, i32)> {
     let Some(py) = guest_python() else {
         eprintln!(
             "SKIPPED: no Python for the guest (target/debug/e2e-python, written by ./run-tests)"
@@ -376,7 +429,7 @@ fn python_drill(iface: &str, extra: &str, budget_ms: f64) -> Option<(Value, i32)
     };
     let here = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let dut = format!(
-        "{} {} --iface {{iface}} --dbc {} --config {{config}} --dwell 10 {extra}",
+        "{} {} --iface {{iface}} --dbc {} --config {{config}} --dwell {dwell_s} {extra}",
         py.display(),
         here.join("dut/northfinder.py").display(),
         here.join("../wire/bench.dbc").display()
@@ -391,7 +444,7 @@ fn python_drill(iface: &str, extra: &str, budget_ms: f64) -> Option<(Value, i32)
             "--heading",
             "251.25",
             "--dwell",
-            "10",
+            &dwell_s.to_string(),
             "--seed",
             "5",
             "--iface",
@@ -453,8 +506,10 @@ fn an_independent_python_device_is_judged_by_the_same_checks() {
         return;
     };
     if judged(&r, code) {
+        let Some((pass, detail)) = latency_verdict(&r) else {
+            return;
+        };
         assert_eq!(code, 1, "{r}");
-        let (pass, detail) = check_named(&r, "latency within the budget");
         assert!(!pass && detail.contains("budget p99"), "{detail}");
         assert!(
             r["latency"]["p50_ms"].as_f64().unwrap() >= 50.0,
@@ -483,8 +538,8 @@ fn an_independent_python_device_that_lies_about_time_is_caught() {
         assert_eq!(code, 1, "{r}");
         let (pass, detail) = check_named(&r, "time tags agree with the data");
         assert!(!pass, "{detail}");
-        let tau = r["time_tag_offset"][0].as_f64().unwrap();
-        assert!((tau + 0.1).abs() < 0.02, "{tau} s: {detail}");
+        let tau = r["data_offset"]["offset_ms"]["value"].as_f64().unwrap();
+        assert!((tau + 100.0).abs() < 20.0, "{tau} ms: {detail}");
         let (pass, detail) = check_named(&r, "frames within the DBC");
         assert!(
             !pass && detail.contains("0x3FF: not in the DBC"),
@@ -493,6 +548,91 @@ fn an_independent_python_device_that_lies_about_time_is_caught() {
         let (pass, detail) = check_named(&r, "time tags never go backwards");
         assert!(!pass && detail.starts_with("1 of"), "{detail}");
     }
+}
+
+/// The independent Python device with a clock 1000 ppm fast against the IMU's (its own
+/// crystal, or a mis-set sample rate; 5 s dwells): the bench estimates its drift from its
+/// NAV_TIMEs within the uncertainty it states, counts the samples it names before they went
+/// on the bus and fails it for leading the stream by more than one output period, with the
+/// figures; its heading is still judged where north-finding is over, against the truth at the
+/// sample it names (right: the table stands still then).
+#[test]
+#[ignore = "needs vcan and the guest's Python: run ./run-tests"]
+fn an_independent_python_device_whose_clock_drifts_is_caught() {
+    let Some((r, code)) = python_drill_dwelling("vcan-py3", "--drift-ppm 1000", 1000.0, 5) else {
+        return;
+    };
+    if !judged(&r, code) {
+        return;
+    }
+    assert_eq!(code, 1, "{r}");
+    let (drift, sigma) = estimate(&r["clock"]["drift_ppm"]);
+    assert!(
+        (drift - 1000.0).abs() <= 3.0 * sigma + 30.0 && sigma < 100.0,
+        "{drift} ± {sigma} ppm: {}",
+        r["clock"]
+    );
+    let (pass, detail) = check_named(
+        &r,
+        "no sample named ahead of the stream beyond the allowance",
+    );
+    assert!(!pass && detail.contains("allowance 20.0 ms"), "{detail}");
+    let lead = &r["lead"];
+    assert!(
+        lead["epochs"].as_u64().unwrap() > lead["of"].as_u64().unwrap() / 2
+            && lead["max_ms"].as_f64().unwrap() > 20.0,
+        "{lead}"
+    );
+    let (pass, detail) = check_named(
+        &r,
+        "heading at the drill's end within 3 of the device's sigmas",
+    );
+    assert!(
+        pass && detail.contains("the first after north-finding"),
+        "{detail}"
+    );
+}
+
+/// The independent Python device whose data are 30 ms older than its tags (it names the
+/// newest sample, not the one its solution is of) and 20 ms late on top: the data's offset is
+/// recovered within its stated uncertainty (not the delay's 50 ms), the tags fail against the
+/// data by more than an output period, its clock shows no drift and it names no sample ahead.
+#[test]
+#[ignore = "needs vcan and the guest's Python: run ./run-tests"]
+fn an_independent_python_device_whose_data_are_stale_is_caught() {
+    let Some((r, code)) = python_drill_dwelling("vcan-py4", "--stale 0.03 --delay 0.02", 1000.0, 5)
+    else {
+        return;
+    };
+    if !judged(&r, code) {
+        return;
+    }
+    assert_eq!(code, 1, "{r}");
+    let (tau, sigma) = estimate(&r["data_offset"]["offset_ms"]);
+    assert!(
+        (tau - 30.0).abs() <= 3.0 * sigma + 2.0 && sigma < 5.0,
+        "{tau} ± {sigma} ms: {}",
+        r["data_offset"]
+    );
+    let (pass, detail) = check_named(&r, "time tags agree with the data");
+    assert!(
+        !pass && detail.contains("limit one output period, 20 ms"),
+        "{detail}"
+    );
+    let (drift, sigma) = estimate(&r["clock"]["drift_ppm"]);
+    assert!(drift.abs() <= 3.0 * sigma + 30.0, "{drift} ± {sigma} ppm");
+    assert!(
+        r["latency"]["p50_ms"].as_f64().unwrap() >= 20.0,
+        "{}",
+        r["latency"]
+    );
+    assert!(
+        check_named(
+            &r,
+            "no sample named ahead of the stream beyond the allowance"
+        )
+        .0
+    );
 }
 
 /// A real receiver's stand-in: a recorded receiver (gpsd's capture of a Telit HE910 in

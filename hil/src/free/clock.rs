@@ -7,6 +7,7 @@
 use crate::free::score::Epoch;
 use crate::stats::wrap180;
 use serde::{Deserialize, Serialize};
+use wire::NavMode;
 
 /// A figure and its standard uncertainty (one sigma), in the figure's unit.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
@@ -234,7 +235,7 @@ const SEARCH_S: f64 = 0.5;
 const CLIP_DEG: f64 = 1.0;
 
 /// How old the device's data are against its tags: in each turn (the truth turning at 0.5
-/// deg/s or more, with 0.6 s either side), the offset `tau` for which its headings best match
+/// deg/s or more, with 0.6 s either side; one mode of the device's), the offset `tau` for which its headings best match
 /// the truth at `tau` before the samples they name, a constant apart (a device may state its
 /// heading from where it started while it does not know north), searched over ±0.5 s; its
 /// uncertainty from the residuals and the turn's rate changes, widened for residuals that
@@ -245,9 +246,9 @@ pub fn data_offset(
     truth_deg: impl Fn(f64) -> f64,
     t_of: impl Fn(u64) -> f64,
 ) -> Option<DataOffset> {
-    let mut pts: Vec<(f64, f64)> = epochs
+    let mut pts: Vec<(f64, f64, NavMode)> = epochs
         .iter()
-        .filter_map(|e| Some((t_of(e.sample?.0), e.att?[0])))
+        .filter_map(|e| Some((t_of(e.sample?.0), e.att?[0], e.mode)))
         .collect();
     pts.sort_by(|a, b| a.0.total_cmp(&b.0));
     let rate = |t: f64| wrap180(truth_deg(t + 0.005) - truth_deg(t - 0.005)) / 0.01;
@@ -272,13 +273,20 @@ pub fn data_offset(
         }
         cur.clear();
     };
+    // a device may change its heading's reference with its mode (from where it started to
+    // north, once found): a turn ends there too
+    let mut mode = None;
     for (i, p) in pts.iter().enumerate() {
-        if !near(p.0) || cur.last().is_some_and(|q| p.0 - q.0 > TURN_GAP_S) {
+        if !near(p.0)
+            || cur.last().is_some_and(|q| p.0 - q.0 > TURN_GAP_S)
+            || mode.is_some_and(|m| m != p.2)
+        {
             close(&mut cur, cur_turning);
             cur_turning = 0;
         }
+        mode = Some(p.2);
         if near(p.0) {
-            cur.push(*p);
+            cur.push((p.0, p.1));
             cur_turning += usize::from(turning[i]);
         }
     }
@@ -436,7 +444,6 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
     use rand_distr::{Distribution, Normal};
-    use wire::NavMode;
 
     const RATE: f64 = 2000.0;
 
@@ -531,7 +538,7 @@ mod tests {
     }
 
     /// Headings from a table that indexes four times, stated from where the device started
-    /// (relative), with 0.1 deg of noise (the dither a simple device leaves in) and
+    /// (relative) until north is found in the last turn, with 0.1 deg of noise (the dither a simple device leaves in) and
     /// `stale_s` older than the samples they name; `ppm`: a clock drifting from its data.
     fn turning(stale_s: f64, ppm: f64, seed: u64) -> (Vec<Epoch>, impl Fn(f64) -> f64) {
         let starts = [2.0, 14.0, 26.0, 38.0];
@@ -544,8 +551,16 @@ mod tests {
                 let t = (k + 1) as f64 / RATE;
                 let mut x = epoch(k, 0.003);
                 let data_t = t - stale_s - ppm * 1e-6 * t;
+                // north found in the middle of the last turn: the heading is stated from north
+                // on, no longer from where the device started
+                let from = if t < 39.5 {
+                    137.0
+                } else {
+                    x.mode = NavMode::Navigation;
+                    0.0
+                };
                 x.att = Some([
-                    (truth(data_t) - 137.0 + noise.sample(&mut rng)).rem_euclid(360.0),
+                    (truth(data_t) - from + noise.sample(&mut rng)).rem_euclid(360.0),
                     0.0,
                     0.0,
                 ]);
@@ -564,7 +579,8 @@ mod tests {
         for (stale, seed) in [(0.0, 1), (0.03, 2), (0.06, 3), (-0.1, 4)] {
             let (e, truth) = turning(stale, 0.0, seed);
             let d = data_offset(&e, &truth, t_of).unwrap();
-            assert_eq!(d.turns.len(), 4, "{d:?}");
+            // the last turn in two: before north was found and after
+            assert_eq!(d.turns.len(), 5, "{d:?}");
             for t in &d.turns {
                 let o = t.offset_ms;
                 assert!(

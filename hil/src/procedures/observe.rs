@@ -38,6 +38,13 @@ pub struct SolutionWatch {
     /// had got when its output stopped.
     #[serde(default)]
     pub last_sample: Option<u64>,
+    /// NAV_TIMEs, in nav's order (their Seq), that named a sample before the one before them
+    /// (the bus's reordering, which Seq shows, aside).
+    #[serde(default)]
+    pub backwards: u64,
+    /// The first of them: the sample before, and the one named.
+    #[serde(default)]
+    pub first_backwards: Option<(u64, u64)>,
 }
 
 impl SolutionWatch {
@@ -136,6 +143,13 @@ fn watch_frame(w: &mut SolutionWatch, last_seq: &mut Option<u8>, f: Option<wire:
             *last_seq = Some(t.seq);
             let mode = format!("{:?}", t.mode);
             let k = u64::from(t.sample_count);
+            if let Some(before) = w.last_sample
+                && k < before
+                && before - k < 1 << 31
+            {
+                w.backwards += 1;
+                w.first_backwards.get_or_insert((before, k));
+            }
             w.last_sample = Some(k);
             if w.last_mode.as_deref() != Some(mode.as_str()) {
                 w.modes.push((mode.clone(), k));
@@ -195,5 +209,35 @@ impl DrillWatch {
             }
         }
         false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn nav_time(seq: u8, sample_count: u32) -> Option<wire::RawFrame> {
+        wire::Message::NavTime(wire::NavTime {
+            sample_count,
+            seq,
+            mode: wire::NavMode::Navigation,
+            health: wire::NavHealth::default(),
+            gps_rx_bytes: 0,
+        })
+        .encode()
+        .ok()
+    }
+
+    /// Epochs heard out of order on the bus are put back by Seq, not taken for time going
+    /// back; a NAV_TIME that names an earlier sample in nav's own order is.
+    #[test]
+    fn time_going_back_is_told_from_the_bus_reordering() {
+        let mut w = SolutionWatch::default();
+        let mut last = None;
+        for (seq, k) in [(0, 40), (2, 120), (1, 80), (3, 160), (4, 80), (5, 240)] {
+            watch_frame(&mut w, &mut last, nav_time(seq, k));
+        }
+        assert_eq!((w.epochs, w.reordered, w.seq_gaps), (6, 1, 0));
+        assert_eq!((w.backwards, w.first_backwards), (1, Some((160, 80))));
     }
 }

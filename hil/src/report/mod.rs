@@ -377,6 +377,29 @@ pub fn solution_checks(
         pass,
         detail,
     });
+    out.push(Check {
+        name: "nav's time tags never go back".into(),
+        pass: w.backwards == 0 && nav.solution.backwards == 0,
+        detail: match w.first_backwards {
+            Some((a, b)) => format!(
+                "{} of {} NAV_TIMEs (in nav's Seq order) named a sample before the one before them; the first from sample {a} to {b}",
+                w.backwards, w.epochs
+            ),
+            None if nav.solution.backwards > 0 => format!(
+                "nav held back {} solutions that named an earlier sample than one it had sent",
+                nav.solution.backwards
+            ),
+            None => format!(
+                "{} NAV_TIMEs, in nav's Seq order, each named a sample at or after the one before{}",
+                w.epochs,
+                if w.reordered > 0 {
+                    format!(" ({} heard out of order on the bus, put back by Seq)", w.reordered)
+                } else {
+                    String::new()
+                }
+            ),
+        },
+    });
 }
 
 /// nav's recording replayed through its pipeline in process sends exactly what nav sent.
