@@ -704,6 +704,7 @@ fn campus_loop_shortened_finds_north_then_navigates() {
         "heading within the drill's tolerance",
         "navigation error within tolerance",
         "solution frames on the bus",
+        "nav's time tags never go back",
         "nav's output replays bit for bit from its recording",
     ] {
         assert!(names.iter().any(|x| x == n), "missing check {n}: {names:?}");

@@ -19,12 +19,14 @@ pub struct Estimate {
 }
 
 impl Estimate {
-    /// `value ± sigma` with `digits` decimals and a unit.
+    /// `value ± sigma` with `digits` decimals and a unit, more (up to 3) where the sigma would
+    /// read as 0.
     pub fn words(&self, digits: usize, unit: &str) -> String {
-        format!(
-            "{:+.*} ± {:.*} {unit}",
-            digits, self.value, digits, self.sigma
-        )
+        let mut d = digits;
+        while d < 3 && self.sigma > 0.0 && self.sigma < 0.5 * 10f64.powi(-(d as i32)) {
+            d += 1;
+        }
+        format!("{:+.*} ± {:.*} {unit}", d, self.value, d, self.sigma)
     }
 }
 
@@ -620,5 +622,10 @@ mod tests {
             sigma: 1.26,
         };
         assert_eq!(e.words(1, "ms"), "+30.0 ± 1.3 ms");
+        let tight = Estimate {
+            value: 7.0123,
+            sigma: 0.014,
+        };
+        assert_eq!(tight.words(1, "ms"), "+7.01 ± 0.01 ms");
     }
 }

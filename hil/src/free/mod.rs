@@ -580,6 +580,39 @@ pub fn card(r: &FreeReport) -> String {
     for x in &r.real {
         out += &format!(" real     {x}\n");
     }
+    out += &timing_lines(r);
+    out += &format!(
+        " output   {} epochs, {:.1} Hz by the host's clock, every {} samples, jitter {:.2} ms rms, longest gap {:.1} ms; {} turntable commands; {} bytes taken from the receiver\n",
+        r.epochs,
+        r.rate.hz,
+        r.rate.step_samples,
+        r.rate.jitter_rms_ms,
+        r.rate.max_interval_ms,
+        r.commands,
+        r.receiver_bytes
+    );
+    for c in &r.checks {
+        out += &format!(
+            " [{}] {:<58} {}\n",
+            if c.pass { "PASS" } else { "FAIL" },
+            c.name,
+            c.detail
+        );
+    }
+    for n in &r.not_judged {
+        out += &format!(" [NOT JUDGED] {n}\n");
+    }
+    match &r.bench_behind {
+        Some(why) => out += &format!(" RESULT: NO VERDICT: {why}\n"),
+        None => out += &format!(" RESULT: {}\n", if r.pass { "PASS" } else { "FAIL" }),
+    }
+    out
+}
+
+/// The card's lines on time: the host's delays, where the times come from, the device's clock,
+/// its data's age.
+fn timing_lines(r: &FreeReport) -> String {
+    let mut out = String::new();
     out += &format!(
         " host     a thread beside the device woke late by median {:.2} ms, p99 {:.2} ms, worst {:.1} ms ({} wake-ups every {} ms)\n",
         r.host.p50_ms,
@@ -633,31 +666,6 @@ pub fn card(r: &FreeReport) -> String {
                 .collect::<Vec<_>>()
                 .join(", ")
         );
-    }
-    out += &format!(
-        " output   {} epochs, {:.1} Hz by the host's clock, every {} samples, jitter {:.2} ms rms, longest gap {:.1} ms; {} turntable commands; {} bytes taken from the receiver\n",
-        r.epochs,
-        r.rate.hz,
-        r.rate.step_samples,
-        r.rate.jitter_rms_ms,
-        r.rate.max_interval_ms,
-        r.commands,
-        r.receiver_bytes
-    );
-    for c in &r.checks {
-        out += &format!(
-            " [{}] {:<58} {}\n",
-            if c.pass { "PASS" } else { "FAIL" },
-            c.name,
-            c.detail
-        );
-    }
-    for n in &r.not_judged {
-        out += &format!(" [NOT JUDGED] {n}\n");
-    }
-    match &r.bench_behind {
-        Some(why) => out += &format!(" RESULT: NO VERDICT: {why}\n"),
-        None => out += &format!(" RESULT: {}\n", if r.pass { "PASS" } else { "FAIL" }),
     }
     out
 }
