@@ -452,19 +452,7 @@ mod tests {
     /// An epoch naming sample `k`, which went on the bus at its time, heard `latency_s` after.
     fn epoch(k: u64, latency_s: f64) -> Epoch {
         let at = (k + 1) as f64 / RATE;
-        Epoch {
-            sample_count: k as u32,
-            seq: (k / 40) as u8,
-            mode: NavMode::NorthFinding,
-            health: Vec::new(),
-            rx_s: at + latency_s,
-            sample: Some((k, at)),
-            scheduled: false,
-            att: None,
-            vel: None,
-            pos: None,
-            hgt: None,
-        }
+        Epoch::named(k, at, at + latency_s, NavMode::NorthFinding)
     }
 
     /// A table indexing 90 deg in 3 s (accelerating, cruising, braking) from each of `starts`.

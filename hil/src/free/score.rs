@@ -38,6 +38,27 @@ pub struct Epoch {
     pub hgt: Option<[f64; 3]>,
 }
 
+#[cfg(test)]
+impl Epoch {
+    /// A NAV_TIME naming sample `k`, which went on the bus at `at_s`, heard at `rx_s`, in
+    /// `mode`, with nothing else (the unit tests' epoch).
+    pub(crate) fn named(k: u64, at_s: f64, rx_s: f64, mode: NavMode) -> Self {
+        Epoch {
+            sample_count: k as u32,
+            seq: (k / 40) as u8,
+            mode,
+            health: Vec::new(),
+            rx_s,
+            sample: Some((k, at_s)),
+            scheduled: false,
+            att: None,
+            vel: None,
+            pos: None,
+            hgt: None,
+        }
+    }
+}
+
 /// Percentiles of a set of values, ms.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Spread {
@@ -319,19 +340,7 @@ mod tests {
 
     fn epoch(k: u64, rate: f64, lag_s: f64) -> Epoch {
         let t = k as f64 / rate;
-        Epoch {
-            sample_count: k as u32,
-            seq: (k / 40) as u8,
-            mode: NavMode::Navigation,
-            health: Vec::new(),
-            rx_s: t + lag_s,
-            sample: Some((k, t)),
-            scheduled: false,
-            att: None,
-            vel: None,
-            pos: None,
-            hgt: None,
-        }
+        Epoch::named(k, t, t + lag_s, NavMode::Navigation)
     }
 
     #[test]
