@@ -8,7 +8,7 @@
 #  3. beside them from the start (or, with WAIT_HOST=1, once the host says it is done:
 #     SUITE_DIR/host.done, or after 30 minutes), the free-running tests (tests/tests/free.rs)
 #     at normal priority, two at a time by default: their verdicts need a machine that keeps
-#     real time, and the lockstep tests only take what they leave. The Python device's two
+#     real time, and the lockstep tests only take what they leave. The Python device's three
 #     tests run first, alone, one after the other: one judges a latency budget set from its
 #     own first run, which a neighbour's load would move, and a Python device (the costliest
 #     of them to run at x1) beside another free-running test lost its verdict under load.
@@ -65,7 +65,7 @@ fi
 rc=0
 "$suite" run --binaries "e2e::free=$free@$here" --name "end-to-end on vcan (free-running)" \
   --ignored --jobs "$free_jobs" --results "$dir/free.json" --history "$dir/previous/free.json" \
-  --alone an_independent_python_device_is_judged_by_the_same_checks,an_independent_python_device_that_lies_about_time_is_caught \
+  --alone an_independent_python_device_is_judged_by_the_same_checks,an_independent_python_device_that_lies_about_time_is_caught,an_independent_python_device_whose_clock_drifts_is_caught \
   --slow-first "$here/e2e-slow-first" || rc=1
 wait "$lockstep_pid" || rc=1
 kill "$mem_pid" 2>/dev/null
