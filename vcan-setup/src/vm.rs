@@ -497,8 +497,20 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
             prog,
         })
     };
+    // a software-emulated guest that is not up within its boot limit (its kernel stalled at
+    // boot: seen once in a fresh clone, the guest silent for the whole 2400 s) starts again,
+    // once, rather than hold the run until its timeout
+    let tcg = || -> Result<Launched> {
+        match launch(false, Some(TCG_BOOT_LIMIT))? {
+            Launched::NoBoot(why) => {
+                eprintln!("vcan-setup: the guest did not come up ({why}); starting it again");
+                launch(false, Some(TCG_BOOT_LIMIT))
+            }
+            done => Ok(done),
+        }
+    };
     let launched = match Accel::choose() {
-        Accel::Tcg => launch(false, None)?,
+        Accel::Tcg => tcg()?,
         Accel::Kvm => launch(true, None)?,
         Accel::Probe(cache) => match launch(true, Some(KVM_BOOT_LIMIT))? {
             Launched::NoBoot(why) => {
@@ -510,7 +522,7 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
                     ))
                 );
                 remember_kvm(cache.as_deref(), false);
-                launch(false, None)?
+                tcg()?
             }
             done => {
                 remember_kvm(cache.as_deref(), true);
@@ -518,13 +530,15 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
             }
         },
     };
-    let Launched::Done {
-        mut output,
-        preboot,
-        boot_secs,
-    } = launched
-    else {
-        return Err(Error::NoStatus("the guest did not boot".into()));
+    let (mut output, preboot, boot_secs) = match launched {
+        Launched::Done {
+            output,
+            preboot,
+            boot_secs,
+        } => (output, preboot, boot_secs),
+        Launched::NoBoot(why) => {
+            return Err(Error::NoStatus(format!("the guest did not boot: {why}")));
+        }
     };
     let rc = std::fs::read_to_string(ctl.path().join("rc"))
         .ok()
@@ -641,6 +655,10 @@ fn guest_script(cmd: &[String], opts: &VmOptions, shares: &[Share]) -> String {
 /// How long a KVM guest may take to come up before the probe gives up on KVM (a KVM guest is
 /// up in about a second; where nested virtualisation does not work it hangs at boot).
 const KVM_BOOT_LIMIT: Duration = Duration::from_secs(15);
+
+/// How long a software-emulated guest may take to come up before it is started again (it is up
+/// in 12-40 s, idle or beside two busy loops).
+const TCG_BOOT_LIMIT: Duration = Duration::from_secs(240);
 
 /// The accelerator the guest runs on.
 enum Accel {
