@@ -497,39 +497,7 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
             prog,
         })
     };
-    // a software-emulated guest that is not up within its boot limit (its kernel stalled at
-    // boot: seen once in a fresh clone, the guest silent for the whole 2400 s) starts again,
-    // once, rather than hold the run until its timeout
-    let tcg = || -> Result<Launched> {
-        match launch(false, Some(TCG_BOOT_LIMIT))? {
-            Launched::NoBoot(why) => {
-                eprintln!("vcan-setup: the guest did not come up ({why}); starting it again");
-                launch(false, Some(TCG_BOOT_LIMIT))
-            }
-            done => Ok(done),
-        }
-    };
-    let launched = match Accel::choose() {
-        Accel::Tcg => tcg()?,
-        Accel::Kvm => launch(true, None)?,
-        Accel::Probe(cache) => match launch(true, Some(KVM_BOOT_LIMIT))? {
-            Launched::NoBoot(why) => {
-                eprintln!(
-                    "vcan-setup: KVM did not start the guest ({why}); using software emulation (TCG){}",
-                    cache.as_ref().map_or(String::new(), |c| format!(
-                        " from now on (remembered in {}; delete it to probe again)",
-                        c.display()
-                    ))
-                );
-                remember_kvm(cache.as_deref(), false);
-                tcg()?
-            }
-            done => {
-                remember_kvm(cache.as_deref(), true);
-                done
-            }
-        },
-    };
+    let launched = on_an_accelerator(&launch)?;
     let (mut output, preboot, boot_secs) = match launched {
         Launched::Done {
             output,
@@ -558,6 +526,46 @@ pub fn run_in_vm(cmd: &[String], opts: &VmOptions) -> Result<RunOutcome> {
         backend: Backend::Vm,
         boot_secs: boot_secs.unwrap_or(0.0),
         total_secs: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// The guest launched (`launch(kvm, boot_limit)`) on the accelerator [`Accel::choose`] says:
+/// KVM, software emulation, or KVM probed with a fall-back to software emulation. A
+/// software-emulated guest that is not up within [`TCG_BOOT_LIMIT`] (its kernel stalled at
+/// boot: seen once in a fresh clone, the guest silent for the whole 2400 s) starts again, once,
+/// rather than hold the run until its timeout.
+fn on_an_accelerator(
+    launch: &dyn Fn(bool, Option<Duration>) -> Result<Launched>,
+) -> Result<Launched> {
+    let tcg = || -> Result<Launched> {
+        match launch(false, Some(TCG_BOOT_LIMIT))? {
+            Launched::NoBoot(why) => {
+                eprintln!("vcan-setup: the guest did not come up ({why}); starting it again");
+                launch(false, Some(TCG_BOOT_LIMIT))
+            }
+            done => Ok(done),
+        }
+    };
+    Ok(match Accel::choose() {
+        Accel::Tcg => tcg()?,
+        Accel::Kvm => launch(true, None)?,
+        Accel::Probe(cache) => match launch(true, Some(KVM_BOOT_LIMIT))? {
+            Launched::NoBoot(why) => {
+                eprintln!(
+                    "vcan-setup: KVM did not start the guest ({why}); using software emulation (TCG){}",
+                    cache.as_ref().map_or(String::new(), |c| format!(
+                        " from now on (remembered in {}; delete it to probe again)",
+                        c.display()
+                    ))
+                );
+                remember_kvm(cache.as_deref(), false);
+                tcg()?
+            }
+            done => {
+                remember_kvm(cache.as_deref(), true);
+                done
+            }
+        },
     })
 }
 
