@@ -5,7 +5,7 @@
 //! seconds on the host's clock since the run's origin, or of the IMU's clock where said.
 
 use crate::free::score::Epoch;
-use crate::stats::wrap180;
+use crate::stats::{median, wrap180};
 use serde::{Deserialize, Serialize};
 use wire::NavMode;
 
@@ -59,7 +59,7 @@ const CLOCK_MIN_EPOCHS: usize = 30;
 /// The device's clock from its epochs: a line through the medians of the latency in up to 40
 /// windows of equal count (a median is not moved by the host's stalls, which delay some epochs
 /// by far more than the device's own jitter), with the uncertainties from those medians'
-/// scatter about the line, at least the named sample's quantization (`sample_s`, one IMU
+/// scatter about the line (widened where they follow each other), at least the named sample's quantization (`sample_s`, one IMU
 /// period, uniform) over the epochs. None below 30 epochs that name samples.
 pub fn clock_fit(epochs: &[Epoch], sample_s: f64) -> Option<ClockFit> {
     let mut pts: Vec<(f64, f64)> = epochs
@@ -72,29 +72,24 @@ pub fn clock_fit(epochs: &[Epoch], sample_s: f64) -> Option<ClockFit> {
     pts.sort_by(|a, b| a.0.total_cmp(&b.0));
     let n = pts.len();
     let m = (n / 10).clamp(3, 40);
-    let med = |v: &mut Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        let k = v.len();
-        if k % 2 == 1 {
-            v[k / 2]
-        } else {
-            0.5 * (v[k / 2 - 1] + v[k / 2])
-        }
-    };
     let windows: Vec<(f64, f64)> = (0..m)
         .map(|w| {
-            let part = &pts[w * n / m..(w + 1) * n / m];
-            let (mut x, mut y): (Vec<f64>, Vec<f64>) = part.iter().copied().unzip();
-            (med(&mut x), med(&mut y))
+            let (x, y): (Vec<f64>, Vec<f64>) =
+                pts[w * n / m..(w + 1) * n / m].iter().copied().unzip();
+            (median(x), median(y))
         })
         .collect();
     let line = fit_line(&windows)?;
+    // windows whose medians follow each other (a device's latency that moves with what it is
+    // doing, not with its clock) tell less than their count: widened as a turn's residuals are
+    let wres: Vec<f64> = windows.iter().map(|&(x, y)| y - line.at(x)).collect();
+    let widen = correlation_widening(&wres);
     let (x0, x1) = (pts[0].0, pts[n - 1].0);
     let res: Vec<f64> = pts.iter().map(|&(x, y)| y - line.at(x)).collect();
     let floor = sample_s / (12.0 * n as f64).sqrt();
     let at = |x: f64| Estimate {
         value: line.at(x) * 1e3,
-        sigma: line.sigma_at(x).hypot(floor) * 1e3,
+        sigma: (line.sigma_at(x) * widen).hypot(floor) * 1e3,
     };
     Some(ClockFit {
         epochs: n as u64,
@@ -103,7 +98,7 @@ pub fn clock_fit(epochs: &[Epoch], sample_s: f64) -> Option<ClockFit> {
         end_ms: at(x1),
         drift_ppm: Estimate {
             value: -line.slope * 1e6,
-            sigma: line.slope_sigma.hypot(floor / (x1 - x0).max(1e-9)) * 1e6,
+            sigma: (line.slope_sigma * widen).hypot(floor / (x1 - x0).max(1e-9)) * 1e6,
         },
         residual_rms_ms: (res.iter().map(|r| r * r).sum::<f64>() / n as f64).sqrt() * 1e3,
         residual_max_ms: res.iter().fold(0.0f64, |a, r| a.max(r.abs())) * 1e3,
@@ -406,9 +401,7 @@ fn one_turn(pts: &[(f64, f64)], truth_deg: &impl Fn(f64) -> f64) -> Option<Turn>
     if kept.len() < 10 {
         return None;
     }
-    let mut abs: Vec<f64> = kept.iter().map(|r| r.abs()).collect();
-    abs.sort_by(f64::total_cmp);
-    let s = 1.4826 * abs[abs.len() / 2];
+    let s = 1.4826 * median(kept.iter().map(|r| r.abs()).collect());
     // the information a turn holds: how much its rate changes about its mean
     let omega: Vec<f64> = pts
         .iter()
@@ -419,8 +412,7 @@ fn one_turn(pts: &[(f64, f64)], truth_deg: &impl Fn(f64) -> f64) -> Option<Turn>
     if info <= 0.0 {
         return None;
     }
-    let rho = lag_one(&res).clamp(0.0, 0.95);
-    let sigma = s / info.sqrt() * ((1.0 + rho) / (1.0 - rho)).sqrt();
+    let sigma = s / info.sqrt() * correlation_widening(&res);
     Some(Turn {
         t_s: 0.5 * (pts[0].0 + pts[pts.len() - 1].0),
         epochs: pts.len() as u64,
@@ -430,6 +422,13 @@ fn one_turn(pts: &[(f64, f64)], truth_deg: &impl Fn(f64) -> f64) -> Option<Turn>
             sigma: sigma.max(fine_step / 12f64.sqrt()) * 1e3,
         },
     })
+}
+
+/// How much residuals `r` that follow each other widen an uncertainty from their count:
+/// sqrt((1 + rho) / (1 - rho)), rho their lag-one autocorrelation (in [0, 0.95]).
+fn correlation_widening(r: &[f64]) -> f64 {
+    let rho = lag_one(r).clamp(0.0, 0.95);
+    ((1.0 + rho) / (1.0 - rho)).sqrt()
 }
 
 /// The lag-one autocorrelation of `r` (residuals about zero).
@@ -527,6 +526,32 @@ mod tests {
         assert!(clock_fit(&vec![epoch(40, 0.0); 29], 1.0 / RATE).is_none());
     }
 
+    /// A device whose latency moves with what it does (8 ms more in every other 7 or 12 s: a
+    /// device busier while it dwells than while it indexes) and whose clock is the IMU's: no
+    /// drift beyond its stated uncertainty. (One step of latency half-way through a minute
+    /// reads as a drift, -200 ± 53 ppm: a line cannot tell them apart; docs/your-device.md.)
+    #[test]
+    fn a_latency_that_moves_with_the_device_s_phase_is_not_taken_for_a_drift() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let jitter = Normal::new(0.0, 0.4e-3).unwrap();
+        let phases: [&dyn Fn(f64) -> bool; 3] = [
+            &|t| (t / 12.0) as u64 % 2 == 1,
+            &|t| ((t + 5.0) / 12.0) as u64 % 2 == 1,
+            &|t| ((t + 9.0) / 7.0) as u64 % 2 == 1,
+        ];
+        for busy_at in phases {
+            let e: Vec<Epoch> = (1..=3000u64)
+                .map(|i| {
+                    let t = (i * 40 + 1) as f64 / RATE;
+                    let busy = if busy_at(t) { 8e-3 } else { 0.0 };
+                    epoch(i * 40, 5e-3 + busy + jitter.sample(&mut rng))
+                })
+                .collect();
+            let c = clock_fit(&e, 1.0 / RATE).unwrap();
+            assert!(c.drift_ppm.value.abs() <= 3.0 * c.drift_ppm.sigma, "{c:?}");
+        }
+    }
+
     /// Headings from a table that indexes four times, stated from where the device started
     /// (relative) until north is found in the last turn, with 0.1 deg of noise (the dither a simple device leaves in) and
     /// `stale_s` older than the samples they name; `ppm`: a clock drifting from its data.
@@ -601,6 +626,18 @@ mod tests {
         assert!((d.turns[0].offset_ms.value - 30.0).abs() < 3.0, "{d:?}");
         // nothing turns: nothing to tell
         assert!(data_offset(&e, |_| 30.0, t_of).is_none());
+    }
+
+    /// Residuals that follow each other widen an uncertainty; independent ones do not.
+    #[test]
+    fn residuals_that_follow_each_other_widen_the_uncertainty() {
+        let alternating: Vec<f64> = (0..40)
+            .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        assert_eq!(correlation_widening(&alternating), 1.0);
+        let slow: Vec<f64> = (0..40).map(|i| (f64::from(i) * 0.2).sin()).collect();
+        let w = correlation_widening(&slow);
+        assert!(w > 3.0 && w <= (1.95f64 / 0.05).sqrt() + 1e-12, "{w}");
     }
 
     #[test]

@@ -52,7 +52,7 @@ pub enum Stamps {
     /// The kernel's software receive stamps (SO_TIMESTAMPNS): vcan, or an adapter without
     /// hardware stamps.
     Kernel,
-    /// The adapter's hardware stamps were present (used for the order; the times are the
+    /// The adapter's hardware stamps were present (not used: the order and the times are the
     /// kernel's, on the host's clock).
     Hardware,
     /// The socket gave no stamps: the times are those of the reads.
@@ -66,7 +66,7 @@ impl Stamps {
             Stamps::None => "no frames heard",
             Stamps::Kernel => "the kernel's software receive stamps (vcan has no hardware stamps)",
             Stamps::Hardware => {
-                "the adapter's hardware stamps for the order, the kernel's for the times"
+                "the kernel's receive stamps (the adapter's hardware stamps are present, on its own clock: not used)"
             }
             Stamps::Read => "the bench's reads (the socket gave no receive stamps)",
         }
