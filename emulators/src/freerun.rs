@@ -369,7 +369,7 @@ pub fn run_imu(
         device: "imu".into(),
         port: iface.into(),
         speed: p.speed,
-        reached_s: stream.next_time() - 1.0 / stream.imu().params().rate_hz,
+        reached_s: stream.imu().last_time(),
         wall_s: start.elapsed().as_secs_f64(),
         written,
         lateness: late.summary(),

@@ -15,6 +15,7 @@ pub mod foxglove;
 pub mod gps;
 pub mod gpsport;
 pub mod imu;
+pub mod imuclock;
 pub mod integrity;
 pub mod kf;
 mod mission;

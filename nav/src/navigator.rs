@@ -3,6 +3,7 @@
 //! to IMU time by the receiver's PPS edge latched in the IMU stream.
 
 use crate::gps::GpsFix;
+use crate::imuclock::ClockEstimate;
 use crate::kf::{FilterConfig, FilterStats, Kf};
 use crate::strapdown::{NavOutput, NavState};
 use nalgebra::Vector3;
@@ -32,13 +33,21 @@ pub struct NavigationConfig {
     /// The solution's integrity monitor.
     pub integrity: crate::integrity::IntegrityConfig,
     /// A PPS edge is taken when it lies a whole number of seconds after the last one taken
-    /// (or after the last one seen) within this, s, plus 100 ppm of the interval for the IMU's
-    /// clock; any other edge (a glitch on the PPS line) is rejected and counted.
+    /// (or after the last one seen) within this, s, plus an allowance for the IMU's clock
+    /// ([`PPS_CLOCK_ALLOWANCE`] of the interval about the rate read from the edges, or
+    /// [`PPS_CLOCK_ALLOWANCE_UNKNOWN`] before it is read); any other edge (a glitch on the PPS
+    /// line) is rejected and counted.
     pub pps_tolerance_s: f64,
 }
 
-/// The IMU clock's allowance in the PPS check, per second of interval (100 ppm).
+/// The IMU clock's allowance in the PPS check, per second of interval, about the rate read
+/// from the edges (100 ppm: its wander between edges is far less).
 pub const PPS_CLOCK_ALLOWANCE: f64 = 1e-4;
+
+/// The same before the rate is read (1000 ppm: a unit's oscillator is off by tens of ppm; one
+/// further off is taken once its edges have told its rate, one beyond is not a clock to
+/// navigate on and its edges are rejected, counted).
+pub const PPS_CLOCK_ALLOWANCE_UNKNOWN: f64 = 1e-3;
 
 impl Default for NavigationConfig {
     fn default() -> Self {
@@ -111,6 +120,10 @@ pub struct NavigatorSummary {
     pub clock_jumps: u64,
     /// The integrity monitor.
     pub integrity: crate::integrity::IntegrityStats,
+    /// The IMU's rate against the PPS, as navigation last used it (none before
+    /// [`crate::imuclock::MIN_EDGES`] edges).
+    #[serde(default)]
+    pub imu_clock: Option<ClockEstimate>,
 }
 
 /// The navigator.
@@ -174,7 +187,13 @@ pub struct Navigator {
     arrivals: (f64, f64, u32),
     /// IMU time the last fix was taken at, and its sentence's index in the stream.
     last_fix_at: Option<(f64, u64)>,
+    /// The IMU's rate against the PPS edges kept (the last good window's).
+    clock: Option<ClockEstimate>,
 }
+
+/// A window of edges whose rate is more uncertain than this (ppm, one sigma: a PPS line with
+/// a glitch taken, or one jittering by milliseconds) leaves the last good rate in use.
+pub const CLOCK_SIGMA_LIMIT_PPM: f64 = 20.0;
 
 /// The receiver's latency is learned from this many fixes; until then a fix belongs to the
 /// latest edge at or before its arrival.
@@ -284,6 +303,7 @@ impl Navigator {
             v_at_pps: None,
             arrivals: (0.0, 0.0, 0),
             last_fix_at: None,
+            clock: None,
         }
     }
 
@@ -378,11 +398,16 @@ impl Navigator {
     /// [`NavigationConfig::pps_tolerance_s`]).
     pub fn on_pps(&mut self, t: f64) -> bool {
         let tol = self.cfg.pps_tolerance_s;
+        // a true second in the IMU's seconds, and how far it may be off
+        let (second, allowance) = match self.clock {
+            Some(c) => (1.0 + c.ppm * 1e-6, PPS_CLOCK_ALLOWANCE),
+            None => (1.0, PPS_CLOCK_ALLOWANCE_UNKNOWN),
+        };
         let fits = |r: Option<f64>| {
             r.is_some_and(|r| {
                 let d = t - r;
-                let n = d.round();
-                n >= 1.0 && (d - n).abs() <= tol + PPS_CLOCK_ALLOWANCE * d
+                let n = (d / second).round();
+                n >= 1.0 && (d - n * second).abs() <= tol + allowance * d
             })
         };
         // the first edge, one that keeps the rhythm, or the second of a new rhythm (the last
@@ -401,12 +426,17 @@ impl Navigator {
         }
         self.pps_edges += 1;
         let sec = match (self.edges.back(), self.last_pps) {
-            (Some(&(s, _)), Some(p)) => s + ((t - p).round() as i64).max(1),
+            (Some(&(s, _)), Some(p)) => s + (((t - p) / second).round() as i64).max(1),
             _ => 0,
         };
         self.edges.push_back((sec, t));
         if self.edges.len() > EDGES_KEPT {
             self.edges.pop_front();
+        }
+        if let Some(c) = ClockEstimate::from_edges(self.edges.iter())
+            .filter(|c| c.sigma_ppm <= CLOCK_SIGMA_LIMIT_PPM)
+        {
+            self.clock = Some(c);
         }
         self.last_pps = Some(t);
         self.v_at_pps = self.state().map(|s| [s.v.x, s.v.y, s.v.z]);
@@ -442,6 +472,8 @@ impl Navigator {
                 }
             }
             NavPhase::Navigating => {
+                // what depends on a second's length goes over the update's true length
+                let dt = self.clock.map_or(dt, |c| c.true_dt(dt));
                 let (Some(st), kf) = (self.state.as_mut(), self.kf.as_mut()) else {
                     return;
                 };
@@ -892,6 +924,7 @@ impl Navigator {
             utc_reanchors: self.utc_reanchors,
             clock_jumps: self.clock_jumps,
             integrity: self.integrity.stats(),
+            imu_clock: self.clock,
         }
     }
 }
@@ -923,6 +956,31 @@ mod tests {
         let s = n.summary();
         assert_eq!((s.pps_edges, s.pps_rejected), (3, 1));
         assert_eq!(n.last_pps, Some(3.0));
+    }
+
+    /// An IMU whose oscillator runs 2,500 ppm fast: its edges are taken, the rate is read from
+    /// them, the edges are then held to it (a glitch is still refused), and a gap of seconds
+    /// keeps its second numbers.
+    #[test]
+    fn the_imus_rate_is_read_from_its_edges_and_they_are_held_to_it() {
+        let mut n = Navigator::new(NavigationConfig::default());
+        let second = 1.0025;
+        let edge = |k: i64| 0.4 + k as f64 * second;
+        for k in 0..20 {
+            assert!(n.on_pps(edge(k)), "edge {k}");
+        }
+        assert!(!n.on_pps(edge(20) - 0.3), "a glitch");
+        // thirty seconds without a pulse: 75 ms of the IMU's seconds, a numbering nominal
+        // seconds would get wrong past 200 s
+        for k in 50..60 {
+            assert!(n.on_pps(edge(k)), "edge {k}");
+        }
+        let s = n.summary();
+        assert_eq!((s.pps_edges, s.pps_rejected), (30, 1));
+        let c = s.imu_clock.expect("the rate is read");
+        assert!((c.ppm - 2500.0).abs() < 1e-3, "{c:?}");
+        assert_eq!((c.edges, c.span_s), (30, 59.0));
+        assert!((c.true_dt(second) - 1.0).abs() < 1e-12);
     }
 
     /// While north-finding runs the navigator takes no updates, only the time: fixes are still

@@ -662,7 +662,9 @@ fn a_drive_with_every_receiver_event_sends_the_same_frames_loaded_or_idle() {
 /// heading within 0.5 deg, end position within 25 m. And the receiver misbehaves while the
 /// vehicle drives: its device vanishes for 4 s and comes back (nav re-opens it), a multipath
 /// burst puts three fixes 2 km off (the innovation gate rejects them) and a 10 s outage sends
-/// void fixes (nav coasts on the INS); the 25 m hold all the same.
+/// void fixes (nav coasts on the INS); the 25 m hold all the same. The IMU's oscillator is off
+/// its nominal rate (+85 ppm, wandering by 15): the run is judged as any other, and nav reads
+/// the rate from the receiver's PPS.
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn campus_loop_shortened_finds_north_then_navigates() {
@@ -676,6 +678,11 @@ fn campus_loop_shortened_finds_north_then_navigates() {
             ("dwell_s = 30.0", "dwell_s = 6.0"),
             ("heading_tolerance_deg = 0.2", "heading_tolerance_deg = 0.5"),
             ("position_tolerance_m = 20.7", "position_tolerance_m = 25.0"),
+            // a real unit's oscillator: off its nominal rate, wandering
+            (
+                "[imu]\n",
+                "[imu]\nclock_offset_ppm = 85.0\nclock_wander_ppm = 15.0\nclock_wander_period_s = 600.0\n",
+            ),
             (
                 "talker = \"GP\"\n",
                 "talker = \"GP\"\nport_drops = [[100.0, 104.0]]\nmultipath = [[120.0, 3.0, 2000.0]]\noutages = [[140.0, 150.0]]\n",
@@ -706,10 +713,16 @@ fn campus_loop_shortened_finds_north_then_navigates() {
         "solution frames on the bus",
         "nav's time tags never go back",
         "nav's output replays bit for bit from its recording",
+        "nav reads the IMU's rate from the PPS",
     ] {
         assert!(names.iter().any(|x| x == n), "missing check {n}: {names:?}");
     }
     let nav = &r["nav"];
+    let clock = &nav["navigation"]["imu_clock"];
+    assert!(
+        (clock["ppm"].as_f64().unwrap() - 85.0).abs() < 16.0,
+        "nav's rate of the IMU: {clock}"
+    );
     let nf_s = nav["north_finding"]["result"]["duration_s"]
         .as_f64()
         .unwrap();

@@ -24,9 +24,11 @@
 //! pulse, whatever N.
 
 pub mod mems;
+pub mod oscillator;
 pub mod pulse;
 pub mod stream;
 
+pub use crate::imu::oscillator::{ImuTimescale, Oscillator};
 pub use crate::imu::pulse::PulseCounter;
 use crate::truth::Motion;
 use nalgebra::{Matrix3, Vector3};
@@ -41,12 +43,24 @@ const ARCSEC: f64 = PI / 180.0 / 3600.0;
 const DEG_H: f64 = PI / 180.0 / 3600.0;
 const G0: f64 = 9.80665;
 
+/// The most the IMU's oscillator may be off its nominal rate, offset and wander together, ppm
+/// (a crystal is off by tens; a mis-set rate by more).
+pub const MAX_CLOCK_ERROR_PPM: f64 = 5000.0;
+
 /// IMU parameters (every one settable in a scenario file).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct ImuParams {
-    /// Sample rate, Hz.
+    /// Nominal sample rate, Hz.
     pub rate_hz: f64,
+    /// The sample clock's oscillator off its nominal rate, ppm (positive: fast, more samples
+    /// per second than `rate_hz`), as a real unit's crystal is by tens of ppm.
+    pub clock_offset_ppm: f64,
+    /// The oscillator's wander about its offset, ppm (amplitude of a sinusoid over
+    /// `clock_wander_period_s`, as with the unit's temperature cycle).
+    pub clock_wander_ppm: f64,
+    /// The wander's cycle, s.
+    pub clock_wander_period_s: f64,
     /// Gyro pulse weight, arcsec/pulse, per axis.
     pub gyro_pulse_arcsec: [f64; 3],
     /// Accelerometer pulse weight, m/s per pulse, per axis.
@@ -115,6 +129,9 @@ impl Default for ImuParams {
     fn default() -> Self {
         Self {
             rate_hz: wire::IMU_RATE_HZ,
+            clock_offset_ppm: 0.0,
+            clock_wander_ppm: 0.0,
+            clock_wander_period_s: 3600.0,
             gyro_pulse_arcsec: [1.0; 3],
             accel_pulse_mps: [1e-4; 3],
             gyro_bias_dph: [0.1; 3],
@@ -168,8 +185,48 @@ impl ImuParams {
         }
     }
 
+    /// The sample clock: nominal rate, offset and wander.
+    pub fn oscillator(&self) -> Oscillator {
+        Oscillator::new(
+            self.rate_hz,
+            self.clock_offset_ppm,
+            self.clock_wander_ppm,
+            self.clock_wander_period_s,
+        )
+    }
+
     /// Check ranges; the message names the parameter.
     pub fn check(&self) -> Result<(), crate::ParamError> {
+        self.check_clock()?;
+        self.check_sensors()
+    }
+
+    /// The oscillator's offset, wander and cycle.
+    fn check_clock(&self) -> Result<(), crate::ParamError> {
+        let off = self.clock_offset_ppm.abs() + self.clock_wander_ppm.abs();
+        if !(off.is_finite() && off <= MAX_CLOCK_ERROR_PPM) {
+            return Err(crate::ParamError::new(
+                "imu",
+                format!(
+                    "clock_offset_ppm ({}) and clock_wander_ppm ({}) must together stay within {MAX_CLOCK_ERROR_PPM} ppm",
+                    self.clock_offset_ppm, self.clock_wander_ppm
+                ),
+            ));
+        }
+        if !(self.clock_wander_period_s.is_finite() && self.clock_wander_period_s >= 1.0) {
+            return Err(crate::ParamError::new(
+                "imu",
+                format!(
+                    "clock_wander_period_s ({}) must be at least 1 s",
+                    self.clock_wander_period_s
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The sensors' and the PPS's parameters.
+    fn check_sensors(&self) -> Result<(), crate::ParamError> {
         for (i, f) in self.dither_hz.iter().enumerate() {
             if self.dither_arcsec[i] != 0.0 && !(*f > 0.0 && *f < self.rate_hz / 2.0) {
                 return Err(crate::ParamError::new(
@@ -306,6 +363,7 @@ pub struct ImuEmulator {
     motion: Box<dyn Motion>,
     p: ImuParams,
     dt: f64,
+    clock: Oscillator,
     k: u64,
     counter0: u16,
     gyro: [PulseCounter; 3],
@@ -378,6 +436,7 @@ impl ImuEmulator {
             drift_sum: [0.0; 3],
             dither_phase,
             dither_last: None,
+            clock: p.oscillator(),
             p,
             dt,
             k: 0,
@@ -439,7 +498,17 @@ impl ImuEmulator {
 
     /// Simulated time at the end of the next sample, s.
     pub fn next_time(&self) -> f64 {
-        (self.k + 1) as f64 * self.dt
+        self.clock.tick_time(self.k + 1)
+    }
+
+    /// Simulated time at the end of the last sample produced (0 before any), s.
+    pub fn last_time(&self) -> f64 {
+        self.clock.tick_time(self.k)
+    }
+
+    /// The sample clock.
+    pub fn oscillator(&self) -> &Oscillator {
+        &self.clock
     }
 
     /// The PPS edge of second `n`: `n` + phase + that second's jitter, s.
@@ -484,7 +553,7 @@ impl ImuEmulator {
             * (2.0 * PI * self.p.dither_hz[i] * t + self.dither_phase[i]).sin()
     }
 
-    /// Where a PPS edge falls inside the sample (t0, t1], in 1/256 of a sample before its end:
+    /// Where a PPS edge falls inside the sample (t0, t1], in 1/256 of the sample before its end:
     /// the edge of whole seconds plus phase and jitter unless it is missing, or a spurious one.
     fn pps_offset(&self, t0: f64, t1: f64) -> Option<u8> {
         let within = |w: &[[f64; 2]], t: f64| w.iter().any(|p| t >= p[0] && t < p[1]);
@@ -498,7 +567,8 @@ impl ImuEmulator {
                     .copied()
                     .find(|e| *e > t0 && *e <= t1)
             });
-        edge.map(|edge| (((t1 - edge) / self.dt) * 256.0).floor().clamp(0.0, 255.0) as u8)
+        let dt = self.sample_length(t0, t1);
+        edge.map(|edge| (((t1 - edge) / dt) * 256.0).floor().clamp(0.0, 255.0) as u8)
     }
 
     /// The housekeeping frame, at 10 Hz of samples (none between).
@@ -521,15 +591,29 @@ impl ImuEmulator {
         Message::ImuHk(hk).encode().ok()
     }
 
+    /// The length of the sample (t0, t1], s: the nominal period on a nominal clock (bit for
+    /// bit), else the oscillator's.
+    fn sample_length(&self, t0: f64, t1: f64) -> f64 {
+        if self.clock.is_nominal() {
+            self.dt
+        } else {
+            t1 - t0
+        }
+    }
+
     /// Produce the next sample's frames.
     pub fn next_sample(&mut self) -> SampleFrames {
-        let (t0, t1) = (self.k as f64 * self.dt, (self.k + 1) as f64 * self.dt);
+        let (t0, t1) = (
+            self.clock.tick_time(self.k),
+            self.clock.tick_time(self.k + 1),
+        );
+        let dt = self.sample_length(t0, t1);
         let inc = self.motion.increments(t0, t1);
         let n = Normal::new(0.0, 1.0).expect("unit normal");
         let mut saturated = false;
         // range limits act on the true input
-        let glim = self.p.gyro_range_dps.to_radians() * self.dt;
-        let alim = self.p.accel_range_g * G0 * self.dt;
+        let glim = self.p.gyro_range_dps.to_radians() * dt;
+        let alim = self.p.accel_range_g * G0 * dt;
         let dth = inc.dtheta.map(|x| {
             saturated |= x.abs() > glim;
             x.clamp(-glim, glim)
@@ -539,8 +623,8 @@ impl ImuEmulator {
             x.clamp(-alim, alim)
         });
         // the error models are linear in the rate, so applying them to the increment is exact
-        let g = self.model.gyro(&(dth / self.dt)) * self.dt;
-        let a = self.model.accel(&(dvt / self.dt)) * self.dt;
+        let g = self.model.gyro(&(dth / dt)) * dt;
+        let a = self.model.accel(&(dvt / dt)) * dt;
         // the dither angle at t0 is the one computed at the end of the last sample
         let d0 = match self.dither_last {
             Some((t, d)) if t == t0 => d,
@@ -549,9 +633,8 @@ impl ImuEmulator {
         let d1: [f64; 3] = std::array::from_fn(|i| self.dither(i, t1));
         self.dither_last = Some((t1, d1));
         for i in 0..3 {
-            let d =
-                g[i] + self.drift[i] * self.dt + self.arw_sigma * n.sample(&mut self.rng) + d1[i]
-                    - d0[i];
+            let d = g[i] + self.drift[i] * dt + self.arw_sigma * n.sample(&mut self.rng) + d1[i]
+                - d0[i];
             self.gyro[i].add(d / (self.p.gyro_pulse_arcsec[i] * ARCSEC));
             self.drift_sum[i] += self.drift[i];
             self.drift[i] =
@@ -591,7 +674,7 @@ impl ImuEmulator {
         let tetra = self
             .tetra
             .as_mut()
-            .map(|u| u.frame(t1, self.dt, &inc.dtheta, sample_counter));
+            .map(|u| u.frame(t1, dt, &inc.dtheta, sample_counter));
         frames.extend(self.housekeeping(sample_counter, bit_fail));
         if let Some(m) = tetra
             && let Ok(f) = Message::MemsGyro(m).encode()
@@ -642,6 +725,40 @@ mod tests {
         for i in 0..3 {
             let pulses = (imu.gyro[i].total - start[i]) as f64;
             assert!((pulses - w[i] * t / arcsec).abs() <= 1.0, "axis {i}");
+        }
+    }
+
+    #[test]
+    fn an_oscillator_off_nominal_samples_the_truth_on_its_own_ticks() {
+        let s = Static::level(45.0);
+        let p = ImuParams {
+            clock_offset_ppm: 2000.0,
+            pps_phase_s: 0.25,
+            ..ImuParams::ideal()
+        };
+        let mut imu = ImuEmulator::new(Box::new(s), p);
+        let start = imu.accel[2].total;
+        let (n, mut edges) = (20_000u64, Vec::new());
+        for _ in 0..n {
+            let sf = imu.next_sample();
+            for f in sf.frames {
+                if let Ok(Message::ImuAccel(a)) = Message::decode(&f)
+                    && a.pps_offset.is_some()
+                {
+                    edges.push(sf.k);
+                }
+            }
+        }
+        // 20,000 samples of a clock 0.2 % fast end before 10 s: the up accelerometer counted
+        // gravity over those true seconds, not over ten
+        let t = imu.last_time();
+        assert!((t - 10.0 / 1.002).abs() < 1e-9, "{t}");
+        let g = (imu.accel[2].total - start) as f64 * 1e-4 / t;
+        assert!((g - s.force()[2]).abs() < 2e-4, "{g}");
+        // the receiver's pulses (whole simulated seconds) come 2,004 samples apart
+        assert_eq!(edges.len(), 10, "{edges:?}");
+        for w in edges.windows(2) {
+            assert!((w[1] - w[0]).abs_diff(2004) <= 1, "{edges:?}");
         }
     }
 

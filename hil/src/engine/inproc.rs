@@ -293,19 +293,23 @@ impl InProcessBench {
         self.step.imu().imu()
     }
 
+    /// The IMU's time scale: nav's IMU time (which counts from the first sample, at the
+    /// nominal rate) to simulated time, on the IMU's own oscillator.
+    pub fn imu_timescale(&self) -> emulators::imu::ImuTimescale {
+        self.imu()
+            .oscillator()
+            .timescale(self.t_first.unwrap_or(0.0))
+    }
+
     /// Simulated time of nav's IMU time `t_nav` (which counts from the first sample).
     pub fn sim_time(&self, t_nav: f64) -> f64 {
-        self.t_first.unwrap_or(0.0) + t_nav
+        self.imu_timescale().sim_time(t_nav)
     }
 
     /// Simulated time of nav's sample number `k`.
     pub fn time_of(&self, k: i64) -> f64 {
         let base = self.pipeline.processor().baseline().unwrap_or(0) as i64;
-        self.t_first.unwrap_or(0.0) + (k - base) as f64 / self.rate_hz()
-    }
-
-    fn rate_hz(&self) -> f64 {
-        self.imu().params().rate_hz
+        self.sim_time((k - base) as f64 / self.imu().params().rate_hz)
     }
 
     /// The devices' frames of the last step, in the order nav met them.

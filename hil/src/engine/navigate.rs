@@ -8,6 +8,7 @@ use anyhow::{Result, bail};
 use emulators::drive::Drive;
 use emulators::geodesy::enu_offset;
 use emulators::gps::{GpsErrorParams, ReceiverParams};
+use emulators::imu::ImuTimescale;
 use nalgebra::Vector3;
 use nav::kf::FilterConfig;
 use nav::navigator::{NavigationConfig, Navigator};
@@ -84,12 +85,17 @@ pub struct NavScore {
 }
 
 /// Score the navigation output in a nav summary against the drive (none when nav did not
-/// navigate). nav counts time from its first sample, which went out `t_first` s into the run.
-pub fn score_summary(drive: &Drive, nav: &nav::summary::Summary, t_first: f64) -> Option<NavScore> {
+/// navigate). nav counts time in the IMU's samples from its first one: `imu` maps that time to
+/// the simulation's (the IMU's oscillator need not run at its nominal rate).
+pub fn score_summary(
+    drive: &Drive,
+    nav: &nav::summary::Summary,
+    imu: &ImuTimescale,
+) -> Option<NavScore> {
     let n = nav.navigation.as_ref()?;
     Some(score_output(
         drive,
-        n.output_t_s + t_first,
+        imu.sim_time(n.output_t_s),
         n.output.as_ref()?,
     ))
 }
@@ -170,7 +176,7 @@ fn cov3(v: &serde_json::Value) -> Option<nalgebra::Matrix3<f64>> {
 /// so that one reading of the recording serves the replay and the scoring alike.
 pub struct RecordingScorer<'a> {
     drive: &'a Drive,
-    t_first: f64,
+    imu: ImuTimescale,
     origin: (f64, f64, f64),
     scored: ScoredRecording,
 }
@@ -191,11 +197,12 @@ pub struct ScoredRecording {
 }
 
 impl<'a> RecordingScorer<'a> {
-    /// A scorer of nav's recording against `drive`; `t_first`: the first sample's time, s.
-    pub fn new(drive: &'a Drive, t_first: f64) -> Self {
+    /// A scorer of nav's recording against `drive`; `imu`: the IMU's time scale (nav's time
+    /// to the simulation's).
+    pub fn new(drive: &'a Drive, imu: ImuTimescale) -> Self {
         Self {
             drive,
-            t_first,
+            imu,
             origin: drive.position(0.0),
             scored: ScoredRecording::default(),
         }
@@ -252,7 +259,7 @@ impl<'a> RecordingScorer<'a> {
         // the sigmas nav sent with the solution (zero: not yet known)
         let sigma = |k: &str| j.as_ref().and_then(|j| j[k].as_f64()).filter(|v| *v > 0.0);
         let cov = |k: &str| j.as_ref().and_then(|j| cov3(&j[k]));
-        let sc = score_output(self.drive, t + self.t_first, &o);
+        let sc = score_output(self.drive, self.imu.sim_time(t), &o);
         let (pc, vc) = (cov("pos_cov_enu_m2"), cov("vel_cov_enu_m2s2"));
         let nees = match (pc, vc, sc.position_error_enu_m, sc.velocity_error_enu_mps) {
             (Some(pc), Some(vc), Some(e), Some(dv)) => nees(&e, &pc).zip(nees(&dv, &vc)),
@@ -359,6 +366,9 @@ pub struct NavRun {
     /// own sigma on every axis (none may be).
     #[serde(default)]
     pub good_fixes_refused: u64,
+    /// The IMU's rate nav read from the PPS edges at the end, and the edges it took.
+    #[serde(default)]
+    pub imu_clock: (Option<nav::imuclock::ClockEstimate>, u64),
     /// The run second by second.
     #[serde(skip)]
     pub series: Vec<NavSample>,
@@ -482,6 +492,7 @@ pub fn navigate(
         integrity: navigator.integrity().stats(),
         untied_fixes: navigator.summary().untied_fixes,
         good_fixes_refused: bench.good_fixes_refused(),
+        imu_clock: (navigator.summary().imu_clock, navigator.summary().pps_edges),
         series,
     })
 }
@@ -728,11 +739,8 @@ mod tests {
         );
     }
 
-    /// The campus loop's sequence, shortened (8 s dwells, one lap): nav's north-finder drives the
-    /// emulated turntable, its heading goes to the navigator, which levels and navigates with
-    /// the filter while the vehicle drives off.
-    #[test]
-    fn north_finding_hands_its_heading_to_the_filter() {
+    /// The campus loop's sequence, shortened (8 s dwells, one lap).
+    fn drill_then_drive() -> Scenario {
         let mut s = Scenario::load(std::path::Path::new(concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/../scenarios/campus-loop.toml"
@@ -745,8 +753,14 @@ mod tests {
         d.laps = 1;
         d.start_wait_s = 70.0;
         s.duration_s = 70.0 + 240.0;
+        s
+    }
+
+    /// The drill, then the drive: north-finding's heading within its sigma, the drive's end
+    /// within the receiver's class, every fix tied to its edge.
+    fn drills_and_drives(s: &Scenario) -> NavRun {
         let rx = s.gps.clone().unwrap();
-        let r = navigate(&s, Some(&FilterConfig::default()), &rx, 0.0).unwrap();
+        let r = navigate(s, Some(&FilterConfig::default()), &rx, 0.0).unwrap();
         eprintln!(
             "{:?} started {:?}, end {:.1} m",
             r.north_finding, r.started_at_s, r.end_position_error_m
@@ -764,11 +778,46 @@ mod tests {
         assert!(r.filter.unwrap().updates > 200);
         // the fixes that came during north-finding were tied to their PPS edges too
         assert_eq!(r.untied_fixes, 0);
+        r
+    }
+
+    /// nav's north-finder drives the emulated turntable, its heading goes to the navigator,
+    /// which levels and navigates with the filter while the vehicle drives off.
+    #[test]
+    fn north_finding_hands_its_heading_to_the_filter() {
+        let s = drill_then_drive();
+        drills_and_drives(&s);
+        let rx = s.gps.clone().unwrap();
         // too short a wait: the vehicle would drive off during north-finding
         let mut early = s.clone();
         early.drive.as_mut().unwrap().start_wait_s = 20.0;
         let e = navigate(&early, Some(&FilterConfig::default()), &rx, 0.0).unwrap_err();
         assert!(e.to_string().contains("wait longer"), "{e}");
+    }
+
+    /// The same drill and drive with the IMU's oscillator 900 ppm fast and wandering by 40 ppm:
+    /// judged as any other, and nav reads the rate from the receiver's edges.
+    #[test]
+    fn an_imu_off_its_nominal_rate_drills_and_drives_as_any_other() {
+        let mut s = drill_then_drive();
+        s.imu.clock_offset_ppm = 900.0;
+        s.imu.clock_wander_ppm = 40.0;
+        s.imu.clock_wander_period_s = 1800.0;
+        let r = drills_and_drives(&s);
+        let (clock, edges) = r.imu_clock;
+        let check = crate::report::imu_clock_check(&s, clock.as_ref(), edges);
+        eprintln!("{}: {}", check.name, check.detail);
+        assert!(check.pass, "{}", check.detail);
+        let c = clock.unwrap();
+        assert!(c.ppm > 900.0 && c.ppm < 940.0, "{c:?}");
+        // a nominal oscillator's line, read as this one, fails the check
+        let nominal = Scenario {
+            imu: ImuParams::default(),
+            ..s.clone()
+        };
+        assert!(!crate::report::imu_clock_check(&nominal, Some(&c), edges).pass);
+        let [p, v] = r.mean_nees_per_dof.unwrap();
+        assert!(p < 3.0 && v < 3.0, "NEES {p} / {v}");
     }
 
     /// Position-only fixes make the horizontal accelerometer biases observable once the

@@ -220,7 +220,7 @@ pub fn run_free(s: &Scenario, o: &FreeOptions) -> Result<FreeReport> {
     let observer = observe::spawn(
         sock,
         bench.origin,
-        s.imu.rate_hz,
+        s.imu.oscillator(),
         bench.sent.clone(),
         seen.clone(),
         stop.clone(),

@@ -13,6 +13,7 @@
 use crate::free::score::Epoch;
 use anyhow::{Context, Result};
 use emulators::freerun::SentSamples;
+use emulators::imu::Oscillator;
 use socketcan::{CanFrame, CanSocket, Socket, SocketOptions};
 use std::collections::{BTreeMap, BinaryHeap};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -248,12 +249,12 @@ impl Clocks {
     }
 }
 
-/// Listen on `sock` until `stop`, into `seen`; times in s since `origin`. `rate_hz`: the IMU's
-/// nominal rate (when a sample not sent yet is due).
+/// Listen on `sock` until `stop`, into `seen`; times in s since `origin`. `clock`: the IMU's
+/// oscillator (when a sample not sent yet is due).
 pub fn listen(
     sock: CanSocket,
     origin: Instant,
-    rate_hz: f64,
+    clock: Oscillator,
     sent: &SentSamples,
     seen: &Mutex<Observed>,
     stop: &AtomicBool,
@@ -263,7 +264,7 @@ pub fn listen(
     let window_ns = (REORDER_WINDOW * 1e9) as i128;
     let place = Place {
         origin,
-        rate_hz,
+        clock,
         sent,
     };
     let mut stamps = Stamps::None;
@@ -314,7 +315,7 @@ pub fn listen(
 /// How a NAV_TIME's named sample is placed.
 struct Place<'a> {
     origin: Instant,
-    rate_hz: f64,
+    clock: Oscillator,
     sent: &'a SentSamples,
 }
 
@@ -329,8 +330,8 @@ impl Place<'_> {
                 at.saturating_duration_since(self.origin).as_secs_f64(),
                 false,
             ),
-            // due at its sample time on the origin's clock (the IMU's sample k ends at k + 1)
-            None => (k, (k + 1) as f64 / self.rate_hz, true),
+            // due at its sample time on the origin's clock (the IMU's sample k ends at tick k + 1)
+            None => (k, self.clock.tick_time(k + 1), true),
         })
     }
 }
@@ -416,14 +417,14 @@ fn take(o: &mut Observed, m: Message, rx_s: f64, place: &Place) {
 pub fn spawn(
     sock: CanSocket,
     origin: Instant,
-    rate_hz: f64,
+    clock: Oscillator,
     sent: Arc<SentSamples>,
     seen: Arc<Mutex<Observed>>,
     stop: Arc<AtomicBool>,
 ) -> Result<std::thread::JoinHandle<Result<()>>> {
     std::thread::Builder::new()
         .name("observer".into())
-        .spawn(move || listen(sock, origin, rate_hz, &sent, &seen, &stop))
+        .spawn(move || listen(sock, origin, clock, &sent, &seen, &stop))
         .context("starting the bus observer")
 }
 

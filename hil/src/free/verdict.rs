@@ -27,9 +27,9 @@ impl<'a> Truth<'a> {
         }
     }
 
-    /// The end of IMU sample `k`, s.
+    /// The end of IMU sample `k` (tick `k + 1` of its oscillator), s.
     fn t_of(&self, k: u64) -> f64 {
-        (k + 1) as f64 / self.s.imu.rate_hz
+        self.s.imu.oscillator().tick_time(k + 1)
     }
 
     /// The IMU's heading at `t`: the vehicle's less the table's angle (it turns

@@ -152,15 +152,14 @@ pub fn run_in_process(
     cfg.north_finding = crate::scenario::navconfig::nf_config(s, nf);
     let mut bench = crate::engine::inproc::InProcessBench::new(s, &cfg, motion, Some(tt), None)?;
     let mut last_phase = None;
-    let dt = 1.0 / s.imu.rate_hz;
-    let mut k: u64 = 0;
+    let (mut k, mut t) = (0u64, 0.0);
     while bench.running()
         && !bench
             .pipeline()
             .finder()
             .is_none_or(NorthFinder::is_finished)
     {
-        bench.step();
+        t = bench.step();
         if let Some(f) = bench.pipeline().finder() {
             let stage = f.stage();
             if last_phase != Some(stage) || k.is_multiple_of(2000) {
@@ -170,7 +169,6 @@ pub fn run_in_process(
         }
         k += 1;
     }
-    let t = k as f64 * dt;
     let finder = bench
         .pipeline()
         .finder()

@@ -10,6 +10,7 @@ use crate::scenario::Scenario;
 use crate::table::Table;
 use emulators::bus::transport::TxStats;
 use nalgebra::Vector3;
+use nav::imuclock::ClockEstimate;
 use nav::summary::Summary;
 use serde::{Deserialize, Serialize};
 
@@ -426,8 +427,63 @@ pub fn replay_check(r: Result<&crate::engine::recording::Playback, &anyhow::Erro
     }
 }
 
-/// Checks of a navigation run: nav navigated, used the receiver's fixes, and its end error is
-/// within the scenario's tolerance.
+/// nav's reading of the IMU's rate from the PPS edges against the line an exact latch of the
+/// same window's true seconds would give on the emulated oscillator: within three of nav's own
+/// sigma and 0.2 ppm.
+/// `clock`: nav's rate at the end, from the `edges` it took.
+pub fn imu_clock_check(s: &Scenario, clock: Option<&ClockEstimate>, edges: u64) -> Check {
+    let name = "nav reads the IMU's rate from the PPS".to_string();
+    let osc = s.imu.oscillator();
+    let Some(c) = clock else {
+        let few = edges < nav::imuclock::MIN_EDGES as u64;
+        return Check {
+            name,
+            pass: few,
+            detail: if few {
+                format!(
+                    "not judged: nav took {edges} PPS edges, {} needed",
+                    nav::imuclock::MIN_EDGES
+                )
+            } else {
+                format!("nav took {edges} PPS edges and gave no rate")
+            },
+        };
+    };
+    // the line an exact latch would give: the oscillator's IMU time at each true second of
+    // the window, fitted as nav fits its edges
+    let end = osc.from_first_sample().sim_time(c.end_s);
+    let period = osc.nominal_period_s();
+    let edges: Vec<(i64, f64)> = (0..=c.span_s.round() as i64)
+        .map(|k| (k, osc.ticks_at(end - c.span_s + k as f64) * period))
+        .collect();
+    let Some(truth) = ClockEstimate::from_edges(edges.iter()).map(|t| t.ppm) else {
+        return Check {
+            name,
+            pass: false,
+            detail: format!(
+                "nav read {:+.2} ppm over {:.0} s: too short a window to judge",
+                c.ppm, c.span_s
+            ),
+        };
+    };
+    let limit = 3.0 * c.sigma_ppm + 0.2;
+    Check {
+        name,
+        pass: (c.ppm - truth).abs() <= limit,
+        detail: format!(
+            "{:+.2} ± {:.2} ppm over the {} edges of the {:.0} s to {:.0} s of IMU time; an exact latch on the oscillator: {:+.2} ppm (limit ±{limit:.2} ppm)",
+            c.ppm,
+            c.sigma_ppm,
+            c.edges,
+            c.end_s - c.span_s,
+            c.end_s,
+            truth
+        ),
+    }
+}
+
+/// Checks of a navigation run: nav navigated, used the receiver's fixes, read the IMU's rate
+/// from the PPS, and its end error is within the scenario's tolerance.
 pub fn navigation_checks(
     out: &mut Vec<Check>,
     s: &Scenario,
@@ -467,6 +523,13 @@ pub fn navigation_checks(
                 filter.map_or(0, |f| f.rejected)
             ),
         });
+    }
+    if gps.is_some() {
+        out.push(imu_clock_check(
+            s,
+            n.and_then(|n| n.imu_clock.as_ref()),
+            n.map_or(0, |n| n.pps_edges),
+        ));
     }
     match score {
         Some(sc) => out.push(Check {

@@ -193,8 +193,8 @@ fn score_navigation(
     let (Some(drive), Some(scored)) = (drive, scored) else {
         return (None, None);
     };
-    let t_first = 1.0 / s.imu.rate_hz;
-    let o = crate::engine::navigate::score_summary(drive, nav_json, t_first);
+    let imu = s.imu.oscillator().from_first_sample();
+    let o = crate::engine::navigate::score_summary(drive, nav_json, &imu);
     let mut navigation_series = None;
     match scored {
         Ok(sc) if !sc.scores.is_empty() => {

@@ -71,7 +71,7 @@ pub(crate) struct Work<'a> {
 /// Recompute `w` here; `what` names the recording in the replay's summary.
 pub(crate) fn compute(w: &Work, what: &str) -> Result<Recomputed> {
     let s = w.scenario;
-    let t_first = 1.0 / s.imu.rate_hz;
+    let imu = s.imu.oscillator().from_first_sample();
     let (reference, read) = std::thread::scope(|sc| {
         let reference = sc.spawn(|| {
             w.reference.then(|| {
@@ -79,7 +79,7 @@ pub(crate) fn compute(w: &Work, what: &str) -> Result<Recomputed> {
             })
         });
         let read = w.replay.then(|| {
-            let mut scorer = w.drive.map(|d| RecordingScorer::new(d, t_first));
+            let mut scorer = w.drive.map(|d| RecordingScorer::new(d, imu));
             let r = crate::engine::recording::replay_and(w.mcap, what, w.nav_cfg, |m| {
                 if let Some(sc) = scorer.as_mut() {
                     sc.message(m);

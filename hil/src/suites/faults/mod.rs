@@ -166,8 +166,8 @@ fn tt_faults(s: &mut Scenario, f: impl FnOnce(&mut emulators::turntable::Turntab
 /// The end position error of a navigating run (nav's final output against the truth), m.
 fn end_error(r: &RunReport) -> Option<f64> {
     let drive = emulators::drive::Drive::plan(r.scenario.drive.as_ref()?).ok()?;
-    let t_first = 1.0 / r.scenario.imu.rate_hz;
-    crate::engine::navigate::score_summary(&drive, &r.nav, t_first).map(|n| n.position_error_m)
+    let imu = r.scenario.imu.oscillator().from_first_sample();
+    crate::engine::navigate::score_summary(&drive, &r.nav, &imu).map(|n| n.position_error_m)
 }
 
 /// What nav must do with a frame overtaken on the bus.
