@@ -86,21 +86,26 @@ impl ReportedTrack {
         };
         self.last = Some(angle);
         let mut at = self.snap(t + self.delay_s);
-        // the history the IMU has read is final: move over the next status period from there
+        // the end of the sample interval the IMU has read into (it reads whole samples)
+        let h = self.snap(self.horizon);
+        let had_knots = !self.knots.is_empty();
+        // the history the IMU has read is final: where it read past the last knot (holding
+        // the angle there), that hold becomes a knot, so that a new knot after it cannot
+        // reshape it, however timely the report
+        // (before the first report the IMU felt no rate: the first knot only sets the angle)
+        if self.knots.last().is_some_and(|k| k.0 < h) {
+            let here = self.eval(h).0;
+            self.knots.push((h, here));
+        }
+        // a report later than the delay: move over the next status period from there
         if at <= self.horizon {
             self.stats.late += 1;
-            let period = self
-                .knots
-                .last()
-                .map_or(self.grid_s, |_| self.delay_s * 0.5);
-            // the end of the sample interval the IMU has read into (it reads whole samples)
-            let h = self.snap(self.horizon);
+            let period = if had_knots {
+                self.delay_s * 0.5
+            } else {
+                self.grid_s
+            };
             at = self.snap(h + period.max(self.grid_s));
-            // where the track stands there, as a knot, so the past keeps its shape
-            let here = self.eval(h).0;
-            if self.knots.last().is_none_or(|k| k.0 < h) {
-                self.knots.push((h, here));
-            }
         }
         if let Some(&(t_last, _)) = self.knots.last()
             && at <= t_last
@@ -255,6 +260,30 @@ mod tests {
         lock(&tr).report(0.6, 200.0, true);
         assert_eq!(lock(&tr).stats.encoder_faults, 1);
         assert!((ReportedAxis(tr.clone()).angle(2.0).to_degrees() - 1.0).abs() < 1e-9);
+    }
+
+    /// The IMU reads past the last report (a host that delivers the reports late holds them
+    /// back): it felt the angle held there, and a report that then comes, in time for its own
+    /// place on the track, does not reshape what was read. Until 2026-12-02 the new knot was
+    /// joined to the last one by a line through the read past, so the truth the judge scored
+    /// against turned earlier than the gyros had: on a loaded host an honest device's headings
+    /// read as 100 ms off their tags.
+    #[test]
+    fn what_the_imu_read_past_the_last_report_stays_as_it_read_it() {
+        let dt = 1.0 / 2000.0;
+        let tr: SharedTrack = Arc::new(Mutex::new(ReportedTrack::new(2000.0, 0.02)));
+        lock(&tr).report(0.0, 0.0, false);
+        // the IMU reads to 0.3 s: the angle held at 0
+        assert_eq!(integrate(&tr, 0, 600, dt), 0.0);
+        let held: Vec<f64> = (0..600).map(|k| lock(&tr).eval(k as f64 * dt).0).collect();
+        // a report at 0.29 s (its place, 0.31 s, not read yet): not late
+        lock(&tr).report(0.29, 2.0, false);
+        assert_eq!(lock(&tr).stats.late, 0);
+        let now: Vec<f64> = (0..600).map(|k| lock(&tr).eval(k as f64 * dt).0).collect();
+        assert_eq!(held, now, "the history read is final");
+        // and the gyros still land on the report
+        let after = integrate(&tr, 600, 800, dt);
+        assert!((after.to_degrees() - 2.0).abs() < 1e-9, "{}", after.to_degrees());
     }
 
     /// Knots sit on the sample grid: the rate is constant inside each sample interval.
