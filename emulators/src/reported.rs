@@ -283,7 +283,11 @@ mod tests {
         assert_eq!(held, now, "the history read is final");
         // and the gyros still land on the report
         let after = integrate(&tr, 600, 800, dt);
-        assert!((after.to_degrees() - 2.0).abs() < 1e-9, "{}", after.to_degrees());
+        assert!(
+            (after.to_degrees() - 2.0).abs() < 1e-9,
+            "{}",
+            after.to_degrees()
+        );
     }
 
     /// Knots sit on the sample grid: the rate is constant inside each sample interval.
