@@ -107,10 +107,11 @@ pub fn clock_fit(epochs: &[Epoch], sample_s: f64) -> Option<ClockFit> {
 
 /// A straight line fitted by least squares, with its uncertainties from the scatter.
 #[derive(Debug, Clone, Copy)]
-struct Line {
+pub(crate) struct Line {
     mean_x: f64,
     mean_y: f64,
-    slope: f64,
+    /// The slope.
+    pub(crate) slope: f64,
     slope_sigma: f64,
     /// The residuals' standard deviation.
     s: f64,
@@ -130,7 +131,7 @@ impl Line {
 }
 
 /// Least squares through `p` (equal weights); none for fewer than 3 points or no spread in x.
-fn fit_line(p: &[(f64, f64)]) -> Option<Line> {
+pub(crate) fn fit_line(p: &[(f64, f64)]) -> Option<Line> {
     let n = p.len() as f64;
     if p.len() < 3 {
         return None;
