@@ -5,7 +5,7 @@
 //! seconds on the host's clock since the run's origin, or of the IMU's clock where said.
 
 use crate::free::score::Epoch;
-use crate::stats::{median, wrap180};
+use crate::stats::{fit_line, median, wrap180};
 use serde::{Deserialize, Serialize};
 use wire::NavMode;
 
@@ -102,60 +102,6 @@ pub fn clock_fit(epochs: &[Epoch], sample_s: f64) -> Option<ClockFit> {
         },
         residual_rms_ms: (res.iter().map(|r| r * r).sum::<f64>() / n as f64).sqrt() * 1e3,
         residual_max_ms: res.iter().fold(0.0f64, |a, r| a.max(r.abs())) * 1e3,
-    })
-}
-
-/// A straight line fitted by least squares, with its uncertainties from the scatter.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Line {
-    mean_x: f64,
-    mean_y: f64,
-    /// The slope.
-    pub(crate) slope: f64,
-    slope_sigma: f64,
-    /// The residuals' standard deviation.
-    s: f64,
-    n: f64,
-    sxx: f64,
-}
-
-impl Line {
-    fn at(&self, x: f64) -> f64 {
-        self.mean_y + self.slope * (x - self.mean_x)
-    }
-
-    /// The line's standard uncertainty at `x`.
-    fn sigma_at(&self, x: f64) -> f64 {
-        self.s * (1.0 / self.n + (x - self.mean_x).powi(2) / self.sxx).sqrt()
-    }
-}
-
-/// Least squares through `p` (equal weights); none for fewer than 3 points or no spread in x.
-pub(crate) fn fit_line(p: &[(f64, f64)]) -> Option<Line> {
-    let n = p.len() as f64;
-    if p.len() < 3 {
-        return None;
-    }
-    let mx = p.iter().map(|q| q.0).sum::<f64>() / n;
-    let my = p.iter().map(|q| q.1).sum::<f64>() / n;
-    let sxx: f64 = p.iter().map(|q| (q.0 - mx).powi(2)).sum();
-    if sxx <= 0.0 {
-        return None;
-    }
-    let slope = p.iter().map(|q| (q.0 - mx) * (q.1 - my)).sum::<f64>() / sxx;
-    let ss: f64 = p
-        .iter()
-        .map(|q| (q.1 - my - slope * (q.0 - mx)).powi(2))
-        .sum();
-    let s = (ss / (n - 2.0)).sqrt();
-    Some(Line {
-        mean_x: mx,
-        mean_y: my,
-        slope,
-        slope_sigma: s / sxx.sqrt(),
-        s,
-        n,
-        sxx,
     })
 }
 

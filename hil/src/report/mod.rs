@@ -456,7 +456,7 @@ pub fn imu_clock_check(s: &Scenario, clock: Option<&ClockEstimate>, edges: u64) 
     let edges: Vec<(f64, f64)> = (0..=c.span_s.round() as i64)
         .map(|k| (k as f64, osc.ticks_at(end - c.span_s + k as f64) * period))
         .collect();
-    let truth = crate::free::clock::fit_line(&edges).map(|l| (l.slope - 1.0) * 1e6);
+    let truth = crate::stats::fit_line(&edges).map(|l| (l.slope - 1.0) * 1e6);
     let Some(truth) = truth.filter(|_| edges.len() >= nav::imuclock::MIN_EDGES) else {
         return Check {
             name,
