@@ -19,7 +19,7 @@
 //! here. An IMU on a table the bench does not model follows the table's reports
 //! ([`crate::reported`]).
 
-use crate::bus::scheduler::{bench_socket, drain};
+use crate::bus::scheduler::{bench_socket, drain, drain_stamped};
 use crate::bus::transport::{CanTxError, Progress, write_all};
 use crate::clock::SimClock;
 use crate::gps::{GpsPty, GpsReceiver, PtyError};
@@ -58,6 +58,49 @@ pub const IMU_WRITE_PERIOD: Duration = Duration::from_millis(1);
 impl Pacing {
     fn clock(&self) -> SimClock {
         SimClock::starting_at(self.origin, self.speed)
+    }
+}
+
+/// The kernel's receive stamps (ns of the UNIX clock) on a pacing's simulated clock: a frame
+/// enters the model at the time it reached the bench, not at the time the bench's thread got
+/// round to reading it (under load a thread woken 30 ms late reads three 100 Hz reports at once;
+/// taken at one instant they made the table turn 20 times its rate, beyond the gyros' range).
+#[derive(Debug, Clone, Copy)]
+struct Stamps {
+    /// The UNIX clock at simulated time 0, ns.
+    unix_at_origin_ns: i128,
+    speed: f64,
+}
+
+impl Stamps {
+    /// Tie the UNIX clock to `p`'s origin, now.
+    fn new(p: &Pacing) -> Self {
+        let unix = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as i128);
+        let now = Instant::now();
+        let since = if now >= p.origin {
+            now.duration_since(p.origin).as_nanos() as i128
+        } else {
+            -(p.origin.duration_since(now).as_nanos() as i128)
+        };
+        Self {
+            unix_at_origin_ns: unix - since,
+            speed: p.speed,
+        }
+    }
+
+    /// The simulated time of a frame stamped `stamp_ns` and read at `now` (s): the stamp's,
+    /// unless there is none or it is not within a second before the read (the UNIX clock was
+    /// stepped): then the read's.
+    fn at(&self, stamp_ns: Option<u64>, now: f64) -> f64 {
+        let Some(ns) = stamp_ns else { return now };
+        let t = (i128::from(ns) - self.unix_at_origin_ns) as f64 * 1e-9 * self.speed;
+        if t <= now && now - t < self.speed {
+            t
+        } else {
+            now
+        }
     }
 }
 
@@ -310,6 +353,15 @@ pub fn run_imu(
         vec![wire::tt_status::SPEC.id]
     };
     let sock = bench_socket(iface, &ids)?;
+    // a socket that cannot stamp gives the reports their read times
+    if !tracks.is_empty()
+        && let Err(e) = socketcan::SocketOptions::set_recv_timestamp(&sock, true)
+    {
+        tracing::warn!(
+            "{iface}: no kernel receive times (SO_TIMESTAMPNS: {e}): the table's reports enter the IMU's truth when read"
+        );
+    }
+    let stamps = Stamps::new(p);
     let clock = p.clock();
     let start = Instant::now();
     let mut late = Lateness::default();
@@ -326,12 +378,12 @@ pub fn run_imu(
         }
         if !tracks.is_empty() {
             let now = clock.now();
-            drain(&sock, iface, |f| {
+            drain_stamped(&sock, iface, |f, stamp| {
                 if let Some(Ok(Message::TtStatus(s))) = f.map(|f| Message::decode(&f))
                     && let Some(tr) = tracks.get(usize::from(s.axis))
                 {
                     tr.lock().unwrap_or_else(|e| e.into_inner()).report(
-                        now,
+                        stamps.at(stamp, now),
                         s.angle_deg,
                         s.faults.encoder,
                     );
@@ -507,6 +559,32 @@ pub fn run_gps(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_frame_enters_at_its_kernel_stamp_not_at_its_read() {
+        let p = Pacing {
+            origin: Instant::now(),
+            speed: 1.0,
+            until_s: f64::INFINITY,
+            max_late: Duration::from_millis(200),
+            imu_write_period: IMU_WRITE_PERIOD,
+        };
+        let st = Stamps::new(&p);
+        let unix_ns = |t: f64| (st.unix_at_origin_ns + (t * 1e9) as i128) as u64;
+        // three reports 10 ms apart, read together 30 ms after the first
+        for (i, t) in [5.000, 5.010, 5.020].into_iter().enumerate() {
+            let at = st.at(Some(unix_ns(t)), 5.030);
+            assert!((at - t).abs() < 1e-6, "report {i}: {at} for {t}");
+        }
+        // no stamp, a stamp from the future, one from long before the read: the read's time
+        assert_eq!(st.at(None, 5.03), 5.03);
+        assert_eq!(st.at(Some(unix_ns(5.2)), 5.03), 5.03);
+        assert_eq!(st.at(Some(unix_ns(3.0)), 5.03), 5.03);
+        // at x10 a stamp's wall seconds are ten simulated ones
+        let fast = Stamps { speed: 10.0, ..st };
+        let at = fast.at(Some(unix_ns(0.5)), 5.03);
+        assert!((at - 5.0).abs() < 1e-6, "{at}");
+    }
 
     #[test]
     fn a_sample_is_found_by_its_counter_across_the_wrap() {

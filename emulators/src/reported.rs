@@ -33,6 +33,8 @@ pub struct ReportedTrack {
     horizon: f64,
     /// The last report's angle, unwrapped, rad.
     last: Option<f64>,
+    /// The fastest the track turns, rad/s (infinite: as fast as the reports say).
+    max_rate: f64,
     /// What was taken.
     pub stats: ReportStats,
 }
@@ -47,6 +49,10 @@ pub struct ReportStats {
     pub late: u64,
     /// Reports left out because their encoder fault bit was set (the angle is not to be trusted).
     pub encoder_faults: u64,
+    /// Reports that came closer together than the table could turn between them: the track
+    /// went to them at its fastest rate instead (see [`ReportedTrack::with_max_rate`]).
+    #[serde(default)]
+    pub bunched: u64,
 }
 
 impl ReportedTrack {
@@ -58,8 +64,20 @@ impl ReportedTrack {
             delay_s: delay_s.max(0.0),
             horizon: 0.0,
             last: None,
+            max_rate: f64::INFINITY,
             stats: ReportStats::default(),
         }
+    }
+
+    /// The track turns no faster than `rad_s`: reports that come closer together than the
+    /// table could turn between them (a controller starved by its host sends its backlog at
+    /// once) are spread at this rate instead of making the IMU's truth jump, beyond what its
+    /// gyros can read. Give the table's own limit with a margin, within the gyros' range.
+    pub fn with_max_rate(mut self, rad_s: f64) -> Self {
+        if rad_s > 0.0 {
+            self.max_rate = rad_s;
+        }
+        self
     }
 
     /// The delay of the track behind the reports, s.
@@ -107,10 +125,16 @@ impl ReportedTrack {
             };
             at = self.snap(h + period.max(self.grid_s));
         }
-        if let Some(&(t_last, _)) = self.knots.last()
-            && at <= t_last
-        {
-            at = t_last + self.grid_s;
+        if let Some(&(t_last, a_last)) = self.knots.last() {
+            if at <= t_last {
+                at = t_last + self.grid_s;
+            }
+            // no faster than the table can turn
+            let need = (angle - a_last).abs() / self.max_rate;
+            if had_knots && at - t_last < need {
+                self.stats.bunched += 1;
+                at = self.snap(t_last + need);
+            }
         }
         // the whole history stays: it is the truth the bench scores against (16 bytes a
         // report, 5.8 MB an hour at 100 Hz)
@@ -287,6 +311,39 @@ mod tests {
             (after.to_degrees() - 2.0).abs() < 1e-9,
             "{}",
             after.to_degrees()
+        );
+    }
+
+    /// A controller starved by its host sends a backlog at once: 100 ms of a 30 deg/s turn in
+    /// ten reports read together. The track goes to them no faster than its limit (45 deg/s
+    /// here) instead of in ten grid steps (600 deg/s, beyond a 400 deg/s gyro), counts them
+    /// bunched, and the gyros still land on the last report.
+    #[test]
+    fn reports_read_together_are_spread_at_the_table_s_fastest() {
+        let dt = 1.0 / 2000.0;
+        let limit = 45f64.to_radians();
+        let tr: SharedTrack = Arc::new(Mutex::new(
+            ReportedTrack::new(2000.0, 0.02).with_max_rate(limit),
+        ));
+        lock(&tr).report(0.0, 0.0, false);
+        assert_eq!(integrate(&tr, 0, 200, dt), 0.0);
+        for i in 1..=10 {
+            lock(&tr).report(0.1, 0.3 * f64::from(i), false);
+        }
+        assert!(lock(&tr).stats.bunched >= 9, "{:?}", lock(&tr).stats);
+        let fastest = (200..2000)
+            .map(|k| lock(&tr).eval((k as f64 + 0.5) * dt).1.abs())
+            .fold(0.0, f64::max);
+        assert!(
+            fastest <= limit * (1.0 + 1e-9),
+            "{} deg/s",
+            fastest.to_degrees()
+        );
+        let turned = integrate(&tr, 200, 2000, dt);
+        assert!(
+            (turned.to_degrees() - 3.0).abs() < 1e-9,
+            "{}",
+            turned.to_degrees()
         );
     }
 

@@ -314,11 +314,39 @@ pub(crate) fn drain(
     iface: &str,
     mut f: impl FnMut(Option<RawFrame>),
 ) -> Result<(), CanTxError> {
-    use std::os::fd::AsRawFd;
     let mut got = Vec::with_capacity(wire::BATCH);
+    drain_into(sock, iface, &mut got, wire::recv_batch, |r| f(r.ok()))
+}
+
+/// As [`drain`], each frame with its kernel receive time (ns since the UNIX epoch) where the
+/// socket has `SO_TIMESTAMPNS` on (none otherwise).
+pub(crate) fn drain_stamped(
+    sock: &CanSocket,
+    iface: &str,
+    mut f: impl FnMut(Option<RawFrame>, Option<u64>),
+) -> Result<(), CanTxError> {
+    let mut got = Vec::with_capacity(wire::BATCH);
+    drain_into(
+        sock,
+        iface,
+        &mut got,
+        wire::recv_batch_stamped,
+        |(r, at)| f(r.ok(), at),
+    )
+}
+
+/// Batches from `recv` until one comes short, each frame to `f`.
+fn drain_into<T>(
+    sock: &CanSocket,
+    iface: &str,
+    got: &mut Vec<T>,
+    recv: impl Fn(std::os::fd::RawFd, &mut Vec<T>, usize) -> std::io::Result<usize>,
+    mut f: impl FnMut(T),
+) -> Result<(), CanTxError> {
+    use std::os::fd::AsRawFd;
     loop {
         got.clear();
-        let n = match wire::recv_batch(sock.as_raw_fd(), &mut got, wire::BATCH) {
+        let n = match recv(sock.as_raw_fd(), got, wire::BATCH) {
             Ok(n) => n,
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
             // the interface went down: the socket reports it once; nothing to read meanwhile
@@ -331,7 +359,7 @@ pub(crate) fn drain(
             }
         };
         for r in got.drain(..) {
-            f(r.ok());
+            f(r);
         }
         if n < wire::BATCH {
             return Ok(());

@@ -389,6 +389,9 @@ pub struct SampleFrames {
     pub k: u64,
     /// IMU_GYRO, IMU_ACCEL and, at 10 Hz, IMU_HK.
     pub frames: Vec<RawFrame>,
+    /// The true input went beyond the gyros' or accelerometers' range in this sample (clamped
+    /// and flagged; a `saturated_s` window alone does not count).
+    pub over_range: bool,
 }
 
 impl ImuEmulator {
@@ -646,6 +649,7 @@ impl ImuEmulator {
         let sample_counter = self.sample_counter(self.k);
         // PPS: an edge (whole seconds + phase + jitter, or a spurious one) inside (t0, t1]?
         let within = |w: &[[f64; 2]], t: f64| w.iter().any(|p| t >= p[0] && t < p[1]);
+        let over_range = saturated;
         saturated |= within(&self.p.saturated_s, t1);
         let pps_offset = self.pps_offset(t0, t1);
         let gf = ImuGyro {
@@ -683,7 +687,11 @@ impl ImuEmulator {
         }
         let k = self.k;
         self.k += 1;
-        SampleFrames { k, frames }
+        SampleFrames {
+            k,
+            frames,
+            over_range,
+        }
     }
 }
 
@@ -957,6 +965,14 @@ mod tests {
             .iter()
             .any(|fr| matches!(Message::decode(fr), Ok(Message::ImuAccel(a)) if a.saturated));
         assert!(sat, "saturation flagged");
+        assert!(f.over_range, "and counted as the motion's, not a window's");
+        // a saturated_s window flags without counting
+        let p = ImuParams {
+            saturated_s: vec![[0.0, 1.0]],
+            ..ImuParams::ideal()
+        };
+        let f = ImuEmulator::new(Box::new(level(0.0)), p).next_sample();
+        assert!(!f.over_range);
     }
 
     #[test]

@@ -60,6 +60,10 @@ pub struct TxStats {
     pub enobufs_retries: u64,
     /// Largest lag behind the simulated clock, ms of wall time.
     pub max_lag_ms: u64,
+    /// Samples whose true input went beyond the sensors' range (clamped): the motion asked
+    /// more of the IMU than it can measure.
+    #[serde(default)]
+    pub over_range_samples: u64,
 }
 
 /// The IMU's frames as they go on the bus, with the configured faults injected. Pure (no I/O):
@@ -109,6 +113,7 @@ impl BusStream {
         let s = self.imu.next_sample();
         let st = &mut self.stats;
         st.samples += 1;
+        st.over_range_samples += u64::from(s.over_range);
         let stopped = self.faults.stop_s.iter().any(|p| t >= p[0] && t < p[1]);
         if stopped || self.faults.drop_samples.contains(&s.k) {
             st.dropped_samples += 1;

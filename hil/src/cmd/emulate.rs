@@ -7,12 +7,12 @@ use emulators::bus::transport::{BusStream, Progress};
 use emulators::freerun::{FreeStats, Pacing};
 use emulators::gps::{GpsPty, GpsReceiver, relink};
 use emulators::imu::ImuEmulator;
-use emulators::reported::{ReportedTrack, SharedTrack};
+use emulators::reported::SharedTrack;
 use emulators::turntable::ttbus::TtBus;
 use hil::scenario::Scenario;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 /// The device to emulate.
@@ -228,9 +228,7 @@ fn imu(
     vcan_setup::ensure_vcan(iface)?;
     let axes = s.turntable.as_ref().map_or(1, |t| usize::from(t.axes));
     let tracks: Vec<SharedTrack> = match follow {
-        Some(delay) => (0..axes)
-            .map(|_| Arc::new(Mutex::new(ReportedTrack::new(s.imu.rate_hz, delay))))
-            .collect(),
+        Some(delay) => (0..axes).map(|_| s.reported_track(delay)).collect(),
         None => Vec::new(),
     };
     let motion = if follow.is_some() {
@@ -326,8 +324,8 @@ fn card(st: &FreeStats) -> String {
     }
     for (axis, f) in st.followed.iter().enumerate() {
         out += &format!(
-            "\n followed the table's axis {axis}: {} reports taken, {} later than the delay, {} with the encoder fault left out",
-            f.reports, f.late, f.encoder_faults
+            "\n followed the table's axis {axis}: {} reports taken, {} later than the delay, {} closer together than the table turns (spread at its fastest), {} with the encoder fault left out",
+            f.reports, f.late, f.bunched, f.encoder_faults
         );
     }
     if let Some(g) = &st.gps {

@@ -25,7 +25,7 @@ use emulators::bus::transport::{BusStream, Progress};
 use emulators::freerun::{FreeStats, Pacing, SentSamples};
 use emulators::gps::{GpsPty, GpsReceiver};
 use emulators::imu::ImuEmulator;
-use emulators::reported::{ReportedTrack, SharedTrack};
+use emulators::reported::SharedTrack;
 use emulators::turntable::ttbus::TtBus;
 use observe::Observed;
 use serde::{Deserialize, Serialize};
@@ -368,9 +368,7 @@ fn prepare_bench(
     let sent = Arc::new(SentSamples::new((30.0 * s.imu.rate_hz) as usize));
     // the IMU rides the table, emulated or real, as its TT_STATUS reports it
     let axes = s.turntable.as_ref().map_or(0, |t| usize::from(t.axes));
-    let tracks: Vec<SharedTrack> = (0..axes)
-        .map(|_| Arc::new(Mutex::new(ReportedTrack::new(s.imu.rate_hz, 0.02))))
-        .collect();
+    let tracks: Vec<SharedTrack> = (0..axes).map(|_| s.reported_track(0.02)).collect();
     let mut devices: Vec<(&'static str, DeviceRun)> = Vec::new();
     if let (Some(tp), false) = (&s.turntable, o.real_turntable) {
         let mut tt = TtBus::new(emulators::turntable::Turntable::new(tp.clone()), 1000.0);
@@ -576,6 +574,7 @@ pub fn card(r: &FreeReport) -> String {
                 ""
             }
         );
+        out += &followed_words(b);
     }
     for x in &r.real {
         out += &format!(" real     {x}\n");
@@ -605,6 +604,29 @@ pub fn card(r: &FreeReport) -> String {
     match &r.bench_behind {
         Some(why) => out += &format!(" RESULT: NO VERDICT: {why}\n"),
         None => out += &format!(" RESULT: {}\n", if r.pass { "PASS" } else { "FAIL" }),
+    }
+    out
+}
+
+/// What the bench's IMU made of the table it rides and whether the motion stayed within its
+/// range: a line of the card, empty where there is nothing to say.
+fn followed_words(b: &FreeStats) -> String {
+    let mut out = String::new();
+    for (axis, f) in b.followed.iter().enumerate() {
+        out += &format!(
+            "          its truth followed the table's axis {axis}: {} reports, {} later than the delay, {} closer together than the table turns (spread at its fastest), {} left out for the encoder fault\n",
+            f.reports, f.late, f.bunched, f.encoder_faults
+        );
+    }
+    if let Some(n) = b
+        .imu
+        .as_ref()
+        .map(|i| i.over_range_samples)
+        .filter(|n| *n > 0)
+    {
+        out += &format!(
+            "          {n} samples went beyond the IMU's range (clamped, flagged saturated)\n"
+        );
     }
     out
 }

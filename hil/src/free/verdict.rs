@@ -149,6 +149,12 @@ pub(crate) fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) ->
         site_error,
         offset: offset.clone(),
         period_s: timing.period_s,
+        over_range: j
+            .stats
+            .iter()
+            .filter_map(|st| st.imu.as_ref())
+            .map(|i| i.over_range_samples)
+            .sum(),
     };
     truth_checks(s, o, &truth, &scores, &mut checks, &mut not_judged);
     let behind = j.stats.iter().find_map(|st| st.behind.clone()).or_else(|| {
@@ -378,6 +384,8 @@ struct Scores {
     offset: Option<DataOffset>,
     /// The device's output period, s.
     period_s: f64,
+    /// Samples the bench's IMU clamped at its range: the gyros did not read the truth there.
+    over_range: u64,
 }
 
 /// What the device's solution says against the truth: the drill's heading and position, the
@@ -396,6 +404,7 @@ fn truth_checks(
         site_error,
         offset,
         period_s,
+        over_range,
     } = sc;
     let (navigation, site_error) = (*navigation, *site_error);
     let drive = s.drive.is_some() && !is_drill(s);
@@ -417,6 +426,11 @@ fn truth_checks(
         _ => {}
     }
     match data_check(offset.as_ref(), *period_s) {
+        // the truth then turned faster than the gyros could read: a heading that follows them
+        // is not older than its tag
+        Ok(_) if *over_range > 0 => not_judged.push(format!(
+            "time tags agree with the data: the bench's IMU was driven beyond its range on {over_range} samples (clamped): its gyros did not read the truth the device is judged against"
+        )),
         Ok(c) => checks.push(c),
         Err(why) => not_judged.push(format!("time tags agree with the data: {why}")),
     }

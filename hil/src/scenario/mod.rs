@@ -521,6 +521,22 @@ impl Scenario {
         (m, Some(tt))
     }
 
+    /// One axis's track of a table the bench does not model, `delay_s` behind its reports: no
+    /// faster than half again the table's rated rate (`[turntable] max_rate_dps`, its default
+    /// without one), and within half the gyros' range, so that a backlog of reports read at
+    /// once cannot turn the IMU's truth beyond what its gyros read.
+    pub fn reported_track(&self, delay_s: f64) -> emulators::reported::SharedTrack {
+        let rated = self.turntable.as_ref().map_or(
+            emulators::turntable::TurntableParams::default().max_rate_dps,
+            |t| t.max_rate_dps,
+        );
+        let limit = (1.5 * rated).min(0.5 * self.imu.gyro_range_dps);
+        std::sync::Arc::new(std::sync::Mutex::new(
+            emulators::reported::ReportedTrack::new(self.imu.rate_hz, delay_s)
+                .with_max_rate(limit.to_radians()),
+        ))
+    }
+
     /// The truth motion of this scenario with its IMU on a table the bench does not model,
     /// following the table's reported angles (`tracks`, one per axis of the scenario's
     /// `[turntable]`; none: no table).
