@@ -25,21 +25,12 @@ pub(crate) struct Line {
     pub(crate) slope: f64,
     /// The slope's standard uncertainty.
     pub(crate) slope_sigma: f64,
-    /// The residuals' standard deviation.
-    s: f64,
-    n: f64,
-    sxx: f64,
 }
 
 impl Line {
     /// The line's value at `x`.
     pub(crate) fn at(&self, x: f64) -> f64 {
         self.mean_y + self.slope * (x - self.mean_x)
-    }
-
-    /// The line's standard uncertainty at `x`.
-    pub(crate) fn sigma_at(&self, x: f64) -> f64 {
-        self.s * (1.0 / self.n + (x - self.mean_x).powi(2) / self.sxx).sqrt()
     }
 }
 
@@ -66,8 +57,5 @@ pub(crate) fn fit_line(p: &[(f64, f64)]) -> Option<Line> {
         mean_y: my,
         slope,
         slope_sigma: s / sxx.sqrt(),
-        s,
-        n,
-        sxx,
     })
 }
