@@ -288,10 +288,10 @@ mod tests {
 
     /// The IMU reads past the last report (a host that delivers the reports late holds them
     /// back): it felt the angle held there, and a report that then comes, in time for its own
-    /// place on the track, does not reshape what was read. Until 2026-12-02 the new knot was
-    /// joined to the last one by a line through the read past, so the truth the judge scored
-    /// against turned earlier than the gyros had: on a loaded host an honest device's headings
-    /// read as 100 ms off their tags.
+    /// place on the track, does not reshape what was read. Were the new knot joined to the last
+    /// one by a line through the read past, the truth the judge scores against would turn
+    /// earlier than the gyros had: on a loaded host an honest device's headings read as 100 ms
+    /// off their tags.
     #[test]
     fn what_the_imu_read_past_the_last_report_stays_as_it_read_it() {
         let dt = 1.0 / 2000.0;
