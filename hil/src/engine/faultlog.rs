@@ -23,6 +23,15 @@ pub struct FaultEvent {
     pub detail: String,
 }
 
+/// nav stopped for a while by the bench (the run's `stall_nav`): SIGSTOP, then SIGCONT.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NavStall {
+    /// Simulated time of the stop, s.
+    pub at_s: f64,
+    /// How long nav stays stopped, wall s.
+    pub wall_s: f64,
+}
+
 /// The events of one device as they are gathered.
 struct Device<'a> {
     name: &'static str,
@@ -75,9 +84,14 @@ impl Device<'_> {
     }
 }
 
-/// Every fault event of scenario `s` run with `link_downs` ([down at, up at], s) and a
-/// SIGKILL of nav at `kill_at_s`, in time order.
-pub fn schedule(s: &Scenario, link_downs: &[[f64; 2]], kill_at_s: Option<f64>) -> Vec<FaultEvent> {
+/// Every fault event of scenario `s` run with `link_downs` ([down at, up at], s), a SIGKILL
+/// of nav at `kill_at_s` and a stop of nav (`stall`), in time order.
+pub fn schedule(
+    s: &Scenario,
+    link_downs: &[[f64; 2]],
+    kill_at_s: Option<f64>,
+    stall: Option<NavStall>,
+) -> Vec<FaultEvent> {
     let mut ev = Vec::new();
     imu_events(s, &mut ev);
     bus_events(s, &mut ev);
@@ -101,6 +115,10 @@ pub fn schedule(s: &Scenario, link_downs: &[[f64; 2]], kill_at_s: Option<f64>) -
         kill_at_s.as_slice(),
         "nav killed (SIGKILL)",
     );
+    if let Some(st) = stall {
+        let detail = format!("nav stopped (SIGSTOP) for {} s of wall time", st.wall_s);
+        bench.push(st.at_s, "stall_nav", "at", detail);
+    }
     ev.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     ev
 }
@@ -242,7 +260,11 @@ mod tests {
         s.faults.stop_s = vec![[10.0, 10.5]];
         s.faults.drop_samples = vec![4000];
         s.imu.pps_spurious_at_s = vec![3.25];
-        let ev = schedule(&s, &[[7.0, 7.5]], Some(12.0));
+        let stall = NavStall {
+            at_s: 11.0,
+            wall_s: 1.0,
+        };
+        let ev = schedule(&s, &[[7.0, 7.5]], Some(12.0), Some(stall));
         let brief: Vec<(f64, &str, &str)> = ev.iter().map(|e| (e.t_s, e.fault, e.phase)).collect();
         let k = 4000.0 / s.imu.rate_hz;
         let mut expected = vec![
@@ -252,10 +274,11 @@ mod tests {
             (7.5, "link_downs", "ends"),
             (10.0, "stop_s", "starts"),
             (10.5, "stop_s", "ends"),
+            (11.0, "stall_nav", "at"),
             (12.0, "kill_nav_at_s", "at"),
         ];
         expected.sort_by(|a, b| a.0.total_cmp(&b.0));
         assert_eq!(brief, expected);
-        assert!(schedule(&Scenario::builtin_static(), &[], None).is_empty());
+        assert!(schedule(&Scenario::builtin_static(), &[], None, None).is_empty());
     }
 }

@@ -38,16 +38,17 @@ pub struct RunTruth {
 
 impl RunTruth {
     /// The truth of scenario `s`, with the bench's own faults: the interface taken down
-    /// (`link_downs`) and nav killed (`kill_nav_at_s`).
+    /// (`link_downs`), nav killed (`kill_nav_at_s`) and nav stopped a while (`stall_nav`).
     pub fn of(
         s: &crate::scenario::Scenario,
         link_downs: &[[f64; 2]],
         kill_nav_at_s: Option<f64>,
+        stall_nav: Option<crate::engine::faultlog::NavStall>,
     ) -> Result<Self> {
         Ok(Self {
             drive: s.drive.as_ref().map(Drive::plan).transpose()?,
             site: s.site,
-            faults: crate::engine::faultlog::schedule(s, link_downs, kill_nav_at_s),
+            faults: crate::engine::faultlog::schedule(s, link_downs, kill_nav_at_s, stall_nav),
         })
     }
 }

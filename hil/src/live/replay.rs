@@ -73,7 +73,7 @@ fn play(
     let (tx, rx) = mpsc::channel();
     view.controls_to(tx);
     let truth = scenario
-        .map(|s| crate::engine::truthrec::RunTruth::of(s, &[], None))
+        .map(|s| crate::engine::truthrec::RunTruth::of(s, &[], None, None))
         .transpose()?;
     let name = mcap.display().to_string();
     let mut wanted = Wanted {

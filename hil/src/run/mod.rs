@@ -6,6 +6,7 @@ pub mod busreplay;
 mod judge;
 pub mod offload;
 
+pub use crate::engine::faultlog::NavStall;
 use crate::engine::truthrec::RunTruth;
 use crate::procedures::observe::{DrillWatch, solution_socket, watch_solution};
 use crate::report::{self, RunReport};
@@ -45,6 +46,10 @@ pub struct RunOptions {
     /// Kill nav outright (SIGKILL) at this simulated time, s; its recording is then read back
     /// and its summary rebuilt from it.
     pub kill_nav_at_s: Option<f64>,
+    /// Stop nav (SIGSTOP) at this simulated time for this many seconds of wall time, then let it
+    /// go on (SIGCONT): a host that deschedules it. Run free (no lockstep), the devices write on
+    /// and nav's socket overflows (the fault matrix's `bus-overload`).
+    pub stall_nav: Option<NavStall>,
     /// Run nav as this user and group id (see [`nav_account`]); none: as the bench's user.
     pub nav_account: Option<(u32, u32)>,
     /// Put gpsd between the GPS emulator's pty and nav (nav's `[gps] source = "gpsd"`), as a
@@ -188,6 +193,7 @@ impl RunOptions {
             html: true,
             link_downs: Vec::new(),
             kill_nav_at_s: None,
+            stall_nav: None,
             nav_account: nav_account(),
             gps_via_gpsd: false,
             live: None,
@@ -305,7 +311,7 @@ pub(crate) fn stop_nav(mut nav: NavProcess) -> Result<(Option<i32>, Vec<String>)
 /// `write_report`.
 pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunReport> {
     let mut setup = prepare(s, opts)?;
-    let truth = RunTruth::of(s, &opts.link_downs, opts.kill_nav_at_s)?;
+    let truth = RunTruth::of(s, &opts.link_downs, opts.kill_nav_at_s, opts.stall_nav)?;
     let account = opts
         .nav_account
         .map_or_else(|| "this user".into(), |(u, g)| format!("uid {u}, gid {g}"));
@@ -525,8 +531,14 @@ fn supervise(
     let mut killed_at: Option<f64> = None;
     let mut memory = NavMemory::new(s.duration_s);
     let mut next_memory = Instant::now();
-    while !devices.is_finished() {
-        std::thread::sleep(Duration::from_millis(50));
+    let mut stall = Stall::new(opts.stall_nav, nav.child.id());
+    // a stall is held to its end even if the stream ends meanwhile (a stopped nav takes no
+    // signal to finish)
+    while !devices.is_finished() || stall.holding() {
+        // a pending stall is started within 2 ms of its simulated time
+        let poll = if stall.pending() { 2 } else { 50 };
+        std::thread::sleep(Duration::from_millis(poll));
+        stall.poll(devices.sim_time());
         if killed_at.is_none() && Instant::now() >= next_memory {
             memory.read(nav.child.id(), devices.sim_time());
             next_memory += Duration::from_secs(1);
@@ -583,6 +595,59 @@ fn supervise(
         drill,
         killed_at,
         memory,
+    }
+}
+
+/// The bench's stop of nav ([`RunOptions::stall_nav`]): SIGSTOP at its simulated time, SIGCONT
+/// its wall time later.
+struct Stall {
+    plan: Option<NavStall>,
+    pid: libc::pid_t,
+    stopped: Option<Instant>,
+    done: bool,
+}
+
+impl Stall {
+    fn new(plan: Option<NavStall>, pid: u32) -> Self {
+        Self {
+            plan,
+            pid: pid as libc::pid_t,
+            stopped: None,
+            done: false,
+        }
+    }
+
+    /// Planned and not yet started.
+    fn pending(&self) -> bool {
+        self.plan.is_some() && self.stopped.is_none() && !self.done
+    }
+
+    /// nav is stopped now.
+    fn holding(&self) -> bool {
+        self.stopped.is_some() && !self.done
+    }
+
+    /// Stop nav when the stream reaches the stall's time, let it go on when the stall is over.
+    fn poll(&mut self, sim_time: f64) {
+        let Some(plan) = self.plan else { return };
+        match self.stopped {
+            None if sim_time >= plan.at_s => {
+                info!(
+                    "stopping nav (SIGSTOP) at {sim_time:.3} s for {} s of wall time",
+                    plan.wall_s
+                );
+                // SAFETY: kill(2) on our own child's pid.
+                unsafe { libc::kill(self.pid, libc::SIGSTOP) };
+                self.stopped = Some(Instant::now());
+            }
+            Some(t) if !self.done && t.elapsed().as_secs_f64() >= plan.wall_s => {
+                info!("nav goes on (SIGCONT) at {sim_time:.3} s");
+                // SAFETY: kill(2) on our own child's pid.
+                unsafe { libc::kill(self.pid, libc::SIGCONT) };
+                self.done = true;
+            }
+            _ => {}
+        }
     }
 }
 
