@@ -16,6 +16,7 @@
 //! `f^b = C_n^b (dv^n/dt + (2 w_ie^n + w_en^n) x v^n - g^n)`.
 
 use crate::geodesy as earth;
+use crate::road::Road;
 use crate::truth::{Increments, Motion, c_b_n, gauss_legendre3};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -52,6 +53,77 @@ pub struct DriveSpec {
     /// Standing still before driving off, s.
     #[serde(default)]
     pub start_wait_s: f64,
+    /// A road's fields (any of them makes the route a road: `crate::road`).
+    /// Height of each waypoint, m (as many as `waypoints`; the start is at `height_m`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub heights_m: Vec<f64>,
+    /// Speed on the leg to each waypoint, m/s (as many as `waypoints`); none: `speed_mps`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub leg_speeds_mps: Vec<f64>,
+    /// Stops: [waypoint number (1 = the first), seconds standing there], in every lap.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stops: Vec<[f64; 2]>,
+    /// Braking limit, m/s^2 (default: `accel_mps2`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub brake_mps2: Option<f64>,
+    /// Jerk limit, m/s^3 (default 1.0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub jerk_mps3: Option<f64>,
+    /// Vertical acceleration limit over a crest or a dip, m/s^2 (default 0.5): sets the
+    /// vertical curves' length.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vertical_accel_mps2: Option<f64>,
+    /// The body's pitch per m/s^2 of longitudinal acceleration (squat, and dive under braking),
+    /// deg (default 0.3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pitch_per_accel_deg: Option<f64>,
+    /// The body's roll out of a turn per m/s^2 of lateral acceleration, deg (default 0.5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roll_per_lateral_accel_deg: Option<f64>,
+    /// The road's bank into a turn at its sharpest, deg (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bank_deg: Option<f64>,
+}
+
+impl Default for DriveSpec {
+    /// No route (a plan refuses it): for code that names only the fields it sets.
+    fn default() -> Self {
+        Self {
+            lat_deg: 0.0,
+            lon_deg: 0.0,
+            height_m: 0.0,
+            waypoints: Vec::new(),
+            speed_mps: 10.0,
+            accel_mps2: default_accel(),
+            turn_rate_dps: default_turn(),
+            lateral_accel_mps2: default_lat(),
+            laps: 1,
+            start_wait_s: 0.0,
+            heights_m: Vec::new(),
+            leg_speeds_mps: Vec::new(),
+            stops: Vec::new(),
+            brake_mps2: None,
+            jerk_mps3: None,
+            vertical_accel_mps2: None,
+            pitch_per_accel_deg: None,
+            roll_per_lateral_accel_deg: None,
+            bank_deg: None,
+        }
+    }
+}
+
+impl DriveSpec {
+    /// The route names a road's fields: it is planned as a road (`crate::road`), not as the
+    /// level route of one speed.
+    pub fn is_road(&self) -> bool {
+        !(self.heights_m.is_empty() && self.leg_speeds_mps.is_empty() && self.stops.is_empty())
+            || self.brake_mps2.is_some()
+            || self.jerk_mps3.is_some()
+            || self.vertical_accel_mps2.is_some()
+            || self.pitch_per_accel_deg.is_some()
+            || self.roll_per_lateral_accel_deg.is_some()
+            || self.bank_deg.is_some()
+    }
 }
 
 fn default_accel() -> f64 {
@@ -84,9 +156,9 @@ struct Segment {
     rate: f64,
 }
 
-/// The planned drive.
+/// The planned level route.
 #[derive(Debug, Clone)]
-pub struct Drive {
+pub(crate) struct Level {
     spec: DriveSpec,
     segs: Vec<Segment>,
     /// For each segment, standing still where it ends (after the plan's end, or in a rounding
@@ -104,7 +176,7 @@ fn wrap(a: f64) -> f64 {
     (a + PI).rem_euclid(2.0 * PI) - PI
 }
 
-impl Drive {
+impl Level {
     /// Plan the route; errors name what is wrong with the spec.
     pub fn plan(spec: &DriveSpec) -> Result<Self, crate::ParamError> {
         check_spec(spec)?;
@@ -203,7 +275,7 @@ impl Drive {
     }
 }
 
-/// See [`Drive::state`].
+/// See [`Level::state`].
 struct State {
     speed: f64,
     psi: f64,
@@ -278,7 +350,7 @@ impl Segment {
     }
 }
 
-impl Drive {
+impl Level {
     /// Everything rate and force have in common at `t`, each from one trajectory lookup:
     /// the body-from-ENU rotation, earth and transport rate, and the kinematics.
     /// Each sine and cosine is taken once (they were the truth's largest cost in an emulated
@@ -360,7 +432,7 @@ fn c_b_n_heading(psi: f64, sin_psi: f64, cos_psi: f64) -> nalgebra::Rotation3<f6
     .inverse()
 }
 
-/// See [`Drive::frame`].
+/// See [`Level::frame`].
 struct DriveFrame {
     speed: f64,
     sin_psi: f64,
@@ -375,7 +447,7 @@ struct DriveFrame {
     wen: Vector3<f64>,
 }
 
-impl Motion for Drive {
+impl Motion for Level {
     fn omega_ib_b(&self, t: f64) -> Vector3<f64> {
         Self::omega_of(&self.frame(t))
     }
@@ -426,6 +498,128 @@ impl Motion for Drive {
 
     fn latitude(&self, t: f64) -> f64 {
         self.position(t).0
+    }
+}
+
+/// A planned drive: the level route of one speed, or a road (`crate::road`) where the
+/// `[drive]` table names a road's fields.
+#[derive(Debug, Clone)]
+pub struct Drive(Kind);
+
+// one per run; the level route, read at every quadrature node, is kept inline
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone)]
+enum Kind {
+    Level(Level),
+    Road(Box<Road>),
+}
+
+impl Drive {
+    /// Plan the route; errors name what is wrong with the spec.
+    pub fn plan(spec: &DriveSpec) -> Result<Self, crate::ParamError> {
+        Ok(Self(if spec.is_road() {
+            Kind::Road(Box::new(Road::plan(spec)?))
+        } else {
+            Kind::Level(Level::plan(spec)?)
+        }))
+    }
+
+    /// The road, when the route is one.
+    pub fn road(&self) -> Option<&Road> {
+        match &self.0 {
+            Kind::Road(r) => Some(r),
+            Kind::Level(_) => None,
+        }
+    }
+
+    fn motion(&self) -> &dyn Motion {
+        match &self.0 {
+            Kind::Level(l) => l,
+            Kind::Road(r) => r.as_ref(),
+        }
+    }
+
+    /// Duration of the plan, s (the vehicle stands still after it).
+    pub fn duration(&self) -> f64 {
+        match &self.0 {
+            Kind::Level(l) => l.duration(),
+            Kind::Road(r) => r.duration(),
+        }
+    }
+
+    /// Speed (m/s), heading (rad), acceleration along the road (m/s^2), heading rate (rad/s)
+    /// and, on a level route, the horizontal position (m east, north of the start; a road's is
+    /// [`Drive::position`]: here the start's).
+    pub fn kinematics(&self, t: f64) -> (f64, f64, f64, f64, [f64; 2]) {
+        match &self.0 {
+            Kind::Level(l) => l.kinematics(t),
+            Kind::Road(r) => {
+                let (v, psi, a, w) = r.kinematics(t);
+                (v, psi, a, w, [0.0, 0.0])
+            }
+        }
+    }
+
+    /// Velocity in ENU, m/s.
+    pub fn velocity(&self, t: f64) -> Vector3<f64> {
+        match &self.0 {
+            Kind::Level(l) => l.velocity(t),
+            Kind::Road(r) => r.velocity(t),
+        }
+    }
+
+    /// Latitude, longitude (rad) and height (m).
+    pub fn position(&self, t: f64) -> (f64, f64, f64) {
+        match &self.0 {
+            Kind::Level(l) => l.position(t),
+            Kind::Road(r) => r.position(t),
+        }
+    }
+
+    /// Heading, rad (clockwise from north).
+    pub fn heading(&self, t: f64) -> f64 {
+        match &self.0 {
+            Kind::Level(l) => l.heading(t),
+            Kind::Road(r) => r.hpr(t)[0],
+        }
+    }
+
+    /// Heading, pitch and roll of the body, rad (a level route's pitch and roll are zero).
+    pub fn hpr(&self, t: f64) -> [f64; 3] {
+        match &self.0 {
+            Kind::Level(l) => [l.heading(t), 0.0, 0.0],
+            Kind::Road(r) => r.hpr(t),
+        }
+    }
+}
+
+impl Motion for Drive {
+    fn omega_ib_b(&self, t: f64) -> Vector3<f64> {
+        self.motion().omega_ib_b(t)
+    }
+
+    fn f_b(&self, t: f64) -> Vector3<f64> {
+        self.motion().f_b(t)
+    }
+
+    fn rate_and_force(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        self.motion().rate_and_force(t)
+    }
+
+    fn increments(&self, t0: f64, t1: f64) -> Increments {
+        self.motion().increments(t0, t1)
+    }
+
+    fn attitude(&self, t: f64) -> UnitQuaternion<f64> {
+        self.motion().attitude(t)
+    }
+
+    fn inertial_attitude(&self, t: f64) -> UnitQuaternion<f64> {
+        self.motion().inertial_attitude(t)
+    }
+
+    fn latitude(&self, t: f64) -> f64 {
+        self.motion().latitude(t)
     }
 }
 
@@ -637,6 +831,7 @@ mod tests {
             lateral_accel_mps2: 2.5,
             laps: 2,
             start_wait_s: 5.0,
+            ..Default::default()
         }
     }
 
@@ -644,7 +839,7 @@ mod tests {
     /// (away from corners) and beat six across a corner.
     #[test]
     fn three_nodes_split_at_corners_integrate_to_rounding() {
-        let d = Drive::plan(&square()).unwrap();
+        let d = Level::plan(&square()).unwrap();
         let six = |t0: f64, t1: f64| crate::truth::gauss_legendre(t0, t1, |t| d.rate_and_force(t));
         let mut worst = (0.0f64, 0.0f64);
         for k in 0..400_000u64 {
@@ -671,7 +866,7 @@ mod tests {
 
     #[test]
     fn the_loop_closes_respects_the_limits_and_ends_at_rest() {
-        let d = Drive::plan(&square()).unwrap();
+        let d = Level::plan(&square()).unwrap();
         let end = d.duration();
         // 2 x 1 km square with 40 m radius corners (1.88 km) at 10 m/s, plus 5 s waiting and
         // 6.7 s lost accelerating and braking
@@ -709,7 +904,7 @@ mod tests {
 
     #[test]
     fn position_is_the_integral_of_velocity_and_rate_matches_attitude() {
-        let d = Drive::plan(&square()).unwrap();
+        let d = Level::plan(&square()).unwrap();
         // integrate the velocity numerically and compare with the analytic position
         let (mut e, mut n) = (0.0, 0.0);
         let h = 0.001;
@@ -737,7 +932,7 @@ mod tests {
 
     #[test]
     fn specific_force_holds_the_centripetal_acceleration_in_turns() {
-        let d = Drive::plan(&square()).unwrap();
+        let d = Level::plan(&square()).unwrap();
         let mut seen = false;
         let mut t = 0.0;
         while t < d.duration() {
@@ -758,7 +953,7 @@ mod tests {
         // a lap that ends heading south into a lap that starts heading north: a reversal
         let mut s = square();
         s.waypoints = vec![[0.0, 200.0], [0.0, 0.0]];
-        let e = Drive::plan(&s).unwrap_err().to_string();
+        let e = Level::plan(&s).unwrap_err().to_string();
         assert!(
             e.contains("turns back on itself by 180 deg at [0.0, 200.0]"),
             "{e}"
@@ -766,7 +961,7 @@ mod tests {
         let mut s = square();
         s.waypoints = vec![[0.0, 30.0], [30.0, 30.0], [30.0, 0.0], [0.0, 0.0]];
         assert!(
-            Drive::plan(&s)
+            Level::plan(&s)
                 .unwrap_err()
                 .to_string()
                 .contains("too short")
@@ -774,7 +969,7 @@ mod tests {
         s = square();
         s.waypoints.pop();
         assert!(
-            Drive::plan(&s)
+            Level::plan(&s)
                 .unwrap_err()
                 .to_string()
                 .contains("must be the start")
@@ -782,7 +977,7 @@ mod tests {
         s = square();
         s.speed_mps = 0.0;
         assert!(
-            Drive::plan(&s)
+            Level::plan(&s)
                 .unwrap_err()
                 .to_string()
                 .contains("positive")

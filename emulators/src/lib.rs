@@ -19,6 +19,7 @@ pub mod gps;
 pub mod imu;
 pub mod player;
 pub mod reported;
+pub mod road;
 pub mod step;
 pub mod truth;
 pub mod turntable;

@@ -57,6 +57,7 @@ fn gpsd_reads_the_emulated_receiver_and_nav_takes_its_fixes_from_gpsd() {
         lateral_accel_mps2: 3.0,
         laps: 1,
         start_wait_s: 2.0,
+        ..Default::default()
     };
     let drive = Drive::plan(&spec).expect("the lap plans");
     let rx = ReceiverParams {

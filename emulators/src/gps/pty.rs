@@ -635,6 +635,7 @@ mod tests {
             lateral_accel_mps2: 2.0,
             laps: 1,
             start_wait_s: 1.0,
+            ..Default::default()
         };
         let run = crate::gps::GpsRun {
             writer: super::super::NmeaWriter::new(super::super::ReceiverParams::default()),

@@ -632,6 +632,7 @@ mod tests {
             lateral_accel_mps2: 2.5,
             laps: 1,
             start_wait_s: 2.0,
+            ..Default::default()
         });
         s.imu = imu;
         s

@@ -949,6 +949,7 @@ mod tests {
             lateral_accel_mps2: 2.0,
             laps: 1,
             start_wait_s: 10.0,
+            ..Default::default()
         });
         s.duration_s = 1000.0;
         let o = outage_periods(&s, 60.0, 180.0);

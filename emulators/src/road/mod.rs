@@ -1,0 +1,228 @@
+//! A land vehicle on a road as it is: climbing and descending, stopping at junctions, changing
+//! speed within acceleration, braking and jerk limits, its body pitching and rolling on its
+//! suspension and with the road's grade and bank, anywhere on the WGS-84 ellipsoid and over any
+//! distance. Exact attitude, rate, specific force, velocity and position as functions of time.
+//!
+//! The plan has three layers, each pure: the road's shape along its length ([`path`]: heading,
+//! grade and bank as functions of the distance `s`), where that shape lies on the ellipsoid
+//! ([`geo`]: latitude, longitude and height as the exact integral along `s`), and the speed
+//! along it in time ([`speed`]). The body's attitude is the road's heading, its pitch plus
+//! `pitch_per_accel` times the longitudinal acceleration (squat and dive), its bank less
+//! `roll_per_lateral_accel` times the lateral acceleration (the body leans out of a turn).
+//! Rate and specific force follow from the navigation equations with WGS-84 earth rate,
+//! transport rate and normal gravity at the current latitude and height:
+//! `w_ib^b = C_n^b (w_ie^n + w_en^n) + w_nb^b`,
+//! `f^b = C_n^b (dv^n/dt + (2 w_ie^n + w_en^n) x v^n - g^n)`.
+//!
+//! `Drive` plans a route this way when its `[drive]` table names any of the fields of a road
+//! (heights, speeds per leg, stops, limits, suspension, bank); without them the level route of
+//! [`crate::drive`] is driven as before.
+
+pub(crate) mod geo;
+pub(crate) mod path;
+mod plan;
+pub mod reference;
+pub(crate) mod speed;
+
+use crate::geodesy as earth;
+use crate::truth::{Increments, Motion, c_b_n, gauss_legendre3};
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+use std::f64::consts::PI;
+
+pub use plan::RoadNotes;
+
+/// A planned road drive.
+#[derive(Debug, Clone)]
+pub struct Road {
+    path: path::Path,
+    placed: geo::Placed,
+    phases: Vec<speed::Phase>,
+    /// Pitch per m/s^2 of longitudinal acceleration, rad.
+    pitch_per_accel: f64,
+    /// Roll per m/s^2 of lateral acceleration, rad.
+    roll_per_lateral: f64,
+    notes: RoadNotes,
+}
+
+/// Everything of the motion at one time.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RoadState {
+    /// Distance, speed, acceleration and jerk along the road.
+    pub along: speed::Along,
+    /// Heading, pitch, roll of the body, rad.
+    pub hpr: [f64; 3],
+    /// Their rates, rad/s.
+    pub hpr_rate: [f64; 3],
+    /// Velocity, ENU, m/s.
+    pub v: Vector3<f64>,
+    /// Its rate of change (components in the local level frame), m/s^2.
+    pub dv: Vector3<f64>,
+}
+
+impl Road {
+    /// Duration of the plan, s (the vehicle stands still after it).
+    pub fn duration(&self) -> f64 {
+        self.phases.last().map_or(0.0, |p| p.t0 + p.dur)
+    }
+
+    /// Length of the road, m.
+    pub fn length(&self) -> f64 {
+        self.path.length
+    }
+
+    /// What the plan had to do and assume (speeds lowered, limits not met, how close it passes
+    /// its waypoints).
+    pub fn notes(&self) -> &RoadNotes {
+        &self.notes
+    }
+
+    pub(crate) fn state(&self, t: f64) -> RoadState {
+        let a = speed::along(&self.phases, t);
+        let r = self.path.at(a.s);
+        let (v, acc, j) = (a.v, a.a, a.j);
+        let lateral = v * v * r.kappa;
+        let hpr = [
+            r.psi,
+            r.gamma + self.pitch_per_accel * acc,
+            r.bank - self.roll_per_lateral * lateral,
+        ];
+        let hpr_rate = [
+            r.kappa * v,
+            r.dgamma * v + self.pitch_per_accel * j,
+            r.dbank * v - self.roll_per_lateral * (2.0 * v * acc * r.kappa + v * v * v * r.dkappa),
+        ];
+        let (sg, cg) = r.gamma.sin_cos();
+        let (sp, cp) = r.psi.sin_cos();
+        let u = Vector3::new(cg * sp, cg * cp, sg);
+        let du = Vector3::new(
+            -sg * r.dgamma * sp + cg * cp * r.kappa,
+            -sg * r.dgamma * cp - cg * sp * r.kappa,
+            cg * r.dgamma,
+        );
+        RoadState {
+            along: a,
+            hpr,
+            hpr_rate,
+            v: u * v,
+            dv: u * acc + du * (v * v),
+        }
+    }
+
+    /// Latitude, longitude (rad) and height (m).
+    pub fn position(&self, t: f64) -> (f64, f64, f64) {
+        let s = speed::along(&self.phases, t).s;
+        let [lat, lon, h] = self.placed.llh(&self.path, s);
+        (lat, lon, h)
+    }
+
+    /// Velocity in ENU, m/s.
+    pub fn velocity(&self, t: f64) -> Vector3<f64> {
+        self.state(t).v
+    }
+
+    /// Heading, pitch and roll of the body, rad.
+    pub fn hpr(&self, t: f64) -> [f64; 3] {
+        self.state(t).hpr
+    }
+
+    /// Speed (m/s), heading (rad), acceleration along the road (m/s^2) and heading rate
+    /// (rad/s).
+    pub fn kinematics(&self, t: f64) -> (f64, f64, f64, f64) {
+        let s = self.state(t);
+        (s.along.v, s.hpr[0], s.along.a, s.hpr_rate[0])
+    }
+
+    /// The body's rotation relative to ENU (body to ENU) and its rate relative to ENU in body
+    /// axes, rad/s.
+    pub fn rotation(&self, t: f64) -> (Rotation3<f64>, Vector3<f64>) {
+        let s = self.state(t);
+        (Self::cbn(&s), Self::omega_nb(&s))
+    }
+
+    fn cbn(s: &RoadState) -> Rotation3<f64> {
+        c_b_n(s.hpr[0], s.hpr[1], s.hpr[2])
+    }
+
+    /// The body's rate relative to ENU, body axes, from the Euler angles' rates
+    /// (`C_b^n = Rz(-psi) Rx(theta) Ry(phi)`).
+    fn omega_nb(s: &RoadState) -> Vector3<f64> {
+        let [_, th, ph] = s.hpr;
+        let [dpsi, dth, dph] = s.hpr_rate;
+        let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), th);
+        let ry = Rotation3::from_axis_angle(&Vector3::y_axis(), ph);
+        ry.inverse() * (rx.inverse() * Vector3::new(0.0, 0.0, -dpsi) + Vector3::new(dth, 0.0, 0.0))
+            + Vector3::new(0.0, dph, 0.0)
+    }
+
+    fn rate_force(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let s = self.state(t);
+        let (lat, h) = self.placed.lat_h(&self.path, s.along.s);
+        let (sl, cl) = lat.sin_cos();
+        let (rm, rn) = earth::radii(lat);
+        let wie = Vector3::from(earth::earth_rate_enu_sc(sl, cl));
+        let lon_rate = s.v.x / ((rn + h) * cl);
+        let wen = Vector3::new(-s.v.y / (rm + h), lon_rate * cl, lon_rate * sl);
+        let cnb = Self::cbn(&s).inverse();
+        let omega = cnb * (wie + wen) + Self::omega_nb(&s);
+        let g = Vector3::new(0.0, 0.0, -earth::gravity_sc(sl, cl, h));
+        let force = cnb * (s.dv + (2.0 * wie + wen).cross(&s.v) - g);
+        (omega, force)
+    }
+}
+
+impl Motion for Road {
+    fn omega_ib_b(&self, t: f64) -> Vector3<f64> {
+        self.rate_force(t).0
+    }
+
+    fn f_b(&self, t: f64) -> Vector3<f64> {
+        self.rate_force(t).1
+    }
+
+    fn rate_and_force(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        self.rate_force(t)
+    }
+
+    fn increments(&self, t0: f64, t1: f64) -> Increments {
+        // smooth within a phase of the speed profile: 3 nodes are exact to rounding on a sample
+        // interval; a phase's start (a step in jerk, so in the pitch rate) splits the interval
+        let f = |t| self.rate_force(t);
+        let i = self.phases.partition_point(|p| p.t0 <= t0);
+        let end = self.duration();
+        let corner = match self.phases.get(i) {
+            Some(p) => Some(p.t0),
+            None => (t0 < end).then_some(end),
+        };
+        match corner.filter(|&c| c < t1) {
+            Some(c) => {
+                let (a, b) = (gauss_legendre3(t0, c, f), gauss_legendre3(c, t1, f));
+                Increments {
+                    dtheta: a.dtheta + b.dtheta,
+                    dv: a.dv + b.dv,
+                }
+            }
+            None => gauss_legendre3(t0, t1, f),
+        }
+    }
+
+    fn attitude(&self, t: f64) -> UnitQuaternion<f64> {
+        UnitQuaternion::from_rotation_matrix(&Self::cbn(&self.state(t)))
+    }
+
+    fn inertial_attitude(&self, t: f64) -> UnitQuaternion<f64> {
+        // inertial <- earth (earth rotation) <- ENU at (lat, lon) <- body
+        let (lat, lon, _) = self.position(t);
+        let q_ie = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), earth::OMEGA * t);
+        let q_en = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), lon + PI / 2.0)
+            * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI / 2.0 - lat);
+        q_ie * q_en * self.attitude(t)
+    }
+
+    fn latitude(&self, t: f64) -> f64 {
+        let s = speed::along(&self.phases, t).s;
+        self.placed.lat_h(&self.path, s).0
+    }
+}
+
+#[cfg(test)]
+mod tests;

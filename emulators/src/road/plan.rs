@@ -1,0 +1,432 @@
+//! From a `[drive]` table with a road's fields to the planned [`Road`]: the legs between the
+//! waypoints at their heights, a turn at each inner waypoint sized for the faster of its two
+//! legs within the lateral-acceleration and turn-rate limits, a vertical curve where the grade
+//! changes sized within the vertical-acceleration limit, and the speed profile from stop to stop.
+
+use super::Road;
+use super::geo::Placed;
+use super::path::{Crest, Path, Turn, tangent_length};
+use super::speed::{Limits, Profile, Stretch};
+use crate::ParamError;
+use crate::drive::DriveSpec;
+use serde::Serialize;
+use std::f64::consts::PI;
+
+/// What the plan had to do and assume, for people: said by `hil` when it shows a route.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct RoadNotes {
+    /// Length of the road, m.
+    pub length_m: f64,
+    /// Duration of the drive, s.
+    pub duration_s: f64,
+    /// Height climbed and descended, m.
+    pub climb_m: f64,
+    /// See [`RoadNotes::climb_m`].
+    pub descent_m: f64,
+    /// Steepest grade, % (signed: negative downhill).
+    pub steepest_grade_pct: f64,
+    /// Legs driven slower than asked, because they are too short to reach their speed and
+    /// change to the next's: (leg number, 1 = to the first waypoint; asked and driven, m/s).
+    pub slowed: Vec<(usize, f64, f64)>,
+    /// The largest difference between a waypoint's height and the road's where it passes it
+    /// (the middle of its turn), m. A waypoint's height is where the grade lines of its two legs
+    /// meet, as a road designer's point of vertical intersection: the vertical curve between
+    /// them passes above it over a dip and below it over a crest by its middle ordinate (about
+    /// 0.09 of the change of grade times the curve's length); outside the curves the road is on
+    /// the grade lines.
+    pub height_miss_m: f64,
+    /// Vertical curves kept shorter than the vertical-acceleration limit asks, because the legs
+    /// beside them are short: (waypoint number, vertical acceleration at the leg's speed, m/s^2).
+    pub sharp_crests: Vec<(usize, f64)>,
+}
+
+/// The route's points: the start, then each lap's waypoints, in metres east and north of the
+/// start and height.
+fn points(spec: &DriveSpec) -> Result<Vec<[f64; 3]>, ParamError> {
+    let n = spec.waypoints.len();
+    if !spec.heights_m.is_empty() && spec.heights_m.len() != n {
+        return Err(ParamError::new(
+            "drive",
+            format!(
+                "heights_m has {} heights for {n} waypoints: give one per waypoint",
+                spec.heights_m.len()
+            ),
+        ));
+    }
+    if !spec.leg_speeds_mps.is_empty() && spec.leg_speeds_mps.len() != n {
+        return Err(ParamError::new(
+            "drive",
+            format!(
+                "leg_speeds_mps has {} speeds for {n} waypoints: give one per leg (the leg to each waypoint)",
+                spec.leg_speeds_mps.len()
+            ),
+        ));
+    }
+    let height = |i: usize| spec.heights_m.get(i).copied().unwrap_or(spec.height_m);
+    if spec.laps > 1 {
+        let last = spec.waypoints[n - 1];
+        if last[0].hypot(last[1]) > 1.0 || (height(n - 1) - spec.height_m).abs() > 0.01 {
+            return Err(ParamError::new(
+                "drive",
+                "with laps > 1 the last waypoint must be the start [0, 0], at the start's height",
+            ));
+        }
+    }
+    let mut pts = vec![[0.0, 0.0, spec.height_m]];
+    for _ in 0..spec.laps {
+        pts.extend((0..n).map(|i| [spec.waypoints[i][0], spec.waypoints[i][1], height(i)]));
+    }
+    Ok(pts)
+}
+
+/// A leg between two points: horizontal length (m), heading and pitch (rad), speed (m/s).
+#[derive(Debug, Clone, Copy)]
+struct Leg {
+    len_h: f64,
+    dh: f64,
+    psi: f64,
+    gamma: f64,
+    speed: f64,
+}
+
+fn legs(spec: &DriveSpec, pts: &[[f64; 3]]) -> Result<Vec<Leg>, ParamError> {
+    let n = spec.waypoints.len();
+    let mut out = Vec::with_capacity(pts.len() - 1);
+    for (i, w) in pts.windows(2).enumerate() {
+        let (de, dn, dh) = (w[1][0] - w[0][0], w[1][1] - w[0][1], w[1][2] - w[0][2]);
+        let len_h = de.hypot(dn);
+        if len_h < 1.0 {
+            return Err(ParamError::new(
+                "drive",
+                format!(
+                    "waypoint {} is {len_h:.2} m from the point before it: a leg needs at least 1 m",
+                    i % n + 1
+                ),
+            ));
+        }
+        let grade = dh / len_h;
+        if grade.abs() > 0.35 {
+            return Err(ParamError::new(
+                "drive",
+                format!(
+                    "the leg to waypoint {} climbs {:.0} % ({dh:.1} m in {len_h:.1} m): no road is steeper than 35 %",
+                    i % n + 1,
+                    grade * 100.0
+                ),
+            ));
+        }
+        let speed = spec
+            .leg_speeds_mps
+            .get(i % n)
+            .copied()
+            .unwrap_or(spec.speed_mps);
+        if !(speed.is_finite() && speed > 0.0) {
+            return Err(ParamError::new(
+                "drive",
+                format!(
+                    "the speed of the leg to waypoint {} must be positive",
+                    i % n + 1
+                ),
+            ));
+        }
+        out.push(Leg {
+            len_h,
+            dh,
+            psi: de.atan2(dn),
+            gamma: grade.atan(),
+            speed,
+        });
+    }
+    Ok(out)
+}
+
+fn wrap(a: f64) -> f64 {
+    (a + PI).rem_euclid(2.0 * PI) - PI
+}
+
+/// The turn at each inner point: (heading change, length, tangent length), sized for the faster
+/// of the two legs.
+fn turns(spec: &DriveSpec, legs: &[Leg]) -> Result<Vec<(f64, f64, f64)>, ParamError> {
+    let n = spec.waypoints.len();
+    let rate = spec.turn_rate_dps.to_radians();
+    legs.windows(2)
+        .enumerate()
+        .map(|(i, w)| {
+            let change = wrap(w[1].psi - w[0].psi);
+            if change.abs() > 170f64.to_radians() {
+                return Err(ParamError::new(
+                    "drive",
+                    format!(
+                        "the route turns back on itself by {:.0} deg at waypoint {}: U-turns are not driven; add a waypoint to turn around",
+                        change.abs().to_degrees(),
+                        i % n + 1
+                    ),
+                ));
+            }
+            if change.abs() < 1e-9 {
+                return Ok((0.0, 0.0, 0.0));
+            }
+            let v = w[0].speed.max(w[1].speed);
+            let kappa = (spec.lateral_accel_mps2 / (v * v)).min(rate / v);
+            let len = 2.0 * change.abs() / kappa;
+            Ok((change, len, tangent_length(change, len)))
+        })
+        .collect()
+}
+
+/// The road's shape: straight legs and turns laid along `s`, and where each point is on it.
+struct Laid {
+    path: Path,
+    /// Each point's place along the road (the middle of its turn), m.
+    at: Vec<f64>,
+    /// Each inner point's turn: where it starts and ends, m.
+    turn_span: Vec<(f64, f64)>,
+}
+
+fn lay(spec: &DriveSpec, legs: &[Leg], tn: &[(f64, f64, f64)]) -> Result<Laid, ParamError> {
+    let n = spec.waypoints.len();
+    let bank = spec.bank_deg.unwrap_or(0.0).to_radians();
+    let mut turns_out = Vec::new();
+    let mut at = vec![0.0];
+    let mut turn_span = Vec::new();
+    let mut s = 0.0;
+    for (i, leg) in legs.iter().enumerate() {
+        let before = if i > 0 { tn[i - 1].2 } else { 0.0 };
+        let after = tn.get(i).map_or(0.0, |t| t.2);
+        let straight = leg.len_h / leg.gamma.cos() - before - after;
+        if straight < -1e-9 {
+            return Err(ParamError::new(
+                "drive",
+                format!(
+                    "the turns at the ends of the leg to waypoint {} need {:.1} m of it, which has {:.1} m: lower its speed or the next's, or move the waypoints apart",
+                    i % n + 1,
+                    before + after,
+                    leg.len_h
+                ),
+            ));
+        }
+        s += straight.max(0.0);
+        if let Some(&(change, len, _)) = tn.get(i) {
+            if len > 0.0 {
+                turns_out.push(Turn {
+                    s0: s,
+                    len,
+                    psi0: leg.psi,
+                    kappa_max: 2.0 * change / len,
+                    bank_max: bank * change.signum(),
+                });
+            }
+            turn_span.push((s, s + len));
+            at.push(s + 0.5 * len);
+            s += len;
+        } else {
+            at.push(s);
+        }
+    }
+    Ok(Laid {
+        path: Path {
+            psi_start: legs[0].psi,
+            gamma_start: legs[0].gamma,
+            turns: turns_out,
+            crests: Vec::new(),
+            length: s,
+        },
+        at,
+        turn_span,
+    })
+}
+
+/// Vertical curves where the grade changes, centred on the points; kept within their
+/// neighbours (and said where that makes them sharper than the limit).
+fn crests(spec: &DriveSpec, legs: &[Leg], laid: &mut Laid, notes: &mut RoadNotes) {
+    let n = spec.waypoints.len();
+    let a_v = spec.vertical_accel_mps2.unwrap_or(0.5);
+    let mut last_end = 0.0;
+    for i in 0..legs.len().saturating_sub(1) {
+        let dg = legs[i + 1].gamma - legs[i].gamma;
+        if dg.abs() < 1e-12 {
+            continue;
+        }
+        let v = legs[i].speed.max(legs[i + 1].speed);
+        let mid = laid.at[i + 1];
+        let next_mid = laid.at.get(i + 2).copied().unwrap_or(laid.path.length);
+        let want = PI * dg.abs() * v * v / (2.0 * a_v);
+        // room: up to the last curve's end before, half-way to the next point after
+        let room = 2.0 * (mid - last_end).min(0.5 * (next_mid - mid));
+        let len = want.min(room).max(1e-3);
+        if len < want * (1.0 - 1e-9) {
+            notes
+                .sharp_crests
+                .push((i % n + 1, PI * dg.abs() * v * v / (2.0 * len)));
+        }
+        laid.path.crests.push(Crest {
+            s0: mid - 0.5 * len,
+            len,
+            gamma0: legs[i].gamma,
+            dgamma: dg,
+        });
+        last_end = mid + 0.5 * len;
+    }
+}
+
+/// The speed profile: standing at the start, then stop to stop.
+fn profile(
+    spec: &DriveSpec,
+    legs: &[Leg],
+    laid: &Laid,
+    notes: &mut RoadNotes,
+) -> Result<Vec<super::speed::Phase>, ParamError> {
+    let n = spec.waypoints.len();
+    let lim = Limits {
+        accel: spec.accel_mps2,
+        brake: spec.brake_mps2.unwrap_or(spec.accel_mps2),
+        jerk: spec.jerk_mps3.unwrap_or(1.0),
+    };
+    if !(lim.brake.is_finite() && lim.brake > 0.0 && lim.jerk.is_finite() && lim.jerk > 0.0) {
+        return Err(ParamError::new(
+            "drive",
+            "brake_mps2 and jerk_mps3 must be positive",
+        ));
+    }
+    let mut wait: Vec<Option<f64>> = vec![None; legs.len() + 1];
+    for &[k, secs] in &spec.stops {
+        if k.fract() != 0.0 || k < 1.0 || k as usize > n || secs.is_nan() || secs < 0.0 {
+            return Err(ParamError::new(
+                "drive",
+                format!(
+                    "stop [{k}, {secs}]: a stop is [waypoint number 1..{n}, seconds standing >= 0]"
+                ),
+            ));
+        }
+        for lap in 0..spec.laps as usize {
+            wait[lap * n + k as usize] = Some(secs);
+        }
+    }
+    let mut p = Profile::default();
+    p.stand(spec.start_wait_s);
+    let mut st = Stretch {
+        s0: 0.0,
+        pieces: Vec::new(),
+        wait_s: 0.0,
+    };
+    let mut first_leg = 0;
+    for (i, leg) in legs.iter().enumerate() {
+        let point = i + 1;
+        let last = point == legs.len();
+        let stop = last || wait[point].is_some();
+        // where this leg's piece ends: stopping, at its turn's start; else at the start of
+        // the turn when the next leg is slower, at its end when faster
+        let span = laid.turn_span.get(i).copied();
+        let end = match (stop, span) {
+            (_, None) => laid.path.length,
+            (true, Some((a, _))) => a,
+            (false, Some((a, b))) => {
+                if legs[i + 1].speed < leg.speed {
+                    a
+                } else {
+                    b
+                }
+            }
+        };
+        st.pieces.push((end, leg.speed));
+        if stop {
+            st.wait_s = wait[point].unwrap_or(0.0);
+            let driven = p.drive(&st, &lim);
+            notes.slowed.extend(
+                driven
+                    .into_iter()
+                    .map(|(k, v)| ((first_leg + k) % n + 1, legs[first_leg + k].speed, v)),
+            );
+            st = Stretch {
+                s0: end,
+                pieces: Vec::new(),
+                wait_s: 0.0,
+            };
+            first_leg = i + 1;
+        }
+    }
+    Ok(p.phases)
+}
+
+impl Road {
+    /// Plan the road of `spec`; errors name the field, the waypoint or the leg that is wrong.
+    pub fn plan(spec: &DriveSpec) -> Result<Self, ParamError> {
+        let pos = |x: f64| x.is_finite() && x > 0.0;
+        if !(pos(spec.speed_mps)
+            && pos(spec.accel_mps2)
+            && pos(spec.turn_rate_dps)
+            && pos(spec.lateral_accel_mps2))
+        {
+            return Err(ParamError::new(
+                "drive",
+                "speed_mps, accel_mps2, turn_rate_dps and lateral_accel_mps2 must be positive",
+            ));
+        }
+        if spec.waypoints.is_empty() || spec.laps == 0 {
+            return Err(ParamError::new(
+                "drive",
+                "needs at least one waypoint and one lap",
+            ));
+        }
+        if spec.lat_deg.is_nan() || spec.lat_deg.abs() > 89.0 {
+            return Err(ParamError::new(
+                "drive",
+                format!(
+                    "lat_deg {}: a road is driven within 89 deg of the equator",
+                    spec.lat_deg
+                ),
+            ));
+        }
+        let pts = points(spec)?;
+        let legs = legs(spec, &pts)?;
+        let tn = turns(spec, &legs)?;
+        let mut legs = legs;
+        let mut laid = lay(spec, &legs, &tn)?;
+        // each leg's pitch climbs its height over the road between its waypoints (the middles
+        // of their turns), which the pitch itself lengthens: a few rounds settle it to rounding
+        for _ in 0..8 {
+            for (i, leg) in legs.iter_mut().enumerate() {
+                leg.gamma = (leg.dh / (laid.at[i + 1] - laid.at[i]))
+                    .clamp(-1.0, 1.0)
+                    .asin();
+            }
+            laid = lay(spec, &legs, &tn)?;
+        }
+        let mut notes = RoadNotes::default();
+        crests(spec, &legs, &mut laid, &mut notes);
+        let phases = profile(spec, &legs, &laid, &mut notes)?;
+        let start = [
+            spec.lat_deg.to_radians(),
+            spec.lon_deg.to_radians(),
+            spec.height_m,
+        ];
+        let placed = Placed::new(&laid.path, start);
+        notes.height_miss_m = laid
+            .at
+            .iter()
+            .zip(&pts)
+            .map(|(&s, p)| (placed.llh(&laid.path, s)[2] - p[2]).abs())
+            .fold(0.0, f64::max);
+        for leg in &legs {
+            if leg.dh > 0.0 {
+                notes.climb_m += leg.dh;
+            } else {
+                notes.descent_m -= leg.dh;
+            }
+            if leg.gamma.tan().abs() > notes.steepest_grade_pct.abs() / 100.0 {
+                notes.steepest_grade_pct = leg.gamma.tan() * 100.0;
+            }
+        }
+        let road = Road {
+            placed,
+            phases,
+            pitch_per_accel: spec.pitch_per_accel_deg.unwrap_or(0.3).to_radians(),
+            roll_per_lateral: spec.roll_per_lateral_accel_deg.unwrap_or(0.5).to_radians(),
+            notes: RoadNotes::default(),
+            path: laid.path,
+        };
+        notes.length_m = road.path.length;
+        notes.duration_s = road.duration();
+        Ok(Road { notes, ..road })
+    }
+}

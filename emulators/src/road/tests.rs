@@ -1,0 +1,295 @@
+use super::*;
+use crate::drive::{Drive, DriveSpec};
+use crate::truth::Motion;
+
+/// A hilly route with switchbacks, stops and speeds per leg (about 5 km, 10 minutes).
+pub(crate) fn hilly() -> DriveSpec {
+    DriveSpec {
+        lat_deg: 46.5,
+        lon_deg: 7.9,
+        height_m: 600.0,
+        waypoints: vec![
+            [0.0, 800.0],
+            [400.0, 1500.0],
+            [-300.0, 2000.0],
+            [300.0, 2600.0],
+            [300.0, 3600.0],
+            [-500.0, 4200.0],
+        ],
+        heights_m: vec![640.0, 700.0, 760.0, 815.0, 760.0, 700.0],
+        leg_speeds_mps: vec![14.0, 10.0, 7.0, 9.0, 16.0, 12.0],
+        stops: vec![[2.0, 20.0], [4.0, 5.0]],
+        speed_mps: 12.0,
+        brake_mps2: Some(2.5),
+        jerk_mps3: Some(1.0),
+        bank_deg: Some(3.0),
+        start_wait_s: 10.0,
+        ..Default::default()
+    }
+}
+
+fn road(spec: &DriveSpec) -> Road {
+    Road::plan(spec).unwrap_or_else(|e| panic!("{}", e.problem))
+}
+
+/// The hilly route plans as asked: every leg at its speed, standing at its stops for as long
+/// as asked, within its acceleration, braking and jerk limits and its lateral-acceleration
+/// limit, climbing and descending through its waypoints' heights.
+#[test]
+fn a_hilly_route_stops_climbs_and_keeps_its_limits() {
+    let spec = hilly();
+    let r = road(&spec);
+    let n = r.notes();
+    assert!(n.slowed.is_empty(), "{n:?}");
+    assert!(n.sharp_crests.is_empty(), "{n:?}");
+    assert!(
+        (n.climb_m - 215.0).abs() < 1e-6 && (n.descent_m - 115.0).abs() < 1e-6,
+        "{n:?}"
+    );
+    let (mut t, dt) = (0.0, 0.01);
+    let mut standing = Vec::new();
+    let mut since: Option<f64> = None;
+    while t < r.duration() + 1.0 {
+        let s = r.state(t);
+        let (v, a, j) = (s.along.v, s.along.a, s.along.j);
+        assert!(
+            (-2.5 - 1e-9..=1.5 + 1e-9).contains(&a) && j.abs() <= 1.0 + 1e-9,
+            "{t}"
+        );
+        let lateral = v * s.hpr_rate[0];
+        assert!(lateral.abs() <= 2.5 + 1e-9, "{t}: lateral {lateral}");
+        assert!(s.hpr_rate[0].abs() <= 15f64.to_radians() + 1e-9, "{t}");
+        match (v < 1e-9, since) {
+            (true, None) => since = Some(t),
+            (false, Some(t0)) => {
+                standing.push(t - t0);
+                since = None;
+            }
+            _ => {}
+        }
+        t += dt;
+    }
+    // the start's wait, the two stops, and standing at the end
+    assert_eq!(standing.len(), 3, "{standing:?}");
+    for (got, want) in standing.iter().zip([10.0, 20.0, 5.0]) {
+        assert!((got - want).abs() < 0.02, "{standing:?}");
+    }
+    // the height at each waypoint (the middle of its turn), within the vertical curves'
+    // rounding
+    // a waypoint's height is on the grade lines: the road passes it by the middle ordinate of
+    // its vertical curve, and is on the grade lines beyond the curves (the end)
+    let ordinate = r
+        .path
+        .crests
+        .iter()
+        .map(|c| c.dgamma.abs() * c.len * (0.25 - 0.5 / std::f64::consts::PI))
+        .fold(0.0, f64::max);
+    assert!(
+        ordinate > 0.3 && (n.height_miss_m - ordinate).abs() < 0.05,
+        "{ordinate} {n:?}"
+    );
+    let end = r.position(r.duration() + 10.0);
+    assert!((end.2 - 700.0).abs() < 0.02, "{end:?}");
+}
+
+/// Velocity is the derivative of the position on the ellipsoid, the velocity's stated rate its
+/// derivative, and the body's stated rate the derivative of its attitude (central
+/// differences, all along the route).
+#[test]
+fn velocity_and_rates_are_the_derivatives_of_position_and_attitude() {
+    let r = road(&hilly());
+    let h = 1e-3;
+    let mut t = 0.5;
+    let mut worst = [0.0f64; 3];
+    while t < r.duration() {
+        let (p0, p1) = (r.position(t - h), r.position(t + h));
+        let (rm, rn) = crate::geodesy::radii(p0.0);
+        let s = r.state(t);
+        let fd = Vector3::new(
+            (p1.1 - p0.1) / (2.0 * h) * (rn + p0.2) * p0.0.cos(),
+            (p1.0 - p0.0) / (2.0 * h) * (rm + p0.2),
+            (p1.2 - p0.2) / (2.0 * h),
+        );
+        worst[0] = worst[0].max((fd - s.v).norm());
+        let dv = (r.velocity(t + h) - r.velocity(t - h)) / (2.0 * h);
+        worst[1] = worst[1].max((dv - s.dv).norm());
+        // a shorter step for the attitude: its third derivative is larger
+        let hr = 2e-4;
+        let (c0, _) = r.rotation(t - hr);
+        let (c1, _) = r.rotation(t + hr);
+        let (c, w) = r.rotation(t);
+        let d = c.matrix().transpose() * (c1.matrix() - c0.matrix()) / (2.0 * hr);
+        let w_fd = Vector3::new(d[(2, 1)], d[(0, 2)], d[(1, 0)]);
+        worst[2] = worst[2].max((w_fd - w).norm());
+        t += 0.731;
+    }
+    assert!(
+        worst[0] < 2e-5 && worst[1] < 2e-5 && worst[2] < 2e-6,
+        "{worst:?}"
+    );
+}
+
+/// The reference strapdown integration of the truth's own increments at 2 kHz follows the
+/// truth over the whole hilly route: the increments the IMU is given, and the position and
+/// attitude the receiver and the scoring are given, are one motion.
+#[test]
+fn a_reference_integration_of_the_increments_follows_the_truth() {
+    let r = road(&hilly());
+    // ten minutes: the free vertical channel has not yet grown (its time constant is 10 min)
+    let e = reference::integrate(&r, &r, 2000.0, r.duration() + 5.0, 60.0, false);
+    let last = e.last().unwrap();
+    let worst_h = e.iter().map(|x| x.horizontal_m).fold(0.0, f64::max);
+    let worst_a = e.iter().map(|x| x.attitude_rad).fold(0.0, f64::max);
+    let worst_v = e.iter().map(|x| x.velocity_mps).fold(0.0, f64::max);
+    let worst_u = e.iter().map(|x| x.vertical_m.abs()).fold(0.0, f64::max);
+    eprintln!(
+        "reference over {:.0} s: horizontal {worst_h:.2e} m, vertical {worst_u:.2e} m, velocity {worst_v:.2e} m/s, attitude {worst_a:.2e} rad",
+        last.t
+    );
+    // measured: 7.7e-4 m, 4.2e-6 m/s, 1.3e-9 rad; the transport rate left out of the truth's
+    // gyro rates gives 347 m, 1.7 m/s, 6e-4 rad
+    assert!(
+        worst_h < 0.01 && worst_v < 1e-4 && worst_a < 2e-8 && worst_u < 0.01,
+        "{e:?}"
+    );
+}
+
+/// Along a meridian the distance driven is the meridian arc (Gauss-Legendre over the meridian
+/// radius, apart from the road's own integral), across the equator; along a parallel at 80 N
+/// the longitude is the distance over the parallel's radius; a climb of 2,000 m ends 2,000 m
+/// up.
+#[test]
+fn long_roads_are_exact_on_the_ellipsoid() {
+    // 300 km due north from 1.3 S at 50 m
+    let north = DriveSpec {
+        lat_deg: -1.3,
+        lon_deg: 30.0,
+        height_m: 50.0,
+        waypoints: vec![[0.0, 300_000.0]],
+        heights_m: vec![50.0],
+        speed_mps: 30.0,
+        ..Default::default()
+    };
+    let r = road(&north);
+    let (lat, lon, _) = r.position(r.duration() + 1.0);
+    let lat0 = (-1.3f64).to_radians();
+    let n = 2000;
+    let mut arc = 0.0;
+    for k in 0..n {
+        let (a, b) = (
+            lat0 + (lat - lat0) * k as f64 / n as f64,
+            lat0 + (lat - lat0) * (k + 1) as f64 / n as f64,
+        );
+        let i = crate::truth::gauss_legendre(a, b, |x| {
+            (
+                Vector3::new(crate::geodesy::radii(x).0 + 50.0, 0.0, 0.0),
+                Vector3::zeros(),
+            )
+        });
+        arc += i.dtheta.x;
+    }
+    assert!((arc - 300_000.0).abs() < 1e-3, "arc {arc}");
+    assert!((lon - 30f64.to_radians()).abs() < 1e-15);
+    assert!(lat.to_degrees() > 1.4);
+    // 100 km due east at 80 N
+    let east = DriveSpec {
+        lat_deg: 80.0,
+        lon_deg: 0.0,
+        height_m: 0.0,
+        waypoints: vec![[100_000.0, 0.0]],
+        heights_m: vec![0.0],
+        speed_mps: 25.0,
+        ..Default::default()
+    };
+    let r = road(&east);
+    let (lat, lon, _) = r.position(r.duration() + 1.0);
+    let l80 = 80f64.to_radians();
+    let want = 100_000.0 / (crate::geodesy::radii(l80).1 * l80.cos());
+    assert!((lat - l80).abs() < 1e-15, "{lat}");
+    assert!(((lon - want) * crate::geodesy::radii(l80).1 * l80.cos()).abs() < 1e-3);
+    // a 2,000 m climb over 25 km
+    let climb = DriveSpec {
+        lat_deg: 30.0,
+        lon_deg: 90.0,
+        height_m: 1000.0,
+        waypoints: vec![[0.0, 25_000.0]],
+        heights_m: vec![3000.0],
+        ..Default::default()
+    };
+    let r = road(&climb);
+    let (_, _, h) = r.position(r.duration() + 1.0);
+    assert!((h - 3000.0).abs() < 1e-6, "{h}");
+}
+
+/// Every bad road is refused with what is wrong and where.
+#[test]
+fn bad_roads_say_what_is_wrong() {
+    type Change = Box<dyn Fn(&mut DriveSpec)>;
+    let cases: Vec<(Change, &str)> = vec![
+        (
+            Box::new(|s| s.heights_m.pop().map(|_| ()).unwrap_or(())),
+            "heights_m has 5 heights for 6 waypoints",
+        ),
+        (
+            Box::new(|s| s.leg_speeds_mps.push(3.0)),
+            "leg_speeds_mps has 7 speeds",
+        ),
+        (
+            Box::new(|s| s.heights_m[1] = 1000.0),
+            "the leg to waypoint 2 climbs",
+        ),
+        (Box::new(|s| s.stops.push([9.0, 1.0])), "stop [9, 1]"),
+        (Box::new(|s| s.stops.push([1.5, 1.0])), "stop [1.5, 1]"),
+        (
+            Box::new(|s| s.leg_speeds_mps[1] = 0.0),
+            "the speed of the leg to waypoint 2",
+        ),
+        (
+            Box::new(|s| s.waypoints[1] = [0.0, 800.5]),
+            "waypoint 2 is 0.50 m",
+        ),
+        (
+            Box::new(|s| s.waypoints[2] = [0.0, 0.0]),
+            "turns back on itself",
+        ),
+        (
+            Box::new(|s| {
+                s.leg_speeds_mps = vec![30.0; 6];
+                s.lateral_accel_mps2 = 0.5;
+            }),
+            "need",
+        ),
+        (
+            Box::new(|s| s.jerk_mps3 = Some(0.0)),
+            "jerk_mps3 must be positive",
+        ),
+        (Box::new(|s| s.lat_deg = 89.5), "within 89 deg"),
+    ];
+    for (change, want) in cases {
+        let mut s = hilly();
+        change(&mut s);
+        match Road::plan(&s) {
+            Ok(_) => panic!("planned, expected: {want}"),
+            Err(e) => assert!(e.problem.contains(want), "{} (expected: {want})", e.problem),
+        }
+    }
+}
+
+/// A route without a road's fields is the level route of old; with any of them, a road.
+#[test]
+fn a_road_is_planned_only_where_the_spec_names_one() {
+    let mut level = hilly();
+    level.heights_m.clear();
+    level.leg_speeds_mps.clear();
+    level.stops.clear();
+    level.brake_mps2 = None;
+    level.jerk_mps3 = None;
+    level.bank_deg = None;
+    assert!(!level.is_road() && Drive::plan(&level).unwrap().road().is_none());
+    let d = Drive::plan(&hilly()).unwrap();
+    assert!(d.road().is_some());
+    // the drive's truth is the road's
+    let t = 200.0;
+    assert_eq!(d.position(t), road(&hilly()).position(t));
+    assert_eq!(d.rate_and_force(t), road(&hilly()).rate_and_force(t));
+}
