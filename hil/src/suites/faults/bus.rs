@@ -2,6 +2,13 @@
 
 use super::*;
 
+/// The stop of nav in `bus-overload`: it makes the overload certain on any host (a fast one
+/// keeps nav up with x40: a CI host's nav received all 24,060 frames).
+const OVERLOAD_STALL: crate::run::NavStall = crate::run::NavStall {
+    at_s: 1.0,
+    wall_s: 0.1,
+};
+
 /// The CAN interface: the link down and up.
 pub(super) fn interface() -> Vec<FaultCase> {
     vec![FaultCase {
@@ -95,12 +102,7 @@ pub(super) fn traffic() -> Vec<FaultCase> {
                 s.speed = 40.0;
                 s.bus.lockstep = false;
                 s.bus.nav_rcvbuf_bytes = 65536;
-                // the stop makes the overload certain on any host: a fast one keeps nav up
-                // with x40 (a CI host's nav received all 24,060 frames)
-                o.stall_nav = Some(crate::run::NavStall {
-                    at_s: 1.0,
-                    wall_s: 0.1,
-                });
+                o.stall_nav = Some(OVERLOAD_STALL);
             },
             judge: |r, _| {
                 let dropped = r.nav.kernel_dropped_frames;
