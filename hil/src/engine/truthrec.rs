@@ -72,13 +72,19 @@ pub(crate) fn state(
         Some(d) => {
             let (lat, lon, h) = d.position(t);
             let v = d.velocity(t);
+            // a level route's pitch and roll are zero; a road's its grade, bank and the body's
+            // motion on its suspension
+            let [hd, p, r] = d.hpr(t);
             (
                 lat.to_degrees(),
                 lon.to_degrees(),
                 h,
                 [v.x, v.y, v.z],
-                // the drive is planar: level, heading along the path
-                [d.heading(t).to_degrees().rem_euclid(360.0), 0.0, 0.0],
+                [
+                    hd.to_degrees().rem_euclid(360.0),
+                    p.to_degrees(),
+                    r.to_degrees(),
+                ],
             )
         }
         None => (
