@@ -80,6 +80,11 @@ pub struct DriveSpec {
     /// The body's roll out of a turn per m/s^2 of lateral acceleration, deg (default 0.5).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub roll_per_lateral_accel_deg: Option<f64>,
+    /// The radius of every turn at its sharpest, m, driven at the speed it allows within the
+    /// lateral-acceleration and turn-rate limits (default: each turn as wide as the faster of
+    /// its legs needs at its speed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corner_radius_m: Option<f64>,
     /// The road's bank into a turn at its sharpest, deg (default 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bank_deg: Option<f64>,
@@ -107,6 +112,7 @@ impl Default for DriveSpec {
             vertical_accel_mps2: None,
             pitch_per_accel_deg: None,
             roll_per_lateral_accel_deg: None,
+            corner_radius_m: None,
             bank_deg: None,
         }
     }
@@ -122,6 +128,7 @@ impl DriveSpec {
             || self.vertical_accel_mps2.is_some()
             || self.pitch_per_accel_deg.is_some()
             || self.roll_per_lateral_accel_deg.is_some()
+            || self.corner_radius_m.is_some()
             || self.bank_deg.is_some()
     }
 }

@@ -764,6 +764,34 @@ fn campus_loop_shortened_finds_north_then_navigates() {
     eprintln!("navigation against truth: {}", r["navigation"]);
 }
 
+/// A hilly city road through vcan and the pty (`scenarios/route-lisbon-hills.toml`: grades to
+/// 12 %, three stops, corners of 15 m taken slowly, the body pitching and rolling, a 10 Hz
+/// receiver): every check passes, among them nav's frames at the in-process twin's samples and
+/// its output replayed bit for bit from its recording; the truth it was scored on climbs, stops
+/// and pitches as the road does.
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn a_hilly_stop_and_go_road_navigates_through_vcan() {
+    let (r, dir) = run_variant("route-lisbon-hills.toml", &[], "vcan-e2e17");
+    keep_report(&dir.path().join("run"), "lisbon-hills");
+    let names: Vec<String> = checks(&r).into_iter().map(|c| c.0).collect();
+    for n in [
+        "nav sent the in-process run's frames at the same samples",
+        "navigation error within tolerance",
+        "nav's output replays bit for bit from its recording",
+        "nav's time tags never go back",
+        "GPS fixes received and used",
+    ] {
+        assert!(names.iter().any(|x| x == n), "missing check {n}: {names:?}");
+    }
+    // 10 Hz fixes over the drive
+    assert!(r["gps"]["fixes"].as_u64().unwrap() > 2000, "{}", r["gps"]);
+    let series = &r["navigation_series"];
+    eprintln!("over the run: {series}; against truth: {}", r["navigation"]);
+    assert!(series["samples"].as_u64().unwrap() > 200, "{series}");
+    assert_eq!(series["bad_records"], 0);
+}
+
 /// The turntable validation suite passes on the healthy emulator and, with each injected fault,
 /// fails the check that names that fault, with a reason. In lockstep with the emulator, the
 /// healthy run's result is the same to the byte at two paces (x5 and x100): no figure comes

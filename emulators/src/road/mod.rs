@@ -108,6 +108,11 @@ impl Road {
         }
     }
 
+    /// Distance driven along the road, m.
+    pub fn distance(&self, t: f64) -> f64 {
+        speed::along(&self.phases, t).s
+    }
+
     /// Latitude, longitude (rad) and height (m).
     pub fn position(&self, t: f64) -> (f64, f64, f64) {
         let s = speed::along(&self.phases, t).s;

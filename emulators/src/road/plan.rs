@@ -26,8 +26,8 @@ pub struct RoadNotes {
     /// Steepest grade, % (signed: negative downhill).
     pub steepest_grade_pct: f64,
     /// Legs driven slower than asked, because they are too short to reach their speed and
-    /// change to the next's: (leg number, 1 = to the first waypoint; asked and driven, m/s).
-    pub slowed: Vec<(usize, f64, f64)>,
+    /// change to the next's: (which, asked and driven, m/s).
+    pub slowed: Vec<(String, f64, f64)>,
     /// The largest difference between a waypoint's height and the road's where it passes it
     /// (the middle of its turn), m. A waypoint's height is where the grade lines of its two legs
     /// meet, as a road designer's point of vertical intersection: the vertical curve between
@@ -144,11 +144,34 @@ fn wrap(a: f64) -> f64 {
     (a + PI).rem_euclid(2.0 * PI) - PI
 }
 
-/// The turn at each inner point: (heading change, length, tangent length), sized for the faster
-/// of the two legs.
-fn turns(spec: &DriveSpec, legs: &[Leg]) -> Result<Vec<(f64, f64, f64)>, ParamError> {
+/// The turn at an inner point.
+#[derive(Debug, Clone, Copy, Default)]
+struct Corner {
+    /// Heading change, rad.
+    change: f64,
+    /// Length, m (0: no turn).
+    len: f64,
+    /// Tangent length, m.
+    tangent: f64,
+    /// Speed through it, m/s.
+    speed: f64,
+}
+
+/// The turn at each inner point: as sharp as `corner_radius_m` asks, driven at the speed its
+/// sharpest point allows within the lateral-acceleration and turn-rate limits; without a
+/// radius, as wide as the faster of its two legs needs to be driven at its speed.
+fn turns(spec: &DriveSpec, legs: &[Leg]) -> Result<Vec<Corner>, ParamError> {
     let n = spec.waypoints.len();
     let rate = spec.turn_rate_dps.to_radians();
+    let a_lat = spec.lateral_accel_mps2;
+    if let Some(r) = spec.corner_radius_m
+        && !(r.is_finite() && r >= 2.0)
+    {
+        return Err(ParamError::new(
+            "drive",
+            format!("corner_radius_m {r}: a road's corner is at least 2 m in radius"),
+        ));
+    }
     legs.windows(2)
         .enumerate()
         .map(|(i, w)| {
@@ -163,13 +186,28 @@ fn turns(spec: &DriveSpec, legs: &[Leg]) -> Result<Vec<(f64, f64, f64)>, ParamEr
                     ),
                 ));
             }
-            if change.abs() < 1e-9 {
-                return Ok((0.0, 0.0, 0.0));
-            }
             let v = w[0].speed.max(w[1].speed);
-            let kappa = (spec.lateral_accel_mps2 / (v * v)).min(rate / v);
+            if change.abs() < 1e-9 {
+                return Ok(Corner {
+                    speed: v,
+                    ..Corner::default()
+                });
+            }
+            let (kappa, speed) = match spec.corner_radius_m {
+                Some(r) => {
+                    // no wider than the legs' own speed needs
+                    let k = (1.0 / r).max((a_lat / (v * v)).min(rate / v));
+                    (k, v.min((a_lat / k).sqrt()).min(rate / k))
+                }
+                None => ((a_lat / (v * v)).min(rate / v), v),
+            };
             let len = 2.0 * change.abs() / kappa;
-            Ok((change, len, tangent_length(change, len)))
+            Ok(Corner {
+                change,
+                len,
+                tangent: tangent_length(change, len),
+                speed,
+            })
         })
         .collect()
 }
@@ -183,7 +221,7 @@ struct Laid {
     turn_span: Vec<(f64, f64)>,
 }
 
-fn lay(spec: &DriveSpec, legs: &[Leg], tn: &[(f64, f64, f64)]) -> Result<Laid, ParamError> {
+fn lay(spec: &DriveSpec, legs: &[Leg], tn: &[Corner]) -> Result<Laid, ParamError> {
     let n = spec.waypoints.len();
     let bank = spec.bank_deg.unwrap_or(0.0).to_radians();
     let mut turns_out = Vec::new();
@@ -191,8 +229,8 @@ fn lay(spec: &DriveSpec, legs: &[Leg], tn: &[(f64, f64, f64)]) -> Result<Laid, P
     let mut turn_span = Vec::new();
     let mut s = 0.0;
     for (i, leg) in legs.iter().enumerate() {
-        let before = if i > 0 { tn[i - 1].2 } else { 0.0 };
-        let after = tn.get(i).map_or(0.0, |t| t.2);
+        let before = if i > 0 { tn[i - 1].tangent } else { 0.0 };
+        let after = tn.get(i).map_or(0.0, |t| t.tangent);
         let straight = leg.len_h / leg.gamma.cos() - before - after;
         if straight < -1e-9 {
             return Err(ParamError::new(
@@ -206,7 +244,7 @@ fn lay(spec: &DriveSpec, legs: &[Leg], tn: &[(f64, f64, f64)]) -> Result<Laid, P
             ));
         }
         s += straight.max(0.0);
-        if let Some(&(change, len, _)) = tn.get(i) {
+        if let Some(&Corner { change, len, .. }) = tn.get(i) {
             if len > 0.0 {
                 turns_out.push(Turn {
                     s0: s,
@@ -269,10 +307,12 @@ fn crests(spec: &DriveSpec, legs: &[Leg], laid: &mut Laid, notes: &mut RoadNotes
     }
 }
 
-/// The speed profile: standing at the start, then stop to stop.
+/// The speed profile: standing at the start, then stop to stop, each leg at its speed and
+/// each turn at its own.
 fn profile(
     spec: &DriveSpec,
     legs: &[Leg],
+    corners: &[Corner],
     laid: &Laid,
     notes: &mut RoadNotes,
 ) -> Result<Vec<super::speed::Phase>, ParamError> {
@@ -288,7 +328,53 @@ fn profile(
             "brake_mps2 and jerk_mps3 must be positive",
         ));
     }
-    let mut wait: Vec<Option<f64>> = vec![None; legs.len() + 1];
+    let wait = stops(spec, legs.len())?;
+    let mut p = Profile::default();
+    p.stand(spec.start_wait_s);
+    // the pieces of the stretch being gathered, and what each is called
+    let mut st = Stretch {
+        s0: 0.0,
+        pieces: Vec::new(),
+        wait_s: 0.0,
+    };
+    let mut names: Vec<String> = Vec::new();
+    let mut drive = |st: &mut Stretch, names: &mut Vec<String>, end: f64, wait_s: f64| {
+        st.wait_s = wait_s;
+        // a turn's speed is the most its sharpest point allows: one driven slower (pulling
+        // away from a stop through it) is not a leg slowed against the plan
+        for (k, v) in p.drive(st, &lim) {
+            if !names[k].starts_with("the turn") {
+                notes.slowed.push((names[k].clone(), st.pieces[k].1, v));
+            }
+        }
+        *st = Stretch {
+            s0: end,
+            pieces: Vec::new(),
+            wait_s: 0.0,
+        };
+        names.clear();
+    };
+    for (i, leg) in legs.iter().enumerate() {
+        let point = i + 1;
+        let span = laid.turn_span.get(i).copied();
+        let end = span.map_or(laid.path.length, |(a, _)| a);
+        st.pieces.push((end, leg.speed));
+        names.push(format!("the leg to waypoint {}", i % n + 1));
+        if span.is_none() || wait[point].is_some() {
+            drive(&mut st, &mut names, end, wait[point].unwrap_or(0.0));
+        }
+        if let Some((_, b)) = span.filter(|(a, b)| b > a) {
+            st.pieces.push((b, corners[i].speed));
+            names.push(format!("the turn at waypoint {}", i % n + 1));
+        }
+    }
+    Ok(p.phases)
+}
+
+/// Seconds standing at each route point (`None`: no stop), from the spec's stops in every lap.
+fn stops(spec: &DriveSpec, n_legs: usize) -> Result<Vec<Option<f64>>, ParamError> {
+    let n = spec.waypoints.len();
+    let mut wait: Vec<Option<f64>> = vec![None; n_legs + 1];
     for &[k, secs] in &spec.stops {
         if k.fract() != 0.0 || k < 1.0 || k as usize > n || secs.is_nan() || secs < 0.0 {
             return Err(ParamError::new(
@@ -302,50 +388,7 @@ fn profile(
             wait[lap * n + k as usize] = Some(secs);
         }
     }
-    let mut p = Profile::default();
-    p.stand(spec.start_wait_s);
-    let mut st = Stretch {
-        s0: 0.0,
-        pieces: Vec::new(),
-        wait_s: 0.0,
-    };
-    let mut first_leg = 0;
-    for (i, leg) in legs.iter().enumerate() {
-        let point = i + 1;
-        let last = point == legs.len();
-        let stop = last || wait[point].is_some();
-        // where this leg's piece ends: stopping, at its turn's start; else at the start of
-        // the turn when the next leg is slower, at its end when faster
-        let span = laid.turn_span.get(i).copied();
-        let end = match (stop, span) {
-            (_, None) => laid.path.length,
-            (true, Some((a, _))) => a,
-            (false, Some((a, b))) => {
-                if legs[i + 1].speed < leg.speed {
-                    a
-                } else {
-                    b
-                }
-            }
-        };
-        st.pieces.push((end, leg.speed));
-        if stop {
-            st.wait_s = wait[point].unwrap_or(0.0);
-            let driven = p.drive(&st, &lim);
-            notes.slowed.extend(
-                driven
-                    .into_iter()
-                    .map(|(k, v)| ((first_leg + k) % n + 1, legs[first_leg + k].speed, v)),
-            );
-            st = Stretch {
-                s0: end,
-                pieces: Vec::new(),
-                wait_s: 0.0,
-            };
-            first_leg = i + 1;
-        }
-    }
-    Ok(p.phases)
+    Ok(wait)
 }
 
 impl Road {
@@ -394,7 +437,7 @@ impl Road {
         }
         let mut notes = RoadNotes::default();
         crests(spec, &legs, &mut laid, &mut notes);
-        let phases = profile(spec, &legs, &laid, &mut notes)?;
+        let phases = profile(spec, &legs, &tn, &laid, &mut notes)?;
         let start = [
             spec.lat_deg.to_radians(),
             spec.lon_deg.to_radians(),

@@ -293,3 +293,35 @@ fn a_road_is_planned_only_where_the_spec_names_one() {
     assert_eq!(d.position(t), road(&hilly()).position(t));
     assert_eq!(d.rate_and_force(t), road(&hilly()).rate_and_force(t));
 }
+
+/// A city corner of 15 m radius is driven at the speed its sharpest point allows (within the
+/// lateral-acceleration limit), then the next leg at its own.
+#[test]
+fn a_sharp_corner_is_driven_slowly() {
+    let spec = DriveSpec {
+        lat_deg: 38.72,
+        lon_deg: -9.14,
+        waypoints: vec![[0.0, 300.0], [300.0, 300.0]],
+        heights_m: vec![0.0, 0.0],
+        speed_mps: 13.0,
+        turn_rate_dps: 30.0,
+        corner_radius_m: Some(15.0),
+        ..Default::default()
+    };
+    let r = road(&spec);
+    assert!(r.notes().slowed.is_empty(), "{:?}", r.notes());
+    let (mut t, mut slowest_in_turn, mut fastest) = (0.0, f64::INFINITY, 0.0f64);
+    while t < r.duration() {
+        let s = r.state(t);
+        let lateral = s.along.v * s.hpr_rate[0];
+        assert!(lateral.abs() <= 2.5 + 1e-9, "{t}: {lateral}");
+        if s.hpr_rate[0].abs() > 0.3 {
+            slowest_in_turn = slowest_in_turn.min(s.along.v);
+        }
+        fastest = fastest.max(s.along.v);
+        t += 0.05;
+    }
+    // sqrt(2.5 m/s^2 x 15 m) at the sharpest
+    assert!((fastest - 13.0).abs() < 1e-9, "{fastest}");
+    assert!(slowest_in_turn <= 6.2, "{slowest_in_turn}");
+}

@@ -15,6 +15,47 @@ pub(crate) enum Plan {
     /// position that meets a tolerance at a confidence; and the latitude beyond which no dwell
     /// does. Exit status 1 when no dwell meets the tolerance.
     NorthFinding(PlanArgs),
+    /// What the bench will drive on a scenario's route: its length and duration, heights,
+    /// speeds, accelerations (along and across the road), the body's pitch and roll, where it
+    /// stands, and what the plan had to do (legs driven slower than asked, short vertical
+    /// curves); with --csv, its profile for a plot. Exit status 1 when the scenario ends before
+    /// the drive does.
+    Route(RouteArgs),
+}
+
+/// `hil plan route`'s arguments.
+#[derive(clap::Args)]
+pub(crate) struct RouteArgs {
+    /// The scenario whose [drive] to show.
+    #[arg(long)]
+    scenario: PathBuf,
+    /// Also write the profile (time, distance, latitude, longitude, height, speed, heading,
+    /// pitch, roll) to this CSV file.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// The CSV's rate, Hz.
+    #[arg(long, default_value_t = 1.0, value_parser = hil::values::step_hz)]
+    csv_hz: f64,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+fn route_cmd(a: RouteArgs) -> Result<i32> {
+    let s = Scenario::load(&a.scenario)?;
+    let r = hil::scenario::route::summary(&s)?;
+    if let Some(f) = &a.csv {
+        hil::scenario::route::csv(&s, a.csv_hz, f)?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        print!("{}", hil::scenario::route::text(&r));
+        if let Some(f) = &a.csv {
+            println!("  profile: {}", f.display());
+        }
+    }
+    Ok(i32::from(r.duration_s > r.scenario_s))
 }
 
 /// `hil plan north-finding`'s arguments.
@@ -95,7 +136,10 @@ pub(crate) fn positions(n: Option<&str>, out_and_back: bool) -> Option<Vec<f64>>
 }
 
 pub(crate) fn plan_cmd(p: Plan) -> Result<i32> {
-    let Plan::NorthFinding(a) = p;
+    let a = match p {
+        Plan::NorthFinding(a) => a,
+        Plan::Route(r) => return route_cmd(r),
+    };
     let (mut s, source) = match (&a.scenario, &a.imu) {
         (Some(f), _) => (Scenario::load(f)?, format!("scenario {}", f.display())),
         (None, Some(f)) => {

@@ -263,7 +263,8 @@ pub(crate) fn start_nav(
             let _ = tx.send(l);
         }
     });
-    let deadline = Instant::now() + Duration::from_secs(60);
+    let started = Instant::now();
+    let stat = format!("/proc/{}/stat", child.id());
     loop {
         match rx.recv_timeout(Duration::from_millis(100)) {
             Ok(l) if l.starts_with("nav: receiving") => break,
@@ -272,9 +273,20 @@ pub(crate) fn start_nav(
                 if let Some(st) = child.try_wait()? {
                     bail!("nav exited before it was ready ({st}); see its messages above");
                 }
-                if Instant::now() > deadline {
+                // liveness, not pace: a nav the machine starves (two CPU hogs beside a loaded
+                // guest) is waited for; one that spent its CPU without getting ready is not
+                let cpu = cpu_seconds(&stat).unwrap_or(0.0);
+                let waited = started.elapsed().as_secs_f64();
+                if (waited > READY_WAIT_S && cpu > READY_CPU_S) || waited > READY_STARVED_S {
                     let _ = child.kill();
-                    bail!("nav did not report ready within 60 s");
+                    bail!(
+                        "nav did not report ready within {waited:.0} s, having had {cpu:.1} s of CPU{}",
+                        if cpu > READY_CPU_S {
+                            ""
+                        } else {
+                            ": the machine starved it"
+                        }
+                    );
                 }
             }
             Err(_) => {
@@ -285,6 +297,13 @@ pub(crate) fn start_nav(
     }
     Ok(NavProcess { child, lines: rx })
 }
+
+/// Wall time after which nav must be ready if it has had [`READY_CPU_S`] of CPU, s.
+const READY_WAIT_S: f64 = 60.0;
+/// CPU time within which nav gets ready (it needs well under a second), s.
+const READY_CPU_S: f64 = 20.0;
+/// Wall time after which a nav not ready is given up on however little CPU it had, s.
+const READY_STARVED_S: f64 = 600.0;
 
 pub(crate) fn stop_nav(mut nav: NavProcess) -> Result<(Option<i32>, Vec<String>)> {
     // SAFETY: kill(2) on our own child's pid.

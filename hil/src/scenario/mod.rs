@@ -3,6 +3,7 @@
 pub mod busload;
 pub mod fogunit;
 pub mod navconfig;
+pub mod route;
 
 use anyhow::{Context, Result, bail};
 use emulators::bus::transport::BusFaults;
