@@ -19,6 +19,11 @@ pub const GM: f64 = 3.986_004_418e14;
 /// (meridian, prime-vertical) radii of curvature at geodetic latitude `lat` (rad), m.
 pub fn radii(lat: f64) -> (f64, f64) {
     let (s, c) = lat.sin_cos();
+    radii_sc(s, c)
+}
+
+/// [`radii`] from the latitude's sine and cosine (the same operations, so the same bits).
+pub fn radii_sc(s: f64, c: f64) -> (f64, f64) {
     let d = (A * c).powi(2) + (B * s).powi(2);
     let rn = A * A / d.sqrt();
     let rm = (A * B).powi(2) / (d * d.sqrt());

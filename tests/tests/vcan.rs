@@ -772,7 +772,12 @@ fn campus_loop_shortened_finds_north_then_navigates() {
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn a_hilly_stop_and_go_road_navigates_through_vcan() {
-    let (r, dir) = run_variant("route-lisbon-hills.toml", &[], "vcan-e2e17");
+    // its first 140 s: the climb, two of the stops, the corners (the whole drive is 261 s)
+    let (r, dir) = run_variant(
+        "route-lisbon-hills.toml",
+        &[("duration_s = 275.0", "duration_s = 140.0")],
+        "vcan-e2e17",
+    );
     keep_report(&dir.path().join("run"), "lisbon-hills");
     let names: Vec<String> = checks(&r).into_iter().map(|c| c.0).collect();
     for n in [
@@ -785,10 +790,10 @@ fn a_hilly_stop_and_go_road_navigates_through_vcan() {
         assert!(names.iter().any(|x| x == n), "missing check {n}: {names:?}");
     }
     // 10 Hz fixes over the drive
-    assert!(r["gps"]["fixes"].as_u64().unwrap() > 2000, "{}", r["gps"]);
+    assert!(r["gps"]["fixes"].as_u64().unwrap() > 1300, "{}", r["gps"]);
     let series = &r["navigation_series"];
     eprintln!("over the run: {series}; against truth: {}", r["navigation"]);
-    assert!(series["samples"].as_u64().unwrap() > 200, "{series}");
+    assert!(series["samples"].as_u64().unwrap() > 130, "{series}");
     assert_eq!(series["bad_records"], 0);
 }
 

@@ -26,7 +26,7 @@ pub(crate) mod speed;
 
 use crate::geodesy as earth;
 use crate::truth::{Increments, Motion, c_b_n, gauss_legendre3};
-use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use std::f64::consts::PI;
 
 pub use plan::RoadNotes;
@@ -57,6 +57,8 @@ pub(crate) struct RoadState {
     pub v: Vector3<f64>,
     /// Its rate of change (components in the local level frame), m/s^2.
     pub dv: Vector3<f64>,
+    /// The sines and cosines of heading and pitch (taken once: a node's largest cost).
+    sc: [(f64, f64); 2],
 }
 
 impl Road {
@@ -99,12 +101,19 @@ impl Road {
             -sg * r.dgamma * cp - cg * sp * r.kappa,
             cg * r.dgamma,
         );
+        // the pitch is the road's when the vehicle does not accelerate: its sine and cosine
+        let sc_pitch = if hpr[1] == r.gamma {
+            (sg, cg)
+        } else {
+            hpr[1].sin_cos()
+        };
         RoadState {
             along: a,
             hpr,
             hpr_rate,
             v: u * v,
             dv: u * acc + du * (v * v),
+            sc: [(sp, cp), sc_pitch],
         }
     }
 
@@ -140,38 +149,51 @@ impl Road {
     /// The body's rotation relative to ENU (body to ENU) and its rate relative to ENU in body
     /// axes, rad/s.
     pub fn rotation(&self, t: f64) -> (Rotation3<f64>, Vector3<f64>) {
-        let s = self.state(t);
-        (Self::cbn(&s), Self::omega_nb(&s))
-    }
-
-    fn cbn(s: &RoadState) -> Rotation3<f64> {
-        c_b_n(s.hpr[0], s.hpr[1], s.hpr[2])
-    }
-
-    /// The body's rate relative to ENU, body axes, from the Euler angles' rates
-    /// (`C_b^n = Rz(-psi) Rx(theta) Ry(phi)`).
-    fn omega_nb(s: &RoadState) -> Vector3<f64> {
-        let [_, th, ph] = s.hpr;
-        let [dpsi, dth, dph] = s.hpr_rate;
-        let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), th);
-        let ry = Rotation3::from_axis_angle(&Vector3::y_axis(), ph);
-        ry.inverse() * (rx.inverse() * Vector3::new(0.0, 0.0, -dpsi) + Vector3::new(dth, 0.0, 0.0))
-            + Vector3::new(0.0, dph, 0.0)
+        let f = Frames::of(&self.state(t));
+        (Rotation3::from_matrix_unchecked(f.cbn), f.omega_nb)
     }
 
     fn rate_force(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
         let s = self.state(t);
         let (lat, h) = self.placed.lat_h(&self.path, s.along.s);
         let (sl, cl) = lat.sin_cos();
-        let (rm, rn) = earth::radii(lat);
+        let (rm, rn) = earth::radii_sc(sl, cl);
         let wie = Vector3::from(earth::earth_rate_enu_sc(sl, cl));
         let lon_rate = s.v.x / ((rn + h) * cl);
         let wen = Vector3::new(-s.v.y / (rm + h), lon_rate * cl, lon_rate * sl);
-        let cnb = Self::cbn(&s).inverse();
-        let omega = cnb * (wie + wen) + Self::omega_nb(&s);
+        let f = Frames::of(&s);
+        let cnb = f.cbn.transpose();
+        let omega = cnb * (wie + wen) + f.omega_nb;
         let g = Vector3::new(0.0, 0.0, -earth::gravity_sc(sl, cl, h));
         let force = cnb * (s.dv + (2.0 * wie + wen).cross(&s.v) - g);
         (omega, force)
+    }
+}
+
+/// The body's attitude as matrices, from one sine and cosine of each angle:
+/// `C_b^n = Rz(-psi) Rx(theta) Ry(phi)` (as [`c_b_n`]), and the body's rate relative to ENU
+/// from the angles' rates.
+struct Frames {
+    cbn: Matrix3<f64>,
+    omega_nb: Vector3<f64>,
+}
+
+impl Frames {
+    fn of(s: &RoadState) -> Self {
+        let ph = s.hpr[2];
+        let [dpsi, dth, dph] = s.hpr_rate;
+        let [(sp, cp), (st, ct)] = s.sc;
+        let (sf, cf) = ph.sin_cos();
+        let rz = Matrix3::new(cp, sp, 0.0, -sp, cp, 0.0, 0.0, 0.0, 1.0);
+        let rx = Matrix3::new(1.0, 0.0, 0.0, 0.0, ct, -st, 0.0, st, ct);
+        let ry = Matrix3::new(cf, 0.0, sf, 0.0, 1.0, 0.0, -sf, 0.0, cf);
+        let omega_nb = ry.transpose()
+            * (rx.transpose() * Vector3::new(0.0, 0.0, -dpsi) + Vector3::new(dth, 0.0, 0.0))
+            + Vector3::new(0.0, dph, 0.0);
+        Self {
+            cbn: rz * rx * ry,
+            omega_nb,
+        }
     }
 }
 
@@ -211,7 +233,8 @@ impl Motion for Road {
     }
 
     fn attitude(&self, t: f64) -> UnitQuaternion<f64> {
-        UnitQuaternion::from_rotation_matrix(&Self::cbn(&self.state(t)))
+        let s = self.state(t);
+        UnitQuaternion::from_rotation_matrix(&c_b_n(s.hpr[0], s.hpr[1], s.hpr[2]))
     }
 
     fn inertial_attitude(&self, t: f64) -> UnitQuaternion<f64> {

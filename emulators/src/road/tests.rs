@@ -325,3 +325,49 @@ fn a_sharp_corner_is_driven_slowly() {
     assert!((fastest - 13.0).abs() < 1e-9, "{fastest}");
     assert!(slowest_in_turn <= 6.2, "{slowest_in_turn}");
 }
+
+/// The attitude matrices built from each angle's sine and cosine are the truth's `c_b_n`
+/// (nalgebra's rotations about the axes), all along the route.
+#[test]
+fn the_attitude_from_sines_and_cosines_is_c_b_n() {
+    let r = road(&hilly());
+    let mut t = 0.0;
+    while t < r.duration() {
+        let s = r.state(t);
+        let (m, _) = r.rotation(t);
+        let want = crate::truth::c_b_n(s.hpr[0], s.hpr[1], s.hpr[2]);
+        assert!((m.matrix() - want.matrix()).norm() < 1e-15, "{t}");
+        t += 1.37;
+    }
+}
+
+/// The truth's cost per IMU sample against the level route's (figures for docs/routes.md:
+/// `cargo test -p emulators --release --lib road::tests::truth_pace -- --ignored --nocapture`).
+#[test]
+#[ignore = "figures"]
+fn truth_pace() {
+    let road = Drive::plan(&hilly()).unwrap();
+    let mut level = hilly();
+    level.heights_m.clear();
+    level.leg_speeds_mps.clear();
+    level.stops.clear();
+    level.brake_mps2 = None;
+    level.jerk_mps3 = None;
+    level.bank_deg = None;
+    let level = Drive::plan(&level).unwrap();
+    for (name, d) in [("road", &road), ("level", &level)] {
+        let t0 = std::time::Instant::now();
+        let mut acc = 0.0;
+        let n = 240_000;
+        for k in 0..n {
+            let i = d.increments(k as f64 / 2000.0, (k + 1) as f64 / 2000.0);
+            acc += i.dtheta.x;
+        }
+        let s = t0.elapsed().as_secs_f64();
+        eprintln!(
+            "{name}: {:.0} ns per sample, x{:.0} ({acc:.3e})",
+            s / n as f64 * 1e9,
+            120.0 / s
+        );
+    }
+}
