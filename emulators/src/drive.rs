@@ -17,7 +17,7 @@
 
 use crate::geodesy as earth;
 use crate::road::Road;
-use crate::truth::{Increments, Motion, c_b_n, gauss_legendre3};
+use crate::truth::{Increments, Motion, c_b_n};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -471,23 +471,14 @@ impl Motion for Level {
     fn increments(&self, t0: f64, t1: f64) -> Increments {
         // within a segment speed is quadratic-free and heading linear: 3 nodes are exact to
         // rounding; a segment's corner (a step in acceleration or turn rate) splits the interval
-        let f = |t| self.rate_and_force(t);
         let i = self.segs.partition_point(|s| s.t0 <= t0);
-        let end = self.duration();
-        let corner = match self.segs.get(i) {
-            Some(s) => Some(s.t0),
-            None => (t0 < end).then_some(end),
-        };
-        match corner.filter(|&c| c < t1) {
-            Some(c) => {
-                let (a, b) = (gauss_legendre3(t0, c, f), gauss_legendre3(c, t1, f));
-                Increments {
-                    dtheta: a.dtheta + b.dtheta,
-                    dv: a.dv + b.dv,
-                }
-            }
-            None => gauss_legendre3(t0, t1, f),
-        }
+        crate::truth::gauss_legendre3_split(
+            t0,
+            t1,
+            self.segs.get(i).map(|s| s.t0),
+            self.duration(),
+            |t| self.rate_and_force(t),
+        )
     }
 
     fn attitude(&self, t: f64) -> UnitQuaternion<f64> {
@@ -495,12 +486,8 @@ impl Motion for Level {
     }
 
     fn inertial_attitude(&self, t: f64) -> UnitQuaternion<f64> {
-        // inertial <- earth (earth rotation) <- ENU at (lat, lon) <- body
         let (lat, lon, _) = self.position(t);
-        let q_ie = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), earth::OMEGA * t);
-        let q_en = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), lon + PI / 2.0)
-            * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI / 2.0 - lat);
-        q_ie * q_en * self.attitude(t)
+        crate::truth::inertial_from_enu(lat, lon, t, self.attitude(t))
     }
 
     fn latitude(&self, t: f64) -> f64 {

@@ -30,7 +30,7 @@ pub struct Increments {
 
 /// Gauss-Legendre nodes and weights on [-1, 1], 6 points.
 #[allow(clippy::excessive_precision)]
-const GL6: [(f64, f64); 6] = [
+pub(crate) const GL6: [(f64, f64); 6] = [
     (-0.932_469_514_203_152_1, 0.171_324_492_379_170_3),
     (-0.661_209_386_466_264_5, 0.360_761_573_048_138_6),
     (-0.238_619_186_083_196_9, 0.467_913_934_572_691_0),
@@ -105,6 +105,44 @@ pub fn gauss_legendre(
         dv += a * (w * h);
     }
     Increments { dtheta, dv }
+}
+
+/// [`gauss_legendre3`] over `(t0, t1]` on a planned motion, split where its plan has a corner
+/// (a step in a rate's derivative): at `next_start`, the start of the plan's next piece after
+/// `t0`, or, past its last piece, at the plan's `end`. Each half is then smooth, so exact.
+pub fn gauss_legendre3_split(
+    t0: f64,
+    t1: f64,
+    next_start: Option<f64>,
+    end: f64,
+    f: impl Fn(f64) -> (Vector3<f64>, Vector3<f64>),
+) -> Increments {
+    let corner = next_start.or_else(|| (t0 < end).then_some(end));
+    match corner.filter(|&c| c < t1) {
+        Some(c) => {
+            let (a, b) = (gauss_legendre3(t0, c, &f), gauss_legendre3(c, t1, &f));
+            Increments {
+                dtheta: a.dtheta + b.dtheta,
+                dv: a.dv + b.dv,
+            }
+        }
+        None => gauss_legendre3(t0, t1, f),
+    }
+}
+
+/// The body's attitude relative to inertial space at `t` from its attitude `q_bn` relative to
+/// ENU at latitude `lat` and longitude `lon` (rad): inertial <- earth (the earth's rotation
+/// since 0) <- ENU <- body.
+pub fn inertial_from_enu(
+    lat: f64,
+    lon: f64,
+    t: f64,
+    q_bn: UnitQuaternion<f64>,
+) -> UnitQuaternion<f64> {
+    let q_ie = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), earth::OMEGA * t);
+    let q_en = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), lon + PI / 2.0)
+        * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI / 2.0 - lat);
+    q_ie * q_en * q_bn
 }
 
 /// Body-to-ENU rotation for heading, pitch, roll (rad).

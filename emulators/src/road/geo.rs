@@ -57,17 +57,6 @@ fn expanded(k: &Knot, u: f64) -> [f64; 3] {
     std::array::from_fn(|i| k.llh[i] + u * (k.d1[i] + 0.5 * u * k.d2[i]))
 }
 
-/// Nodes and weights of 6-point Gauss-Legendre on [-1, 1].
-#[allow(clippy::excessive_precision)]
-const GL6: [(f64, f64); 6] = [
-    (-0.932_469_514_203_152_1, 0.171_324_492_379_170_3),
-    (-0.661_209_386_466_264_5, 0.360_761_573_048_138_6),
-    (-0.238_619_186_083_196_9, 0.467_913_934_572_691_0),
-    (0.238_619_186_083_196_9, 0.467_913_934_572_691_0),
-    (0.661_209_386_466_264_5, 0.360_761_573_048_138_6),
-    (0.932_469_514_203_152_1, 0.171_324_492_379_170_3),
-];
-
 /// (lat, lon, h) at `s` from knot `k` (`s` at most one piece past it).
 fn from_knot(path: &Path, k: &Knot, s: f64) -> [f64; 3] {
     let (c, h) = (0.5 * (k.s + s), 0.5 * (s - k.s));
@@ -75,7 +64,7 @@ fn from_knot(path: &Path, k: &Knot, s: f64) -> [f64; 3] {
         return k.llh;
     }
     let mut out = k.llh;
-    for (x, w) in GL6 {
+    for (x, w) in crate::truth::GL6 {
         let si = c + h * x;
         let (d1, _) = rates(path, si, expanded(k, si - k.s));
         for i in 0..3 {

@@ -25,9 +25,8 @@ pub mod reference;
 pub(crate) mod speed;
 
 use crate::geodesy as earth;
-use crate::truth::{Increments, Motion, c_b_n, gauss_legendre3};
+use crate::truth::{Increments, Motion, c_b_n};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
-use std::f64::consts::PI;
 
 pub use plan::RoadNotes;
 
@@ -213,23 +212,14 @@ impl Motion for Road {
     fn increments(&self, t0: f64, t1: f64) -> Increments {
         // smooth within a phase of the speed profile: 3 nodes are exact to rounding on a sample
         // interval; a phase's start (a step in jerk, so in the pitch rate) splits the interval
-        let f = |t| self.rate_force(t);
         let i = self.phases.partition_point(|p| p.t0 <= t0);
-        let end = self.duration();
-        let corner = match self.phases.get(i) {
-            Some(p) => Some(p.t0),
-            None => (t0 < end).then_some(end),
-        };
-        match corner.filter(|&c| c < t1) {
-            Some(c) => {
-                let (a, b) = (gauss_legendre3(t0, c, f), gauss_legendre3(c, t1, f));
-                Increments {
-                    dtheta: a.dtheta + b.dtheta,
-                    dv: a.dv + b.dv,
-                }
-            }
-            None => gauss_legendre3(t0, t1, f),
-        }
+        crate::truth::gauss_legendre3_split(
+            t0,
+            t1,
+            self.phases.get(i).map(|p| p.t0),
+            self.duration(),
+            |t| self.rate_force(t),
+        )
     }
 
     fn attitude(&self, t: f64) -> UnitQuaternion<f64> {
@@ -238,12 +228,8 @@ impl Motion for Road {
     }
 
     fn inertial_attitude(&self, t: f64) -> UnitQuaternion<f64> {
-        // inertial <- earth (earth rotation) <- ENU at (lat, lon) <- body
         let (lat, lon, _) = self.position(t);
-        let q_ie = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), earth::OMEGA * t);
-        let q_en = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), lon + PI / 2.0)
-            * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI / 2.0 - lat);
-        q_ie * q_en * self.attitude(t)
+        crate::truth::inertial_from_enu(lat, lon, t, self.attitude(t))
     }
 
     fn latitude(&self, t: f64) -> f64 {

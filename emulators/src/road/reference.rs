@@ -133,19 +133,6 @@ fn error_at(
     }
 }
 
-impl Truth for super::Road {
-    fn llh(&self, t: f64) -> [f64; 3] {
-        let (a, b, c) = self.position(t);
-        [a, b, c]
-    }
-    fn vel(&self, t: f64) -> Vector3<f64> {
-        self.velocity(t)
-    }
-    fn q_bn(&self, t: f64) -> UnitQuaternion<f64> {
-        self.attitude(t)
-    }
-}
-
 impl Truth for crate::drive::Drive {
     fn llh(&self, t: f64) -> [f64; 3] {
         let (a, b, c) = self.position(t);

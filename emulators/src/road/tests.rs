@@ -134,7 +134,7 @@ fn velocity_and_rates_are_the_derivatives_of_position_and_attitude() {
 /// attitude the receiver and the scoring are given, are one motion.
 #[test]
 fn a_reference_integration_of_the_increments_follows_the_truth() {
-    let r = road(&hilly());
+    let r = Drive::plan(&hilly()).unwrap();
     // ten minutes: the free vertical channel has not yet grown (its time constant is 10 min)
     let e = reference::integrate(&r, &r, 2000.0, r.duration() + 5.0, 60.0, false);
     let last = e.last().unwrap();
