@@ -120,15 +120,6 @@ fn legs(spec: &DriveSpec, pts: &[[f64; 3]]) -> Result<Vec<Leg>, ParamError> {
             .get(i % n)
             .copied()
             .unwrap_or(spec.speed_mps);
-        if !(speed.is_finite() && speed > 0.0) {
-            return Err(ParamError::new(
-                "drive",
-                format!(
-                    "the speed of the leg to waypoint {} must be positive",
-                    i % n + 1
-                ),
-            ));
-        }
         out.push(Leg {
             len_h,
             dh,
@@ -391,6 +382,95 @@ fn stops(spec: &DriveSpec, n_legs: usize) -> Result<Vec<Option<f64>>, ParamError
     Ok(wait)
 }
 
+/// The longest road planned, m: its knots (one each 5 m at most) are kept in memory.
+pub const MAX_LENGTH_M: f64 = 3.0e6;
+/// The most legs a road has (waypoints times laps).
+pub const MAX_LEGS: usize = 10_000;
+
+/// Every number of a road's spec is finite, its heights are on the earth, and it is not so
+/// long that planning it would not end: refused with the field before anything is planned.
+fn sane(spec: &DriveSpec) -> Result<(), ParamError> {
+    let finite = |xs: &mut dyn Iterator<Item = f64>| {
+        let mut all = true;
+        for x in xs {
+            all &= x.is_finite();
+        }
+        all
+    };
+    let opts = [
+        spec.brake_mps2,
+        spec.jerk_mps3,
+        spec.vertical_accel_mps2,
+        spec.pitch_per_accel_deg,
+        spec.roll_per_lateral_accel_deg,
+        spec.corner_radius_m,
+        spec.bank_deg,
+    ];
+    if !finite(&mut spec.waypoints.iter().flatten().copied())
+        || !finite(&mut spec.heights_m.iter().copied().chain([spec.height_m]))
+        || !finite(&mut spec.leg_speeds_mps.iter().copied())
+        || !finite(&mut spec.stops.iter().flatten().copied())
+        || !finite(&mut opts.iter().flatten().copied())
+        || !finite(&mut [spec.lon_deg, spec.start_wait_s].into_iter())
+    {
+        return Err(ParamError::new(
+            "drive",
+            "every number of a road (waypoints, heights, speeds, stops, limits) must be finite",
+        ));
+    }
+    if let Some(h) = spec
+        .heights_m
+        .iter()
+        .chain([&spec.height_m])
+        .find(|h| !(-500.0..=9000.0).contains(*h))
+    {
+        return Err(ParamError::new(
+            "drive",
+            format!("height {h} m: a road is between -500 m and 9,000 m"),
+        ));
+    }
+    if !(0.0..=86_400.0).contains(&spec.start_wait_s) || spec.stops.iter().any(|s| s[1] > 86_400.0)
+    {
+        return Err(ParamError::new(
+            "drive",
+            "start_wait_s and a stop's seconds are from 0 to a day",
+        ));
+    }
+    let legs = spec.waypoints.len() * spec.laps as usize;
+    let one_lap: f64 = std::iter::once(&[0.0, 0.0])
+        .chain(&spec.waypoints)
+        .collect::<Vec<_>>()
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum();
+    if legs > MAX_LEGS || one_lap * f64::from(spec.laps) > MAX_LENGTH_M {
+        return Err(ParamError::new(
+            "drive",
+            format!(
+                "{legs} legs, {:.0} km: a road has at most {MAX_LEGS} legs and {:.0} km",
+                one_lap * f64::from(spec.laps) / 1e3,
+                MAX_LENGTH_M / 1e3
+            ),
+        ));
+    }
+    // a land vehicle's speeds (the slowest: a drive that ends)
+    let speeds = std::iter::once(("speed_mps".to_string(), spec.speed_mps)).chain(
+        spec.leg_speeds_mps
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (format!("the speed of the leg to waypoint {}", i + 1), *v)),
+    );
+    for (what, v) in speeds {
+        if !(0.1..=150.0).contains(&v) {
+            return Err(ParamError::new(
+                "drive",
+                format!("{what} is {v} m/s: a road's speeds are from 0.1 m/s to 150 m/s"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 impl Road {
     /// Plan the road of `spec`; errors name the field, the waypoint or the leg that is wrong.
     pub fn plan(spec: &DriveSpec) -> Result<Self, ParamError> {
@@ -420,6 +500,7 @@ impl Road {
                 ),
             ));
         }
+        sane(spec)?;
         let pts = points(spec)?;
         let legs = legs(spec, &pts)?;
         let tn = turns(spec, &legs)?;

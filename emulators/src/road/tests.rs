@@ -264,6 +264,15 @@ fn bad_roads_say_what_is_wrong() {
             "jerk_mps3 must be positive",
         ),
         (Box::new(|s| s.lat_deg = 89.5), "within 89 deg"),
+        (Box::new(|s| s.waypoints[3][0] = f64::NAN), "must be finite"),
+        (Box::new(|s| s.heights_m[0] = 12_000.0), "height 12000 m"),
+        (Box::new(|s| s.laps = 5000), "legs"),
+        (Box::new(|s| s.waypoints[5] = [0.0, 4e6]), "km"),
+        (
+            Box::new(|s| s.leg_speeds_mps[0] = 1e-9),
+            "from 0.1 m/s to 150 m/s",
+        ),
+        (Box::new(|s| s.stops[0][1] = 1e12), "from 0 to a day"),
     ];
     for (change, want) in cases {
         let mut s = hilly();
