@@ -26,17 +26,21 @@ use std::f64::consts::PI;
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct DriveSpec {
-    /// Start latitude, deg.
+    /// Start latitude, deg (a track's start is its own: not given with `track`).
+    #[serde(default = "not_given", skip_serializing_if = "is_nan")]
     pub lat_deg: f64,
     /// Start longitude, deg.
+    #[serde(default = "not_given", skip_serializing_if = "is_nan")]
     pub lon_deg: f64,
     /// Height, m.
     #[serde(default)]
     pub height_m: f64,
     /// Waypoints, metres east and north of the start. The route runs start -> waypoints; with
-    /// `laps` > 1 it is a loop that must end at the start.
+    /// `laps` > 1 it is a loop that must end at the start. None with `track`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub waypoints: Vec<[f64; 2]>,
-    /// Cruise speed, m/s.
+    /// Cruise speed, m/s (a track's speeds are its own: not given with `track`).
+    #[serde(default = "not_given", skip_serializing_if = "is_nan")]
     pub speed_mps: f64,
     /// Longitudinal acceleration limit, m/s^2.
     #[serde(default = "default_accel")]
@@ -88,6 +92,26 @@ pub struct DriveSpec {
     /// The road's bank into a turn at its sharpest, deg (default 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bank_deg: Option<f64>,
+    /// A recorded track to drive instead of waypoints: a GPX, NMEA or CSV file (relative to
+    /// the scenario's folder), fitted into a road (`crate::road::track`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub track: Option<String>,
+    /// The track's jitter, m (default: estimated from the track).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub track_jitter_m: Option<f64>,
+    /// The fastest the vehicle drives, m/s: a step of the track faster is a jump no vehicle
+    /// makes (default 70).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub track_max_speed_mps: Option<f64>,
+}
+
+/// A start or a speed a track gives instead of the scenario.
+fn not_given() -> f64 {
+    f64::NAN
+}
+
+fn is_nan(x: &f64) -> bool {
+    x.is_nan()
 }
 
 impl Default for DriveSpec {
@@ -114,6 +138,9 @@ impl Default for DriveSpec {
             roll_per_lateral_accel_deg: None,
             corner_radius_m: None,
             bank_deg: None,
+            track: None,
+            track_jitter_m: None,
+            track_max_speed_mps: None,
         }
     }
 }
@@ -130,6 +157,7 @@ impl DriveSpec {
             || self.roll_per_lateral_accel_deg.is_some()
             || self.corner_radius_m.is_some()
             || self.bank_deg.is_some()
+            || self.track.is_some()
     }
 }
 
@@ -511,6 +539,18 @@ enum Kind {
 impl Drive {
     /// Plan the route; errors name what is wrong with the spec.
     pub fn plan(spec: &DriveSpec) -> Result<Self, crate::ParamError> {
+        if let Some(file) = &spec.track {
+            let road = crate::road::track::read(std::path::Path::new(file))
+                .and_then(|t| Road::from_track(spec, &t))
+                .map_err(|e| crate::ParamError::new("drive", e.to_string()))?;
+            return Ok(Self(Kind::Road(Box::new(road))));
+        }
+        if spec.lat_deg.is_nan() || spec.lon_deg.is_nan() {
+            return Err(crate::ParamError::new(
+                "drive",
+                "lat_deg and lon_deg: the route's start (or a track to drive)",
+            ));
+        }
         Ok(Self(if spec.is_road() {
             Kind::Road(Box::new(Road::plan(spec)?))
         } else {

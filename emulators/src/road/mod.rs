@@ -23,6 +23,7 @@ pub(crate) mod path;
 mod plan;
 pub mod reference;
 pub(crate) mod speed;
+pub mod track;
 
 use crate::geodesy as earth;
 use crate::truth::{Increments, Motion, c_b_n};
@@ -41,6 +42,8 @@ pub struct Road {
     /// Roll per m/s^2 of lateral acceleration, rad.
     roll_per_lateral: f64,
     notes: RoadNotes,
+    /// What was done with the recorded track it was fitted to, when it was.
+    track: Option<Box<track::TrackNotes>>,
 }
 
 /// Everything of the motion at one time.
@@ -75,6 +78,11 @@ impl Road {
     /// its waypoints).
     pub fn notes(&self) -> &RoadNotes {
         &self.notes
+    }
+
+    /// What was done with the recorded track the road was fitted to, when it was.
+    pub fn track_notes(&self) -> Option<&track::TrackNotes> {
+        self.track.as_deref()
     }
 
     pub(crate) fn state(&self, t: f64) -> RoadState {

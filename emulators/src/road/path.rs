@@ -161,6 +161,18 @@ impl Path {
 /// Where a turn of `change` rad and length 1 m ends, in the frame of its start (x to the right
 /// of the way in, y along it), m: the shape scales with the length.
 pub(crate) fn unit_turn_end(change: f64) -> (f64, f64) {
+    unit_turn_to(change, 1.0)
+}
+
+/// How far the middle of a turn of `change` rad and length 1 m passes from the corner of its
+/// two straight lines, m: the shape scales with the length.
+pub(crate) fn unit_turn_miss(change: f64) -> f64 {
+    let (x, y) = unit_turn_to(change.abs(), 0.5);
+    x.hypot(y - tangent_length(change, 1.0))
+}
+
+/// Where a turn of `change` rad and length 1 m is `u` into it, as [`unit_turn_end`].
+fn unit_turn_to(change: f64, u: f64) -> (f64, f64) {
     let t = Turn {
         s0: 0.0,
         len: 1.0,
@@ -172,7 +184,7 @@ pub(crate) fn unit_turn_end(change: f64) -> (f64, f64) {
     let n = 64;
     let (mut x, mut y) = (0.0, 0.0);
     for k in 0..n {
-        let (a, b) = (k as f64 / n as f64, (k + 1) as f64 / n as f64);
+        let (a, b) = (u * k as f64 / n as f64, u * (k + 1) as f64 / n as f64);
         let i = crate::truth::gauss_legendre(a, b, |u| {
             let (sin, cos) = t.at(u).0.sin_cos();
             (

@@ -42,7 +42,7 @@ pub struct RoadNotes {
 
 /// The route's points: the start, then each lap's waypoints, in metres east and north of the
 /// start and height.
-fn points(spec: &DriveSpec) -> Result<Vec<[f64; 3]>, ParamError> {
+pub(in crate::road) fn points(spec: &DriveSpec) -> Result<Vec<[f64; 3]>, ParamError> {
     let n = spec.waypoints.len();
     if !spec.heights_m.is_empty() && spec.heights_m.len() != n {
         return Err(ParamError::new(
@@ -81,15 +81,15 @@ fn points(spec: &DriveSpec) -> Result<Vec<[f64; 3]>, ParamError> {
 
 /// A leg between two points: horizontal length (m), heading and pitch (rad), speed (m/s).
 #[derive(Debug, Clone, Copy)]
-struct Leg {
-    len_h: f64,
-    dh: f64,
-    psi: f64,
-    gamma: f64,
-    speed: f64,
+pub(in crate::road) struct Leg {
+    pub len_h: f64,
+    pub dh: f64,
+    pub psi: f64,
+    pub gamma: f64,
+    pub speed: f64,
 }
 
-fn legs(spec: &DriveSpec, pts: &[[f64; 3]]) -> Result<Vec<Leg>, ParamError> {
+pub(in crate::road) fn legs(spec: &DriveSpec, pts: &[[f64; 3]]) -> Result<Vec<Leg>, ParamError> {
     let n = spec.waypoints.len();
     let mut out = Vec::with_capacity(pts.len() - 1);
     for (i, w) in pts.windows(2).enumerate() {
@@ -151,7 +151,50 @@ struct Corner {
 /// The turn at each inner point: as sharp as `corner_radius_m` asks, driven at the speed its
 /// sharpest point allows within the lateral-acceleration and turn-rate limits; without a
 /// radius, as wide as the faster of its two legs needs to be driven at its speed.
-fn turns(spec: &DriveSpec, legs: &[Leg]) -> Result<Vec<Corner>, ParamError> {
+/// With `fit` (a fitted track's corners, `Some(tolerance)`), each turn is made sharp enough
+/// to pass within the tolerance of its corner, turns whose tangents do not fit in a leg
+/// between them are made sharper, each in proportion, and each is driven as slowly as that
+/// needs.
+fn turns(spec: &DriveSpec, legs: &[Leg], fit: Option<f64>) -> Result<Vec<Corner>, ParamError> {
+    let mut tn = turns_for_speed(spec, legs)?;
+    if let Some(tol) = fit {
+        for c in tn.iter_mut().filter(|c| c.len > 0.0) {
+            let most = tol / super::path::unit_turn_miss(c.change);
+            if c.len > most {
+                c.tangent *= most / c.len;
+                c.len = most;
+            }
+        }
+        let (rate, a_lat) = (spec.turn_rate_dps.to_radians(), spec.lateral_accel_mps2);
+        let tangent = |i: Option<usize>| i.and_then(|i| tn.get(i)).map_or(0.0, |c| c.tangent);
+        // each leg's share: 1 where its turns fit in it
+        let share: Vec<f64> = legs
+            .iter()
+            .enumerate()
+            .map(|(j, l)| {
+                let need = tangent(j.checked_sub(1)) + tangent(Some(j));
+                if need > 0.0 {
+                    (l.len_h / need).min(1.0)
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        for (i, c) in tn.iter_mut().enumerate().filter(|(_, c)| c.len > 0.0) {
+            let fit = share[i].min(share[i + 1]) * (1.0 - 1e-9);
+            if fit < 1.0 {
+                c.len *= fit;
+                c.tangent *= fit;
+            }
+            let kappa = 2.0 * c.change.abs() / c.len;
+            c.speed = c.speed.min((a_lat / kappa).sqrt()).min(rate / kappa);
+        }
+    }
+    Ok(tn)
+}
+
+/// Each inner point's turn for the speeds of its legs.
+fn turns_for_speed(spec: &DriveSpec, legs: &[Leg]) -> Result<Vec<Corner>, ParamError> {
     let n = spec.waypoints.len();
     let rate = spec.turn_rate_dps.to_radians();
     let a_lat = spec.lateral_accel_mps2;
@@ -278,7 +321,11 @@ fn crests(spec: &DriveSpec, legs: &[Leg], laid: &mut Laid, notes: &mut RoadNotes
         }
         let v = legs[i].speed.max(legs[i + 1].speed);
         let mid = laid.at[i + 1];
-        let next_mid = laid.at.get(i + 2).copied().unwrap_or(laid.path.length);
+        // the next point where the grade changes (a point on one grade, to 0.02 %, is no limit)
+        let next = (i + 1..legs.len().saturating_sub(1))
+            .find(|&j| (legs[j + 1].gamma - legs[j].gamma).abs() >= 2e-4)
+            .unwrap_or(legs.len() - 1);
+        let next_mid = laid.at.get(next + 1).copied().unwrap_or(laid.path.length);
         let want = PI * dg.abs() * v * v / (2.0 * a_v);
         // room: up to the last curve's end before, half-way to the next point after
         let room = 2.0 * (mid - last_end).min(0.5 * (next_mid - mid));
@@ -389,7 +436,7 @@ pub const MAX_LEGS: usize = 10_000;
 
 /// Every number of a road's spec is finite, its heights are on the earth, and it is not so
 /// long that planning it would not end: refused with the field before anything is planned.
-fn sane(spec: &DriveSpec) -> Result<(), ParamError> {
+pub(in crate::road) fn sane(spec: &DriveSpec) -> Result<(), ParamError> {
     let finite = |xs: &mut dyn Iterator<Item = f64>| {
         let mut all = true;
         for x in xs {
@@ -503,7 +550,24 @@ impl Road {
         sane(spec)?;
         let pts = points(spec)?;
         let legs = legs(spec, &pts)?;
-        let tn = turns(spec, &legs)?;
+        Ok(Self::build(spec, &pts, legs, None)?.0)
+    }
+
+    /// Lay the road out along `legs` between the points `pts` (each's height third), plan its
+    /// speed, and place it on the ellipsoid from the spec's start. With `fit` (a fitted track's
+    /// corners, whose legs are as short as the track's: the tolerance, m) each turn passes
+    /// within the tolerance of its corner and is as sharp as the legs either side of it leave
+    /// room for, driven as slowly as that needs; without it a leg too short for its turns is
+    /// refused. Also returns each point's places along the road:
+    /// where its turn starts (where a stop there stands) and its middle (the ends for the first
+    /// and last point), m.
+    pub(in crate::road) fn build(
+        spec: &DriveSpec,
+        pts: &[[f64; 3]],
+        legs: Vec<Leg>,
+        fit: Option<f64>,
+    ) -> Result<(Self, Vec<[f64; 2]>), ParamError> {
+        let tn = turns(spec, &legs, fit)?;
         let mut legs = legs;
         let mut laid = lay(spec, &legs, &tn)?;
         // each leg's pitch climbs its height over the road between its waypoints (the middles
@@ -528,7 +592,7 @@ impl Road {
         notes.height_miss_m = laid
             .at
             .iter()
-            .zip(&pts)
+            .zip(pts)
             .map(|(&s, p)| (placed.llh(&laid.path, s)[2] - p[2]).abs())
             .fold(0.0, f64::max);
         for leg in &legs {
@@ -541,16 +605,21 @@ impl Road {
                 notes.steepest_grade_pct = leg.gamma.tan() * 100.0;
             }
         }
+        let mut reached: Vec<[f64; 2]> = laid.at.iter().map(|&s| [s, s]).collect();
+        for (r, span) in reached.iter_mut().skip(1).zip(&laid.turn_span) {
+            r[0] = span.0;
+        }
         let road = Road {
             placed,
             phases,
             pitch_per_accel: spec.pitch_per_accel_deg.unwrap_or(0.3).to_radians(),
             roll_per_lateral: spec.roll_per_lateral_accel_deg.unwrap_or(0.5).to_radians(),
             notes: RoadNotes::default(),
+            track: None,
             path: laid.path,
         };
         notes.length_m = road.path.length;
         notes.duration_s = road.duration();
-        Ok(Road { notes, ..road })
+        Ok((Road { notes, ..road }, reached))
     }
 }

@@ -21,6 +21,97 @@ pub(crate) enum Plan {
     /// curves); with --csv, its profile for a plot. Exit status 1 when the scenario ends before
     /// the drive does.
     Route(RouteArgs),
+    /// Check a recorded track (GPX 1.0/1.1, an NMEA log of GGA/RMC, or a CSV reference
+    /// trajectory) and show what the bench will drive from it: the points it dropped and why,
+    /// what it assumed, the stops it found, how far the road it drives is from the track's
+    /// points and times, and the route's summary; with --svg, a picture of the track against
+    /// the road. A track the bench cannot drive is refused with the file, the line or point,
+    /// and what is wrong (exit status 2).
+    Track(TrackArgs),
+}
+
+/// `hil plan track`'s arguments.
+#[derive(clap::Args)]
+pub(crate) struct TrackArgs {
+    /// The track file.
+    file: PathBuf,
+    /// A scenario whose [drive] limits (acceleration, braking, jerk, lateral acceleration,
+    /// turn rate, the body's pitch and roll, start_wait_s, track_jitter_m,
+    /// track_max_speed_mps) to drive the track with (default: a driver's: 2 m/s^2 of
+    /// acceleration, 3 of braking and lateral, 2 m/s^3 of jerk, 40 deg/s of turn rate).
+    #[arg(long)]
+    scenario: Option<PathBuf>,
+    /// Write a picture of the track against the road the bench drives (SVG).
+    #[arg(long)]
+    svg: Option<PathBuf>,
+    /// Also write the drive's profile (time, distance, latitude, longitude, height, speed,
+    /// heading, pitch, roll) to this CSV file.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+fn track_cmd(a: TrackArgs) -> Result<i32> {
+    use emulators::drive::{Drive, DriveSpec};
+    let (mut spec, run_s) = match &a.scenario {
+        Some(p) => {
+            let s = Scenario::load(p)?;
+            let d = s
+                .drive
+                .clone()
+                .with_context(|| format!("scenario {} has no [drive]", p.display()))?;
+            (d, Some(s.duration_s))
+        }
+        // a driver's limits, not the level route's gentle ones: a track is driven as it was
+        None => (
+            DriveSpec {
+                accel_mps2: 2.0,
+                brake_mps2: Some(3.0),
+                jerk_mps3: Some(2.0),
+                turn_rate_dps: 40.0,
+                lateral_accel_mps2: 3.0,
+                ..DriveSpec::default()
+            },
+            None,
+        ),
+    };
+    spec.track = Some(a.file.display().to_string());
+    let track = match emulators::road::track::read(&a.file) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Ok(2);
+        }
+    };
+    let d = match Drive::plan(&spec) {
+        Ok(d) => d,
+        Err(e) => {
+            eprintln!("error: {}", e.problem);
+            return Ok(2);
+        }
+    };
+    let name = a.file.display().to_string();
+    let r = hil::scenario::route::summary_of(&name, run_s.unwrap_or(d.duration()), &d);
+    if let Some(f) = &a.csv {
+        hil::scenario::route::csv_of(&d, 1.0, f)?;
+    }
+    if let (Some(f), Some(n)) = (&a.svg, &r.track) {
+        let pic = hil::scenario::trackview::svg(&track, &d, n, &name);
+        std::fs::write(f, pic).with_context(|| format!("cannot write {}", f.display()))?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        print!("{}", hil::scenario::route::text(&r));
+        for (what, f) in [("picture", &a.svg), ("profile", &a.csv)] {
+            if let Some(f) = f {
+                println!("  {what}: {}", f.display());
+            }
+        }
+    }
+    Ok(0)
 }
 
 /// `hil plan route`'s arguments.
@@ -39,6 +130,87 @@ pub(crate) struct RouteArgs {
     /// Print the summary as JSON.
     #[arg(long)]
     json: bool,
+    /// Also write the drive as a recorded track, as a logger would record it, to this file:
+    /// .gpx (GPX 1.1; --track-format gpx10 for 1.0), .nmea (GGA and RMC) or .csv (a reference
+    /// trajectory: exact, with attitude and velocity). The bench drives such a file with
+    /// `[drive] track`.
+    #[arg(long)]
+    track: Option<PathBuf>,
+    /// The track's format (default: from the file's extension).
+    #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(["gpx", "gpx10", "nmea", "csv"]))]
+    track_format: Option<String>,
+    /// The logger's step between points, s (a reference trajectory's: its step).
+    #[arg(long, default_value_t = 1.0, value_parser = hil::values::duration_s)]
+    track_step: f64,
+    /// The logger's spread of its step, +- s (uniform).
+    #[arg(long, default_value_t = 0.0, value_parser = hil::values::pause_s)]
+    track_step_spread: f64,
+    /// The logger's horizontal jitter, m (1 sigma, wandering with a 30 s time constant; its
+    /// heights jitter twice as much).
+    #[arg(long, default_value_t = 0.0, value_parser = jitter_m)]
+    track_jitter: f64,
+    /// The chance of a glitch (a point 450 m off) and of a point without elevation.
+    #[arg(long, default_value_t = 0.0, value_parser = probability)]
+    track_glitch: f64,
+    /// See --track-glitch.
+    #[arg(long, default_value_t = 0.0, value_parser = probability)]
+    track_no_elevation: f64,
+    /// The logger's seed.
+    #[arg(long, default_value_t = 1)]
+    track_seed: u64,
+}
+
+fn jitter_m(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..=100.0).contains(&v) => Ok(v),
+        _ => Err(format!("a jitter is from 0 to 100 m, got {s:?}")),
+    }
+}
+
+fn probability(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!("a chance is from 0 to 1, got {s:?}")),
+    }
+}
+
+/// The scenario's drive recorded as a track file.
+fn record_track(s: &Scenario, a: &RouteArgs, out: &std::path::Path) -> Result<()> {
+    use emulators::road::track::{Format, logger};
+    let spec = s.drive.as_ref().context("the scenario has no [drive]")?;
+    let d = emulators::drive::Drive::plan(spec)
+        .map_err(|e| anyhow::anyhow!("[{}] {}", e.table, e.problem))?;
+    let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("");
+    let fmt = a.track_format.as_deref().unwrap_or(ext);
+    let (format, v10) = match fmt {
+        "gpx" => (Format::Gpx, false),
+        "gpx10" => (Format::Gpx, true),
+        "nmea" | "nma" | "log" => (Format::Nmea, false),
+        "csv" => (Format::Csv, false),
+        _ => anyhow::bail!(
+            "--track {}: say the format with --track-format (gpx, gpx10, nmea, csv)",
+            out.display()
+        ),
+    };
+    // the scenario's UTC start, else 2026-05-01T08:00:00Z
+    let t0 = 1_777_622_400.0;
+    let points = if format == Format::Csv {
+        logger::reference(&d, a.track_step, t0)
+    } else {
+        let log = logger::Logger {
+            step_s: a.track_step,
+            step_spread_s: a.track_step_spread.min(0.9 * a.track_step),
+            standing_step_s: a.track_step.max(5.0),
+            jitter_m: a.track_jitter,
+            jitter_h_m: 2.0 * a.track_jitter,
+            no_elevation: a.track_no_elevation,
+            glitch: a.track_glitch,
+            seed: a.track_seed,
+        };
+        logger::record(&d, &log, t0)
+    };
+    std::fs::write(out, logger::write(&points, format, v10))
+        .with_context(|| format!("cannot write {}", out.display()))
 }
 
 fn route_cmd(a: RouteArgs) -> Result<i32> {
@@ -47,12 +219,18 @@ fn route_cmd(a: RouteArgs) -> Result<i32> {
     if let Some(f) = &a.csv {
         hil::scenario::route::csv(&s, a.csv_hz, f)?;
     }
+    if let Some(f) = &a.track {
+        record_track(&s, &a, f)?;
+    }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
         print!("{}", hil::scenario::route::text(&r));
         if let Some(f) = &a.csv {
             println!("  profile: {}", f.display());
+        }
+        if let Some(f) = &a.track {
+            println!("  track: {}", f.display());
         }
     }
     Ok(i32::from(r.duration_s > r.scenario_s))
@@ -139,6 +317,7 @@ pub(crate) fn plan_cmd(p: Plan) -> Result<i32> {
     let a = match p {
         Plan::NorthFinding(a) => a,
         Plan::Route(r) => return route_cmd(r),
+        Plan::Track(t) => return track_cmd(t),
     };
     let (mut s, source) = match (&a.scenario, &a.imu) {
         (Some(f), _) => (Scenario::load(f)?, format!("scenario {}", f.display())),

@@ -859,32 +859,37 @@ mod tests {
     }
 
     /// A hilly city road (grades to 12 %, three stops, slow corners, the body pitching and
-    /// rolling on its suspension, a 10 Hz receiver) navigated in process with the scenario's
-    /// filter: within its position tolerance, and its sigmas honest (mean NEES per degree of
-    /// freedom of position and velocity in [0.3, 3] over the drive).
+    /// rolling on its suspension, a 10 Hz receiver), and the same drive from a handheld
+    /// logger's GPX track of it (the road fitted to the track, glitches dropped), navigated in
+    /// process with the scenario's filter: within the position tolerance, and the sigmas
+    /// honest (mean NEES per degree of freedom of position and velocity in [0.3, 3] over the
+    /// drive).
     #[test]
     fn a_hilly_stop_and_go_road_is_navigated_with_honest_sigmas() {
-        let s = Scenario::load(std::path::Path::new(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../scenarios/route-lisbon-hills.toml"
-        )))
-        .unwrap();
-        let rx = s.gps.clone().unwrap();
-        let f = s.navigation.as_ref().map(|n| n.filter.clone());
-        let r = navigate(&s, f.as_ref(), &rx, 0.05).unwrap();
-        eprintln!(
-            "lisbon hills: rms {:.2} m, end {:.2} m, NEES per dof {:?}",
-            r.rms_position_error_m, r.end_position_error_m, r.mean_nees_per_dof
-        );
-        assert!(
-            r.rms_position_error_m < 25.0 && r.end_position_error_m < 25.0,
-            "{r:?}"
-        );
-        let [p, v] = r.mean_nees_per_dof.unwrap();
-        assert!(
-            (0.3..3.0).contains(&p) && (0.3..3.0).contains(&v),
-            "{p} {v}"
-        );
+        for file in ["route-lisbon-hills.toml", "track-lisbon-handheld.toml"] {
+            let s = Scenario::load(
+                &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                    .join("../scenarios")
+                    .join(file),
+            )
+            .unwrap();
+            let rx = s.gps.clone().unwrap();
+            let f = s.navigation.as_ref().map(|n| n.filter.clone());
+            let r = navigate(&s, f.as_ref(), &rx, 0.05).unwrap();
+            eprintln!(
+                "{file}: rms {:.2} m, end {:.2} m, NEES per dof {:?}",
+                r.rms_position_error_m, r.end_position_error_m, r.mean_nees_per_dof
+            );
+            assert!(
+                r.rms_position_error_m < 25.0 && r.end_position_error_m < 25.0,
+                "{file}: {r:?}"
+            );
+            let [p, v] = r.mean_nees_per_dof.unwrap();
+            assert!(
+                (0.3..3.0).contains(&p) && (0.3..3.0).contains(&v),
+                "{file}: {p} {v}"
+            );
+        }
     }
 
     #[test]

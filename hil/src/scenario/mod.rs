@@ -4,6 +4,7 @@ pub mod busload;
 pub mod fogunit;
 pub mod navconfig;
 pub mod route;
+pub mod trackview;
 
 use anyhow::{Context, Result, bail};
 use emulators::bus::transport::BusFaults;
@@ -228,14 +229,33 @@ impl Scenario {
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read scenario {}", path.display()))?;
-        Self::from_text(&text).with_context(|| format!("scenario {}", path.display()))
+        Self::from_text_at(&text, path.parent())
+            .with_context(|| format!("scenario {}", path.display()))
+    }
+
+    /// Parse and check a scenario's text; a `[drive] track` file is found relative to `dir`
+    /// (the scenario's folder), and kept as an absolute path so that the scenario written into
+    /// a run's folder finds it too.
+    pub fn from_text_at(text: &str, dir: Option<&Path>) -> Result<Self> {
+        let mut s: Scenario = toml::from_str(text)?;
+        if let Some(d) = s.drive.as_mut()
+            && let Some(t) = d.track.as_mut()
+        {
+            let p = Path::new(t.as_str());
+            let full = match dir {
+                Some(dir) if p.is_relative() => dir.join(p),
+                _ => p.to_path_buf(),
+            };
+            let full = std::path::absolute(&full).unwrap_or(full);
+            *t = full.display().to_string();
+        }
+        s.check()?;
+        Ok(s)
     }
 
     /// Parse and check a scenario's text.
     pub fn from_text(text: &str) -> Result<Self> {
-        let s: Scenario = toml::from_str(text)?;
-        s.check()?;
-        Ok(s)
+        Self::from_text_at(text, None)
     }
 
     /// The bus model's physical faults make sense: windows in order and in the run, a
@@ -475,10 +495,13 @@ impl Scenario {
         TILT.field("site.pitch_deg", site.pitch_deg)?;
         TILT.field("site.roll_deg", site.roll_deg)?;
         if let Some(d) = &self.drive {
-            LATITUDE.field("drive.lat_deg", d.lat_deg)?;
-            LONGITUDE.field("drive.lon_deg", d.lon_deg)?;
+            // a track's start and speeds are its own
+            if d.track.is_none() {
+                LATITUDE.field("drive.lat_deg", d.lat_deg)?;
+                LONGITUDE.field("drive.lon_deg", d.lon_deg)?;
+                VEHICLE_SPEED.field("drive.speed_mps", d.speed_mps)?;
+            }
             HEIGHT.field("drive.height_m", d.height_m)?;
-            VEHICLE_SPEED.field("drive.speed_mps", d.speed_mps)?;
             VEHICLE_ACCEL.field("drive.accel_mps2", d.accel_mps2)?;
             RATE.field("drive.turn_rate_dps", d.turn_rate_dps)?;
             VEHICLE_ACCEL.field("drive.lateral_accel_mps2", d.lateral_accel_mps2)?;

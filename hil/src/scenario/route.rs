@@ -38,6 +38,8 @@ pub struct RouteSummary {
     pub standing: Vec<[f64; 2]>,
     /// What a road's plan had to do and assume.
     pub notes: Option<emulators::road::RoadNotes>,
+    /// What was done with the recorded track the road was fitted to, when it was.
+    pub track: Option<emulators::road::track::TrackNotes>,
 }
 
 /// The route of scenario `s`, sampled at 10 Hz.
@@ -46,14 +48,19 @@ pub fn summary(s: &Scenario) -> Result<RouteSummary> {
         bail!("scenario {} has no [drive]", s.name)
     };
     let d = Drive::plan(spec).map_err(|e| anyhow::anyhow!("[{}] {}", e.table, e.problem))?;
+    Ok(summary_of(&s.name, s.duration_s, &d))
+}
+
+/// The route `d` (called `name`, in a run of `run_s`), sampled at 10 Hz.
+pub fn summary_of(name: &str, run_s: f64, d: &Drive) -> RouteSummary {
     let end = d.duration();
     let n = (end * 10.0).ceil() as usize + 1;
     let mut r = RouteSummary {
-        scenario: s.name.clone(),
+        scenario: name.to_string(),
         kind: if d.road().is_some() { "road" } else { "level" },
         length_m: 0.0,
         duration_s: end,
-        scenario_s: s.duration_s,
+        scenario_s: run_s,
         height_m: [d.position(0.0).2, f64::INFINITY, f64::NEG_INFINITY],
         top_speed_mps: 0.0,
         accel_mps2: [0.0; 2],
@@ -62,6 +69,7 @@ pub fn summary(s: &Scenario) -> Result<RouteSummary> {
         roll_deg: [f64::INFINITY, f64::NEG_INFINITY],
         standing: Vec::new(),
         notes: d.road().map(|r| r.notes().clone()),
+        track: d.road().and_then(|r| r.track_notes().cloned()),
     };
     let mut still_from: Option<f64> = None;
     for k in 0..n {
@@ -97,7 +105,7 @@ pub fn summary(s: &Scenario) -> Result<RouteSummary> {
     if let Some(road) = d.road() {
         r.length_m = road.length();
     }
-    Ok(r)
+    r
 }
 
 /// The summary for people.
@@ -157,7 +165,37 @@ pub fn text(r: &RouteSummary) -> String {
             );
         }
     }
+    if let Some(t) = &r.track {
+        track_text(&mut o, t);
+    }
     o
+}
+
+/// What was done with a recorded track, for people.
+fn track_text(o: &mut String, t: &emulators::road::track::TrackNotes) {
+    let _ = writeln!(
+        o,
+        "  from a track of {} points ({} used): {} corners, {} stops; jitter {:.1} m",
+        t.points_read,
+        t.points_used,
+        t.corners,
+        t.stops.len(),
+        t.jitter_m
+    );
+    let _ = writeln!(
+        o,
+        "  the road driven is {:.1} m (RMS) from the track's points, {:.1} m at worst ({}); it passes the corners {:.1} s (RMS) from the track's times, {:.1} s at worst",
+        t.distance_rms_m, t.distance_max_m, t.distance_max_at, t.time_rms_s, t.time_max_s
+    );
+    for (at, secs) in &t.stops {
+        let _ = writeln!(o, "  stop: {secs:.0} s at {at}");
+    }
+    for d in &t.dropped {
+        let _ = writeln!(o, "  dropped: {d}");
+    }
+    for a in &t.assumed {
+        let _ = writeln!(o, "  assumed: {a}");
+    }
 }
 
 /// The route's profile at `hz`: time, distance, latitude, longitude, height, speed, heading,
@@ -165,6 +203,11 @@ pub fn text(r: &RouteSummary) -> String {
 pub fn csv(s: &Scenario, hz: f64, out: &std::path::Path) -> Result<()> {
     let spec = s.drive.as_ref().context("the scenario has no [drive]")?;
     let d = Drive::plan(spec).map_err(|e| anyhow::anyhow!("[{}] {}", e.table, e.problem))?;
+    csv_of(&d, hz, out)
+}
+
+/// The profile of the drive `d` at `hz`, as [`csv`].
+pub fn csv_of(d: &Drive, hz: f64, out: &std::path::Path) -> Result<()> {
     let mut o =
         String::from("t_s,dist_m,lat_deg,lon_deg,h_m,speed_mps,heading_deg,pitch_deg,roll_deg\n");
     let n = (d.duration() * hz).ceil() as usize + 1;

@@ -1,0 +1,316 @@
+//! Tracks read, fitted and driven; every class of bad track refused with its reason.
+
+use super::logger::{Logger, record, reference, write};
+use super::*;
+use crate::drive::{Drive, DriveSpec};
+use crate::geodesy as earth;
+use crate::road::Road;
+
+/// 2026-05-01T08:00:00Z.
+const T0: f64 = 1_777_622_400.0;
+
+fn hilly_drive() -> Drive {
+    Drive::plan(&crate::road::tests::hilly()).unwrap_or_else(|e| panic!("{}", e.problem))
+}
+
+/// A handheld logger's track of the hilly drive: 1 s +- 0.4 s, 3 m of wandering jitter,
+/// 6 m in height, some elevations missing and glitches.
+fn logged(seed: u64) -> Vec<TrackPoint> {
+    let log = Logger {
+        step_s: 1.0,
+        step_spread_s: 0.4,
+        standing_step_s: 5.0,
+        jitter_m: 3.0,
+        jitter_h_m: 6.0,
+        no_elevation: 0.02,
+        glitch: 0.004,
+        seed,
+    };
+    record(&hilly_drive(), &log, T0)
+}
+
+fn drive_of(text: &str, name: &str) -> Road {
+    let track = parse(text, name).unwrap_or_else(|e| panic!("{e}"));
+    // a driver's limits (the track's corners are sharper than the road's own: see
+    // `hil plan track`)
+    let spec = DriveSpec {
+        start_wait_s: 5.0,
+        accel_mps2: 2.0,
+        brake_mps2: Some(3.0),
+        jerk_mps3: Some(2.0),
+        turn_rate_dps: 40.0,
+        lateral_accel_mps2: 3.0,
+        ..DriveSpec::default()
+    };
+    Road::from_track(&spec, &track).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The horizontal distance of the truth's path (every second) from the road driven, m: RMS
+/// and worst.
+fn from_truth(truth: &Drive, road: &Road) -> (f64, f64) {
+    let samples: Vec<[f64; 3]> = (0..=(road.length() / 2.0) as usize)
+        .map(|k| road.placed.llh(&road.path, k as f64 * 2.0))
+        .collect();
+    let (mut sum, mut worst, mut n) = (0.0, 0.0f64, 0);
+    let mut t = 0.0;
+    while t < truth.duration() {
+        let (lat, lon, _) = truth.position(t);
+        let d = samples
+            .iter()
+            .map(|s| {
+                let e = earth::enu_offset((lat, lon, 0.0), (s[0], s[1], 0.0));
+                e[0].hypot(e[1])
+            })
+            .fold(f64::INFINITY, f64::min);
+        sum += d * d;
+        worst = worst.max(d);
+        n += 1;
+        t += 5.0;
+    }
+    ((sum / n as f64).sqrt(), worst)
+}
+
+/// A logger's track of a known drive, written as GPX, read back and driven: the road the
+/// bench drives lies within a few metres of the road the track was logged on (the jitter is 3
+/// m), the glitches are dropped and said, the stops found, and each corner is reached within
+/// seconds of when the track was.
+#[test]
+fn a_logged_track_is_driven_on_the_road_it_was_logged_on() {
+    let pts = logged(7);
+    let glitches = 3;
+    let text = write(&pts, Format::Gpx, false);
+    let road = drive_of(&text, "hilly.gpx");
+    let n = road.track_notes().expect("a track's notes");
+    let (rms, worst) = from_truth(&hilly_drive(), &road);
+    assert!(rms < 3.0 && worst < 12.0, "{rms} {worst} {n:#?}");
+    assert!(
+        n.distance_rms_m < 6.0 && n.distance_rms_m > 0.3,
+        "the points scatter about the road by their jitter: {n:#?}"
+    );
+    let said = n.dropped.iter().filter(|d| d.contains("glitch")).count();
+    assert!(said >= glitches.min(1), "{n:#?}");
+    assert!(n.stops.len() >= 2, "the two stops of 20 s and 5 s: {n:#?}");
+    assert!(n.time_rms_s < 3.0 && n.time_max_s < 8.0, "{n:#?}");
+    // the drive lasts as long as the track, after the scenario's 5 s of standing
+    let span = pts[pts.len() - 1].t - pts[0].t;
+    assert!(
+        (road.duration() - 5.0 - span).abs() < 5.0,
+        "{} against {span}",
+        road.duration()
+    );
+    // the logger's error wanders (30 s): over the few seconds the jitter is estimated on, it
+    // moves less than its 3 m
+    assert!(n.jitter_m > 0.1 && n.jitter_m < 3.0, "{n:#?}");
+}
+
+/// The same track in the three formats reads as the same points (to the formats' rounding),
+/// and GPX 1.0 as 1.1.
+#[test]
+fn the_three_formats_read_the_same_points() {
+    let exact = reference(&hilly_drive(), 1.0, T0);
+    for (fmt, v10, tol_m, tol_h) in [
+        (Format::Gpx, false, 0.01, 0.02),
+        (Format::Gpx, true, 0.01, 0.02),
+        (Format::Nmea, false, 0.2, 0.1),
+        (Format::Csv, false, 0.001, 0.002),
+    ] {
+        let back = parse(&write(&exact, fmt, v10), "x").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(back.format, fmt);
+        assert_eq!(back.points.len(), exact.len(), "{fmt:?}");
+        for (a, b) in exact.iter().zip(&back.points) {
+            let rm = earth::radii(a.lat_deg.to_radians()).0;
+            assert!((a.t - b.t).abs() < 2e-3, "{fmt:?} {} {}", a.t, b.t);
+            assert!(
+                (a.lat_deg - b.lat_deg).to_radians().abs() * rm < tol_m
+                    && (a.lon_deg - b.lon_deg).to_radians().abs() * rm < tol_m,
+                "{fmt:?} {a:?} {b:?}"
+            );
+            let (ha, hb) = (a.h_m.unwrap_or(0.0), b.h_m.unwrap_or(f64::NAN));
+            assert!((ha - hb).abs() < tol_h, "{fmt:?} {ha} {hb}");
+        }
+    }
+}
+
+/// A reference trajectory as CSV (every 0.5 s, with attitude and velocity) is driven within
+/// centimetres... of its own path: no jitter to average, and the corners where its lines meet.
+#[test]
+fn a_reference_trajectory_is_driven_where_it_went() {
+    let exact = reference(&hilly_drive(), 0.5, T0);
+    let road = drive_of(&write(&exact, Format::Csv, false), "ref.csv");
+    let n = road.track_notes().expect("notes");
+    let (rms, worst) = from_truth(&hilly_drive(), &road);
+    assert!(rms < 1.0 && worst < 4.0, "{rms} {worst} {n:#?}");
+    assert!(n.dropped.is_empty(), "{n:#?}");
+}
+
+fn refused(text: &str, name: &str, at: &str, what: &str) {
+    let e = parse(text, name)
+        .and_then(|t| {
+            Road::from_track(
+                &DriveSpec {
+                    start_wait_s: 1.0,
+                    ..DriveSpec::default()
+                },
+                &t,
+            )
+        })
+        .map(|_| ())
+        .expect_err(what);
+    let msg = e.to_string();
+    assert!(
+        msg.contains(name) && e.at.contains(at) && e.what.contains(what),
+        "{msg}: wanted {at:?} and {what:?}"
+    );
+}
+
+const GPX_HEAD: &str = "<?xml version=\"1.0\"?>\n<gpx version=\"1.1\" xmlns=\"http://www.topografix.com/GPX/1/1\"><trk><trkseg>\n";
+
+fn gpx_of(pts: &[(f64, f64, Option<&str>)]) -> String {
+    let mut s = GPX_HEAD.to_string();
+    for (lat, lon, t) in pts {
+        s.push_str(&format!("<trkpt lat=\"{lat}\" lon=\"{lon}\">"));
+        if let Some(t) = t {
+            s.push_str(&format!("<time>{t}</time>"));
+        }
+        s.push_str("</trkpt>\n");
+    }
+    s + "</trkseg></trk></gpx>\n"
+}
+
+/// Every class of track the bench cannot drive is refused with the file, the place and why.
+#[test]
+fn every_bad_track_is_refused_with_its_reason() {
+    // no times
+    refused(
+        &gpx_of(&[(46.0, 7.0, None), (46.001, 7.0, None)]),
+        "a.gpx",
+        "trkpt 1 (line 3)",
+        "no <time>",
+    );
+    // time going back
+    refused(
+        &gpx_of(&[
+            (46.0, 7.0, Some("2026-05-01T08:00:00Z")),
+            (46.001, 7.0, Some("2026-05-01T08:00:10Z")),
+            (46.002, 7.0, Some("2026-05-01T08:00:05Z")),
+        ]),
+        "b.gpx",
+        "point 3 (line 5)",
+        "time goes back 5.000 s",
+    );
+    // too few points
+    refused(
+        &gpx_of(&[(46.0, 7.0, Some("2026-05-01T08:00:00Z"))]),
+        "c.gpx",
+        "the whole file",
+        "too few to drive",
+    );
+    // a jump no vehicle makes (and stays there: not a glitch)
+    let mut pts = Vec::new();
+    for k in 0..10 {
+        let lat = if k < 5 { 46.0 } else { 46.1 } + k as f64 * 1e-4;
+        pts.push((lat, 7.0, Some(format!("2026-05-01T08:00:{:02}Z", k * 2))));
+    }
+    let pts: Vec<(f64, f64, Option<&str>)> =
+        pts.iter().map(|(a, b, c)| (*a, *b, c.as_deref())).collect();
+    refused(&gpx_of(&pts), "d.gpx", "point 6", "a jump no vehicle makes");
+    // not XML
+    refused(
+        "<?xml version=\"1.0\"?><gpx><trk>",
+        "e.gpx",
+        "line 1",
+        "not well-formed XML",
+    );
+    // a route, not a track
+    refused(
+        &format!("{GPX_HEAD}</trkseg></trk><rte><rtept lat=\"1\" lon=\"2\"/></rte></gpx>"),
+        "f.gpx",
+        "the whole file",
+        "a route or waypoints",
+    );
+    // off the earth
+    refused(
+        &gpx_of(&[(96.0, 7.0, Some("2026-05-01T08:00:00Z"))]),
+        "g.gpx",
+        "trkpt 1",
+        "not a place on the earth",
+    );
+    // CSV without the columns a track needs, and with a bad number
+    refused("a,b,c\n1,2,3\n", "h.csv", "header", "time, lat and lon");
+    refused(
+        "time,lat,lon\n0,46.0,7.0\n1,46.0x,7.0\n",
+        "i.csv",
+        "line 3",
+        "lat \"46.0x\" is not a number",
+    );
+    // NMEA whose every sentence fails its checksum
+    let bad = "$GPGGA,080000.00,4600.0000,N,00700.0000,E,1,08,0.9,500.0,M,48.0,M,,*00\r\n";
+    refused(
+        &bad.repeat(3),
+        "j.nmea",
+        "the whole file",
+        "no usable point",
+    );
+    // a time that is not a time
+    refused(
+        &gpx_of(&[(46.0, 7.0, Some("yesterday"))]),
+        "k.gpx",
+        "trkpt 1",
+        "not ISO 8601",
+    );
+}
+
+/// An NMEA log without RMC (GGA only: no date) counts its times from its first midnight and
+/// rolls over at the next; sentences with a bad checksum or no fix are skipped and said.
+#[test]
+fn an_nmea_log_without_dates_rolls_over_midnight_and_says_what_it_skipped() {
+    let exact = reference(&hilly_drive(), 1.0, T0 + 16.0 * 3600.0 - 60.0);
+    let text = write(&exact[..180], Format::Nmea, false);
+    let mut lines: Vec<String> = text
+        .lines()
+        .filter(|l| l.starts_with("$GPGGA"))
+        .map(String::from)
+        .collect();
+    lines[10] = lines[10].replace('*', "1*"); // a corrupt sentence
+    lines.insert(20, "$GPGGA,235930.000,,,,,0,00,,,M,,M,,*43".to_string());
+    let t = parse(&lines.join("\r\n"), "gga.nmea").unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(t.points.len(), 179, "{:?}", t.skipped);
+    assert_eq!(t.skipped.len(), 2, "{:?}", t.skipped);
+    assert!(
+        t.skipped.iter().any(|s| s.starts_with("line 11")),
+        "{:?}",
+        t.skipped
+    );
+    // steps of one second through midnight (16:00 UTC + 8 h: the log's first midnight is 0)
+    for w in t.points.windows(2) {
+        let dt = w[1].t - w[0].t;
+        assert!(dt > 0.9 && dt < 2.1, "{dt} at {}", w[1].line);
+    }
+}
+
+/// A track across the date line and one at 70 N are driven where they went: the legs are laid
+/// on the ellipsoid, so a long straight of constant heading stays on its line.
+#[test]
+fn tracks_across_the_date_line_and_far_north_stay_on_their_line() {
+    for (lat, lon) in [(-16.8f64, 179.995f64), (70.2, 25.0)] {
+        let mut s = String::from("time,lat,lon,height\n");
+        // 40 km north-east on a line of constant heading (tan(psi) = dlon / dq, q the
+        // isometric latitude), 25 m/s, a point every 10 s
+        let e = (1.0 - (earth::B / earth::A).powi(2)).sqrt();
+        let q = |p: f64| p.sin().atanh() - e * (e * p.sin()).atanh();
+        let rm = earth::radii(lat.to_radians()).0;
+        for k in 0..=160 {
+            let la = lat + (k as f64 * 250.0 * 0.6 / rm).to_degrees();
+            let dq = q(la.to_radians()) - q(f64::to_radians(lat));
+            let lo = lon + (dq * 0.8 / 0.6).to_degrees();
+            let lo = (lo + 180.0).rem_euclid(360.0) - 180.0;
+            s.push_str(&format!("{},{la:.9},{lo:.9},100\n", k * 10));
+        }
+        let road = drive_of(&s, "line.csv");
+        let n = road.track_notes().expect("notes");
+        assert!(
+            n.distance_max_m < 1.0 && n.corners < 40,
+            "{lat} {lon}: {n:#?}"
+        );
+    }
+}
