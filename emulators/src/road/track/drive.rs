@@ -101,17 +101,15 @@ impl Road {
         let v = merged(vertices);
         let wrong = |e: ParamError| {
             let mut what = e.problem;
-            if what.contains("waypoint") {
-                let list: Vec<String> = v
-                    .iter()
-                    .enumerate()
-                    .skip(1)
-                    .map(|(k, x)| format!("{k} at {}", x.at))
-                    .collect();
-                what += &format!(
-                    " (the fit's corners are its waypoints: {})",
-                    list.join(", ")
-                );
+            // the corner a waypoint's message names, by where it is in the track
+            if let Some(k) = what
+                .split("waypoint ")
+                .nth(1)
+                .and_then(|r| r.split(|c: char| !c.is_ascii_digit()).next())
+                .and_then(|d| d.parse::<usize>().ok())
+                .and_then(|k| v.get(k))
+            {
+                what += &format!(" (waypoint: the corner fitted at {})", k.at);
             }
             TrackError::new(&track.file, "the road fitted to it", what)
         };
@@ -126,6 +124,28 @@ impl Road {
         sane(&spec2).map_err(wrong)?;
         let pts = points(&spec2).map_err(wrong)?;
         let legs0 = geodetic_legs(&v);
+        if let Some(k) = legs0.iter().position(|l| l.dh.abs() > 0.35 * l.len_h) {
+            return Err(TrackError::new(
+                &track.file,
+                format!("from {} to {}", v[k].at, v[k + 1].at),
+                format!(
+                    "the road fitted to it climbs {:.0} m in {:.0} m: no road is steeper than 35 %",
+                    legs0[k].dh, legs0[k].len_h
+                ),
+            ));
+        }
+        let length: f64 = legs0.iter().map(|l| l.len_h).sum();
+        if !(length.is_finite() && length <= crate::road::plan::MAX_LENGTH_M) {
+            return Err(TrackError::new(
+                &track.file,
+                "the whole file",
+                format!(
+                    "{:.0} km of road: the bench drives at most {:.0} km",
+                    length / 1e3,
+                    crate::road::plan::MAX_LENGTH_M / 1e3
+                ),
+            ));
+        }
         let want: Vec<f64> = v.windows(2).map(|w| w[1].t_in - w[0].t_out).collect();
         let mut speeds = first_speeds(&legs0, &want, opt.max_speed_mps);
         // the plan's time is the track's plus the scenario's wait before it
@@ -289,7 +309,7 @@ fn finish_notes(spec: &DriveSpec, road: &mut Road, notes: &mut TrackNotes, offse
     }
     if notes.time_max_s > 10.0 {
         notes.assumed.push(format!(
-            "the drive passes a corner {:.0} s from when the track did: the [drive] limits (acceleration {} m/s^2, braking {}, jerk {} m/s^3, lateral {} m/s^2, turn rate {} deg/s) are gentler than the track was driven",
+            "the drive passes a corner {:.0} s from when the track did: where the track's points are far apart its corners are sharper than the road's, or the [drive] limits (acceleration {} m/s^2, braking {}, jerk {} m/s^3, lateral {} m/s^2, turn rate {} deg/s) are gentler than the track was driven",
             notes.time_max_s,
             spec.accel_mps2,
             spec.brake_mps2.unwrap_or(spec.accel_mps2),

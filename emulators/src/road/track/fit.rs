@@ -7,8 +7,8 @@
 //!    swerve between them (the jitter allowance plus half of 8 m/s^2 over the two intervals) is
 //!    dropped, the worst first; then a step between two kept points faster than the top speed
 //!    (with the jitter allowance) is a jump no vehicle makes, and refused.
-//! 3. **Stops**: points that stay within a few jitters of where they began for 3 s or more are
-//!    one stop, at their mean, for as long as they stayed.
+//! 3. **Stops**: points that stay within 8 m (or three jitters) of their mean for 3 s or more
+//!    are one stop, at their median, for as long as they stayed.
 //! 4. **Corners**: the path between stops is simplified (Douglas-Peucker) to a tolerance of
 //!    three jitters, the jitter estimated from the points' scatter about the simplified path
 //!    where the scenario does not give it; each corner is then moved to where the straight
@@ -21,7 +21,8 @@
 //! 6. **Times**: each corner is passed when the track's point there was, each stop kept as
 //!    long as the track stood; the planner sets each leg's speed from them.
 //!
-//! Gaps of more than a minute between points are bridged by a straight leg, and said.
+//! Gaps of more than a minute between points are bridged by a straight leg, and said; a step
+//! of more than 5 km is a hole in the track, refused.
 
 use super::{Track, TrackError, TrackNotes, TrackPoint};
 use crate::geodesy as earth;
@@ -75,17 +76,24 @@ pub struct Fitted {
 /// A glitch's allowance for jitter, m, and the sharpest swerve a vehicle makes, m/s^2.
 const GLITCH_SLACK_M: f64 = 15.0;
 const SWERVE_MPS2: f64 = 8.0;
-/// A stop: within this many jitters (at least 4 m) of where it began, for at least this long.
+/// A stop: within this many jitters (at least [`STOP_RADIUS_M`]) of where it stands, for at
+/// least this long.
 const STOP_JITTERS: f64 = 3.0;
+const STOP_RADIUS_M: f64 = 8.0;
 const STOP_MIN_S: f64 = 3.0;
-/// A gap said, s.
+/// A gap said, s; the longest step bridged by a straight leg, m.
 const GAP_S: f64 = 60.0;
+const BRIDGE_M: f64 = 5_000.0;
 /// Heights are fitted over this much road either side of a corner, m.
 const HEIGHT_WINDOW_M: f64 = 100.0;
+/// A point's height this far from the median of its neighbours' is a glitch, m.
+const HEIGHT_GLITCH_M: f64 = 50.0;
 /// The fitted heights are simplified to at least this, m.
 const GRADE_TOLERANCE_M: f64 = 0.5;
 /// A turn back by more than this is driven as two quarter turns this far apart, rad and m.
 const U_TURN_RAD: f64 = 2.6;
+/// A turn back by more than this over legs shorter than two tolerances is a zigzag, rad.
+const ZIGZAG_RAD: f64 = 2.0;
 const U_TURN_WIDTH_M: f64 = 10.0;
 
 fn rad(p: &TrackPoint) -> (f64, f64, f64) {
@@ -122,8 +130,30 @@ pub fn fit(track: &Track, opt: &FitOptions) -> Result<Fitted, TrackError> {
             ),
         ));
     }
+    if let Some(p) = pts.iter().find(|p| p.lat_deg.abs() > 89.0) {
+        return Err(TrackError::new(
+            &track.file,
+            p.at(),
+            format!(
+                "latitude {}: a road is driven within 89 deg of the equator",
+                p.lat_deg
+            ),
+        ));
+    }
     for w in pts.windows(2) {
         let dt = w[1].t - w[0].t;
+        let d = dist(&w[0], &w[1]);
+        if d > BRIDGE_M {
+            return Err(TrackError::new(
+                &track.file,
+                w[1].at(),
+                format!(
+                    "{:.1} km from {} with nothing between ({dt:.0} s): a hole in the track no straight leg stands in for; cut the track there",
+                    d / 1e3,
+                    w[0].at()
+                ),
+            ));
+        }
         if dt > GAP_S {
             notes.assumed.push(format!(
                 "a gap of {dt:.0} s between {} and {}: bridged by a straight leg",
@@ -141,9 +171,10 @@ pub fn fit(track: &Track, opt: &FitOptions) -> Result<Fitted, TrackError> {
     }
     .clamp(0.3, 30.0);
     notes.jitter_m = jitter;
-    let runs = stops(&pts, (STOP_JITTERS * jitter).max(4.0));
+    let runs = stops(&pts, (STOP_JITTERS * jitter).max(STOP_RADIUS_M));
     let (stops_at, corners) = simplify_all(&pts, &runs, simplify_tolerance(jitter));
     let mut vertices = place(&pts, &runs, &stops_at, &corners);
+    zigzags(&mut vertices, simplify_tolerance(jitter));
     u_turns(&mut vertices);
     heights(&pts, &mut vertices, opt, &mut notes);
     notes.points_used = pts.len();
@@ -271,9 +302,13 @@ fn stops(pts: &[TrackPoint], radius: f64) -> Vec<Run> {
     let mut out = Vec::new();
     let mut i = 0;
     while i < pts.len() {
+        // a stop goes on while the next point is within the radius of its points' mean (a
+        // standing receiver's error wanders about where it stands)
         let mut j = i;
-        while j + 1 < pts.len() && dist(&pts[i], &pts[j + 1]) <= radius {
+        let mut sum = ecef(&pts[i]);
+        while j + 1 < pts.len() && (ecef(&pts[j + 1]) - sum / (j + 1 - i) as f64).norm() <= radius {
             j += 1;
+            sum += ecef(&pts[j]);
         }
         if j > i && pts[j].t - pts[i].t >= STOP_MIN_S {
             out.push(Run {
@@ -481,7 +516,7 @@ fn line(p: &[Vector2<f64>]) -> Option<(Vector2<f64>, Vector2<f64>)> {
     Some((c, Vector2::new(theta.cos(), theta.sin())))
 }
 
-/// The corners on the ellipsoid: a stop at its points' mean, a moving corner where the lines
+/// The corners on the ellipsoid: a stop at its points' median, a moving corner where the lines
 /// of its two legs meet (when they meet near it).
 fn place(pts: &[TrackPoint], runs: &[Run], _stops: &[usize], corners: &[Corner]) -> Vec<Vertex> {
     let mut out = Vec::with_capacity(corners.len());
@@ -492,8 +527,18 @@ fn place(pts: &[TrackPoint], runs: &[Run], _stops: &[usize], corners: &[Corner])
             Some(r) => {
                 let run = &runs[r];
                 let l = local(at, &pts[run.first..=run.last]);
-                let mean = l.iter().sum::<Vector2<f64>>() / l.len() as f64;
-                (mean, pts[run.first].t, pts[run.last].t)
+                // where it stands: the median (the points of the last metres of its approach
+                // and of its pulling away are few)
+                let median = |axis: usize| {
+                    let mut x: Vec<f64> = l.iter().map(|q| q[axis]).collect();
+                    x.sort_by(f64::total_cmp);
+                    x[x.len() / 2]
+                };
+                (
+                    Vector2::new(median(0), median(1)),
+                    pts[run.first].t,
+                    pts[run.last].t,
+                )
             }
             None => {
                 let moved = match (k.checked_sub(1).map(|j| corners[j]), corners.get(k + 1)) {
@@ -533,6 +578,28 @@ fn meet(
     let s = (w.x * d2.y - w.y * d2.x) / cross;
     let x = l1 + d1 * s;
     (x.norm() < 20.0).then_some(x)
+}
+
+/// A corner where the path turns back on itself over less than a few tolerances is the
+/// receiver's error zigzagging while the vehicle creeps, not the road: dropped.
+fn zigzags(v: &mut Vec<Vertex>, tol: f64) {
+    let mut k = 1;
+    while k + 1 < v.len() {
+        let at = (v[k].llh[0], v[k].llh[1], 0.0);
+        let off = |x: &Vertex| {
+            let e = earth::enu_offset(at, (x.llh[0], x.llh[1], 0.0));
+            Vector2::new(e[0], e[1])
+        };
+        let (a, b) = (-off(&v[k - 1]), off(&v[k + 1]));
+        let change = (a.x * b.y - a.y * b.x).atan2(a.dot(&b));
+        let stop = v[k].t_out > v[k].t_in;
+        if !stop && change.abs() > ZIGZAG_RAD && a.norm().min(b.norm()) < 2.0 * tol {
+            v.remove(k);
+            k = k.saturating_sub(1).max(1);
+        } else {
+            k += 1;
+        }
+    }
 }
 
 /// A corner where the road turns back on itself is driven as two quarter turns, the second
@@ -581,6 +648,32 @@ fn heights(pts: &[TrackPoint], v: &mut [Vertex], opt: &FitOptions, notes: &mut T
         }
         return;
     }
+    // a height far from the heights about it is a glitch of the height alone
+    let mut hs_all: Vec<Option<f64>> = pts.iter().map(|p| p.h_m).collect();
+    let mut glitched = Vec::new();
+    for i in 0..pts.len() {
+        let Some(h) = hs_all[i] else { continue };
+        let mut near: Vec<f64> = (i.saturating_sub(5)..(i + 6).min(pts.len()))
+            .filter(|&j| j != i)
+            .filter_map(|j| pts[j].h_m)
+            .collect();
+        if near.len() < 4 {
+            continue;
+        }
+        near.sort_by(f64::total_cmp);
+        let median = near[near.len() / 2];
+        if (h - median).abs() > HEIGHT_GLITCH_M {
+            glitched.push(format!("{} ({:+.0} m)", pts[i].at(), h - median));
+            hs_all[i] = None;
+        }
+    }
+    if !glitched.is_empty() {
+        notes.dropped.push(format!(
+            "the heights of {} point(s), off the heights about them by more than {HEIGHT_GLITCH_M} m: {}",
+            glitched.len(),
+            glitched.join(", ")
+        ));
+    }
     if missing > 0 {
         notes.assumed.push(format!(
             "{missing} point(s) without a height: the road's height there is fitted from the others"
@@ -596,8 +689,9 @@ fn heights(pts: &[TrackPoint], v: &mut [Vertex], opt: &FitOptions, notes: &mut T
     }
     let hs: Vec<(f64, f64)> = pts
         .iter()
-        .filter_map(|p| {
-            let h = p.h_m?;
+        .zip(&hs_all)
+        .filter_map(|(p, h)| {
+            let h = (*h)?;
             let k = v.partition_point(|x| x.t_in <= p.t).saturating_sub(1);
             let s = match v.get(k + 1) {
                 Some(next) if p.t > v[k].t_out => {

@@ -314,3 +314,74 @@ fn tracks_across_the_date_line_and_far_north_stay_on_their_line() {
         );
     }
 }
+
+/// Tracks broken every way a file breaks (bytes changed, lines cut, dropped, repeated or
+/// swapped, the end cut off) are read and driven or refused with a reason: never a panic,
+/// never a hang.
+#[test]
+fn broken_tracks_are_driven_or_refused_never_a_panic() {
+    use rand::{Rng, SeedableRng};
+    let exact = reference(&hilly_drive(), 2.0, T0);
+    let log = Logger {
+        jitter_m: 3.0,
+        step_spread_s: 0.4,
+        glitch: 0.01,
+        ..Logger::default()
+    };
+    let logged = record(&hilly_drive(), &log, T0);
+    let texts = [
+        write(&logged, Format::Gpx, false),
+        write(&logged, Format::Nmea, false),
+        write(&exact, Format::Csv, false),
+    ];
+    let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+    let spec = DriveSpec {
+        start_wait_s: 2.0,
+        ..DriveSpec::default()
+    };
+    let (mut driven, mut refused) = (0, 0);
+    for k in 0..120 {
+        let mut lines: Vec<String> = texts[k % 3].lines().map(String::from).collect();
+        for _ in 0..rng.random_range(1..6) {
+            let n = lines.len();
+            let i = rng.random_range(0..n);
+            match rng.random_range(0..5) {
+                0 => {
+                    let mut b = lines[i].clone().into_bytes();
+                    if !b.is_empty() {
+                        let j = rng.random_range(0..b.len());
+                        b[j] = rng.random_range(b' '..b'~');
+                    }
+                    lines[i] = String::from_utf8_lossy(&b).into_owned();
+                }
+                1 => {
+                    let half = lines[i].len() / 2;
+                    lines[i].truncate(half);
+                }
+                2 => {
+                    lines.remove(i);
+                }
+                3 => lines.insert(i, lines[i].clone()),
+                _ => lines.swap(i, rng.random_range(0..n)),
+            }
+        }
+        if k % 7 == 0 {
+            let cut = rng.random_range(0..lines.len());
+            lines.truncate(cut);
+        }
+        match parse(&lines.join("\n"), "broken").and_then(|t| Road::from_track(&spec, &t)) {
+            Ok(r) => {
+                assert!(r.duration().is_finite() && r.length() > 0.0);
+                driven += 1;
+            }
+            Err(e) => {
+                assert!(!e.what.is_empty() && !e.at.is_empty(), "{e}");
+                refused += 1;
+            }
+        }
+    }
+    assert!(
+        driven > 20 && refused > 5,
+        "{driven} driven, {refused} refused"
+    );
+}
