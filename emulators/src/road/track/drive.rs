@@ -124,28 +124,7 @@ impl Road {
         sane(&spec2).map_err(wrong)?;
         let pts = points(&spec2).map_err(wrong)?;
         let legs0 = geodetic_legs(&v);
-        if let Some(k) = legs0.iter().position(|l| l.dh.abs() > 0.35 * l.len_h) {
-            return Err(TrackError::new(
-                &track.file,
-                format!("from {} to {}", v[k].at, v[k + 1].at),
-                format!(
-                    "the road fitted to it climbs {:.0} m in {:.0} m: no road is steeper than 35 %",
-                    legs0[k].dh, legs0[k].len_h
-                ),
-            ));
-        }
-        let length: f64 = legs0.iter().map(|l| l.len_h).sum();
-        if !(length.is_finite() && length <= crate::road::plan::MAX_LENGTH_M) {
-            return Err(TrackError::new(
-                &track.file,
-                "the whole file",
-                format!(
-                    "{:.0} km of road: the bench drives at most {:.0} km",
-                    length / 1e3,
-                    crate::road::plan::MAX_LENGTH_M / 1e3
-                ),
-            ));
-        }
+        check_legs(track, &v, &legs0)?;
         let want: Vec<f64> = v.windows(2).map(|w| w[1].t_in - w[0].t_out).collect();
         let mut speeds = first_speeds(&legs0, &want, opt.max_speed_mps);
         // the plan's time is the track's plus the scenario's wait before it
@@ -245,6 +224,33 @@ fn window(want: &[f64], k: usize) -> (usize, usize) {
 
 /// The track's time over which a leg's speed is set, s.
 const RETIME_WINDOW_S: f64 = 30.0;
+
+/// The legs are a road's: none steeper than 35 %, and no longer in all than the bench drives.
+fn check_legs(track: &Track, v: &[Vertex], legs: &[Leg]) -> Result<(), TrackError> {
+    if let Some(k) = legs.iter().position(|l| l.dh.abs() > 0.35 * l.len_h) {
+        return Err(TrackError::new(
+            &track.file,
+            format!("from {} to {}", v[k].at, v[k + 1].at),
+            format!(
+                "the road fitted to it climbs {:.0} m in {:.0} m: no road is steeper than 35 %",
+                legs[k].dh, legs[k].len_h
+            ),
+        ));
+    }
+    let length: f64 = legs.iter().map(|l| l.len_h).sum();
+    if !(length.is_finite() && length <= crate::road::plan::MAX_LENGTH_M) {
+        return Err(TrackError::new(
+            &track.file,
+            "the whole file",
+            format!(
+                "{:.0} km of road: the bench drives at most {:.0} km",
+                length / 1e3,
+                crate::road::plan::MAX_LENGTH_M / 1e3
+            ),
+        ));
+    }
+    Ok(())
+}
 
 /// The fit's options from the scenario's `[drive]`, refused where out of range.
 fn fit_options(spec: &DriveSpec, track: &Track) -> Result<FitOptions, TrackError> {

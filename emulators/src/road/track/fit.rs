@@ -648,32 +648,7 @@ fn heights(pts: &[TrackPoint], v: &mut [Vertex], opt: &FitOptions, notes: &mut T
         }
         return;
     }
-    // a height far from the heights about it is a glitch of the height alone
-    let mut hs_all: Vec<Option<f64>> = pts.iter().map(|p| p.h_m).collect();
-    let mut glitched = Vec::new();
-    for i in 0..pts.len() {
-        let Some(h) = hs_all[i] else { continue };
-        let mut near: Vec<f64> = (i.saturating_sub(5)..(i + 6).min(pts.len()))
-            .filter(|&j| j != i)
-            .filter_map(|j| pts[j].h_m)
-            .collect();
-        if near.len() < 4 {
-            continue;
-        }
-        near.sort_by(f64::total_cmp);
-        let median = near[near.len() / 2];
-        if (h - median).abs() > HEIGHT_GLITCH_M {
-            glitched.push(format!("{} ({:+.0} m)", pts[i].at(), h - median));
-            hs_all[i] = None;
-        }
-    }
-    if !glitched.is_empty() {
-        notes.dropped.push(format!(
-            "the heights of {} point(s), off the heights about them by more than {HEIGHT_GLITCH_M} m: {}",
-            glitched.len(),
-            glitched.join(", ")
-        ));
-    }
+    let hs_all = height_glitches(pts, notes);
     if missing > 0 {
         notes.assumed.push(format!(
             "{missing} point(s) without a height: the road's height there is fitted from the others"
@@ -726,19 +701,7 @@ fn heights(pts: &[TrackPoint], v: &mut [Vertex], opt: &FitOptions, notes: &mut T
         };
         x.llh[2] = linear_at(&sel, s);
     }
-    // the heights' own jitter, as the positions' (from runs of five points)
-    let mut var = Vec::new();
-    for w in pts.windows(5) {
-        let hs: Option<Vec<f64>> = w.iter().map(|p| p.h_m).collect();
-        if let Some(hs) = hs.filter(|_| w[4].t - w[0].t <= 10.0) {
-            let ts: Vec<f64> = w.iter().map(|p| p.t - w[2].t).collect();
-            if let Some(r) = quadratic_residual(&ts, &hs) {
-                var.push(r / 2.0);
-            }
-        }
-    }
-    var.sort_by(f64::total_cmp);
-    let h_jitter = var.get(var.len() / 2).map_or(3.0, |m| (m / 0.45).sqrt());
+    let h_jitter = height_jitter(pts);
     grade_breaks(v, &at_corner, (2.0 * h_jitter).max(GRADE_TOLERANCE_M));
 }
 
@@ -780,6 +743,54 @@ fn grade_breaks(v: &mut [Vertex], s: &[f64], tol: f64) {
             v[k].llh[2] = v[a].llh[2] + grade * (s[k] - s[a]);
         }
     }
+}
+
+/// The heights' own jitter, m, as the positions' (from runs of five points a few seconds
+/// apart; 3 m where there are none).
+fn height_jitter(pts: &[TrackPoint]) -> f64 {
+    let mut var = Vec::new();
+    for w in pts.windows(5) {
+        let hs: Option<Vec<f64>> = w.iter().map(|p| p.h_m).collect();
+        if let Some(hs) = hs.filter(|_| w[4].t - w[0].t <= 10.0) {
+            let ts: Vec<f64> = w.iter().map(|p| p.t - w[2].t).collect();
+            if let Some(r) = quadratic_residual(&ts, &hs) {
+                var.push(r / 2.0);
+            }
+        }
+    }
+    var.sort_by(f64::total_cmp);
+    var.get(var.len() / 2).map_or(3.0, |m| (m / 0.45).sqrt())
+}
+
+/// Each point's height, but for those far from the heights about them (a glitch of the height
+/// alone: dropped and said).
+fn height_glitches(pts: &[TrackPoint], notes: &mut TrackNotes) -> Vec<Option<f64>> {
+    let mut hs_all: Vec<Option<f64>> = pts.iter().map(|p| p.h_m).collect();
+    let mut glitched = Vec::new();
+    for i in 0..pts.len() {
+        let Some(h) = hs_all[i] else { continue };
+        let mut near: Vec<f64> = (i.saturating_sub(5)..(i + 6).min(pts.len()))
+            .filter(|&j| j != i)
+            .filter_map(|j| pts[j].h_m)
+            .collect();
+        if near.len() < 4 {
+            continue;
+        }
+        near.sort_by(f64::total_cmp);
+        let median = near[near.len() / 2];
+        if (h - median).abs() > HEIGHT_GLITCH_M {
+            glitched.push(format!("{} ({:+.0} m)", pts[i].at(), h - median));
+            hs_all[i] = None;
+        }
+    }
+    if !glitched.is_empty() {
+        notes.dropped.push(format!(
+            "the heights of {} point(s), off the heights about them by more than {HEIGHT_GLITCH_M} m: {}",
+            glitched.len(),
+            glitched.join(", ")
+        ));
+    }
+    hs_all
 }
 
 /// A weighted straight-line fit of `(x, y, weight)` evaluated at `x0` (the mean where all `x`
