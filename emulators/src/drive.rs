@@ -146,6 +146,20 @@ impl Default for DriveSpec {
 }
 
 impl DriveSpec {
+    /// No route, with a driver's limits rather than the level route's gentle ones: 2 m/s^2 of
+    /// acceleration, 3 of braking and of lateral acceleration, 2 m/s^3 of jerk, 40 deg/s of
+    /// turn rate (a recorded track driven as it was, where no scenario says otherwise).
+    pub fn driver() -> Self {
+        Self {
+            accel_mps2: 2.0,
+            brake_mps2: Some(3.0),
+            jerk_mps3: Some(2.0),
+            turn_rate_dps: 40.0,
+            lateral_accel_mps2: 3.0,
+            ..Self::default()
+        }
+    }
+
     /// The route names a road's fields: it is planned as a road (`crate::road`), not as the
     /// level route of one speed.
     pub fn is_road(&self) -> bool {

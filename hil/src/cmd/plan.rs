@@ -65,17 +65,7 @@ fn track_cmd(a: TrackArgs) -> Result<i32> {
             (d, Some(s.duration_s))
         }
         // a driver's limits, not the level route's gentle ones: a track is driven as it was
-        None => (
-            DriveSpec {
-                accel_mps2: 2.0,
-                brake_mps2: Some(3.0),
-                jerk_mps3: Some(2.0),
-                turn_rate_dps: 40.0,
-                lateral_accel_mps2: 3.0,
-                ..DriveSpec::default()
-            },
-            None,
-        ),
+        None => (DriveSpec::driver(), None),
     };
     spec.track = Some(a.file.display().to_string());
     let track = match emulators::road::track::read(&a.file) {

@@ -86,16 +86,7 @@ pub fn svg(track: &Track, drive: &Drive, notes: &TrackNotes, title: &str) -> Str
         notes.stops.len()
     );
     // the road
-    let mut path = String::new();
-    for (k, r) in road.iter().enumerate() {
-        let _ = write!(
-            path,
-            "{}{:.1},{:.1}",
-            if k == 0 { "M" } else { " L" },
-            sx(r.1),
-            sy(r.2)
-        );
-    }
+    let path = polyline(road.iter().map(|r| (sx(r.1), sy(r.2))));
     let _ = writeln!(
         o,
         "<path d=\"{path}\" fill=\"none\" stroke=\"#1f5fbf\" stroke-width=\"2\" stroke-linejoin=\"round\"/>"
@@ -231,16 +222,7 @@ fn profile(o: &mut String, track: &Track, notes: &TrackNotes, road: &[(f64, f64,
         h1,
         t_end
     );
-    let mut path = String::new();
-    for (k, r) in road.iter().enumerate() {
-        let _ = write!(
-            path,
-            "{}{:.1},{:.1}",
-            if k == 0 { "M" } else { " L" },
-            px(r.0),
-            py(r.3)
-        );
-    }
+    let path = polyline(road.iter().map(|r| (px(r.0), py(r.3))));
     let _ = writeln!(
         o,
         "<path d=\"{path}\" fill=\"none\" stroke=\"#1f5fbf\" stroke-width=\"1.5\"/>"
@@ -253,6 +235,15 @@ fn profile(o: &mut String, track: &Track, notes: &TrackNotes, road: &[(f64, f64,
             py(h)
         );
     }
+}
+
+/// An SVG path's `d` through points (pixels).
+fn polyline(points: impl Iterator<Item = (f64, f64)>) -> String {
+    let mut d = String::new();
+    for (k, (x, y)) in points.enumerate() {
+        let _ = write!(d, "{}{x:.1},{y:.1}", if k == 0 { "M" } else { " L" });
+    }
+    d
 }
 
 fn escape(s: &str) -> String {

@@ -580,18 +580,24 @@ fn meet(
     (x.norm() < 20.0).then_some(x)
 }
 
+/// At corner `k`: the way in and the way out, east-north metres about it (to the corner from
+/// the one before, to the next from it), and the turn between them, rad (positive: left).
+fn turn_at(v: &[Vertex], k: usize) -> (Vector2<f64>, Vector2<f64>, f64) {
+    let at = (v[k].llh[0], v[k].llh[1], 0.0);
+    let off = |x: &Vertex| {
+        let e = earth::enu_offset(at, (x.llh[0], x.llh[1], 0.0));
+        Vector2::new(e[0], e[1])
+    };
+    let (a, b) = (-off(&v[k - 1]), off(&v[k + 1]));
+    (a, b, (a.x * b.y - a.y * b.x).atan2(a.dot(&b)))
+}
+
 /// A corner where the path turns back on itself over less than a few tolerances is the
 /// receiver's error zigzagging while the vehicle creeps, not the road: dropped.
 fn zigzags(v: &mut Vec<Vertex>, tol: f64) {
     let mut k = 1;
     while k + 1 < v.len() {
-        let at = (v[k].llh[0], v[k].llh[1], 0.0);
-        let off = |x: &Vertex| {
-            let e = earth::enu_offset(at, (x.llh[0], x.llh[1], 0.0));
-            Vector2::new(e[0], e[1])
-        };
-        let (a, b) = (-off(&v[k - 1]), off(&v[k + 1]));
-        let change = (a.x * b.y - a.y * b.x).atan2(a.dot(&b));
+        let (a, b, change) = turn_at(v, k);
         let stop = v[k].t_out > v[k].t_in;
         if !stop && change.abs() > ZIGZAG_RAD && a.norm().min(b.norm()) < 2.0 * tol {
             v.remove(k);
@@ -607,13 +613,7 @@ fn zigzags(v: &mut Vec<Vertex>, tol: f64) {
 fn u_turns(v: &mut Vec<Vertex>) {
     let mut k = 1;
     while k + 1 < v.len() {
-        let at = (v[k].llh[0], v[k].llh[1], 0.0);
-        let off = |x: &Vertex| {
-            let e = earth::enu_offset(at, (x.llh[0], x.llh[1], 0.0));
-            Vector2::new(e[0], e[1])
-        };
-        let (a, b) = (-off(&v[k - 1]), off(&v[k + 1]));
-        let change = (a.x * b.y - a.y * b.x).atan2(a.dot(&b));
+        let (a, b, change) = turn_at(v, k);
         if change.abs() > U_TURN_RAD && a.norm() > 1.0 && b.norm() > 1.0 {
             // the side the road turns to: right of the way in for a clockwise turn
             let dir = a / a.norm();
@@ -623,10 +623,11 @@ fn u_turns(v: &mut Vec<Vertex>) {
                 Vector2::new(-dir.y, dir.x)
             };
             let q = side * U_TURN_WIDTH_M;
-            let (rm, rn) = earth::radii(at.0);
+            let lat = v[k].llh[0];
+            let (rm, rn) = earth::radii(lat);
             let mut second = v[k].clone();
             second.llh[0] += q.y / rm;
-            second.llh[1] += q.x / (rn * at.0.cos());
+            second.llh[1] += q.x / (rn * lat.cos());
             v.insert(k + 1, second);
             k += 1;
         }

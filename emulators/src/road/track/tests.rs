@@ -35,12 +35,7 @@ fn drive_of(text: &str, name: &str) -> Road {
     // `hil plan track`)
     let spec = DriveSpec {
         start_wait_s: 5.0,
-        accel_mps2: 2.0,
-        brake_mps2: Some(3.0),
-        jerk_mps3: Some(2.0),
-        turn_rate_dps: 40.0,
-        lateral_accel_mps2: 3.0,
-        ..DriveSpec::default()
+        ..DriveSpec::driver()
     };
     Road::from_track(&spec, &track).unwrap_or_else(|e| panic!("{e}"))
 }
