@@ -257,6 +257,19 @@ pub fn realtime_reader(c: &mut std::process::Command) {
     }
 }
 
+/// gpsd's receiver captures in `../shared/testdata/gpsd-nmea` (next to the workspace, or next
+/// to its parent for a clone elsewhere), when present.
+pub fn gpsd_testdata() -> Option<PathBuf> {
+    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
+    [
+        "../../shared/testdata/gpsd-nmea",
+        "../../../shared/testdata/gpsd-nmea",
+    ]
+    .into_iter()
+    .map(|p| here.join(p))
+    .find(|p| p.is_dir())
+}
+
 #[cfg(test)]
 mod tests {
     /// The watchdog reports counted starved are found wherever the run's JSON holds them.

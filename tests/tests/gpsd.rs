@@ -10,14 +10,7 @@ use nav::gps::{GpsDecoder, GpsFix};
 use std::path::{Path, PathBuf};
 
 fn testdata() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/testdata/gpsd-nmea");
-    let p = if p.is_dir() {
-        p
-    } else {
-        // a clone elsewhere: ../shared next to the workspace's parent
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/testdata/gpsd-nmea")
-    };
-    p.is_dir().then_some(p)
+    e2e::gpsd_testdata()
 }
 
 /// A TPV with a position.

@@ -121,3 +121,41 @@ fn a_drive_written_as_a_track_reads_back() {
     let len = v["length_m"].as_f64().unwrap();
     assert!((len - 1741.0).abs() < 60.0, "{len}");
 }
+
+/// Real receivers' logs (gpsd's captures, in `../shared`): each is driven or refused with a
+/// reason (exit status 0 or 2, never a crash); most stand still and are refused as too few
+/// points to drive, and the one of a moving vessel (a u-blox ZED-F9P at 3 m/s) is driven within
+/// a few metres of its fixes.
+#[test]
+fn real_receivers_logs_are_driven_or_refused_with_a_reason() {
+    let Some(dir) = e2e::gpsd_testdata() else {
+        eprintln!("SKIPPED: ../shared/testdata/gpsd-nmea is absent");
+        return;
+    };
+    let entries = std::fs::read_dir(&dir).expect("the captures' folder reads");
+    let mut logs: Vec<_> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "log"))
+        .collect();
+    logs.sort();
+    assert!(logs.len() > 20, "{}", dir.display());
+    let mut driven = 0;
+    for log in &logs {
+        let (v, o) = plan_track(log, &[]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        match o.status.code() {
+            Some(0) => driven += 1,
+            Some(2) => assert!(
+                err.contains("error: track") && err.contains(&*log.to_string_lossy()),
+                "{err}"
+            ),
+            c => panic!("{}: exit {c:?}: {err}", log.display()),
+        }
+        if log.ends_with("bundg_zeus_9.log") {
+            let t = &v["track"];
+            assert!(t["distance_rms_m"].as_f64().is_some_and(|d| d < 3.0), "{t}");
+            assert!(v["length_m"].as_f64().is_some_and(|l| l > 300.0), "{v}");
+        }
+    }
+    assert!(driven >= 3, "{driven} of {} driven", logs.len());
+}

@@ -7,8 +7,9 @@
 //!    swerve between them (the jitter allowance plus half of 8 m/s^2 over the two intervals) is
 //!    dropped, the worst first; then a step between two kept points faster than the top speed
 //!    (with the jitter allowance) is a jump no vehicle makes, and refused.
-//! 3. **Stops**: points that stay within 8 m (or three jitters) of their mean for 3 s or more
-//!    are one stop, at their median, for as long as they stayed.
+//! 3. **Stops**: points that stay within 8 m (or three jitters) of their mean for 3 s or more,
+//!    drifting from the first no faster than 0.5 m/s, are one stop, at their median, for as long
+//!    as they stayed.
 //! 4. **Corners**: the path between stops is simplified (Douglas-Peucker) to a tolerance of
 //!    three jitters, the jitter estimated from the points' scatter about the simplified path
 //!    where the scenario does not give it; each corner is then moved to where the straight
@@ -80,6 +81,8 @@ const SWERVE_MPS2: f64 = 8.0;
 /// least this long.
 const STOP_JITTERS: f64 = 3.0;
 const STOP_RADIUS_M: f64 = 8.0;
+/// A stop's points drift from its first no faster than this, m/s.
+const STOP_CREEP_MPS: f64 = 0.5;
 const STOP_MIN_S: f64 = 3.0;
 /// A gap said, s; the longest step bridged by a straight leg, m.
 const GAP_S: f64 = 60.0;
@@ -306,7 +309,10 @@ fn stops(pts: &[TrackPoint], radius: f64) -> Vec<Run> {
         // standing receiver's error wanders about where it stands)
         let mut j = i;
         let mut sum = ecef(&pts[i]);
-        while j + 1 < pts.len() && (ecef(&pts[j + 1]) - sum / (j + 1 - i) as f64).norm() <= radius {
+        while j + 1 < pts.len()
+            && (ecef(&pts[j + 1]) - sum / (j + 1 - i) as f64).norm() <= radius
+            && standing(&pts[i], &pts[j + 1])
+        {
             j += 1;
             sum += ecef(&pts[j]);
         }
@@ -329,6 +335,13 @@ fn stops(pts: &[TrackPoint], radius: f64) -> Vec<Run> {
     merge_stops(pts, out, radius)
 }
 
+/// From `a` to `b` the vehicle may have stood: it moved no more than a few metres, or than a
+/// creep of [`STOP_CREEP_MPS`] (a standing receiver's error wanders; a vehicle crawling along
+/// moves on).
+fn standing(a: &TrackPoint, b: &TrackPoint) -> bool {
+    dist(a, b) <= (STOP_CREEP_MPS * (b.t - a.t)).max(4.0)
+}
+
 /// A stop that goes on after a few points that strayed (the vehicle crept forward, the jitter
 /// wandered out of the radius and back) is one stop.
 fn merge_stops(pts: &[TrackPoint], runs: Vec<Run>, radius: f64) -> Vec<Run> {
@@ -338,6 +351,7 @@ fn merge_stops(pts: &[TrackPoint], runs: Vec<Run>, radius: f64) -> Vec<Run> {
             && let Some(k) = out.iter().rposition(|x| x.stop)
             && out.len() - k <= 4
             && dist(&pts[out[k].last], &pts[r.first]) <= radius
+            && standing(&pts[out[k].first], &pts[r.last])
         {
             let first = out[k].first;
             out.truncate(k);

@@ -120,11 +120,16 @@ pub fn parse(text: &str, name: &str) -> Result<Track, TrackError> {
     let head = text.trim_start_matches('\u{feff}').trim_start();
     let track = if head.starts_with("<?xml") || head.starts_with("<gpx") {
         formats::gpx(text, name)?
-    } else if text
-        .lines()
-        .take(50)
-        .any(|l| l.contains("$GP") || l.contains("$GN") || l.contains("$GL"))
-    {
+    } else if text.lines().take(50).any(|l| {
+        // a sentence: `$`, its address (a talker and a type, or a maker's: letters and
+        // digits), a comma
+        l.find('$').is_some_and(|i| {
+            let addr = l[i + 1..].split(',').next().unwrap_or("");
+            (2..=6).contains(&addr.len())
+                && addr.bytes().all(|c| c.is_ascii_alphanumeric())
+                && l.len() > i + 1 + addr.len()
+        })
+    }) {
         formats::nmea(text, name)?
     } else {
         formats::csv(text, name)?
