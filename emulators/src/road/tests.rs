@@ -28,6 +28,17 @@ pub(crate) fn hilly() -> DriveSpec {
     }
 }
 
+/// `spec` without a road's fields: the level route of old.
+fn level_of(mut spec: DriveSpec) -> DriveSpec {
+    spec.heights_m.clear();
+    spec.leg_speeds_mps.clear();
+    spec.stops.clear();
+    spec.brake_mps2 = None;
+    spec.jerk_mps3 = None;
+    spec.bank_deg = None;
+    spec
+}
+
 fn road(spec: &DriveSpec) -> Road {
     Road::plan(spec).unwrap_or_else(|e| panic!("{}", e.problem))
 }
@@ -287,13 +298,7 @@ fn bad_roads_say_what_is_wrong() {
 /// A route without a road's fields is the level route of old; with any of them, a road.
 #[test]
 fn a_road_is_planned_only_where_the_spec_names_one() {
-    let mut level = hilly();
-    level.heights_m.clear();
-    level.leg_speeds_mps.clear();
-    level.stops.clear();
-    level.brake_mps2 = None;
-    level.jerk_mps3 = None;
-    level.bank_deg = None;
+    let level = level_of(hilly());
     assert!(!level.is_road() && Drive::plan(&level).unwrap().road().is_none());
     let d = Drive::plan(&hilly()).unwrap();
     assert!(d.road().is_some());
@@ -356,13 +361,7 @@ fn the_attitude_from_sines_and_cosines_is_c_b_n() {
 #[ignore = "figures"]
 fn truth_pace() {
     let road = Drive::plan(&hilly()).unwrap();
-    let mut level = hilly();
-    level.heights_m.clear();
-    level.leg_speeds_mps.clear();
-    level.stops.clear();
-    level.brake_mps2 = None;
-    level.jerk_mps3 = None;
-    level.bank_deg = None;
+    let level = level_of(hilly());
     let level = Drive::plan(&level).unwrap();
     for (name, d) in [("road", &road), ("level", &level)] {
         let t0 = std::time::Instant::now();
