@@ -34,6 +34,14 @@ pub fn gravity(lat: f64, h: f64) -> f64 {
     g0 * (1.0 - 2.0 / A * (1.0 + F + M_RATIO - 2.0 * F * s2) * h + 3.0 * h * h / (A * A))
 }
 
+/// The vertical gradient of normal gravity `d gravity / d h` at latitude `lat` (rad) and height
+/// `h` (m), 1/s^2 (negative: about -3.09e-6, gravity weakening upwards).
+pub fn gravity_gradient(lat: f64, h: f64) -> f64 {
+    let s2 = lat.sin().powi(2);
+    let g0 = GAMMA_E * (1.0 + SOMIGLIANA_K * s2) / (1.0 - E2 * s2).sqrt();
+    g0 * (-2.0 / A * (1.0 + F + M_RATIO - 2.0 * F * s2) + 6.0 * h / (A * A))
+}
+
 /// Earth rate in the ENU frame at latitude `lat` (rad), rad/s.
 pub fn earth_rate_enu(lat: f64) -> [f64; 3] {
     [0.0, OMEGA_IE * lat.cos(), OMEGA_IE * lat.sin()]
@@ -54,6 +62,17 @@ mod tests {
         // about -3.086e-6 s^-2 per metre of height
         let dg = gravity(0.5, 1000.0) - gravity(0.5, 0.0);
         assert!((dg + 3.086e-3).abs() < 2e-5, "{dg}");
+    }
+
+    #[test]
+    fn the_gravity_gradient_is_the_derivative_of_gravity() {
+        for (lat, h) in [(0.0, 0.0), (0.97, 200.0), (1.4, 2500.0), (-0.6, -400.0)] {
+            let d = 0.5;
+            let fd = (gravity(lat, h + d) - gravity(lat, h - d)) / (2.0 * d);
+            let g = gravity_gradient(lat, h);
+            assert!((g - fd).abs() < 1e-12, "{lat} {h}: {g} against {fd}");
+            assert!((-3.1e-6..-3.07e-6).contains(&g), "{g}");
+        }
     }
 
     #[test]
