@@ -772,22 +772,25 @@ fn campus_loop_shortened_finds_north_then_navigates() {
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
 fn a_hilly_stop_and_go_road_navigates_through_vcan() {
-    // its first 100 s: the climb, the first stop, the corners (the whole drive is 261 s); and
-    // the same drive from a handheld logger's GPX track of it (the road fitted to the track)
+    // its first 70 s: the climb, the first corner, the first stop and away (the whole drive is
+    // 261 s, navigated in process by hil's unit test); and the first 50 s of the same drive from
+    // a handheld logger's GPX track of it (the road fitted to the track: the climb, the corner
+    // and the braking into the stop)
     let track = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../scenarios/tracks/lisbon-handheld.gpx");
     let track_line = format!("track = {:?}", track.display().to_string());
-    for (scenario, replace, iface, report) in [
+    for (scenario, replace, iface, report, seconds) in [
         (
             "route-lisbon-hills.toml",
-            vec![("duration_s = 275.0", "duration_s = 100.0")],
+            vec![("duration_s = 275.0", "duration_s = 70.0")],
             "vcan-e2e17",
             "lisbon-hills",
+            70,
         ),
         (
             "track-lisbon-handheld.toml",
             vec![
-                ("duration_s = 270.0", "duration_s = 100.0"),
+                ("duration_s = 270.0", "duration_s = 50.0"),
                 (
                     "track = \"tracks/lisbon-handheld.gpx\"",
                     track_line.as_str(),
@@ -795,6 +798,7 @@ fn a_hilly_stop_and_go_road_navigates_through_vcan() {
             ],
             "vcan-e2e18",
             "lisbon-track",
+            50,
         ),
     ] {
         let (r, dir) = run_variant(scenario, &replace, iface);
@@ -813,13 +817,20 @@ fn a_hilly_stop_and_go_road_navigates_through_vcan() {
             );
         }
         // 10 Hz fixes over the drive
-        assert!(r["gps"]["fixes"].as_u64().unwrap() > 900, "{}", r["gps"]);
+        assert!(
+            r["gps"]["fixes"].as_u64().unwrap() > 9 * seconds,
+            "{}",
+            r["gps"]
+        );
         let series = &r["navigation_series"];
         eprintln!(
             "{scenario}: over the run: {series}; against truth: {}",
             r["navigation"]
         );
-        assert!(series["samples"].as_u64().unwrap() > 90, "{series}");
+        assert!(
+            series["samples"].as_u64().unwrap() > seconds - 10,
+            "{series}"
+        );
         assert_eq!(series["bad_records"], 0);
     }
 }
