@@ -92,6 +92,12 @@ pub struct DriveSpec {
     /// The road's bank into a turn at its sharpest, deg (default 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bank_deg: Option<f64>,
+    /// The road's roughness: 1 a typical paved road, whose bumps pitch and roll the body by
+    /// about 0.1 deg and lift it by millimetres over waves of 3 to 31 m, so that its rates grow
+    /// with its speed and its vertical acceleration with the speed squared (about 0.1 m/s^2
+    /// RMS at 10 m/s, 0.9 at 30); 2 a poor one; 0 smooth (default).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roughness: Option<f64>,
     /// A recorded track to drive instead of waypoints: a GPX, NMEA or CSV file (relative to
     /// the scenario's folder), fitted into a road (`crate::road::track`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -138,6 +144,7 @@ impl Default for DriveSpec {
             roll_per_lateral_accel_deg: None,
             corner_radius_m: None,
             bank_deg: None,
+            roughness: None,
             track: None,
             track_jitter_m: None,
             track_max_speed_mps: None,
@@ -171,6 +178,7 @@ impl DriveSpec {
             || self.roll_per_lateral_accel_deg.is_some()
             || self.corner_radius_m.is_some()
             || self.bank_deg.is_some()
+            || self.roughness.is_some()
             || self.track.is_some()
     }
 }

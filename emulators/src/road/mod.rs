@@ -22,6 +22,7 @@ pub(crate) mod geo;
 pub(crate) mod path;
 mod plan;
 pub mod reference;
+mod rough;
 pub(crate) mod speed;
 pub mod track;
 
@@ -41,6 +42,8 @@ pub struct Road {
     pitch_per_accel: f64,
     /// Roll per m/s^2 of lateral acceleration, rad.
     roll_per_lateral: f64,
+    /// The road's bumps (none: smooth).
+    roughness: Option<rough::Roughness>,
     notes: RoadNotes,
     /// What was done with the recorded track it was fitted to, when it was.
     track: Option<Box<track::TrackNotes>>,
@@ -90,12 +93,12 @@ impl Road {
         let r = self.path.at(a.s);
         let (v, acc, j) = (a.v, a.a, a.j);
         let lateral = v * v * r.kappa;
-        let hpr = [
+        let mut hpr = [
             r.psi,
             r.gamma + self.pitch_per_accel * acc,
             r.bank - self.roll_per_lateral * lateral,
         ];
-        let hpr_rate = [
+        let mut hpr_rate = [
             r.kappa * v,
             r.dgamma * v + self.pitch_per_accel * j,
             r.dbank * v - self.roll_per_lateral * (2.0 * v * acc * r.kappa + v * v * v * r.dkappa),
@@ -114,14 +117,35 @@ impl Road {
         } else {
             hpr[1].sin_cos()
         };
-        RoadState {
+        let mut state = RoadState {
             along: a,
             hpr,
             hpr_rate,
             v: u * v,
             dv: u * acc + du * (v * v),
             sc: [(sp, cp), sc_pitch],
+        };
+        if let Some(rough) = &self.roughness {
+            // the bumps: pitch and roll on top, the heave straight up (its rate d/ds times the
+            // speed, its acceleration d2/ds2 times the speed squared plus d/ds times the
+            // acceleration along the road)
+            let [p, q, z] = rough.at(a.s);
+            hpr[1] += p.value;
+            hpr[2] += q.value;
+            hpr_rate[1] += p.d1 * v;
+            hpr_rate[2] += q.d1 * v;
+            state.hpr = hpr;
+            state.hpr_rate = hpr_rate;
+            state.sc[1] = hpr[1].sin_cos();
+            state.v.z += z.d1 * v;
+            state.dv.z += z.d2 * v * v + z.d1 * acc;
         }
+        state
+    }
+
+    /// The heave of the road's bumps `s` metres along it, m (0 on a smooth road).
+    fn heave(&self, s: f64) -> f64 {
+        self.roughness.as_ref().map_or(0.0, |r| r.heave(s))
     }
 
     /// Distance driven along the road, m.
@@ -133,12 +157,18 @@ impl Road {
     pub fn position(&self, t: f64) -> (f64, f64, f64) {
         let s = speed::along(&self.phases, t).s;
         let [lat, lon, h] = self.placed.llh(&self.path, s);
-        (lat, lon, h)
+        (lat, lon, h + self.heave(s))
     }
 
     /// Velocity in ENU, m/s.
     pub fn velocity(&self, t: f64) -> Vector3<f64> {
         self.state(t).v
+    }
+
+    /// The vehicle's vertical acceleration, m/s^2 (over crests and dips, and the road's bumps
+    /// on a rough road).
+    pub fn vertical_accel(&self, t: f64) -> f64 {
+        self.state(t).dv.z
     }
 
     /// Heading, pitch and roll of the body, rad.
@@ -163,6 +193,7 @@ impl Road {
     fn rate_force(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
         let s = self.state(t);
         let (lat, h) = self.placed.lat_h(&self.path, s.along.s);
+        let h = h + self.heave(s.along.s);
         let (sl, cl) = lat.sin_cos();
         let (rm, rn) = earth::radii_sc(sl, cl);
         let wie = Vector3::from(earth::earth_rate_enu_sc(sl, cl));

@@ -4,6 +4,7 @@
 //! changes sized within the vertical-acceleration limit, and the speed profile from stop to stop.
 
 use super::Road;
+use super::rough;
 use super::geo::Placed;
 use super::path::{Crest, Path, Turn, tangent_length};
 use super::speed::{Limits, Profile, Stretch};
@@ -452,6 +453,7 @@ pub(in crate::road) fn sane(spec: &DriveSpec) -> Result<(), ParamError> {
         spec.roll_per_lateral_accel_deg,
         spec.corner_radius_m,
         spec.bank_deg,
+        spec.roughness,
     ];
     if !finite(&mut spec.waypoints.iter().flatten().copied())
         || !finite(&mut spec.heights_m.iter().copied().chain([spec.height_m]))
@@ -463,6 +465,12 @@ pub(in crate::road) fn sane(spec: &DriveSpec) -> Result<(), ParamError> {
         return Err(ParamError::new(
             "drive",
             "every number of a road (waypoints, heights, speeds, stops, limits) must be finite",
+        ));
+    }
+    if let Some(r) = spec.roughness.filter(|r| !(0.0..=5.0).contains(r)) {
+        return Err(ParamError::new(
+            "drive",
+            format!("roughness {r}: from 0 (smooth) to 5 (1 is a typical paved road)"),
         ));
     }
     if let Some(h) = spec
@@ -614,6 +622,7 @@ impl Road {
             phases,
             pitch_per_accel: spec.pitch_per_accel_deg.unwrap_or(0.3).to_radians(),
             roll_per_lateral: spec.roll_per_lateral_accel_deg.unwrap_or(0.5).to_radians(),
+            roughness: rough::Roughness::new(spec.roughness.unwrap_or(0.0)),
             notes: RoadNotes::default(),
             track: None,
             path: laid.path,

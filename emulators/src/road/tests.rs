@@ -108,8 +108,20 @@ fn a_hilly_route_stops_climbs_and_keeps_its_limits() {
 /// differences, all along the route).
 #[test]
 fn velocity_and_rates_are_the_derivatives_of_position_and_attitude() {
-    let r = road(&hilly());
-    let h = 1e-3;
+    derivatives_within(&hilly(), 1e-3, [2e-5, 2e-5, 2e-6]);
+    // on a poor road (the bumps' shortest wave 4 m: at 16 m/s their acceleration's third
+    // derivative is 10^4 times larger, so a shorter step)
+    let rough = DriveSpec {
+        roughness: Some(2.0),
+        ..hilly()
+    };
+    derivatives_within(&rough, 2e-4, [2e-5, 2e-5, 2e-6]);
+}
+
+/// Over `spec`'s road, every 0.731 s, the velocity is the position's central difference (step
+/// `h`), the velocity's rate the velocity's, the body rate the attitude's, within `tol`.
+fn derivatives_within(spec: &DriveSpec, h: f64, tol: [f64; 3]) {
+    let r = road(spec);
     let mut t = 0.5;
     let mut worst = [0.0f64; 3];
     while t < r.duration() {
@@ -135,7 +147,7 @@ fn velocity_and_rates_are_the_derivatives_of_position_and_attitude() {
         t += 0.731;
     }
     assert!(
-        worst[0] < 2e-5 && worst[1] < 2e-5 && worst[2] < 2e-6,
+        worst[0] < tol[0] && worst[1] < tol[1] && worst[2] < tol[2],
         "{worst:?}"
     );
 }
@@ -145,7 +157,16 @@ fn velocity_and_rates_are_the_derivatives_of_position_and_attitude() {
 /// attitude the receiver and the scoring are given, are one motion.
 #[test]
 fn a_reference_integration_of_the_increments_follows_the_truth() {
-    let r = Drive::plan(&hilly()).unwrap();
+    reference_follows(&hilly());
+    // and on a poor road, shaken by its bumps
+    reference_follows(&DriveSpec {
+        roughness: Some(2.0),
+        ..hilly()
+    });
+}
+
+fn reference_follows(spec: &DriveSpec) {
+    let r = Drive::plan(spec).unwrap();
     // ten minutes: the free vertical channel has not yet grown (its time constant is 10 min)
     let e = reference::integrate(&r, &r, 2000.0, r.duration() + 5.0, 60.0, false);
     let last = e.last().unwrap();
@@ -284,6 +305,7 @@ fn bad_roads_say_what_is_wrong() {
             "from 0.1 m/s to 150 m/s",
         ),
         (Box::new(|s| s.stops[0][1] = 1e12), "from 0 to a day"),
+        (Box::new(|s| s.roughness = Some(-1.0)), "roughness -1"),
     ];
     for (change, want) in cases {
         let mut s = hilly();
@@ -293,6 +315,44 @@ fn bad_roads_say_what_is_wrong() {
             Err(e) => assert!(e.problem.contains(want), "{} (expected: {want})", e.problem),
         }
     }
+}
+
+/// On a rough road the body is shaken more the faster it drives: its pitch and roll rates
+/// grow with the speed, its vertical acceleration with the speed squared; on a smooth one it
+/// is not shaken at all.
+#[test]
+fn a_rough_road_shakes_the_body_more_at_speed() {
+    // straight and level, 3 km at one speed (after the start's acceleration)
+    let at = |v: f64, roughness: Option<f64>| {
+        let spec = DriveSpec {
+            lat_deg: 50.0,
+            lon_deg: 10.0,
+            waypoints: vec![[0.0, 3000.0]],
+            speed_mps: v,
+            leg_speeds_mps: vec![v],
+            roughness,
+            ..Default::default()
+        };
+        let r = road(&spec);
+        let (mut rate, mut accel, mut n) = (0.0, 0.0, 0.0);
+        let mut t = 40.0;
+        while t < 90.0 {
+            let s = r.state(t);
+            assert!((s.along.v - v).abs() < 1e-9, "{v} m/s at {t} s");
+            rate += s.hpr_rate[1].powi(2) + s.hpr_rate[2].powi(2);
+            accel += s.dv.z.powi(2);
+            n += 1.0;
+            t += 0.0123;
+        }
+        ((rate / n).sqrt().to_degrees(), (accel / n).sqrt())
+    };
+    let (slow, fast) = (at(10.0, Some(1.0)), at(30.0, Some(1.0)));
+    eprintln!("pitch and roll rate, vertical acceleration (RMS): {slow:?} at 10 m/s, {fast:?} at 30");
+    assert!((fast.0 / slow.0 - 3.0).abs() < 0.3, "{slow:?} {fast:?}");
+    assert!((fast.1 / slow.1 - 9.0).abs() < 1.0, "{slow:?} {fast:?}");
+    // a typical road: about a degree per second and 0.9 m/s^2 at 30 m/s
+    assert!((0.5..1.5).contains(&fast.0) && (0.6..1.2).contains(&fast.1), "{fast:?}");
+    assert_eq!(at(30.0, None), (0.0, 0.0));
 }
 
 /// A route without a road's fields is the level route of old; with any of them, a road.
@@ -361,9 +421,14 @@ fn the_attitude_from_sines_and_cosines_is_c_b_n() {
 #[ignore = "figures"]
 fn truth_pace() {
     let road = Drive::plan(&hilly()).unwrap();
+    let rough = Drive::plan(&DriveSpec {
+        roughness: Some(1.0),
+        ..hilly()
+    })
+    .unwrap();
     let level = level_of(hilly());
     let level = Drive::plan(&level).unwrap();
-    for (name, d) in [("road", &road), ("level", &level)] {
+    for (name, d) in [("road", &road), ("rough road", &rough), ("level", &level)] {
         let t0 = std::time::Instant::now();
         let mut acc = 0.0;
         let n = 240_000;

@@ -34,6 +34,9 @@ pub struct RouteSummary {
     pub pitch_deg: [f64; 2],
     /// See [`RouteSummary::pitch_deg`].
     pub roll_deg: [f64; 2],
+    /// A road's vertical acceleration while driving, m/s^2: RMS and largest (over crests and
+    /// dips, and the bumps of a rough road).
+    pub vertical_mps2: Option<[f64; 2]>,
     /// Times the vehicle stands (at least 1 s): [from, for], s.
     pub standing: Vec<[f64; 2]>,
     /// What a road's plan had to do and assume.
@@ -67,11 +70,13 @@ pub fn summary_of(name: &str, run_s: f64, d: &Drive) -> RouteSummary {
         lateral_mps2: 0.0,
         pitch_deg: [f64::INFINITY, f64::NEG_INFINITY],
         roll_deg: [f64::INFINITY, f64::NEG_INFINITY],
+        vertical_mps2: None,
         standing: Vec::new(),
         notes: d.road().map(|r| r.notes().clone()),
         track: d.road().and_then(|r| r.track_notes().cloned()),
     };
     let mut still_from: Option<f64> = None;
+    let mut vertical = (0.0f64, 0.0f64, 0.0f64);
     for k in 0..n {
         let t = (k as f64 * 0.1).min(end);
         let (v, _, a, w, _) = d.kinematics(t);
@@ -83,6 +88,10 @@ pub fn summary_of(name: &str, run_s: f64, d: &Drive) -> RouteSummary {
         r.top_speed_mps = r.top_speed_mps.max(v);
         r.accel_mps2 = [r.accel_mps2[0].max(a), r.accel_mps2[1].max(-a)];
         r.lateral_mps2 = r.lateral_mps2.max((v * w).abs());
+        if let Some(road) = d.road().filter(|_| v > 1e-6) {
+            let z = road.vertical_accel(t);
+            vertical = (vertical.0 + z * z, vertical.1 + 1.0, vertical.2.max(z.abs()));
+        }
         r.pitch_deg = [
             r.pitch_deg[0].min(p.to_degrees()),
             r.pitch_deg[1].max(p.to_degrees()),
@@ -104,6 +113,7 @@ pub fn summary_of(name: &str, run_s: f64, d: &Drive) -> RouteSummary {
     }
     if let Some(road) = d.road() {
         r.length_m = road.length();
+        r.vertical_mps2 = Some([(vertical.0 / vertical.1.max(1.0)).sqrt(), vertical.2]);
     }
     r
 }
@@ -140,6 +150,12 @@ pub fn text(r: &RouteSummary) -> String {
         "  pitch {:+.2} to {:+.2} deg, roll {:+.2} to {:+.2} deg",
         r.pitch_deg[0], r.pitch_deg[1], r.roll_deg[0], r.roll_deg[1]
     );
+    if let Some([rms, max]) = r.vertical_mps2 {
+        let _ = writeln!(
+            o,
+            "  vertical acceleration while driving {rms:.2} m/s^2 RMS, up to {max:.2} (crests, dips and the road's bumps)"
+        );
+    }
     let stands: Vec<String> = r
         .standing
         .iter()
