@@ -562,10 +562,7 @@ impl Drive {
     /// Plan the route; errors name what is wrong with the spec.
     pub fn plan(spec: &DriveSpec) -> Result<Self, crate::ParamError> {
         if let Some(file) = &spec.track {
-            let road = crate::road::track::read(std::path::Path::new(file))
-                .and_then(|t| Road::from_track(spec, &t))
-                .map_err(|e| crate::ParamError::new("drive", e.to_string()))?;
-            return Ok(Self(Kind::Road(Box::new(road))));
+            return plan_track(spec, file);
         }
         if spec.lat_deg.is_nan() || spec.lon_deg.is_nan() {
             return Err(crate::ParamError::new(
@@ -677,6 +674,36 @@ impl Motion for Drive {
     fn latitude(&self, t: f64) -> f64 {
         self.motion().latitude(t)
     }
+}
+
+/// A drive from the recorded track `file`: read and fitted once per process for the same
+/// spec and the same file (its size and modification time), since a run plans its drive
+/// several times (the truth, the reference, the scoring, the report) and a long track takes
+/// seconds to fit.
+fn plan_track(spec: &DriveSpec, file: &str) -> Result<Drive, crate::ParamError> {
+    use std::collections::HashMap;
+    use std::sync::{Mutex, OnceLock};
+    static PLANNED: OnceLock<Mutex<HashMap<String, Drive>>> = OnceLock::new();
+    let stamp = std::fs::metadata(file)
+        .ok()
+        .map(|m| (m.len(), m.modified().ok()));
+    let key = format!("{spec:?} {stamp:?}");
+    let cache = PLANNED.get_or_init(|| Mutex::new(HashMap::new()));
+    if let Some(d) = cache.lock().ok().and_then(|c| c.get(&key).cloned()) {
+        return Ok(d);
+    }
+    let road = crate::road::track::read(std::path::Path::new(file))
+        .and_then(|t| Road::from_track(spec, &t))
+        .map_err(|e| crate::ParamError::new("drive", e.to_string()))?;
+    let d = Drive(Kind::Road(Box::new(road)));
+    if let Ok(mut c) = cache.lock() {
+        // a few tracks per process at most; a bench that plans many keeps the latest
+        if c.len() >= 8 {
+            c.clear();
+        }
+        c.insert(key, d.clone());
+    }
+    Ok(d)
 }
 
 /// The spec's speeds, rates and waypoints are usable.

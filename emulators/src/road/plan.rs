@@ -4,9 +4,9 @@
 //! changes sized within the vertical-acceleration limit, and the speed profile from stop to stop.
 
 use super::Road;
-use super::rough;
 use super::geo::Placed;
 use super::path::{Crest, Path, Turn, tangent_length};
+use super::rough;
 use super::speed::{Limits, Profile, Stretch};
 use crate::ParamError;
 use crate::drive::DriveSpec;

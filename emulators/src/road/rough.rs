@@ -85,11 +85,7 @@ impl Roughness {
     /// Pitch, roll (rad) and heave (m) `s` metres along the road, with their derivatives along
     /// it.
     pub fn at(&self, s: f64) -> [Along3; 3] {
-        [
-            sum(&self.pitch, s),
-            sum(&self.roll, s),
-            sum(&self.heave, s),
-        ]
+        [sum(&self.pitch, s), sum(&self.roll, s), sum(&self.heave, s)]
     }
 
     /// The heave `s` metres along the road, m.
@@ -111,8 +107,14 @@ mod tests {
             for i in 0..3 {
                 let d1 = (c[i].value - a[i].value) / (2.0 * h);
                 let d2 = (c[i].d1 - a[i].d1) / (2.0 * h);
-                assert!((d1 - b[i].d1).abs() < 1e-7 * (1.0 + b[i].d1.abs()), "{s} {i}");
-                assert!((d2 - b[i].d2).abs() < 1e-6 * (1.0 + b[i].d2.abs()), "{s} {i}");
+                assert!(
+                    (d1 - b[i].d1).abs() < 1e-7 * (1.0 + b[i].d1.abs()),
+                    "{s} {i}"
+                );
+                assert!(
+                    (d2 - b[i].d2).abs() < 1e-6 * (1.0 + b[i].d2.abs()),
+                    "{s} {i}"
+                );
             }
         }
         assert!(Roughness::new(0.0).is_none());

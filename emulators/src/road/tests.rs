@@ -347,11 +347,16 @@ fn a_rough_road_shakes_the_body_more_at_speed() {
         ((rate / n).sqrt().to_degrees(), (accel / n).sqrt())
     };
     let (slow, fast) = (at(10.0, Some(1.0)), at(30.0, Some(1.0)));
-    eprintln!("pitch and roll rate, vertical acceleration (RMS): {slow:?} at 10 m/s, {fast:?} at 30");
+    eprintln!(
+        "pitch and roll rate, vertical acceleration (RMS): {slow:?} at 10 m/s, {fast:?} at 30"
+    );
     assert!((fast.0 / slow.0 - 3.0).abs() < 0.3, "{slow:?} {fast:?}");
     assert!((fast.1 / slow.1 - 9.0).abs() < 1.0, "{slow:?} {fast:?}");
     // a typical road: about a degree per second and 0.9 m/s^2 at 30 m/s
-    assert!((0.5..1.5).contains(&fast.0) && (0.6..1.2).contains(&fast.1), "{fast:?}");
+    assert!(
+        (0.5..1.5).contains(&fast.0) && (0.6..1.2).contains(&fast.1),
+        "{fast:?}"
+    );
     assert_eq!(at(30.0, None), (0.0, 0.0));
 }
 

@@ -90,7 +90,11 @@ pub fn summary_of(name: &str, run_s: f64, d: &Drive) -> RouteSummary {
         r.lateral_mps2 = r.lateral_mps2.max((v * w).abs());
         if let Some(road) = d.road().filter(|_| v > 1e-6) {
             let z = road.vertical_accel(t);
-            vertical = (vertical.0 + z * z, vertical.1 + 1.0, vertical.2.max(z.abs()));
+            vertical = (
+                vertical.0 + z * z,
+                vertical.1 + 1.0,
+                vertical.2.max(z.abs()),
+            );
         }
         r.pitch_deg = [
             r.pitch_deg[0].min(p.to_degrees()),

@@ -380,3 +380,30 @@ fn broken_tracks_are_driven_or_refused_never_a_panic() {
         "{driven} driven, {refused} refused"
     );
 }
+
+/// A track file is read and fitted once per process for the same spec: planned again it is the
+/// same drive; the file rewritten (another track), it is read again.
+#[test]
+fn a_track_is_planned_once_until_its_file_changes() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = dir.path().join("drive.csv");
+    let exact = reference(&hilly_drive(), 1.0, T0);
+    std::fs::write(&file, write(&exact, Format::Csv, false)).expect("written");
+    let spec = DriveSpec {
+        track: Some(file.display().to_string()),
+        ..DriveSpec::driver()
+    };
+    let plan = || Drive::plan(&spec).unwrap_or_else(|e| panic!("{}", e.problem));
+    let (a, b) = (plan(), plan());
+    assert_eq!(a.duration(), b.duration());
+    assert_eq!(a.position(100.0), b.position(100.0));
+    // the first half of the drive only: another size, another plan
+    std::fs::write(&file, write(&exact[..exact.len() / 2], Format::Csv, false)).expect("written");
+    let c = plan();
+    assert!(
+        c.duration() < 0.7 * a.duration(),
+        "{} {}",
+        c.duration(),
+        a.duration()
+    );
+}
