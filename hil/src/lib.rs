@@ -15,6 +15,7 @@
 //!
 //! The commands (`src/cmd`, `src/main.rs`) parse arguments and call into these.
 
+pub mod campaign;
 pub mod check;
 pub mod engine;
 pub mod experiments;

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 const CRATES: [&str; 5] = ["wire", "nav", "emulators", "hil", "vcan-setup"];
 
 /// hil's folders in the order they may import (each from those before it).
-const HIL_LAYERS: [&str; 9] = [
+const HIL_LAYERS: [&str; 10] = [
     "scenario",
     "engine",
     "live",
@@ -23,6 +23,7 @@ const HIL_LAYERS: [&str; 9] = [
     "free",
     "experiments",
     "suites",
+    "campaign",
 ];
 
 fn src(krate: &str) -> PathBuf {

@@ -1,0 +1,18 @@
+//! Regression campaigns: several builds of a navigation computer through the same cases (fault
+//! matrix rows, scenarios, drills, experiments), one verdict per build and case against a
+//! baseline build.
+//!
+//! - [`spec`]: the campaign file (TOML): the devices under test, the baseline, the cases and
+//!   their repeats;
+//! - [`plan`]: the cells (device x case x repeat), each keyed by the build (a hash of the nav
+//!   binary and its config), the case and the seed, so that a campaign resumes where it stopped
+//!   and a build's cells already run are not run again; a cluster's task takes its cell by
+//!   number;
+//! - [`verdict`]: a case's figures per build against the baseline's: the same (every repeat's
+//!   frames bit for bit), better, worse or not distinguishable, decided by the figures' own
+//!   scatter (Welch's interval on the difference of the means), and flaky where a build's
+//!   repeats disagree on pass or fail.
+
+pub mod plan;
+pub mod spec;
+pub mod verdict;

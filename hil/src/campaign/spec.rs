@@ -1,0 +1,344 @@
+//! The campaign file:
+//!
+//! ```toml
+//! name = "nightly"
+//! baseline = "release"
+//! repeats = 3                      # statistical cases' repeats (default 3)
+//!
+//! [[device]]
+//! name = "release"
+//! nav = "builds/nav-1.4"           # a nav binary (default: the nav beside hil)
+//!
+//! [[device]]
+//! name = "new-filter"
+//! nav = "builds/nav-1.5"
+//! [device.config.filter]           # nav config overrides for this device
+//! kind = "adaptive"
+//!
+//! [[device]]
+//! name = "their-box"
+//! dut = "python3 their_nav.py {iface}"   # a free-running device command
+//!
+//! [[case]]
+//! faults = ["imu-frames-dropped", "gps-outage-void"]   # or ["all"]
+//!
+//! [[case]]
+//! scenario = "scenarios/drive-gps.toml"
+//! duration_s = 60.0
+//!
+//! [[case]]
+//! drill = "north-finding"
+//! seeds = [1, 2, 3]
+//!
+//! [[case]]
+//! experiment = "north-finding"
+//! runs = 8
+//! ```
+
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// A campaign: devices, a baseline among them, cases.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Campaign {
+    /// The campaign's name (its report's title).
+    pub name: String,
+    /// The device every other is compared with.
+    pub baseline: String,
+    /// Repeats of a statistical case (a scenario, a drill without seeds), each with another
+    /// seed.
+    #[serde(default = "three")]
+    pub repeats: u32,
+    /// The devices under test.
+    #[serde(rename = "device")]
+    pub devices: Vec<Device>,
+    /// The cases.
+    #[serde(rename = "case")]
+    pub cases: Vec<CaseSpec>,
+}
+
+fn three() -> u32 {
+    3
+}
+
+/// A device under test: a build of nav with its config, or a free-running device's command.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Device {
+    /// Its name in the report.
+    pub name: String,
+    /// A nav binary (relative to the campaign file's folder); none: the nav beside hil.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nav: Option<PathBuf>,
+    /// nav config overrides (tables and keys of nav's config file).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub config: Option<toml::Table>,
+    /// A free-running device's command (`{iface}`, `{tty}` replaced), instead of nav.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dut: Option<String>,
+}
+
+/// A case as the file says it: exactly one of its kinds.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq, Default)]
+#[serde(deny_unknown_fields)]
+pub struct CaseSpec {
+    /// Fault-matrix rows by name, or `["all"]`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub faults: Vec<String>,
+    /// A scenario file (relative to the campaign file's folder).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scenario: Option<PathBuf>,
+    /// A drill (`north-finding`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drill: Option<String>,
+    /// An experiment (`north-finding`, `navigation`, `routes`, ...).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub experiment: Option<String>,
+    /// A scenario's length, s (default: the scenario's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duration_s: Option<f64>,
+    /// The seeds of a drill or a scenario (default: 1 to the campaign's `repeats`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub seeds: Vec<u64>,
+    /// An experiment's runs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub runs: Option<u32>,
+}
+
+/// What a case runs.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum CaseKind {
+    /// One fault-matrix row (lockstep: one run says it all).
+    Fault(String),
+    /// A scenario through the bench.
+    Scenario(PathBuf),
+    /// A drill.
+    Drill(String),
+    /// An experiment in process with its runs.
+    Experiment(String, u32),
+}
+
+/// One case of a campaign, with its seeds.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Case {
+    /// Its name in the report and in its cells' keys (`fault:imu-frames-dropped`,
+    /// `scenario:drive-gps`, ...).
+    pub id: String,
+    /// What it runs.
+    pub kind: CaseKind,
+    /// A scenario's length, s.
+    pub duration_s: Option<f64>,
+    /// One cell per seed and device.
+    pub seeds: Vec<u64>,
+}
+
+impl Campaign {
+    /// Read and check a campaign file; its relative paths are made relative to its folder.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading the campaign {}", path.display()))?;
+        let mut c: Self =
+            toml::from_str(&text).with_context(|| format!("campaign {}", path.display()))?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        for d in &mut c.devices {
+            if let Some(n) = &d.nav {
+                d.nav = Some(dir.join(n));
+            }
+        }
+        for k in &mut c.cases {
+            if let Some(s) = &k.scenario {
+                k.scenario = Some(dir.join(s));
+            }
+        }
+        c.check()
+            .with_context(|| format!("campaign {}", path.display()))?;
+        Ok(c)
+    }
+
+    /// Devices named once each, the baseline among them, each device one thing, each case one
+    /// kind, repeats at least one.
+    pub fn check(&self) -> Result<()> {
+        if self.devices.is_empty() || self.cases.is_empty() {
+            bail!("a campaign needs at least one [[device]] and one [[case]]");
+        }
+        for (i, d) in self.devices.iter().enumerate() {
+            if self.devices[..i].iter().any(|e| e.name == d.name) {
+                bail!("device {:?} is named twice", d.name);
+            }
+            if d.dut.is_some() && (d.nav.is_some() || d.config.is_some()) {
+                bail!(
+                    "device {:?}: a free-running `dut` command has no `nav` or `config`",
+                    d.name
+                );
+            }
+        }
+        if !self.devices.iter().any(|d| d.name == self.baseline) {
+            bail!(
+                "the baseline {:?} is not a device (devices: {})",
+                self.baseline,
+                self.devices
+                    .iter()
+                    .map(|d| d.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+        if self.repeats == 0 {
+            bail!("repeats must be at least 1");
+        }
+        self.cases()?;
+        Ok(())
+    }
+
+    /// The cases, each fault row its own case, in the file's order.
+    pub fn cases(&self) -> Result<Vec<Case>> {
+        let mut out = Vec::new();
+        let seeds = |k: &CaseSpec| -> Vec<u64> {
+            if k.seeds.is_empty() {
+                (1..=u64::from(self.repeats)).collect()
+            } else {
+                k.seeds.clone()
+            }
+        };
+        for (i, k) in self.cases.iter().enumerate() {
+            let kinds = usize::from(!k.faults.is_empty())
+                + usize::from(k.scenario.is_some())
+                + usize::from(k.drill.is_some())
+                + usize::from(k.experiment.is_some());
+            if kinds != 1 {
+                bail!(
+                    "case {} must name exactly one of faults, scenario, drill, experiment",
+                    i + 1
+                );
+            }
+            for f in &k.faults {
+                out.push(Case {
+                    id: format!("fault:{f}"),
+                    kind: CaseKind::Fault(f.clone()),
+                    duration_s: None,
+                    seeds: vec![0],
+                });
+            }
+            if let Some(s) = &k.scenario {
+                let stem = s.file_stem().map_or_else(
+                    || s.display().to_string(),
+                    |x| x.to_string_lossy().into_owned(),
+                );
+                out.push(Case {
+                    id: format!("scenario:{stem}"),
+                    kind: CaseKind::Scenario(s.clone()),
+                    duration_s: k.duration_s,
+                    seeds: seeds(k),
+                });
+            }
+            if let Some(d) = &k.drill {
+                out.push(Case {
+                    id: format!("drill:{d}"),
+                    kind: CaseKind::Drill(d.clone()),
+                    duration_s: None,
+                    seeds: seeds(k),
+                });
+            }
+            if let Some(e) = &k.experiment {
+                out.push(Case {
+                    id: format!("experiment:{e}"),
+                    kind: CaseKind::Experiment(e.clone(), k.runs.unwrap_or(8)),
+                    duration_s: None,
+                    seeds: vec![0],
+                });
+            }
+        }
+        for (i, c) in out.iter().enumerate() {
+            if out[..i].iter().any(|d| d.id == c.id) {
+                bail!("case {} is named twice", c.id);
+            }
+        }
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    pub(crate) const EXAMPLE: &str = r#"
+name = "nightly"
+baseline = "release"
+repeats = 2
+
+[[device]]
+name = "release"
+
+[[device]]
+name = "worse"
+[device.config.filter]
+gps_sigma_m = 0.5
+
+[[case]]
+faults = ["imu-frames-dropped", "gps-outage-void"]
+
+[[case]]
+scenario = "scenarios/drive-gps.toml"
+duration_s = 60.0
+
+[[case]]
+drill = "north-finding"
+seeds = [7, 8, 9]
+
+[[case]]
+experiment = "north-finding"
+runs = 4
+"#;
+
+    #[test]
+    fn a_campaign_file_gives_its_cases_with_their_seeds() {
+        let c: Campaign = toml::from_str(EXAMPLE).expect("parses");
+        c.check().expect("valid");
+        let cases = c.cases().expect("cases");
+        let ids: Vec<&str> = cases.iter().map(|c| c.id.as_str()).collect();
+        assert_eq!(
+            ids,
+            [
+                "fault:imu-frames-dropped",
+                "fault:gps-outage-void",
+                "scenario:drive-gps",
+                "drill:north-finding",
+                "experiment:north-finding"
+            ]
+        );
+        assert_eq!(cases[0].seeds, [0]);
+        assert_eq!(cases[2].seeds, [1, 2]);
+        assert_eq!(cases[3].seeds, [7, 8, 9]);
+        assert_eq!(
+            cases[4].kind,
+            CaseKind::Experiment("north-finding".into(), 4)
+        );
+    }
+
+    #[test]
+    fn a_bad_campaign_says_what_is_wrong() {
+        let bad = |from: &str, to: &str, want: &str| {
+            let text = EXAMPLE.replacen(from, to, 1);
+            let e = toml::from_str::<Campaign>(&text)
+                .map_err(anyhow::Error::from)
+                .and_then(|c| c.check())
+                .expect_err(want);
+            assert!(format!("{e:#}").contains(want), "{e:#} (expected {want})");
+        };
+        bad(
+            "baseline = \"release\"",
+            "baseline = \"nightly\"",
+            "the baseline \"nightly\" is not a device",
+        );
+        bad("name = \"worse\"", "name = \"release\"", "named twice");
+        bad(
+            "drill = \"north-finding\"",
+            "drill = \"north-finding\"\nexperiment = \"x\"",
+            "exactly one",
+        );
+        bad("repeats = 2", "repeats = 0", "at least 1");
+        bad("duration_s = 60.0", "duration = 60.0", "unknown field");
+    }
+}
