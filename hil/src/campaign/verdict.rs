@@ -195,6 +195,41 @@ fn figure(name: &str, base: &[(u64, f64)], build: &[(u64, f64)]) -> FigureVerdic
     }
 }
 
+/// Every figure both sides have in every cell, compared.
+fn figures_of(base: &[CellResult], build: &[CellResult]) -> Vec<FigureVerdict> {
+    let names: Vec<&String> = base
+        .iter()
+        .flat_map(|c| c.figures.keys())
+        .filter(|n| {
+            build.iter().all(|c| c.figures.contains_key(*n))
+                && base.iter().all(|c| c.figures.contains_key(*n))
+        })
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    let series = |v: &[CellResult], n: &str| -> Vec<(u64, f64)> {
+        v.iter().map(|c| (c.seed, c.figures[n])).collect()
+    };
+    names
+        .iter()
+        .map(|n| figure(n, &series(base, n), &series(build, n)))
+        .collect()
+}
+
+/// Every seed of both sides ran and sent the same frames (their hashes equal).
+fn same_frames(base: &[CellResult], build: &[CellResult]) -> bool {
+    let hash_of = |s: u64| {
+        build
+            .iter()
+            .find(|c| c.seed == s)
+            .and_then(|c| c.sent_hash.as_ref())
+    };
+    base.len() == build.len()
+        && base
+            .iter()
+            .all(|b| b.sent_hash.is_some() && hash_of(b.seed) == b.sent_hash.as_ref())
+}
+
 /// The verdict of case `case` for the build whose cells are `build`, against the baseline's
 /// cells `base` (both of that case only).
 pub fn judge(case: &str, base: &[CellResult], build: &[CellResult]) -> CaseVerdict {
@@ -234,16 +269,7 @@ pub fn judge(case: &str, base: &[CellResult], build: &[CellResult]) -> CaseVerdi
             Vec::new(),
         );
     }
-    let hash_of = |v: &[CellResult], s: u64| {
-        v.iter()
-            .find(|c| c.seed == s)
-            .and_then(|c| c.sent_hash.clone())
-    };
-    let same = base.len() == build.len()
-        && base.iter().all(|b| {
-            let h = hash_of(build, b.seed);
-            h.is_some() && h == b.sent_hash
-        });
+    let same = same_frames(base, build);
     if same {
         return done(
             Verdict::Same,
@@ -254,23 +280,7 @@ pub fn judge(case: &str, base: &[CellResult], build: &[CellResult]) -> CaseVerdi
             Vec::new(),
         );
     }
-    let names: Vec<&String> = base
-        .iter()
-        .flat_map(|c| c.figures.keys())
-        .filter(|n| {
-            build.iter().all(|c| c.figures.contains_key(*n))
-                && base.iter().all(|c| c.figures.contains_key(*n))
-        })
-        .collect::<std::collections::BTreeSet<_>>()
-        .into_iter()
-        .collect();
-    let series = |v: &[CellResult], n: &str| -> Vec<(u64, f64)> {
-        v.iter().map(|c| (c.seed, c.figures[n])).collect()
-    };
-    let figures: Vec<FigureVerdict> = names
-        .iter()
-        .map(|n| figure(n, &series(base, n), &series(build, n)))
-        .collect();
+    let figures = figures_of(base, build);
     let listed = |v: Verdict| -> Vec<String> {
         figures
             .iter()
