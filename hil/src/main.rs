@@ -10,6 +10,7 @@ use cmd::args::{BusArgs, LiveArgs};
 use cmd::bench::{BenchArgs, bench};
 use cmd::busload::busload;
 use cmd::calibrate::{Calibrate, calibrate_rotating_imu, calibrate_tetrahedral};
+use cmd::campaign::{CampaignArgs, campaign};
 use cmd::demo::demo;
 use cmd::drill::{Drill, drill_north_finding};
 use cmd::experiment::{Experiment, experiment};
@@ -186,6 +187,16 @@ enum Cmd {
     /// it declines and the run judges itself); a result does not depend on where it was
     /// computed. Runs until SIGINT or SIGTERM.
     JudgeServer(cmd::judge::JudgeServerArgs),
+    /// A regression campaign: several devices under test (builds of nav with their config
+    /// overrides, or free-running devices) through the same cases, each case run with each
+    /// seed for each device (a cell), the cells kept by build, case and seed so that a
+    /// campaign resumes and an unchanged build is not run again; then one verdict per build and
+    /// case against the baseline: the same bit for bit, better, worse or not distinguishable
+    /// by the figures' scatter, or flaky. Writes report.md, report.svg, report.json and
+    /// junit.xml. Exit status 1 on a regression or a flaky case, 2 while cells lack results, 3 when the campaign cannot be planned (a bad file, a missing binary).
+    /// This version runs scenario cases (fault rows, drills and experiments are planned and
+    /// judged, not yet run).
+    Campaign(CampaignArgs),
 }
 
 fn main() {
@@ -276,5 +287,6 @@ fn real_main(cli: Cli) -> Result<i32> {
         Cmd::Bench(a) => bench(a),
         Cmd::Faults(a) => faults(a),
         Cmd::JudgeServer(a) => cmd::judge::judge_server(a),
+        Cmd::Campaign(a) => campaign(a),
     }
 }

@@ -14,5 +14,7 @@
 //!   repeats disagree on pass or fail.
 
 pub mod plan;
+pub mod report;
+pub mod run;
 pub mod spec;
 pub mod verdict;

@@ -262,11 +262,20 @@ pub fn judge(case: &str, base: &[CellResult], build: &[CellResult]) -> CaseVerdi
     };
     let (bp, bf) = passes(base);
     let (dp, df) = passes(build);
+    let figures = figures_of(base, build);
     if dp > 0 && df > 0 {
+        let failed: Vec<String> = build
+            .iter()
+            .filter(|c| c.pass == Some(false))
+            .map(|c| c.seed.to_string())
+            .collect();
         return done(
             Verdict::Flaky,
-            format!("its repeats disagree: {dp} passed, {df} failed"),
-            Vec::new(),
+            format!(
+                "its repeats disagree: {dp} passed, {df} failed (seed {})",
+                failed.join(", ")
+            ),
+            figures,
         );
     }
     let same = same_frames(base, build);
@@ -280,7 +289,6 @@ pub fn judge(case: &str, base: &[CellResult], build: &[CellResult]) -> CaseVerdi
             Vec::new(),
         );
     }
-    let figures = figures_of(base, build);
     let listed = |v: Verdict| -> Vec<String> {
         figures
             .iter()

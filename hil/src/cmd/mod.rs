@@ -6,6 +6,7 @@ pub(crate) mod args;
 pub(crate) mod bench;
 pub(crate) mod busload;
 pub(crate) mod calibrate;
+pub(crate) mod campaign;
 pub(crate) mod demo;
 pub(crate) mod drill;
 pub(crate) mod emulate;

@@ -203,11 +203,8 @@ pub(crate) fn seeded_run(
     rx: &ReceiverParams,
     seed: u64,
 ) -> Result<PartRun> {
-    let mut sc = s.clone();
-    sc.imu.seed = s.imu.seed + 1000 * seed;
-    if let Some(t) = sc.turntable.as_mut() {
-        t.seed += seed;
-    }
+    // the scenario's own receiver is not the one navigated with: `rx` (its seed changed alike)
+    let sc = s.reseeded(seed);
     let mut rx = rx.clone();
     rx.errors.seed += 1000 * seed;
     let mut run = navigate(&sc, filter, &rx, 0.0)?;

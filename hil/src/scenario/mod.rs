@@ -5,6 +5,7 @@ pub mod fogunit;
 pub mod navconfig;
 pub mod route;
 pub mod trackview;
+pub mod variant;
 
 use anyhow::{Context, Result, bail};
 use emulators::bus::transport::BusFaults;

@@ -1,0 +1,172 @@
+//! Running a campaign's cells and reading what they gave.
+//!
+//! A cell is one run of the bench by this program (`hil run`), in a folder of its own under the
+//! campaign's output folder (`cells/<key>/`): the scenario as the cell runs it (the case's,
+//! re-seeded for the cell's seed, with the device's nav settings merged in: the bench's nav and
+//! its in-process twin read the same), the run's folder, its JSON report, and `result.json`,
+//! the figures the verdicts are taken from. A cell is done when `result.json` is there; a cell
+//! that could not run (no report) leaves none, so running the campaign again runs it again.
+
+use super::plan::Cell;
+use super::spec::{Campaign, Case, CaseKind, Device};
+use super::verdict::CellResult;
+use crate::scenario::Scenario;
+use anyhow::{Context, Result, bail};
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// How this machine runs cells.
+#[derive(Debug, Clone)]
+pub struct Runner {
+    /// This program (`hil`).
+    pub exe: PathBuf,
+    /// The nav binary of a device that names none.
+    pub nav_default: PathBuf,
+    /// The campaign's output folder.
+    pub out: PathBuf,
+    /// The CAN interfaces' prefix: cell `k` runs on `<prefix><k mod 64>`.
+    pub iface_prefix: String,
+}
+
+/// The figures of a bench run's JSON report that the verdicts read (absolute values of signed
+/// errors): the end of the drive, the drive second by second, a drill's heading.
+pub fn figures_of_report(r: &Value) -> BTreeMap<String, f64> {
+    let mut f = BTreeMap::new();
+    let mut put = |name: &str, v: &Value| {
+        if let Some(x) = v.as_f64().filter(|x| x.is_finite()) {
+            f.insert(name.to_string(), x.abs());
+        }
+    };
+    let n = &r["navigation"];
+    put("end_position_error_m", &n["position_error_m"]);
+    put("end_velocity_error_mps", &n["velocity_error_mps"]);
+    put("end_heading_error_deg", &n["heading_error_deg"]);
+    put("end_position_sigma_m", &n["position_sigma_m"]);
+    let s = &r["navigation_series"];
+    put("rms_position_error_m", &s["rms_position_error_m"]);
+    put("max_position_error_m", &s["max_position_error_m"]);
+    let d = &r["drill"];
+    put("drill_heading_error_deg", &d["error_deg"]);
+    put("drill_heading_sigma_deg", &d["sigma_deg"]);
+    f
+}
+
+/// A cell's result from the bench run's JSON report `r`.
+pub fn result_of_report(cell: &Cell, r: &Value) -> CellResult {
+    CellResult {
+        device: cell.device.clone(),
+        case: cell.case.clone(),
+        seed: cell.seed,
+        pass: r["pass"].as_bool(),
+        figures: figures_of_report(r),
+        sent_hash: r["nav"]["solution"]["sent_hash"]
+            .as_str()
+            .filter(|h| !h.is_empty())
+            .map(str::to_string),
+    }
+}
+
+/// The scenario cell `cell` of case `case` runs for `device`: the case's, its length as the
+/// case says, re-seeded for the cell's seed, with the device's nav settings.
+pub fn cell_scenario(case: &Case, device: &Device, cell: &Cell) -> Result<Scenario> {
+    let CaseKind::Scenario(path) = &case.kind else {
+        bail!("case {} is not a scenario", case.id);
+    };
+    let mut s = Scenario::load(path)?;
+    if let Some(d) = case.duration_s {
+        s.duration_s = d;
+    }
+    s.name = format!("{}-{}-s{}", s.name, device.name, cell.seed);
+    let s = s.reseeded(cell.seed);
+    match &device.config {
+        Some(over) => s
+            .with_nav_settings(over)
+            .with_context(|| format!("device {:?}", device.name)),
+        None => Ok(s),
+    }
+}
+
+impl Runner {
+    /// Run `cell` (of `campaign`, whose cases are `cases`) and keep its result; the result.
+    pub fn run(&self, campaign: &Campaign, cases: &[Case], cell: &Cell) -> Result<CellResult> {
+        let case = cases
+            .iter()
+            .find(|c| c.id == cell.case)
+            .with_context(|| format!("cell {}: no case {}", cell.number, cell.case))?;
+        let device = campaign
+            .devices
+            .iter()
+            .find(|d| d.name == cell.device)
+            .with_context(|| format!("cell {}: no device {}", cell.number, cell.device))?;
+        let dir = cell.folder(&self.out);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let r = match &case.kind {
+            CaseKind::Scenario(_) => self.run_scenario(case, device, cell, &dir)?,
+            CaseKind::Fault(_) | CaseKind::Drill(_) | CaseKind::Experiment(..) => bail!(
+                "cell {} ({}): this version runs scenario cases only; fault rows, drills and experiments are planned and judged but not yet run",
+                cell.number,
+                cell.case
+            ),
+        };
+        let result = result_of_report(cell, &r);
+        let text = serde_json::to_string_pretty(&result)?;
+        std::fs::write(dir.join("result.json"), text)
+            .with_context(|| format!("writing {}", dir.join("result.json").display()))?;
+        Ok(result)
+    }
+
+    fn run_scenario(&self, case: &Case, device: &Device, cell: &Cell, dir: &Path) -> Result<Value> {
+        let s = cell_scenario(case, device, cell)?;
+        let file = dir.join("scenario.toml");
+        std::fs::write(&file, toml::to_string(&s)?)
+            .with_context(|| format!("writing {}", file.display()))?;
+        let iface = format!("{}{}", self.iface_prefix, cell.number % 64);
+        let mut c = Command::new(&self.exe);
+        c.arg("run")
+            .arg("--scenario")
+            .arg(&file)
+            .arg("--json")
+            .arg("--out")
+            .arg(dir.join("run"))
+            .args(["--iface", &iface]);
+        match &device.dut {
+            Some(cmd) => {
+                c.args(["--free", "--dut", cmd]);
+            }
+            None => {
+                c.arg("--nav")
+                    .arg(device.nav.as_deref().unwrap_or(&self.nav_default));
+            }
+        }
+        let o = c
+            .output()
+            .with_context(|| format!("starting {}", self.exe.display()))?;
+        std::fs::write(dir.join("run.log"), &o.stderr)
+            .with_context(|| format!("writing {}", dir.join("run.log").display()))?;
+        // a run whose checks fail still reports (exit status 1): a result; no report: none
+        serde_json::from_slice(&o.stdout).with_context(|| {
+            format!(
+                "cell {} ({} on {}): the run gave no report (exit status {:?}; its log: {})",
+                cell.number,
+                cell.case,
+                cell.device,
+                o.status.code(),
+                dir.join("run.log").display()
+            )
+        })
+    }
+}
+
+/// Every cell's result kept in `out` (the cells without one left out).
+pub fn results(cells: &[Cell], out: &Path) -> Result<Vec<CellResult>> {
+    let mut v = Vec::new();
+    for c in cells.iter().filter(|c| c.done(out)) {
+        let p = c.folder(out).join("result.json");
+        let text =
+            std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
+        v.push(serde_json::from_str(&text).with_context(|| format!("{}", p.display()))?);
+    }
+    Ok(v)
+}

@@ -1,0 +1,133 @@
+//! `hil campaign` as a lab drives it by hand or from a cluster: the plan of cells with their
+//! keys, a cluster's results merged into one report (the regression first, JUnit for the CI
+//! server, the exit status failing on it), and a bad campaign refused with what is wrong. The
+//! cells' runs through vcan are the end-to-end tests' (they need the guest).
+
+use e2e::bin;
+use std::path::Path;
+use std::process::Command;
+
+const CAMPAIGN: &str = r#"
+name = "nightly"
+baseline = "release"
+repeats = 3
+
+[[device]]
+name = "release"
+
+[[device]]
+name = "overconfident"
+[device.config.navigation.filter]
+use_gst = false
+gps_sigma_m = 0.3
+
+[[case]]
+scenario = "SCENARIO"
+duration_s = 40.0
+"#;
+
+fn hil(args: &[&str], dir: &Path) -> std::process::Output {
+    Command::new(bin("hil"))
+        .arg("campaign")
+        .arg(dir.join("campaign.toml"))
+        .arg("--out")
+        .arg(dir.join("out"))
+        .args(args)
+        .output()
+        .expect("hil runs")
+}
+
+/// The plan's cell lines: (number, device, seed, key, done).
+fn plan(dir: &Path) -> Vec<(usize, String, u64, String, bool)> {
+    let o = hil(&["--plan"], dir);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            (
+                f[0].parse().expect("number"),
+                f[1].to_string(),
+                f[3].parse().expect("seed"),
+                f[5].to_string(),
+                f[4] == "yes",
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_clusters_results_merge_into_one_verdict_per_build() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
+    std::fs::write(
+        dir.path().join("campaign.toml"),
+        CAMPAIGN.replace("SCENARIO", &scenario.display().to_string()),
+    )
+    .unwrap();
+    let cells = plan(dir.path());
+    assert_eq!(cells.len(), 6, "{cells:?}");
+    assert!(cells.iter().all(|c| !c.4));
+    // what each cluster task left: the overconfident build's errors 40 % larger, seed by seed
+    for (_, device, seed, key, _) in &cells {
+        let x = 15.0 + *seed as f64;
+        let k = if device == "overconfident" { 1.4 } else { 1.0 };
+        let folder = dir.path().join("out/cells").join(key);
+        std::fs::create_dir_all(&folder).unwrap();
+        let result = serde_json::json!({
+            "device": device, "case": "scenario:drive-gps", "seed": seed, "pass": true,
+            "figures": {"rms_position_error_m": k * x, "end_position_error_m": k * x + 1.0},
+            "sent_hash": format!("{device}{seed}"),
+        });
+        std::fs::write(folder.join("result.json"), result.to_string()).unwrap();
+    }
+    assert!(
+        plan(dir.path()).iter().all(|c| c.4),
+        "every cell has its result"
+    );
+    let o = hil(&["--merge"], dir.path());
+    let md = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "a regression fails: {md}");
+    assert!(
+        md.contains("**WORSE** overconfident on scenario:drive-gps"),
+        "{md}"
+    );
+    assert!(
+        md.contains("rms_position_error_m: 23.8000 against 17.0000"),
+        "{md}"
+    );
+    let out = dir.path().join("out");
+    for f in ["report.md", "report.svg", "report.json"] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    let xml = std::fs::read_to_string(out.join("junit.xml")).unwrap();
+    let j = hil::junit::foreign(&xml, "junit.xml").unwrap();
+    assert_eq!((j.tests, j.failures), (1, 1), "{xml}");
+    // a task of the array for a cell that has its result: nothing to run
+    let o = hil(&["--cell", "2"], dir.path());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("cell 2 has its result already"));
+    let o = hil(&["--cell", "6"], dir.path());
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("the plan has 6 cells"));
+}
+
+#[test]
+fn a_bad_campaign_is_refused_with_what_is_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("campaign.toml"),
+        CAMPAIGN
+            .replace("SCENARIO", "x.toml")
+            .replace("baseline = \"release\"", "baseline = \"tuesday\""),
+    )
+    .unwrap();
+    let o = hil(&["--plan"], dir.path());
+    assert_eq!(o.status.code(), Some(3));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("the baseline \"tuesday\" is not a device"),
+        "{e}"
+    );
+}
