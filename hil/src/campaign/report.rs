@@ -176,7 +176,7 @@ pub fn svg(m: &Merged) -> String {
     }
     let (left, top, w, h) = (260.0, 40.0, 140.0, 26.0);
     let width = left + w * devices.len() as f64 + 10.0;
-    let height = top + h * cases.len() as f64 + 10.0;
+    let height = top + h * cases.len() as f64 + 34.0;
     let mut o = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{height}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
     );
@@ -217,6 +217,11 @@ pub fn svg(m: &Merged) -> String {
             );
         }
     }
+    let _ = writeln!(
+        o,
+        "<text x=\"6\" y=\"{}\" fill=\"#555\">red worse, orange flaky, grey missing, green better, pale not distinguishable, blue the same frames</text>",
+        height - 10.0
+    );
     o.push_str("</svg>\n");
     o
 }
