@@ -175,7 +175,7 @@ pub fn svg(m: &Merged) -> String {
         }
     }
     let (left, top, w, h) = (260.0, 40.0, 140.0, 26.0);
-    let width = left + w * devices.len() as f64 + 10.0;
+    let width = (left + w * devices.len() as f64 + 10.0).max(640.0);
     let height = top + h * cases.len() as f64 + 34.0;
     let mut o = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{height}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
