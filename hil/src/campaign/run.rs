@@ -102,19 +102,104 @@ impl Runner {
             .with_context(|| format!("cell {}: no device {}", cell.number, cell.device))?;
         let dir = cell.folder(&self.out);
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-        let r = match &case.kind {
-            CaseKind::Scenario(_) => self.run_scenario(case, device, cell, &dir)?,
-            CaseKind::Fault(_) | CaseKind::Drill(_) | CaseKind::Experiment(..) => bail!(
-                "cell {} ({}): this version runs scenario cases only; fault rows, drills and experiments are planned and judged but not yet run",
+        let result = match &case.kind {
+            CaseKind::Scenario(_) => {
+                result_of_report(cell, &self.run_scenario(case, device, cell, &dir)?)
+            }
+            CaseKind::Fault(name) => self.run_fault(name, device, cell, &dir)?,
+            CaseKind::Drill(_) | CaseKind::Experiment(..) => bail!(
+                "cell {} ({}): this version runs scenario and fault cases; drills and experiments are planned and judged but not yet run",
                 cell.number,
                 cell.case
             ),
         };
-        let result = result_of_report(cell, &r);
         let text = serde_json::to_string_pretty(&result)?;
         std::fs::write(dir.join("result.json"), text)
             .with_context(|| format!("writing {}", dir.join("result.json").display()))?;
         Ok(result)
+    }
+
+    /// A fault row for `device`: `hil faults --only` with its nav binary (the matrix's own
+    /// settings: a device's nav settings apply to scenario cases), the row's pass, its
+    /// detection latency and what nav sent.
+    fn run_fault(
+        &self,
+        name: &str,
+        device: &Device,
+        cell: &Cell,
+        dir: &Path,
+    ) -> Result<CellResult> {
+        if device.dut.is_some() {
+            bail!(
+                "cell {} ({}): the fault matrix runs builds of nav; {:?} is a free-running device",
+                cell.number,
+                cell.case,
+                device.name
+            );
+        }
+        let mut c = Command::new(&self.exe);
+        c.args(["faults", "--only", name, "--jobs", "1", "--json"])
+            .arg("--out")
+            .arg(dir.join("run"))
+            .args([
+                "--iface",
+                &format!("{}{}", self.iface_prefix, cell.number % 64),
+            ])
+            .arg("--nav")
+            .arg(device.nav.as_deref().unwrap_or(&self.nav_default));
+        let m = self.report_of(c, cell, dir)?;
+        let row = &m["rows"][0];
+        if row["fault"].as_str() != Some(name) {
+            bail!(
+                "cell {} ({}): the matrix gave no row {name}",
+                cell.number,
+                cell.case
+            );
+        }
+        let mut figures = BTreeMap::new();
+        if let Some(l) = row["verdict"]["latency_s"]
+            .as_f64()
+            .filter(|x| x.is_finite())
+        {
+            figures.insert("detection_latency_s".to_string(), l.abs());
+        }
+        // what nav sent in the row's run, for "the same frames"
+        let run: Value = row["run_dir"]
+            .as_str()
+            .and_then(|d| std::fs::read(Path::new(d).join("report.json")).ok())
+            .and_then(|b| serde_json::from_slice(&b).ok())
+            .unwrap_or(Value::Null);
+        Ok(CellResult {
+            device: cell.device.clone(),
+            case: cell.case.clone(),
+            seed: cell.seed,
+            pass: row["verdict"]["pass"].as_bool(),
+            figures,
+            sent_hash: run["nav"]["solution"]["sent_hash"]
+                .as_str()
+                .filter(|h| !h.is_empty())
+                .map(str::to_string),
+        })
+    }
+
+    /// Run `c` (a hil command printing its JSON report), its log kept in the cell's folder;
+    /// the report (a run whose checks fail still reports, with exit status 1).
+    fn report_of(&self, mut c: Command, cell: &Cell, dir: &Path) -> Result<Value> {
+        let o = c
+            .output()
+            .with_context(|| format!("starting {}", self.exe.display()))?;
+        std::fs::write(dir.join("run.log"), &o.stderr)
+            .with_context(|| format!("writing {}", dir.join("run.log").display()))?;
+        serde_json::from_slice(&o.stdout).with_context(|| {
+            format!(
+                "cell {} ({} on {}): the run gave no report (exit status {:?}; its log: {})",
+                cell.number,
+                cell.case,
+                cell.device,
+                o.status.code(),
+                dir.join("run.log").display()
+            )
+        })
     }
 
     fn run_scenario(&self, case: &Case, device: &Device, cell: &Cell, dir: &Path) -> Result<Value> {
@@ -140,22 +225,7 @@ impl Runner {
                     .arg(device.nav.as_deref().unwrap_or(&self.nav_default));
             }
         }
-        let o = c
-            .output()
-            .with_context(|| format!("starting {}", self.exe.display()))?;
-        std::fs::write(dir.join("run.log"), &o.stderr)
-            .with_context(|| format!("writing {}", dir.join("run.log").display()))?;
-        // a run whose checks fail still reports (exit status 1): a result; no report: none
-        serde_json::from_slice(&o.stdout).with_context(|| {
-            format!(
-                "cell {} ({} on {}): the run gave no report (exit status {:?}; its log: {})",
-                cell.number,
-                cell.case,
-                cell.device,
-                o.status.code(),
-                dir.join("run.log").display()
-            )
-        })
+        self.report_of(c, cell, dir)
     }
 }
 

@@ -20,7 +20,7 @@
 //! dut = "python3 their_nav.py {iface}"   # a free-running device command
 //!
 //! [[case]]
-//! faults = ["imu-frames-dropped", "gps-outage-void"]   # or ["all"]
+//! faults = ["imu-frames-dropped", "gps-void-outage"]   # or ["all"]
 //!
 //! [[case]]
 //! scenario = "scenarios/drive-gps.toml"
@@ -213,7 +213,22 @@ impl Campaign {
                     i + 1
                 );
             }
-            for f in &k.faults {
+            let known: Vec<&str> = crate::suites::faults::matrix()
+                .iter()
+                .map(|c| c.name)
+                .collect();
+            let rows: Vec<String> = if k.faults.iter().any(|f| f == "all") {
+                known.iter().map(|f| f.to_string()).collect()
+            } else {
+                k.faults.clone()
+            };
+            if let Some(bad) = rows.iter().find(|f| !known.contains(&f.as_str())) {
+                bail!(
+                    "case {}: {bad:?} is not a fault of the matrix (`hil faults --list`)",
+                    i + 1
+                );
+            }
+            for f in &rows {
                 out.push(Case {
                     id: format!("fault:{f}"),
                     kind: CaseKind::Fault(f.clone()),
@@ -277,7 +292,7 @@ name = "worse"
 gps_sigma_m = 0.5
 
 [[case]]
-faults = ["imu-frames-dropped", "gps-outage-void"]
+faults = ["imu-frames-dropped", "gps-void-outage"]
 
 [[case]]
 scenario = "scenarios/drive-gps.toml"
@@ -302,7 +317,7 @@ runs = 4
             ids,
             [
                 "fault:imu-frames-dropped",
-                "fault:gps-outage-void",
+                "fault:gps-void-outage",
                 "scenario:drive-gps",
                 "drill:north-finding",
                 "experiment:north-finding"
@@ -315,6 +330,14 @@ runs = 4
             cases[4].kind,
             CaseKind::Experiment("north-finding".into(), 4)
         );
+        // every row of the matrix
+        let all: Campaign = toml::from_str(&EXAMPLE.replace(
+            "faults = [\"imu-frames-dropped\", \"gps-void-outage\"]",
+            "faults = [\"all\"]",
+        ))
+        .expect("parses");
+        let rows = crate::suites::faults::matrix().len();
+        assert_eq!(all.cases().expect("cases").len(), rows + 3);
     }
 
     #[test]
@@ -339,6 +362,11 @@ runs = 4
             "exactly one",
         );
         bad("repeats = 2", "repeats = 0", "at least 1");
+        bad(
+            "\"gps-void-outage\"",
+            "\"gps-outage\"",
+            "\"gps-outage\" is not a fault of the matrix",
+        );
         bad("duration_s = 60.0", "duration = 60.0", "unknown field");
     }
 }

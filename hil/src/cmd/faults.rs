@@ -1,7 +1,7 @@
 //! `hil faults`: the fault matrix, where vcan is (natively, or all of it in the guest).
 
 use crate::cmd::args::BusArgs;
-use crate::cmd::guest::{absolute, default_out, junit_back, junit_through_guest, rerun_in_guest};
+use crate::cmd::guest::{absolute, default_out, junit_back, junit_through_guest, run_in_guest};
 use anyhow::{Result, bail};
 use hil::run::sibling_binary;
 use hil::suites::faults::{FaultOptions, matrix, run_matrix};
@@ -28,14 +28,22 @@ pub(crate) struct FaultsArgs {
     /// a test case per fault, failing with what was expected and observed.
     #[arg(long, value_name = "FILE")]
     pub(crate) junit: Option<PathBuf>,
+    /// The nav binary (default: next to hil): another build of nav through the matrix.
+    #[arg(long)]
+    pub(crate) nav: Option<PathBuf>,
     #[command(flatten)]
     pub(crate) bus: BusArgs,
 }
 
 pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
     if a.list {
+        // into a pager or `head`: a closed pipe ends the list, not the program
+        use std::io::Write as _;
+        let mut o = std::io::stdout().lock();
         for c in matrix() {
-            println!("{:<28} {}", c.name, c.injected);
+            if writeln!(o, "{:<28} {}", c.name, c.injected).is_err() {
+                break;
+            }
         }
         return Ok(0);
     }
@@ -47,6 +55,10 @@ pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
         bail!("--only: `{bad}` is not a fault of the matrix (see `hil faults --list`)");
     }
     let out = absolute(&a.bus.out.clone().unwrap_or_else(|| default_out("faults")))?;
+    let nav = match &a.nav {
+        Some(n) => absolute(n)?,
+        None => sibling_binary("nav")?,
+    };
     if !a.bus.here() {
         let mut args: Vec<String> = vec![
             "faults".into(),
@@ -62,8 +74,22 @@ pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
         if !a.only.is_empty() {
             args.extend(["--only".into(), a.only.join(",")]);
         }
+        args.extend(["--nav".into(), nav.to_string_lossy().into_owned()]);
+        if a.bus.json {
+            args.push("--json".into());
+        }
         let junit = junit_through_guest(&mut args, &out, a.junit.as_deref())?;
-        let code = rerun_in_guest(args, a.bus.json, &out, vec![], "faults.json")?;
+        let shares = nav
+            .parent()
+            .map(|p| vec![p.to_path_buf()])
+            .unwrap_or_default();
+        let code = run_in_guest(
+            args,
+            &out,
+            shares,
+            vec![nav],
+            a.bus.json.then_some("faults.json"),
+        )?;
         junit_back(junit)?;
         return Ok(code);
     }
@@ -71,7 +97,7 @@ pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
     let o = FaultOptions {
         iface: a.bus.iface.clone(),
         out: out.clone(),
-        nav_bin: sibling_binary("nav")?,
+        nav_bin: nav,
         only: a.only.clone(),
         speed: a.speed,
         progress: !a.bus.json,

@@ -92,6 +92,10 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
         None => sibling_binary("nav")?,
     };
     args.extend(["--nav".into(), nav.to_string_lossy().into_owned()]);
+    // another build of nav may live outside the folders the guest is given
+    if let Some(dir) = nav.parent() {
+        extra.push(dir.to_path_buf());
+    }
     if a.bus.json {
         args.push("--json".into());
     }
