@@ -194,8 +194,8 @@ enum Cmd {
     /// case against the baseline: the same bit for bit, better, worse or not distinguishable
     /// by the figures' scatter, or flaky. Writes report.md, report.svg, report.json and
     /// junit.xml. Exit status 1 on a regression or a flaky case, 2 while cells lack results, 3 when the campaign cannot be planned (a bad file, a missing binary).
-    /// This version runs scenario cases and fault rows (drills and experiments are planned and
-    /// judged, not yet run).
+    /// This version runs scenarios, fault rows and drills (experiments are planned and judged,
+    /// not yet run).
     Campaign(CampaignArgs),
 }
 

@@ -88,6 +88,30 @@ pub fn cell_scenario(case: &Case, device: &Device, cell: &Cell) -> Result<Scenar
     }
 }
 
+/// The north-finding drill cell `cell` runs for `device`, as `hil drill north-finding --seed`
+/// makes it: at the paper's start point, its heading drawn from the seed, `dwell_s` at each of
+/// four positions (60 s by default), at up to x25 (lockstep: its result is the same at any
+/// pace), with the device's nav settings.
+pub fn drill_scenario(case: &Case, device: &Device, cell: &Cell) -> Result<Scenario> {
+    use rand::{Rng, SeedableRng};
+    let heading = rand::rngs::StdRng::seed_from_u64(cell.seed).random::<f64>() * 360.0;
+    let mut s = crate::procedures::northfinding::scenario(
+        heading,
+        28.218157,
+        case.dwell_s.unwrap_or(60.0),
+        cell.seed,
+    );
+    s.site.lon_deg = 112.989583;
+    s.speed = 25.0;
+    s.name = format!("drill-{}-s{}", device.name, cell.seed);
+    match &device.config {
+        Some(over) => s
+            .with_nav_settings(over)
+            .with_context(|| format!("device {:?}", device.name)),
+        None => Ok(s),
+    }
+}
+
 impl Runner {
     /// Run `cell` (of `campaign`, whose cases are `cases`) and keep its result; the result.
     pub fn run(&self, campaign: &Campaign, cases: &[Case], cell: &Cell) -> Result<CellResult> {
@@ -104,11 +128,16 @@ impl Runner {
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         let result = match &case.kind {
             CaseKind::Scenario(_) => {
-                result_of_report(cell, &self.run_scenario(case, device, cell, &dir)?)
+                let s = cell_scenario(case, device, cell)?;
+                result_of_report(cell, &self.run_scenario(&s, device, cell, &dir)?)
             }
             CaseKind::Fault(name) => self.run_fault(name, device, cell, &dir)?,
-            CaseKind::Drill(_) | CaseKind::Experiment(..) => bail!(
-                "cell {} ({}): this version runs scenario and fault cases; drills and experiments are planned and judged but not yet run",
+            CaseKind::Drill(_) => {
+                let s = drill_scenario(case, device, cell)?;
+                result_of_report(cell, &self.run_scenario(&s, device, cell, &dir)?)
+            }
+            CaseKind::Experiment(..) => bail!(
+                "cell {} ({}): this version runs scenario, fault and drill cases; experiments are planned and judged but not yet run",
                 cell.number,
                 cell.case
             ),
@@ -202,8 +231,13 @@ impl Runner {
         })
     }
 
-    fn run_scenario(&self, case: &Case, device: &Device, cell: &Cell, dir: &Path) -> Result<Value> {
-        let s = cell_scenario(case, device, cell)?;
+    fn run_scenario(
+        &self,
+        s: &Scenario,
+        device: &Device,
+        cell: &Cell,
+        dir: &Path,
+    ) -> Result<Value> {
         let file = dir.join("scenario.toml");
         std::fs::write(&file, toml::to_string(&s)?)
             .with_context(|| format!("writing {}", file.display()))?;

@@ -105,6 +105,9 @@ pub struct CaseSpec {
     /// An experiment's runs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub runs: Option<u32>,
+    /// A north-finding drill's dwell at each position, s (default 60).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dwell_s: Option<f64>,
 }
 
 /// What a case runs.
@@ -130,6 +133,8 @@ pub struct Case {
     pub kind: CaseKind,
     /// A scenario's length, s.
     pub duration_s: Option<f64>,
+    /// A drill's dwell at each position, s.
+    pub dwell_s: Option<f64>,
     /// One cell per seed and device.
     pub seeds: Vec<u64>,
 }
@@ -233,6 +238,7 @@ impl Campaign {
                     id: format!("fault:{f}"),
                     kind: CaseKind::Fault(f.clone()),
                     duration_s: None,
+                    dwell_s: None,
                     seeds: vec![0],
                 });
             }
@@ -245,14 +251,25 @@ impl Campaign {
                     id: format!("scenario:{stem}"),
                     kind: CaseKind::Scenario(s.clone()),
                     duration_s: k.duration_s,
+                    dwell_s: None,
                     seeds: seeds(k),
                 });
+            }
+            if let Some(d) = k.drill.as_ref().filter(|d| d.as_str() != "north-finding") {
+                bail!(
+                    "case {}: drill {d:?}: the drill a campaign runs is \"north-finding\"",
+                    i + 1
+                );
+            }
+            if k.dwell_s.is_some_and(|d| !(5.0..=600.0).contains(&d)) {
+                bail!("case {}: dwell_s from 5 to 600 s", i + 1);
             }
             if let Some(d) = &k.drill {
                 out.push(Case {
                     id: format!("drill:{d}"),
                     kind: CaseKind::Drill(d.clone()),
                     duration_s: None,
+                    dwell_s: k.dwell_s,
                     seeds: seeds(k),
                 });
             }
@@ -261,6 +278,7 @@ impl Campaign {
                     id: format!("experiment:{e}"),
                     kind: CaseKind::Experiment(e.clone(), k.runs.unwrap_or(8)),
                     duration_s: None,
+                    dwell_s: None,
                     seeds: vec![0],
                 });
             }

@@ -230,6 +230,29 @@ fn same_frames(base: &[CellResult], build: &[CellResult]) -> bool {
             .all(|b| b.sent_hash.is_some() && hash_of(b.seed) == b.sent_hash.as_ref())
 }
 
+/// Why the same: the seeds, and the failures both had.
+fn same_why(seeds: usize, passed: usize, failed: usize) -> String {
+    let both = if failed > 0 {
+        format!(" (both: {passed} passed, {failed} failed)")
+    } else {
+        String::new()
+    };
+    format!("the same frames as the baseline, bit for bit, with each of its {seeds} seeds{both}")
+}
+
+/// Why flaky: the seeds that failed.
+fn flaky_why(build: &[CellResult], passed: usize, failed: usize) -> String {
+    let seeds: Vec<String> = build
+        .iter()
+        .filter(|c| c.pass == Some(false))
+        .map(|c| c.seed.to_string())
+        .collect();
+    format!(
+        "its repeats disagree: {passed} passed, {failed} failed (seed {})",
+        seeds.join(", ")
+    )
+}
+
 /// The verdict of case `case` for the build whose cells are `build`, against the baseline's
 /// cells `base` (both of that case only).
 pub fn judge(case: &str, base: &[CellResult], build: &[CellResult]) -> CaseVerdict {
@@ -262,32 +285,13 @@ pub fn judge(case: &str, base: &[CellResult], build: &[CellResult]) -> CaseVerdi
     };
     let (bp, bf) = passes(base);
     let (dp, df) = passes(build);
-    let figures = figures_of(base, build);
-    if dp > 0 && df > 0 {
-        let failed: Vec<String> = build
-            .iter()
-            .filter(|c| c.pass == Some(false))
-            .map(|c| c.seed.to_string())
-            .collect();
-        return done(
-            Verdict::Flaky,
-            format!(
-                "its repeats disagree: {dp} passed, {df} failed (seed {})",
-                failed.join(", ")
-            ),
-            figures,
-        );
-    }
     let same = same_frames(base, build);
     if same {
-        return done(
-            Verdict::Same,
-            format!(
-                "the same frames as the baseline, bit for bit, with each of its {} seeds",
-                base.len()
-            ),
-            Vec::new(),
-        );
+        return done(Verdict::Same, same_why(base.len(), bp, bf), Vec::new());
+    }
+    let figures = figures_of(base, build);
+    if dp > 0 && df > 0 {
+        return done(Verdict::Flaky, flaky_why(build, dp, df), figures);
     }
     let listed = |v: Verdict| -> Vec<String> {
         figures

@@ -44,8 +44,10 @@ impl Scenario {
 
     /// This scenario with nav's settings changed by `over`: tables and keys of nav's config
     /// file ([`NAV_TABLES`]), merged into the scenario's own (e.g. `[navigation.filter]
-    /// gps_sigma_m = 0.5`). A table the scenario does not have is added as it is given. The
-    /// result is checked as any scenario is.
+    /// gps_sigma_m = 0.5`). A table the scenario does not have is left out: the settings change
+    /// how nav does what the scenario asks, not what it asks (a drill does not navigate
+    /// because a device's navigation settings are given). The result is checked as any
+    /// scenario is.
     pub fn with_nav_settings(&self, over: &toml::Table) -> Result<Scenario> {
         if let Some(k) = over.keys().find(|k| !NAV_TABLES.contains(&k.as_str())) {
             bail!(
@@ -54,7 +56,12 @@ impl Scenario {
             );
         }
         let mut table = toml::Table::try_from(self).context("the scenario as TOML")?;
-        merge(&mut table, over);
+        let present: toml::Table = over
+            .iter()
+            .filter(|(k, _)| table.contains_key(*k))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect();
+        merge(&mut table, &present);
         let s: Scenario = table
             .try_into()
             .context("nav settings merged into the scenario")?;
@@ -98,6 +105,9 @@ mod tests {
             },
             s
         );
+        // a drive does not find north because north-finding settings are given
+        let nf: toml::Table = toml::from_str("[north_finding]\ndwell_s = 10.0\n").expect("parses");
+        assert_eq!(s.with_nav_settings(&nf).expect("merged"), s);
     }
 
     #[test]
