@@ -86,6 +86,17 @@ fn a_clusters_results_merge_into_one_verdict_per_build() {
         plan(dir.path()).iter().all(|c| c.4),
         "every cell has its result"
     );
+    // the plan for a cluster's submitter: as many array tasks as cells
+    let o = hil(&["--plan", "--json"], dir.path());
+    let p: serde_json::Value = serde_json::from_slice(&o.stdout).expect("the plan as JSON");
+    let p = p.as_array().expect("cells");
+    assert_eq!(p.len(), 6);
+    assert!(
+        p.iter()
+            .enumerate()
+            .all(|(i, c)| c["cell"] == i && c["done"] == true)
+    );
+    assert_eq!(p[5]["key"], cells[5].3.as_str());
     let o = hil(&["--merge"], dir.path());
     let md = String::from_utf8_lossy(&o.stdout);
     assert_eq!(o.status.code(), Some(1), "a regression fails: {md}");

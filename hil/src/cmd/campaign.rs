@@ -35,7 +35,7 @@ pub(crate) struct CampaignArgs {
     /// The CAN interfaces' prefix: cell K runs on `<prefix><K mod 64>`.
     #[arg(long, default_value = "vcan-cmp")]
     pub(crate) iface_prefix: String,
-    /// Print the merged report as JSON on stdout.
+    /// Print the merged report (with `--plan`: the plan's cells) as JSON on stdout.
     #[arg(long)]
     pub(crate) json: bool,
 }
@@ -64,6 +64,19 @@ pub(crate) fn campaign(a: CampaignArgs) -> Result<i32> {
         }
     };
     let out = absolute(&a.out)?;
+    if a.plan && a.json {
+        let plan: Vec<serde_json::Value> = cells
+            .iter()
+            .map(|k| {
+                serde_json::json!({
+                    "cell": k.number, "device": k.device, "build": k.build, "case": k.case,
+                    "seed": k.seed, "key": k.key, "done": k.done(&out),
+                })
+            })
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&plan)?);
+        return Ok(0);
+    }
     if a.plan {
         println!(
             "{:>4}  {:<16} {:<32} {:>6}  {:<4} key",
