@@ -28,6 +28,22 @@ pub struct Merged {
 }
 
 impl Merged {
+    /// The matrix's columns and rows: the devices and the cases, each once, in the verdicts'
+    /// order.
+    fn axes(&self) -> (Vec<&str>, Vec<&str>) {
+        let mut devices: Vec<&str> = Vec::new();
+        let mut cases: Vec<&str> = Vec::new();
+        for v in &self.verdicts {
+            if !devices.contains(&v.device.as_str()) {
+                devices.push(&v.device);
+            }
+            if !cases.contains(&v.case.as_str()) {
+                cases.push(&v.case);
+            }
+        }
+        (devices, cases)
+    }
+
     /// The exit status: 1 on a regression or a flaky case, 2 when results are missing (the
     /// campaign is not finished), 0 otherwise.
     pub fn exit_status(&self) -> i32 {
@@ -126,20 +142,7 @@ pub fn markdown(m: &Merged, cells: &[Cell]) -> String {
             );
         }
     }
-    let devices: Vec<&str> = {
-        let mut d: Vec<&str> = m.verdicts.iter().map(|v| v.device.as_str()).collect();
-        d.dedup();
-        d
-    };
-    let cases: Vec<&str> = {
-        let mut c: Vec<&str> = Vec::new();
-        for v in &m.verdicts {
-            if !c.contains(&v.case.as_str()) {
-                c.push(&v.case);
-            }
-        }
-        c
-    };
+    let (devices, cases) = m.axes();
     let _ = writeln!(o, "\n## Every build on every case\n");
     let _ = writeln!(o, "| case | {} |", devices.join(" | "));
     let _ = writeln!(o, "|---|{}", "---|".repeat(devices.len()));
@@ -166,14 +169,7 @@ pub fn markdown(m: &Merged, cells: &[Cell]) -> String {
 
 /// The matrix as a picture: a row per case, a column per build, a colour per verdict.
 pub fn svg(m: &Merged) -> String {
-    let mut devices: Vec<&str> = m.verdicts.iter().map(|v| v.device.as_str()).collect();
-    devices.dedup();
-    let mut cases: Vec<&str> = Vec::new();
-    for v in &m.verdicts {
-        if !cases.contains(&v.case.as_str()) {
-            cases.push(&v.case);
-        }
-    }
+    let (devices, cases) = m.axes();
     let (left, top, w, h) = (260.0, 40.0, 140.0, 26.0);
     let width = (left + w * devices.len() as f64 + 10.0).max(640.0);
     let height = top + h * cases.len() as f64 + 34.0;
@@ -234,8 +230,7 @@ fn xml(s: &str) -> String {
 
 /// The verdicts as JUnit suites, one per build.
 pub fn junit_suites(m: &Merged) -> Vec<junit::Suite> {
-    let mut devices: Vec<&str> = m.verdicts.iter().map(|v| v.device.as_str()).collect();
-    devices.dedup();
+    let (devices, _) = m.axes();
     devices
         .iter()
         .map(|d| {

@@ -93,8 +93,7 @@ pub fn cell_scenario(case: &Case, device: &Device, cell: &Cell) -> Result<Scenar
 /// four positions (60 s by default), at up to x25 (lockstep: its result is the same at any
 /// pace), with the device's nav settings.
 pub fn drill_scenario(case: &Case, device: &Device, cell: &Cell) -> Result<Scenario> {
-    use rand::{Rng, SeedableRng};
-    let heading = rand::rngs::StdRng::seed_from_u64(cell.seed).random::<f64>() * 360.0;
+    let heading = crate::procedures::northfinding::heading_of_seed(cell.seed);
     let mut s = crate::procedures::northfinding::scenario(
         heading,
         28.218157,

@@ -125,11 +125,8 @@ fn drill_plan(s: &hil::scenario::Scenario) -> hil::procedures::plan::PlanReport 
 pub(crate) fn drill_north_finding(a: NorthFindingArgs) -> Result<i32> {
     let heading = match a.heading {
         Some(h) => h.rem_euclid(360.0),
-        // random, reproducible from the seed (the same generator as the Monte Carlo)
-        None => {
-            use rand::{Rng, SeedableRng};
-            rand::rngs::StdRng::seed_from_u64(a.seed).random::<f64>() * 360.0
-        }
+        // random, reproducible from the seed
+        None => hil::procedures::northfinding::heading_of_seed(a.seed),
     };
     let dwell_s = match a.dwell {
         Dwell::Seconds(d) => d,

@@ -60,6 +60,14 @@ pub fn progress_line(p: &serde_json::Value) -> String {
     )
 }
 
+/// The drill's true heading drawn from its seed, deg in [0, 360) (`hil drill north-finding`
+/// without `--heading`, a campaign's drill cell): reproducible from the seed, the same
+/// generator as the Monte Carlo.
+pub fn heading_of_seed(seed: u64) -> f64 {
+    use rand::{Rng, SeedableRng};
+    rand::rngs::StdRng::seed_from_u64(seed).random::<f64>() * 360.0
+}
+
 /// The operator drill as a scenario: the vehicle parked at `heading_deg` at latitude `lat_deg`,
 /// four-position north-finding with `dwell_s` per position, IMU and mechanism seeded by `seed`,
 /// and enough simulated time for the four dwells, the moves and a few repeats.
