@@ -9,7 +9,8 @@ use e2e::{bin, checks, hil_json};
 use serde_json::Value;
 use std::process::Command;
 
-/// The free drill both drill tests run: our nav at the paper's site, 15 s dwells.
+/// The free drill both drill tests run: our nav at the paper's site, 6 s dwells (about 50 s at
+/// x1: the time the table stands and turns is what is judged, not the heading's accuracy).
 const FREE_DRILL: [&str; 9] = [
     "drill",
     "north-finding",
@@ -17,7 +18,7 @@ const FREE_DRILL: [&str; 9] = [
     "--heading",
     "137.5",
     "--dwell",
-    "15",
+    "6",
     "--seed",
     "7",
 ];
@@ -121,7 +122,8 @@ fn a_real_turntable_stand_in_turns_the_emulated_imu_in_a_free_drill() {
         .collect();
     assert_eq!(bench, ["imu", "gps"]);
     let followed = &r["bench"][0]["followed"][0];
-    assert!(followed["reports"].as_u64().unwrap() > 5000, "{followed}");
+    // the table's status at 100 Hz over the drill's 50 s
+    assert!(followed["reports"].as_u64().unwrap() > 3000, "{followed}");
     let h = &r["heading"];
     let (err, sigma) = (
         h["error_deg"].as_f64().unwrap(),
@@ -422,20 +424,12 @@ fn guest_python() -> Option<std::path::PathBuf> {
     p.is_file().then_some(p)
 }
 
-/// A drill of the independent device under test, `tests/dut/northfinder.py` (10 s dwells) with
-/// `extra` on its command line, free-running on `iface` under a latency budget of `budget_ms`:
-/// the bench's report and exit status, or none (said on stderr) where the guest has no Python.
+/// A drill of the independent device under test, `tests/dut/northfinder.py` (5 s dwells, the
+/// device's and the drill's: about 50 s at x1) with `extra` on its command line, free-running on
+/// `iface` under a latency budget of `budget_ms`: the bench's report and exit status, or none
+/// (said on stderr) where the guest has no Python.
 fn python_drill(iface: &str, extra: &str, budget_ms: f64) -> Option<(Value, i32)> {
-    python_drill_dwelling(iface, extra, budget_ms, 10)
-}
-
-/// [`python_drill`] with dwells of `dwell_s` (the device's and the drill's).
-fn python_drill_dwelling(
-    iface: &str,
-    extra: &str,
-    budget_ms: f64,
-    dwell_s: u32,
-) -> Option<(Value, i32)> {
+    let dwell_s = 5;
     let Some(py) = guest_python() else {
         eprintln!(
             "SKIPPED: no Python for the guest (target/debug/e2e-python, written by ./run-tests)"
@@ -597,7 +591,7 @@ fn an_independent_python_device_that_lies_about_time_is_caught() {
 #[test]
 #[ignore = "needs vcan and the guest's Python: run ./run-tests"]
 fn an_independent_python_device_whose_clock_drifts_is_caught() {
-    let Some((r, code)) = python_drill_dwelling("vcan-py3", "--drift-ppm 1000", 1000.0, 5) else {
+    let Some((r, code)) = python_drill("vcan-py3", "--drift-ppm 1000", 1000.0) else {
         return;
     };
     if !judged(&r, code) {

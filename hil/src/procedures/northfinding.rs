@@ -502,6 +502,36 @@ mod tests {
         }
     }
 
+    /// Two and four positions visited out and back (0, 180, 180, 0; 0, 90, 180, 270, 270, 180,
+    /// 90, 0) at the same total dwell as `hil drill` with 8 and 4 s: nav visits every position
+    /// in order, dwelling twice where the sequence turns back, and lands within 3 of its sigmas.
+    /// (Eight positions, the most moves, go through vcan: `tests/tests/vcan.rs`.)
+    #[test]
+    fn two_and_four_positions_out_and_back_land_within_3_sigma_in_order() {
+        for (n, dwell) in [(2usize, 8.0), (4, 4.0)] {
+            let mut s = scenario(123.4, 28.218157, dwell, 3);
+            let out: Vec<f64> = (0..n).map(|k| k as f64 * 360.0 / n as f64).collect();
+            let want: Vec<f64> = out.iter().chain(out.iter().rev()).copied().collect();
+            set_positions(&mut s, nav::northplan::out_and_back(n));
+            let nf = s.north_finding.clone().expect("a drill");
+            assert_eq!(nf.positions_deg, want, "{n} positions");
+            let o = run_in_process(&s, &nf, |_| {}).unwrap();
+            assert!(o.abort.is_none(), "{n} positions: {:?}", o.abort);
+            let (e, sig) = (o.error_deg.unwrap(), o.sigma_deg.unwrap());
+            assert!(
+                e.abs() <= 3.0 * sig,
+                "{n} positions: error {e} deg, sigma {sig}"
+            );
+            let visited: Vec<f64> = o.result.as_ref().expect("nav's result")["positions"]
+                .as_array()
+                .expect("positions")
+                .iter()
+                .map(|p| p["commanded_deg"].as_f64().expect("commanded"))
+                .collect();
+            assert_eq!(visited, want, "{n} positions");
+        }
+    }
+
     #[test]
     fn a_turntable_fault_aborts_with_the_reason() {
         let (mut s, nf) = drill(10.0, 10.0);

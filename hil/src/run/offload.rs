@@ -622,8 +622,8 @@ mod tests {
     /// goes to the server as any other scenario: it was judged in the guest instead.
     #[test]
     fn a_scenario_driving_a_track_survives_the_way_to_the_server() {
-        let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../scenarios/track-lisbon-handheld.toml");
+        let p =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/track-lisbon-handheld.toml");
         let s = Scenario::load(&p).expect("the track's scenario");
         assert!(s.drive.as_ref().is_some_and(|d| d.lat_deg.is_nan()));
         assert!(survives(&s).expect("encoded"));
