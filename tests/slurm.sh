@@ -10,14 +10,22 @@
 # cannot be met), `hil experiment merge` of the parts there are names the missing part and the
 # runs it held, and a rerun of that part alone, then a merge job after it, completes the report.
 #
+# With CAMPAIGN=FILE, a regression campaign then runs on the same cluster (`hil campaign`): a job
+# array of two parts (`--shard K/2`, each part's cells on vcan in a guest of its own where this
+# kernel has no CAN, its experiments' runs in process here), one cell of part 1 killed on purpose
+# while it runs (`scancel`), the plan asked which cells have no result (that one alone), it
+# resubmitted as a job array of that cell, the merge a job after it. The same campaign then runs
+# here with a local pool (`--jobs 2`): its report must equal the cluster's, byte for byte (the
+# JUnit XML but for when and where it was written), and give the verdicts CAMPAIGN_EXPECT names.
+#
 # Usage: tests/slurm.sh HIL [OUT]   (HIL: the hil binary; OUT: where the reports go, kept)
 # Needs root (munged and slurmd run as root here) and the packages slurmctld, slurmd,
-# slurm-client and munge (./run-tests installs them). Environment: RUNS (default 2) and DWELL
+# slurm-client and munge (./run-tests installs them). Environment: RUNS (default 1) and DWELL
 # (default 10 s) size the Monte Carlo; KEEP=1 keeps the cluster's folder.
 set -euo pipefail
 hil=$(realpath "$1")
 out=$(realpath -m "${2:-$(mktemp -d /tmp/hil-slurm-out.XXXXXX)}")
-runs=${RUNS:-2}
+runs=${RUNS:-1}
 dwell=${DWELL:-10}
 parts=4
 # a fresh start: parts left from an earlier run must not complete this one
@@ -186,3 +194,85 @@ for f in report.md runs.csv; do
 done
 [ $rc = 0 ] || exit 1
 echo "== the merged report equals the single run's (report.md, runs.csv): the cluster's part took $cluster_s s, $((SECONDS - started)) s in all; reports in $out"
+
+[ -n "${CAMPAIGN:-}" ] || exit 0
+camp=$(realpath "$CAMPAIGN")
+cout="$out/campaign"
+lout="$out/campaign-local"
+rm -rf "$cout" "$lout"
+t0=$SECONDS
+# the plan's cells as "number key on-the-bus done" lines
+plan_lines() {
+  "$hil" campaign "$camp" --plan --json --out "$cout" | python3 -c '
+import json, sys
+for c in json.load(sys.stdin):
+    print(c["cell"], c["key"], int(not c["case"].startswith("experiment:")), int(c["done"]))'
+}
+cells=$(plan_lines)
+# the cell killed on purpose: part 1's last cell on the bus (its part's cells run in order, so
+# every other cell of the part has its result by then)
+kill_cell=$(awk '$1 % 2 == 1 && $3 == 1 { n = $1; k = $2 } END { print n, k }' <<<"$cells")
+read -r kill_n kill_key <<<"$kill_cell"
+carray=$(sbatch --parsable --job-name=campaign --array=0-1 --cpus-per-task=1 \
+  --output="$state/jobs/campaign-%a.log" \
+  --wrap "exec '$hil' campaign '$camp' --shard \$SLURM_ARRAY_TASK_ID/2 --out '$cout' --iface-prefix vcan-p\$SLURM_ARRAY_TASK_ID-")
+echo "== campaign $(basename "$camp"): $(wc -l <<<"$cells") cells as job array $carray (2 parts); cell $kill_n to be killed while it runs"
+# its folder appears when it starts: then the task running it is cancelled
+for _ in $(seq $((limit * 5))); do
+  [ -d "$cout/cells/$kill_key" ] && break
+  case "$(state_of "$carray")" in *PENDING*|*RUNNING*|*CONFIGURING*) ;; *) break ;; esac
+  sleep 0.2
+done
+[ -d "$cout/cells/$kill_key" ] || { echo "slurm.sh: cell $kill_n never started; the array: $(state_of "$carray")" >&2; tail -n 20 "$state"/jobs/campaign-*.log >&2; exit 1; }
+sleep 2
+scancel "${carray}_1"
+m=$(wait_job "$carray")
+echo "== cell $kill_n killed while it ran (scancel of array task 1); the array ended $m"
+missing=$(plan_lines | awk '$4 == 0 { print $1 }' | paste -sd, -)
+if [ "$missing" != "$kill_n" ]; then
+  echo "slurm.sh: the cells without a result are '$missing', not the killed one alone ($kill_n); the parts' logs:" >&2
+  tail -n 20 "$state"/jobs/campaign-*.log >&2
+  exit 1
+fi
+rerun=$(sbatch --parsable --job-name=campaign-rerun --array="$missing" --output="$state/jobs/campaign-rerun-%a.log" \
+  --wrap "exec '$hil' campaign '$camp' --cell \$SLURM_ARRAY_TASK_ID --out '$cout' --iface-prefix vcan-r")
+# the merge's exit status is the campaign's (1: a regression found): kept, the job itself ends well
+cmerge=$(sbatch --parsable --job-name=campaign-merge --dependency=afterok:"$rerun" --kill-on-invalid-dep=yes \
+  --output="$state/jobs/campaign-merge.log" \
+  --wrap "'$hil' campaign '$camp' --merge --out '$cout' > '$cout/merge.out'; echo \$? > '$cout/merge.status'")
+echo "== the cell without a result, $missing, submitted again alone as job array $rerun, the merge as job $cmerge (afterok:$rerun)"
+m=$(wait_job "$cmerge")
+case "$m" in *COMPLETED*) ;; *) echo "slurm.sh: the campaign's merge ended $m" >&2; tail -n 20 "$state"/jobs/campaign-*.log >&2; exit 1 ;; esac
+status=$(cat "$cout/merge.status")
+echo "== the cluster's campaign: merged (exit status $status), $((SECONDS - t0)) s"
+t1=$SECONDS
+lstatus=0
+"$hil" campaign "$camp" --jobs 2 --out "$lout" --iface-prefix vcan-l >"$lout.out" 2>"$lout.err" || lstatus=$?
+echo "== the same campaign here, two cells at a time: exit status $lstatus, $((SECONDS - t1)) s"
+rc=0
+# (JUnit XML says when and on which host it was written: those two attributes aside)
+unstamped() { sed -E 's/ (timestamp|hostname)="[^"]*"//g' "$1"; }
+for f in report.md report.json junit.xml; do
+  if ! cmp -s <(unstamped "$cout/$f") <(unstamped "$lout/$f"); then
+    echo "slurm.sh: the campaign's $f from the cluster differs from the local pool's:" >&2
+    diff <(unstamped "$lout/$f") <(unstamped "$cout/$f") | head -20 >&2
+    rc=1
+  fi
+done
+[ "$status" = "$lstatus" ] || { echo "slurm.sh: exit status $status on the cluster, $lstatus here" >&2; rc=1; }
+# the verdicts the campaign's file promises (CAMPAIGN_EXPECT: "case=verdict ..." for its one
+# device beside the baseline)
+for want in ${CAMPAIGN_EXPECT:-}; do
+  got=$(python3 -c '
+import json, sys
+m = json.load(open(sys.argv[1]))
+print(" ".join(v["verdict"] for v in m["verdicts"] if v["case"] == sys.argv[2]) or "none")' "$cout/report.json" "${want%%=*}")
+  if [ "$got" != "${want#*=}" ]; then
+    echo "slurm.sh: the campaign's verdict on ${want%%=*} is '$got', not ${want#*=}:" >&2
+    cat "$cout/report.md" >&2
+    rc=1
+  fi
+done
+[ $rc = 0 ] || exit 1
+[ -z "${CAMPAIGN_EXPECT:-}" ] || echo "== the verdicts: ${CAMPAIGN_EXPECT}"
+echo "== the cluster's campaign report equals the local pool's (report.md and report.json byte for byte, junit.xml but for its time stamp and host); reports in $cout"

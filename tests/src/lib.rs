@@ -76,14 +76,14 @@ pub fn python<S: AsRef<std::ffi::OsStr>>(script: &str, args: &[S], what: &str) -
     o.stdout
 }
 
-/// The drill every drill test runs (6 s dwells, truth 287.5 deg, seed 7, tolerance 0.5 deg):
+/// The drill every drill test runs (4 s dwells, truth 287.5 deg, seed 7, tolerance 0.5 deg):
 /// through vcan (`tests/tests/vcan.rs`), in process (`tests/tests/in_process.rs`) and watched
 /// live (`tests/tests/live_view.rs`), so their results can be compared.
 pub const DRILL: [&str; 10] = [
     "drill",
     "north-finding",
     "--dwell",
-    "6",
+    "4",
     "--heading",
     "287.5",
     "--seed",

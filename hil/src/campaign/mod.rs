@@ -11,8 +11,13 @@
 //! - [`verdict`]: a case's figures per build against the baseline's: the same (every repeat's
 //!   frames bit for bit), better, worse or not distinguishable, decided by the figures' own
 //!   scatter (Welch's interval on the difference of the means), and flaky where a build's
-//!   repeats disagree on pass or fail.
+//!   repeats disagree on pass or fail;
+//! - [`run`]: running a cell (a bench run through vcan, a fault row, or an experiment's run in
+//!   process) and keeping its result;
+//! - [`report`]: the merged verdicts as Markdown, SVG, JSON and JUnit XML;
+//! - [`cost`]: what the cells took, and what a campaign of many would take on a cluster.
 
+pub mod cost;
 pub mod plan;
 pub mod report;
 pub mod run;

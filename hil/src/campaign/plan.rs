@@ -19,6 +19,11 @@ fn fnv1a(mut h: u64, bytes: &[u8]) -> u64 {
 
 const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
 
+/// 64-bit FNV-1a of `bytes`.
+pub fn hash_bytes(bytes: &[u8]) -> u64 {
+    fnv1a(FNV_OFFSET, bytes)
+}
+
 /// What makes a device's results what they are: its program's bytes and its config, hashed
 /// (16 hex digits). Two devices of the same binary and config are one build; a rebuilt binary
 /// is another.
@@ -138,6 +143,50 @@ pub fn pending<'a>(cells: &'a [Cell], out: &Path) -> Vec<&'a Cell> {
     cells.iter().filter(|c| !c.done(out)).collect()
 }
 
+/// Part `k` of `n` of the plan (`--shard K/N`, a cluster's array task among N): the cells whose
+/// number is `k` modulo `n`, so that every part gets cells of every case and device alike.
+pub fn shard(cells: &[Cell], k: usize, n: usize) -> Result<Vec<&Cell>> {
+    if n == 0 || k >= n {
+        bail!("--shard {k}/{n}: the part is 0 to N-1 of N parts (N at least 1)");
+    }
+    Ok(cells.iter().filter(|c| c.number % n == k).collect())
+}
+
+/// Experiments run nav's library in process (hil's own, with the device's settings): a device
+/// that is another nav binary, or a free-running command, cannot run them; refused with the
+/// device and the case when the campaign is planned.
+pub fn check_in_process(c: &Campaign, cases: &[Case], nav_default: &Path) -> Result<()> {
+    let Some(e) = cases
+        .iter()
+        .find(|k| matches!(k.kind, super::spec::CaseKind::Experiment(_)))
+    else {
+        return Ok(());
+    };
+    let ours = hash_file(FNV_OFFSET, nav_default)?;
+    for d in &c.devices {
+        let other = match (&d.dut, &d.nav) {
+            (Some(_), _) => true,
+            (None, Some(nav)) => {
+                hash_file(FNV_OFFSET, nav).with_context(|| format!("device {:?}", d.name))? != ours
+            }
+            (None, None) => false,
+        };
+        if other {
+            bail!(
+                "case {}: an experiment runs nav's library in process (the nav beside hil, with a device's settings); device {:?} is {}: give it scenario or drill cases instead",
+                e.id,
+                d.name,
+                if d.dut.is_some() {
+                    "a free-running command"
+                } else {
+                    "another nav binary"
+                }
+            );
+        }
+    }
+    Ok(())
+}
+
 /// The cell a cluster's task `K` of the plan runs (`--cell K`).
 pub fn cell_at(cells: &[Cell], k: usize) -> Result<&Cell> {
     cells.get(k).with_context(|| {
@@ -173,13 +222,13 @@ mod tests {
         let nav = dir.path().join("nav");
         std::fs::write(&nav, b"a build of nav").expect("written");
         let (_, cells) = plan(dir.path(), &nav);
-        // 2 devices x (2 fault rows + 2 scenario seeds + 3 drill seeds + 1 experiment)
-        assert_eq!(cells.len(), 16);
+        // 2 devices x (2 fault rows + 2 scenario seeds + 3 drill seeds + 4 + 2 experiment runs)
+        assert_eq!(cells.len(), 26);
         assert!(cells.iter().enumerate().all(|(i, c)| c.number == i));
         let keys: std::collections::BTreeSet<&str> = cells.iter().map(|c| c.key.as_str()).collect();
         assert_eq!(keys.len(), cells.len(), "every key its own");
         // the two devices are one binary with another config: two builds
-        assert_ne!(cells[0].build, cells[8].build);
+        assert_ne!(cells[0].build, cells[13].build);
         assert_eq!(
             cells[3].key,
             format!("{}-scenario_drive-gps-s2", cells[3].build)
@@ -194,16 +243,55 @@ mod tests {
             std::fs::write(c.folder(&out).join("result.json"), "{}").expect("written");
         }
         let left = pending(&cells, &out);
-        assert_eq!(left.len(), 13);
+        assert_eq!(left.len(), 23);
         assert_eq!(left[0].number, 3);
         // nav rebuilt: every key changes, nothing is taken for done
         std::fs::write(&nav, b"another build of nav").expect("written");
         let (_, rebuilt) = plan(dir.path(), &nav);
         assert!(rebuilt.iter().zip(&cells).all(|(a, b)| a.build != b.build));
-        assert_eq!(pending(&rebuilt, &out).len(), 16);
-        assert_eq!(cell_at(&cells, 15).expect("last").number, 15);
-        let e = cell_at(&cells, 16).expect_err("past the end");
-        assert!(e.to_string().contains("16 cells"), "{e}");
+        assert_eq!(pending(&rebuilt, &out).len(), 26);
+        assert_eq!(cell_at(&cells, 25).expect("last").number, 25);
+        let e = cell_at(&cells, 26).expect_err("past the end");
+        assert!(e.to_string().contains("26 cells"), "{e}");
+        // three parts: every cell in exactly one
+        let parts: Vec<Vec<usize>> = (0..3)
+            .map(|k| {
+                shard(&cells, k, 3)
+                    .expect("part")
+                    .iter()
+                    .map(|c| c.number)
+                    .collect()
+            })
+            .collect();
+        assert_eq!(parts[1][..3], [1, 4, 7]);
+        let mut all: Vec<usize> = parts.concat();
+        all.sort_unstable();
+        assert_eq!(all, (0..26).collect::<Vec<_>>());
+        assert!(shard(&cells, 3, 3).is_err() && shard(&cells, 0, 0).is_err());
+    }
+
+    #[test]
+    fn an_experiment_is_refused_for_another_nav_binary() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let nav = dir.path().join("nav");
+        std::fs::write(&nav, b"a build of nav").expect("written");
+        let (mut c, _) = plan(dir.path(), &nav);
+        let cases = c.cases().expect("cases");
+        check_in_process(&c, &cases, &nav).expect("both devices are the nav beside hil");
+        // a copy of the same binary is the same
+        let copy = dir.path().join("nav-copy");
+        std::fs::write(&copy, b"a build of nav").expect("written");
+        c.devices[1].nav = Some(copy);
+        check_in_process(&c, &cases, &nav).expect("the same bytes");
+        let other = dir.path().join("nav-other");
+        std::fs::write(&other, b"another build").expect("written");
+        c.devices[1].nav = Some(other);
+        let e = check_in_process(&c, &cases, &nav).expect_err("another binary");
+        assert!(
+            format!("{e:#}").contains("case experiment:north-finding")
+                && format!("{e:#}").contains("device \"worse\" is another nav binary"),
+            "{e:#}"
+        );
     }
 
     #[test]

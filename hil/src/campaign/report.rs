@@ -154,7 +154,7 @@ pub fn markdown(m: &Merged, cells: &[Cell]) -> String {
                 let link = cells
                     .iter()
                     .find(|c| c.device == *d && c.case == *k)
-                    .map(|c| format!("cells/{}/run/", c.key));
+                    .map(|c| format!("cells/{}/", c.key));
                 match (v, link) {
                     (Some(v), Some(l)) => format!("[{}]({l})", mark(v.verdict)),
                     (Some(v), None) => mark(v.verdict).to_string(),
@@ -282,7 +282,7 @@ mod tests {
     use crate::campaign::spec::tests::EXAMPLE;
 
     /// The example campaign's results: the `worse` build's scenario errors 30 % larger, its
-    /// fault rows the same frames, one drill seed failing, the experiment not run.
+    /// fault rows the same frames, one drill seed failing, the experiments not run.
     fn merged() -> (Merged, Vec<Cell>) {
         let c: Campaign = toml::from_str(EXAMPLE).expect("parses");
         let cases = c.cases().expect("cases");
@@ -338,7 +338,7 @@ mod tests {
         assert_eq!(verdict("scenario:drive-gps"), Some(Verdict::Worse));
         assert_eq!(verdict("drill:north-finding"), Some(Verdict::Flaky));
         assert_eq!(verdict("experiment:north-finding"), Some(Verdict::Missing));
-        assert_eq!((m.cells, m.cells_done), (16, 14));
+        assert_eq!((m.cells, m.cells_done), (26, 14));
         assert_eq!(m.exit_status(), 1);
         let md = markdown(&m, &cells);
         let regressions = md.find("## Regressions").expect("section");
@@ -352,15 +352,15 @@ mod tests {
             "{md}"
         );
         assert!(
-            md.contains("[same](cells/bbbb-fault_imu-frames-dropped-s0/run/)"),
+            md.contains("[same](cells/bbbb-fault_imu-frames-dropped-s0/)"),
             "{md}"
         );
         let svg = svg(&m);
-        assert_eq!(svg.matches("<rect x=").count(), 5, "{svg}");
+        assert_eq!(svg.matches("<rect x=").count(), 6, "{svg}");
         assert!(svg.contains("#d73027") && svg.contains("#fc8d59") && svg.contains("#91bfdb"));
         let suites = junit_suites(&m);
         assert_eq!(suites.len(), 1);
-        assert_eq!((suites[0].cases.len(), suites[0].failures()), (5, 3));
+        assert_eq!((suites[0].cases.len(), suites[0].failures()), (6, 4));
         let back: Merged =
             serde_json::from_str(&serde_json::to_string(&m).expect("json")).expect("reads back");
         assert_eq!(back, m);

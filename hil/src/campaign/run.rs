@@ -8,7 +8,7 @@
 //! that could not run (no report) leaves none, so running the campaign again runs it again.
 
 use super::plan::Cell;
-use super::spec::{Campaign, Case, CaseKind, Device};
+use super::spec::{Campaign, Case, CaseKind, Device, Experiment};
 use super::verdict::CellResult;
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
@@ -28,6 +28,8 @@ pub struct Runner {
     pub out: PathBuf,
     /// The CAN interfaces' prefix: cell `k` runs on `<prefix><k mod 64>`.
     pub iface_prefix: String,
+    /// Cells run side by side (kept with each cell's time).
+    pub jobs: usize,
 }
 
 /// The figures of a bench run's JSON report that the verdicts read (absolute values of signed
@@ -47,6 +49,8 @@ pub fn figures_of_report(r: &Value) -> BTreeMap<String, f64> {
     let s = &r["navigation_series"];
     put("rms_position_error_m", &s["rms_position_error_m"]);
     put("max_position_error_m", &s["max_position_error_m"]);
+    put("nees_position", &s["mean_nees_per_dof"][0]);
+    put("nees_velocity", &s["mean_nees_per_dof"][1]);
     let d = &r["drill"];
     put("drill_heading_error_deg", &d["error_deg"]);
     put("drill_heading_sigma_deg", &d["sigma_deg"]);
@@ -124,7 +128,13 @@ impl Runner {
             .find(|d| d.name == cell.device)
             .with_context(|| format!("cell {}: no device {}", cell.number, cell.device))?;
         let dir = cell.folder(&self.out);
+        if dir.exists() && !cell.done(&self.out) {
+            // what a run stopped part way left (a killed task): the cell starts afresh
+            std::fs::remove_dir_all(&dir)
+                .with_context(|| format!("clearing {} (a run that did not end)", dir.display()))?;
+        }
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let started = std::time::Instant::now();
         let result = match &case.kind {
             CaseKind::Scenario(_) => {
                 let s = cell_scenario(case, device, cell)?;
@@ -135,12 +145,14 @@ impl Runner {
                 let s = drill_scenario(case, device, cell)?;
                 result_of_report(cell, &self.run_scenario(&s, device, cell, &dir)?)
             }
-            CaseKind::Experiment(..) => bail!(
-                "cell {} ({}): this version runs scenario, fault and drill cases; experiments are planned and judged but not yet run",
-                cell.number,
-                cell.case
-            ),
+            CaseKind::Experiment(e) => in_process(e, case, device, cell)?,
         };
+        super::cost::CellTime {
+            wall_s: started.elapsed().as_secs_f64(),
+            jobs: self.jobs,
+            guest: std::env::var_os(vcan_setup::GUEST_ENV).is_some(),
+        }
+        .write(&dir)?;
         let text = serde_json::to_string_pretty(&result)?;
         std::fs::write(dir.join("result.json"), text)
             .with_context(|| format!("writing {}", dir.join("result.json").display()))?;
@@ -260,6 +272,106 @@ impl Runner {
         }
         self.report_of(c, cell, dir)
     }
+}
+
+/// An experiment's cell: one run in process (nav's library, the bench's devices, no bus) with
+/// the device's nav settings, for the cell's seed. What nav computed is hashed to the bit for
+/// "the same" (there are no frames on a bus to compare).
+pub fn in_process(e: &Experiment, case: &Case, device: &Device, cell: &Cell) -> Result<CellResult> {
+    if device.dut.is_some() {
+        bail!(
+            "cell {} ({}): an experiment runs nav's library in process; {:?} is a free-running device",
+            cell.number,
+            cell.case,
+            device.name
+        );
+    }
+    let (pass, figures, bits) = match e {
+        Experiment::NorthFinding => {
+            let s = drill_scenario(case, device, cell)?;
+            let nf = s
+                .north_finding
+                .clone()
+                .context("the drill's scenario has no [north_finding]")?;
+            let o = crate::procedures::northfinding::run_in_process(&s, &nf, |_| {})
+                .with_context(|| format!("cell {} ({})", cell.number, cell.case))?;
+            let mut f = BTreeMap::new();
+            let mut put = |name: &str, v: Option<f64>| {
+                if let Some(x) = v.filter(|x| x.is_finite()) {
+                    f.insert(name.to_string(), x.abs());
+                }
+            };
+            put("drill_heading_error_deg", o.error_deg);
+            put("drill_heading_sigma_deg", o.sigma_deg);
+            let pass = o.abort.is_none()
+                && matches!((o.error_deg, o.sigma_deg), (Some(e), Some(s)) if e.abs() <= 3.0 * s);
+            (pass, f, serde_json::to_vec(&o)?)
+        }
+        Experiment::Navigation(path) => {
+            let mut s = Scenario::load(path)?;
+            if let Some(d) = case.duration_s {
+                s.duration_s = d;
+            }
+            let s = match &device.config {
+                Some(over) => s
+                    .reseeded(cell.seed)
+                    .with_nav_settings(over)
+                    .with_context(|| format!("device {:?}", device.name))?,
+                None => s.reseeded(cell.seed),
+            };
+            let rx = s
+                .gps
+                .clone()
+                .with_context(|| format!("{}: no [gps] to navigate with", path.display()))?;
+            let filter = s
+                .navigation
+                .as_ref()
+                .map(|n| n.filter.clone())
+                .unwrap_or_default();
+            let r = crate::engine::navigate::navigate(&s, Some(&filter), &rx, 0.0)
+                .with_context(|| format!("cell {} ({})", cell.number, cell.case))?;
+            let mut f = BTreeMap::new();
+            let mut put = |name: &str, x: f64| {
+                if x.is_finite() {
+                    f.insert(name.to_string(), x.abs());
+                }
+            };
+            put("end_position_error_m", r.end_position_error_m);
+            put("end_velocity_error_mps", r.end_velocity_error_mps);
+            put("end_heading_error_deg", r.end_heading_error_deg);
+            put("rms_position_error_m", r.rms_position_error_m);
+            put(
+                "max_position_error_m",
+                r.series
+                    .iter()
+                    .map(|x| x.position_error_m)
+                    .fold(0.0, f64::max),
+            );
+            if let Some([p, v]) = r.mean_nees_per_dof {
+                put("nees_position", p);
+                put("nees_velocity", v);
+            }
+            // as a bench run's checks judge it: the end error, no good fix refused, the sigmas
+            let consistent = r
+                .mean_nees_per_dof
+                .is_none_or(|n| n.iter().all(|x| *x <= crate::report::NEES_PER_DOF_LIMIT));
+            let pass = r.end_position_error_m <= s.position_tolerance_m
+                && r.good_fixes_refused == 0
+                && consistent;
+            (pass, f, serde_json::to_vec(&r)?)
+        }
+    };
+    Ok(CellResult {
+        device: cell.device.clone(),
+        case: cell.case.clone(),
+        seed: cell.seed,
+        pass: Some(pass),
+        figures,
+        sent_hash: Some(format!(
+            "in-process:{:016x}",
+            super::plan::hash_bytes(&bits)
+        )),
+    })
 }
 
 /// Every cell's result kept in `out` (the cells without one left out).

@@ -12,7 +12,7 @@
 //! [[device]]
 //! name = "new-filter"
 //! nav = "builds/nav-1.5"
-//! [device.config.filter]           # nav config overrides for this device
+//! [device.config.navigation.filter]   # nav settings for this device
 //! kind = "adaptive"
 //!
 //! [[device]]
@@ -31,7 +31,12 @@
 //! seeds = [1, 2, 3]
 //!
 //! [[case]]
-//! experiment = "north-finding"
+//! experiment = "north-finding"     # drills in process, a run per seed
+//! runs = 8
+//!
+//! [[case]]
+//! experiment = "navigation"        # the scenario's drive navigated in process, a run per seed
+//! scenario = "scenarios/drive-gps.toml"
 //! runs = 8
 //! ```
 
@@ -47,8 +52,8 @@ pub struct Campaign {
     pub name: String,
     /// The device every other is compared with.
     pub baseline: String,
-    /// Repeats of a statistical case (a scenario, a drill without seeds), each with another
-    /// seed.
+    /// Repeats of a statistical case (a scenario, a drill or an experiment without seeds or
+    /// runs), each with another seed.
     #[serde(default = "three")]
     pub repeats: u32,
     /// The devices under test.
@@ -102,7 +107,7 @@ pub struct CaseSpec {
     /// The seeds of a drill or a scenario (default: 1 to the campaign's `repeats`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub seeds: Vec<u64>,
-    /// An experiment's runs.
+    /// An experiment's runs (seeds 1 to `runs`; default the campaign's `repeats`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub runs: Option<u32>,
     /// A north-finding drill's dwell at each position, s (default 60).
@@ -119,9 +124,22 @@ pub enum CaseKind {
     Scenario(PathBuf),
     /// A drill.
     Drill(String),
-    /// An experiment in process with its runs.
-    Experiment(String, u32),
+    /// An experiment in process (nav's library, no bus), one run per seed: `north-finding`
+    /// (the drill) or `navigation` (the scenario's drive).
+    Experiment(Experiment),
 }
+
+/// The experiments a campaign runs, in process (nav's library with the device's settings).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum Experiment {
+    /// North-finding drills, one per seed (the drill of `hil drill north-finding --seed`).
+    NorthFinding,
+    /// The scenario's drive navigated with its receiver, one run per seed.
+    Navigation(PathBuf),
+}
+
+/// The experiments a campaign knows, by name.
+pub const EXPERIMENTS: [&str; 2] = ["north-finding", "navigation"];
 
 /// One case of a campaign, with its seeds.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -208,8 +226,9 @@ impl Campaign {
             }
         };
         for (i, k) in self.cases.iter().enumerate() {
+            // an experiment's scenario is its drive, not a case of its own
             let kinds = usize::from(!k.faults.is_empty())
-                + usize::from(k.scenario.is_some())
+                + usize::from(k.scenario.is_some() && k.experiment.is_none())
                 + usize::from(k.drill.is_some())
                 + usize::from(k.experiment.is_some());
             if kinds != 1 {
@@ -217,6 +236,18 @@ impl Campaign {
                     "case {} must name exactly one of faults, scenario, drill, experiment",
                     i + 1
                 );
+            }
+            if k.runs.is_some() && k.experiment.is_none() {
+                bail!(
+                    "case {}: runs are an experiment's (a scenario or a drill has seeds)",
+                    i + 1
+                );
+            }
+            if k.runs.is_some() && !k.seeds.is_empty() {
+                bail!("case {}: give runs or seeds, not both", i + 1);
+            }
+            if k.runs == Some(0) {
+                bail!("case {}: runs must be at least 1", i + 1);
             }
             let known: Vec<&str> = crate::suites::faults::matrix()
                 .iter()
@@ -242,11 +273,8 @@ impl Campaign {
                     seeds: vec![0],
                 });
             }
-            if let Some(s) = &k.scenario {
-                let stem = s.file_stem().map_or_else(
-                    || s.display().to_string(),
-                    |x| x.to_string_lossy().into_owned(),
-                );
+            if let Some(s) = k.scenario.as_ref().filter(|_| k.experiment.is_none()) {
+                let stem = stem_of(s);
                 out.push(Case {
                     id: format!("scenario:{stem}"),
                     kind: CaseKind::Scenario(s.clone()),
@@ -274,13 +302,11 @@ impl Campaign {
                 });
             }
             if let Some(e) = &k.experiment {
-                out.push(Case {
-                    id: format!("experiment:{e}"),
-                    kind: CaseKind::Experiment(e.clone(), k.runs.unwrap_or(8)),
-                    duration_s: None,
-                    dwell_s: None,
-                    seeds: vec![0],
-                });
+                let run_seeds = match k.runs {
+                    Some(n) => (1..=u64::from(n)).collect(),
+                    None => seeds(k),
+                };
+                out.push(experiment_case(i, e, k, run_seeds)?);
             }
         }
         for (i, c) in out.iter().enumerate() {
@@ -290,6 +316,48 @@ impl Campaign {
         }
         Ok(out)
     }
+}
+
+/// The experiment case `e` of the file's case `i` (`k`), with its runs' seeds.
+fn experiment_case(i: usize, e: &str, k: &CaseSpec, seeds: Vec<u64>) -> Result<Case> {
+    let (id, which) = match (e, &k.scenario) {
+        ("north-finding", None) => (
+            "experiment:north-finding".to_string(),
+            Experiment::NorthFinding,
+        ),
+        ("north-finding", Some(_)) => bail!(
+            "case {}: experiment \"north-finding\" runs the drill (dwell_s), not a scenario",
+            i + 1
+        ),
+        ("navigation", Some(s)) => (
+            format!("experiment:navigation:{}", stem_of(s)),
+            Experiment::Navigation(s.clone()),
+        ),
+        ("navigation", None) => bail!(
+            "case {}: experiment \"navigation\" needs the scenario whose drive it navigates",
+            i + 1
+        ),
+        (other, _) => bail!(
+            "case {}: experiment {other:?}: a campaign runs {}",
+            i + 1,
+            EXPERIMENTS.join(" or ")
+        ),
+    };
+    Ok(Case {
+        id,
+        kind: CaseKind::Experiment(which),
+        duration_s: k.duration_s,
+        dwell_s: k.dwell_s,
+        seeds,
+    })
+}
+
+/// A scenario's name in a case's id: its file's stem.
+fn stem_of(s: &Path) -> String {
+    s.file_stem().map_or_else(
+        || s.display().to_string(),
+        |x| x.to_string_lossy().into_owned(),
+    )
 }
 
 #[cfg(test)]
@@ -323,6 +391,12 @@ seeds = [7, 8, 9]
 [[case]]
 experiment = "north-finding"
 runs = 4
+
+[[case]]
+experiment = "navigation"
+scenario = "scenarios/drive-gps.toml"
+duration_s = 30.0
+seeds = [3, 4]
 "#;
 
     #[test]
@@ -338,7 +412,8 @@ runs = 4
                 "fault:gps-void-outage",
                 "scenario:drive-gps",
                 "drill:north-finding",
-                "experiment:north-finding"
+                "experiment:north-finding",
+                "experiment:navigation:drive-gps",
             ]
         );
         assert_eq!(cases[0].seeds, [0]);
@@ -346,7 +421,16 @@ runs = 4
         assert_eq!(cases[3].seeds, [7, 8, 9]);
         assert_eq!(
             cases[4].kind,
-            CaseKind::Experiment("north-finding".into(), 4)
+            CaseKind::Experiment(Experiment::NorthFinding)
+        );
+        assert_eq!(cases[4].seeds, [1, 2, 3, 4]);
+        assert_eq!(
+            cases[5].kind,
+            CaseKind::Experiment(Experiment::Navigation("scenarios/drive-gps.toml".into()))
+        );
+        assert_eq!(
+            (cases[5].seeds.as_slice(), cases[5].duration_s),
+            ([3, 4].as_slice(), Some(30.0))
         );
         // every row of the matrix
         let all: Campaign = toml::from_str(&EXAMPLE.replace(
@@ -355,7 +439,7 @@ runs = 4
         ))
         .expect("parses");
         let rows = crate::suites::faults::matrix().len();
-        assert_eq!(all.cases().expect("cases").len(), rows + 3);
+        assert_eq!(all.cases().expect("cases").len(), rows + 4);
     }
 
     #[test]
@@ -380,6 +464,22 @@ runs = 4
             "exactly one",
         );
         bad("repeats = 2", "repeats = 0", "at least 1");
+        bad(
+            "runs = 4",
+            "runs = 4\nseeds = [1]",
+            "runs or seeds, not both",
+        );
+        bad("seeds = [7, 8, 9]", "runs = 3", "runs are an experiment's");
+        bad(
+            "experiment = \"north-finding\"",
+            "experiment = \"routes\"",
+            "a campaign runs north-finding or navigation",
+        );
+        bad(
+            "experiment = \"navigation\"\nscenario = \"scenarios/drive-gps.toml\"",
+            "experiment = \"navigation\"",
+            "needs the scenario",
+        );
         bad(
             "\"gps-void-outage\"",
             "\"gps-outage\"",

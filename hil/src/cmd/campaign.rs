@@ -1,12 +1,12 @@
 //! `hil campaign`: several builds through the same cases, one verdict per build and case
 //! against the baseline.
 
-use crate::cmd::guest::absolute;
+use crate::cmd::guest::{absolute, run_in_guest};
 use anyhow::{Context, Result};
-use hil::campaign::plan::{Build, Cell, cell_at, cells, pending};
+use hil::campaign::plan::{Build, Cell, cell_at, cells, check_in_process, shard};
 use hil::campaign::report;
 use hil::campaign::run::{Runner, results};
-use hil::campaign::spec::Campaign;
+use hil::campaign::spec::{Campaign, Case, CaseKind};
 use hil::run::sibling_binary;
 use std::path::PathBuf;
 
@@ -24,8 +24,13 @@ pub(crate) struct CampaignArgs {
     #[arg(long)]
     pub(crate) plan: bool,
     /// Run only cell K of the plan (0-based), as a cluster's array task does; no merge.
-    #[arg(long, value_name = "K")]
+    #[arg(long, value_name = "K", conflicts_with = "shard")]
     pub(crate) cell: Option<usize>,
+    /// Run only part K of N (0-based): the cells whose number is K modulo N that have no result
+    /// yet, as a cluster's array task of N does (in one guest where this kernel has no CAN);
+    /// no merge.
+    #[arg(long, value_name = "K/N", value_parser = hil::experiments::shard::parse)]
+    pub(crate) shard: Option<(usize, usize)>,
     /// Cells run side by side, each on a CAN interface of its own.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=16))]
     pub(crate) jobs: u16,
@@ -50,8 +55,127 @@ fn planned(a: &CampaignArgs) -> Result<(Campaign, Vec<hil::campaign::spec::Case>
         .map(|d| Build::of(d, &nav))
         .collect::<Result<Vec<_>>>()?;
     let cases = c.cases()?;
+    check_in_process(&c, &cases, &nav)?;
     let cells = cells(&c, &cases, &builds)?;
     Ok((c, cases, cells))
+}
+
+/// Whether a cell of `case` needs the bus (every case but an experiment, which runs in
+/// process).
+fn on_the_bus(cases: &[Case], cell: &Cell) -> bool {
+    cases
+        .iter()
+        .find(|k| k.id == cell.case)
+        .is_none_or(|k| !matches!(k.kind, CaseKind::Experiment(_)))
+}
+
+/// The plan's cells (their number, device, case, seed, whether done, key) on stdout, as a
+/// table or as JSON for a cluster's submitter.
+fn print_plan(cells: &[Cell], out: &std::path::Path, json: bool) -> Result<()> {
+    if json {
+        let plan: Vec<serde_json::Value> = cells
+            .iter()
+            .map(|k| {
+                serde_json::json!({
+                    "cell": k.number, "device": k.device, "build": k.build, "case": k.case,
+                    "seed": k.seed, "key": k.key, "done": k.done(out),
+                })
+            })
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&plan)?);
+        return Ok(());
+    }
+    println!(
+        "{:>4}  {:<16} {:<32} {:>6}  {:<4} key",
+        "cell", "device", "case", "seed", "done"
+    );
+    for k in cells {
+        println!(
+            "{:>4}  {:<16} {:<32} {:>6}  {:<4} {}",
+            k.number,
+            k.device,
+            k.case,
+            k.seed,
+            if k.done(out) { "yes" } else { "no" },
+            k.key
+        );
+    }
+    Ok(())
+}
+
+/// Run `todo`, `jobs` at a time, each cell's end said; how many could not run (said with why).
+fn run_cells(runner: &Runner, c: &Campaign, cases: &[Case], todo: &[&Cell], jobs: usize) -> usize {
+    let failed = hil::par::map(
+        todo,
+        jobs,
+        |cell| match runner.run(c, cases, cell) {
+            Ok(_) => {
+                eprintln!(
+                    "hil: cell {} done: {} on {}",
+                    cell.number, cell.case, cell.device
+                );
+                None
+            }
+            Err(e) => Some(format!("{e:#}")),
+        },
+        || Some("the cell's run panicked".to_string()),
+    );
+    for f in failed.iter().flatten() {
+        eprintln!("hil: {f}");
+    }
+    failed.iter().flatten().count()
+}
+
+/// This command again inside the QEMU guest (this kernel has no CAN): the campaign's file, its
+/// nav binaries and scenarios and the output folder shared; the guest runs the cells (and the
+/// merge, unless a cell or a part was asked for).
+fn in_guest(a: &CampaignArgs, c: &Campaign, cases: &[Case], out: &std::path::Path) -> Result<i32> {
+    let file = absolute(&a.file)?;
+    let mut args: Vec<String> = vec![
+        "campaign".into(),
+        file.to_string_lossy().into_owned(),
+        "--out".into(),
+        out.to_string_lossy().into_owned(),
+        "--jobs".into(),
+        a.jobs.to_string(),
+        "--iface-prefix".into(),
+        a.iface_prefix.clone(),
+    ];
+    if let Some(k) = a.cell {
+        args.extend(["--cell".into(), k.to_string()]);
+    }
+    if let Some((k, n)) = a.shard {
+        args.extend(["--shard".into(), format!("{k}/{n}")]);
+    }
+    if a.json {
+        args.push("--json".into());
+    }
+    let mut shares: Vec<PathBuf> = file
+        .parent()
+        .map(|p| vec![p.to_path_buf()])
+        .unwrap_or_default();
+    let mut navs = vec![sibling_binary("nav")?];
+    for d in &c.devices {
+        if let Some(n) = &d.nav {
+            let n = absolute(n)?;
+            shares.extend(n.parent().map(std::path::Path::to_path_buf));
+            navs.push(n);
+        }
+    }
+    for k in cases {
+        let path = match &k.kind {
+            CaseKind::Scenario(p) => Some(p),
+            CaseKind::Experiment(hil::campaign::spec::Experiment::Navigation(p)) => Some(p),
+            _ => None,
+        };
+        if let Some(p) = path {
+            shares.extend(absolute(p)?.parent().map(std::path::Path::to_path_buf));
+        }
+    }
+    shares.sort();
+    shares.dedup();
+    let json = (a.json && a.cell.is_none() && a.shard.is_none()).then_some("report.json");
+    run_in_guest(args, out, shares, navs, json)
 }
 
 pub(crate) fn campaign(a: CampaignArgs) -> Result<i32> {
@@ -64,43 +188,39 @@ pub(crate) fn campaign(a: CampaignArgs) -> Result<i32> {
         }
     };
     let out = absolute(&a.out)?;
-    if a.plan && a.json {
-        let plan: Vec<serde_json::Value> = cells
-            .iter()
-            .map(|k| {
-                serde_json::json!({
-                    "cell": k.number, "device": k.device, "build": k.build, "case": k.case,
-                    "seed": k.seed, "key": k.key, "done": k.done(&out),
-                })
-            })
-            .collect();
-        println!("{}", serde_json::to_string_pretty(&plan)?);
-        return Ok(0);
-    }
     if a.plan {
-        println!(
-            "{:>4}  {:<16} {:<32} {:>6}  {:<4} key",
-            "cell", "device", "case", "seed", "done"
-        );
-        for k in &cells {
-            println!(
-                "{:>4}  {:<16} {:<32} {:>6}  {:<4} {}",
-                k.number,
-                k.device,
-                k.case,
-                k.seed,
-                if k.done(&out) { "yes" } else { "no" },
-                k.key
-            );
-        }
+        print_plan(&cells, &out, a.json)?;
         return Ok(0);
     }
+    let selected: Vec<&Cell> = match (a.cell, a.shard) {
+        (Some(k), _) => vec![cell_at(&cells, k)?],
+        (None, Some((k, n))) => shard(&cells, k, n)?,
+        (None, None) if a.merge => Vec::new(),
+        (None, None) => cells.iter().collect(),
+    };
+    let todo: Vec<&Cell> = selected.into_iter().filter(|k| !k.done(&out)).collect();
+    let here = std::env::var_os(vcan_setup::GUEST_ENV).is_some()
+        || matches!(vcan_setup::can_support(), vcan_setup::CanSupport::Available);
     let runner = Runner {
         exe: std::env::current_exe().context("this program's path")?,
         nav_default: sibling_binary("nav")?,
         out: out.clone(),
         iface_prefix: a.iface_prefix.clone(),
+        jobs: usize::from(a.jobs),
     };
+    if !here && todo.iter().any(|k| on_the_bus(&cases, k)) {
+        // the experiments' runs in process here, on this machine's CPU rather than the guest's
+        // emulated one (the same results: hil::run::offload's judge does the same), then the
+        // cells on the bus in the guest
+        let local: Vec<&Cell> = todo
+            .iter()
+            .copied()
+            .filter(|k| !on_the_bus(&cases, k))
+            .collect();
+        let failed = run_cells(&runner, &c, &cases, &local, usize::from(a.jobs));
+        let code = in_guest(&a, &c, &cases, &out)?;
+        return Ok(if failed > 0 && code == 0 { 2 } else { code });
+    }
     if let Some(k) = a.cell {
         let cell = cell_at(&cells, k)?;
         if cell.done(&out) {
@@ -114,41 +234,43 @@ pub(crate) fn campaign(a: CampaignArgs) -> Result<i32> {
         return Ok(0);
     }
     if !a.merge {
-        let todo = pending(&cells, &out);
+        let of = match a.shard {
+            Some((k, n)) => format!("part {k}/{n}'s {}", shard(&cells, k, n)?.len()),
+            None => cells.len().to_string(),
+        };
         eprintln!(
-            "hil: {} of {} cells to run ({} have results), {} at a time",
+            "hil: {} of {of} cells to run, {} at a time",
             todo.len(),
-            cells.len(),
-            cells.len() - todo.len(),
             a.jobs
         );
-        let failed = hil::par::map(
-            &todo,
-            usize::from(a.jobs),
-            |cell| match runner.run(&c, &cases, cell) {
-                Ok(_) => {
-                    eprintln!(
-                        "hil: cell {} done: {} on {}",
-                        cell.number, cell.case, cell.device
-                    );
-                    None
-                }
-                Err(e) => Some(format!("{e:#}")),
-            },
-            || Some("the cell's run panicked".to_string()),
-        );
-        for f in failed.iter().flatten() {
-            eprintln!("hil: {f}");
+        let failed = run_cells(&runner, &c, &cases, &todo, usize::from(a.jobs));
+        if a.shard.is_some() {
+            // a part is one task of a cluster's array: the merge is a job of its own; a part
+            // with a cell that could not run fails, so that the cluster says which to run again
+            if failed > 0 {
+                eprintln!(
+                    "hil: {failed} of the part's cells could not run (no result): run the part again"
+                );
+                return Ok(2);
+            }
+            return Ok(0);
         }
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let merged = report::merge(&c, &cases, &cells, &results(&cells, &out)?);
     report::write(&out, &merged, &cells)?;
+    let cost = hil::campaign::cost::Cost::of(&cells, &out);
+    std::fs::write(out.join("cost.md"), cost.markdown())
+        .with_context(|| format!("writing {}", out.join("cost.md").display()))?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&merged)?);
     } else {
         print!("{}", report::markdown(&merged, &cells));
-        eprintln!("hil: the report is in {}", out.join("report.md").display());
+        eprintln!(
+            "hil: the report is in {} (what the cells cost: {})",
+            out.join("report.md").display(),
+            out.join("cost.md").display()
+        );
     }
     Ok(merged.exit_status())
 }

@@ -111,6 +111,10 @@ pub struct SeriesStats {
     pub max_position_error_m: f64,
     /// Records that could not be read.
     pub bad_records: u64,
+    /// Mean NEES per degree of freedom over the run, position and velocity (1 when nav's
+    /// covariance is consistent with its errors; none without nav's covariances).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_nees_per_dof: Option<[f64; 2]>,
 }
 
 impl SeriesStats {
@@ -130,6 +134,16 @@ impl SeriesStats {
                 .map(|x| x.position_error_m)
                 .fold(0.0, f64::max),
             bad_records,
+            mean_nees_per_dof: {
+                let v: Vec<[f64; 2]> = scores.iter().filter_map(|x| x.nees).collect();
+                (!v.is_empty()).then(|| {
+                    let k = 3.0 * v.len() as f64;
+                    [
+                        v.iter().map(|x| x[0]).sum::<f64>() / k,
+                        v.iter().map(|x| x[1]).sum::<f64>() / k,
+                    ]
+                })
+            },
         }
     }
 }

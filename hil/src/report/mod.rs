@@ -483,6 +483,25 @@ pub fn imu_clock_check(s: &Scenario, clock: Option<&ClockEstimate>, edges: u64) 
     }
 }
 
+/// The largest mean NEES per degree of freedom (position, velocity) over a run that still holds
+/// nav's sigmas to its errors: a consistent filter averages 1; a mean of 5 over a run is sigmas
+/// about 2.2 times too small on every sample (one 3-dof sample of a consistent filter gets
+/// there with probability 0.2 %), the divergence a reader of NAV_* frames must not be left with.
+pub const NEES_PER_DOF_LIMIT: f64 = 5.0;
+
+/// Whether nav's sigmas hold its errors over the run (none where nav sent no covariances).
+pub fn sigma_check(series: &crate::engine::navigate::SeriesStats) -> Option<Check> {
+    let [p, v] = series.mean_nees_per_dof?;
+    Some(Check {
+        name: "nav's sigmas hold its errors (NEES)".into(),
+        pass: p <= NEES_PER_DOF_LIMIT && v <= NEES_PER_DOF_LIMIT,
+        detail: format!(
+            "mean NEES per degree of freedom over {} s: position {p:.2}, velocity {v:.2} (1 when consistent; limit {NEES_PER_DOF_LIMIT})",
+            series.samples
+        ),
+    })
+}
+
 /// Checks of a navigation run: nav navigated, used the receiver's fixes, read the IMU's rate
 /// from the PPS, and its end error is within the scenario's tolerance.
 pub fn navigation_checks(
@@ -885,4 +904,42 @@ pub fn cpu_seconds(path: &str) -> Option<f64> {
     // SAFETY: sysconf has no preconditions.
     let tick = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
     (tick > 0).then(|| (user + system) as f64 / tick as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::navigate::SeriesStats;
+
+    #[test]
+    fn sigmas_that_do_not_hold_the_errors_fail_their_check() {
+        let series = |nees: Option<[f64; 2]>| SeriesStats {
+            samples: 30,
+            rms_position_error_m: 10.0,
+            max_position_error_m: 20.0,
+            bad_records: 0,
+            mean_nees_per_dof: nees,
+        };
+        assert!(
+            sigma_check(&series(None)).is_none(),
+            "no covariances: no check"
+        );
+        let c = sigma_check(&series(Some([0.8, 1.3]))).expect("a check");
+        assert!(
+            c.pass && c.detail.contains("position 0.80, velocity 1.30"),
+            "{}",
+            c.detail
+        );
+        // an overconfident filter (sigmas a tenth of the errors: NEES 100)
+        assert!(
+            !sigma_check(&series(Some([100.0, 0.9])))
+                .expect("a check")
+                .pass
+        );
+        assert!(
+            !sigma_check(&series(Some([0.9, 5.1])))
+                .expect("a check")
+                .pass
+        );
+    }
 }

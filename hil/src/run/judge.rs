@@ -213,6 +213,9 @@ fn score_navigation(
         Err(e) => tracing::warn!("nav's recording: {e:#}"),
     }
     report::navigation_checks(checks, s, o.as_ref(), nav_json, gps_stats);
+    if let Some(c) = navigation_series.as_ref().and_then(report::sigma_check) {
+        checks.push(c);
+    }
     (o, navigation_series)
 }
 
