@@ -14,9 +14,9 @@
 # array of two parts (`--shard K/2`, each part's cells on vcan in a guest of its own where this
 # kernel has no CAN, its experiments' runs in process here), one cell of part 1 killed on purpose
 # while it runs (`scancel`), the plan asked which cells have no result (that one alone), it
-# resubmitted as a job array of that cell, the merge a job after it. The same campaign then runs
-# here with a local pool (`--jobs 2`): its report must equal the cluster's, byte for byte (the
-# JUnit XML but for when and where it was written), and give the verdicts CAMPAIGN_EXPECT names.
+# resubmitted as a job array of that cell, the merge a job after it; its report must give the
+# verdicts CAMPAIGN_EXPECT names. (`./run-tests` compares it with the local pool's report of the
+# same campaign through vcan: tests/tests/campaign.rs.)
 #
 # Usage: tests/slurm.sh HIL [OUT]   (HIL: the hil binary; OUT: where the reports go, kept)
 # Needs root (munged and slurmd run as root here) and the packages slurmctld, slurmd,
@@ -198,8 +198,7 @@ echo "== the merged report equals the single run's (report.md, runs.csv): the cl
 [ -n "${CAMPAIGN:-}" ] || exit 0
 camp=$(realpath "$CAMPAIGN")
 cout="$out/campaign"
-lout="$out/campaign-local"
-rm -rf "$cout" "$lout"
+rm -rf "$cout"
 t0=$SECONDS
 # the plan's cells as "number key on-the-bus done" lines
 plan_lines() {
@@ -245,21 +244,7 @@ m=$(wait_job "$cmerge")
 case "$m" in *COMPLETED*) ;; *) echo "slurm.sh: the campaign's merge ended $m" >&2; tail -n 20 "$state"/jobs/campaign-*.log >&2; exit 1 ;; esac
 status=$(cat "$cout/merge.status")
 echo "== the cluster's campaign: merged (exit status $status), $((SECONDS - t0)) s"
-t1=$SECONDS
-lstatus=0
-"$hil" campaign "$camp" --jobs 2 --out "$lout" --iface-prefix vcan-l >"$lout.out" 2>"$lout.err" || lstatus=$?
-echo "== the same campaign here, two cells at a time: exit status $lstatus, $((SECONDS - t1)) s"
 rc=0
-# (JUnit XML says when and on which host it was written: those two attributes aside)
-unstamped() { sed -E 's/ (timestamp|hostname)="[^"]*"//g' "$1"; }
-for f in report.md report.json junit.xml; do
-  if ! cmp -s <(unstamped "$cout/$f") <(unstamped "$lout/$f"); then
-    echo "slurm.sh: the campaign's $f from the cluster differs from the local pool's:" >&2
-    diff <(unstamped "$lout/$f") <(unstamped "$cout/$f") | head -20 >&2
-    rc=1
-  fi
-done
-[ "$status" = "$lstatus" ] || { echo "slurm.sh: exit status $status on the cluster, $lstatus here" >&2; rc=1; }
 # the verdicts the campaign's file promises (CAMPAIGN_EXPECT: "case=verdict ..." for its one
 # device beside the baseline)
 for want in ${CAMPAIGN_EXPECT:-}; do
@@ -273,6 +258,10 @@ print(" ".join(v["verdict"] for v in m["verdicts"] if v["case"] == sys.argv[2]) 
     rc=1
   fi
 done
+if [ -n "${CAMPAIGN_STATUS:-}" ] && [ "$status" != "$CAMPAIGN_STATUS" ]; then
+  echo "slurm.sh: the campaign's merge exited $status, not $CAMPAIGN_STATUS" >&2
+  rc=1
+fi
 [ $rc = 0 ] || exit 1
-[ -z "${CAMPAIGN_EXPECT:-}" ] || echo "== the verdicts: ${CAMPAIGN_EXPECT}"
-echo "== the cluster's campaign report equals the local pool's (report.md and report.json byte for byte, junit.xml but for its time stamp and host); reports in $cout"
+[ -z "${CAMPAIGN_EXPECT:-}" ] || echo "== the verdicts: ${CAMPAIGN_EXPECT} (exit status $status)"
+echo "== the cluster's campaign report is in $cout (the local pool's must be the same: tests/tests/campaign.rs)"

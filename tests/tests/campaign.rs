@@ -142,3 +142,56 @@ fn a_bad_campaign_is_refused_with_what_is_wrong() {
         "{e}"
     );
 }
+
+/// The regression campaign `./run-tests` runs twice: on its Slurm cluster, by parts with a
+/// cell killed and resubmitted alone (`tests/slurm.sh`, `target/slurm-reports/campaign/`),
+/// and through vcan with a local pool (`tests/tests/vcan.rs`,
+/// `target/e2e-reports/campaign-local/`). The two reports are the same bytes: report.md,
+/// report.json, and the JUnit XML but for when and on which host it was written.
+#[test]
+#[ignore = "reads the reports ./run-tests' Slurm stage and end-to-end tests leave: run ./run-tests"]
+fn the_clusters_campaign_report_equals_the_local_pools() {
+    let target = e2e::reports_dir()
+        .parent()
+        .expect("the target folder")
+        .to_path_buf();
+    let cluster = target.join("slurm-reports/campaign");
+    let local = e2e::reports_dir().join("campaign-local");
+    for d in [&cluster, &local] {
+        if !d.join("report.json").is_file() {
+            eprintln!(
+                "SKIPPED: no campaign report in {} (./run-tests leaves it)",
+                d.display()
+            );
+            return;
+        }
+    }
+    // the attributes that say when and on which host a file was written, left out
+    let unstamped = |p: &Path| -> String {
+        let mut text =
+            std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        for attribute in [" timestamp=\"", " hostname=\""] {
+            let mut out = String::new();
+            for (i, part) in text.split(attribute).enumerate() {
+                // each part after the first starts with the value and its closing quote
+                out.push_str(if i == 0 {
+                    part
+                } else {
+                    part.split_once('"').map_or(part, |x| x.1)
+                });
+            }
+            text = out;
+        }
+        text
+    };
+    for f in ["report.md", "report.json", "junit.xml"] {
+        let (a, b) = (unstamped(&cluster.join(f)), unstamped(&local.join(f)));
+        assert!(a == b, "{f}: the cluster's\n{a}\nthe local pool's\n{b}");
+    }
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(cluster.join("report.json")).unwrap()).unwrap();
+    assert!(
+        m["verdicts"].as_array().is_some_and(|v| !v.is_empty()),
+        "{m}"
+    );
+}
