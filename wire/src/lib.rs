@@ -6,11 +6,14 @@
 //! Frame layouts are written nowhere else.
 //!
 //! The crate does no I/O. [`RawFrame`] is a plain classic CAN frame; the optional `socketcan`
-//! feature converts it to and from `socketcan::CanFrame`.
+//! feature converts it to and from `socketcan::CanFrame`. The optional `dbc` feature is the
+//! generic codec of any DBC ([`dbc`]: a lab's own contract), equal to this one on `bench.dbc`.
 
 pub mod busload;
 pub mod candump;
 mod codec;
+#[cfg(feature = "dbc")]
+pub mod dbc;
 pub mod errframe;
 mod messages;
 #[cfg(feature = "socketcan")]
