@@ -12,6 +12,7 @@
 pub mod busload;
 pub mod candump;
 mod codec;
+pub mod crc;
 #[cfg(feature = "dbc")]
 pub mod dbc;
 pub mod errframe;
