@@ -1,7 +1,7 @@
 //! `hil faults`: the fault matrix, where vcan is (natively, or all of it in the guest).
 
 use crate::cmd::args::BusArgs;
-use crate::cmd::guest::{absolute, default_out, junit_back, junit_through_guest, run_in_guest};
+use crate::cmd::guest::{absolute, default_out, run_in_guest_with_junit};
 use anyhow::{Result, bail};
 use hil::run::sibling_binary;
 use hil::suites::faults::{FaultOptions, matrix, run_matrix};
@@ -78,19 +78,18 @@ pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
         if a.bus.json {
             args.push("--json".into());
         }
-        let junit = junit_through_guest(&mut args, &out, a.junit.as_deref())?;
         let shares = nav
             .parent()
             .map(|p| vec![p.to_path_buf()])
             .unwrap_or_default();
-        let code = run_in_guest(
+        let code = run_in_guest_with_junit(
             args,
             &out,
             shares,
             vec![nav],
             a.bus.json.then_some("faults.json"),
+            a.junit.as_deref(),
         )?;
-        junit_back(junit)?;
         return Ok(code);
     }
     let in_guest = std::env::var_os(GUEST_ENV).is_some();

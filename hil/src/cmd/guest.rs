@@ -98,9 +98,25 @@ pub(crate) fn run_in_guest(
     Ok(o.status)
 }
 
+/// [`run_in_guest`] for a command with `--junit FILE` (`junit`): the guest writes its JUnit XML
+/// into the shared output folder, and it is copied to FILE once the guest is done.
+pub(crate) fn run_in_guest_with_junit(
+    mut args: Vec<String>,
+    out: &Path,
+    extra: Vec<PathBuf>,
+    libs_for: Vec<PathBuf>,
+    json: Option<&str>,
+    junit: Option<&Path>,
+) -> Result<i32> {
+    let pair = junit_through_guest(&mut args, out, junit)?;
+    let code = run_in_guest(args, out, extra, libs_for, json)?;
+    junit_back(pair)?;
+    Ok(code)
+}
+
 /// `--junit FILE` of a command re-run in the guest: the guest writes `junit.xml` into the
 /// shared output folder, and [`junit_back`] copies it to FILE once the guest is done.
-pub(crate) fn junit_through_guest(
+fn junit_through_guest(
     args: &mut Vec<String>,
     out: &Path,
     junit: Option<&Path>,
@@ -112,7 +128,7 @@ pub(crate) fn junit_through_guest(
 }
 
 /// Copy the guest's JUnit XML to where `--junit` asked (see [`junit_through_guest`]).
-pub(crate) fn junit_back(pair: Option<(PathBuf, PathBuf)>) -> Result<()> {
+fn junit_back(pair: Option<(PathBuf, PathBuf)>) -> Result<()> {
     let Some((from, to)) = pair else {
         return Ok(());
     };

@@ -1,7 +1,7 @@
 //! `hil run`: one scenario through the bench.
 
 use crate::cmd::args::{BusArgs, FreeArgs, LiveArgs, finish_view};
-use crate::cmd::guest::{absolute, default_out, junit_back, junit_through_guest, run_in_guest};
+use crate::cmd::guest::{absolute, default_out, run_in_guest_with_junit};
 use anyhow::{Context, Result};
 use hil::report;
 use hil::run::{RunOptions, run_here, sibling_binary};
@@ -107,15 +107,14 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
     }
     args.extend(a.live.to_args());
     args.extend(a.free.to_args());
-    let junit = junit_through_guest(&mut args, &out, a.junit.as_deref())?;
-    let code = run_in_guest(
+    let code = run_in_guest_with_junit(
         args,
         &out,
         extra,
         vec![nav],
         a.bus.json.then_some("report.json"),
+        a.junit.as_deref(),
     )?;
-    junit_back(junit)?;
     Ok(code)
 }
 

@@ -1,7 +1,7 @@
 //! `hil validate turntable`: the validation suite against the mechanism on a bus.
 
 use crate::cmd::args::BusArgs;
-use crate::cmd::guest::{absolute, default_out, junit_back, junit_through_guest, run_in_guest};
+use crate::cmd::guest::{absolute, default_out, run_in_guest_with_junit};
 use anyhow::{Context, Result, bail};
 use clap::Subcommand;
 use std::path::PathBuf;
@@ -90,15 +90,14 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
         if a.bus.json {
             args.push("--json".into());
         }
-        let junit = junit_through_guest(&mut args, &out, a.junit.as_deref())?;
-        let code = run_in_guest(
+        let code = run_in_guest_with_junit(
             args,
             &out,
             vec![],
             vec![],
             a.bus.json.then_some("validation.json"),
+            a.junit.as_deref(),
         )?;
-        junit_back(junit)?;
         return Ok(code);
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
