@@ -76,6 +76,8 @@ pub struct SignalLayout {
     pub unit: String,
     /// Which frames carry it.
     pub mux: Mux,
+    /// Its bits' payload positions, least significant first (worked out once, when read).
+    at: Vec<u16>,
 }
 
 /// One message's layout.
@@ -234,10 +236,21 @@ impl Contract {
 /// No bit of `message` carried by two signals that go into the same frame (a multiplexed
 /// signal shares its bits only with those of other multiplexor values).
 fn no_overlap(message: &str, signals: &[SignalLayout]) -> Result<(), ContractError> {
+    // each signal's bits as a mask of the 512 a CAN FD payload has
+    let masks: Vec<[u64; 8]> = signals
+        .iter()
+        .map(|s| {
+            let mut m = [0u64; 8];
+            for p in s.positions().filter(|p| *p < 512) {
+                m[p / 64] |= 1 << (p % 64);
+            }
+            m
+        })
+        .collect();
     for (i, a) in signals.iter().enumerate() {
-        for b in &signals[..i] {
+        for (j, b) in signals[..i].iter().enumerate() {
             let together = !matches!((a.mux, b.mux), (Mux::When(x), Mux::When(y)) if x != y);
-            if together && a.positions().any(|p| b.positions().any(|q| q == p)) {
+            if together && masks[i].iter().zip(&masks[j]).any(|(x, y)| x & y != 0) {
                 return Err(ContractError::BadSignal {
                     message: message.to_string(),
                     signal: a.name.clone(),
@@ -247,6 +260,27 @@ fn no_overlap(message: &str, signals: &[SignalLayout]) -> Result<(), ContractErr
         }
     }
     Ok(())
+}
+
+/// The payload positions of a signal's bits from the DBC's start bit, least significant first.
+fn bit_positions(start: u16, len: u16, big_endian: bool) -> Vec<u16> {
+    if !big_endian {
+        return (0..len).map(|i| start.saturating_add(i)).collect();
+    }
+    // the start bit is the most significant; walk down within a byte, then on to the next
+    // byte's most significant bit (the DBC's sawtooth numbering)
+    let mut at = Vec::with_capacity(usize::from(len));
+    let mut p = start;
+    for _ in 0..len {
+        at.push(p);
+        p = if p.is_multiple_of(8) {
+            p.saturating_add(15)
+        } else {
+            p - 1
+        };
+    }
+    at.reverse();
+    at
 }
 
 /// The layout of signal `s` of message `message` (`size` bytes), checked.
@@ -299,6 +333,11 @@ fn signal_layout(
             MultiplexIndicator::MultiplexedSignal(v)
             | MultiplexIndicator::MultiplexorAndMultiplexedSignal(v) => Mux::When(v),
         },
+        at: bit_positions(
+            s.start_bit as u16,
+            s.size as u16,
+            matches!(s.byte_order, ByteOrder::BigEndian),
+        ),
     };
     if s.start_bit >= (size * 8) as u64 {
         return Err(bad(format!(
@@ -319,21 +358,7 @@ impl SignalLayout {
     /// The payload bit positions (byte x 8 + bit, bit 0 the byte's least significant) of the
     /// raw value's bits, least significant first.
     pub fn positions(&self) -> impl Iterator<Item = usize> + '_ {
-        let len = usize::from(self.len);
-        let mut at: Vec<usize> = Vec::with_capacity(len);
-        if self.big_endian {
-            // the start bit is the most significant; walk down within a byte, then on to the
-            // next byte's most significant bit (the DBC's sawtooth numbering)
-            let mut p = usize::from(self.start);
-            for _ in 0..len {
-                at.push(p);
-                p = if p % 8 == 0 { p + 15 } else { p - 1 };
-            }
-            at.reverse();
-        } else {
-            at.extend((0..len).map(|i| usize::from(self.start) + i));
-        }
-        at.into_iter()
+        self.at.iter().map(|p| usize::from(*p))
     }
 
     /// The raw bits, least significant first in a word.
