@@ -182,7 +182,8 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
     let mut pipeline = Pipeline::new(cfg, recorder.is_some())?;
     let mut sigint = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;
     let mut sigterm = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
-    let mut shell = Shell::new(iface, sock, stamped, recorder.as_ref(), export);
+    let wait = Duration::from_millis(cfg.watchdog.imu_timeout_ms);
+    let mut shell = Shell::new(iface, sock, stamped, recorder.as_ref(), export, wait);
     let mut out = Vec::new();
     let mut batch = Vec::with_capacity(wire::BATCH);
     let mut read_errors = 0u64;
@@ -242,7 +243,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
                 take_in_order(&mut batch, release, &mut pipeline, &mut shell, &mut out).await?;
             }
             _ = tick.tick() => {
-                watch.check(&mut pipeline, &mut shell, &mut out).await?;
+                read_errors += watch.check(&mut batch, &mut pipeline, &mut shell, &mut out).await?;
                 if let Some(r) = shell.recorder {
                     r.ship_due();
                 }
@@ -279,13 +280,17 @@ struct ImuWatch {
 }
 
 impl ImuWatch {
-    /// Once a tick: the IMU is silent when no gyro frame came within the timeout.
+    /// Once a tick: the IMU is silent when no gyro frame came within the timeout. The
+    /// receiver's bytes read before the silence go in before the watchdog's report (no frame
+    /// after them will come to release them: `nav::arrival`). Returns the read errors met.
     async fn check(
         &mut self,
+        batch: &mut Vec<Received>,
         pipeline: &mut Pipeline,
         shell: &mut Shell<'_>,
         out: &mut Vec<Output>,
-    ) -> Result<()> {
+    ) -> Result<u64> {
+        let mut read_errors = 0;
         // an IMU frame waiting in the socket means the loop is late (a loaded computer, a
         // process stopped and continued), not that the IMU is silent
         if self.gyro_frames > 0
@@ -295,10 +300,14 @@ impl ImuWatch {
                 .as_ref()
                 .is_some_and(|s| imu_frame_waiting(s.as_raw_fd()))
         {
+            if !shell.waiting.is_empty() {
+                read_errors = drain_can(batch, shell);
+                take_in_order(batch, nav::arrival::Release::All, pipeline, shell, out).await?;
+            }
             pipeline.set_imu_timeout(true, self.timeout_ms, out);
             shell.act(out).await?;
         }
-        Ok(())
+        Ok(read_errors)
     }
 }
 
@@ -393,6 +402,7 @@ async fn finish(
                 port: c.port.clone(),
                 port_errors,
                 opens,
+                reads_released_by_wait: shell.waiting.expired(),
                 fixes_jsonl: c.fixes_jsonl.clone(),
             })
         }
@@ -613,13 +623,15 @@ struct Shell<'a> {
 
 impl<'a> Shell<'a> {
     /// The shell of a run on `iface` (its socket, none without CAN; `stamped`: the socket
-    /// gives receive times), recording to `recorder`, exporting fixes to `export`.
+    /// gives receive times), recording to `recorder`, exporting fixes to `export`; the
+    /// receiver's bytes wait at most `wait` for a frame received after them.
     fn new(
         iface: &'a str,
         sock: Option<socketcan::tokio::CanSocket>,
         stamped: bool,
         recorder: Option<&'a Recorder>,
         export: Option<std::io::BufWriter<std::fs::File>>,
+        wait: Duration,
     ) -> Self {
         Shell {
             iface,
@@ -631,7 +643,7 @@ impl<'a> Shell<'a> {
             parameters: Vec::new(),
             export,
             stamped,
-            waiting: nav::arrival::Waiting::default(),
+            waiting: nav::arrival::Waiting::new(wait),
         }
     }
 

@@ -1161,6 +1161,7 @@ impl Pipeline {
                 stats: self.gps_stats(),
                 port_errors: g.port_errors,
                 opens: g.opens,
+                reads_released_by_wait: g.reads_released_by_wait,
                 fixes,
                 last_fix: last_fix.cloned(),
                 fixes_jsonl: g.fixes_jsonl,

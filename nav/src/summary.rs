@@ -141,6 +141,11 @@ pub struct GpsSummary {
     pub port_errors: u64,
     /// Times the port was (re)opened.
     pub opens: u64,
+    /// Reads of the port that went into the pipeline because their wait for a frame received
+    /// after them ended (`nav::arrival`): 0 in a run whose IMU never stopped; more, and a
+    /// lockstep run's frames may depend on the host's pace.
+    #[serde(default)]
+    pub reads_released_by_wait: u64,
     /// Fixes handed to navigation.
     pub fixes: u64,
     /// The last fix.
@@ -186,6 +191,8 @@ pub struct GpsPortCounts {
     pub port_errors: u64,
     /// Times the port was (re)opened.
     pub opens: u64,
+    /// Reads released by their wait, not by a later frame.
+    pub reads_released_by_wait: u64,
     /// Export file of the fixes.
     pub fixes_jsonl: Option<PathBuf>,
 }

@@ -241,8 +241,14 @@ fn reference_checks(
             name: "nav sent the in-process run's frames at the same samples".into(),
             pass: a == b && !a.is_empty(),
             detail: format!(
-                "hash over every frame sent and its IMU sample: nav {a}, in process {b} ({} frames)",
-                nav.solution.frames_sent
+                "hash over every frame sent and its IMU sample: nav {a}, in process {b} ({} frames){}",
+                nav.solution.frames_sent,
+                match nav.gps.as_ref().map_or(0, |g| g.reads_released_by_wait) {
+                    0 => String::new(),
+                    n => format!(
+                        "; {n} of the receiver's reads went in when their wait ended, no frame after them having come (the IMU stopped, or the host stalled nav's bench as long as nav's watchdog)"
+                    ),
+                }
             ),
         });
         if lockstep.enabled && lockstep.stalls == 0 && lockstep.starved == 0 {
