@@ -534,7 +534,6 @@ impl NorthFinder {
     /// Advance the sequence on the turntable's state (no command outstanding).
     fn step(&mut self) {
         let since = self.core.t - self.core.phase_since;
-        let w = self.where_();
         match self.core.phase {
             Phase::Enabling => {
                 if let Some(s) = self.state() {
@@ -565,9 +564,10 @@ impl NorthFinder {
                             .push(TtCommand::IndexAbs, self.cfg.axis, target);
                     }
                 }
-                _ if since > self.cfg.lock_timeout_s => {
-                    self.core.fail(format!("lock pin did not withdraw at {w}"))
-                }
+                _ if since > self.cfg.lock_timeout_s => self.core.fail(format!(
+                    "lock pin did not withdraw at {w}",
+                    w = self.where_()
+                )),
                 _ => {}
             },
             Phase::Indexing | Phase::Returning => {
@@ -583,7 +583,8 @@ impl NorthFinder {
                         if d.min(360.0 - d) > 0.05 {
                             self.core.fail(format!(
                                 "turntable at {:.4} deg, not at {want} deg, after the move ({w})",
-                                st.angle_deg
+                                st.angle_deg,
+                                w = self.where_()
                             ));
                             return;
                         }
@@ -598,7 +599,8 @@ impl NorthFinder {
                 } else if since > self.cfg.move_timeout_s {
                     self.core.fail(format!(
                         "move did not finish within {} s at {w}",
-                        self.cfg.move_timeout_s
+                        self.cfg.move_timeout_s,
+                        w = self.where_()
                     ));
                 }
             }
@@ -612,7 +614,8 @@ impl NorthFinder {
                 } else if since > self.cfg.lock_timeout_s {
                     self.core.fail(format!(
                         "lock pin did not engage within {} s at {w}",
-                        self.cfg.lock_timeout_s
+                        self.cfg.lock_timeout_s,
+                        w = self.where_()
                     ));
                 }
             }

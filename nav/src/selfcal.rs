@@ -519,7 +519,6 @@ impl SelfCalibrator {
     fn step(&mut self) {
         let since = self.core.t - self.core.phase_since;
         let timeout = self.cfg.move_timeout_s;
-        let w = self.where_();
         match self.core.phase {
             CalPhase::Enabling => {
                 if self.both(|s| s != TtState::Disabled) {
@@ -558,8 +557,10 @@ impl SelfCalibrator {
                 if self.both(|s| s == TtState::Idle) {
                     self.start_rotation();
                 } else if since > timeout {
-                    self.core
-                        .fail(format!("the lock pins did not withdraw while {w}"));
+                    self.core.fail(format!(
+                        "the lock pins did not withdraw while {w}",
+                        w = self.where_()
+                    ));
                 }
             }
             CalPhase::Rotating => self.rotate(since),

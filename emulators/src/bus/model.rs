@@ -189,6 +189,12 @@ struct IdStats {
 pub struct CanBus {
     timing: BusTiming,
     nodes: Vec<Node>,
+    /// The node of each identifier met so far (an index into `nodes`, which only grows): the
+    /// contract's lookup and the name's search once per identifier, not per frame.
+    node_of_id: BTreeMap<u16, usize>,
+    /// A bit's time, ns, where it is a whole number (500 kbit/s: 2,000; any rate that divides
+    /// 1 GHz): a frame's time is then the product, exactly what the rounded quotient gives.
+    ns_per_bit: Option<u64>,
     /// Per disturbance window, the next corruption, ns.
     next_corruption: Vec<u64>,
     /// Stuck windows already applied.
@@ -209,6 +215,12 @@ pub struct CanBus {
     last_ns: u64,
 }
 
+/// The time of a bit at `bitrate_bps`, ns, when it is a whole number.
+fn whole_ns_per_bit(bitrate_bps: f64) -> Option<u64> {
+    (bitrate_bps >= 1.0 && bitrate_bps <= 1e9 && 1e9 % bitrate_bps == 0.0)
+        .then(|| (1e9 / bitrate_bps) as u64)
+}
+
 /// Name of the node of frames whose identifier the contract does not know (a foreign node on
 /// the harness, the fault injector).
 pub const FOREIGN: &str = "OTHER";
@@ -217,12 +229,15 @@ impl CanBus {
     /// An idle bus.
     pub fn new(timing: BusTiming) -> Self {
         let next_corruption = timing.faults.disturbed_s.iter().map(|w| ns(w[0])).collect();
+        let ns_per_bit = whole_ns_per_bit(timing.bitrate_bps);
         Self {
             timing,
             nodes: vec![Node {
                 name: "NAV",
                 ..Default::default()
             }],
+            node_of_id: BTreeMap::new(),
+            ns_per_bit,
             next_corruption,
             stuck_done: 0,
             corrupted: 0,
@@ -252,8 +267,13 @@ impl CanBus {
     /// The node that sends `frame`: the contract's transmitter of its identifier, else
     /// [`FOREIGN`].
     fn node_of(&mut self, frame: &RawFrame) -> usize {
+        if let Some(&i) = self.node_of_id.get(&frame.id) {
+            return i;
+        }
         let name = wire::spec_for_id(frame.id).map_or(FOREIGN, |s| s.sender);
-        self.node_named(name)
+        let i = self.node_named(name);
+        self.node_of_id.insert(frame.id, i);
+        i
     }
 
     /// The node called `name`, added when new.
@@ -280,7 +300,10 @@ impl CanBus {
         if self.timing.ideal {
             return 0;
         }
-        (f64::from(bits) * 1e9 / self.timing.bitrate_bps).round() as u64
+        match self.ns_per_bit {
+            Some(k) => u64::from(bits) * k,
+            None => (f64::from(bits) * 1e9 / self.timing.bitrate_bps).round() as u64,
+        }
     }
 
     /// `frame` is handed to its node's controller at `t_ns`. False when the node's queue was
