@@ -2,22 +2,23 @@
 //!
 //! Layers: truth ([`truth`]: exact motion, pure functions of time) -> sensor error model
 //! ([`imu`]: biases, noise, pulse quantization) -> wire encoding (the `wire` crate) ->
-//! transport ([`bus::transport`]: vcan or a real CAN interface). Everything but the transport is
-//! pure and tested without I/O. All emulators share one simulated clock ([`clock::SimClock`]).
+//! transport ([`adapters::transport`]: vcan or a real CAN interface). Everything outside
+//! [`adapters`] is pure (no I/O, no wall time) and tested without I/O; the adapters put it on
+//! vcan and a pty, paced by one clock ([`adapters::clock::SimClock`]).
 //!
-//! Rooms: [`imu`] (the unit, its pulse counters, its stream of frames, the MEMS units),
-//! [`turntable`] (the mechanism and its traffic), [`gps`] (the receiver), [`bus`] (the
-//! physical bus model, the scheduler that drives every device on it in lockstep with nav, the
-//! socket transport), [`step`] (the one order in which the devices act).
+//! Rooms: [`truth`], [`drive`] and [`road`] (the motion), [`imu`] (the unit, its pulse
+//! counters, its stream of frames, the MEMS units), [`turntable`] (the mechanism and its
+//! traffic), [`gps`] (the receiver), [`bus`] (the physical bus model), [`step`] (the one order in
+//! which the devices act), [`reported`]; then [`adapters`] (the scheduler that drives every
+//! device on vcan in lockstep with nav, the socket transport, the pty, the player, the
+//! free-running devices).
 
+pub mod adapters;
 pub mod bus;
-pub mod clock;
 pub mod drive;
-pub mod freerun;
 pub mod geodesy;
 pub mod gps;
 pub mod imu;
-pub mod player;
 pub mod reported;
 pub mod road;
 pub mod step;

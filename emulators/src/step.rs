@@ -5,7 +5,7 @@
 //! devices make of nav's frames (NAV_TIME places the frames nav sent before it on the bus; a
 //! turntable command reaches the mechanism when it is over). Pure: no I/O, no wall time.
 //!
-//! The bus scheduler ([`crate::bus::scheduler::run`]) puts each [`Step`] on vcan and the pty; the
+//! The bus scheduler ([`crate::adapters::scheduler::run`]) puts each [`Step`] on vcan and the pty; the
 //! in-process runs feed it to nav's pipeline directly. Both call [`Stepper::step`] and
 //! [`Stepper::from_nav`], so the order nav meets its inputs in is the same on both, by
 //! construction.

@@ -91,7 +91,7 @@ impl Suite {
         Suite {
             name: name.to_string(),
             time_s,
-            timestamp: nav::params::now_rfc3339(),
+            timestamp: nav::procedures::unit_parameters::now_rfc3339(),
             cases,
         }
     }

@@ -205,7 +205,7 @@ fn main() {
     // the results, not in a log line per run; under the fuzzer its warnings about the hostile
     // input are the expected answer, counted by the fuzzer, not logged a million times
     // log lines clear the status line a terminal may be showing (hil::status)
-    nav::cli::init_tracing_on(
+    nav::shell::cli::init_tracing_on(
         // (a judge server replays other runs' recordings: nav's warnings are theirs, and go in
         // their reports)
         if matches!(cli.cmd, Cmd::Fuzz { .. } | Cmd::JudgeServer(_)) {
@@ -216,7 +216,9 @@ fn main() {
         hil::status::LogWriter,
     );
     // exit 0: pass, 1: a check failed or the run could not go on
-    std::process::exit(nav::cli::exit_code("hil", real_main(cli), |code| code));
+    std::process::exit(nav::shell::cli::exit_code("hil", real_main(cli), |code| {
+        code
+    }));
 }
 
 fn real_main(cli: Cli) -> Result<i32> {

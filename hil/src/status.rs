@@ -1,7 +1,7 @@
 //! Progress for people and for logs. On a terminal, progress is one status line that redraws
 //! itself (with a bar where the total is known), and log lines clear it before they print; in a
 //! file, a pipe or a CI log every progress report is a plain line of its own, with no control
-//! codes (nor colour: `nav::cli`).
+//! codes (nor colour: `nav::shell::cli`).
 
 use std::io::{IsTerminal, Write};
 use std::sync::Mutex;

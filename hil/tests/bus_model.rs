@@ -35,7 +35,7 @@ fn drill(timing: TimingModel) -> (Vec<(f64, wire::TtCmd)>, Vec<wire::RawFrame>, 
         if bench
             .pipeline()
             .finder()
-            .is_some_and(nav::procedure::Procedure::is_finished)
+            .is_some_and(nav::procedures::common::Procedure::is_finished)
         {
             break;
         }

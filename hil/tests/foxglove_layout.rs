@@ -91,7 +91,7 @@ fn the_layout_opens_and_every_topic_it_names_is_ours() {
         .collect();
     // the recordings' channels (nav.mcap: nav's JSON channels; truth.mcap: the bench's)
     ours.extend(
-        nav::channels::JsonChannel::ALL
+        nav::record::channels::JsonChannel::ALL
             .iter()
             .map(|c| c.topic().to_string()),
     );

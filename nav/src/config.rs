@@ -1,8 +1,8 @@
 //! The `nav` config file (TOML). On a vehicle it names `can0` and `/dev/ttyS1`; on the bench it
 //! names a vcan interface and a pty. Nothing else differs.
 
-use crate::attitude::{ImuProcessor, ProcessingConfig};
-use crate::imu::ImuCalibration;
+use crate::frontend::imu_frames::ImuCalibration;
+use crate::frontend::processing::{ImuProcessor, ProcessingConfig};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
@@ -21,7 +21,7 @@ pub struct NavConfig {
     #[serde(default)]
     pub imu: ImuCalibration,
     /// The unit's calibration parameters from a file a calibration procedure wrote
-    /// ([`crate::params`]): its gyro biases and scale factors replace `[imu]`'s.
+    /// ([`crate::procedures::unit_parameters`]): its gyro biases and scale factors replace `[imu]`'s.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<CalibrationConfig>,
     /// Dither filter, coning and sculling compensation.
@@ -29,16 +29,16 @@ pub struct NavConfig {
     pub processing: ProcessingConfig,
     /// Four-position north-finding on the indexing mechanism at start-up.
     #[serde(default)]
-    pub north_finding: crate::northfind::NorthFindingConfig,
+    pub north_finding: crate::procedures::north_finding::NorthFindingConfig,
     /// Self-calibration of a dual-axis rotating IMU at start-up (calibration mode).
     #[serde(default, skip_serializing_if = "is_off")]
-    pub self_calibration: crate::selfcal::SelfCalibrationConfig,
+    pub self_calibration: crate::procedures::self_calibration::SelfCalibrationConfig,
     /// Calibration of a redundant MEMS gyro unit on a three-axis table at start-up.
     #[serde(default, skip_serializing_if = "is_tetra_off")]
-    pub tetra_calibration: crate::tetracal::TetraCalibrationConfig,
+    pub tetra_calibration: crate::procedures::tetra_calibration::TetraCalibrationConfig,
     /// Navigation after start-up (levelling, hand-over, strapdown, SINS/GPS filter).
     #[serde(default)]
-    pub navigation: crate::navigator::NavigationConfig,
+    pub navigation: crate::navigation::navigator::NavigationConfig,
     /// Liveness watchdog.
     #[serde(default)]
     pub watchdog: WatchdogConfig,
@@ -47,11 +47,11 @@ pub struct NavConfig {
     pub record: RecordConfig,
 }
 
-fn is_off(c: &crate::selfcal::SelfCalibrationConfig) -> bool {
+fn is_off(c: &crate::procedures::self_calibration::SelfCalibrationConfig) -> bool {
     !c.enabled
 }
 
-fn is_tetra_off(c: &crate::tetracal::TetraCalibrationConfig) -> bool {
+fn is_tetra_off(c: &crate::procedures::tetra_calibration::TetraCalibrationConfig) -> bool {
     !c.enabled
 }
 
@@ -187,7 +187,7 @@ pub enum ConfigError {
     },
     /// The IMU parameter file named in `[calibration]` is refused.
     #[error(transparent)]
-    Parameters(#[from] crate::params::ParamsError),
+    Parameters(#[from] crate::procedures::unit_parameters::ParamsError),
     /// A value makes no sense.
     #[error("config file {path}: {what}")]
     Invalid {
@@ -355,7 +355,7 @@ impl NavConfig {
             if c.parameters.is_relative() {
                 c.parameters = base.join(&c.parameters);
             }
-            let p = crate::params::ImuParameters::load(&c.parameters, &c.imu)?;
+            let p = crate::procedures::unit_parameters::ImuParameters::load(&c.parameters, &c.imu)?;
             let imu = &mut self.imu;
             let zero = [0.0; 3];
             for (inline, from_file, name) in [
@@ -386,7 +386,7 @@ impl NavConfig {
             if p.is_relative() {
                 *p = base.join(&*p);
             }
-            let f = crate::params::RedundantParameters::load(p, &t.imu)?;
+            let f = crate::procedures::unit_parameters::RedundantParameters::load(p, &t.imu)?;
             t.coefficients = Some(f.coefficients());
         }
         Ok(())
@@ -439,12 +439,12 @@ mod tests {
     #[test]
     fn the_calibration_file_is_loaded_for_its_unit_only() {
         let dir = tempfile::tempdir().unwrap();
-        let params = crate::params::ImuParameters {
-            format: crate::params::FORMAT.into(),
+        let params = crate::procedures::unit_parameters::ImuParameters {
+            format: crate::procedures::unit_parameters::FORMAT.into(),
             imu: "FOG-7".into(),
             procedure: "test".into(),
-            date: crate::params::now_rfc3339(),
-            gyro: crate::params::GyroParameters {
+            date: crate::procedures::unit_parameters::now_rfc3339(),
+            gyro: crate::procedures::unit_parameters::GyroParameters {
                 bias_dph: [0.01, -0.02, 0.03],
                 scale_factor_ppm: [10.0, 11.0, 12.0],
             },

@@ -7,9 +7,9 @@
 use anyhow::{Context, Result, bail};
 use clap::Parser;
 use nav::config::NavConfig;
-use nav::gpsport::GpsEvent;
 use nav::pipeline::{Output, Pipeline};
-use nav::record::{Record, Recorder, wall_ns};
+use nav::record::writer::{Record, Recorder, wall_ns};
+use nav::shell::gps_port::GpsEvent;
 use nav::summary::Summary;
 use std::os::fd::AsRawFd;
 use std::path::PathBuf;
@@ -68,8 +68,8 @@ fn open_error_hint(iface: &str, e: &std::io::Error) -> String {
 }
 
 fn main() {
-    nav::cli::init_tracing();
-    std::process::exit(nav::cli::exit_code("nav", real_main(), |()| 0));
+    nav::shell::cli::init_tracing();
+    std::process::exit(nav::shell::cli::exit_code("nav", real_main(), |()| 0));
 }
 
 fn real_main() -> Result<()> {
@@ -130,7 +130,7 @@ fn open_can(c: &nav::config::CanConfig) -> Result<(socketcan::tokio::CanSocket, 
     let sock = socketcan::tokio::CanSocket::open(iface)
         .map_err(|e| anyhow::anyhow!("CAN interface {iface}: {}", open_error_hint(iface, &e)))?;
     // the kernel's receive time of every frame, for the recording (candump's time stamps)
-    // and the order of the receiver's bytes among the frames (nav::arrival)
+    // and the order of the receiver's bytes among the frames (nav::shell::arrival)
     let stamped = match socketcan::SocketOptions::set_recv_timestamp(&sock, true) {
         Ok(()) => true,
         Err(e) => {
@@ -173,7 +173,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
         }
         None => (None, false),
     };
-    let mut gps = cfg.gps.as_ref().map(nav::gpsport::GpsPort::new);
+    let mut gps = cfg.gps.as_ref().map(nav::shell::gps_port::GpsPort::new);
     let export = open_export(cfg)?;
     let recorder = match &cfg.record.mcap {
         Some(p) => Some(Recorder::start(p)?),
@@ -239,7 +239,7 @@ async fn run(cfg: &NavConfig) -> Result<Summary> {
             // the receiver's bytes that waited as long as they may for a later frame
             _ = until(shell.waiting.deadline()) => {
                 read_errors += drain_can(&mut batch, &shell);
-                let release = nav::arrival::Release::Expired(Instant::now());
+                let release = nav::shell::arrival::Release::Expired(Instant::now());
                 take_in_order(&mut batch, release, &mut pipeline, &mut shell, &mut out).await?;
             }
             _ = tick.tick() => {
@@ -282,7 +282,7 @@ struct ImuWatch {
 impl ImuWatch {
     /// Once a tick: the IMU is silent when no gyro frame came within the timeout. The
     /// receiver's bytes read before the silence go in before the watchdog's report (no frame
-    /// after them will come to release them: `nav::arrival`). Returns the read errors met.
+    /// after them will come to release them: `nav::shell::arrival`). Returns the read errors met.
     async fn check(
         &mut self,
         batch: &mut Vec<Received>,
@@ -302,7 +302,14 @@ impl ImuWatch {
         {
             if !shell.waiting.is_empty() {
                 read_errors = drain_can(batch, shell);
-                take_in_order(batch, nav::arrival::Release::All, pipeline, shell, out).await?;
+                take_in_order(
+                    batch,
+                    nav::shell::arrival::Release::All,
+                    pipeline,
+                    shell,
+                    out,
+                )
+                .await?;
             }
             pipeline.set_imu_timeout(true, self.timeout_ms, out);
             shell.act(out).await?;
@@ -332,7 +339,14 @@ async fn on_frame(
         read_errors += 1;
         warn!(interface = shell.iface, "read error: {e}");
     }
-    take_in_order(batch, nav::arrival::Release::Ordered, pipeline, shell, out).await?;
+    take_in_order(
+        batch,
+        nav::shell::arrival::Release::Ordered,
+        pipeline,
+        shell,
+        out,
+    )
+    .await?;
     if let Some(r) = shell.recorder {
         r.ship_due();
     }
@@ -347,7 +361,7 @@ async fn on_frame(
 
 /// What the receive loop leaves for the end of the run.
 struct Ended {
-    gps: Option<nav::gpsport::GpsPort>,
+    gps: Option<nav::shell::gps_port::GpsPort>,
     read_errors: u64,
     start: Instant,
 }
@@ -371,7 +385,14 @@ async fn finish(
     // what reached the socket and the port before the signal is processed, not left unread:
     // every frame on the bus is then either received or in the kernel's drop count
     read_errors += drain_can(batch, shell);
-    take_in_order(batch, nav::arrival::Release::All, pipeline, shell, out).await?;
+    take_in_order(
+        batch,
+        nav::shell::arrival::Release::All,
+        pipeline,
+        shell,
+        out,
+    )
+    .await?;
     if let Some(g) = gps.as_mut() {
         while let Some(bytes) = g.try_read() {
             shell.gps_bytes(wall_ns(), bytes, pipeline, out).await?;
@@ -429,7 +450,7 @@ async fn finish(
 fn write_summary(cfg: &NavConfig, recorder: Option<Recorder>, summary: &mut Summary) -> Result<()> {
     if let Some(r) = recorder {
         r.send(Record::Json {
-            channel: nav::record::JsonChannel::Summary,
+            channel: nav::record::writer::JsonChannel::Summary,
             t_ns: wall_ns(),
             publish_ns: (summary.last_sample.unwrap_or(0) as f64 * 1e9 / cfg.imu.rate_hz) as u64,
             json: serde_json::to_string(&summary)?,
@@ -457,20 +478,27 @@ async fn on_gps_event(
             // the frames received before the bytes were read go through first, those after
             // them after: the bytes take their place in the order things arrived, once a
             // frame received after them says that none before them is still on its way
-            // (nav::arrival)
+            // (nav::shell::arrival)
             shell.waiting.push(t_ns, bytes, Instant::now());
             read_errors = drain_can(batch, shell);
             let release = if shell.stamped {
-                nav::arrival::Release::Ordered
+                nav::shell::arrival::Release::Ordered
             } else {
-                nav::arrival::Release::All
+                nav::shell::arrival::Release::All
             };
             take_in_order(batch, release, pipeline, shell, out).await?;
         }
         GpsEvent::Opened | GpsEvent::Closed(_) if !shell.waiting.is_empty() => {
             // the bytes read before the port opened or closed go in before it
             read_errors = drain_can(batch, shell);
-            take_in_order(batch, nav::arrival::Release::All, pipeline, shell, out).await?;
+            take_in_order(
+                batch,
+                nav::shell::arrival::Release::All,
+                pipeline,
+                shell,
+                out,
+            )
+            .await?;
             port_event(ev, pipeline, out);
         }
         _ => port_event(ev, pipeline, out),
@@ -573,10 +601,10 @@ fn drain_can(batch: &mut Vec<Received>, shell: &Shell<'_>) -> u64 {
 }
 
 /// The frames in `batch` and the receiver's bytes that wait, through the pipeline in the
-/// order they arrived (`nav::arrival`), with the waiting bytes `release` lets go after them.
+/// order they arrived (`nav::shell::arrival`), with the waiting bytes `release` lets go after them.
 async fn take_in_order(
     batch: &mut Vec<Received>,
-    release: nav::arrival::Release,
+    release: nav::shell::arrival::Release,
     pipeline: &mut Pipeline,
     shell: &mut Shell<'_>,
     out: &mut Vec<Output>,
@@ -588,11 +616,13 @@ async fn take_in_order(
     let mut frames = std::mem::take(batch);
     for step in steps {
         match step {
-            nav::arrival::Step::Frames(r) => {
+            nav::shell::arrival::Step::Frames(r) => {
                 batch.extend(frames.drain(..r.len()));
                 take_frames(batch, pipeline, shell, out).await?;
             }
-            nav::arrival::Step::Bytes(b) => shell.gps_bytes(b.t_ns, b.bytes, pipeline, out).await?,
+            nav::shell::arrival::Step::Bytes(b) => {
+                shell.gps_bytes(b.t_ns, b.bytes, pipeline, out).await?
+            }
         }
     }
     // the batch's buffer back for the next read
@@ -612,13 +642,16 @@ struct Shell<'a> {
     frames_sent: u64,
     send_errors: u64,
     /// The parameter files as stamped, and where each was written (none: it could not be).
-    parameters: Vec<(Option<std::path::PathBuf>, nav::params::ParameterFile)>,
+    parameters: Vec<(
+        Option<std::path::PathBuf>,
+        nav::procedures::unit_parameters::ParameterFile,
+    )>,
     /// Where every decoded fix goes as a JSON line, when asked for.
     export: Option<std::io::BufWriter<std::fs::File>>,
     /// The socket gives each frame's kernel receive time.
     stamped: bool,
     /// The receiver's bytes read and waiting for the frames sent before them.
-    waiting: nav::arrival::Waiting,
+    waiting: nav::shell::arrival::Waiting,
 }
 
 impl<'a> Shell<'a> {
@@ -643,7 +676,7 @@ impl<'a> Shell<'a> {
             parameters: Vec::new(),
             export,
             stamped,
-            waiting: nav::arrival::Waiting::new(wait),
+            waiting: nav::shell::arrival::Waiting::new(wait),
         }
     }
 
@@ -737,7 +770,7 @@ impl<'a> Shell<'a> {
                 }
                 Output::Parameters { path, file } => {
                     let mut p = *file;
-                    p.set_date(nav::params::now_rfc3339());
+                    p.set_date(nav::procedures::unit_parameters::now_rfc3339());
                     let written = match write_atomically(&path, &p.to_toml()) {
                         Ok(()) => {
                             info!("calibration parameters written to {}", path.display());

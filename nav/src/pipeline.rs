@@ -6,7 +6,7 @@
 //! One CAN frame, followed from input to output ([`Pipeline::on_frame`]):
 //! 1. **decode** it with the wire contract; bad frames are counted by kind ([`FrameCounters`]);
 //! 2. **turntable** status and acknowledgements go to the procedure commanding the mechanism
-//!    (north-finding or a calibration, `crate::mission`);
+//!    (north-finding or a calibration, `crate::procedures::mission`);
 //! 3. the IMU **front end** turns gyro/accel frames into samples on the one IMU clock (the
 //!    extended sample counter);
 //! 4. **processing** (dither filter, coning and sculling) turns samples into updates; a PPS
@@ -20,21 +20,21 @@
 //!
 //! IMU time is `(sample - baseline) / rate`: seconds from the front end's first sample.
 
-use crate::attitude::{ImuProcessor, Update, quaternion_to_rotation_vector};
 use crate::config::NavConfig;
-use crate::earth;
-use crate::gps::GpsFix;
-use crate::imu::{ImuEvent, ImuFrontEnd, ImuSample};
-use crate::mission::Mission;
-use crate::navigator::Navigator;
-use crate::northfind::NorthFinder;
-use crate::output::{Solution, SolutionEncoder};
-use crate::procedure::{Procedure, Reporting};
-use crate::record::JsonChannel;
-use crate::selfcal::SelfCalibrator;
+use crate::frontend::gps_receiver::GpsFix;
+use crate::frontend::imu_frames::{ImuEvent, ImuFrontEnd, ImuSample};
+use crate::frontend::processing::{ImuProcessor, Update, quaternion_to_rotation_vector};
+use crate::navigation::earth;
+use crate::navigation::navigator::Navigator;
+use crate::navigation::solution_frames::{Solution, SolutionEncoder};
+use crate::procedures::common::{Procedure, Reporting};
+use crate::procedures::mission::Mission;
+use crate::procedures::north_finding::NorthFinder;
+use crate::procedures::self_calibration::SelfCalibrator;
+use crate::procedures::tetra_calibration::TetraCalibrator;
+use crate::record::writer::JsonChannel;
 use crate::summary::CanBusHealth;
 use crate::summary::{AttitudeSummary, Summary};
-use crate::tetracal::TetraCalibrator;
 use std::collections::BTreeMap;
 use thiserror::Error;
 use tracing::{info, warn};
@@ -73,7 +73,7 @@ pub enum Output {
         /// Where.
         path: std::path::PathBuf,
         /// The file.
-        file: Box<crate::params::ParameterFile>,
+        file: Box<crate::procedures::unit_parameters::ParameterFile>,
     },
 }
 
@@ -82,10 +82,10 @@ pub enum Output {
 pub enum PipelineError {
     /// The processing chain's settings.
     #[error("processing chain: {0}")]
-    Processing(#[from] crate::fir::FirError),
+    Processing(#[from] crate::frontend::dither_filter::FirError),
     /// A procedure's settings (north-finding, self-calibration, the redundant unit's).
     #[error(transparent)]
-    Procedure(#[from] crate::ttlink::SettingError),
+    Procedure(#[from] crate::procedures::turntable_link::SettingError),
 }
 
 /// Frames received, by outcome.
@@ -168,8 +168,8 @@ pub struct Pipeline {
     record: bool,
     fe: ImuFrontEnd,
     proc: ImuProcessor,
-    fir: Option<crate::fir::FirResponse>,
-    coning_method: crate::coning::ConingMethod,
+    fir: Option<crate::frontend::dither_filter::FirResponse>,
+    coning_method: crate::frontend::coning::ConingMethod,
     /// The procedures on the mechanism the config enables ([`REGISTRY`]'s
     /// order; the config allows one).
     procedures: Vec<Running>,
@@ -187,7 +187,7 @@ pub struct Pipeline {
     fixes: u64,
     last_fix: Option<GpsFix>,
     /// The receiver's bytes, decoded here (in the order they came among the frames).
-    decoder: crate::gps::GpsDecoder,
+    decoder: crate::frontend::gps_receiver::GpsDecoder,
     decoded: Vec<GpsFix>,
     /// Bytes taken from the receiver.
     gps_rx_bytes: u64,
@@ -200,7 +200,7 @@ pub struct Pipeline {
     /// FNV-1a over every frame sent and the IMU sample it was sent at.
     sent_hash: u64,
     encode_errors: u64,
-    integrity: Option<crate::integrity::Symptom>,
+    integrity: Option<crate::navigation::integrity::Symptom>,
     /// The filter's re-anchors and relinearisations last reported.
     filter_resets: (u64, u64),
     samples: Vec<ImuSample>,
@@ -211,12 +211,14 @@ pub struct Pipeline {
 
 /// What builds a procedure from nav's config (none when the config does not enable it).
 pub(crate) type Make =
-    fn(&NavConfig) -> Result<Option<Box<dyn Mission>>, crate::ttlink::SettingError>;
+    fn(
+        &NavConfig,
+    ) -> Result<Option<Box<dyn Mission>>, crate::procedures::turntable_link::SettingError>;
 
 /// The gyro parameters nav's front end applies (a calibration's estimates are residuals on top
 /// of them).
-fn front_end_gyro(c: &NavConfig) -> crate::params::GyroParameters {
-    crate::params::GyroParameters {
+fn front_end_gyro(c: &NavConfig) -> crate::procedures::unit_parameters::GyroParameters {
+    crate::procedures::unit_parameters::GyroParameters {
         bias_dph: c.imu.gyro_bias_dph,
         scale_factor_ppm: c.imu.gyro_scale_factor_ppm,
     }
@@ -225,9 +227,14 @@ fn front_end_gyro(c: &NavConfig) -> crate::params::GyroParameters {
 /// Every procedure nav can run at start, in the order the pipeline serves them: each built from
 /// its section of the config.
 pub(crate) const REGISTRY: [Make; 3] = [
-    |c| crate::northfind::NorthFinding::make(&c.north_finding),
-    |c| crate::selfcal::SelfCalibration::make(&c.self_calibration, front_end_gyro(c)),
-    |c| crate::tetracal::TetraCalibration::make(&c.tetra_calibration),
+    |c| crate::procedures::north_finding::NorthFinding::make(&c.north_finding),
+    |c| {
+        crate::procedures::self_calibration::SelfCalibration::make(
+            &c.self_calibration,
+            front_end_gyro(c),
+        )
+    },
+    |c| crate::procedures::tetra_calibration::TetraCalibration::make(&c.tetra_calibration),
 ];
 
 impl Pipeline {
@@ -271,7 +278,7 @@ impl Pipeline {
             timeouts: 0,
             fixes: 0,
             last_fix: None,
-            decoder: crate::gps::GpsDecoder::default(),
+            decoder: crate::frontend::gps_receiver::GpsDecoder::default(),
             decoded: Vec::new(),
             gps_rx_bytes: 0,
             gps_bad_at: None,
@@ -327,7 +334,7 @@ impl Pipeline {
     pub fn on_gps_bytes(&mut self, bytes: &[u8], out: &mut Vec<Output>) {
         let from = out.len();
         self.gps_rx_bytes += bytes.len() as u64;
-        let bad = |s: &crate::gps::GpsStats| {
+        let bad = |s: &crate::frontend::gps_receiver::GpsStats| {
             s.garbage_bytes + s.binary_lines + s.overlong_lines + s.bad_checksum + s.unparsed
         };
         let before = bad(&self.decoder.stats());
@@ -356,7 +363,7 @@ impl Pipeline {
     }
 
     /// The receiver's stream counters (bytes, lines, sentences, what was wrong).
-    pub fn gps_stats(&self) -> crate::gps::GpsStats {
+    pub fn gps_stats(&self) -> crate::frontend::gps_receiver::GpsStats {
         self.decoder.stats()
     }
 
@@ -907,13 +914,13 @@ impl Pipeline {
 
     /// The redundant unit's calibration (when enabled).
     pub fn tetra_calibrator(&self) -> Option<&TetraCalibrator> {
-        self.mission::<crate::tetracal::TetraCalibration>()
+        self.mission::<crate::procedures::tetra_calibration::TetraCalibration>()
             .map(|c| &c.cal)
     }
 
     /// The self-calibration procedure (when enabled).
     pub fn calibrator(&self) -> Option<&SelfCalibrator> {
-        self.mission::<crate::selfcal::SelfCalibration>()
+        self.mission::<crate::procedures::self_calibration::SelfCalibration>()
             .map(|c| &c.cal)
     }
 
@@ -1087,7 +1094,7 @@ impl Pipeline {
     /// The fixes the filter's gate refused since the last call, for an in-process run that
     /// scores them (a pipeline that records puts them in its recording instead; the
     /// navigator keeps the latest few dozen).
-    pub fn take_rejected_fixes(&mut self) -> Vec<crate::navigator::RejectedFix> {
+    pub fn take_rejected_fixes(&mut self) -> Vec<crate::navigation::navigator::RejectedFix> {
         self.navigator
             .as_mut()
             .map(Navigator::take_rejected)
@@ -1096,7 +1103,7 @@ impl Pipeline {
 
     /// The north-finder (when enabled).
     pub fn finder(&self) -> Option<&NorthFinder> {
-        self.mission::<crate::northfind::NorthFinding>()
+        self.mission::<crate::procedures::north_finding::NorthFinding>()
             .map(|n| &n.finder)
     }
 
@@ -1134,13 +1141,13 @@ impl Pipeline {
         s.command_send_errors = io.command_send_errors;
         for (file, p) in io.parameter_files {
             match p {
-                crate::params::ParameterFile::Imu(p) => {
+                crate::procedures::unit_parameters::ParameterFile::Imu(p) => {
                     if let Some(sc) = s.self_calibration.as_mut() {
                         sc.parameters = Some(p);
                         sc.parameters_file = file;
                     }
                 }
-                crate::params::ParameterFile::Redundant(p) => {
+                crate::procedures::unit_parameters::ParameterFile::Redundant(p) => {
                     if let Some(tc) = s.tetra_calibration.as_mut() {
                         tc.parameters = Some(p);
                         tc.parameters_file = file;

@@ -2,23 +2,23 @@
 //! `/nav/summary` and printed for people. The bench reads the JSON back into these types, so a
 //! missing or renamed field is an error naming it.
 
-use crate::attitude::ProcessingStats;
-use crate::coning::ConingMethod;
-use crate::fir::FirResponse;
-use crate::imu::{Housekeeping, ImuStats};
-use crate::mission::Mission;
-use crate::northfind::NorthFinding;
-use crate::procedure::Reporting;
-use crate::selfcal::SelfCalibration;
-use crate::tetracal::TetraCalibration;
+use crate::frontend::coning::ConingMethod;
+use crate::frontend::dither_filter::FirResponse;
+use crate::frontend::imu_frames::{Housekeeping, ImuStats};
+use crate::frontend::processing::ProcessingStats;
+use crate::procedures::common::Reporting;
+use crate::procedures::mission::Mission;
+use crate::procedures::north_finding::NorthFinding;
+use crate::procedures::self_calibration::SelfCalibration;
+use crate::procedures::tetra_calibration::TetraCalibration;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-pub use crate::northfind::NorthFindingSummary;
-pub use crate::selfcal::SelfCalibrationSummary;
-pub use crate::tetracal::TetraCalibrationSummary;
+pub use crate::procedures::north_finding::NorthFindingSummary;
+pub use crate::procedures::self_calibration::SelfCalibrationSummary;
+pub use crate::procedures::tetra_calibration::TetraCalibrationSummary;
 
 /// The run summary.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -93,7 +93,7 @@ pub struct Summary {
     /// The GPS receiver, when there is one.
     pub gps: Option<GpsSummary>,
     /// Navigation, when enabled.
-    pub navigation: Option<crate::navigator::NavigatorSummary>,
+    pub navigation: Option<crate::navigation::navigator::NavigatorSummary>,
     /// The IMU's last housekeeping.
     pub housekeeping: Housekeeping,
     /// The navigation solution sent on the bus (NAV_TIME..NAV_HGT at 50 Hz of IMU time).
@@ -124,7 +124,7 @@ pub struct SolutionSummary {
     #[serde(default)]
     pub sent_hash: String,
     /// Solutions not sent because they named an earlier sample than one already sent (none
-    /// expected; [`crate::output::SolutionEncoder::backwards`]).
+    /// expected; [`crate::navigation::solution_frames::SolutionEncoder::backwards`]).
     #[serde(default)]
     pub backwards: u64,
 }
@@ -136,20 +136,20 @@ pub struct GpsSummary {
     /// Serial device.
     pub port: PathBuf,
     /// Stream counters.
-    pub stats: crate::gps::GpsStats,
+    pub stats: crate::frontend::gps_receiver::GpsStats,
     /// Port trouble (read errors, the device vanishing), and re-opens.
     pub port_errors: u64,
     /// Times the port was (re)opened.
     pub opens: u64,
     /// Reads of the port that went into the pipeline because their wait for a frame received
-    /// after them ended (`nav::arrival`): 0 in a run whose IMU never stopped; more, and a
+    /// after them ended (`nav::shell::arrival`): 0 in a run whose IMU never stopped; more, and a
     /// lockstep run's frames may depend on the host's pace.
     #[serde(default)]
     pub reads_released_by_wait: u64,
     /// Fixes handed to navigation.
     pub fixes: u64,
     /// The last fix.
-    pub last_fix: Option<crate::gps::GpsFix>,
+    pub last_fix: Option<crate::frontend::gps_receiver::GpsFix>,
     /// Export file.
     pub fixes_jsonl: Option<PathBuf>,
 }
@@ -179,7 +179,10 @@ pub struct ShellCounts {
     /// The recording's file, when nav records.
     pub mcap: Option<PathBuf>,
     /// The parameter files written (where, when written, and what).
-    pub parameter_files: Vec<(Option<PathBuf>, crate::params::ParameterFile)>,
+    pub parameter_files: Vec<(
+        Option<PathBuf>,
+        crate::procedures::unit_parameters::ParameterFile,
+    )>,
 }
 
 /// The receiver's port as the shell saw it.

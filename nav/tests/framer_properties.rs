@@ -2,7 +2,7 @@
 //! reads, gives the same sentences, counters and fixes as the stream read at once; and no input
 //! makes them panic or grow without bound.
 
-use nav::gps::{GpsDecoder, GpsStats, LineFramer};
+use nav::frontend::gps_receiver::{GpsDecoder, GpsStats, LineFramer};
 use proptest::prelude::*;
 
 /// A sentence with its checksum.

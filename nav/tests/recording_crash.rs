@@ -5,8 +5,8 @@
 //! time and then kills itself with SIGKILL (no destructor, no flush runs), then reads what the
 //! child left on disk.
 
-use nav::rawmsg::frame_of;
-use nav::record::{FLUSH_EVERY, Record, Recorder, SHIP_AFTER, wall_ns};
+use nav::record::raw::frame_of;
+use nav::record::writer::{FLUSH_EVERY, Record, Recorder, SHIP_AFTER, wall_ns};
 use std::time::{Duration, Instant};
 use wire::RawFrame;
 

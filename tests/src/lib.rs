@@ -17,11 +17,11 @@ pub fn bin(name: &str) -> PathBuf {
     p
 }
 
-/// Messages per topic in a recording (every part of it: `nav::record::parts`), reading until
+/// Messages per topic in a recording (every part of it: `nav::record::writer::parts`), reading until
 /// the end or the first error.
 pub fn mcap_topic_counts(path: &Path) -> anyhow::Result<BTreeMap<String, u64>> {
     let mut counts = BTreeMap::new();
-    for part in nav::record::parts(path) {
+    for part in nav::record::writer::parts(path) {
         let buf = std::fs::read(&part)?;
         for m in mcap::MessageStream::new(&buf)? {
             let m = m?;

@@ -6,7 +6,7 @@
 //! ptys exist on any Linux host, so these run without the VM. Skips with a message when
 //! ../shared is absent.
 
-use nav::gps::{GpsDecoder, GpsFix};
+use nav::frontend::gps_receiver::{GpsDecoder, GpsFix};
 use std::path::{Path, PathBuf};
 
 fn testdata() -> Option<PathBuf> {
@@ -45,7 +45,7 @@ fn tpvs(chk: &str) -> Vec<Tpv> {
 }
 
 /// Decode a log as nav would receive it: the bytes after the `#` comment lines.
-pub fn decode_log(text: &[u8]) -> (Vec<GpsFix>, nav::gps::GpsStats) {
+pub fn decode_log(text: &[u8]) -> (Vec<GpsFix>, nav::frontend::gps_receiver::GpsStats) {
     let mut d = GpsDecoder::default();
     let mut fixes = Vec::new();
     let mut body = Vec::new();
@@ -96,11 +96,11 @@ fn gpsd_logs_decode_and_match_tpv() {
 }
 
 /// Replay one log through a pty into the nav binary; returns nav's exported fixes and counters.
-fn through_nav(log: &Path) -> (Vec<GpsFix>, nav::gps::GpsStats) {
+fn through_nav(log: &Path) -> (Vec<GpsFix>, nav::frontend::gps_receiver::GpsStats) {
     use std::io::{BufRead, BufReader};
     use std::process::{Command, Stdio};
     let dir = tempfile::tempdir().unwrap();
-    let mut pty = emulators::gps::GpsPty::open().unwrap();
+    let mut pty = emulators::adapters::pty::GpsPty::open().unwrap();
     let cfg = dir.path().join("nav.toml");
     std::fs::write(
         &cfg,
@@ -124,9 +124,9 @@ fn through_nav(log: &Path) -> (Vec<GpsFix>, nav::gps::GpsStats) {
     }
     // nav's reader opens the port right after it reports ready
     std::thread::sleep(std::time::Duration::from_millis(300));
-    let lines = emulators::gps::parse_log(&std::fs::read(log).unwrap());
+    let lines = emulators::adapters::pty::parse_log(&std::fs::read(log).unwrap());
     let stop = std::sync::atomic::AtomicBool::new(false);
-    emulators::gps::replay(&mut pty, &lines, 2000.0, &stop).unwrap();
+    emulators::adapters::pty::replay(&mut pty, &lines, 2000.0, &stop).unwrap();
     std::thread::sleep(std::time::Duration::from_millis(400));
     // SAFETY: kill(2) on our own child
     unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
@@ -150,7 +150,10 @@ fn gpsd_logs_through_a_pty_into_nav_match_tpv() {
     compare(&logs, through_nav);
 }
 
-fn compare(logs: &[PathBuf], decode: impl Fn(&Path) -> (Vec<GpsFix>, nav::gps::GpsStats) + Sync) {
+fn compare(
+    logs: &[PathBuf],
+    decode: impl Fn(&Path) -> (Vec<GpsFix>, nav::frontend::gps_receiver::GpsStats) + Sync,
+) {
     let (mut total, mut matched) = (0usize, 0usize);
     let mut mismatches = Vec::new();
     // the logs side by side (each through its own pty and nav, which mostly wait): eight at a
@@ -201,7 +204,7 @@ fn compare(logs: &[PathBuf], decode: impl Fn(&Path) -> (Vec<GpsFix>, nav::gps::G
 
 /// The receivers' own accuracy (GST) in the captures that have it: nav reads every statement
 /// gpsd reports with usable sigmas (latitude and longitude up to
-/// [`nav::gps::MAX_GST_SIGMA_M`]) with gpsd's values, and sets aside as unusable exactly those
+/// [`nav::frontend::gps_receiver::MAX_GST_SIGMA_M`]) with gpsd's values, and sets aside as unusable exactly those
 /// whose sigmas are missing or implausible (a receiver without a fix states 305 km).
 #[test]
 fn gst_statements_read_as_gpsd_reads_them() {
@@ -247,9 +250,9 @@ fn gst_statements_read_as_gpsd_reads_them() {
         let ours = d.take_accuracies();
         let st = d.stats();
         let usable = |g: &[f64; 3]| {
-            g[..2]
-                .iter()
-                .all(|v| v.is_finite() && *v > 0.0 && *v <= nav::gps::MAX_GST_SIGMA_M)
+            g[..2].iter().all(|v| {
+                v.is_finite() && *v > 0.0 && *v <= nav::frontend::gps_receiver::MAX_GST_SIGMA_M
+            })
         };
         let name = path.file_name().unwrap().to_string_lossy().to_string();
         eprintln!(

@@ -8,8 +8,9 @@
 //! Ignored by a plain `cargo test`; `./run-tests` installs gpsd and gpsd-clients with apt and
 //! runs it.
 
+use emulators::adapters::pty::GpsPty;
 use emulators::drive::{Drive, DriveSpec};
-use emulators::gps::{GpsErrorParams, GpsPty, GpsReceiver, GpsRun, NmeaWriter, ReceiverParams};
+use emulators::gps::{GpsErrorParams, GpsReceiver, GpsRun, NmeaWriter, ReceiverParams};
 use nav::config::{GpsConfig, GpsSource};
 use serde_json::Value;
 use std::io::BufRead;
@@ -127,11 +128,11 @@ fn gpsd_reads_the_emulated_receiver_and_nav_takes_its_fixes_from_gpsd() {
                 .build()
                 .expect("a runtime");
             rt.block_on(async move {
-                let mut port = nav::gpsport::GpsPort::new(&cfg);
+                let mut port = nav::shell::gps_port::GpsPort::new(&cfg);
                 let mut bytes = Vec::new();
                 while !stop.load(std::sync::atomic::Ordering::Relaxed) {
                     let next = tokio::time::timeout(Duration::from_millis(100), port.next());
-                    if let Ok(nav::gpsport::GpsEvent::Bytes { bytes: b, .. }) = next.await {
+                    if let Ok(nav::shell::gps_port::GpsEvent::Bytes { bytes: b, .. }) = next.await {
                         bytes.extend(b);
                     }
                 }
@@ -181,7 +182,7 @@ fn gpsd_reads_the_emulated_receiver_and_nav_takes_its_fixes_from_gpsd() {
         "gpsd's VERSION and WATCH replies: {gpsd_json}"
     );
     // decoded as nav's pipeline decodes them
-    let mut decoder = nav::gps::GpsDecoder::default();
+    let mut decoder = nav::frontend::gps_receiver::GpsDecoder::default();
     let mut nav_fixes = Vec::new();
     decoder.push_bytes(&bytes, &mut nav_fixes);
     let nav_accuracy = decoder.take_accuracies();

@@ -3,6 +3,12 @@
 //! - no circle of module imports in any crate of the workspace;
 //! - hil's folders import only from those before them (scenario, engine, procedures, report,
 //!   run, experiments, suites), and its top-level helpers import nothing of the crate;
+//! - nav's parts import only from those before them (frontend, navigation, procedures,
+//!   record, then config, summary and pipeline, then the shell);
+//! - the emulators' models are pure: nothing outside `emulators/src/adapters/` imports an
+//!   adapter, reads the wall clock, sleeps, starts a thread or touches a socket;
+//! - a file's name is used once in its crate (but `mod.rs`, `lib.rs`, `main.rs`, `tests.rs`,
+//!   and hil's `cmd/`, whose files are named for the commands they parse);
 //! - no function over 100 lines outside tests, but for the tables of data in [`DATA_TABLES`];
 //! - no module imports its crate's root whole (`use crate::*`);
 //! - the README and the docs record no dated results.
@@ -24,6 +30,19 @@ const HIL_LAYERS: [&str; 10] = [
     "experiments",
     "suites",
     "campaign",
+];
+
+/// nav's parts in the order they may import (each from those before it): its folders and, between
+/// the recording and the shell, the top-level modules the pipeline is made of.
+const NAV_LAYERS: [&str; 8] = [
+    "frontend",
+    "navigation",
+    "procedures",
+    "record",
+    "config",
+    "summary",
+    "pipeline",
+    "shell",
 ];
 
 fn src(krate: &str) -> PathBuf {
@@ -207,32 +226,161 @@ fn no_crate_has_a_circle_of_module_imports() {
     }
 }
 
-#[test]
-fn hils_folders_import_only_from_those_before_them() {
+/// Modules of `krate` that import a module of a later layer than their own (`layers`, the top
+/// module of each path), and how many modules were checked. `lib`, `main` and the folders in
+/// `skip` are not checked; a module in no layer may import nothing of the crate when
+/// `top_helpers_import_nothing`, and is itself an error otherwise.
+fn layer_violations(
+    krate: &str,
+    layers: &[&str],
+    skip: &[&str],
+    top_helpers_import_nothing: bool,
+) -> (Vec<String>, usize) {
     let layer = |m: &str| -> Option<usize> {
         let top = m.split("::").next().unwrap_or(m);
-        HIL_LAYERS.iter().position(|l| *l == top)
+        layers.iter().position(|l| *l == top)
     };
-    let mut checked = 0;
-    for (m, deps) in imports("hil") {
-        if m == "lib" || m == "main" || m.starts_with("cmd") {
+    let (mut bad, mut checked) = (Vec::new(), 0);
+    for (m, deps) in imports(krate) {
+        let top = m.split("::").next().unwrap_or(&m);
+        if m == "lib" || m == "main" || skip.contains(&top) {
             continue;
         }
         checked += 1;
         for d in deps {
             match (layer(&m), layer(&d)) {
-                (Some(a), Some(b)) => assert!(
-                    b <= a,
-                    "hil::{m} ({}) imports hil::{d} ({}), a folder after its own",
-                    HIL_LAYERS[a],
-                    HIL_LAYERS[b]
-                ),
-                (None, _) => panic!("hil's top-level helper {m} imports hil::{d}"),
-                (Some(_), None) => {}
+                (Some(a), Some(b)) if b > a => bad.push(format!(
+                    "{krate}::{m} ({}) imports {krate}::{d} ({}), a part after its own",
+                    layers[a], layers[b]
+                )),
+                (None, _) if top_helpers_import_nothing => bad.push(format!(
+                    "{krate}'s top-level helper {m} imports {krate}::{d}"
+                )),
+                (None, _) => bad.push(format!("{krate}::{m} is in none of the parts {layers:?}")),
+                _ => {}
             }
         }
     }
+    (bad, checked)
+}
+
+#[test]
+fn hils_folders_import_only_from_those_before_them() {
+    let (bad, checked) = layer_violations("hil", &HIL_LAYERS, &["cmd"], true);
+    assert!(bad.is_empty(), "{}", bad.join("\n"));
     assert!(checked > 30, "{checked} modules of hil checked");
+}
+
+#[test]
+fn navs_parts_import_only_from_those_before_them() {
+    let (bad, checked) = layer_violations("nav", &NAV_LAYERS, &[], false);
+    assert!(bad.is_empty(), "{}", bad.join("\n"));
+    assert!(checked > 30, "{checked} modules of nav checked");
+    // every module of nav is in one of its parts (a new file at the top is a new part, named
+    // in NAV_LAYERS, or belongs in a folder)
+    let root = src("nav");
+    let mut fs = Vec::new();
+    files(&root, &mut fs);
+    let outside: Vec<String> = fs
+        .iter()
+        .map(|(p, _)| module_of(&root, p))
+        .filter(|m| {
+            let top = m.split("::").next().unwrap_or(m);
+            m != "lib" && m != "main" && !NAV_LAYERS.contains(&top)
+        })
+        .collect();
+    assert!(
+        outside.is_empty(),
+        "nav's modules outside its parts: {outside:?}"
+    );
+}
+
+/// "Pure" is a folder in the emulators: the models (truth, drive, road, IMU, turntable,
+/// receiver, bus model, the step order) import no adapter, and none reads the wall clock,
+/// sleeps, starts a thread or opens a socket (tests aside). Their results depend on simulated
+/// time and the seed only; `adapters/` puts them on vcan and the pty.
+#[test]
+fn the_emulators_models_are_pure() {
+    let root = src("emulators");
+    let mut fs = Vec::new();
+    files(&root, &mut fs);
+    let mut bad = Vec::new();
+    for (m, deps) in imports("emulators") {
+        if m == "lib" || m.starts_with("adapters") {
+            continue;
+        }
+        for d in deps.iter().filter(|d| d.starts_with("adapters")) {
+            bad.push(format!("emulators::{m} imports emulators::{d}"));
+        }
+    }
+    let io = [
+        "Instant",
+        "SystemTime",
+        "thread::",
+        "libc::",
+        "socketcan",
+        "std::net",
+    ];
+    for (p, t) in &fs {
+        // the adapters, and a module's tests kept in a file of their own
+        if module_of(&root, p).starts_with("adapters") || p.ends_with("tests.rs") {
+            continue;
+        }
+        for line in without_tests(t).lines() {
+            let l = line.trim_start();
+            if l.starts_with("//") {
+                continue;
+            }
+            if let Some(w) = io.iter().find(|w| l.contains(*w)) {
+                bad.push(format!("{}: {w}: {}", p.display(), l));
+            }
+        }
+    }
+    assert!(fs.len() > 20, "{} files of the emulators read", fs.len());
+    assert!(
+        bad.is_empty(),
+        "the emulators' models touch I/O:\n{}",
+        bad.join("\n")
+    );
+}
+
+/// No two files of a crate have the same name: a reader who meets `observe.rs` knows which one
+/// is meant. Not counted: `mod.rs`, `lib.rs`, `main.rs`, `tests.rs` (a module's tests beside
+/// it), and hil's `cmd/` (each file named for the command whose arguments it parses, whose work
+/// lives elsewhere under a name of its own).
+#[test]
+fn a_files_name_is_used_once_in_its_crate() {
+    let mut dups = Vec::new();
+    for k in CRATES {
+        let root = src(k);
+        let mut fs = Vec::new();
+        files(&root, &mut fs);
+        let mut seen: BTreeMap<String, Vec<String>> = BTreeMap::new();
+        for (p, _) in &fs {
+            let rel = p.strip_prefix(&root).expect("under the source folder");
+            let name = rel
+                .file_name()
+                .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+            if ["mod.rs", "lib.rs", "main.rs", "tests.rs"].contains(&name.as_str())
+                || (k == "hil" && rel.starts_with("cmd"))
+            {
+                continue;
+            }
+            seen.entry(name)
+                .or_default()
+                .push(rel.display().to_string());
+        }
+        for (name, at) in seen {
+            if at.len() > 1 {
+                dups.push(format!("{k}: {name} at {}", at.join(", ")));
+            }
+        }
+    }
+    assert!(
+        dups.is_empty(),
+        "file names used twice:\n{}",
+        dups.join("\n")
+    );
 }
 
 /// Where a function starts on `line`: its indentation and name (none for other lines).

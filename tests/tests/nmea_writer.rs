@@ -12,7 +12,7 @@ fn sentences_decode_in_nav_with_the_applied_error() {
         h_m: 50.0,
         vel_enu: [3.0, 4.0, 0.0],
     };
-    let mut dec = nav::gps::GpsDecoder::default();
+    let mut dec = nav::frontend::gps_receiver::GpsDecoder::default();
     let mut fixes = Vec::new();
     for i in 0..5 {
         let (s, e) = w.fix(f64::from(i), 4.0 * 3600.0, (21, 11, 2026), &truth);
@@ -55,7 +55,7 @@ fn outages_and_time_to_first_fix_give_void_or_no_sentences() {
         [false, false, true, true, true, false, false, true, true]
     );
     // an epoch without a fix (empty fields, no satellites in view) is well-formed NMEA
-    let mut dec = nav::gps::GpsDecoder::default();
+    let mut dec = nav::frontend::gps_receiver::GpsDecoder::default();
     let mut fixes = Vec::new();
     let (text, _) = NmeaWriter::new(p.clone()).fix(0.0, 0.0, (1, 1, 2026), &truth);
     dec.push_bytes(text.as_bytes(), &mut fixes);
@@ -99,7 +99,7 @@ fn gga_altitude_is_above_the_geoid_and_nav_takes_the_ellipsoid_height() {
             vel_enu: [0.0; 3],
         };
         let (s, _) = w.fix(1.0, 4.0 * 3600.0, (21, 11, 2026), &truth);
-        let mut dec = nav::gps::GpsDecoder::default();
+        let mut dec = nav::frontend::gps_receiver::GpsDecoder::default();
         let mut fixes = Vec::new();
         dec.push_bytes(s.as_bytes(), &mut fixes);
         let f = fixes.iter().find(|f| f.sentence == "GGA").unwrap();
@@ -133,7 +133,7 @@ fn a_multi_gnss_receivers_sentences_all_decode() {
         h_m: 1700.0,
         vel_enu: [3.0, 4.0, 0.0],
     };
-    let mut dec = nav::gps::GpsDecoder::default();
+    let mut dec = nav::frontend::gps_receiver::GpsDecoder::default();
     let mut fixes = Vec::new();
     for i in 0..5 {
         let (s, _) = w.fix(f64::from(i), 4.0 * 3600.0, (21, 11, 2026), &truth);

@@ -75,7 +75,7 @@ pub struct VmOptions {
     /// More executables whose shared libraries the guest needs (the command's own are found).
     pub libs_for: Vec<PathBuf>,
     /// TCP ports of the guest reachable from the host: (host address, guest port). The guest
-    /// then gets a network card on QEMU's user-mode network (address [`GUEST_IP`], no route
+    /// then gets a network card on QEMU's user-mode network (address `GUEST_IP`, no route
     /// out) and QEMU forwards each host address to the guest's port (a live view's server
     /// inside the guest, watched from the host).
     pub forward_tcp: Vec<(std::net::SocketAddr, u16)>,

@@ -217,7 +217,7 @@ pub struct CanBus {
 
 /// The time of a bit at `bitrate_bps`, ns, when it is a whole number.
 fn whole_ns_per_bit(bitrate_bps: f64) -> Option<u64> {
-    (bitrate_bps >= 1.0 && bitrate_bps <= 1e9 && 1e9 % bitrate_bps == 0.0)
+    ((1.0..=1e9).contains(&bitrate_bps) && 1e9 % bitrate_bps == 0.0)
         .then(|| (1e9 / bitrate_bps) as u64)
 }
 

@@ -205,7 +205,7 @@ pub struct Epoch {
 }
 
 /// The receiver on the IMU stream's clock, without I/O: epochs out as simulated time passes.
-/// The bench puts them on a pty ([`crate::gps::GpsDevice`]); in-process runs decode them directly.
+/// The bench puts them on a pty ([`crate::adapters::pty::GpsDevice`]); in-process runs decode them directly.
 pub struct GpsReceiver {
     run: GpsRun,
     k: u64,

@@ -3,7 +3,7 @@
 //! cluster of N nodes. Kept apart from the report: the verdicts do not depend on where or how
 //! fast a cell ran, so a cluster's report and the local pool's are the same bytes.
 
-use super::plan::Cell;
+use super::cells::Cell;
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;

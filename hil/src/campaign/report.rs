@@ -3,9 +3,9 @@
 //! XML for a CI server (a suite per build, a case per campaign case, failing on a regression, a
 //! flaky case or a missing result).
 
-use super::plan::Cell;
+use super::against_baseline::{CaseVerdict, CellResult, Verdict, judge};
+use super::cells::Cell;
 use super::spec::{Campaign, Case};
-use super::verdict::{CaseVerdict, CellResult, Verdict, judge};
 use crate::junit;
 use anyhow::Result;
 use serde::{Deserialize, Serialize};
@@ -278,7 +278,7 @@ pub fn write(out: &Path, m: &Merged, cells: &[Cell]) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::campaign::plan::{Build, cells};
+    use crate::campaign::cells::{Build, cells};
     use crate::campaign::spec::tests::EXAMPLE;
 
     /// The example campaign's results: the `worse` build's scenario errors 30 % larger, its

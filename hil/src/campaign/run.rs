@@ -7,9 +7,9 @@
 //! the figures the verdicts are taken from. A cell is done when `result.json` is there; a cell
 //! that could not run (no report) leaves none, so running the campaign again runs it again.
 
-use super::plan::Cell;
+use super::against_baseline::CellResult;
+use super::cells::Cell;
 use super::spec::{Campaign, Case, CaseKind, Device, Experiment};
-use super::verdict::CellResult;
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
 use serde_json::Value;
@@ -369,7 +369,7 @@ pub fn in_process(e: &Experiment, case: &Case, device: &Device, cell: &Cell) -> 
         figures,
         sent_hash: Some(format!(
             "in-process:{:016x}",
-            super::plan::hash_bytes(&bits)
+            super::cells::hash_bytes(&bits)
         )),
     })
 }

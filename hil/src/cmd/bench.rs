@@ -5,7 +5,7 @@ use crate::cmd::guest::{absolute, default_out, rerun_in_guest};
 use anyhow::{Context, Result, bail};
 use hil::run::{run_here, sibling_binary};
 use hil::scenario::Scenario;
-use hil::suites::bench::{BusPace, Suite};
+use hil::suites::benchmarks::{BusPace, Suite};
 use std::path::{Path, PathBuf};
 use vcan_setup::GUEST_ENV;
 
@@ -56,20 +56,20 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
     };
     let mut suite = Suite::new(if in_guest { "vm" } else { "native" });
     for s in &scenarios {
-        let r = hil::suites::bench::emulators(s, a.seconds.min(s.duration_s));
+        let r = hil::suites::benchmarks::emulators(s, a.seconds.min(s.duration_s));
         say(format!(
             "hil bench: emulators of {}: x{:.1}",
             r.scenario, r.speed_factor
         ));
         suite.emulators.push(r);
     }
-    suite.front_end = Some(hil::suites::bench::frontend(a.seconds, a.passes)?);
+    suite.front_end = Some(hil::suites::benchmarks::frontend(a.seconds, a.passes)?);
     say("hil bench: nav's front end timed".into());
     if let Some(s) = scenarios
         .iter()
         .find(|s| s.gps.is_some() && s.drive.is_some() && s.turntable.is_none())
     {
-        let r = hil::suites::bench::pipeline_drive(s, a.seconds)?;
+        let r = hil::suites::benchmarks::pipeline_drive(s, a.seconds)?;
         say(format!(
             "hil bench: nav's pipeline on {}: x{:.1}",
             r.scenario, r.speed_factor
@@ -79,7 +79,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
     if !a.no_bus {
         vcan_setup::ensure_vcan(&a.bus.iface)?;
         for per_write in [1, wire::BATCH] {
-            let r = hil::suites::bench::raw_vcan(&a.bus.iface, a.raw_frames, per_write)?;
+            let r = hil::suites::benchmarks::raw_vcan(&a.bus.iface, a.raw_frames, per_write)?;
             say(format!(
                 "hil bench: raw vcan, {per_write} frame(s) per write: {:.0} frames/s",
                 r.frames_per_second
@@ -111,7 +111,7 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
             suite.bus.push(p);
         }
     }
-    let md = hil::suites::bench::markdown(&suite);
+    let md = hil::suites::benchmarks::markdown(&suite);
     std::fs::write(
         out.join("bench.json"),
         serde_json::to_string_pretty(&suite)?,

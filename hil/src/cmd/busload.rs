@@ -80,6 +80,6 @@ fn measured(s: &Scenario) -> Result<String> {
         100.0 * b.load,
         100.0 * nominal,
         100.0 * worst,
-        hil::report::bus::markdown(&b)
+        hil::report::bus_figures::markdown(&b)
     ))
 }

@@ -152,7 +152,7 @@ pub(crate) fn calibrate_rotating_imu(a: CalibrateArgs) -> Result<i32> {
         hil::status::finish();
         if let Some(p) = &o.parameters {
             let mut p = p.clone();
-            p.date = nav::params::now_rfc3339();
+            p.date = nav::procedures::unit_parameters::now_rfc3339();
             let f = out.join(hil::scenario::navconfig::PARAMETER_FILE);
             std::fs::write(&f, p.to_toml()).with_context(|| format!("writing {}", f.display()))?;
             eprintln!("hil: parameter file {}", f.display());
@@ -258,7 +258,7 @@ pub(crate) fn calibrate_tetrahedral(a: TetraArgs) -> Result<i32> {
         hil::status::finish();
         if let Some(p) = &o.parameters {
             let mut p = p.clone();
-            p.date = nav::params::now_rfc3339();
+            p.date = nav::procedures::unit_parameters::now_rfc3339();
             let f = out.join(hil::scenario::navconfig::TETRA_PARAMETER_FILE);
             std::fs::write(&f, p.to_toml()).with_context(|| format!("writing {}", f.display()))?;
             eprintln!("hil: parameter file {}", f.display());

@@ -3,7 +3,7 @@
 
 use crate::cmd::guest::{absolute, run_in_guest};
 use anyhow::{Context, Result};
-use hil::campaign::plan::{Build, Cell, cell_at, cells, check_in_process, shard};
+use hil::campaign::cells::{Build, Cell, cell_at, cells, check_in_process, shard};
 use hil::campaign::report;
 use hil::campaign::run::{Runner, results};
 use hil::campaign::spec::{Campaign, Case, CaseKind};

@@ -1,11 +1,12 @@
 //! `hil emulate imu|turntable|gps`: one emulated device on its own, free-running on the host's
-//! clock (`emulators::freerun`), until stopped: a stand-in for the hardware for anybody's
+//! clock (`emulators::adapters::freerun`), until stopped: a stand-in for the hardware for anybody's
 //! device under test.
 
 use anyhow::{Context, Result, bail};
-use emulators::bus::transport::{BusStream, Progress};
-use emulators::freerun::{FreeStats, Pacing};
-use emulators::gps::{GpsPty, GpsReceiver, relink};
+use emulators::adapters::freerun::{FreeStats, Pacing};
+use emulators::adapters::pty::{GpsPty, relink};
+use emulators::adapters::transport::{BusStream, Progress};
+use emulators::gps::GpsReceiver;
 use emulators::imu::ImuEmulator;
 use emulators::reported::SharedTrack;
 use emulators::turntable::ttbus::TtBus;
@@ -245,7 +246,7 @@ fn imu(
         s.motion()
     };
     let stream = BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults);
-    Ok(emulators::freerun::run_imu(
+    Ok(emulators::adapters::freerun::run_imu(
         iface, stream, &tracks, None, p, stop, progress,
     )?)
 }
@@ -264,7 +265,7 @@ fn turntable(
     };
     let tick_hz = 1000.0;
     let mut tt = TtBus::new(emulators::turntable::Turntable::new(tp.clone()), tick_hz);
-    Ok(emulators::freerun::run_turntable(
+    Ok(emulators::adapters::freerun::run_turntable(
         iface, &mut tt, tick_hz, p, stop, progress,
     )?)
 }
@@ -289,7 +290,7 @@ fn gps(
     let mut pty = GpsPty::open().context("GPS emulator")?;
     relink(link, pty.path()).context("GPS emulator")?;
     let mut receiver = GpsReceiver::new(run);
-    let r = emulators::freerun::run_gps(&mut pty, &mut receiver, p, stop, progress);
+    let r = emulators::adapters::freerun::run_gps(&mut pty, &mut receiver, p, stop, progress);
     let _ = std::fs::remove_file(link);
     Ok(r?)
 }

@@ -6,7 +6,7 @@ use clap::Subcommand;
 use hil::experiments::Experiment as Exp;
 use hil::experiments::coning::ConingTables;
 use hil::experiments::navigation::Navigation;
-use hil::experiments::northfinding::NorthFindingMc;
+use hil::experiments::north_finding_mc::NorthFindingMc;
 use hil::experiments::routes::Routes;
 use hil::scenario::Scenario;
 use std::path::{Path, PathBuf};
@@ -191,7 +191,7 @@ pub(crate) fn experiment(e: Experiment) -> Result<i32> {
                 bail!("--runs must be positive and --dwell at least 2 s");
             }
             let out = out.unwrap_or_else(|| default_out("experiment-north-finding"));
-            let o = hil::experiments::northfinding::McOptions {
+            let o = hil::experiments::north_finding_mc::McOptions {
                 runs,
                 dwell_s: dwell,
                 latitude_deg: lat,
@@ -339,9 +339,9 @@ fn routes_options(
     let kinds = filters
         .iter()
         .map(|f| {
-            serde_json::from_value::<nav::kf::FilterKind>(serde_json::Value::String(
-                f.trim().to_string(),
-            ))
+            serde_json::from_value::<nav::navigation::filter::FilterKind>(
+                serde_json::Value::String(f.trim().to_string()),
+            )
             .map_err(|_| {
                 anyhow::anyhow!(
                     "--filters: `{f}` is not a filter kind (standard, fading, adaptive)"

@@ -295,9 +295,9 @@ fn imu_file(p: &std::path::Path) -> Result<emulators::imu::ImuParams> {
 pub(crate) fn positions(n: Option<&str>, out_and_back: bool) -> Option<Vec<f64>> {
     let n: usize = n.map_or(4, |n| n.parse().unwrap_or(4));
     if out_and_back {
-        Some(nav::northplan::out_and_back(n))
+        Some(nav::procedures::drill_plan::out_and_back(n))
     } else if n != 4 {
-        Some(nav::northplan::equally_spaced(n))
+        Some(nav::procedures::drill_plan::equally_spaced(n))
     } else {
         None
     }
@@ -346,6 +346,6 @@ pub(crate) fn plan_cmd(p: Plan) -> Result<i32> {
     }
     Ok(i32::from(matches!(
         r.answer,
-        nav::northplan::DwellAnswer::Cannot { .. }
+        nav::procedures::drill_plan::DwellAnswer::Cannot { .. }
     )))
 }

@@ -4,10 +4,10 @@
 
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, anyhow};
-use emulators::bus::scheduler::{BusOutcome, Devices, Lockstep};
-use emulators::bus::transport::{Progress, TtLockstep, TurntableTxStats};
-use emulators::clock::SimClock;
-use emulators::gps::GpsDevice;
+use emulators::adapters::clock::SimClock;
+use emulators::adapters::pty::GpsDevice;
+use emulators::adapters::scheduler::{BusOutcome, Devices, Lockstep};
+use emulators::adapters::transport::{Progress, TtLockstep, TurntableTxStats};
 use emulators::turntable::Turntable;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -61,8 +61,8 @@ pub fn start_scenario(
     gps: Option<(emulators::gps::GpsRun, GpsDevice)>,
     sent_log: Option<&std::path::Path>,
     link_downs: &[[f64; 2]],
-    watch: Option<emulators::bus::scheduler::Watch>,
-    hold: Option<emulators::bus::scheduler::Hold>,
+    watch: Option<emulators::adapters::scheduler::Watch>,
+    hold: Option<emulators::adapters::scheduler::Hold>,
 ) -> Result<Running<BusOutcome>> {
     let lockstep = Lockstep::at_rate(s.imu.rate_hz);
     let follow = s.bus.lockstep.then_some(lockstep);
@@ -72,20 +72,20 @@ pub fn start_scenario(
         step: crate::engine::inproc::stepper(s, motion, turntable, receiver, s.duration_s),
         gps,
         sent_log: sent_log
-            .map(|p| emulators::bus::transport::SentLog::create(p, iface))
+            .map(|p| emulators::adapters::transport::SentLog::create(p, iface))
             .transpose()?,
         // the bus model's own log on the simulated clock, beside the bench's
         bus_log: sent_log
             .filter(|_| s.bus.log)
             .map(|p| {
-                emulators::bus::transport::SentLog::create(&p.with_file_name("bus.log"), iface)
+                emulators::adapters::transport::SentLog::create(&p.with_file_name("bus.log"), iface)
             })
             .transpose()?,
         link: (!link_downs.is_empty()).then(|| {
             let name = iface.to_string();
             let mut windows = link_downs.to_vec();
             windows.sort_by(|a, b| a[0].total_cmp(&b[0]));
-            emulators::bus::scheduler::LinkOutages::new(
+            emulators::adapters::scheduler::LinkOutages::new(
                 windows,
                 Box::new(move |up| vcan_setup::set_link(&name, up).map_err(std::io::Error::other)),
             )
@@ -101,8 +101,10 @@ pub fn start_scenario(
         std::thread::Builder::new()
             .name("bus".into())
             .spawn(move || {
-                emulators::bus::scheduler::run(&iface, devices, clock, follow, &stop, &progress)
-                    .context("emulators")
+                emulators::adapters::scheduler::run(
+                    &iface, devices, clock, follow, &stop, &progress,
+                )
+                .context("emulators")
             })
             .context("starting the emulator thread")?
     };
@@ -134,7 +136,7 @@ pub fn start_turntable(
         std::thread::Builder::new()
             .name("turntable".into())
             .spawn(move || {
-                emulators::bus::transport::run_turntable(&iface, tt, &ls, &progress, &stop)
+                emulators::adapters::transport::run_turntable(&iface, tt, &ls, &progress, &stop)
                     .context("turntable emulator")
             })
             .context("starting the turntable emulator")?

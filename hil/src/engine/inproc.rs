@@ -11,8 +11,8 @@
 
 use crate::scenario::Scenario;
 use anyhow::{Context, Result};
-use emulators::bus::scheduler::{Lockstep, TtBus};
-use emulators::bus::transport::BusStream;
+use emulators::adapters::scheduler::{Lockstep, TtBus};
+use emulators::adapters::transport::BusStream;
 use emulators::drive::Drive;
 use emulators::gps::{GpsReceiver, GpsRun, NmeaWriter};
 use emulators::imu::ImuEmulator;

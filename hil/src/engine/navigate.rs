@@ -10,10 +10,10 @@ use emulators::geodesy::enu_offset;
 use emulators::gps::{GpsErrorParams, ReceiverParams};
 use emulators::imu::ImuTimescale;
 use nalgebra::Vector3;
-use nav::kf::FilterConfig;
-use nav::navigator::{NavigationConfig, Navigator};
-use nav::procedure::Procedure;
-use nav::strapdown::NavOutput;
+use nav::navigation::filter::FilterConfig;
+use nav::navigation::navigator::{NavigationConfig, Navigator};
+use nav::navigation::strapdown::NavOutput;
+use nav::procedures::common::Procedure;
 use serde::Serialize;
 
 /// A navigation output's errors against the drive at simulated time `t`: horizontal position
@@ -231,7 +231,8 @@ impl<'a> RecordingScorer<'a> {
         match m.channel.topic.as_str() {
             "/nav/solution" => self.solution(m),
             "/gps/fix" => {
-                let Ok(f) = serde_json::from_slice::<nav::gps::GpsFix>(&m.data) else {
+                let Ok(f) = serde_json::from_slice::<nav::frontend::gps_receiver::GpsFix>(&m.data)
+                else {
                     return;
                 };
                 if f.sentence == "GGA" {
@@ -267,7 +268,8 @@ impl<'a> RecordingScorer<'a> {
     fn solution(&mut self, m: &mcap::Message) {
         let j: Option<serde_json::Value> = serde_json::from_slice(&m.data).ok();
         let parsed = j.as_ref().and_then(|j| {
-            let o: nav::strapdown::NavOutput = serde_json::from_value(j["output"].clone()).ok()?;
+            let o: nav::navigation::strapdown::NavOutput =
+                serde_json::from_value(j["output"].clone()).ok()?;
             Some((j["t_s"].as_f64()?, o))
         });
         let Some((t, o)) = parsed else {
@@ -369,13 +371,13 @@ pub struct NavRun {
     /// Horizontal position error at the end of each receiver outage, m.
     pub outage_end_errors_m: Vec<f64>,
     /// Filter counters.
-    pub filter: Option<nav::kf::FilterStats>,
+    pub filter: Option<nav::navigation::filter::FilterStats>,
     /// North-finding's result (scenarios that find north first).
-    pub north_finding: Option<nav::northfind::NorthResult>,
+    pub north_finding: Option<nav::procedures::north_finding::NorthResult>,
     /// IMU time navigation started, s.
     pub started_at_s: Option<f64>,
     /// nav's integrity monitor over the run.
-    pub integrity: nav::integrity::IntegrityStats,
+    pub integrity: nav::navigation::integrity::IntegrityStats,
     /// Fixes nav could not tie to a PPS edge (applied at their arrival instead): none while
     /// the receiver's PPS reaches the IMU.
     #[serde(default)]
@@ -386,7 +388,7 @@ pub struct NavRun {
     pub good_fixes_refused: u64,
     /// The IMU's rate nav read from the PPS edges at the end, and the edges it took.
     #[serde(default)]
-    pub imu_clock: (Option<nav::imuclock::ClockEstimate>, u64),
+    pub imu_clock: (Option<nav::frontend::imu_clock::ClockEstimate>, u64),
     /// The run second by second.
     #[serde(skip)]
     pub series: Vec<NavSample>,
@@ -504,7 +506,7 @@ pub fn navigate(
         end_heading_error_deg: end.heading_error_deg,
         mean_nees_per_dof: nees,
         outage_end_errors_m: outage_end,
-        filter: navigator.filter().map(nav::kf::Kf::stats),
+        filter: navigator.filter().map(nav::navigation::filter::Kf::stats),
         north_finding: nf_result,
         started_at_s: navigator.summary().started_at_s,
         integrity: navigator.integrity().stats(),
@@ -549,10 +551,10 @@ fn run_config(
 /// North-finding's result before the drive: it must have finished, with the levelling, before
 /// the vehicle drives off at `start_wait_s`.
 fn north_finding_result(
-    finder: Option<&nav::northfind::NorthFinder>,
+    finder: Option<&nav::procedures::north_finding::NorthFinder>,
     level_s: f64,
     start_wait_s: f64,
-) -> Result<Option<nav::northfind::NorthResult>> {
+) -> Result<Option<nav::procedures::north_finding::NorthResult>> {
     Ok(match finder {
         Some(f) => {
             let Some(r) = f.result() else {
@@ -678,7 +680,7 @@ mod tests {
         let std_ = navigate(
             &s,
             Some(&FilterConfig {
-                kind: nav::kf::FilterKind::Standard,
+                kind: nav::navigation::filter::FilterKind::Standard,
                 ..FilterConfig::default()
             }),
             &rx,
@@ -725,7 +727,7 @@ mod tests {
         rx.errors.gm_sigma_m = 0.4;
         rx.errors.gm_tau_s = 60.0;
         rx.errors.white_sigma_m = 0.2;
-        use nav::kf::FilterKind::*;
+        use nav::navigation::filter::FilterKind::*;
         for kind in [Standard, Fading, Adaptive] {
             let f = FilterConfig {
                 kind,
@@ -858,7 +860,7 @@ mod tests {
         let rx = s.gps.clone().unwrap();
         let truth = emulators::imu::ImuEmulator::new(s.motion(), s.imu.clone()).accel_bias_mps2();
         let f = FilterConfig {
-            kind: nav::kf::FilterKind::Standard,
+            kind: nav::navigation::filter::FilterKind::Standard,
             ..FilterConfig::default()
         };
         let r = navigate(&s, Some(&f), &rx, 0.05).unwrap();

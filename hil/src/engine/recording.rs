@@ -88,7 +88,7 @@ pub(crate) enum Input {
     /// An error frame from nav's controller.
     Error(wire::errframe::ErrorFrame),
     /// A fix nav decoded.
-    Fix(Box<nav::gps::GpsFix>),
+    Fix(Box<nav::frontend::gps_receiver::GpsFix>),
     /// Bytes nav read from the receiver.
     Bytes(Vec<u8>),
     /// The watchdog's change: active, after ms.
@@ -187,11 +187,11 @@ impl Replayer {
     }
 }
 
-/// Every message of nav's recording `path`, part after part ([`nav::record::parts`]), in
+/// Every message of nav's recording `path`, part after part ([`nav::record::writer::parts`]), in
 /// order, to `f`. A part cut short (nav killed outright) ends the reading there, with a warning
 /// naming what was being done: what came before is kept. Returns whether it was cut short.
 pub fn each_message(path: &Path, doing: &str, mut f: impl FnMut(&mcap::Message)) -> Result<bool> {
-    let mut parts = nav::record::parts(path);
+    let mut parts = nav::record::writer::parts(path);
     if parts.is_empty() {
         parts.push(path.to_path_buf());
     }
@@ -243,9 +243,9 @@ pub fn replay_and(
 
 /// What a message of nav's recording gives its pipeline on replay (none: nothing).
 pub(crate) fn input_of(m: &mcap::Message) -> Option<Input> {
-    let frame = nav::rawmsg::frame_of;
+    let frame = nav::record::raw::frame_of;
     Some(match m.channel.topic.as_str() {
-        "/can/raw" => match (frame(m), nav::rawmsg::error_frame_of(m)) {
+        "/can/raw" => match (frame(m), nav::record::raw::error_frame_of(m)) {
             (Some(f), _) => Input::Frame(f),
             (None, Some(e)) => Input::Error(e),
             (None, None) => Input::Bad,
@@ -260,11 +260,13 @@ pub(crate) fn input_of(m: &mcap::Message) -> Option<Input> {
             },
             Err(_) => Input::Bad,
         },
-        "/gps/fix" => match serde_json::from_slice::<nav::gps::GpsFix>(&m.data) {
-            Ok(fix) => Input::Fix(Box::new(fix)),
-            Err(_) => Input::Bad,
-        },
-        "/gps/raw" => match nav::rawmsg::serial_of(m) {
+        "/gps/fix" => {
+            match serde_json::from_slice::<nav::frontend::gps_receiver::GpsFix>(&m.data) {
+                Ok(fix) => Input::Fix(Box::new(fix)),
+                Err(_) => Input::Bad,
+            }
+        }
+        "/gps/raw" => match nav::record::raw::serial_of(m) {
             Some(b) => Input::Bytes(b.to_vec()),
             None => Input::Bad,
         },
@@ -351,7 +353,10 @@ pub fn export_candump(mcap_path: &Path, iface: &str, out: &mut impl std::io::Wri
         if failed.is_some() || !matches!(m.channel.topic.as_str(), "/can/raw" | "/can/tx") {
             return;
         }
-        let line = match (nav::rawmsg::frame_of(m), nav::rawmsg::error_frame_of(m)) {
+        let line = match (
+            nav::record::raw::frame_of(m),
+            nav::record::raw::error_frame_of(m),
+        ) {
             (Some(f), _) => wire::candump::format_line(m.log_time / 1000, iface, &f),
             (None, Some(e)) => wire::candump::format_error_line(m.log_time / 1000, iface, &e),
             (None, None) => return,
@@ -385,7 +390,7 @@ pub fn text(r: &Playback) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nav::record::{Record, Recorder};
+    use nav::record::writer::{Record, Recorder};
 
     fn frame(id: u16, b: u8) -> RawFrame {
         RawFrame {

@@ -6,8 +6,8 @@ use crate::scenario::Scenario;
 use anyhow::{Context, Result};
 use emulators::truth::Motion;
 use nalgebra::UnitQuaternion;
-use nav::attitude::{ProcessingStats, quaternion_to_rotation_vector};
-use nav::imu::ImuStats;
+use nav::frontend::imu_frames::ImuStats;
+use nav::frontend::processing::{ProcessingStats, quaternion_to_rotation_vector};
 use serde::{Deserialize, Serialize};
 
 /// Result of an in-process run.
@@ -79,7 +79,7 @@ pub fn run_in_process(s: &Scenario) -> Result<InProcess> {
         bench.time_of(proc.valid_sample()),
         &q,
     );
-    let dph = nav::earth::DEG_PER_HOUR_PER_RAD_S;
+    let dph = nav::navigation::earth::DEG_PER_HOUR_PER_RAD_S;
     let (expected_rate_dph, expected_specific_force_mps2) = if s.is_static() {
         let m = imu.error_model();
         let drift = imu.mean_drift_dph();
@@ -95,7 +95,7 @@ pub fn run_in_process(s: &Scenario) -> Result<InProcess> {
     let fir = s
         .processing
         .dither_filter
-        .then(|| nav::fir::Fir::design(s.processing.fir))
+        .then(|| nav::frontend::dither_filter::Fir::design(s.processing.fir))
         .transpose()
         .context("dither filter")?;
     let dither_residual_gain = fir.map_or(1.0, |f| {
@@ -164,7 +164,7 @@ mod tests {
         let r = run_in_process(&s).unwrap();
         // the cone axis (x) does not drift beyond quantization (1 arcsec pulses); across it the
         // filter's passband gain scales the coning's oscillation: |1 - F(10 Hz)| a
-        let fir = nav::fir::Fir::default_dither_filter();
+        let fir = nav::frontend::dither_filter::Fir::default_dither_filter();
         let across = (1.0 - fir.amplitude(10.0)).abs() * 3600.0 + 3.0;
         let e = r.error_deg.map(|x| x * 3600.0);
         assert!(e[0].abs() < 3.0, "cone-axis error {e:?} arcsec");

@@ -129,7 +129,7 @@ pub fn write(
     site: &Static,
     duration_s: f64,
     clock: &[(f64, u64)],
-    turntable: &[emulators::bus::scheduler::TtTruth],
+    turntable: &[emulators::adapters::scheduler::TtTruth],
     faults: &[crate::engine::faultlog::FaultEvent],
 ) -> Result<u64> {
     let path = out.join("truth.mcap");
@@ -223,7 +223,7 @@ pub(crate) fn truth_messages(
         "vel_enu_mps": v, "hpr_deg": hpr,
     });
     let f = serde_json::json!({
-        "timestamp": nav::foxglove::time(publish),
+        "timestamp": nav::record::foxglove::time(publish),
         "frame_id": "truth",
         "latitude": lat, "longitude": lon, "altitude": h,
         "position_covariance": vec![0.0; 9],
@@ -243,7 +243,7 @@ pub(crate) fn fault_message(f: &crate::engine::faultlog::FaultEvent) -> serde_js
     };
     let message = format!("{} {} {}{detail}", f.device, f.fault, f.phase);
     let ns = (f.t_s.max(0.0) * 1e9) as u64;
-    nav::foxglove::log(ns, nav::foxglove::LOG_WARNING, "bench", message)
+    nav::record::foxglove::log(ns, nav::record::foxglove::LOG_WARNING, "bench", message)
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! IMU, in process. The emulated IMU (the paper's fibre-optic gyros: no dither, 100 Hz) sits in
 //! a two-axis mechanism on a static base, both axes turning at 5 deg/s and reversing after every
 //! revolution; its frames are decoded by nav's IMU front end, and nav's two estimators
-//! ([`nav::calib`]) run on the samples: the paper's decoupled recursive least squares and the
+//! ([`nav::procedures::rotating_estimator`]) run on the samples: the paper's decoupled recursive least squares and the
 //! 14-state alignment Kalman filter with the gyro biases and scale factors in its state. The
 //! mean absolute errors over 450-900 s are compared, as the median over many seeds, with the
 //! paper's ratios (52.41 % for the biases, 46.68 % for the scale factors), and the heading error
@@ -22,7 +22,7 @@ use anyhow::{Context, Result};
 use emulators::imu::ImuEmulator;
 use emulators::truth::{Composed, Indexer, Reversing, Static};
 use nalgebra::{UnitQuaternion, Vector3};
-use nav::calib::{AlignKf, AlignKfConfig, GyroRls, expected_rate};
+use nav::procedures::rotating_estimator::{AlignKf, AlignKfConfig, GyroRls, expected_rate};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -88,9 +88,9 @@ pub struct CalibReport {
     /// Both ratios at or below the paper's.
     pub meets_paper: bool,
     /// Paper 001 at the paper's noise and at realistic MEMS noise.
-    pub tetra: Vec<crate::experiments::tetrahedral::TetraSummary>,
+    pub tetra: Vec<crate::experiments::redundant_imu::TetraSummary>,
     /// One failed gyro of the four, each kind, with and without a reference rate.
-    pub failures: Vec<crate::experiments::tetrahedral::FailureRow>,
+    pub failures: Vec<crate::experiments::redundant_imu::FailureRow>,
 }
 
 /// One run of both estimators.
@@ -101,14 +101,15 @@ pub fn run_one(o: &CalibOptions, seed: u64) -> Result<CalibRun> {
     let mut imu = ImuEmulator::new(Box::new(motion), p.clone());
     let true_bias = Vector3::from(imu.gyro_bias_dph()) * DEG_H;
     let true_sf = Vector3::from(p.gyro_scale_factor_ppm) * 1e-6;
-    let mut front = nav::imu::ImuFrontEnd::new(nav::imu::ImuCalibration {
-        gyro_pulse_arcsec: p.gyro_pulse_arcsec,
-        accel_pulse_mps: p.accel_pulse_mps,
-        gyro_range_dps: p.gyro_range_dps,
-        accel_range_mps2: p.accel_range_g * G0,
-        rate_hz: p.rate_hz,
-        ..Default::default()
-    });
+    let mut front =
+        nav::frontend::imu_frames::ImuFrontEnd::new(nav::frontend::imu_frames::ImuCalibration {
+            gyro_pulse_arcsec: p.gyro_pulse_arcsec,
+            accel_pulse_mps: p.accel_pulse_mps,
+            gyro_range_dps: p.gyro_range_dps,
+            accel_range_mps2: p.accel_range_g * G0,
+            rate_hz: p.rate_hz,
+            ..Default::default()
+        });
     let dt = 1.0 / o.rate_hz;
     let noise = o.gyro_noise_dph * DEG_H;
     let mut rls = GyroRls::new(o.gyro_bias_dph * DEG_H, o.gyro_sf_ppm * 1e-6, noise);
@@ -141,7 +142,8 @@ pub fn run_one(o: &CalibOptions, seed: u64) -> Result<CalibRun> {
             rls.update(&(dth / dt), &w_exp);
             let kf = kf.get_or_insert_with(|| {
                 let t0 = s.k as f64 * dt;
-                let q0 = q_nb * nav::calib::c_p_b(inner.angle(t0), axis.angle(t0));
+                let q0 = q_nb
+                    * nav::procedures::rotating_estimator::c_p_b(inner.angle(t0), axis.angle(t0));
                 AlignKf::new(kf_cfg, q0, lat, 0.0, 0.0)
             });
             kf.propagate(&Vector3::from(smp.dtheta), &Vector3::from(smp.dv), dt);
@@ -246,16 +248,19 @@ pub const PARAMETER_FILE: &str = "gyro-parameters.toml";
 
 /// The IMU parameter file of a run's RLS estimates (what nav loads at start with
 /// `[calibration]`), for the emulated IMU of its seed.
-pub fn parameters(o: &CalibOptions, r: &CalibRun) -> nav::params::ImuParameters {
-    nav::params::ImuParameters {
-        format: nav::params::FORMAT.into(),
+pub fn parameters(
+    o: &CalibOptions,
+    r: &CalibRun,
+) -> nav::procedures::unit_parameters::ImuParameters {
+    nav::procedures::unit_parameters::ImuParameters {
+        format: nav::procedures::unit_parameters::FORMAT.into(),
         imu: format!("emulated-fog-seed-{}", r.seed),
         procedure: format!(
             "paper 004 decoupled RLS, dual-axis rotation at {} deg/s reversing every turn, {} s, static base at {} deg",
             o.axis_rate_dps, o.duration_s, o.lat_deg
         ),
-        date: nav::params::now_rfc3339(),
-        gyro: nav::params::GyroParameters {
+        date: nav::procedures::unit_parameters::now_rfc3339(),
+        gyro: nav::procedures::unit_parameters::GyroParameters {
             bias_dph: r.rls_bias_dph,
             scale_factor_ppm: r.rls_sf_ppm,
         },
@@ -293,14 +298,14 @@ pub fn calibration(o: &CalibOptions, out: Option<&Path>, progress: bool) -> Resu
     let uncal = mean_abs(&|r| r.heading_uncalibrated_deg);
     let heading_ratio_rls = mean_abs(&|r| r.rls.heading_deg) / uncal;
     let heading_ratio_kf = mean_abs(&|r| r.kf.heading_deg) / uncal;
-    let tetra = crate::experiments::tetrahedral::experiment(
-        &crate::experiments::tetrahedral::NOISES,
+    let tetra = crate::experiments::redundant_imu::experiment(
+        &crate::experiments::redundant_imu::NOISES,
         o.runs,
         o.seed,
     )?;
     let report = CalibReport {
         tetra,
-        failures: crate::experiments::tetrahedral::failures(o.seed),
+        failures: crate::experiments::redundant_imu::failures(o.seed),
         options: o.clone(),
         meets_paper: bias_ratio <= PAPER_BIAS_RATIO && sf_ratio <= PAPER_SF_RATIO,
         runs,
@@ -395,8 +400,8 @@ pub fn markdown(r: &CalibReport) -> String {
         "Target (ratios at or below the paper's): {}\n",
         if r.meets_paper { "met" } else { "NOT met" }
     );
-    s += &crate::experiments::tetrahedral::markdown(&r.tetra);
-    s += &crate::experiments::tetrahedral::failures_markdown(&r.failures);
+    s += &crate::experiments::redundant_imu::markdown(&r.tetra);
+    s += &crate::experiments::redundant_imu::failures_markdown(&r.failures);
     s
 }
 

@@ -7,9 +7,9 @@ use crate::scenario::Scenario;
 use anyhow::{Context, Result};
 use emulators::imu::ImuParams;
 use emulators::truth::{Coning, Motion};
-use nav::attitude::ImuProcessor;
-use nav::coning::{self, ConingCoefficients, ConingMethod};
-use nav::fir::Fir;
+use nav::frontend::coning::{self, ConingCoefficients, ConingMethod};
+use nav::frontend::dither_filter::Fir;
+use nav::frontend::processing::ImuProcessor;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -200,7 +200,7 @@ pub struct ConingReport {
     /// Coefficient sets for n = 2..5.
     pub coefficients: Vec<CoefficientRow>,
     /// Filter response.
-    pub fir: nav::fir::FirResponse,
+    pub fir: nav::frontend::dither_filter::FirResponse,
     /// Table 2 analogue (exact data).
     pub table2: Vec<Row>,
     /// Table 3 analogue (emulated sensor).

@@ -1,15 +1,15 @@
 //! The papers' tables, reproduced in process with the same emulators and nav code as the bench:
-//! coning ([`coning`]), north-finding Monte Carlo ([`northfinding`]), navigation ([`navigation`])
-//! and its routes ([`routes`], judged window by window: [`windows`]), calibration ([`calibration`], [`tetrahedral`]); each can run in
+//! coning ([`coning`]), north-finding Monte Carlo ([`north_finding_mc`]), navigation ([`navigation`])
+//! and its routes ([`routes`], judged window by window: [`windows`]), calibration ([`calibration`], [`redundant_imu`]); each can run in
 //! parts ([`shard`]).
 
 pub mod calibration;
 pub mod coning;
 pub mod navigation;
-pub mod northfinding;
+pub mod north_finding_mc;
+pub mod redundant_imu;
 pub mod routes;
 pub mod shard;
-pub mod tetrahedral;
 pub mod windows;
 
 use anyhow::Result;

@@ -12,7 +12,7 @@ use crate::table::Table;
 use anyhow::{Context, Result, bail};
 use emulators::gps::ReceiverParams;
 use emulators::gps::errors::{Environment, EnvironmentPreset};
-use nav::kf::{FilterConfig, FilterKind};
+use nav::navigation::filter::{FilterConfig, FilterKind};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -315,7 +315,7 @@ fn plan(o: &NavExpOptions) -> Result<Plan> {
     }
     for (k, n) in KINDS {
         let mut f = filter(k, None);
-        f.correction = nav::kf::Correction::Output;
+        f.correction = nav::navigation::filter::Correction::Output;
         add(
             format!("{n}, output correction"),
             Group::OutputCorrection,

@@ -15,7 +15,7 @@ use crate::experiments::windows::{Stretch, Windowed};
 use crate::report::plot::{BandChart, Panel};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
-use nav::kf::FilterKind;
+use nav::navigation::filter::FilterKind;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::Path;

@@ -13,7 +13,7 @@
 //! it stops and says so, and gives no verdict on the device.
 
 pub mod clock;
-pub mod observe;
+pub mod listener;
 pub mod probe;
 pub mod score;
 mod verdict;
@@ -21,13 +21,14 @@ mod verdict;
 use crate::check::Check;
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
-use emulators::bus::transport::{BusStream, Progress};
-use emulators::freerun::{FreeStats, Pacing, SentSamples};
-use emulators::gps::{GpsPty, GpsReceiver};
+use emulators::adapters::freerun::{FreeStats, Pacing, SentSamples};
+use emulators::adapters::pty::GpsPty;
+use emulators::adapters::transport::{BusStream, Progress};
+use emulators::gps::GpsReceiver;
 use emulators::imu::ImuEmulator;
 use emulators::reported::SharedTrack;
 use emulators::turntable::ttbus::TtBus;
-use observe::Observed;
+use listener::Observed;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -111,7 +112,7 @@ pub struct FreeReport {
     /// The device's clock against the IMU's.
     pub clock: Option<clock::ClockFit>,
     /// The host's scheduling delays beside the device, as the probe saw them.
-    pub host: emulators::freerun::LatenessSummary,
+    pub host: emulators::adapters::freerun::LatenessSummary,
     /// Where the frames' times come from, in words.
     pub stamps: String,
     /// Frames heard out of their stamps' order, put back in it.
@@ -200,7 +201,7 @@ pub fn run_free(s: &Scenario, o: &FreeOptions) -> Result<FreeReport> {
     let gps_port = match (&pty, &o.real_gps) {
         (_, Some(p)) => Some(p.clone()),
         (Some(p), None) => {
-            emulators::gps::relink(&link, p.path())?;
+            emulators::adapters::pty::relink(&link, p.path())?;
             Some(link.clone())
         }
         _ => None,
@@ -215,9 +216,9 @@ pub fn run_free(s: &Scenario, o: &FreeOptions) -> Result<FreeReport> {
     // a moment for the device to open its devices, as a vehicle's computer boots first
     std::thread::sleep(Duration::from_secs(1));
     let seen = Arc::new(Mutex::new(Observed::default()));
-    let sock = observe::open(&o.iface)?;
+    let sock = listener::open(&o.iface)?;
     let bench = start_bench(s, o, prepared)?;
-    let observer = observe::spawn(
+    let observer = listener::spawn(
         sock,
         bench.origin,
         s.imu.oscillator(),
@@ -377,7 +378,7 @@ fn prepare_bench(
         devices.push((
             "turntable",
             Box::new(move |pacing: Pacing| {
-                Ok(emulators::freerun::run_turntable(
+                Ok(emulators::adapters::freerun::run_turntable(
                     &iface, &mut tt, 1000.0, &pacing, &stop, &progress,
                 )?)
             }),
@@ -396,7 +397,7 @@ fn prepare_bench(
         devices.push((
             "imu",
             Box::new(move |pacing: Pacing| {
-                Ok(emulators::freerun::run_imu(
+                Ok(emulators::adapters::freerun::run_imu(
                     &iface,
                     stream,
                     &tracks,
@@ -417,7 +418,7 @@ fn prepare_bench(
         devices.push((
             "gps",
             Box::new(move |pacing: Pacing| {
-                Ok(emulators::freerun::run_gps(
+                Ok(emulators::adapters::freerun::run_gps(
                     &mut pty, &mut rx, &pacing, &stop, &progress,
                 )?)
             }),
@@ -461,7 +462,7 @@ fn start_bench(s: &Scenario, o: &FreeOptions, p: Prepared) -> Result<Bench> {
         speed: 1.0,
         until_s: s.duration_s,
         max_late: Duration::from_secs_f64(o.max_late_ms * 1e-3),
-        imu_write_period: emulators::freerun::IMU_WRITE_PERIOD,
+        imu_write_period: emulators::adapters::freerun::IMU_WRITE_PERIOD,
     };
     for tx in go {
         // a thread that has already ended says why when it is joined

@@ -4,7 +4,7 @@
 //! sets the host's delays against it ([`HostDelays::unexplained_ms`]).
 
 use anyhow::{Context, Result};
-use emulators::freerun::{Lateness, LatenessSummary};
+use emulators::adapters::freerun::{Lateness, LatenessSummary};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -4,7 +4,7 @@
 
 use crate::check::Check;
 use crate::free::clock::{self, DataOffset, Lead};
-use crate::free::observe::Observed;
+use crate::free::listener::Observed;
 use crate::free::score::{self, DriveScore, Epoch, HeadingScore, Spread};
 use crate::free::{FreeOptions, FreeReport, Judged, is_drill};
 use crate::scenario::Scenario;

@@ -20,12 +20,12 @@
 //! channel, so one layout (`docs/foxglove-layout.json`) serves both. Times are simulated time,
 //! as in the recordings; the server sends it as the Time capability's time.
 //!
-//! A viewer's pause holds the scheduler ([`emulators::bus::scheduler::Hold`]): nav confirms every sample
+//! A viewer's pause holds the scheduler ([`emulators::adapters::scheduler::Hold`]): nav confirms every sample
 //! sent, then is stopped (SIGSTOP) until the viewer plays again; the stream's next frames are
 //! written before nav goes on (SIGCONT). nav's result does not change (the e2e live test
 //! pauses a drill and checks it against the in-process reference).
 
-pub mod bench;
+pub mod bench_run;
 pub mod replay;
 pub mod server;
 
@@ -39,7 +39,7 @@ use std::time::Duration;
 /// The default address of the live view.
 pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
 
-use nav::channels::JsonChannel;
+use nav::record::channels::JsonChannel;
 const FOXGLOVE_LOCATION: &str = JsonChannel::Location.schema().1;
 const FOXGLOVE_LOG: &str = JsonChannel::Log.schema().1;
 const FOXGLOVE_POSE: &str = JsonChannel::Pose.schema().1;
@@ -260,7 +260,7 @@ impl View {
     /// A line on `/hil/log` at simulated time `t_ns` of the current run.
     pub(crate) fn log(&self, t_ns: u64, level: u8, text: &str) {
         let at = self.offset_ns.load(Ordering::Relaxed) + t_ns;
-        let m = nav::foxglove::log(at, level, "hil", text.to_string());
+        let m = nav::record::foxglove::log(at, level, "hil", text.to_string());
         self.server
             .publish(Ch::HilLog as usize, at, m.to_string().as_bytes());
     }
@@ -290,15 +290,19 @@ impl View {
             (now / 1_000_000_000 + 1) * 1_000_000_000
         };
         self.offset_ns.store(offset, Ordering::Relaxed);
-        self.log(0, nav::foxglove::LOG_INFO, &format!("run {name} begins"));
+        self.log(
+            0,
+            nav::record::foxglove::LOG_INFO,
+            &format!("run {name} begins"),
+        );
     }
 
     /// The pause a viewer may ask for, for the scheduler; it stops and continues the process
     /// [`View::set_nav_pid`] names.
-    pub(crate) fn hold(self: &Arc<Self>) -> emulators::bus::scheduler::Hold {
+    pub(crate) fn hold(self: &Arc<Self>) -> emulators::adapters::scheduler::Hold {
         let pid = self.nav_pid.clone();
         let view = Arc::downgrade(self);
-        emulators::bus::scheduler::Hold {
+        emulators::adapters::scheduler::Hold {
             paused: self.paused.clone(),
             notify: Box::new(move |stand| {
                 let p = pid.load(Ordering::Relaxed);
@@ -318,7 +322,12 @@ impl View {
                         (Playback::Playing, "playing again")
                     };
                     v.server.playback_state(status, t, 1.0, false, None);
-                    let m = nav::foxglove::log(t, nav::foxglove::LOG_INFO, "hil", text.into());
+                    let m = nav::record::foxglove::log(
+                        t,
+                        nav::record::foxglove::LOG_INFO,
+                        "hil",
+                        text.into(),
+                    );
                     v.server
                         .publish(Ch::HilLog as usize, t, m.to_string().as_bytes());
                 }

@@ -5,10 +5,10 @@
 //! there. Every pass is the same pipeline on the same inputs (a replay is deterministic), so
 //! what is shown after a seek is what a straight replay shows there. The frames, nav's lines
 //! and the truth (from the run's scenario, when the folder has it) go through the same watcher
-//! and publisher as a bench run's ([`super::bench`]).
+//! and publisher as a bench run's ([`super::bench_run`]).
 
 use super::View;
-use super::bench::BenchRun;
+use super::bench_run::BenchRun;
 use super::server::{Control, Playback as Status};
 use crate::engine::recording::{Input, Playback, Replayer, each_message, input_of, text};
 use crate::scenario::Scenario;

@@ -85,7 +85,7 @@ fn said<'a, R>(
     }
 }
 
-/// Every procedure the bench knows, in the order of nav's registry (`nav::mission`).
+/// Every procedure the bench knows, in the order of nav's registry (`nav::procedures::mission`).
 pub const ALL: [&dyn BenchProcedure; 3] = [
     &northfinding::NorthFinding,
     &rotating::RotatingImu,
@@ -135,7 +135,7 @@ impl Outcomes {
 fn parameter_file_check<P>(
     name: &str,
     file: Option<&std::path::Path>,
-    load: impl FnOnce(&std::path::Path) -> Result<P, nav::params::ParamsError>,
+    load: impl FnOnce(&std::path::Path) -> Result<P, nav::procedures::unit_parameters::ParamsError>,
     describe: impl FnOnce(&P) -> String,
 ) -> Check {
     let loaded = file.map(load);

@@ -5,9 +5,9 @@ use crate::check::Check;
 use crate::scenario::Scenario;
 use crate::stats::wrap180;
 use anyhow::{Result, bail};
-use nav::northfind::{NorthFinder, NorthFindingConfig, NorthResult, Progress};
-use nav::northplan::{self, DrillPlan, Prediction};
-use nav::procedure::Procedure;
+use nav::procedures::common::Procedure;
+use nav::procedures::drill_plan::{self, DrillPlan, Prediction};
+use nav::procedures::north_finding::{NorthFinder, NorthFindingConfig, NorthResult, Progress};
 use serde::{Deserialize, Serialize};
 
 /// The outcome of one drill.
@@ -31,7 +31,7 @@ pub struct DrillOutcome {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub degraded: Option<String>,
     /// The sigma predicted before the drill from the IMU's and the table's figures
-    /// ([`nav::northplan`]), deg.
+    /// ([`nav::procedures::drill_plan`]), deg.
     #[serde(default)]
     pub predicted_sigma_deg: Option<f64>,
     /// The full result.
@@ -81,7 +81,7 @@ pub fn scenario(heading_deg: f64, lat_deg: f64, dwell_s: f64, seed: u64) -> Scen
         seed,
         ..Default::default()
     });
-    s.north_finding = Some(nav::northfind::NorthFindingConfig {
+    s.north_finding = Some(nav::procedures::north_finding::NorthFindingConfig {
         dwell_s,
         ..Default::default()
     });
@@ -97,7 +97,7 @@ pub fn drill_plan(s: &Scenario, nf: &NorthFindingConfig) -> DrillPlan {
 
 /// The heading sigma the scenario's drill `nf` is predicted to give.
 pub fn predict(s: &Scenario, nf: &NorthFindingConfig) -> Prediction {
-    northplan::predict(&drill_plan(s, nf))
+    drill_plan::predict(&drill_plan(s, nf))
 }
 
 /// Give the scenario's drill these table positions in order (the emulated mechanism gets a
@@ -512,7 +512,7 @@ mod tests {
             let mut s = scenario(123.4, 28.218157, dwell, 3);
             let out: Vec<f64> = (0..n).map(|k| k as f64 * 360.0 / n as f64).collect();
             let want: Vec<f64> = out.iter().chain(out.iter().rev()).copied().collect();
-            set_positions(&mut s, nav::northplan::out_and_back(n));
+            set_positions(&mut s, nav::procedures::drill_plan::out_and_back(n));
             let nf = s.north_finding.clone().expect("a drill");
             assert_eq!(nf.positions_deg, want, "{n} positions");
             let o = run_in_process(&s, &nf, |_| {}).unwrap();

@@ -2,14 +2,14 @@
 //! `hil drill` makes before it runs): the heading sigma the drill will give on the scenario's
 //! IMU and mechanism at its latitude, its terms, the dwell that meets a tolerance at a
 //! confidence, and the latitude beyond which none does. The figures come from
-//! [`nav::northplan`], the same code nav uses at start-up; `hil experiment north-finding`
+//! [`nav::procedures::drill_plan`], the same code nav uses at start-up; `hil experiment north-finding`
 //! checks them against drills.
 
 use super::northfinding::drill_plan;
 use crate::scenario::Scenario;
 use crate::scenario::navconfig::gyro_noise;
-use nav::northfind::NorthFindingConfig;
-use nav::northplan::{self, DrillPlan, DwellAnswer, GyroNoise, Prediction};
+use nav::procedures::drill_plan::{self, DrillPlan, DwellAnswer, GyroNoise, Prediction};
+use nav::procedures::north_finding::NorthFindingConfig;
 use serde::Serialize;
 use std::fmt::Write as _;
 
@@ -81,7 +81,7 @@ fn row(base: &DrillPlan, dwell_s: f64) -> Row {
         dwell_s,
         ..base.clone()
     };
-    let prediction = northplan::predict(&p);
+    let prediction = drill_plan::predict(&p);
     Row {
         dwell_s,
         drill_s: drill_s(&p, &prediction),
@@ -103,8 +103,14 @@ pub fn plan(r: &PlanRequest) -> PlanReport {
         confidence: r.confidence,
         asked_meets: r.confidence * asked.prediction.sigma_deg <= r.tolerance_deg,
         asked,
-        answer: northplan::dwell_for(&base, r.tolerance_deg, r.confidence, lo, hi),
-        latitude_limit_deg: northplan::latitude_limit(&base, r.tolerance_deg, r.confidence, lo, hi),
+        answer: drill_plan::dwell_for(&base, r.tolerance_deg, r.confidence, lo, hi),
+        latitude_limit_deg: drill_plan::latitude_limit(
+            &base,
+            r.tolerance_deg,
+            r.confidence,
+            lo,
+            hi,
+        ),
         table: [10.0, 15.0, 30.0, 60.0, 120.0, 300.0]
             .into_iter()
             .map(|d| row(&base, d))

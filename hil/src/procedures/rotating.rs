@@ -6,8 +6,8 @@ use crate::check::Check;
 use crate::scenario::Scenario;
 use crate::scenario::fogunit::{CalibOptions, fog_params};
 use anyhow::{Result, bail};
-use nav::procedure::Procedure;
-use nav::selfcal::{SelfCalibrationConfig, SelfCalibrationResult};
+use nav::procedures::common::Procedure;
+use nav::procedures::self_calibration::{SelfCalibrationConfig, SelfCalibrationResult};
 use serde::{Deserialize, Serialize};
 
 /// The procedure's settings an operator chooses.
@@ -70,7 +70,7 @@ pub(super) fn fog_bench(
         ..CalibOptions::default()
     };
     s.imu = fog_params(&e, seed);
-    s.processing.fir = nav::fir::FirSpec {
+    s.processing.fir = nav::frontend::dither_filter::FirSpec {
         fs_hz: s.imu.rate_hz,
         passband_hz: 20.0,
         stopband_hz: 45.0,
@@ -150,7 +150,7 @@ pub struct CalibrateOutcome {
     pub heading_uncalibrated_deg: f64,
     /// The parameters nav started with (a file loaded with `[calibration]`), when any.
     #[serde(default)]
-    pub loaded: Option<nav::params::GyroParameters>,
+    pub loaded: Option<nav::procedures::unit_parameters::GyroParameters>,
     /// The coarse alignment's heading error, deg: the east gyro bias over the horizontal
     /// earth rate, what a calibrated unit's static alignment gains.
     #[serde(default)]
@@ -168,7 +168,7 @@ pub struct CalibrateOutcome {
     pub duration_s: f64,
     /// The parameter file nav made of its result (undated in process).
     #[serde(default)]
-    pub parameters: Option<nav::params::ImuParameters>,
+    pub parameters: Option<nav::procedures::unit_parameters::ImuParameters>,
 }
 
 /// The unit's true biases (deg/h) and scale factors (ppm) of scenario `s`.
@@ -193,12 +193,12 @@ pub fn outcome(
     // what nav started with; its estimates are residuals on top (composed as nav's front end
     // applies them: `(raw - b0) / (1 + k0)` reads `(1 + k') w + b'`)
     let loaded = s.nav_parameters.as_ref().and_then(|p| {
-        nav::params::ImuParameters::load(p, &s.unit_id())
+        nav::procedures::unit_parameters::ImuParameters::load(p, &s.unit_id())
             .ok()
             .map(|p| p.gyro)
     });
     let (b0, k0) = loaded.map_or(([0.0; 3], [0.0; 3]), |g| (g.bias_dph, g.scale_factor_ppm));
-    let score = |g: &nav::selfcal::GyroEstimate| {
+    let score = |g: &nav::procedures::self_calibration::GyroEstimate| {
         let be: [f64; 3] =
             std::array::from_fn(|j| b0[j] + g.gyro_bias_dph[j] * (1.0 + k0[j] * 1e-6) - tb[j]);
         let ke: [f64; 3] = std::array::from_fn(|j| {
@@ -466,7 +466,7 @@ fn checks(out: &mut Vec<Check>, o: &CalibrateOutcome, nav: &nav::summary::Summar
         out.push(super::parameter_file_check(
             "parameter file written, and loadable for the unit",
             sc.and_then(|c| c.parameters_file.as_deref()),
-            |f| nav::params::ImuParameters::load(f, &imu),
+            |f| nav::procedures::unit_parameters::ImuParameters::load(f, &imu),
             |p| {
                 format!(
                     "unit {}, gyro bias {:.5?} deg/h, scale factor {:.3?} ppm",

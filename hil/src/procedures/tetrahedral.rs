@@ -7,8 +7,8 @@ use crate::check::Check;
 use crate::scenario::Scenario;
 use anyhow::{Result, bail};
 use emulators::imu::mems::TetraParams;
-use nav::calib::{GyroCoefficients, TETRA_GYROS};
-use nav::procedure::Procedure;
+use nav::procedures::common::Procedure;
+use nav::procedures::rotating_estimator::{GyroCoefficients, TETRA_GYROS};
 use serde::{Deserialize, Serialize};
 
 /// Largest errors over the four gyros, per coefficient.
@@ -77,7 +77,7 @@ pub struct TetraOptions {
 
 impl Default for TetraOptions {
     fn default() -> Self {
-        let c = nav::tetracal::TetraCalibrationConfig::default();
+        let c = nav::procedures::tetra_calibration::TetraCalibrationConfig::default();
         Self {
             lat_deg: c.latitude_deg,
             heading_deg: 0.0,
@@ -124,7 +124,7 @@ pub fn tetra_scenario(o: &TetraOptions) -> Scenario {
         max_rate_dps: 60.0,
         ..Default::default()
     });
-    let c = nav::tetracal::TetraCalibrationConfig {
+    let c = nav::procedures::tetra_calibration::TetraCalibrationConfig {
         enabled: true,
         latitude_deg: o.lat_deg,
         base_heading_deg: o.heading_deg,
@@ -157,7 +157,7 @@ pub struct TetraOutcome {
     /// The unit's true coefficients.
     pub truth: emulators::imu::mems::TetraParams,
     /// nav's result.
-    pub result: Option<nav::tetracal::TetraCalibrationResult>,
+    pub result: Option<nav::procedures::tetra_calibration::TetraCalibrationResult>,
     /// Largest errors and the mean relative error.
     pub errors: Option<TetraErrors>,
     /// Largest |error| / sigma over the 16 coefficients.
@@ -170,13 +170,13 @@ pub struct TetraOutcome {
     pub duration_s: f64,
     /// The unit's parameter file nav made of its estimates (undated in process).
     #[serde(default)]
-    pub parameters: Option<nav::params::RedundantParameters>,
+    pub parameters: Option<nav::procedures::unit_parameters::RedundantParameters>,
 }
 
 /// Score nav's result against the unit of scenario `s`.
 pub fn tetra_outcome(
     s: &Scenario,
-    result: Option<&nav::tetracal::TetraCalibrationResult>,
+    result: Option<&nav::procedures::tetra_calibration::TetraCalibrationResult>,
     abort: Option<&str>,
     duration_s: f64,
 ) -> TetraOutcome {
@@ -352,7 +352,7 @@ fn checks(out: &mut Vec<Check>, o: &TetraOutcome, nav: &nav::summary::Summary) {
         out.push(super::parameter_file_check(
             "the unit's parameter file written, and loadable for it",
             tc.and_then(|c| c.parameters_file.as_deref()),
-            |f| nav::params::RedundantParameters::load(f, &unit),
+            |f| nav::procedures::unit_parameters::RedundantParameters::load(f, &unit),
             |p| format!("unit {}, {} gyros", p.imu, p.gyro.len()),
         ));
     }
@@ -366,7 +366,7 @@ fn checks(out: &mut Vec<Check>, o: &TetraOutcome, nav: &nav::summary::Summary) {
         out.push(Check {
             name: "the failed gyro isolated by the parity monitor".into(),
             pass: m.is_some_and(|m| {
-                matches!(m.status, nav::redundant::Status::Isolated { gyro: g, .. } if g == gyro)
+                matches!(m.status, nav::procedures::redundant_rates::Status::Isolated { gyro: g, .. } if g == gyro)
             }),
             detail: format!(
                 "injected {}; monitor {}",
@@ -463,7 +463,10 @@ mod tetra_tests {
         assert!(r.checked_s > 40, "{}", r.checked_s);
         let m = r.monitor.expect("the monitor ran");
         assert!(
-            matches!(m.status, nav::redundant::Status::Isolated { gyro: 2, .. }),
+            matches!(
+                m.status,
+                nav::procedures::redundant_rates::Status::Isolated { gyro: 2, .. }
+            ),
             "{m:?}"
         );
     }

@@ -66,7 +66,7 @@ pub fn turntable_series(mcap_path: &Path, rate_hz: f64) -> anyhow::Result<(Point
         if m.channel.topic != "/can/raw" && m.channel.topic != "/can/tx" {
             return;
         }
-        let Some(f) = nav::rawmsg::frame_of(m) else {
+        let Some(f) = nav::record::raw::frame_of(m) else {
             return;
         };
         let t = gyro as f64 / rate_hz;
@@ -151,7 +151,7 @@ pub fn run_report(r: &RunReport, out: &Path) -> String {
     }
     b += "</table>\n";
     b += &frames_section(r);
-    b += &crate::report::bus::html(&r.bus);
+    b += &crate::report::bus_figures::html(&r.bus);
     let plots = turntable_plot(r, out) + &navigation_csv_plots(out);
     if !plots.is_empty() {
         b += "<h2>Plots</h2>\n";
@@ -549,7 +549,7 @@ mod tests {
     /// home through 360: the angle is unwrapped and the commands are steps on the same turn.
     #[test]
     fn the_turntable_plot_follows_the_recording() {
-        use nav::record::{Record, Recorder};
+        use nav::record::writer::{Record, Recorder};
         use wire::{ImuGyro, Message, TtCmd, TtCommand, TtState, TtStatus};
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("nav.mcap");

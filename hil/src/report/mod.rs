@@ -1,6 +1,6 @@
 //! Checks of a run against truth and the bus accounting, and the result card.
 
-pub mod bus;
+pub mod bus_figures;
 pub mod html;
 pub mod page;
 pub mod plot;
@@ -8,9 +8,9 @@ pub mod plot;
 use crate::engine::reference::InProcess;
 use crate::scenario::Scenario;
 use crate::table::Table;
-use emulators::bus::transport::TxStats;
+use emulators::adapters::transport::TxStats;
 use nalgebra::Vector3;
-use nav::imuclock::ClockEstimate;
+use nav::frontend::imu_clock::ClockEstimate;
 use nav::summary::Summary;
 use serde::{Deserialize, Serialize};
 
@@ -33,7 +33,7 @@ pub struct RunReport {
     /// watchdog to report an IMU stop or the stream's end left out).
     pub pace_reached: f64,
     /// How the emulators followed nav (lockstep).
-    pub lockstep: emulators::bus::scheduler::LockstepStats,
+    pub lockstep: emulators::adapters::scheduler::LockstepStats,
     /// The bus model: load, each identifier's queueing delays, the turntable command round
     /// trip, each node's queue.
     #[serde(default)]
@@ -44,13 +44,13 @@ pub struct RunReport {
     /// runs with a turntable, which moves on nav's own commands).
     pub in_process: Option<InProcess>,
     /// What the turntable emulator did (runs with a turntable).
-    pub turntable: Option<emulators::bus::transport::TurntableTxStats>,
+    pub turntable: Option<emulators::adapters::transport::TurntableTxStats>,
     /// The outcomes of the procedures the scenario ran, scored against its truth (in the JSON:
     /// `drill`, `calibration`, `tetra_calibration`).
     #[serde(flatten)]
     pub procedures: crate::procedures::Outcomes,
     /// What the GPS emulator wrote (runs with a receiver).
-    pub gps: Option<emulators::gps::GpsTxStats>,
+    pub gps: Option<emulators::adapters::pty::GpsTxStats>,
     /// nav's solution frames as the bench received them.
     pub solution: crate::procedures::observe::SolutionWatch,
     /// nav's navigation scored against truth (runs that navigate).
@@ -75,7 +75,7 @@ pub struct RunReport {
     pub pass: bool,
     /// The live view, when the run had one: what its clients got and lost.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub live: Option<crate::live::bench::RunViewStats>,
+    pub live: Option<crate::live::bench_run::RunViewStats>,
 }
 
 /// What the bench's side of a run saw, for [`checks`].
@@ -84,11 +84,11 @@ pub struct BenchSide<'a> {
     /// The IMU's frames.
     pub tx: &'a TxStats,
     /// The lockstep with nav.
-    pub lockstep: &'a emulators::bus::scheduler::LockstepStats,
+    pub lockstep: &'a emulators::adapters::scheduler::LockstepStats,
     /// The bus model.
     pub bus: &'a emulators::bus::model::BusStats,
     /// The turntable's frames, when there is one.
-    pub turntable: Option<&'a emulators::bus::transport::TurntableTxStats>,
+    pub turntable: Option<&'a emulators::adapters::transport::TurntableTxStats>,
     /// The receiver reached nav through gpsd.
     pub gps_via_gpsd: bool,
 }
@@ -171,7 +171,7 @@ pub fn checks(
 
 /// The lockstep held: no stall, no fix late (lockstep runs only).
 fn lockstep_check(
-    lockstep: &emulators::bus::scheduler::LockstepStats,
+    lockstep: &emulators::adapters::scheduler::LockstepStats,
     nav: &Summary,
     gps_via_gpsd: bool,
 ) -> Option<Check> {
@@ -441,14 +441,14 @@ pub fn imu_clock_check(s: &Scenario, clock: Option<&ClockEstimate>, edges: u64) 
     let name = "nav reads the IMU's rate from the PPS".to_string();
     let osc = s.imu.oscillator();
     let Some(c) = clock else {
-        let few = edges < nav::imuclock::MIN_EDGES as u64;
+        let few = edges < nav::frontend::imu_clock::MIN_EDGES as u64;
         return Check {
             name,
             pass: few,
             detail: if few {
                 format!(
                     "not judged: nav took {edges} PPS edges, {} needed",
-                    nav::imuclock::MIN_EDGES
+                    nav::frontend::imu_clock::MIN_EDGES
                 )
             } else {
                 format!("nav took {edges} PPS edges and gave no rate")
@@ -463,7 +463,7 @@ pub fn imu_clock_check(s: &Scenario, clock: Option<&ClockEstimate>, edges: u64) 
         .map(|k| (k as f64, osc.ticks_at(end - c.span_s + k as f64) * period))
         .collect();
     let truth = crate::stats::fit_line(&edges).map(|l| (l.slope - 1.0) * 1e6);
-    let Some(truth) = truth.filter(|_| edges.len() >= nav::imuclock::MIN_EDGES) else {
+    let Some(truth) = truth.filter(|_| edges.len() >= nav::frontend::imu_clock::MIN_EDGES) else {
         return Check {
             name,
             pass: false,
@@ -515,12 +515,12 @@ pub fn navigation_checks(
     s: &Scenario,
     score: Option<&crate::engine::navigate::NavScore>,
     nav: &Summary,
-    gps: Option<&emulators::gps::GpsTxStats>,
+    gps: Option<&emulators::adapters::pty::GpsTxStats>,
 ) {
     let n = nav.navigation.as_ref();
     out.push(Check {
         name: "nav navigated".into(),
-        pass: n.is_some_and(|n| n.phase == nav::navigator::NavPhase::Navigating),
+        pass: n.is_some_and(|n| n.phase == nav::navigation::navigator::NavPhase::Navigating),
         detail: match n {
             Some(n) => format!(
                 "phase {:?}, started at {} s of IMU time",
@@ -780,7 +780,7 @@ pub fn markdown(r: &RunReport) -> String {
     if let Some(m) = &r.nav_memory {
         let _ = writeln!(s, "{}\n", memory_line(m));
     }
-    s += &bus::markdown(&r.bus);
+    s += &bus_figures::markdown(&r.bus);
     let mut t = Table::left(&["check", "result", "detail"]);
     for c in &r.checks {
         t.row([

@@ -5,7 +5,7 @@
 //! What goes back is what nav received, in the order its loop took it: the frames of `/can/raw`
 //! (IMU and turntable), the bytes of `/gps/raw` (the receiver's port), and a silence wherever
 //! nav's liveness watchdog fired (`/nav/event` `imu_timeout`), so it fires at the same place.
-//! The player ([`emulators::player`]) paces them on the IMU clock at the speed asked and in
+//! The player ([`emulators::adapters::player`]) paces them on the IMU clock at the speed asked and in
 //! lockstep with nav's NAV_TIME frames, as the bench runs its emulators; the turntable's
 //! answers come from the recording (nav's commands go on the bus and are not answered again).
 //! nav's frames of the new run (`/can/tx`) are compared with the recorded ones: identical bit
@@ -14,8 +14,8 @@
 
 use crate::run::{NavFolder, RemoveOnDrop, start_nav, stop_nav};
 use anyhow::{Context, Result, bail};
-use emulators::gps::{GpsPty, relink};
-use emulators::player::{PlayOptions, PlayStats, Recorded};
+use emulators::adapters::player::{PlayOptions, PlayStats, Recorded};
+use emulators::adapters::pty::{GpsPty, relink};
 use nav::config::{GpsSource, NavConfig};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -76,7 +76,7 @@ impl Recording {
             cut: false,
         };
         r.cut = crate::engine::recording::each_message(mcap, "replaying", |m| {
-            let frame = || nav::rawmsg::frame_of(m);
+            let frame = || nav::record::raw::frame_of(m);
             match m.channel.topic.as_str() {
                 "/can/raw" => match frame() {
                     Some(f) => {
@@ -89,7 +89,7 @@ impl Recording {
                     Some(f) => r.sent.push(f),
                     None => r.bad_records += 1,
                 },
-                "/gps/raw" => match nav::rawmsg::serial_of(m) {
+                "/gps/raw" => match nav::record::raw::serial_of(m) {
                     Some(b) => {
                         r.items.push(Recorded::Gps(b.to_vec()));
                         times.push(Some(m.log_time));
@@ -322,7 +322,7 @@ pub fn replay_on_bus(mcap: &Path, cfg: &NavConfig, opts: &BusReplayOptions) -> R
         imu_rate_hz: cfg.imu.rate_hz,
         // well past nav's watchdog, so that it fires where it fired
         silence: Duration::from_millis(cfg.watchdog.imu_timeout_ms * 3 + 100),
-        lockstep: Some(emulators::bus::scheduler::Lockstep::at_rate(
+        lockstep: Some(emulators::adapters::scheduler::Lockstep::at_rate(
             cfg.imu.rate_hz,
         )),
     };
@@ -400,8 +400,8 @@ fn play_showing_progress(
     opts: &BusReplayOptions,
     play_opts: &PlayOptions,
     imu_rate_hz: f64,
-) -> std::thread::Result<Result<PlayStats, emulators::bus::scheduler::BusError>> {
-    let progress = emulators::bus::transport::Progress::default();
+) -> std::thread::Result<Result<PlayStats, emulators::adapters::scheduler::BusError>> {
+    let progress = emulators::adapters::transport::Progress::default();
     let stop = AtomicBool::new(false);
     let duration_s = items
         .iter()
@@ -411,7 +411,7 @@ fn play_showing_progress(
     std::thread::scope(|sc| {
         let (done_tx, done) = std::sync::mpsc::channel::<()>();
         let player = sc.spawn(|| {
-            let r = emulators::player::play(
+            let r = emulators::adapters::player::play(
                 &opts.iface,
                 items.iter().cloned(),
                 pty,

@@ -11,13 +11,13 @@ use crate::engine::truthrec::RunTruth;
 use crate::report::{self, KillOutcome, NavMemory, RunReport};
 use crate::scenario::Scenario;
 use anyhow::Result;
-use emulators::bus::scheduler::TtTruth;
+use emulators::adapters::scheduler::TtTruth;
 use emulators::drive::Drive;
 use std::path::Path;
 
 /// A run whose devices and nav have stopped: what the bus, nav and the bench's watchers said.
 pub(super) struct Ended {
-    pub(super) bus: emulators::bus::scheduler::BusOutcome,
+    pub(super) bus: emulators::adapters::scheduler::BusOutcome,
     pub(super) sim_reached: f64,
     pub(super) wall: f64,
     pub(super) nav_exit: Option<i32>,
@@ -186,7 +186,7 @@ fn score_navigation(
     drive: Option<&Drive>,
     scored: Option<Result<ScoredRecording>>,
     nav_json: &nav::summary::Summary,
-    gps_stats: Option<&emulators::gps::GpsTxStats>,
+    gps_stats: Option<&emulators::adapters::pty::GpsTxStats>,
     checks: &mut Vec<report::Check>,
     evidence: &mut Evidence,
 ) -> (Option<NavScore>, Option<SeriesStats>) {

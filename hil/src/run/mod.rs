@@ -13,7 +13,7 @@ use crate::report::{self, RunReport};
 use crate::report::{KillOutcome, NavMemory, cpu_seconds};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
-use emulators::gps::{GpsDevice, GpsPty, relink};
+use emulators::adapters::pty::{GpsDevice, GpsPty, relink};
 use judge::{Ended, judge, write_evidence};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -340,7 +340,7 @@ pub fn run_here(s: &Scenario, opts: &RunOptions, backend: &str) -> Result<RunRep
     phases.end("nav start");
     let live = match &opts.live {
         Some(v) => {
-            let l = crate::live::bench::BenchRun::begin(v, &s.name, Some(&truth), true)?;
+            let l = crate::live::bench_run::BenchRun::begin(v, &s.name, Some(&truth), true)?;
             l.set_nav_pid(nav.child.id());
             Some(l)
         }
@@ -541,8 +541,8 @@ fn supervise(
     s: &Scenario,
     opts: &RunOptions,
     nav: &NavProcess,
-    devices: &crate::engine::devices::Running<emulators::bus::scheduler::BusOutcome>,
-    live: Option<&crate::live::bench::BenchRun>,
+    devices: &crate::engine::devices::Running<emulators::adapters::scheduler::BusOutcome>,
+    live: Option<&crate::live::bench_run::BenchRun>,
 ) -> Supervised {
     let mut drill = DrillWatch::default();
     let mut next_report = Instant::now() + Duration::from_secs(5);

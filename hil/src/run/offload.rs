@@ -359,7 +359,7 @@ fn ask_as(dir: &Path, w: &Work, program: Program) -> Result<Option<Recomputed>> 
 
 /// Write the request for `w` into `part`: the recording's parts, nav's config and its files.
 fn submit(part: &Path, w: &Work, program: Program) -> Result<()> {
-    let mut parts = nav::record::parts(w.mcap);
+    let mut parts = nav::record::writer::parts(w.mcap);
     if parts.is_empty() && w.mcap.exists() {
         parts.push(w.mcap.to_path_buf());
     }
@@ -582,7 +582,7 @@ fn recompute(folder: &Path, req: &Request) -> Reply {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nav::record::{Record, Recorder};
+    use nav::record::writer::{Record, Recorder};
 
     /// A few seconds of the GPS drive, its frames recorded as nav records what it receives:
     /// (scenario, nav's config, the recording's folder).
@@ -689,14 +689,14 @@ mod tests {
     /// unit's coefficients): the server loads them from copies and gets the run's config.
     #[test]
     fn the_parameter_files_nav_ran_with_go_to_the_server_and_load_there_as_here() {
-        let g = nav::params::RedundantGyro {
+        let g = nav::procedures::unit_parameters::RedundantGyro {
             bias_dps: 0.05,
             scale_factor: 2e-3,
             sigma_j_deg: 0.1,
             sigma_k_deg: -0.1,
         };
-        let p = nav::params::RedundantParameters {
-            format: nav::params::REDUNDANT_FORMAT.into(),
+        let p = nav::procedures::unit_parameters::RedundantParameters {
+            format: nav::procedures::unit_parameters::REDUNDANT_FORMAT.into(),
             imu: "MEMS-1".into(),
             procedure: "test".into(),
             date: "2026-11-24T01:00:00Z".into(),

@@ -8,7 +8,7 @@ pub mod trackview;
 pub mod variant;
 
 use anyhow::{Context, Result, bail};
-use emulators::bus::transport::BusFaults;
+use emulators::adapters::transport::BusFaults;
 use emulators::drive::{Drive, DriveSpec};
 use emulators::gps::ReceiverParams;
 use emulators::imu::ImuParams;
@@ -17,8 +17,8 @@ use emulators::truth::{
     Vibration,
 };
 use emulators::turntable::{ProfileAxis, Turntable, TurntableParams};
-use nav::attitude::ProcessingConfig;
-use nav::navigator::NavigationConfig;
+use nav::frontend::processing::ProcessingConfig;
+use nav::navigation::navigator::NavigationConfig;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -50,15 +50,15 @@ pub struct Scenario {
     pub turntable: Option<TurntableParams>,
     /// nav runs four-position north-finding (needs a turntable); the run ends when it reports.
     #[serde(default)]
-    pub north_finding: Option<nav::northfind::NorthFindingConfig>,
+    pub north_finding: Option<nav::procedures::north_finding::NorthFindingConfig>,
     /// nav runs its self-calibration of a dual-axis rotating IMU (needs a turntable of two or
     /// more axes); the run ends when it reports.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub self_calibration: Option<nav::selfcal::SelfCalibrationConfig>,
+    pub self_calibration: Option<nav::procedures::self_calibration::SelfCalibrationConfig>,
     /// nav calibrates the redundant MEMS unit (`[imu.tetra]`) on a three-axis table; the run
     /// ends when it reports.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub tetra_calibration: Option<nav::tetracal::TetraCalibrationConfig>,
+    pub tetra_calibration: Option<nav::procedures::tetra_calibration::TetraCalibrationConfig>,
     /// An IMU parameter file nav loads at start (`[calibration]`), for the emulated unit
     /// ([`Scenario::unit_id`]); e.g. what an earlier self-calibration wrote.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -386,7 +386,7 @@ impl Scenario {
                 self.site.lon_deg
             );
         }
-        nav::attitude::ImuProcessor::new(&self.processing)
+        nav::frontend::processing::ImuProcessor::new(&self.processing)
             .map_err(|e| anyhow::anyhow!("processing: {e}"))?;
         let r = self.imu.rate_hz;
         if (self.processing.fir.fs_hz - r).abs() > 1e-9 {
@@ -433,7 +433,7 @@ impl Scenario {
             }
         }
         if let Some(p) = &self.nav_parameters {
-            nav::params::ImuParameters::load(p, &self.unit_id())?;
+            nav::procedures::unit_parameters::ImuParameters::load(p, &self.unit_id())?;
         }
         if let Some(c) = &self.tetra_calibration {
             c.check()?;
@@ -459,7 +459,10 @@ impl Scenario {
                 );
             }
             if let Some(p) = &c.parameters {
-                nav::params::RedundantParameters::load(p, &self.mems_unit_id())?;
+                nav::procedures::unit_parameters::RedundantParameters::load(
+                    p,
+                    &self.mems_unit_id(),
+                )?;
             }
             if self.north_finding.is_some()
                 || self.self_calibration.is_some()

@@ -6,11 +6,11 @@ use crate::scenario::Scenario;
 use anyhow::{Context, Result};
 use emulators::gps::ReceiverParams;
 use nav::config::{CanConfig, GpsConfig, NavConfig, RecordConfig, WatchdogConfig};
-use nav::imu::ImuCalibration;
-use nav::kf::FilterConfig;
-use nav::navigator::NavigationConfig;
-use nav::northfind::NorthFindingConfig;
-use nav::northplan::{GyroNoise, PlanConfig};
+use nav::frontend::imu_frames::ImuCalibration;
+use nav::navigation::filter::FilterConfig;
+use nav::navigation::navigator::NavigationConfig;
+use nav::procedures::drill_plan::{GyroNoise, PlanConfig};
+use nav::procedures::north_finding::NorthFindingConfig;
 use std::path::Path;
 
 /// nav's `[navigation]` for a scenario: enabled, the surveyed heading when north-finding does
@@ -31,9 +31,9 @@ pub fn navigation_config(s: &Scenario) -> Option<NavigationConfig> {
 /// by the IMU's seed, the parameter file written in the run folder.
 pub fn self_calibration_config(
     s: &Scenario,
-    c: &nav::selfcal::SelfCalibrationConfig,
-) -> nav::selfcal::SelfCalibrationConfig {
-    nav::selfcal::SelfCalibrationConfig {
+    c: &nav::procedures::self_calibration::SelfCalibrationConfig,
+) -> nav::procedures::self_calibration::SelfCalibrationConfig {
+    nav::procedures::self_calibration::SelfCalibrationConfig {
         enabled: true,
         latitude_deg: s.site.lat_deg,
         imu: s.unit_id(),
@@ -43,12 +43,12 @@ pub fn self_calibration_config(
 }
 
 /// nav's `[imu]` for a scenario, with the parameter file it names loaded (as nav loads it).
-pub fn imu_calibration(s: &Scenario) -> nav::imu::ImuCalibration {
+pub fn imu_calibration(s: &Scenario) -> nav::frontend::imu_frames::ImuCalibration {
     let mut c = crate::scenario::navconfig::calibration(s);
     if let Some(p) = s
         .nav_parameters
         .as_ref()
-        .and_then(|p| nav::params::ImuParameters::load(p, &s.unit_id()).ok())
+        .and_then(|p| nav::procedures::unit_parameters::ImuParameters::load(p, &s.unit_id()).ok())
     {
         c.gyro_bias_dph = p.gyro.bias_dph;
         c.gyro_scale_factor_ppm = p.gyro.scale_factor_ppm;
@@ -99,20 +99,25 @@ pub fn nav_config(s: &Scenario, iface: Option<&str>, gps_port: Option<&Path>) ->
         tetra_calibration: s
             .tetra_calibration
             .as_ref()
-            .map(|c| nav::tetracal::TetraCalibrationConfig {
-                enabled: true,
-                latitude_deg: s.site.lat_deg,
-                base_heading_deg: s.site.heading_deg,
-                imu: s.mems_unit_id(),
-                parameters_out: Some(TETRA_PARAMETER_FILE.into()),
-                // what nav's config loader makes of the file it names
-                coefficients: c.parameters.as_ref().and_then(|p| {
-                    nav::params::RedundantParameters::load(p, &s.mems_unit_id())
+            .map(
+                |c| nav::procedures::tetra_calibration::TetraCalibrationConfig {
+                    enabled: true,
+                    latitude_deg: s.site.lat_deg,
+                    base_heading_deg: s.site.heading_deg,
+                    imu: s.mems_unit_id(),
+                    parameters_out: Some(TETRA_PARAMETER_FILE.into()),
+                    // what nav's config loader makes of the file it names
+                    coefficients: c.parameters.as_ref().and_then(|p| {
+                        nav::procedures::unit_parameters::RedundantParameters::load(
+                            p,
+                            &s.mems_unit_id(),
+                        )
                         .ok()
                         .map(|f| f.coefficients())
-                }),
-                ..c.clone()
-            })
+                    }),
+                    ..c.clone()
+                },
+            )
             .unwrap_or_default(),
         watchdog: WatchdogConfig {
             imu_timeout_ms: IMU_TIMEOUT_MS,

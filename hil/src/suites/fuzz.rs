@@ -14,7 +14,7 @@
 //! - `scenario`: scenario file text through the bench's parser and checks.
 
 use crate::scenario::Scenario;
-use crate::suites::bench::each_sample;
+use crate::suites::benchmarks::each_sample;
 use anyhow::{Context, Result, bail};
 use nav::pipeline::Pipeline;
 use rand::rngs::StdRng;
@@ -390,7 +390,7 @@ impl CanTarget {
 }
 
 fn nmea(bytes: &[u8], rng: &mut StdRng) -> bool {
-    let mut d = nav::gps::GpsDecoder::default();
+    let mut d = nav::frontend::gps_receiver::GpsDecoder::default();
     let mut fixes = Vec::new();
     // cut into reads anywhere, as a serial port delivers them
     let mut at = 0;

@@ -95,7 +95,7 @@ pub enum SuiteTime {
     /// second at most (how fast an operator watching wants it), infinite for as fast as it goes.
     Lockstep {
         /// The emulator's side of the lockstep.
-        ls: std::sync::Arc<emulators::bus::transport::TtLockstep>,
+        ls: std::sync::Arc<emulators::adapters::transport::TtLockstep>,
         /// Mechanism seconds per wall second at most.
         pace: f64,
     },

@@ -12,9 +12,9 @@
 //! Every refusal names the file, the line or point, and what is wrong; nothing is dropped
 //! without being counted in [`TrackNotes`].
 
-mod drive;
 pub mod fit;
 pub mod formats;
+mod legs;
 pub mod logger;
 
 use serde::Serialize;

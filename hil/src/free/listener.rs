@@ -1,0 +1,469 @@
+//! The bench's ear on the bus in a free-running run: every frame but the IMU's stream, decoded
+//! by the DBC only. The device under test's solution epochs (NAV_TIME and the frames of its
+//! Seq), each NAV_TIME tied to the IMU sample it names and the instant that sample went on the
+//! bus (or, for a sample not sent yet, the instant it is due); its turntable commands counted;
+//! every frame outside the DBC counted and named.
+//!
+//! Frames are taken in the order of their kernel receive stamps, not of their reads: vcan hands
+//! a sender's frames to the receive queue of the CPU it is on, so a device that moves between
+//! CPUs on a loaded host can be heard out of order; the stamp is taken as the frame is queued,
+//! in the order it was sent. Frames wait [`REORDER_WINDOW`] for a later-read, earlier-stamped
+//! one. Where the adapter stamps in hardware the card says so; vcan's are the kernel's.
+
+use crate::free::score::Epoch;
+use anyhow::{Context, Result};
+use emulators::adapters::freerun::SentSamples;
+use emulators::imu::Oscillator;
+use socketcan::{CanFrame, CanSocket, Socket, SocketOptions};
+use std::collections::{BTreeMap, BinaryHeap};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime};
+use wire::{Message, NavHealth};
+
+/// How long a frame waits for one stamped before it and read after it, s.
+pub const REORDER_WINDOW: f64 = 0.2;
+
+/// What the bench has heard so far.
+#[derive(Debug, Default)]
+pub struct Observed {
+    /// The device's solution epochs, in the order they came.
+    pub epochs: Vec<Epoch>,
+    /// Frames outside the DBC: an identifier it does not define, a length or a value its
+    /// layout refuses, an extended or remote frame; by what they were.
+    pub outside_dbc: BTreeMap<String, u64>,
+    /// TT_CMD frames on the bus (the device under test commanding the table).
+    pub commands: u64,
+    /// Bytes the device says it took from the receiver (NAV_TIME's GpsRxBytes, 12 bits,
+    /// accumulated), and the last value seen.
+    pub receiver_bytes: u64,
+    last_rx_bytes: Option<u16>,
+    /// Where the frames' times came from (the card says it).
+    pub stamps: Stamps,
+    /// Frames heard in another order than their stamps' (put back in order).
+    pub reordered: u64,
+}
+
+/// Where the times of the frames the bench hears come from.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Stamps {
+    /// Nothing heard yet.
+    #[default]
+    None,
+    /// The kernel's software receive stamps (SO_TIMESTAMPNS): vcan, or an adapter without
+    /// hardware stamps.
+    Kernel,
+    /// The adapter's hardware stamps were present (not used: the order and the times are the
+    /// kernel's, on the host's clock).
+    Hardware,
+    /// The socket gave no stamps: the times are those of the reads.
+    Read,
+}
+
+impl Stamps {
+    /// In words, for the card.
+    pub fn words(self) -> &'static str {
+        match self {
+            Stamps::None => "no frames heard",
+            Stamps::Kernel => "the kernel's software receive stamps (vcan has no hardware stamps)",
+            Stamps::Hardware => {
+                "the kernel's receive stamps (the adapter's hardware stamps are present, on its own clock: not used)"
+            }
+            Stamps::Read => "the bench's reads (the socket gave no receive stamps)",
+        }
+    }
+}
+
+impl Observed {
+    /// Frames outside the DBC, in all.
+    pub fn outside_count(&self) -> u64 {
+        self.outside_dbc.values().sum()
+    }
+}
+
+/// The names of the health bits set.
+fn health_names(h: &NavHealth) -> Vec<String> {
+    [
+        (h.imu_timeout, "imu_timeout"),
+        (h.imu_gaps, "imu_gaps"),
+        (h.imu_bit, "imu_bit"),
+        (h.gps_stale, "gps_stale"),
+        (h.turntable, "turntable"),
+        (h.filter, "filter"),
+        (h.gps_data, "gps_data"),
+        (h.can_bus, "can_bus"),
+    ]
+    .into_iter()
+    .filter(|(on, _)| *on)
+    .map(|(_, n)| n.to_string())
+    .collect()
+}
+
+/// A socket on `iface` that hears everything but the IMU's stream (0x080-0x09F), with the
+/// kernel's receive stamps (and the adapter's, where it has them).
+pub fn open(iface: &str) -> Result<CanSocket> {
+    use socketcan::timestamp as ts;
+    let sock = CanSocket::open(iface).with_context(|| format!("listening on {iface}"))?;
+    sock.set_filters(&[socketcan::CanFilter::new_inverted(0x080, 0x7E0)])
+        .with_context(|| format!("filters on {iface}"))?;
+    // a socket without stamps is still heard (by the reads' times, said on the card)
+    let _ = sock.set_recv_timestamp(true);
+    let _ = sock.set_timestamping(
+        ts::SOF_TIMESTAMPING_RX_HARDWARE
+            | ts::SOF_TIMESTAMPING_RAW_HARDWARE
+            | ts::SOF_TIMESTAMPING_OPT_CMSG,
+    );
+    sock.set_read_timeout(Duration::from_millis(20))
+        .with_context(|| format!("read timeout on {iface}"))?;
+    Ok(sock)
+}
+
+/// Frames held until no earlier-stamped one can still come: ordered by stamp (ns), then by
+/// the order they were read.
+#[derive(Debug, Default)]
+pub struct Reorder {
+    held: BinaryHeap<Waiting>,
+    reads: u64,
+    newest: Option<i128>,
+    /// Frames read after one stamped later than them.
+    pub reordered: u64,
+}
+
+/// A frame in [`Reorder`], first out the earliest stamp (then the earliest read).
+#[derive(Debug)]
+struct Waiting {
+    stamp: i128,
+    read: u64,
+    held: Held,
+}
+
+impl PartialEq for Waiting {
+    fn eq(&self, o: &Self) -> bool {
+        (self.stamp, self.read) == (o.stamp, o.read)
+    }
+}
+impl Eq for Waiting {}
+impl PartialOrd for Waiting {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Waiting {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        // the heap's top is its greatest: the earliest
+        (o.stamp, o.read).cmp(&(self.stamp, self.read))
+    }
+}
+
+/// A frame waiting in [`Reorder`]: its time and what it was.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Held {
+    /// The frame's time, ns since the origin.
+    pub at_ns: i128,
+    /// The frame.
+    pub frame: HeldFrame,
+}
+
+/// A frame as read: in the DBC's form, or what it was when it is none.
+#[derive(Debug, Clone, PartialEq)]
+pub enum HeldFrame {
+    /// A data frame in the DBC's form.
+    Raw(wire::RawFrame),
+    /// A frame outside the DBC, in words.
+    Outside(String),
+}
+
+impl Reorder {
+    /// A frame stamped `stamp_ns` (ns since the run's origin, on the host's clock).
+    pub fn push(&mut self, stamp_ns: i128, frame: Held) {
+        if self.newest.is_some_and(|n| stamp_ns < n) {
+            self.reordered += 1;
+        }
+        self.newest = Some(self.newest.map_or(stamp_ns, |n| n.max(stamp_ns)));
+        self.reads += 1;
+        self.held.push(Waiting {
+            stamp: stamp_ns,
+            read: self.reads,
+            held: frame,
+        });
+    }
+
+    /// Frames held.
+    pub fn len(&self) -> usize {
+        self.held.len()
+    }
+
+    /// Nothing held.
+    pub fn is_empty(&self) -> bool {
+        self.held.is_empty()
+    }
+
+    /// The next frame stamped at or before `until_ns` (no frame stamped before it can still
+    /// come: the window has passed), or the next of any (`all`: the end).
+    pub fn pop(&mut self, until_ns: i128, all: bool) -> Option<Held> {
+        if !all && self.held.peek()?.stamp > until_ns {
+            return None;
+        }
+        self.held.pop().map(|w| w.held)
+    }
+}
+
+/// A frame in the DBC's form, or what it was: none for a controller's error frame.
+fn held_frame(f: &CanFrame) -> Option<HeldFrame> {
+    match wire::from_can_frame(f) {
+        Ok(r) => Some(HeldFrame::Raw(r)),
+        // a controller's error frame is no device's message
+        Err(wire::FrameConvError::Error(_)) => None,
+        Err(e) => Some(HeldFrame::Outside(format!("{e}"))),
+    }
+}
+
+/// The clocks the bench times a run with: the host's monotonic `origin` and the wall clock the
+/// kernel stamps with, tied at one instant.
+#[derive(Debug, Clone, Copy)]
+struct Clocks {
+    wall_at_origin_ns: i128,
+}
+
+impl Clocks {
+    fn new(origin: Instant) -> Self {
+        let wall = SystemTime::now()
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as i128);
+        let now = Instant::now();
+        let since = if now >= origin {
+            now.duration_since(origin).as_nanos() as i128
+        } else {
+            -(origin.duration_since(now).as_nanos() as i128)
+        };
+        Self {
+            wall_at_origin_ns: wall - since,
+        }
+    }
+
+    /// A wall-clock stamp in ns since the origin.
+    fn since_origin_ns(&self, wall: SystemTime) -> i128 {
+        wall.duration_since(SystemTime::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as i128)
+            - self.wall_at_origin_ns
+    }
+}
+
+/// Listen on `sock` until `stop`, into `seen`; times in s since `origin`. `clock`: the IMU's
+/// oscillator (when a sample not sent yet is due).
+pub fn listen(
+    sock: CanSocket,
+    origin: Instant,
+    clock: Oscillator,
+    sent: &SentSamples,
+    seen: &Mutex<Observed>,
+    stop: &AtomicBool,
+) -> Result<()> {
+    let clocks = Clocks::new(origin);
+    let mut order = Reorder::default();
+    let window_ns = (REORDER_WINDOW * 1e9) as i128;
+    let place = Place {
+        origin,
+        clock,
+        sent,
+    };
+    let mut stamps = Stamps::None;
+    loop {
+        let stopping = stop.load(Ordering::Relaxed);
+        if !stopping {
+            match sock.read_frame_with_timestamps() {
+                Ok((f, ts)) => {
+                    let read_ns = origin.elapsed().as_nanos() as i128;
+                    let at_ns = ts
+                        .socket
+                        .or(ts.sw)
+                        .map_or(read_ns, |w| clocks.since_origin_ns(w));
+                    stamps = match (ts.hw, ts.socket.or(ts.sw)) {
+                        (Some(_), _) => Stamps::Hardware,
+                        (None, Some(_)) => Stamps::Kernel,
+                        (None, None) => Stamps::Read,
+                    };
+                    if let Some(frame) = held_frame(&f) {
+                        order.push(at_ns, Held { at_ns, frame });
+                    }
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::TimedOut
+                            | std::io::ErrorKind::WouldBlock
+                            | std::io::ErrorKind::Interrupted
+                    ) => {}
+                Err(e) => return Err(e).context("reading the bus"),
+            }
+        }
+        // a frame waits for the window on the host's clock (its stamps' clock): a quiet bus
+        // releases what it holds
+        let now_ns = origin.elapsed().as_nanos() as i128;
+        let mut o = seen.lock().unwrap_or_else(|e| e.into_inner());
+        o.stamps = stamps;
+        o.reordered = order.reordered;
+        while let Some(h) = order.pop(now_ns - window_ns, stopping) {
+            take_held(&mut o, h, &place);
+        }
+        if stopping {
+            return Ok(());
+        }
+    }
+}
+
+/// How a NAV_TIME's named sample is placed.
+struct Place<'a> {
+    origin: Instant,
+    clock: Oscillator,
+    sent: &'a SentSamples,
+}
+
+impl Place<'_> {
+    /// The sample whose counter is `counter`: its index, the instant it went on the bus (or is
+    /// due, s since the origin) and whether it had not gone out when placed.
+    fn named(&self, counter: u16) -> Option<(u64, f64, bool)> {
+        let (k, at) = self.sent.place(counter)?;
+        Some(match at {
+            Some(at) => (
+                k,
+                at.saturating_duration_since(self.origin).as_secs_f64(),
+                false,
+            ),
+            // due at its sample time on the origin's clock (the IMU's sample k ends at tick k + 1)
+            None => (k, self.clock.tick_time(k + 1), true),
+        })
+    }
+}
+
+/// A held frame into what was heard.
+fn take_held(o: &mut Observed, h: Held, place: &Place) {
+    let rx_s = h.at_ns as f64 * 1e-9;
+    let raw = match h.frame {
+        HeldFrame::Outside(what) => {
+            *o.outside_dbc.entry(what).or_default() += 1;
+            return;
+        }
+        HeldFrame::Raw(r) => r,
+    };
+    let m = match Message::decode(&raw) {
+        Ok(m) => m,
+        Err(e) => {
+            let what = match wire::spec_for_id(raw.id) {
+                Some(s) => format!("{} (0x{:03X}): {e}", s.name, raw.id),
+                None => format!("0x{:03X}: not in the DBC", raw.id),
+            };
+            *o.outside_dbc.entry(what).or_default() += 1;
+            return;
+        }
+    };
+    take(o, m, rx_s, place);
+}
+
+/// A decoded frame into what was heard.
+fn take(o: &mut Observed, m: Message, rx_s: f64, place: &Place) {
+    let same = |o: &mut Observed, seq: Option<u8>| -> Option<usize> {
+        let i = o.epochs.len().checked_sub(1)?;
+        seq.is_none_or(|s| o.epochs[i].seq == s).then_some(i)
+    };
+    match m {
+        Message::NavTime(t) => {
+            if let Some(prev) = o.last_rx_bytes {
+                o.receiver_bytes += u64::from(t.gps_rx_bytes.wrapping_sub(prev) & 0xFFF);
+            }
+            o.last_rx_bytes = Some(t.gps_rx_bytes);
+            let named = place.named(t.sample_count as u16);
+            o.epochs.push(Epoch {
+                sample_count: t.sample_count,
+                seq: t.seq,
+                mode: t.mode,
+                health: health_names(&t.health),
+                rx_s,
+                sample: named.map(|(k, at, _)| (k, at)),
+                scheduled: named.is_some_and(|n| n.2),
+                att: None,
+                vel: None,
+                pos: None,
+                hgt: None,
+            });
+        }
+        Message::NavAtt(a) => {
+            if let Some(i) = same(o, Some(a.seq)) {
+                o.epochs[i].att = Some([a.heading_deg, a.pitch_deg, a.roll_deg]);
+            }
+        }
+        Message::NavVel(v) => {
+            if let Some(i) = same(o, Some(v.seq)) {
+                o.epochs[i].vel = Some(v.enu_mps);
+            }
+        }
+        // NAV_POS has no Seq: it belongs to the epoch whose NAV_VEL came last
+        Message::NavPos(p) => {
+            if let Some(i) = same(o, None).filter(|i| o.epochs[*i].vel.is_some()) {
+                o.epochs[i].pos = Some([p.lat_deg, p.lon_deg]);
+            }
+        }
+        Message::NavHgt(h) => {
+            if let Some(i) = same(o, Some(h.seq)) {
+                o.epochs[i].hgt = Some([h.height_m, h.pos_sigma_m, h.heading_sigma_deg]);
+            }
+        }
+        Message::TtCmd(_) => o.commands += 1,
+        _ => {}
+    }
+}
+
+/// Listen in a thread of its own.
+pub fn spawn(
+    sock: CanSocket,
+    origin: Instant,
+    clock: Oscillator,
+    sent: Arc<SentSamples>,
+    seen: Arc<Mutex<Observed>>,
+    stop: Arc<AtomicBool>,
+) -> Result<std::thread::JoinHandle<Result<()>>> {
+    std::thread::Builder::new()
+        .name("observer".into())
+        .spawn(move || listen(sock, origin, clock, &sent, &seen, &stop))
+        .context("starting the bus observer")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn held(at_ns: i128, what: &str) -> Held {
+        Held {
+            at_ns,
+            frame: HeldFrame::Outside(what.into()),
+        }
+    }
+
+    fn name(h: Held) -> String {
+        match h.frame {
+            HeldFrame::Outside(w) => w,
+            HeldFrame::Raw(r) => format!("{:03X}", r.id),
+        }
+    }
+
+    /// Frames read out of their stamps' order come out in it, once no earlier one can come.
+    #[test]
+    fn frames_come_out_in_their_stamps_order() {
+        let mut r = Reorder::default();
+        r.push(100, held(100, "a"));
+        r.push(300, held(300, "c"));
+        // read after c, stamped before it: heard out of order
+        r.push(200, held(200, "b"));
+        r.push(300, held(300, "d"));
+        assert_eq!(r.reordered, 1);
+        assert_eq!(r.len(), 4);
+        // the window has passed the first two only
+        assert_eq!(r.pop(250, false).map(name).as_deref(), Some("a"));
+        assert_eq!(r.pop(250, false).map(name).as_deref(), Some("b"));
+        assert!(r.pop(250, false).is_none());
+        // at the end everything, same stamps in the order they were read
+        assert_eq!(r.pop(0, true).map(name).as_deref(), Some("c"));
+        assert_eq!(r.pop(0, true).map(name).as_deref(), Some("d"));
+        assert!(r.pop(0, true).is_none() && r.is_empty());
+    }
+}

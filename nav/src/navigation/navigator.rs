@@ -1,0 +1,1252 @@
+//! The navigation mode: levelling, hand-over (heading from north-finding or the config, position
+//! from the first good GPS fix), strapdown navigation, and the SINS/GPS filter with fixes tied
+//! to IMU time by the receiver's PPS edge latched in the IMU stream.
+
+use crate::frontend::gps_receiver::GpsFix;
+use crate::frontend::imu_clock::ClockEstimate;
+use crate::navigation::filter::{FilterConfig, FilterStats, Kf};
+use crate::navigation::strapdown::{NavOutput, NavState};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// Navigation settings (the `[navigation]` table of nav's config).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct NavigationConfig {
+    /// Navigate (after north-finding, when that is enabled).
+    pub enabled: bool,
+    /// Heading at the start when north-finding does not provide one, deg.
+    pub initial_heading_deg: Option<f64>,
+    /// Static levelling time before navigation starts, s.
+    pub level_s: f64,
+    /// Use GPS fixes in the filter (false: pure inertial after the start).
+    pub gps_aiding: bool,
+    /// The filter.
+    pub filter: FilterConfig,
+    /// A fix is applied when IMU time reaches its PPS edge plus this (s), carried forward from
+    /// the edge with the INS velocity; a fix that arrives later is applied at once and counted
+    /// late. Applying fixes at a time set by the IMU stream, not by when the serial port
+    /// happened to be read, makes the solution depend on the data alone. Allow for the
+    /// receiver's output latency and the serial transfer (a few hundred bytes at 9600 baud take
+    /// about 0.4 s).
+    pub fix_delay_s: f64,
+    /// The solution's integrity monitor.
+    pub integrity: crate::navigation::integrity::IntegrityConfig,
+    /// A PPS edge is taken when it lies a whole number of seconds after the last one taken
+    /// (or after the last one seen) within this, s, plus an allowance for the IMU's clock
+    /// ([`PPS_CLOCK_ALLOWANCE`] of the interval about the rate read from the edges, or
+    /// [`PPS_CLOCK_ALLOWANCE_UNKNOWN`] before it is read); any other edge (a glitch on the PPS
+    /// line) is rejected and counted.
+    pub pps_tolerance_s: f64,
+}
+
+/// The IMU clock's allowance in the PPS check, per second of interval, about the rate read
+/// from the edges (100 ppm: its wander between edges is far less).
+pub const PPS_CLOCK_ALLOWANCE: f64 = 1e-4;
+
+/// The same before the rate is read (1000 ppm: a unit's oscillator is off by tens of ppm; one
+/// further off is taken once its edges have told its rate, one beyond is not a clock to
+/// navigate on and its edges are rejected, counted).
+pub const PPS_CLOCK_ALLOWANCE_UNKNOWN: f64 = 1e-3;
+
+impl Default for NavigationConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            initial_heading_deg: None,
+            level_s: 2.0,
+            gps_aiding: true,
+            filter: FilterConfig::default(),
+            fix_delay_s: 0.5,
+            integrity: crate::navigation::integrity::IntegrityConfig::default(),
+            pps_tolerance_s: 0.002,
+        }
+    }
+}
+
+/// Where navigation is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NavPhase {
+    /// Waiting for a heading (north-finding) and a first good fix.
+    Waiting,
+    /// Levelling from the accelerometers.
+    Levelling,
+    /// Navigating.
+    Navigating,
+}
+
+/// Counters and the latest output.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct NavigatorSummary {
+    /// Phase.
+    pub phase: NavPhase,
+    /// IMU time navigation started, s.
+    pub started_at_s: Option<f64>,
+    /// The latest (filter-corrected) output.
+    pub output: Option<NavOutput>,
+    /// IMU time of that output, s from the first sample.
+    pub output_t_s: f64,
+    /// Filter counters.
+    pub filter: Option<FilterStats>,
+    /// Fixes seen, used, ignored (invalid, flagged, before the start).
+    pub fixes_seen: u64,
+    /// Fixes ignored.
+    pub fixes_ignored: u64,
+    /// PPS edges seen.
+    pub pps_edges: u64,
+    /// Fixes that arrived after their PPS edge plus `fix_delay_s` of IMU time (applied at once).
+    pub late_fixes: u64,
+    /// Fixes whose PPS edge never came (the PPS input missing): applied at their arrival less
+    /// `fix_delay_s`, without the PPS tie.
+    #[serde(default)]
+    pub untied_fixes: u64,
+    /// PPS edges rejected: not a whole number of seconds after the last edge (a glitch).
+    #[serde(default)]
+    pub pps_rejected: u64,
+    /// The receiver's latency, fix after its PPS edge, learned from the first fixes (s).
+    #[serde(default)]
+    pub receiver_latency_s: Option<f64>,
+    /// UTC second less the PPS edge's second number, as the fixes tie them (none before the
+    /// first fix with a time).
+    #[serde(default)]
+    pub utc_edge_offset_s: Option<i64>,
+    /// Times that tie was corrected once the receiver's latency was learned.
+    #[serde(default)]
+    pub utc_reanchors: u64,
+    /// Fixes whose UTC time fitted no PPS edge near (set aside, as the receiver's clock jumped
+    /// or the fix was seconds old).
+    #[serde(default)]
+    pub clock_jumps: u64,
+    /// The integrity monitor.
+    pub integrity: crate::navigation::integrity::IntegrityStats,
+    /// The IMU's rate against the PPS, as navigation last used it (none before
+    /// [`crate::frontend::imu_clock::MIN_EDGES`] edges).
+    #[serde(default)]
+    pub imu_clock: Option<ClockEstimate>,
+}
+
+/// The navigator.
+#[derive(Debug)]
+pub struct Navigator {
+    cfg: NavigationConfig,
+    phase: NavPhase,
+    heading: Option<f64>,
+    /// The sigma of the heading handed over, deg.
+    heading_sigma_deg: Option<f64>,
+    first_fix: Option<(f64, f64, f64)>,
+    /// What the receiver said of the accuracy of the fix navigation starts at.
+    first_fix_accuracy: crate::navigation::filter::StatedAccuracy,
+    level_sum: Vector3<f64>,
+    level_t: f64,
+    state: Option<NavState>,
+    kf: Option<Kf>,
+    f_acc: Vector3<f64>,
+    t_acc: f64,
+    last_pps: Option<f64>,
+    /// The last edge seen, taken or not.
+    last_pps_seen: Option<f64>,
+    pps_rejected: u64,
+    last_t: f64,
+    started_at: Option<f64>,
+    fixes_seen: u64,
+    fixes_ignored: u64,
+    pps_edges: u64,
+    last_good_fix_t: Option<f64>,
+    /// Fixes waiting for their time.
+    held: Vec<Held>,
+    /// The PPS edges taken, newest last (the last [`EDGES_KEPT`]): (second number, counted
+    /// from the first edge by the whole seconds between edges; IMU time).
+    edges: std::collections::VecDeque<(i64, f64)>,
+    /// UTC second (unwrapped across midnight) less the second number of its edge, once the
+    /// first fix has decided it.
+    anchor: Option<i64>,
+    /// The last UTC time of day seen, and the days added to make times continuous.
+    utc_last: Option<f64>,
+    utc_days: i64,
+    /// The first fixes' ties, checked once the receiver's latency is learned.
+    first_ties: Vec<FirstTie>,
+    /// Fixes the filter's gate refused since [`Navigator::take_rejected`] was last called.
+    rejected: Vec<RejectedFix>,
+    /// The receiver's latest statements of its accuracy (GST), newest last: a fix takes the
+    /// one of its own UTC time when it is applied (GST comes after GGA in an epoch).
+    accuracies: std::collections::VecDeque<crate::frontend::gps_receiver::GpsAccuracy>,
+    /// Times the tie between UTC seconds and edges was corrected.
+    utc_reanchors: u64,
+    /// Fixes whose UTC time fitted no edge near (set aside).
+    clock_jumps: u64,
+    /// The tie the last fixes whose time fitted no edge pointed to, and how many in a row.
+    jump_streak: Option<(i64, u32)>,
+    late_fixes: u64,
+    untied_fixes: u64,
+    integrity: crate::navigation::integrity::IntegrityMonitor,
+    /// The INS's velocity (east, north, up) at the last PPS edge: when the fix was taken.
+    v_at_pps: Option<[f64; 3]>,
+    /// The first fixes' arrivals after the last edge, as unit vectors on the circle of one
+    /// second (sums of cos and sin, count): the receiver's latency.
+    arrivals: (f64, f64, u32),
+    /// IMU time the last fix was taken at, and its sentence's index in the stream.
+    last_fix_at: Option<(f64, u64)>,
+    /// The IMU's rate against the PPS edges kept (the last good window's).
+    clock: Option<ClockEstimate>,
+}
+
+/// A window of edges whose rate is more uncertain than this (ppm, one sigma: a PPS line with
+/// a glitch taken, or one jittering by milliseconds) leaves the last good rate in use.
+pub const CLOCK_SIGMA_LIMIT_PPM: f64 = 20.0;
+
+/// The receiver's latency is learned from this many fixes; until then a fix belongs to the
+/// latest edge at or before its arrival.
+pub const LATENCY_FIXES: u32 = 5;
+
+/// Fixes in a row whose UTC time fits no edge near, and that agree on a new tie, before the
+/// receiver's seconds are tied to the edges anew.
+pub const JUMPS_TO_REANCHOR: u32 = 3;
+
+/// PPS edges kept for tying fixes that come late.
+pub const EDGES_KEPT: usize = 64;
+
+/// A fix the filter's gate refused: where the receiver put it, how far off (NIS), when.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+pub struct RejectedFix {
+    /// Latitude, deg.
+    pub lat_deg: f64,
+    /// Longitude, deg.
+    pub lon_deg: f64,
+    /// Its normalized innovation squared.
+    pub nis: Option<f64>,
+    /// IMU time it was taken at, s.
+    pub t_s: f64,
+}
+
+/// Rejected fixes kept between two calls of [`Navigator::take_rejected`].
+const REJECTED_KEPT: usize = 64;
+
+/// The receiver's accuracy statements kept for the fixes still held (10 Hz over 2 s).
+pub const ACCURACIES_KEPT: usize = 20;
+
+/// What a held fix is tied to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Tie {
+    /// The edge with this second number, and the fix's fraction of a second after it.
+    Edge(i64, f64),
+    /// Nothing yet: it came before the IMU stream showed any edge.
+    Untied,
+}
+
+/// A fix waiting for its time.
+#[derive(Debug, Clone)]
+struct Held {
+    fix: GpsFix,
+    tie: Tie,
+    /// IMU time it arrived at.
+    arrived: f64,
+}
+
+/// One of the first fixes: its UTC second and fraction, its arrival, and the last edge then.
+#[derive(Debug, Clone, Copy)]
+struct FirstTie {
+    whole: i64,
+    frac: f64,
+    arrived: f64,
+    s_last: i64,
+    t_last: f64,
+}
+
+/// A fix waits at most this long (IMU time, s) past `fix_delay_s` for its PPS edge (1 Hz: the
+/// edge comes within a second); then the PPS input is taken for missing and the fix is applied
+/// at its arrival.
+pub const PPS_WAIT_S: f64 = 1.2;
+
+/// A fix older than this (IMU time, s) makes the GPS stale: the solution is coasting.
+pub const GPS_STALE_S: f64 = 2.5;
+
+impl Navigator {
+    /// A navigator with these settings.
+    pub fn new(cfg: NavigationConfig) -> Self {
+        Self {
+            heading: cfg.initial_heading_deg.map(f64::to_radians),
+            heading_sigma_deg: None,
+            integrity: crate::navigation::integrity::IntegrityMonitor::new(cfg.integrity.clone()),
+            cfg,
+            phase: NavPhase::Waiting,
+            first_fix: None,
+            first_fix_accuracy: crate::navigation::filter::StatedAccuracy::default(),
+            level_sum: Vector3::zeros(),
+            level_t: 0.0,
+            state: None,
+            kf: None,
+            f_acc: Vector3::zeros(),
+            t_acc: 0.0,
+            last_pps: None,
+            last_pps_seen: None,
+            pps_rejected: 0,
+            last_t: 0.0,
+            started_at: None,
+            fixes_seen: 0,
+            fixes_ignored: 0,
+            pps_edges: 0,
+            last_good_fix_t: None,
+            held: Vec::new(),
+            edges: std::collections::VecDeque::new(),
+            anchor: None,
+            utc_last: None,
+            utc_days: 0,
+            first_ties: Vec::new(),
+            accuracies: std::collections::VecDeque::new(),
+            rejected: Vec::new(),
+            utc_reanchors: 0,
+            clock_jumps: 0,
+            jump_streak: None,
+            late_fixes: 0,
+            untied_fixes: 0,
+            v_at_pps: None,
+            arrivals: (0.0, 0.0, 0),
+            last_fix_at: None,
+            clock: None,
+        }
+    }
+
+    /// The receiver's latency after its PPS edge (s, in [-0.2, 0.8)), once learned from [`LATENCY_FIXES`] fixes: the circular mean of their
+    /// arrivals after the last edge, so that a few arriving behind the IMU stream (just before
+    /// their edge's frame was processed) do not drag it a second away.
+    pub fn receiver_latency(&self) -> Option<f64> {
+        let (c, s, n) = self.arrivals;
+        // a latency is positive: what comes out of the circle below -0.2 s is a latency of
+        // most of a second (a stream steadily 0.2 s behind the receiver is not one)
+        (n >= LATENCY_FIXES).then(|| {
+            let l = s.atan2(c) / std::f64::consts::TAU;
+            if l < -0.2 { l + 1.0 } else { l }
+        })
+    }
+
+    /// IMU time the last fix was taken at (its PPS edge, or its arrival without PPS), and its
+    /// sentence's index in the stream.
+    pub fn last_fix_time(&self) -> Option<(f64, u64)> {
+        self.last_fix_at
+    }
+
+    /// The mode for the solution header.
+    pub fn mode(&self) -> wire::NavMode {
+        use wire::NavMode;
+        match self.phase {
+            NavPhase::Waiting => NavMode::Init,
+            NavPhase::Levelling => NavMode::Levelling,
+            NavPhase::Navigating if !self.cfg.gps_aiding => NavMode::Navigation,
+            NavPhase::Navigating if self.gps_stale() => NavMode::Coasting,
+            NavPhase::Navigating => NavMode::GpsAided,
+        }
+    }
+
+    /// No good fix within [`GPS_STALE_S`] of IMU time.
+    pub fn gps_stale(&self) -> bool {
+        self.last_good_fix_t
+            .is_none_or(|t| self.last_t - t > GPS_STALE_S)
+    }
+
+    /// The filter's horizontal position sigma (m) and heading sigma (deg); none without it.
+    pub fn sigmas(&self) -> Option<(f64, f64)> {
+        let (k, st) = (self.kf.as_ref()?, self.state.as_ref()?);
+        let p = k.covariance();
+        let (rm, rn) = crate::navigation::earth::radii(st.lat);
+        let pos = (p[(6, 6)] * (rm + st.h).powi(2)
+            + p[(7, 7)] * ((rn + st.h) * st.lat.cos()).powi(2))
+        .sqrt();
+        Some((pos, p[(2, 2)].sqrt().to_degrees()))
+    }
+
+    /// The filter's position covariance in a local East-North-Up plane, m^2, row-major (none
+    /// before the filter runs).
+    pub fn position_covariance_enu(&self) -> Option<[f64; 9]> {
+        let (k, st) = (self.kf.as_ref()?, self.state.as_ref()?);
+        let p = k.covariance();
+        let (rm, rn) = crate::navigation::earth::radii(st.lat);
+        // states 6, 7, 8: latitude and longitude (rad), height (m); to east, north, up metres
+        let scale = [(rn + st.h) * st.lat.cos(), rm + st.h, 1.0];
+        let state = [7, 6, 8];
+        let mut c = [0.0; 9];
+        for i in 0..3 {
+            for j in 0..3 {
+                c[3 * i + j] = p[(state[i], state[j])] * scale[i] * scale[j];
+            }
+        }
+        Some(c)
+    }
+
+    /// The filter's velocity covariance, East-North-Up, (m/s)^2, row-major (none before the
+    /// filter runs).
+    pub fn velocity_covariance_enu(&self) -> Option<[f64; 9]> {
+        let p = self.kf.as_ref()?.covariance();
+        Some(std::array::from_fn(|k| p[(3 + k / 3, 3 + k % 3)]))
+    }
+
+    /// The filter's attitude sigmas about east, north and up (up: heading), deg.
+    pub fn attitude_sigmas_deg(&self) -> Option<[f64; 3]> {
+        let p = self.kf.as_ref()?.covariance();
+        Some(std::array::from_fn(|i| {
+            p[(i, i)].max(0.0).sqrt().to_degrees()
+        }))
+    }
+
+    /// North-finding's heading (deg) becomes available.
+    pub fn set_heading(&mut self, deg: f64, sigma_deg: Option<f64>) {
+        self.heading = Some(deg.to_radians());
+        self.heading_sigma_deg = sigma_deg;
+    }
+
+    /// A PPS edge at IMU time `t`; false when it was rejected (see
+    /// [`NavigationConfig::pps_tolerance_s`]).
+    pub fn on_pps(&mut self, t: f64) -> bool {
+        let tol = self.cfg.pps_tolerance_s;
+        // a true second in the IMU's seconds, and how far it may be off
+        let (second, allowance) = match self.clock {
+            Some(c) => (1.0 + c.ppm * 1e-6, PPS_CLOCK_ALLOWANCE),
+            None => (1.0, PPS_CLOCK_ALLOWANCE_UNKNOWN),
+        };
+        let fits = |r: Option<f64>| {
+            r.is_some_and(|r| {
+                let d = t - r;
+                let n = (d / second).round();
+                n >= 1.0 && (d - n * second).abs() <= tol + allowance * d
+            })
+        };
+        // the first edge, one that keeps the rhythm, or the second of a new rhythm (the last
+        // edge taken was the glitch)
+        let take = self.last_pps.is_none() || fits(self.last_pps) || fits(self.last_pps_seen);
+        self.last_pps_seen = Some(t);
+        if !take {
+            self.pps_rejected += 1;
+            if self.pps_rejected == 1 {
+                tracing::warn!(
+                    "a PPS edge at IMU time {t:.4} s is {:.4} s after the last one: not a whole second, rejected",
+                    self.last_pps.map_or(0.0, |p| t - p)
+                );
+            }
+            return false;
+        }
+        self.pps_edges += 1;
+        let sec = match (self.edges.back(), self.last_pps) {
+            (Some(&(s, _)), Some(p)) => s + (((t - p) / second).round() as i64).max(1),
+            _ => 0,
+        };
+        self.edges.push_back((sec, t));
+        if self.edges.len() > EDGES_KEPT {
+            self.edges.pop_front();
+        }
+        if let Some(c) = ClockEstimate::from_edges(self.edges.iter())
+            .filter(|c| c.sigma_ppm <= CLOCK_SIGMA_LIMIT_PPM)
+        {
+            self.clock = Some(c);
+        }
+        self.last_pps = Some(t);
+        self.v_at_pps = self.state().map(|s| [s.v.x, s.v.y, s.v.z]);
+        true
+    }
+
+    /// IMU time has reached `t` while the navigator does not yet take updates (north-finding
+    /// still runs): fixes are tied to their PPS edges and taken as they fall due, so that the
+    /// position is current at the handover and no fix waits for an edge that already came.
+    pub fn on_time(&mut self, t: f64) {
+        self.last_t = t;
+        self.apply_due_fixes();
+    }
+
+    /// A processing-chain update valid at IMU time `t` over `dt` s.
+    pub fn on_update(&mut self, t: f64, phi: [f64; 3], dv: [f64; 3], dt: f64) {
+        self.last_t = t;
+        self.apply_due_fixes();
+        match self.phase {
+            NavPhase::Waiting => {
+                // a heading (north-finding or the config) and a position (the first good fix)
+                if self.heading.is_some() && self.first_fix.is_some() {
+                    self.phase = NavPhase::Levelling;
+                    self.level_sum = Vector3::zeros();
+                    self.level_t = 0.0;
+                }
+            }
+            NavPhase::Levelling => {
+                self.level_sum += Vector3::from(dv);
+                self.level_t += dt;
+                if self.level_t >= self.cfg.level_s {
+                    self.start(t);
+                }
+            }
+            NavPhase::Navigating => {
+                // what depends on a second's length goes over the update's true length
+                let dt = self.clock.map_or(dt, |c| c.true_dt(dt));
+                let (Some(st), kf) = (self.state.as_mut(), self.kf.as_mut()) else {
+                    return;
+                };
+                let (phi, dv) = match kf.as_ref() {
+                    Some(k) => k.compensate(phi, dv, dt),
+                    None => (phi, dv),
+                };
+                self.f_acc += st.q_nb * Vector3::from(dv);
+                self.t_acc += dt;
+                st.update(phi, dv, dt);
+                if let Some(k) = kf
+                    && self.t_acc >= 0.1
+                {
+                    k.propagate(st, &(self.f_acc / self.t_acc), self.t_acc);
+                    self.f_acc = Vector3::zeros();
+                    self.t_acc = 0.0;
+                    if let Some((sigma, _)) = self.sigmas() {
+                        self.integrity.on_position_sigma(sigma);
+                    }
+                }
+            }
+        }
+    }
+
+    fn start(&mut self, t: f64) {
+        let f = self.level_sum / self.level_t.max(1e-9);
+        let roll = (-f.x).atan2(f.z);
+        let pitch = f.y.atan2((f.x * f.x + f.z * f.z).sqrt());
+        let (lat, lon, h) = self.first_fix.unwrap_or((0.0, 0.0, 0.0));
+        let st = NavState::from_euler(
+            self.heading.unwrap_or(0.0),
+            pitch,
+            roll,
+            Vector3::zeros(),
+            lat,
+            lon,
+            h,
+        );
+        self.kf = self.cfg.gps_aiding.then(|| {
+            // the filter starts no surer of the heading than what found it (a degraded
+            // north-finding's sigma is larger than the configured one)
+            let mut fc = self.cfg.filter.clone();
+            if let Some(s) = self.heading_sigma_deg {
+                fc.init_att_deg[2] = fc.init_att_deg[2].max(s);
+            }
+            let mut k = Kf::new(fc, lat);
+            k.levelled(&st.q_nb, f.norm());
+            if self.first_fix.is_some() {
+                k.started_at_fix(&self.first_fix_accuracy, &st);
+            }
+            k
+        });
+        self.state = Some(st);
+        self.phase = NavPhase::Navigating;
+        self.started_at = Some(t);
+        tracing::info!(
+            lat_deg = lat.to_degrees(),
+            lon_deg = lon.to_degrees(),
+            heading_deg = self.heading.unwrap_or(0.0).to_degrees(),
+            "navigation started"
+        );
+    }
+
+    /// What the receiver said of a fix's accuracy: its HDOP, and the GST of the same UTC time.
+    fn stated_accuracy(&self, fix: &GpsFix) -> crate::navigation::filter::StatedAccuracy {
+        let gst = fix.time_of_day_s.and_then(|t| {
+            self.accuracies
+                .iter()
+                .rev()
+                .find(|a| a.time_of_day_s.is_some_and(|u| (u - t).abs() < 1e-3))
+        });
+        crate::navigation::filter::StatedAccuracy {
+            gst: gst.map(|a| ([a.lat_sigma_m, a.lon_sigma_m], a.alt_sigma_m)),
+            hdop: fix.hdop,
+        }
+    }
+
+    /// The fixes the filter's gate refused since the last call.
+    pub fn take_rejected(&mut self) -> Vec<RejectedFix> {
+        std::mem::take(&mut self.rejected)
+    }
+
+    /// The receiver's statement of its accuracy (GST): kept for the fix of the same UTC time.
+    pub fn on_accuracy(&mut self, a: &crate::frontend::gps_receiver::GpsAccuracy) {
+        if self.accuracies.len() >= ACCURACIES_KEPT {
+            self.accuracies.pop_front();
+        }
+        self.accuracies.push_back(*a);
+    }
+
+    /// A decoded GPS fix arrived (IMU time is that of the latest update). It is tied to its PPS
+    /// edge and waits until IMU time reaches that edge (plus the fix's fraction of a second at
+    /// receivers faster than 1 Hz) plus `fix_delay_s` (see [`NavigationConfig::fix_delay_s`]).
+    ///
+    /// The tie comes from the data: the fix's UTC time against the count of PPS edges in the
+    /// IMU stream. The first fix decides which UTC second an edge is (the latest edge at or
+    /// before its arrival, less its fraction of a second: a receiver outputs its fix after the
+    /// pulse); from then on every fix's edge is its UTC second, whenever its bytes came, and
+    /// after [`LATENCY_FIXES`] fixes the decision is checked against the receiver's learned
+    /// latency (a receiver later than the IMU stream's lag behind it by most of a second). A
+    /// fix without a time, or before any edge, is tied by its arrival.
+    pub fn on_fix(&mut self, fix: &GpsFix) {
+        let a = self.last_t;
+        let utc = fix
+            .time_of_day_s
+            .filter(|_| !fix.time_backwards)
+            .map(|u| self.unwrap_utc(u));
+        if !fix.valid || fix.quality == 0 || fix.time_backwards {
+            // nothing to tie: counted and set aside at once
+            self.apply_fix(fix, a);
+            return;
+        }
+        let Some(&(s_last, t_last)) = self.edges.back() else {
+            // no PPS in the IMU stream (yet): wait for an edge, then by arrival
+            self.held.push(Held {
+                fix: fix.clone(),
+                tie: Tie::Untied,
+                arrived: a,
+            });
+            return;
+        };
+        let Some(u) = utc else {
+            // no time in the sentence: the edge the fix came the receiver's latency after
+            let sec = self.edge_by_arrival(a, 0.0, s_last, t_last);
+            self.hold_or_apply(fix, sec, 0.0, a);
+            return;
+        };
+        let (whole, frac) = (u.floor(), u - u.floor());
+        let whole = whole as i64;
+        if self.anchor.is_none() {
+            let sec = self.edge_by_arrival(a, frac, s_last, t_last);
+            self.anchor = Some(whole - sec);
+        }
+        if self.first_ties.len() < LATENCY_FIXES as usize {
+            self.first_ties.push(FirstTie {
+                whole,
+                frac,
+                arrived: a,
+                s_last,
+                t_last,
+            });
+            let anchor = self.anchor.unwrap_or(0);
+            let edge_t = t_last + (whole - anchor - s_last) as f64;
+            let ph = (a - edge_t - frac) * std::f64::consts::TAU;
+            self.arrivals = (
+                self.arrivals.0 + ph.cos(),
+                self.arrivals.1 + ph.sin(),
+                self.arrivals.2 + 1,
+            );
+            if self.first_ties.len() == LATENCY_FIXES as usize {
+                self.check_anchor();
+            }
+        }
+        let mut sec = whole - self.anchor.unwrap_or(0);
+        if sec > s_last + 2 || sec < s_last - 2 {
+            // a time that fits no edge near: a receiver whose clock jumped, or a fix seconds
+            // old. Set aside, unless the receiver's clock stays where it jumped to: then the
+            // edges are tied to its seconds anew.
+            let candidate = whole - self.edge_by_arrival(a, frac, s_last, t_last);
+            self.jump_streak = match self.jump_streak {
+                Some((c, n)) if c == candidate => Some((c, n + 1)),
+                _ => Some((candidate, 1)),
+            };
+            if self.jump_streak.is_some_and(|(_, n)| n < JUMPS_TO_REANCHOR) {
+                self.clock_jumps += 1;
+                self.fixes_seen += 1;
+                self.fixes_ignored += 1;
+                return;
+            }
+            tracing::warn!("the receiver's clock moved: its fixes are tied to the PPS edges anew");
+            self.anchor = Some(candidate);
+            self.utc_reanchors += 1;
+            sec = whole - candidate;
+        }
+        self.jump_streak = None;
+        self.hold_or_apply(fix, sec, frac, a);
+    }
+
+    /// The edge (its second number) a fix arriving at IMU time `a`, `frac` s after its UTC
+    /// second, belongs to: the latest edge at or before `a - frac` until the receiver's
+    /// latency is learned, then the edge nearest `a - frac - latency`.
+    fn edge_by_arrival(&self, a: f64, frac: f64, s_last: i64, t_last: f64) -> i64 {
+        let x = a - frac - t_last;
+        let n = match self.receiver_latency() {
+            Some(l) => (x - l).round(),
+            None => (x + 1e-9).floor(),
+        };
+        s_last + n as i64
+    }
+
+    /// With the receiver's latency learned, the first fixes' edges by their arrival: when most
+    /// say another UTC second for the edges than the first fix did, the tie moves there.
+    fn check_anchor(&mut self) {
+        let votes: Vec<i64> = self
+            .first_ties
+            .iter()
+            .map(|f| f.whole - self.edge_by_arrival(f.arrived, f.frac, f.s_last, f.t_last))
+            .collect();
+        let best = votes
+            .iter()
+            .copied()
+            .max_by_key(|v| (votes.iter().filter(|w| *w == v).count(), -*v))
+            .unwrap_or(0);
+        if Some(best) != self.anchor
+            && votes.iter().filter(|v| **v == best).count() * 2 > votes.len()
+        {
+            tracing::warn!(
+                "the receiver's fixes belong to the PPS edge a second {} than the first fix said (its latency {:.2} s): tied anew",
+                if best < self.anchor.unwrap_or(0) {
+                    "later"
+                } else {
+                    "earlier"
+                },
+                self.receiver_latency().unwrap_or(0.0)
+            );
+            self.utc_reanchors += 1;
+            self.anchor = Some(best);
+        }
+    }
+
+    /// A UTC time of day (s) made continuous across midnight.
+    fn unwrap_utc(&mut self, u: f64) -> f64 {
+        if let Some(last) = self.utc_last {
+            if u < last - 43_200.0 {
+                self.utc_days += 1;
+            } else if u > last + 43_200.0 {
+                self.utc_days -= 1;
+            }
+        }
+        self.utc_last = Some(u);
+        u + self.utc_days as f64 * 86_400.0
+    }
+
+    /// IMU time of the edge numbered `sec` (extrapolated a whole number of seconds from the
+    /// nearest edge kept when it was missing); none when it has not come yet.
+    fn edge_time(&self, sec: i64) -> Option<f64> {
+        let &(s_last, t_last) = self.edges.back()?;
+        if sec > s_last {
+            return None;
+        }
+        let (s, t) = self
+            .edges
+            .iter()
+            .rev()
+            .find(|e| e.0 <= sec)
+            .or(self.edges.front())
+            .copied()
+            .unwrap_or((s_last, t_last));
+        Some(t + (sec - s) as f64)
+    }
+
+    /// Take the fix now when its time has passed (counted late), else hold it.
+    fn hold_or_apply(&mut self, fix: &GpsFix, sec: i64, frac: f64, a: f64) {
+        if let Some(t) = self.edge_time(sec)
+            && self.last_t >= t + frac + self.cfg.fix_delay_s
+        {
+            self.late_fixes += 1;
+            self.apply_fix(fix, t + frac);
+            return;
+        }
+        self.held.push(Held {
+            fix: fix.clone(),
+            tie: Tie::Edge(sec, frac),
+            arrived: a,
+        });
+    }
+
+    /// Fixes whose PPS edge has not come within [`PPS_WAIT_S`] plus `fix_delay_s` of their
+    /// arrival: the PPS input is missing. They are applied at their arrival less `fix_delay_s`
+    /// and counted, rather than held until an edge comes back and then applied at the wrong
+    /// time.
+    fn apply_untied_fixes(&mut self) {
+        let wait = PPS_WAIT_S + self.cfg.fix_delay_s;
+        if !self.held.iter().any(|h| self.last_t - h.arrived > wait) {
+            return;
+        }
+        let held = std::mem::take(&mut self.held);
+        for h in held {
+            if self.last_t - h.arrived > wait {
+                self.untied_fixes += 1;
+                if self.untied_fixes == 1 {
+                    tracing::warn!(
+                        "a GPS fix waited {wait} s for its PPS edge: the PPS input is missing; fixes are applied at their arrival"
+                    );
+                }
+                self.apply_fix(&h.fix, h.arrived - self.cfg.fix_delay_s);
+            } else {
+                self.held.push(h);
+            }
+        }
+    }
+
+    /// When the held fix is due: IMU time of its edge (plus its fraction), once that edge has
+    /// come; a fix that came before any edge is tied by its arrival once there is one.
+    fn due_at(&self, h: &Held) -> Option<f64> {
+        match h.tie {
+            Tie::Edge(sec, frac) => self.edge_time(sec).map(|t| t + frac),
+            Tie::Untied => None,
+        }
+    }
+
+    /// Apply the held fixes whose time has come (their edge, plus their fraction, plus the
+    /// delay), in the order of those times.
+    fn apply_due_fixes(&mut self) {
+        // fixes that came before the first edge: tied now that there is one
+        if !self.edges.is_empty() && self.held.iter().any(|h| h.tie == Tie::Untied) {
+            let held = std::mem::take(&mut self.held);
+            for h in held {
+                if h.tie == Tie::Untied
+                    && let Some(&(s_last, t_last)) = self.edges.front()
+                {
+                    let frac = h.fix.time_of_day_s.map_or(0.0, |u| u - u.floor());
+                    let sec = self.edge_by_arrival(h.arrived.max(t_last), frac, s_last, t_last);
+                    if let Some(u) = h.fix.time_of_day_s
+                        && self.anchor.is_none()
+                    {
+                        self.anchor = Some(u.floor() as i64 - sec);
+                    }
+                    self.held.push(Held {
+                        tie: Tie::Edge(sec, frac),
+                        ..h
+                    });
+                } else {
+                    self.held.push(h);
+                }
+            }
+        }
+        self.apply_untied_fixes();
+        let d = self.cfg.fix_delay_s;
+        if !self
+            .held
+            .iter()
+            .any(|h| self.due_at(h).is_some_and(|t| self.last_t >= t + d))
+        {
+            return;
+        }
+        let mut held = std::mem::take(&mut self.held);
+        held.sort_by(|a, b| {
+            let (ta, tb) = (self.due_at(a), self.due_at(b));
+            ta.unwrap_or(f64::INFINITY)
+                .total_cmp(&tb.unwrap_or(f64::INFINITY))
+        });
+        for h in held {
+            match self.due_at(&h) {
+                Some(t) if self.last_t >= t + d => self.apply_fix(&h.fix, t),
+                _ => self.held.push(h),
+            }
+        }
+    }
+
+    /// Apply a fix taken at IMU time `taken_at`.
+    fn apply_fix(&mut self, fix: &GpsFix, taken_at: f64) {
+        self.fixes_seen += 1;
+        self.last_fix_at = Some((taken_at, fix.seq));
+        if !fix.valid || fix.time_backwards || fix.quality == 0 {
+            self.fixes_ignored += 1;
+            return;
+        }
+        self.last_good_fix_t = Some(self.last_t);
+        // RMC, GLL carry no height: they keep the one GGA gave (a start at height 0 wherever the
+        // vehicle is had every later fix rejected at 1700 m)
+        let alt = fix
+            .ellipsoid_height_m()
+            .or(self.first_fix.map(|f| f.2))
+            .unwrap_or(0.0);
+        let p = (fix.lat_deg.to_radians(), fix.lon_deg.to_radians(), alt);
+        if self.phase != NavPhase::Navigating {
+            self.first_fix = Some(p);
+            if fix.sentence == "GGA" {
+                self.first_fix_accuracy = self.stated_accuracy(fix);
+            }
+            return;
+        }
+        // RMC's speed and track against the INS's velocity when the fix was taken
+        if let (Some(v), Some(speed), Some(track)) = (self.v_at_pps, fix.speed_mps, fix.track_deg) {
+            let (s, c) = track.to_radians().sin_cos();
+            self.integrity.on_velocity(v, [speed * s, speed * c]);
+        }
+        // only GGA carries a full position (RMC repeats it without height)
+        if fix.sentence != "GGA" {
+            return;
+        }
+        let stated = self.stated_accuracy(fix);
+        let (Some(st), Some(k)) = (self.state.as_mut(), self.kf.as_mut()) else {
+            self.fixes_ignored += 1;
+            return;
+        };
+        // carry the fix forward from when it was taken to now with the INS velocity
+        let dt = (self.last_t - taken_at).clamp(0.0, 2.0);
+        let (rm, rn) = crate::navigation::earth::radii(st.lat);
+        let lat = p.0 + st.v.y * dt / (rm + st.h);
+        let lon = p.1 + st.v.x * dt / ((rn + st.h) * st.lat.cos());
+        let h = p.2 + st.v.z * dt;
+        let used = k.update(st, lat, lon, h, &stated);
+        if !used {
+            self.fixes_ignored += 1;
+            if self.rejected.len() < REJECTED_KEPT {
+                self.rejected.push(RejectedFix {
+                    lat_deg: fix.lat_deg,
+                    lon_deg: fix.lon_deg,
+                    nis: k.last_nis(),
+                    t_s: taken_at,
+                });
+            }
+        }
+        if let Some(nis) = k.last_nis() {
+            self.integrity.on_fix(nis, !used);
+        }
+    }
+
+    /// The solution's integrity monitor.
+    pub fn integrity(&self) -> &crate::navigation::integrity::IntegrityMonitor {
+        &self.integrity
+    }
+
+    /// IMU time of the latest update, s.
+    pub fn time(&self) -> f64 {
+        self.last_t
+    }
+
+    /// The filter (once navigating with GPS aiding).
+    pub fn filter(&self) -> Option<&Kf> {
+        self.kf.as_ref()
+    }
+
+    /// The best current state.
+    pub fn state(&self) -> Option<NavState> {
+        let st = self.state?;
+        Some(self.kf.as_ref().map_or(st, |k| k.corrected(&st)))
+    }
+
+    /// Summary.
+    pub fn summary(&self) -> NavigatorSummary {
+        NavigatorSummary {
+            phase: self.phase,
+            started_at_s: self.started_at,
+            output: self.state().map(|s| s.output()),
+            output_t_s: self.last_t,
+            filter: self.kf.as_ref().map(Kf::stats),
+            fixes_seen: self.fixes_seen,
+            fixes_ignored: self.fixes_ignored,
+            pps_edges: self.pps_edges,
+            late_fixes: self.late_fixes,
+            untied_fixes: self.untied_fixes,
+            pps_rejected: self.pps_rejected,
+            receiver_latency_s: self.receiver_latency(),
+            utc_edge_offset_s: self.anchor,
+            utc_reanchors: self.utc_reanchors,
+            clock_jumps: self.clock_jumps,
+            integrity: self.integrity.stats(),
+            imu_clock: self.clock,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A PPS line with jitter within the tolerance keeps every edge; a glitch between two edges
+    /// is rejected and counted, the rhythm goes on; a gap of whole seconds (PPS missing) is no
+    /// glitch; when the first edge ever was the glitch, the true rhythm is taken from its
+    /// second edge on.
+    #[test]
+    fn pps_edges_off_the_whole_second_are_rejected_and_counted() {
+        let mut n = Navigator::new(NavigationConfig::default());
+        let taken: Vec<bool> = [1.0, 2.0008, 2.9993, 4.0, 4.37, 5.0011, 9.0, 10.0]
+            .into_iter()
+            .map(|t| n.on_pps(t))
+            .collect();
+        assert_eq!(taken, [true, true, true, true, false, true, true, true]);
+        let s = n.summary();
+        assert_eq!((s.pps_edges, s.pps_rejected), (7, 1));
+        assert_eq!(n.last_pps, Some(10.0));
+
+        let mut n = Navigator::new(NavigationConfig::default());
+        for t in [0.63, 1.0, 2.0, 3.0] {
+            n.on_pps(t);
+        }
+        let s = n.summary();
+        assert_eq!((s.pps_edges, s.pps_rejected), (3, 1));
+        assert_eq!(n.last_pps, Some(3.0));
+    }
+
+    /// An IMU whose oscillator runs 2,500 ppm fast: its edges are taken, the rate is read from
+    /// them, the edges are then held to it (a glitch is still refused), and a gap of seconds
+    /// keeps its second numbers.
+    #[test]
+    fn the_imus_rate_is_read_from_its_edges_and_they_are_held_to_it() {
+        let mut n = Navigator::new(NavigationConfig::default());
+        let second = 1.0025;
+        let edge = |k: i64| 0.4 + k as f64 * second;
+        for k in 0..20 {
+            assert!(n.on_pps(edge(k)), "edge {k}");
+        }
+        assert!(!n.on_pps(edge(20) - 0.3), "a glitch");
+        // thirty seconds without a pulse: 75 ms of the IMU's seconds, a numbering nominal
+        // seconds would get wrong past 200 s
+        for k in 50..60 {
+            assert!(n.on_pps(edge(k)), "edge {k}");
+        }
+        let s = n.summary();
+        assert_eq!((s.pps_edges, s.pps_rejected), (30, 1));
+        let c = s.imu_clock.expect("the rate is read");
+        assert!((c.ppm - 2500.0).abs() < 1e-3, "{c:?}");
+        assert_eq!((c.edges, c.span_s), (30, 59.0));
+        assert!((c.true_dt(second) - 1.0).abs() < 1e-12);
+    }
+
+    /// While north-finding runs the navigator takes no updates, only the time: fixes are still
+    /// tied to their PPS edges and taken when due (the position stays current), none is held
+    /// past its edge and none is counted as lacking one. Until 2026-11-23 every fix of a
+    /// 145 s north-finding piled up and was then counted "untied" (PPS missing) at once.
+    #[test]
+    fn fixes_during_north_finding_are_taken_at_their_edges() {
+        let mut n = Navigator::new(NavigationConfig::default());
+        let fix = |k: u32| GpsFix {
+            sentence: "GGA".into(),
+            lat_deg: -45.0 + f64::from(k) * 1e-6,
+            lon_deg: 170.0,
+            alt_m: Some(5.0),
+            quality: 1,
+            valid: true,
+            ..GpsFix::default()
+        };
+        let mut t = 0.0;
+        for k in 0..150u32 {
+            // the edge at the whole second, the fix 0.1 s later, time moving in 10 ms steps
+            for step in 0..100 {
+                t = f64::from(k) + f64::from(step) * 0.01;
+                n.on_time(t);
+                if step == 0 {
+                    assert!(n.on_pps(t));
+                }
+                if step == 10 {
+                    n.on_fix(&fix(k));
+                }
+            }
+        }
+        assert!(t > 149.0);
+        let s = n.summary();
+        assert_eq!(s.untied_fixes, 0);
+        assert_eq!(s.fixes_seen, 150, "every fix taken once due");
+        assert!(n.held.is_empty());
+        let (lat, _, _) = n.first_fix.expect("a position");
+        assert!((lat.to_degrees() - (-45.0 + 149e-6)).abs() < 1e-9);
+    }
+
+    /// A receiver whose fixes come 0.7 s after their pulse: once its latency is learned, each
+    /// fix is taken at its own edge, not the next one (which the half-second rule alone picks:
+    /// a position error of a second's travel); and a bench receiver 0.05 s after the pulse
+    /// whose fix now and then reaches nav before the edge's IMU frame is still tied right.
+    #[test]
+    fn fixes_are_tied_to_their_own_edge_whatever_the_receivers_latency() {
+        for (latency, early_every) in [(0.7, None), (0.05, Some(4))] {
+            let mut n = Navigator::new(NavigationConfig::default());
+            let mut taken = Vec::new();
+            for k in 0..20u32 {
+                let edge = f64::from(k);
+                for step in 0..100 {
+                    let t = edge + f64::from(step) * 0.01;
+                    // the IMU stream behind the receiver now and then: the edge's frame is
+                    // processed after the fix
+                    let early = early_every.is_some_and(|e| k % e == 3);
+                    if step == 0 && !early {
+                        assert!(n.on_pps(edge));
+                    }
+                    n.on_time(t);
+                    let arrive = (latency * 100.0f64).round() as i32;
+                    if k > 0 && step == arrive {
+                        n.on_fix(&GpsFix {
+                            sentence: "GGA".into(),
+                            lat_deg: 60.0,
+                            lon_deg: 25.0,
+                            alt_m: Some(5.0),
+                            quality: 1,
+                            valid: true,
+                            seq: u64::from(k),
+                            time_of_day_s: Some(43_200.0 + f64::from(k)),
+                            ..GpsFix::default()
+                        });
+                    }
+                    if step == 0 && early {
+                        assert!(n.on_pps(edge));
+                    }
+                    if step == 99
+                        && let Some(at) = n.last_fix_time()
+                    {
+                        taken.push((k, at));
+                    }
+                }
+            }
+            // by the end of each second from the seventh on (the latency learned), that
+            // second's fix was taken, at its own edge
+            for &(k, (at, seq)) in taken.iter().filter(|(k, _)| *k >= 7) {
+                assert_eq!(
+                    seq,
+                    u64::from(k),
+                    "latency {latency}: second {k}: fix {seq} last"
+                );
+                assert!(
+                    (at - f64::from(k)).abs() < 1e-9,
+                    "latency {latency}: fix of second {k} taken at {at}"
+                );
+            }
+            let l = n.receiver_latency().expect("learned");
+            assert!((l - latency).abs() < 0.02, "{l}");
+        }
+    }
+
+    /// The fix last taken, when it is new.
+    fn note_taken(n: &Navigator, taken: &mut Vec<(f64, u64)>) {
+        if let Some(x) = n.last_fix_time()
+            && taken.last() != Some(&x)
+        {
+            taken.push(x);
+        }
+    }
+
+    fn timed_fix(utc: f64, seq: u64) -> GpsFix {
+        GpsFix {
+            sentence: "GGA".into(),
+            lat_deg: 60.0,
+            lon_deg: 25.0,
+            alt_m: Some(5.0),
+            quality: 1,
+            valid: true,
+            seq,
+            time_of_day_s: Some(utc),
+            ..GpsFix::default()
+        }
+    }
+
+    /// Each fix is taken at the IMU time its UTC time says (its edge, plus its fraction of a
+    /// second at 5 Hz), however late or early within its second its bytes came: the arrival
+    /// only decides which UTC second the first edge is. A first fix that comes before the IMU
+    /// stream has shown any edge is tied once the edge is there, not applied at its arrival.
+    #[test]
+    fn fixes_are_taken_at_the_time_their_utc_says_whenever_they_arrive() {
+        // arrivals: a fixed offset, or jumping about within the second (a loaded host)
+        for jitter in [false, true] {
+            let mut n = Navigator::new(NavigationConfig::default());
+            let mut taken = Vec::new();
+            let mut seq = 0u64;
+            // the receiver's UTC second of day at IMU time 0.3 (the first edge)
+            let utc0 = 50_000.0;
+            let mut pending: Vec<(f64, GpsFix)> = Vec::new();
+            for i in 0..2000u32 {
+                let t = f64::from(i) * 0.005;
+                n.on_time(t);
+                // edges at 0.3, 1.3, ...; the first one comes after the first fix arrives
+                if ((t - 0.3) / 1.0).fract().abs() < 1e-9 && t >= 0.3 {
+                    assert!(n.on_pps(t));
+                }
+                // epochs at 5 Hz from the first edge on, their bytes 0.06-0.35 s later
+                if t >= 0.3 - 1e-9 && (((t - 0.3) * 5.0).round() - (t - 0.3) * 5.0).abs() < 1e-9 {
+                    let e = ((t - 0.3) * 5.0).round();
+                    let delay = if jitter {
+                        0.06 + 0.29 * ((e * 0.37).sin().abs())
+                    } else {
+                        0.08
+                    };
+                    seq += 1;
+                    pending.push((t + delay, timed_fix(utc0 + e * 0.2, seq)));
+                }
+                // a fix whose bytes came before the first edge was seen
+                if i == 50 {
+                    n.on_fix(&timed_fix(utc0 - 0.2 + 0.0, 0));
+                }
+                pending.retain(|(at, f)| {
+                    if t >= *at - 1e-9 {
+                        n.on_fix(f);
+                        false
+                    } else {
+                        true
+                    }
+                });
+                note_taken(&n, &mut taken);
+            }
+            let s = n.summary();
+            assert_eq!(
+                (s.late_fixes, s.untied_fixes, s.utc_reanchors),
+                (0, 0, 0),
+                "{s:?}"
+            );
+            for &(at, seq) in taken.iter().filter(|x| x.1 > 0) {
+                let want = 0.3 + (seq - 1) as f64 * 0.2;
+                assert!(
+                    (at - want).abs() < 1e-9,
+                    "jitter {jitter}: fix {seq} taken at {at}, not {want}"
+                );
+            }
+            assert!(taken.len() > 40, "{}", taken.len());
+            assert_eq!(s.utc_edge_offset_s, Some(50_000));
+        }
+    }
+
+    /// A receiver whose clock jumps (here 100 s ahead, and stays there): the first fixes with
+    /// the new time fit no edge and are set aside, then the edges are tied to its seconds anew
+    /// and its fixes are taken at their edges again.
+    #[test]
+    fn a_receiver_clock_that_jumps_and_stays_is_followed_after_three_fixes() {
+        let mut n = Navigator::new(NavigationConfig::default());
+        let mut taken = Vec::new();
+        for k in 0..30u32 {
+            for step in 0..100 {
+                let t = f64::from(k) + f64::from(step) * 0.01;
+                n.on_time(t);
+                if step == 0 {
+                    assert!(n.on_pps(t));
+                }
+                if step == 10 {
+                    let jump = if k >= 15 { 100.0 } else { 0.0 };
+                    n.on_fix(&timed_fix(1000.0 + f64::from(k) + jump, u64::from(k)));
+                }
+                note_taken(&n, &mut taken);
+            }
+        }
+        let s = n.summary();
+        assert_eq!(
+            (s.clock_jumps, s.utc_reanchors, s.late_fixes),
+            (2, 1, 0),
+            "{s:?}"
+        );
+        assert_eq!(s.utc_edge_offset_s, Some(1100));
+        let seqs: Vec<u64> = taken.iter().map(|x| x.1).collect();
+        assert!(!seqs.contains(&15) && !seqs.contains(&16), "{seqs:?}");
+        for &(at, seq) in &taken {
+            assert!((at - seq as f64).abs() < 1e-9, "fix {seq} taken at {at}");
+        }
+        assert!(seqs.contains(&17) && seqs.contains(&28), "{seqs:?}");
+    }
+
+    /// Navigation starts at the height the receiver gives, whatever the sentence that came last
+    /// before the start (RMC has none), at an alpine pass and at the Dead Sea: no fix of the
+    /// first minute is rejected.
+    #[test]
+    fn navigation_starts_at_the_receivers_height_with_no_rejection() {
+        for height in [1700.0, -430.0, 4000.0, 5000.0] {
+            let mut n = Navigator::new(NavigationConfig {
+                enabled: true,
+                initial_heading_deg: Some(0.0),
+                ..NavigationConfig::default()
+            });
+            let dt = 0.01;
+            let g = 9.80665 - height * 3.086e-6;
+            for i in 0..6000u32 {
+                let t = f64::from(i + 1) * dt;
+                n.on_update(t, [0.0; 3], [0.0, 0.0, g * dt], dt);
+                if (i + 1) % 100 == 0 {
+                    assert!(n.on_pps(t));
+                    let k = u64::from((i + 1) / 100);
+                    let utc = 40_000.0 + k as f64;
+                    let gga = GpsFix {
+                        alt_m: Some(height),
+                        ..timed_fix(utc, 2 * k)
+                    };
+                    let rmc = GpsFix {
+                        sentence: "RMC".into(),
+                        alt_m: None,
+                        ..timed_fix(utc, 2 * k + 1)
+                    };
+                    n.on_fix(&gga);
+                    n.on_fix(&rmc);
+                }
+            }
+            let s = n.summary();
+            assert_eq!(s.phase, NavPhase::Navigating, "{height} m");
+            let f = s.filter.expect("the filter runs");
+            assert!(f.updates > 40, "{height} m: {f:?}");
+            assert_eq!(f.rejected, 0, "{height} m: {f:?}");
+            let h = s.output.expect("a solution").h_m;
+            assert!((h - height).abs() < 5.0, "{height} m: at {h} m");
+        }
+    }
+}
