@@ -427,7 +427,7 @@ pub fn imu_clock_check(s: &Scenario, clock: Option<&ClockEstimate>, edges: u64) 
 pub const NEES_PER_DOF_LIMIT: f64 = 5.0;
 
 /// Whether nav's sigmas hold its errors over the run (none where nav sent no covariances).
-pub fn sigma_check(series: &crate::engine::navigate::SeriesStats) -> Option<Check> {
+pub fn sigma_check(series: &crate::engine::scoring::SeriesStats) -> Option<Check> {
     let [p, v] = series.mean_nees_per_dof?;
     Some(Check {
         name: "nav's sigmas hold its errors (NEES)".into(),
@@ -444,7 +444,7 @@ pub fn sigma_check(series: &crate::engine::navigate::SeriesStats) -> Option<Chec
 pub fn navigation_checks(
     out: &mut Vec<Check>,
     s: &Scenario,
-    score: Option<&crate::engine::navigate::NavScore>,
+    score: Option<&crate::engine::scoring::NavScore>,
     nav: &Summary,
     gps: Option<&emulators::adapters::pty::GpsTxStats>,
 ) {
@@ -595,7 +595,7 @@ fn static_checks(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::engine::navigate::SeriesStats;
+    use crate::engine::scoring::SeriesStats;
 
     #[test]
     fn sigmas_that_do_not_hold_the_errors_fail_their_check() {

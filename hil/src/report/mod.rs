@@ -57,9 +57,9 @@ pub struct RunReport {
     /// nav's solution frames as the bench received them.
     pub solution: crate::procedures::observe::SolutionWatch,
     /// nav's navigation scored against truth (runs that navigate).
-    pub navigation: Option<crate::engine::navigate::NavScore>,
+    pub navigation: Option<crate::engine::scoring::NavScore>,
     /// The same second by second, from nav's recording.
-    pub navigation_series: Option<crate::engine::navigate::SeriesStats>,
+    pub navigation_series: Option<crate::engine::scoring::SeriesStats>,
     /// nav's exit status.
     pub nav_exit: Option<i32>,
     /// nav's summary (as nav wrote it; rebuilt from its recording when it was killed).

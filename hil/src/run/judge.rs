@@ -6,7 +6,7 @@
 
 use super::offload::{self, Recomputed};
 use super::{Phases, RunOptions};
-use crate::engine::navigate::{FixFate, NavScore, ScoredRecording, SeriesStats};
+use crate::engine::scoring::{FixFate, NavScore, ScoredRecording, SeriesStats};
 use crate::engine::truthrec::RunTruth;
 use crate::report::{self, KillOutcome, NavMemory, RunReport};
 use crate::scenario::Scenario;
@@ -194,7 +194,7 @@ fn score_navigation(
         return (None, None);
     };
     let imu = s.imu.oscillator().from_first_sample();
-    let o = crate::engine::navigate::score_summary(drive, nav_json, &imu);
+    let o = crate::engine::scoring::score_summary(drive, nav_json, &imu);
     let mut navigation_series = None;
     match scored {
         Ok(sc) if !sc.scores.is_empty() => {

@@ -17,9 +17,9 @@
 //! writes `server.alive` (its pid and a count) every second while it runs and removes it when
 //! stopped. CBOR keeps every `f64` bit for bit (NaN included).
 
-use crate::engine::navigate::{RecordingScorer, ScoredRecording};
 use crate::engine::recording::Playback;
 use crate::engine::reference::InProcess;
+use crate::engine::scoring::{RecordingScorer, ScoredRecording};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, anyhow, bail};
 use emulators::drive::Drive;

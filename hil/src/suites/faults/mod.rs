@@ -167,7 +167,7 @@ fn tt_faults(s: &mut Scenario, f: impl FnOnce(&mut emulators::turntable::Turntab
 fn end_error(r: &RunReport) -> Option<f64> {
     let drive = emulators::drive::Drive::plan(r.scenario.drive.as_ref()?).ok()?;
     let imu = r.scenario.imu.oscillator().from_first_sample();
-    crate::engine::navigate::score_summary(&drive, &r.nav, &imu).map(|n| n.position_error_m)
+    crate::engine::scoring::score_summary(&drive, &r.nav, &imu).map(|n| n.position_error_m)
 }
 
 /// What nav must do with a frame overtaken on the bus.
