@@ -2,7 +2,6 @@
 
 use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
-use hil::run::sibling_binary;
 use std::path::PathBuf;
 
 mod cmd;
@@ -200,7 +199,14 @@ enum Cmd {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let cmd = <Cli as clap::CommandFactory>::command();
+    let matches = cmd.clone().get_matches();
+    let cli = match <Cli as clap::FromArgMatches>::from_arg_matches(&matches) {
+        Ok(c) => c,
+        Err(e) => e.exit(),
+    };
+    // kept for running the same command again in the QEMU guest (cmd::guest::same_command)
+    cmd::guest::remember(cmd, matches);
     // nav's pipeline runs in process here (drills, experiments, replays): its progress goes in
     // the results, not in a log line per run; under the fuzzer its warnings about the hostile
     // input are the expected answer, counted by the fuzzer, not logged a million times

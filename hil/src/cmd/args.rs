@@ -43,19 +43,6 @@ pub(crate) struct LiveArgs {
 }
 
 impl LiveArgs {
-    /// The arguments that ask for this view again (a command run again in the guest).
-    pub(crate) fn to_args(&self) -> Vec<String> {
-        match self.live {
-            Some(a) => vec![
-                "--live".into(),
-                a.to_string(),
-                "--live-wait".into(),
-                self.live_wait.to_string(),
-            ],
-            None => Vec::new(),
-        }
-    }
-
     /// The view to run on: the one already started, or a new one (`true`: this caller owns it
     /// and finishes it), or none.
     pub(crate) fn view(
@@ -150,33 +137,6 @@ pub(crate) struct FreeArgs {
 }
 
 impl FreeArgs {
-    /// The arguments that ask for this again (a command run again in the guest).
-    pub(crate) fn to_args(&self) -> Vec<String> {
-        if !self.free {
-            return Vec::new();
-        }
-        let mut a = vec![
-            "--free".into(),
-            "--answer-within".into(),
-            self.answer_within.to_string(),
-            "--max-late-ms".into(),
-            self.max_late_ms.to_string(),
-        ];
-        if let Some(d) = &self.dut {
-            a.extend(["--dut".into(), d.clone()]);
-        }
-        if let Some(b) = self.latency_budget_ms {
-            a.extend(["--latency-budget-ms".into(), b.to_string()]);
-        }
-        if let Some(b) = self.lead_allowance_ms {
-            a.extend(["--lead-allowance-ms".into(), b.to_string()]);
-        }
-        for r in &self.real {
-            a.extend(["--real".into(), r.clone()]);
-        }
-        a
-    }
-
     /// The run's options for scenario `s`, on `iface` into `out`, our nav being `nav`.
     pub(crate) fn options(
         &self,

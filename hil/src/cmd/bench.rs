@@ -1,7 +1,7 @@
 //! `hil bench`: the benchmark suite, where vcan is (natively, or all of it in the guest).
 
 use crate::cmd::args::BusArgs;
-use crate::cmd::guest::{absolute, default_out, rerun_in_guest};
+use crate::cmd::guest::{absolute, default_out, run_in_guest, same_command};
 use anyhow::{Context, Result, bail};
 use hil::run::{run_here, sibling_binary};
 use hil::scenario::Scenario;
@@ -129,29 +129,14 @@ pub(crate) fn bench(a: BenchArgs) -> Result<i32> {
 
 /// The whole benchmark again inside the QEMU guest, with the same arguments.
 fn bench_in_guest(a: &BenchArgs, out: &Path) -> Result<i32> {
-    let mut args: Vec<String> = vec![
-        "bench".into(),
-        "--seconds".into(),
-        a.seconds.to_string(),
-        "--passes".into(),
-        a.passes.to_string(),
-        "--bus-seconds".into(),
-        a.bus_seconds.to_string(),
-        "--raw-frames".into(),
-        a.raw_frames.to_string(),
-        "--iface".into(),
-        a.bus.iface.clone(),
-        "--out".into(),
-        out.to_string_lossy().into_owned(),
-    ];
-    let mut extra = vec![];
-    // the scenarios asked for (none: the shipped ones and the drill, chosen in the guest)
-    for f in &a.scenario {
-        let f = absolute(f)?;
-        extra.push(f.parent().map(Path::to_path_buf).unwrap_or_default());
-        args.extend(["--scenario".into(), f.to_string_lossy().into_owned()]);
-    }
-    rerun_in_guest(args, a.bus.json, out, extra, "bench.json")
+    let (args, extra) = same_command(&[("out", out.to_string_lossy().into_owned())], &[])?;
+    run_in_guest(
+        args,
+        out,
+        extra,
+        vec![hil::run::sibling_binary("nav")?],
+        a.bus.json.then_some("bench.json"),
+    )
 }
 
 /// The scenario files given, or the shipped ones under scenarios/.

@@ -2,7 +2,7 @@
 
 use crate::cmd::args::{BusArgs, FreeArgs, LiveArgs, finish_view};
 use crate::cmd::drill::{NorthFindingArgs, drill_north_finding};
-use crate::cmd::guest::{absolute, default_out, run_in_guest};
+use crate::cmd::guest::{absolute, default_out, run_in_guest, same_command};
 use crate::cmd::run::run_procedure;
 use anyhow::{Context, Result};
 use hil::run::sibling_binary;
@@ -19,17 +19,8 @@ pub(crate) fn demo(speed: f64, dwell: f64, out: Option<PathBuf>, live: LiveArgs)
     let in_guest = std::env::var_os(GUEST_ENV).is_some();
     if !in_guest && !matches!(vcan_setup::can_support(), CanSupport::Available) {
         // one guest boot for both parts
-        let args = vec![
-            "demo".into(),
-            "--speed".into(),
-            speed.to_string(),
-            "--dwell".into(),
-            dwell.to_string(),
-            "--out".into(),
-            out.to_string_lossy().into_owned(),
-        ];
-        let args = [args, live.to_args()].concat();
-        let status = run_in_guest(args, &out, vec![], vec![sibling_binary("nav")?], None)?;
+        let (args, shares) = same_command(&[("out", out.to_string_lossy().into_owned())], &[])?;
+        let status = run_in_guest(args, &out, shares, vec![sibling_binary("nav")?], None)?;
         return Ok(status);
     }
     let seed = std::time::SystemTime::now()

@@ -1,7 +1,7 @@
 //! `hil faults`: the fault matrix, where vcan is (natively, or all of it in the guest).
 
 use crate::cmd::args::BusArgs;
-use crate::cmd::guest::{absolute, default_out, run_in_guest_with_junit};
+use crate::cmd::guest::{absolute, default_out, run_in_guest_with_junit, same_command};
 use anyhow::{Result, bail};
 use hil::run::sibling_binary;
 use hil::suites::faults::{FaultOptions, matrix, run_matrix};
@@ -60,28 +60,14 @@ pub(crate) fn faults(a: FaultsArgs) -> Result<i32> {
         None => sibling_binary("nav")?,
     };
     if !a.bus.here() {
-        let mut args: Vec<String> = vec![
-            "faults".into(),
-            "--speed".into(),
-            a.speed.to_string(),
-            "--iface".into(),
-            a.bus.iface.clone(),
-            "--jobs".into(),
-            a.jobs.to_string(),
-            "--out".into(),
-            out.to_string_lossy().into_owned(),
-        ];
-        if !a.only.is_empty() {
-            args.extend(["--only".into(), a.only.join(",")]);
-        }
-        args.extend(["--nav".into(), nav.to_string_lossy().into_owned()]);
-        if a.bus.json {
-            args.push("--json".into());
-        }
-        let shares = nav
-            .parent()
-            .map(|p| vec![p.to_path_buf()])
-            .unwrap_or_default();
+        let (args, mut shares) = same_command(
+            &[
+                ("out", out.to_string_lossy().into_owned()),
+                ("nav", nav.to_string_lossy().into_owned()),
+            ],
+            &["junit"],
+        )?;
+        shares.extend(nav.parent().map(std::path::Path::to_path_buf));
         let code = run_in_guest_with_junit(
             args,
             &out,

@@ -20,24 +20,124 @@ pub(crate) fn absolute(p: &Path) -> Result<PathBuf> {
     })
 }
 
-/// Run this program with `args` inside the QEMU guest (this kernel has no CAN): shares the
-/// workspace, `out` and `extra` folders; returns the guest command's exit status.
-/// Run the hil command `args` again inside the guest with nav's libraries, `--json` added when
-/// asked; the run's JSON file `json_file` then goes to stdout alone.
-pub(crate) fn rerun_in_guest(
-    mut args: Vec<String>,
-    json: bool,
-    out: &Path,
-    extra: Vec<PathBuf>,
-    json_file: &str,
-) -> Result<i32> {
-    if json {
-        args.push("--json".into());
-    }
-    let nav = crate::sibling_binary("nav")?;
-    run_in_guest(args, out, extra, vec![nav], json.then_some(json_file))
+/// This run's command line as clap parsed it, kept for running the same command again in the
+/// guest ([`same_command`]).
+static PARSED: std::sync::OnceLock<(clap::Command, clap::ArgMatches)> = std::sync::OnceLock::new();
+
+/// Keep the command line `matches` of command `cmd` (hil's `main`, once).
+pub(crate) fn remember(mut cmd: clap::Command, matches: clap::ArgMatches) {
+    cmd.build();
+    let _ = PARSED.set((cmd, matches));
 }
 
+/// This command again, for the guest, from its parsed arguments: every argument given on the
+/// command line (or by the environment), the paths among them made absolute with their folders
+/// shared, the options in `set` given the values there (added where absent: the output folder,
+/// the nav binary, resolved here) and those in `drop` left out (`--junit`, handled by
+/// [`run_in_guest_with_junit`]). Returns the arguments and the folders to share.
+pub(crate) fn same_command(
+    set: &[(&str, String)],
+    drop: &[&str],
+) -> Result<(Vec<String>, Vec<PathBuf>)> {
+    let (cmd, m) = PARSED
+        .get()
+        .context("the command line was not kept (hil's main calls cmd::guest::remember)")?;
+    argv_of(cmd, m, set, drop)
+}
+
+/// [`same_command`] for the command line `m` of command `cmd` (built).
+fn argv_of(
+    cmd: &clap::Command,
+    m: &clap::ArgMatches,
+    set: &[(&str, String)],
+    drop: &[&str],
+) -> Result<(Vec<String>, Vec<PathBuf>)> {
+    let mut args = Vec::new();
+    let mut shares = Vec::new();
+    let (mut cmd, mut m) = (cmd, m);
+    while let Some((name, sub)) = m.subcommand() {
+        args.push(name.to_string());
+        cmd = cmd
+            .find_subcommand(name)
+            .with_context(|| format!("no subcommand {name} in hil's command line"))?;
+        m = sub;
+        if sub.subcommand().is_none() {
+            break;
+        }
+    }
+    let mut positional = Vec::new();
+    for arg in cmd.get_arguments() {
+        let id = arg.get_id().as_str();
+        let given = matches!(
+            m.value_source(id),
+            Some(clap::parser::ValueSource::CommandLine | clap::parser::ValueSource::EnvVariable)
+        );
+        if drop.contains(&id) || set.iter().any(|(k, _)| *k == id) || !given {
+            continue;
+        }
+        let flag = arg
+            .get_long()
+            .map(|l| format!("--{l}"))
+            .or_else(|| arg.get_short().map(|c| format!("-{c}")));
+        if !arg.get_action().takes_values() {
+            let n = match arg.get_action() {
+                clap::ArgAction::Count => usize::from(m.get_count(id)),
+                _ => 1,
+            };
+            args.extend(std::iter::repeat_n(flag.clone().unwrap_or_default(), n));
+            continue;
+        }
+        let is_path = arg.get_value_parser().type_id() == std::any::TypeId::of::<PathBuf>();
+        for occurrence in m.get_raw_occurrences(id).into_iter().flatten() {
+            let mut values = Vec::new();
+            for v in occurrence {
+                let v = if is_path {
+                    let p = absolute(Path::new(v))?;
+                    shares.push(if p.is_dir() {
+                        p.clone()
+                    } else {
+                        p.parent().map(Path::to_path_buf).unwrap_or_default()
+                    });
+                    p.to_string_lossy().into_owned()
+                } else {
+                    v.to_string_lossy().into_owned()
+                };
+                values.push(v);
+            }
+            match &flag {
+                None => positional.extend(values),
+                Some(f) if values.is_empty() => args.push(f.clone()),
+                Some(f) => {
+                    for v in values {
+                        // a value that starts with '-' (a negative latitude) stays with its option
+                        if v.starts_with('-') {
+                            args.push(format!("{f}={v}"));
+                        } else {
+                            args.extend([f.clone(), v]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    for (id, v) in set {
+        let long = cmd
+            .get_arguments()
+            .find(|a| a.get_id().as_str() == *id)
+            .and_then(|a| a.get_long())
+            .with_context(|| format!("hil {}: no option {id}", args.join(" ")))?;
+        args.extend([format!("--{long}"), v.clone()]);
+    }
+    args.extend(positional);
+    shares.sort();
+    shares.dedup();
+    Ok((args, shares))
+}
+
+/// Run this program with `args` inside the QEMU guest (this kernel has no CAN): shares the
+/// workspace, `out` and `extra` folders, with the libraries of the programs `libs_for`; `json`:
+/// the run's JSON file in `out` then goes to stdout alone. Returns the guest command's exit
+/// status.
 pub(crate) fn run_in_guest(
     args: Vec<String>,
     out: &Path,
@@ -253,5 +353,92 @@ mod tests {
         // program): left read-write
         assert!(programs_cached(exe, &[ws, "/w/target/debug/runs/a".into()]).is_empty());
         assert!(programs_cached(exe, &["/w/target/debug".into()]).is_empty());
+    }
+    use clap::{CommandFactory, FromArgMatches};
+
+    /// hil's command line `argv`, parsed, then again as the guest is given it (with `set` and
+    /// without `drop`): the guest's arguments and the folders shared.
+    fn again(
+        argv: &[&str],
+        set: &[(&str, String)],
+        drop: &[&str],
+    ) -> (crate::Cli, Vec<String>, Vec<PathBuf>) {
+        let mut cmd = crate::Cli::command();
+        cmd.build();
+        let m = cmd.clone().try_get_matches_from(argv).expect("parses");
+        let (args, shares) = argv_of(&cmd, &m, set, drop).expect("the command again");
+        let m2 = cmd
+            .try_get_matches_from(std::iter::once("hil".to_string()).chain(args.iter().cloned()))
+            .unwrap_or_else(|e| panic!("{args:?} parses again: {e}"));
+        (
+            crate::Cli::from_arg_matches(&m2).expect("a command"),
+            args,
+            shares,
+        )
+    }
+
+    /// A command run again in the guest asks for what was asked here: every option given (a
+    /// flag, a value, a value that starts with '-', an optional value left out), the paths
+    /// made absolute with their folders shared, the output folder and nav set here, `--junit`
+    /// left to the guest's own file; defaults are not spelled out (the guest takes the same).
+    #[test]
+    fn a_command_again_in_the_guest_parses_to_what_was_asked() {
+        let here = std::env::current_dir().expect("a working folder");
+        let (cli, args, shares) = again(
+            &[
+                "hil",
+                "run",
+                "--scenario",
+                "x/drive.toml",
+                "--speed",
+                "5",
+                "--no-reference",
+                "--live",
+                "--iface",
+                "vcan9",
+                "--junit",
+                "j.xml",
+                "--json",
+            ],
+            &[("out", "/o".into()), ("nav", "/bin/nav2".into())],
+            &["junit"],
+        );
+        let crate::Cmd::Run(a) = cli.cmd else {
+            panic!("{args:?}: not run")
+        };
+        assert_eq!(a.scenario, Some(here.join("x/drive.toml")));
+        assert_eq!(shares, vec![here.join("x")]);
+        assert_eq!(a.speed, Some(5.0));
+        assert!(a.no_reference && a.bus.json && !a.gpsd);
+        assert_eq!(
+            a.live.live,
+            Some(hil::live::DEFAULT_ADDR.parse().expect("an address"))
+        );
+        assert_eq!(a.bus.iface, "vcan9");
+        assert_eq!(a.bus.out, Some(PathBuf::from("/o")));
+        assert_eq!(a.nav, Some(PathBuf::from("/bin/nav2")));
+        assert_eq!(a.junit, None);
+        assert!(
+            !args.iter().any(|x| x == "--duration"),
+            "{args:?}: a default spelled out"
+        );
+        // a subcommand's subcommand, and a negative value kept with its option
+        let (cli, args, _) = again(
+            &[
+                "hil",
+                "drill",
+                "north-finding",
+                "--lat",
+                "-35.5",
+                "--out-and-back",
+            ],
+            &[],
+            &[],
+        );
+        let crate::Cmd::Drill(crate::cmd::drill::Drill::NorthFinding(a)) = cli.cmd else {
+            panic!("{args:?}: not the drill")
+        };
+        assert_eq!(a.lat, -35.5, "{args:?}");
+        assert!(a.out_and_back, "{args:?}");
     }
 }

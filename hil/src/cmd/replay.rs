@@ -1,7 +1,7 @@
 //! `hil replay`: a recording through nav's pipeline.
 
 use crate::cmd::args::BusArgs;
-use crate::cmd::guest::{absolute, default_out, run_in_guest};
+use crate::cmd::guest::{absolute, default_out, run_in_guest, same_command};
 use anyhow::{Context, Result, bail};
 use hil::run::sibling_binary;
 use hil::scenario::Scenario;
@@ -128,28 +128,17 @@ pub(crate) fn replay_bus(
         }
         return Ok(i32::from(!r.identical()));
     }
-    // no CAN here: the same command in the QEMU guest, the recording's folder shared
-    let mcap = absolute(&mcap)?;
-    let mut args: Vec<String> = vec!["replay".into(), "--bus".into()];
-    args.push(mcap.to_string_lossy().into_owned());
-    let cfg_path = match config {
-        Some(c) => absolute(c)?,
-        None => mcap.parent().unwrap_or(Path::new("/")).join("nav.toml"),
-    };
-    args.extend(["--config".into(), cfg_path.to_string_lossy().into_owned()]);
-    args.extend(["--speed".into(), speed.to_string()]);
-    args.extend(["--nav".into(), nav_bin.to_string_lossy().into_owned()]);
-    args.extend(["--iface".into(), bus.iface.clone()]);
-    args.extend(["--out".into(), out.to_string_lossy().into_owned()]);
-    let mut extra: Vec<PathBuf> = [&mcap, &cfg_path]
-        .iter()
-        .filter_map(|p| p.parent().map(Path::to_path_buf))
-        .collect();
-    extra.dedup();
+    // no CAN here: the same command in the QEMU guest, the recording's folder shared (and the
+    // config's, given or beside the recording)
+    let (args, extra) = same_command(
+        &[
+            ("out", out.to_string_lossy().into_owned()),
+            ("nav", nav_bin.to_string_lossy().into_owned()),
+        ],
+        &[],
+    )?;
     run_in_guest(
-        args.into_iter()
-            .chain(bus.json.then(|| "--json".to_string()))
-            .collect(),
+        args,
         &out,
         extra,
         vec![nav_bin],

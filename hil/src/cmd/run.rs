@@ -1,7 +1,7 @@
 //! `hil run`: one scenario through the bench.
 
 use crate::cmd::args::{BusArgs, FreeArgs, LiveArgs, finish_view};
-use crate::cmd::guest::{absolute, default_out, run_in_guest_with_junit};
+use crate::cmd::guest::{absolute, default_out, run_in_guest_with_junit, same_command};
 use anyhow::{Context, Result};
 use hil::report;
 use hil::run::{RunOptions, run_here, sibling_binary};
@@ -67,46 +67,21 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
     if a.bus.here() {
         return run_lockstep_here(&s, &a, &out, in_guest);
     }
-    // No CAN here: run this same command inside the QEMU guest.
-    let mut args: Vec<String> = vec!["run".into()];
-    let mut extra = vec![out.clone()];
-    if let Some(p) = &a.scenario {
-        let p = absolute(p)?;
-        extra.push(p.parent().map(Path::to_path_buf).unwrap_or_default());
-        args.extend(["--scenario".into(), p.to_string_lossy().into_owned()]);
-    }
-    args.extend([
-        "--duration".into(),
-        s.duration_s.to_string(),
-        "--speed".into(),
-        s.speed.to_string(),
-    ]);
-    args.extend([
-        "--iface".into(),
-        a.bus.iface.clone(),
-        "--out".into(),
-        out.to_string_lossy().into_owned(),
-    ]);
+    // No CAN here: run this same command inside the QEMU guest, with the output folder and
+    // the nav binary resolved here (another build of nav may live outside the folders the
+    // guest is given: its folder is shared)
     let nav = match &a.nav {
         Some(n) => absolute(n)?,
         None => sibling_binary("nav")?,
     };
-    args.extend(["--nav".into(), nav.to_string_lossy().into_owned()]);
-    // another build of nav may live outside the folders the guest is given
-    if let Some(dir) = nav.parent() {
-        extra.push(dir.to_path_buf());
-    }
-    if a.bus.json {
-        args.push("--json".into());
-    }
-    if a.no_reference {
-        args.push("--no-reference".into());
-    }
-    if a.gpsd {
-        args.push("--gpsd".into());
-    }
-    args.extend(a.live.to_args());
-    args.extend(a.free.to_args());
+    let (args, mut extra) = same_command(
+        &[
+            ("out", out.to_string_lossy().into_owned()),
+            ("nav", nav.to_string_lossy().into_owned()),
+        ],
+        &["junit"],
+    )?;
+    extra.extend(nav.parent().map(Path::to_path_buf));
     let code = run_in_guest_with_junit(
         args,
         &out,

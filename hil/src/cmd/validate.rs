@@ -1,7 +1,7 @@
 //! `hil validate turntable`: the validation suite against the mechanism on a bus.
 
 use crate::cmd::args::BusArgs;
-use crate::cmd::guest::{absolute, default_out, run_in_guest_with_junit};
+use crate::cmd::guest::{absolute, default_out, run_in_guest_with_junit, same_command};
 use anyhow::{Context, Result, bail};
 use clap::Subcommand;
 use std::path::PathBuf;
@@ -67,33 +67,12 @@ pub(crate) fn validate_turntable(a: ValidateArgs) -> Result<i32> {
     )?;
     let here = a.real || a.bus.here();
     if !here {
-        let mut args: Vec<String> = vec![
-            "validate".into(),
-            "turntable".into(),
-            "--iface".into(),
-            a.bus.iface.clone(),
-            "--axis".into(),
-            a.axis.to_string(),
-            "--speed".into(),
-            a.speed.to_string(),
-            "--out".into(),
-            out.to_string_lossy().into_owned(),
-        ];
-        if let Some(f) = a.fault {
-            args.extend([
-                "--fault".into(),
-                clap::ValueEnum::to_possible_value(&f)
-                    .map(|v| v.get_name().to_string())
-                    .unwrap_or_default(),
-            ]);
-        }
-        if a.bus.json {
-            args.push("--json".into());
-        }
+        let (args, shares) =
+            same_command(&[("out", out.to_string_lossy().into_owned())], &["junit"])?;
         let code = run_in_guest_with_junit(
             args,
             &out,
-            vec![],
+            shares,
             vec![],
             a.bus.json.then_some("validation.json"),
             a.junit.as_deref(),
