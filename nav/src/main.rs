@@ -301,15 +301,7 @@ impl ImuWatch {
                 .is_some_and(|s| imu_frame_waiting(s.as_raw_fd()))
         {
             if !shell.waiting.is_empty() {
-                read_errors = drain_can(batch, shell);
-                take_in_order(
-                    batch,
-                    nav::shell::arrival::Release::All,
-                    pipeline,
-                    shell,
-                    out,
-                )
-                .await?;
+                read_errors = take_all(batch, pipeline, shell, out).await?;
             }
             pipeline.set_imu_timeout(true, self.timeout_ms, out);
             shell.act(out).await?;
@@ -384,15 +376,7 @@ async fn finish(
     let iface = shell.iface;
     // what reached the socket and the port before the signal is processed, not left unread:
     // every frame on the bus is then either received or in the kernel's drop count
-    read_errors += drain_can(batch, shell);
-    take_in_order(
-        batch,
-        nav::shell::arrival::Release::All,
-        pipeline,
-        shell,
-        out,
-    )
-    .await?;
+    read_errors += take_all(batch, pipeline, shell, out).await?;
     if let Some(g) = gps.as_mut() {
         while let Some(bytes) = g.try_read() {
             shell.gps_bytes(wall_ns(), bytes, pipeline, out).await?;
@@ -490,15 +474,7 @@ async fn on_gps_event(
         }
         GpsEvent::Opened | GpsEvent::Closed(_) if !shell.waiting.is_empty() => {
             // the bytes read before the port opened or closed go in before it
-            read_errors = drain_can(batch, shell);
-            take_in_order(
-                batch,
-                nav::shell::arrival::Release::All,
-                pipeline,
-                shell,
-                out,
-            )
-            .await?;
+            read_errors = take_all(batch, pipeline, shell, out).await?;
             port_event(ev, pipeline, out);
         }
         _ => port_event(ev, pipeline, out),
@@ -598,6 +574,27 @@ fn drain_can(batch: &mut Vec<Received>, shell: &Shell<'_>) -> u64 {
             }
         }
     }
+}
+
+/// Every frame the socket has received, then every read of the receiver's port still waiting,
+/// through the pipeline now (a port event, nav's watchdog, the end of the run: no later frame
+/// will come to release them). Returns the read errors met.
+async fn take_all(
+    batch: &mut Vec<Received>,
+    pipeline: &mut Pipeline,
+    shell: &mut Shell<'_>,
+    out: &mut Vec<Output>,
+) -> Result<u64> {
+    let read_errors = drain_can(batch, shell);
+    take_in_order(
+        batch,
+        nav::shell::arrival::Release::All,
+        pipeline,
+        shell,
+        out,
+    )
+    .await?;
+    Ok(read_errors)
 }
 
 /// The frames in `batch` and the receiver's bytes that wait, through the pipeline in the

@@ -22,6 +22,43 @@ pub fn frame_bits_worst(dlc: u8) -> u32 {
     exposed + 13 + (exposed - 1) / 4
 }
 
+/// The longest time a frame of `payload` bytes takes on the bus, s: standard or `extended`
+/// identifier, classic CAN or CAN FD (`fd`, with the bit-rate switch: the data phase at
+/// `data_bps`, the rest at `nominal_bps`), every stuff bit the rules allow counted (one per
+/// four bits of the stuffed fields; CAN FD's CRC field with its fixed stuff bits). For classic
+/// frames the bound of Davis et al. (2007): `g + 8n + 13 + floor((g + 8n - 1) / 4)` bits, `g`
+/// 34 standard, 54 extended.
+pub fn frame_time_worst_s(
+    extended: bool,
+    payload: usize,
+    fd: bool,
+    nominal_bps: f64,
+    data_bps: f64,
+) -> f64 {
+    let n = payload as u32 * 8;
+    if !fd {
+        let g = if extended { 54 } else { 34 };
+        return f64::from(g + n + 13 + (g + n - 1) / 4) / nominal_bps;
+    }
+    // arbitration phase: SOF, identifier (SRR, IDE and the 18 more bits when extended), RRS,
+    // IDE/FDF, res, BRS
+    let arb = if extended {
+        1 + 11 + 2 + 18 + 1 + 1 + 1 + 1
+    } else {
+        1 + 11 + 1 + 1 + 1 + 1 + 1
+    };
+    // data phase: ESI, DLC, the data, stuffed; the stuff count (4) and CRC (17 or 21) with a
+    // fixed stuff bit before every four bits, the CRC delimiter
+    let crc = if payload <= 16 { 17 } else { 21 };
+    let stuffed = 1 + 4 + n;
+    let fixed = 4 + crc;
+    let data = stuffed + stuffed / 4 + fixed + fixed.div_ceil(4) + 1;
+    // after the switch back: ACK slot and delimiter, end of frame, intermission
+    let tail = 1 + 1 + 7 + 3;
+    let arb = arb + (arb - 1) / 4;
+    f64::from(arb + tail) / nominal_bps + f64::from(data) / data_bps
+}
+
 /// Bits on the wire for `frame` exactly as a classic CAN controller sends it (11-bit
 /// identifier, data frame): start of frame, arbitration, control and data fields and the
 /// CRC-15 sequence with their stuff bits (a bit of opposite value after five equal bits, the

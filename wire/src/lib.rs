@@ -16,6 +16,8 @@ pub mod crc;
 #[cfg(feature = "dbc")]
 pub mod dbc;
 pub mod errframe;
+#[cfg(feature = "dbc")]
+pub mod mapping;
 mod messages;
 #[cfg(feature = "socketcan")]
 mod sock;

@@ -1,0 +1,617 @@
+//! A lab's mapping: which messages and signals of the DBC it brings carry what the bench's
+//! emulated devices produce (the IMU's samples, its status), which of its messages carry an
+//! alive counter and a checksum and how, and the bus's bit rates. Read from a TOML file beside
+//! the DBC and checked against the contract ([`crate::dbc::Contract`]) before anything runs: a
+//! mapping that does not fit (a message or a signal the DBC lacks, a signal too narrow for the
+//! range it must carry, a counter that is not a whole number, a checksum of the wrong width or
+//! over its own bytes, a rate the bus cannot hold) is refused, naming the message and the
+//! signal. Every key: docs/your-device.md.
+
+use crate::crc::Crc;
+use crate::dbc::{Contract, FrameId, Kind, MessageLayout, SignalLayout};
+use serde::Deserialize;
+use thiserror::Error;
+
+/// The mapping file as written.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MappingFile {
+    /// The DBC it maps, relative to the mapping file.
+    pub dbc: String,
+    /// The bus's bit rates.
+    pub bus: BusRates,
+    /// The IMU's frames, when the lab's contract has them.
+    #[serde(default)]
+    pub imu: Option<ImuMapping>,
+    /// The messages protected by an alive counter and a checksum.
+    #[serde(default)]
+    pub protect: Vec<Protection>,
+}
+
+/// The bus's bit rates.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BusRates {
+    /// Arbitration phase (classic CAN: the only one), bit/s.
+    pub bitrate: f64,
+    /// CAN FD's data phase with the bit-rate switch, bit/s (default: `bitrate`).
+    #[serde(default)]
+    pub data_bitrate: Option<f64>,
+}
+
+/// The IMU's samples and status.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuMapping {
+    /// Samples per second.
+    pub rate_hz: f64,
+    /// Samples a frame packs (`{k}` in the signals' names: 0 to this less one).
+    #[serde(default = "one")]
+    pub samples_per_frame: usize,
+    /// The three gyros.
+    pub gyro: Channel,
+    /// The three accelerometers.
+    pub accel: Channel,
+    /// The unit's status frame.
+    #[serde(default)]
+    pub status: Option<StatusMapping>,
+}
+
+fn one() -> usize {
+    1
+}
+
+/// What a channel's signals carry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Quantity {
+    /// A rate (deg/s) or a specific force (m/s^2), in the signal's unit.
+    Rate,
+    /// The increment over one sample (deg, m/s).
+    Increment,
+    /// Pulse counts, wrapping at the signal's width.
+    Pulses,
+}
+
+/// Three axes of one sensor in one message.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Channel {
+    /// The message.
+    pub message: String,
+    /// What its signals carry.
+    pub quantity: Quantity,
+    /// The x, y and z signals (with `{k}`, the sample's place in the frame, when a frame packs
+    /// several).
+    pub signals: [String; 3],
+    /// The largest magnitude the unit puts out, in the signals' unit (pulses: per sample).
+    pub full_scale: f64,
+    /// The sample counter's signal (the frame's first sample), wrapping at its width.
+    #[serde(default)]
+    pub counter: Option<String>,
+}
+
+/// The unit's status frame.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StatusMapping {
+    /// The message.
+    pub message: String,
+    /// One frame per this many samples.
+    pub every: u32,
+    /// The temperature's signal (degC).
+    #[serde(default)]
+    pub temperature: Option<String>,
+    /// The built-in test word's signal.
+    #[serde(default)]
+    pub bit: Option<String>,
+    /// The PPS latch's offset into the sample (ms).
+    #[serde(default)]
+    pub pps_offset: Option<String>,
+    /// The PPS latch's valid flag.
+    #[serde(default)]
+    pub pps_valid: Option<String>,
+}
+
+/// An alive counter and a checksum on every frame of a message.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Protection {
+    /// The message.
+    pub message: String,
+    /// The alive counter's signal: one more every frame, wrapping at its width.
+    #[serde(default)]
+    pub alive: Option<String>,
+    /// The checksum's signal.
+    #[serde(default)]
+    pub crc: Option<String>,
+    /// The checksum's algorithm, by its catalogue name ([`Crc::named`]).
+    #[serde(default)]
+    pub algorithm: Option<String>,
+    /// The payload bytes it covers, first and last (default: every byte but its own).
+    #[serde(default)]
+    pub bytes: Option<[usize; 2]>,
+}
+
+/// Why a mapping does not fit its DBC.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum MappingError {
+    /// The text is not a mapping.
+    #[error("the mapping does not read: {0}")]
+    Parse(String),
+    /// A message the DBC does not have.
+    #[error("[{section}]: message {message} is not in the DBC")]
+    NoMessage {
+        /// Where in the mapping.
+        section: String,
+        /// The message.
+        message: String,
+    },
+    /// A signal its message does not have.
+    #[error("[{section}]: message {message} has no signal {signal}")]
+    NoSignal {
+        /// Where in the mapping.
+        section: String,
+        /// The message.
+        message: String,
+        /// The signal.
+        signal: String,
+    },
+    /// A signal that cannot carry what it must.
+    #[error("[{section}]: message {message}, signal {signal}: {why}")]
+    BadSignal {
+        /// Where in the mapping.
+        section: String,
+        /// The message.
+        message: String,
+        /// The signal.
+        signal: String,
+        /// What is wrong.
+        why: String,
+    },
+    /// A value out of its range.
+    #[error("[{section}]: {why}")]
+    Bad {
+        /// Where in the mapping.
+        section: String,
+        /// What is wrong.
+        why: String,
+    },
+    /// More traffic than the bus carries.
+    #[error("the bus cannot hold the traffic: {0}")]
+    Overload(String),
+}
+
+/// A mapping checked against its DBC.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mapping {
+    /// What the file says.
+    pub file: MappingFile,
+    /// The devices' frames per second, by message.
+    pub frames_per_s: Vec<(String, f64)>,
+    /// The bus's load from those frames at their longest (every stuff bit), 0 to 1.
+    pub worst_load: f64,
+}
+
+impl Mapping {
+    /// Read the mapping `text` and check it against `contract`.
+    pub fn parse(text: &str, contract: &Contract) -> Result<Self, MappingError> {
+        let file: MappingFile =
+            toml::from_str(text).map_err(|e| MappingError::Parse(e.to_string()))?;
+        Self::check(file, contract)
+    }
+
+    /// Check `file` against `contract`.
+    pub fn check(file: MappingFile, contract: &Contract) -> Result<Self, MappingError> {
+        let rates = file.bus;
+        let data_bps = rates.data_bitrate.unwrap_or(rates.bitrate);
+        if !(rates.bitrate >= 1000.0 && data_bps >= rates.bitrate && data_bps <= 1.2e7) {
+            return Err(MappingError::Bad {
+                section: "bus".into(),
+                why: format!(
+                    "bitrate {} and data_bitrate {data_bps}: a bit rate from 1 kbit/s, the data phase's at least that and at most 12 Mbit/s",
+                    rates.bitrate
+                ),
+            });
+        }
+        let mut frames: Vec<(String, f64)> = Vec::new();
+        if let Some(imu) = &file.imu {
+            check_imu(imu, contract, &mut frames)?;
+        }
+        for (i, p) in file.protect.iter().enumerate() {
+            check_protection(&format!("protect {}", i + 1), p, contract)?;
+        }
+        let mut worst_load = 0.0;
+        for (name, per_s) in &frames {
+            let m = message(contract, "imu", name)?;
+            let t = crate::busload::frame_time_worst_s(
+                matches!(m.id, FrameId::Extended(_)),
+                m.size,
+                m.size > 8,
+                rates.bitrate,
+                data_bps,
+            );
+            worst_load += per_s * t;
+        }
+        if worst_load > 1.0 {
+            let list: Vec<String> = frames
+                .iter()
+                .map(|(m, f)| format!("{m} {f:.0}/s"))
+                .collect();
+            return Err(MappingError::Overload(format!(
+                "{} at {} bit/s (data phase {data_bps}) is {:.0} % of the bus at its longest frames",
+                list.join(", "),
+                rates.bitrate,
+                100.0 * worst_load
+            )));
+        }
+        Ok(Self {
+            file,
+            frames_per_s: frames,
+            worst_load,
+        })
+    }
+}
+
+/// The message `name` of `contract`, or the error naming it under `section`.
+fn message<'a>(
+    contract: &'a Contract,
+    section: &str,
+    name: &str,
+) -> Result<&'a MessageLayout, MappingError> {
+    contract
+        .message(name)
+        .ok_or_else(|| MappingError::NoMessage {
+            section: section.into(),
+            message: name.into(),
+        })
+}
+
+/// The signal `name` of message `m`, or the error naming both under `section`.
+fn signal<'a>(
+    m: &'a MessageLayout,
+    section: &str,
+    name: &str,
+) -> Result<&'a SignalLayout, MappingError> {
+    m.signal(name).ok_or_else(|| MappingError::NoSignal {
+        section: section.into(),
+        message: m.name.clone(),
+        signal: name.into(),
+    })
+}
+
+fn bad_signal(section: &str, m: &MessageLayout, s: &SignalLayout, why: String) -> MappingError {
+    MappingError::BadSignal {
+        section: section.into(),
+        message: m.name.clone(),
+        signal: s.name.clone(),
+        why,
+    }
+}
+
+/// A counter's signal: a whole number from 0 (unsigned, factor 1, offset 0).
+fn check_counter(section: &str, m: &MessageLayout, s: &SignalLayout) -> Result<(), MappingError> {
+    if s.kind != Kind::Unsigned || s.factor != 1.0 || s.offset != 0.0 {
+        return Err(bad_signal(
+            section,
+            m,
+            s,
+            "a counter must be an unsigned whole number (factor 1, offset 0)".into(),
+        ));
+    }
+    Ok(())
+}
+
+fn check_imu(
+    imu: &ImuMapping,
+    contract: &Contract,
+    frames: &mut Vec<(String, f64)>,
+) -> Result<(), MappingError> {
+    let spf = imu.samples_per_frame;
+    if !(imu.rate_hz > 0.0 && imu.rate_hz <= 100_000.0) || spf == 0 || spf > 64 {
+        return Err(MappingError::Bad {
+            section: "imu".into(),
+            why: format!(
+                "rate_hz {} and samples_per_frame {spf}: a rate up to 100 kHz, 1 to 64 samples a frame",
+                imu.rate_hz
+            ),
+        });
+    }
+    for (section, c) in [("imu.gyro", &imu.gyro), ("imu.accel", &imu.accel)] {
+        let m = message(contract, section, &c.message)?;
+        for name in &c.signals {
+            if spf > 1 && !name.contains("{k}") {
+                return Err(MappingError::Bad {
+                    section: section.into(),
+                    why: format!(
+                        "signal {name}: a frame packs {spf} samples, so each signal's name needs {{k}} (the sample's place, 0 to {})",
+                        spf - 1
+                    ),
+                });
+            }
+            for k in 0..spf {
+                let s = signal(m, section, &name.replace("{k}", &k.to_string()))?;
+                check_range(section, m, s, c)?;
+            }
+        }
+        if let Some(n) = &c.counter {
+            check_counter(section, m, signal(m, section, n)?)?;
+        }
+        if !frames.iter().any(|(f, _)| *f == c.message) {
+            frames.push((c.message.clone(), imu.rate_hz / spf as f64));
+        }
+    }
+    if let Some(st) = &imu.status {
+        let m = message(contract, "imu.status", &st.message)?;
+        for n in [&st.temperature, &st.bit, &st.pps_offset, &st.pps_valid]
+            .into_iter()
+            .flatten()
+        {
+            signal(m, "imu.status", n)?;
+        }
+        if st.every == 0 {
+            return Err(MappingError::Bad {
+                section: "imu.status".into(),
+                why: "every: at least 1 sample".into(),
+            });
+        }
+        frames.push((st.message.clone(), imu.rate_hz / f64::from(st.every)));
+    }
+    Ok(())
+}
+
+/// A sensor's signal carries its full scale both ways (pulses: a whole number wide enough for
+/// one sample's pulses to be told from a wrap).
+fn check_range(
+    section: &str,
+    m: &MessageLayout,
+    s: &SignalLayout,
+    c: &Channel,
+) -> Result<(), MappingError> {
+    if !(c.full_scale > 0.0 && c.full_scale.is_finite()) {
+        return Err(MappingError::Bad {
+            section: section.into(),
+            why: format!("full_scale {}: a positive number", c.full_scale),
+        });
+    }
+    let Some((lo, hi)) = s.raw_range() else {
+        // a float carries any value
+        return Ok(());
+    };
+    if c.quantity == Quantity::Pulses {
+        if s.factor != 1.0 || s.offset != 0.0 {
+            return Err(bad_signal(
+                section,
+                m,
+                s,
+                "pulses are whole counts (factor 1, offset 0)".into(),
+            ));
+        }
+        // a counter of n bits tells a step of less than half its span from a wrap
+        let span = (hi - lo) as f64 + 1.0;
+        if 2.0 * c.full_scale >= span {
+            return Err(bad_signal(
+                section,
+                m,
+                s,
+                format!(
+                    "{} bits wrap after {span} pulses: a sample's {} pulses cannot be told from a wrap",
+                    s.len, c.full_scale
+                ),
+            ));
+        }
+        return Ok(());
+    }
+    let (a, b) = (
+        lo as f64 * s.factor + s.offset,
+        hi as f64 * s.factor + s.offset,
+    );
+    let (lo_phys, hi_phys) = (a.min(b), a.max(b));
+    if lo_phys > -c.full_scale || hi_phys < c.full_scale {
+        return Err(bad_signal(
+            section,
+            m,
+            s,
+            format!(
+                "carries {lo_phys} to {hi_phys} {}, the unit puts out up to {} either way",
+                s.unit, c.full_scale
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn check_protection(
+    section: &str,
+    p: &Protection,
+    contract: &Contract,
+) -> Result<(), MappingError> {
+    let m = message(contract, section, &p.message)?;
+    if let Some(a) = &p.alive {
+        check_counter(section, m, signal(m, section, a)?)?;
+    }
+    let Some(c) = &p.crc else {
+        if p.algorithm.is_some() || p.bytes.is_some() {
+            return Err(MappingError::Bad {
+                section: section.into(),
+                why: format!(
+                    "message {}: an algorithm or bytes without a crc signal",
+                    m.name
+                ),
+            });
+        }
+        return Ok(());
+    };
+    let s = signal(m, section, c)?;
+    let name = p.algorithm.as_deref().unwrap_or("(none)");
+    let Some(crc) = Crc::named(name) else {
+        return Err(bad_signal(
+            section,
+            m,
+            s,
+            format!(
+                "algorithm {name}: not one the bench knows (CRC-8/SAE-J1850, CRC-8/AUTOSAR, CRC-8/SMBUS, CRC-16/IBM-3740, CRC-16/ARC)"
+            ),
+        ));
+    };
+    if s.kind != Kind::Unsigned || u32::from(s.len) != u32::from(crc.width) {
+        return Err(bad_signal(
+            section,
+            m,
+            s,
+            format!(
+                "{name} is {} bits; the signal is {} bits{}",
+                crc.width,
+                s.len,
+                if s.kind == Kind::Unsigned {
+                    ""
+                } else {
+                    ", and not unsigned"
+                }
+            ),
+        ));
+    }
+    let [first, last] = p.bytes.unwrap_or([0, m.size.saturating_sub(1)]);
+    if first > last || last >= m.size {
+        return Err(MappingError::Bad {
+            section: section.into(),
+            why: format!(
+                "message {}: bytes {first} to {last}, not within its {} bytes",
+                m.name, m.size
+            ),
+        });
+    }
+    let own: Vec<usize> = s.positions().map(|b| b / 8).collect();
+    if p.bytes.is_some() && own.iter().any(|b| (first..=last).contains(b)) {
+        return Err(bad_signal(
+            section,
+            m,
+            s,
+            format!("the checksum covers bytes {first} to {last}, its own among them"),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lab() -> Contract {
+        Contract::parse(include_str!("../contracts/lab-imu.dbc")).expect("the lab's DBC reads")
+    }
+
+    const MAPPING: &str = include_str!("../contracts/lab-imu.toml");
+
+    /// The second contract's mapping fits its DBC: ten samples a CAN FD frame at 1 kHz, two
+    /// blocks and a status frame, a small share of a 500 kbit/s bus with a 2 Mbit/s data phase.
+    #[test]
+    fn the_lab_contracts_mapping_fits_its_dbc() {
+        let m = Mapping::parse(MAPPING, &lab()).expect("fits");
+        assert_eq!(
+            m.frames_per_s,
+            vec![
+                ("IMU_GYRO_BLOCK".to_string(), 100.0),
+                ("IMU_ACCEL_BLOCK".to_string(), 100.0),
+                ("IMU_STATUS".to_string(), 10.0)
+            ]
+        );
+        // a 64-byte FD frame with an extended identifier at its longest: 56 bits at the
+        // arbitration rate (36 and their stuff bits, then ACK, end of frame and intermission)
+        // and 679 in the data phase (ESI, DLC and 512 data bits with theirs, the stuff count
+        // and 21-bit CRC with their fixed stuff bits, the CRC delimiter)
+        let fd = crate::busload::frame_time_worst_s(true, 64, true, 500e3, 2e6);
+        assert!((fd - (56.0 / 500e3 + 679.0 / 2e6)).abs() < 1e-12, "{fd}");
+        assert!(
+            m.worst_load > 0.09 && m.worst_load < 0.1,
+            "{}",
+            m.worst_load
+        );
+    }
+
+    /// What does not fit is refused, naming the message and the signal.
+    #[test]
+    fn a_mapping_that_does_not_fit_is_refused_naming_message_and_signal() {
+        let c = lab();
+        let refused = |from: &str, to: &str| {
+            assert!(MAPPING.contains(from), "{from}");
+            Mapping::parse(&MAPPING.replacen(from, to, 1), &c)
+                .expect_err("refused")
+                .to_string()
+        };
+        let e = refused("message = \"IMU_GYRO_BLOCK\"", "message = \"IMU_RATES\"");
+        assert!(
+            e.contains("[imu.gyro]") && e.contains("IMU_RATES is not in the DBC"),
+            "{e}"
+        );
+        let e = refused("samples_per_frame = 10", "samples_per_frame = 11");
+        assert!(e.contains("IMU_GYRO_BLOCK has no signal GyroX_10"), "{e}");
+        let e = refused("full_scale = 300.0", "full_scale = 400.0");
+        assert!(
+            e.contains("IMU_GYRO_BLOCK, signal GyroX_0: carries -327.68 to 327.67 deg/s"),
+            "{e}"
+        );
+        let e = refused("counter = \"SampleCtr\"", "counter = \"GyroX_0\"");
+        assert!(e.contains("signal GyroX_0: a counter must be"), "{e}");
+        let e = refused(
+            "algorithm = \"CRC-8/SAE-J1850\"",
+            "algorithm = \"CRC-16/ARC\"",
+        );
+        assert!(
+            e.contains("[protect 1]")
+                && e.contains("signal Crc8: CRC-16/ARC is 16 bits; the signal is 8 bits"),
+            "{e}"
+        );
+        let e = refused("bytes = [1, 63]", "bytes = [0, 63]");
+        assert!(
+            e.contains("signal Crc8: the checksum covers bytes 0 to 63, its own among them"),
+            "{e}"
+        );
+        let e = refused(
+            "algorithm = \"CRC-8/SAE-J1850\"",
+            "algorithm = \"CRC-9/NONE\"",
+        );
+        assert!(
+            e.contains("algorithm CRC-9/NONE: not one the bench knows"),
+            "{e}"
+        );
+        let e = refused("rate_hz = 1000.0", "rate_hz = 20000.0");
+        assert!(
+            e.starts_with("the bus cannot hold the traffic: IMU_GYRO_BLOCK 2000/s"),
+            "{e}"
+        );
+        let e = refused("data_bitrate = 2000000", "data_bitrate = 200000");
+        assert!(e.contains("[bus]"), "{e}");
+        let e = refused("dbc = ", "dbx = ");
+        assert!(e.starts_with("the mapping does not read"), "{e}");
+    }
+
+    /// Pulse counts need a whole-number signal wide enough that a sample's pulses are told
+    /// from a wrap.
+    #[test]
+    fn pulses_need_a_counter_wider_than_a_samples_pulses() {
+        let c = lab();
+        let pulses = MAPPING
+            .replacen("quantity = \"rate\"", "quantity = \"pulses\"", 1)
+            .replacen("full_scale = 300.0", "full_scale = 100.0", 1);
+        let e = Mapping::parse(&pulses, &c)
+            .expect_err("a scaled signal")
+            .to_string();
+        assert!(e.contains("signal GyroX_0: pulses are whole counts"), "{e}");
+        // the counters: 12 bits, whole numbers
+        let on_counter = pulses.replacen(
+            "signals = [\"GyroX_{k}\", \"GyroY_{k}\", \"GyroZ_{k}\"]",
+            "signals = [\"SampleCtr\", \"SampleCtr\", \"SampleCtr\"]",
+            1,
+        );
+        let one_sample = on_counter.replacen("samples_per_frame = 10", "samples_per_frame = 1", 1);
+        Mapping::parse(&one_sample, &c).expect("100 pulses on 12 bits");
+        let e = Mapping::parse(
+            &one_sample.replacen("full_scale = 100.0", "full_scale = 2048.0", 1),
+            &c,
+        )
+        .expect_err("wraps")
+        .to_string();
+        assert!(e.contains("12 bits wrap after 4096 pulses"), "{e}");
+    }
+}
