@@ -33,41 +33,70 @@ pub(crate) fn remember(mut cmd: clap::Command, matches: clap::ArgMatches) {
 /// This command again, for the guest, from its parsed arguments: every argument given on the
 /// command line (or by the environment), the paths among them made absolute with their folders
 /// shared, the options in `set` given the values there (added where absent: the output folder,
-/// the nav binary, resolved here) and those in `drop` left out (`--junit`, handled by
+/// the nav binary, resolved here; those the command does not have left out) and those in `drop`
+/// left out (`--junit`, handled by
 /// [`run_in_guest_with_junit`]). Returns the arguments and the folders to share.
 pub(crate) fn same_command(
+    set: &[(&str, String)],
+    drop: &[&str],
+) -> Result<(Vec<String>, Vec<PathBuf>)> {
+    as_command(None, set, drop)
+}
+
+/// [`same_command`], but as the command `target` (its path: `["run"]`) where this one hands its
+/// work to it (a drill runs its scenario as `hil run` does): the options this command was given
+/// that the target also has, with `set` (the target's options; the scenario the drill wrote).
+pub(crate) fn as_command(
+    target: Option<&[&str]>,
     set: &[(&str, String)],
     drop: &[&str],
 ) -> Result<(Vec<String>, Vec<PathBuf>)> {
     let (cmd, m) = PARSED
         .get()
         .context("the command line was not kept (hil's main calls cmd::guest::remember)")?;
-    argv_of(cmd, m, set, drop)
+    argv_of(cmd, m, target, set, drop)
 }
 
-/// [`same_command`] for the command line `m` of command `cmd` (built).
+/// [`as_command`] for the command line `m` of command `root` (built).
 fn argv_of(
-    cmd: &clap::Command,
+    root: &clap::Command,
     m: &clap::ArgMatches,
+    target: Option<&[&str]>,
     set: &[(&str, String)],
     drop: &[&str],
 ) -> Result<(Vec<String>, Vec<PathBuf>)> {
     let mut args = Vec::new();
     let mut shares = Vec::new();
-    let (mut cmd, mut m) = (cmd, m);
+    let (mut given_cmd, mut m) = (root, m);
+    let mut path = Vec::new();
     while let Some((name, sub)) = m.subcommand() {
-        args.push(name.to_string());
-        cmd = cmd
+        path.push(name.to_string());
+        given_cmd = given_cmd
             .find_subcommand(name)
             .with_context(|| format!("no subcommand {name} in hil's command line"))?;
         m = sub;
-        if sub.subcommand().is_none() {
-            break;
-        }
     }
+    let cmd = match target {
+        None => given_cmd,
+        Some(t) => {
+            path = t.iter().map(|x| x.to_string()).collect();
+            t.iter().try_fold(root, |c, name| {
+                c.find_subcommand(name)
+                    .with_context(|| format!("no command {name} in hil"))
+            })?
+        }
+    };
+    args.extend(path);
     let mut positional = Vec::new();
     for arg in cmd.get_arguments() {
         let id = arg.get_id().as_str();
+        // (as another command: only the options this one was given too)
+        if !given_cmd
+            .get_arguments()
+            .any(|a| a.get_id() == arg.get_id())
+        {
+            continue;
+        }
         let given = matches!(
             m.value_source(id),
             Some(clap::parser::ValueSource::CommandLine | clap::parser::ValueSource::EnvVariable)
@@ -120,13 +149,16 @@ fn argv_of(
             }
         }
     }
+    // an option the command does not have (a drill names no nav binary: the guest takes the
+    // one beside hil, as here) is not asked for
     for (id, v) in set {
-        let long = cmd
+        if let Some(long) = cmd
             .get_arguments()
             .find(|a| a.get_id().as_str() == *id)
             .and_then(|a| a.get_long())
-            .with_context(|| format!("hil {}: no option {id}", args.join(" ")))?;
-        args.extend([format!("--{long}"), v.clone()]);
+        {
+            args.extend([format!("--{long}"), v.clone()]);
+        }
     }
     args.extend(positional);
     shares.sort();
@@ -366,7 +398,7 @@ mod tests {
         let mut cmd = crate::Cli::command();
         cmd.build();
         let m = cmd.clone().try_get_matches_from(argv).expect("parses");
-        let (args, shares) = argv_of(&cmd, &m, set, drop).expect("the command again");
+        let (args, shares) = argv_of(&cmd, &m, None, set, drop).expect("the command again");
         let m2 = cmd
             .try_get_matches_from(std::iter::once("hil".to_string()).chain(args.iter().cloned()))
             .unwrap_or_else(|e| panic!("{args:?} parses again: {e}"));
@@ -432,13 +464,59 @@ mod tests {
                 "-35.5",
                 "--out-and-back",
             ],
+            &[("out", "/o".into()), ("nav", "/bin/nav2".into())],
             &[],
-            &[],
+        );
+        assert!(
+            !args.iter().any(|x| x == "--nav"),
+            "{args:?}: the drill has no --nav"
         );
         let crate::Cmd::Drill(crate::cmd::drill::Drill::NorthFinding(a)) = cli.cmd else {
             panic!("{args:?}: not the drill")
         };
         assert_eq!(a.lat, -35.5, "{args:?}");
+        assert_eq!(a.bus.out, Some(PathBuf::from("/o")), "{args:?}");
+        // the drill's scenario run as `hil run`: the options both have, the scenario set
+        let mut cmd = crate::Cli::command();
+        cmd.build();
+        let m = cmd
+            .clone()
+            .try_get_matches_from([
+                "hil",
+                "drill",
+                "north-finding",
+                "--seed",
+                "7",
+                "--speed",
+                "10",
+                "--iface",
+                "vcan3",
+                "--json",
+            ])
+            .expect("parses");
+        let (args, _) = argv_of(
+            &cmd,
+            &m,
+            Some(&["run"]),
+            &[("scenario", "/o/scenario.toml".into())],
+            &[],
+        )
+        .expect("as hil run");
+        let m2 = cmd
+            .try_get_matches_from(std::iter::once("hil".to_string()).chain(args.iter().cloned()))
+            .unwrap_or_else(|e| panic!("{args:?}: {e}"));
+        let crate::Cmd::Run(r) = crate::Cli::from_arg_matches(&m2).expect("a command").cmd else {
+            panic!("{args:?}: not run")
+        };
+        assert_eq!(r.scenario, Some(PathBuf::from("/o/scenario.toml")));
+        assert_eq!(
+            (r.speed, r.bus.iface.as_str(), r.bus.json),
+            (Some(10.0), "vcan3", true)
+        );
+        assert!(
+            !args.iter().any(|x| x == "--seed"),
+            "{args:?}: run has no --seed"
+        );
         assert!(a.out_and_back, "{args:?}");
     }
 }

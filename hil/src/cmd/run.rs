@@ -1,7 +1,7 @@
 //! `hil run`: one scenario through the bench.
 
 use crate::cmd::args::{BusArgs, FreeArgs, LiveArgs, finish_view};
-use crate::cmd::guest::{absolute, default_out, run_in_guest_with_junit, same_command};
+use crate::cmd::guest::{absolute, as_command, default_out, run_in_guest_with_junit};
 use anyhow::{Context, Result};
 use hil::report;
 use hil::run::{RunOptions, run_here, sibling_binary};
@@ -67,21 +67,30 @@ pub(crate) fn run(a: RunArgs) -> Result<i32> {
     if a.bus.here() {
         return run_lockstep_here(&s, &a, &out, in_guest);
     }
-    // No CAN here: run this same command inside the QEMU guest, with the output folder and
-    // the nav binary resolved here (another build of nav may live outside the folders the
-    // guest is given: its folder is shared)
+    // No CAN here: the run inside the QEMU guest, as `hil run` with the options this command
+    // was given (a drill or a calibration hands its scenario to this run: the scenario it
+    // wrote), the output folder and the nav binary resolved here (another build of nav may
+    // live outside the folders the guest is given: its folder is shared)
     let nav = match &a.nav {
         Some(n) => absolute(n)?,
         None => sibling_binary("nav")?,
     };
-    let (args, mut extra) = same_command(
-        &[
-            ("out", out.to_string_lossy().into_owned()),
-            ("nav", nav.to_string_lossy().into_owned()),
-        ],
-        &["junit"],
-    )?;
+    let mut set = vec![
+        ("out", out.to_string_lossy().into_owned()),
+        ("nav", nav.to_string_lossy().into_owned()),
+    ];
+    let scenario = a.scenario.as_deref().map(absolute).transpose()?;
+    if let Some(p) = &scenario {
+        set.push(("scenario", p.to_string_lossy().into_owned()));
+    }
+    let (args, mut extra) = as_command(Some(&["run"]), &set, &["junit"])?;
     extra.extend(nav.parent().map(Path::to_path_buf));
+    extra.extend(
+        scenario
+            .as_deref()
+            .and_then(Path::parent)
+            .map(Path::to_path_buf),
+    );
     let code = run_in_guest_with_junit(
         args,
         &out,
