@@ -57,6 +57,25 @@ pub(crate) fn as_command(
     argv_of(cmd, m, target, set, drop)
 }
 
+/// A value for the guest's command line: a path made absolute, its folder (or itself, a
+/// folder) added to `shares`.
+fn value_for_guest(
+    v: &std::ffi::OsStr,
+    is_path: bool,
+    shares: &mut Vec<PathBuf>,
+) -> Result<String> {
+    if !is_path {
+        return Ok(v.to_string_lossy().into_owned());
+    }
+    let p = absolute(Path::new(v))?;
+    shares.push(if p.is_dir() {
+        p.clone()
+    } else {
+        p.parent().map(Path::to_path_buf).unwrap_or_default()
+    });
+    Ok(p.to_string_lossy().into_owned())
+}
+
 /// [`as_command`] for the command line `m` of command `root` (built).
 fn argv_of(
     root: &clap::Command,
@@ -118,21 +137,9 @@ fn argv_of(
         }
         let is_path = arg.get_value_parser().type_id() == std::any::TypeId::of::<PathBuf>();
         for occurrence in m.get_raw_occurrences(id).into_iter().flatten() {
-            let mut values = Vec::new();
-            for v in occurrence {
-                let v = if is_path {
-                    let p = absolute(Path::new(v))?;
-                    shares.push(if p.is_dir() {
-                        p.clone()
-                    } else {
-                        p.parent().map(Path::to_path_buf).unwrap_or_default()
-                    });
-                    p.to_string_lossy().into_owned()
-                } else {
-                    v.to_string_lossy().into_owned()
-                };
-                values.push(v);
-            }
+            let values = occurrence
+                .map(|v| value_for_guest(v, is_path, &mut shares))
+                .collect::<Result<Vec<_>>>()?;
             match &flag {
                 None => positional.extend(values),
                 Some(f) if values.is_empty() => args.push(f.clone()),
