@@ -128,7 +128,8 @@ pub struct Protection {
     /// The checksum's algorithm, by its catalogue name ([`Crc::named`]).
     #[serde(default)]
     pub algorithm: Option<String>,
-    /// The payload bytes it covers, first and last (default: every byte but its own).
+    /// The payload bytes it covers, first and last (default: those after its own when it
+    /// leads the payload, else those before it).
     #[serde(default)]
     pub bytes: Option<[usize; 2]>,
 }
