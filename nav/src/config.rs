@@ -246,6 +246,14 @@ impl NavConfig {
         if self.can.is_none() && self.gps.is_none() {
             return Err("names no device: give [can] and/or [gps]".into());
         }
+        // the IMU's silence is told from a late loop by it, and the receiver's bytes wait up to
+        // it for a frame received after them (nav::shell::arrival)
+        if !(20..=600_000).contains(&self.watchdog.imu_timeout_ms) {
+            return Err(format!(
+                "watchdog.imu_timeout_ms = {}: from 20 ms (many IMU periods) to 600,000 ms",
+                self.watchdog.imu_timeout_ms
+            ));
+        }
         if let Some(g) = &self.gps {
             match g.source {
                 GpsSource::Serial if g.port.as_os_str().is_empty() => {
@@ -527,6 +535,13 @@ mod tests {
         .unwrap();
         let e = full(NavConfig::load(&p).unwrap_err());
         assert!(e.contains("navigation.filter.adaptive_forgetting"), "{e}");
+        std::fs::write(
+            &p,
+            "[can]\ninterface = \"can0\"\n[watchdog]\nimu_timeout_ms = 0\n",
+        )
+        .unwrap();
+        let e = full(NavConfig::load(&p).unwrap_err());
+        assert!(e.contains("watchdog.imu_timeout_ms = 0"), "{e}");
         let e = NavConfig::load(&dir.path().join("missing.toml"))
             .unwrap_err()
             .to_string();
