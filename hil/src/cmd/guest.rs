@@ -461,7 +461,12 @@ mod tests {
             !args.iter().any(|x| x == "--duration"),
             "{args:?}: a default spelled out"
         );
-        // a subcommand's subcommand, and a negative value kept with its option
+    }
+
+    /// A subcommand's subcommand again in the guest: a negative value kept with its option, an
+    /// option it does not have (`--nav`) not asked for.
+    #[test]
+    fn a_subcommands_subcommand_again_in_the_guest_keeps_its_values() {
         let (cli, args, _) = again(
             &[
                 "hil",
@@ -483,7 +488,13 @@ mod tests {
         };
         assert_eq!(a.lat, -35.5, "{args:?}");
         assert_eq!(a.bus.out, Some(PathBuf::from("/o")), "{args:?}");
-        // the drill's scenario run as `hil run`: the options both have, the scenario set
+        assert!(a.out_and_back, "{args:?}");
+    }
+
+    /// A drill's scenario handed to `hil run` goes to the guest as `hil run`: the options both
+    /// commands have, the scenario set, the drill's own options (`--seed`) left out.
+    #[test]
+    fn a_drill_handed_to_run_goes_to_the_guest_as_run() {
         let mut cmd = crate::Cli::command();
         cmd.build();
         let m = cmd
@@ -524,6 +535,5 @@ mod tests {
             !args.iter().any(|x| x == "--seed"),
             "{args:?}: run has no --seed"
         );
-        assert!(a.out_and_back, "{args:?}");
     }
 }
