@@ -129,7 +129,9 @@ enum Cmd {
     /// `--measure`, run the scenario (by default the main job's drill and GPS drive) in process
     /// on the bus model and print what it measured: the load, each identifier's worst and p99
     /// queueing delay, the TT_CMD -> TT_ACK round trip and each node's queue. Exit status 1
-    /// when a scenario does not fit a bit rate.
+    /// when a scenario does not fit a bit rate. With `--mapping`, a lab's own contract: its
+    /// mapped messages' load and worst-case response times (CAN FD and 29-bit identifiers as its
+    /// DBC says).
     Busload {
         /// Bit rate, bit/s; repeat or separate by commas for several (default: 1 Mbit/s, or
         /// the scenario's `bus.bitrate_bps`).
@@ -141,6 +143,10 @@ enum Cmd {
         /// Run the scenario in process on the bus model and print the measured figures.
         #[arg(long)]
         measure: bool,
+        /// A lab's mapping file (its DBC beside it, docs/your-device.md): the load and every
+        /// message's worst-case response time at the mapping's bit rates.
+        #[arg(long, conflicts_with_all = ["scenario", "measure", "bitrate"])]
+        mapping: Option<PathBuf>,
     },
     /// Print the DBC file of the wire contract.
     Dbc,
@@ -243,9 +249,13 @@ fn real_main(cli: Cli) -> Result<i32> {
         Cmd::Calibrate(Calibrate::Tetrahedral(a)) => calibrate_tetrahedral(a),
         Cmd::Validate(Validate::Turntable(a)) => validate_turntable(a),
         Cmd::Busload {
+            mapping: Some(m), ..
+        } => cmd::busload::mapped(&m),
+        Cmd::Busload {
             bitrate,
             scenario,
             measure,
+            mapping: None,
         } => busload(&bitrate, scenario, measure),
         Cmd::Replay {
             recording,

@@ -199,3 +199,41 @@ fn cantools_reads_the_lab_contracts_frames_with_their_checksums_right() {
         }
     }
 }
+
+/// `hil busload --mapping` on the lab's contract: every mapped message with its rate, its
+/// share of the bus and its worst-case response time (extended identifiers, CAN FD where the
+/// DBC's frame is longer than 8 bytes), the total, exit 0; a mapping whose traffic names a
+/// message its DBC lacks is refused, naming it.
+#[test]
+fn hil_busload_analyses_the_lab_contracts_bus() {
+    let here = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../wire/contracts");
+    let o = Command::new(e2e::bin("hil"))
+        .args(["busload", "--mapping"])
+        .arg(here.join("lab-imu.toml"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{text}{}", String::from_utf8_lossy(&o.stderr));
+    for row in [
+        "IMU_GYRO_BLOCK   0x18FF1021    64  yes       100",
+        "TABLE_REPORT     0x18EF1020     8   no       100",
+        "TABLE_CMD        0x18EF2010     8   no        10",
+    ] {
+        assert!(text.contains(row), "no row {row:?} in\n{text}");
+    }
+    // the highest priority waits for one 64-byte FD frame at most, then is sent: 452 + 320 us
+    assert!(text.contains("3.20      0.0        0.772"), "{text}");
+    assert!(text.contains("total: 14.7 % of the bus"), "{text}");
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(here.join("lab-imu.dbc"), dir.path().join("lab-imu.dbc")).unwrap();
+    let toml = std::fs::read_to_string(here.join("lab-imu.toml")).unwrap();
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, toml.replace("\"INS_POSITION\"", "\"INS_SPEED\"")).unwrap();
+    let o = Command::new(e2e::bin("hil"))
+        .args(["busload", "--mapping"])
+        .arg(&bad)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("INS_SPEED is not in the DBC"), "{err}");
+}

@@ -26,6 +26,23 @@ pub struct MappingFile {
     /// The messages protected by an alive counter and a checksum.
     #[serde(default)]
     pub protect: Vec<Protection>,
+    /// The bus's other periodic messages (the device's own frames, the table's reports), for
+    /// the bus's load and every message's worst-case response time.
+    #[serde(default)]
+    pub traffic: Vec<Traffic>,
+}
+
+/// A periodic message besides the IMU's.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Traffic {
+    /// The message, by its DBC name.
+    pub message: String,
+    /// Its period, ms.
+    pub period_ms: f64,
+    /// How late after its period's start it may be queued, ms (default 0).
+    #[serde(default)]
+    pub jitter_ms: f64,
 }
 
 /// The bus's bit rates.
@@ -222,6 +239,20 @@ impl Mapping {
         for (i, p) in file.protect.iter().enumerate() {
             check_protection(&format!("protect {}", i + 1), p, contract)?;
         }
+        for (i, t) in file.traffic.iter().enumerate() {
+            let section = format!("traffic {}", i + 1);
+            message(contract, &section, &t.message)?;
+            if !(t.period_ms > 0.0 && t.jitter_ms >= 0.0 && t.jitter_ms.is_finite()) {
+                return Err(MappingError::Bad {
+                    section,
+                    why: format!(
+                        "{}: period_ms {} and jitter_ms {}: a period above 0, a jitter from 0",
+                        t.message, t.period_ms, t.jitter_ms
+                    ),
+                });
+            }
+            frames.push((t.message.clone(), 1000.0 / t.period_ms));
+        }
         let mut worst_load = 0.0;
         for (name, per_s) in &frames {
             let m = message(contract, "imu", name)?;
@@ -251,6 +282,39 @@ impl Mapping {
             frames_per_s: frames,
             worst_load,
         })
+    }
+}
+
+impl Mapping {
+    /// Every periodic message the mapping names (the IMU's at their rates, then the
+    /// `[[traffic]]`), for [`crate::busload::response_times`].
+    pub fn periodic(&self, contract: &Contract) -> Vec<crate::busload::Periodic> {
+        let jitter = |name: &str| {
+            self.file
+                .traffic
+                .iter()
+                .find(|t| t.message == name)
+                .map_or(0.0, |t| t.jitter_ms / 1000.0)
+        };
+        self.frames_per_s
+            .iter()
+            .filter_map(|(name, per_s)| {
+                let m = contract.message(name)?;
+                let (id, extended) = match m.id {
+                    FrameId::Extended(x) => (x, true),
+                    FrameId::Standard(x) => (u32::from(x), false),
+                };
+                Some(crate::busload::Periodic {
+                    name: name.clone(),
+                    id,
+                    extended,
+                    payload: m.size,
+                    fd: m.size > 8,
+                    period_s: 1.0 / per_s,
+                    jitter_s: jitter(name),
+                })
+            })
+            .collect()
     }
 }
 
@@ -722,18 +786,40 @@ mod tests {
     const MAPPING: &str = include_str!("../contracts/lab-imu.toml");
 
     /// The second contract's mapping fits its DBC: ten samples a CAN FD frame at 1 kHz, two
-    /// blocks and a status frame, a small share of a 500 kbit/s bus with a 2 Mbit/s data phase.
+    /// blocks and a status frame, the table's reports, the box's commands and solution: a small
+    /// share of a 500 kbit/s bus with a 2 Mbit/s data phase, every message with a bound.
     #[test]
     fn the_lab_contracts_mapping_fits_its_dbc() {
-        let m = Mapping::parse(MAPPING, &lab()).expect("fits");
+        let c = lab();
+        let m = Mapping::parse(MAPPING, &c).expect("fits");
+        let per_s = |n: &str, f: f64| (n.to_string(), f);
         assert_eq!(
             m.frames_per_s,
             vec![
-                ("IMU_GYRO_BLOCK".to_string(), 100.0),
-                ("IMU_ACCEL_BLOCK".to_string(), 100.0),
-                ("IMU_STATUS".to_string(), 10.0)
+                per_s("IMU_GYRO_BLOCK", 100.0),
+                per_s("IMU_ACCEL_BLOCK", 100.0),
+                per_s("IMU_STATUS", 10.0),
+                per_s("TABLE_REPORT", 100.0),
+                per_s("TABLE_CMD", 10.0),
+                per_s("INS_HEADING", 50.0),
+                per_s("INS_POSITION", 10.0),
             ]
         );
+        let p = m.periodic(&c);
+        assert!(p.iter().all(|x| x.extended) && p[0].fd && !p[2].fd && p[6].fd);
+        assert_eq!(p[4].jitter_s, 0.005);
+        let r = crate::busload::response_times(&p, 500e3, 2e6);
+        // each message waits at most for one lower frame, every higher one once (the bus is
+        // lightly loaded) and itself: below the sum of all frames' longest times, above its own
+        let all: f64 = p
+            .iter()
+            .map(|x| crate::busload::frame_time_worst_s(true, x.payload, x.fd, 500e3, 2e6))
+            .sum();
+        for (x, r) in p.iter().zip(&r) {
+            let own = crate::busload::frame_time_worst_s(true, x.payload, x.fd, 500e3, 2e6);
+            let r = r.unwrap_or_else(|| panic!("{} has no bound", x.name));
+            assert!(r >= own && r <= all + x.jitter_s + 1e-12, "{}: {r}", x.name);
+        }
         // a 64-byte FD frame with an extended identifier at its longest: 56 bits at the
         // arbitration rate (36 and their stuff bits, then ACK, end of frame and intermission)
         // and 679 in the data phase (ESI, DLC and 512 data bits with theirs, the stuff count
@@ -741,7 +827,7 @@ mod tests {
         let fd = crate::busload::frame_time_worst_s(true, 64, true, 500e3, 2e6);
         assert!((fd - (56.0 / 500e3 + 679.0 / 2e6)).abs() < 1e-12, "{fd}");
         assert!(
-            m.worst_load > 0.09 && m.worst_load < 0.1,
+            m.worst_load > 0.14 && m.worst_load < 0.16,
             "{}",
             m.worst_load
         );
@@ -762,6 +848,16 @@ mod tests {
             e.contains("[imu.gyro]") && e.contains("IMU_RATES is not in the DBC"),
             "{e}"
         );
+        let e = refused(
+            "message = \"INS_POSITION\"\nperiod_ms",
+            "message = \"INS_SPEED\"\nperiod_ms",
+        );
+        assert!(
+            e.contains("[traffic 4]") && e.contains("INS_SPEED is not in the DBC"),
+            "{e}"
+        );
+        let e = refused("period_ms = 10.0", "period_ms = 0.0");
+        assert!(e.contains("traffic 1") && e.contains("period_ms 0"), "{e}");
         let e = refused("samples_per_frame = 10", "samples_per_frame = 11");
         assert!(e.contains("IMU_GYRO_BLOCK has no signal GyroX_10"), "{e}");
         let e = refused("full_scale = 300.0", "full_scale = 400.0");

@@ -1,7 +1,7 @@
 //! `hil campaign`: several builds through the same cases, one verdict per build and case
 //! against the baseline.
 
-use crate::cmd::guest::{absolute, run_in_guest};
+use crate::cmd::guest::{absolute, run_in_guest, same_command};
 use anyhow::{Context, Result};
 use hil::campaign::cells::{Build, Cell, cell_at, cells, check_in_process, shard};
 use hil::campaign::report;
@@ -126,34 +126,11 @@ fn run_cells(runner: &Runner, c: &Campaign, cases: &[Case], todo: &[&Cell], jobs
     failed.iter().flatten().count()
 }
 
-/// This command again inside the QEMU guest (this kernel has no CAN): the campaign's file, its
-/// nav binaries and scenarios and the output folder shared; the guest runs the cells (and the
-/// merge, unless a cell or a part was asked for).
+/// This command again inside the QEMU guest (this kernel has no CAN), from its parsed
+/// arguments: the campaign's file, its nav binaries and scenarios and the output folder shared;
+/// the guest runs the cells (and the merge, unless a cell or a part was asked for).
 fn in_guest(a: &CampaignArgs, c: &Campaign, cases: &[Case], out: &std::path::Path) -> Result<i32> {
-    let file = absolute(&a.file)?;
-    let mut args: Vec<String> = vec![
-        "campaign".into(),
-        file.to_string_lossy().into_owned(),
-        "--out".into(),
-        out.to_string_lossy().into_owned(),
-        "--jobs".into(),
-        a.jobs.to_string(),
-        "--iface-prefix".into(),
-        a.iface_prefix.clone(),
-    ];
-    if let Some(k) = a.cell {
-        args.extend(["--cell".into(), k.to_string()]);
-    }
-    if let Some((k, n)) = a.shard {
-        args.extend(["--shard".into(), format!("{k}/{n}")]);
-    }
-    if a.json {
-        args.push("--json".into());
-    }
-    let mut shares: Vec<PathBuf> = file
-        .parent()
-        .map(|p| vec![p.to_path_buf()])
-        .unwrap_or_default();
+    let (args, mut shares) = same_command(&[("out", out.to_string_lossy().into_owned())], &[])?;
     let mut navs = vec![sibling_binary("nav")?];
     for d in &c.devices {
         if let Some(n) = &d.nav {
