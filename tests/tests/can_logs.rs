@@ -178,3 +178,62 @@ fn the_bus_models_log_reads_back_with_its_error_frames_on_the_simulated_clock() 
         );
     }
 }
+
+/// The lab's contract as the emulated IMU put it on vcan (`the_imu_speaks_a_labs_own_contract_on_vcan_in_can_fd_frames`,
+/// its candump capture in `target/e2e-reports/lab-contract/`): python-can reads every line of
+/// it as an extended CAN FD frame with the bit-rate switch, cantools decodes each with the lab's
+/// DBC, every CRC-8/SAE-J1850 right and every alive counter one up on its message's last, and
+/// the sample counter ten up a frame (wrapping at 12 bits).
+#[test]
+#[ignore = "reads the end-to-end tests' capture: run ./run-tests"]
+fn cantools_decodes_the_lab_contract_the_emulated_imu_sent_on_vcan() {
+    let log = reports_dir().join("lab-contract/candump.log");
+    if !log.is_file() {
+        panic!(
+            "{} is missing: the end-to-end tests run first (./run-tests)",
+            log.display()
+        );
+    }
+    let dbc =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../wire/contracts/lab-imu.dbc");
+    let out = e2e::python(
+        LAB_READ_BACK,
+        &[log.as_os_str(), dbc.as_os_str()],
+        "python-can and cantools on the lab's capture",
+    );
+    let r: Value = serde_json::from_slice(&out).expect("the read-back's JSON");
+    assert_eq!(r["frames"], 400, "{r}");
+    assert_eq!(r["fd_brs_extended"], 400, "{r}");
+    assert_eq!(r["decoded"], 400, "{r}");
+    assert_eq!(r["bad_crc"], 0, "{r}");
+    assert_eq!(r["bad_alive"], 0, "{r}");
+    assert_eq!(r["bad_counter"], 0, "{r}");
+}
+
+const LAB_READ_BACK: &str = r#"
+import json, sys
+import can, cantools
+db = cantools.database.load_file(sys.argv[2], database_format="dbc")
+def crc8_sae_j1850(data):
+    crc = 0xFF
+    for b in data:
+        crc ^= b
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+    return crc ^ 0xFF
+out = {"frames": 0, "fd_brs_extended": 0, "decoded": 0, "bad_crc": 0, "bad_alive": 0, "bad_counter": 0}
+alive, counter = {}, {}
+for m in can.LogReader(sys.argv[1]):
+    out["frames"] += 1
+    out["fd_brs_extended"] += int(m.is_fd and m.bitrate_switch and m.is_extended_id)
+    msg = db.get_message_by_frame_id(m.arbitration_id)
+    data = bytes(m.data)
+    s = msg.decode(data, decode_choices=False, scaling=False)
+    out["decoded"] += 1
+    out["bad_crc"] += int(s["Crc8"] != crc8_sae_j1850(data[1:64]))
+    if msg.name in alive:
+        out["bad_alive"] += int(s["AliveCtr"] != (alive[msg.name] + 1) % 16)
+        out["bad_counter"] += int(s["SampleCtr"] != (counter[msg.name] + 10) % 4096)
+    alive[msg.name], counter[msg.name] = s["AliveCtr"], s["SampleCtr"]
+print(json.dumps(out))
+"#;

@@ -213,7 +213,11 @@ fn hil_busload_analyses_the_lab_contracts_bus() {
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{text}{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     for row in [
         "IMU_GYRO_BLOCK   0x18FF1021    64  yes       100",
         "TABLE_REPORT     0x18EF1020     8   no       100",
@@ -235,5 +239,8 @@ fn hil_busload_analyses_the_lab_contracts_bus() {
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success() && err.contains("INS_SPEED is not in the DBC"), "{err}");
+    assert!(
+        !o.status.success() && err.contains("INS_SPEED is not in the DBC"),
+        "{err}"
+    );
 }

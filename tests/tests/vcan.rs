@@ -1050,6 +1050,64 @@ fn nav_sends(id: u16) -> bool {
         .any(|m| m.id == id && m.sender == "NAV")
 }
 
+/// `candump -L` on an interface, listening (it has shown a marker frame sent after it
+/// started: a fixed wait lost the run's first 0.16 s on a slow host); the marker stays out of
+/// the capture.
+struct Candump {
+    child: std::process::Child,
+    reader: std::thread::JoinHandle<String>,
+}
+
+impl Candump {
+    fn listening(iface: &str) -> Self {
+        use std::io::BufRead;
+        let mut child = Command::new("candump")
+            .args(["-L", "-r", "16777216", iface])
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .expect("candump (can-utils) runs: ./run-tests installs it");
+        let out = child.stdout.take().unwrap();
+        const MARKER: &str = "7EE#A5";
+        let (listening_tx, listening) = std::sync::mpsc::channel();
+        let reader = std::thread::spawn(move || {
+            let mut captured = String::new();
+            for l in std::io::BufReader::new(out).lines().map_while(Result::ok) {
+                if l.ends_with(MARKER) {
+                    let _ = listening_tx.send(());
+                } else {
+                    captured.push_str(&l);
+                    captured.push('\n');
+                }
+            }
+            captured
+        });
+        let t0 = std::time::Instant::now();
+        loop {
+            let sent = Command::new("cansend").args([iface, MARKER]).status();
+            assert!(sent.is_ok_and(|s| s.success()), "cansend (can-utils) runs");
+            if listening
+                .recv_timeout(std::time::Duration::from_millis(200))
+                .is_ok()
+            {
+                break;
+            }
+            assert!(
+                t0.elapsed() < std::time::Duration::from_secs(20),
+                "candump shows nothing"
+            );
+        }
+        Self { child, reader }
+    }
+
+    /// Stop it (SIGINT) and take what it printed.
+    fn stop(mut self) -> String {
+        // SAFETY: kill(2) on our own child.
+        unsafe { libc::kill(self.child.id() as libc::pid_t, libc::SIGINT) };
+        self.child.wait().unwrap();
+        self.reader.join().unwrap()
+    }
+}
+
 /// The field's own tools against the bench (can-utils, installed by ./run-tests with the
 /// guest's packages):
 /// - `candump -L` watching a bench run sees every frame the emulators wrote and every frame nav
@@ -1069,49 +1127,10 @@ fn can_utils_watch_the_bus_and_play_our_logs() {
     vcan_setup::ensure_vcan(other).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let mut dump = Command::new("candump")
-        .args(["-L", "-r", "16777216", iface])
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("candump (can-utils) runs: ./run-tests installs it");
-    let out = dump.stdout.take().unwrap();
-    // candump is listening once it shows a marker frame sent after it started (a fixed wait
-    // lost the run's first 0.16 s on a slow host); the marker stays out of the capture
-    const MARKER: &str = "7EE#A5";
-    let (listening_tx, listening) = std::sync::mpsc::channel();
-    let reader = std::thread::spawn(move || {
-        let mut captured = String::new();
-        for l in std::io::BufReader::new(out).lines().map_while(Result::ok) {
-            if l.ends_with(MARKER) {
-                let _ = listening_tx.send(());
-            } else {
-                captured.push_str(&l);
-                captured.push('\n');
-            }
-        }
-        captured
-    });
-    let t0 = std::time::Instant::now();
-    loop {
-        let sent = Command::new("cansend").args([iface, MARKER]).status();
-        assert!(sent.is_ok_and(|s| s.success()), "cansend (can-utils) runs");
-        if listening
-            .recv_timeout(std::time::Duration::from_millis(200))
-            .is_ok()
-        {
-            break;
-        }
-        assert!(
-            t0.elapsed() < std::time::Duration::from_secs(20),
-            "candump shows nothing"
-        );
-    }
+    let dump = Candump::listening(iface);
     let (r, code) = hil_run(&["--duration", "4", "--speed", "5", "--iface", iface], &run);
     assert_eq!(code, 0, "the run passes");
-    // SAFETY: kill(2) on our own child.
-    unsafe { libc::kill(dump.id() as libc::pid_t, libc::SIGINT) };
-    dump.wait().unwrap();
-    let captured = reader.join().unwrap();
+    let captured = dump.stop();
     let capture = dir.path().join("candump.log");
     std::fs::write(&capture, &captured).unwrap();
     let imu = log_frames(&captured, |id| (0x080..=0x082).contains(&id));
@@ -1706,4 +1725,48 @@ fn a_campaign_of_two_builds_finds_the_worse_one_worse_and_the_rest_the_same() {
     for f in ["report.md", "report.json", "junit.xml", "cost.md"] {
         keep_file(dir.path(), "campaign-local", f);
     }
+}
+
+/// The emulated IMU speaking a lab's own contract on vcan (`hil emulate imu --mapping
+/// wire/contracts/lab-imu.toml`): the interface given CAN FD's MTU, the unit's samples ten to a
+/// 64-byte CAN FD frame with the bit-rate switch, 29-bit identifiers, as candump sees them. Its
+/// capture is decoded by cantools with the lab's DBC on the host after these tests, checksums
+/// and alive counters checked (tests/tests/can_logs.rs).
+#[test]
+#[ignore = "needs vcan: run ./run-tests"]
+fn the_imu_speaks_a_labs_own_contract_on_vcan_in_can_fd_frames() {
+    let iface = "vcan-e2e19";
+    vcan_setup::ensure_vcan_fd(iface).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mapping =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../wire/contracts/lab-imu.toml");
+    let dump = Candump::listening(iface);
+    let report = dir.path().join("emulate.json");
+    let o = Command::new(bin("hil"))
+        .args(["emulate", "imu", "--iface", iface, "--duration", "2"])
+        // what is checked is the frames, not the host's pace (the lockstep tests run beside)
+        .args(["--max-late-ms", "10000", "--mapping"])
+        .arg(&mapping)
+        .arg("--report")
+        .arg(&report)
+        .output()
+        .expect("hil runs");
+    let captured = dump.stop();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let st: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    // 1 kHz, ten samples a frame, two blocks: 400 frames in 2 s
+    assert_eq!(st["written"], 400, "{st}");
+    let lines: Vec<&str> = captured.lines().collect();
+    assert_eq!(lines.len(), 400, "{captured}");
+    for l in &lines {
+        // "(time) iface 18FF1021##5<128 hex digits>": extended, FD with the bit-rate switch
+        let frame = l.split_whitespace().nth(2).unwrap_or_default();
+        let (id, data) = frame
+            .split_once("##")
+            .unwrap_or_else(|| panic!("not FD: {l}"));
+        assert!(["18FF1021", "18FF1022"].contains(&id), "{l}");
+        assert!(data.starts_with('5') && data.len() == 1 + 128, "{l}");
+    }
+    std::fs::write(dir.path().join("candump.log"), &captured).unwrap();
+    keep_file(dir.path(), "lab-contract", "candump.log");
 }

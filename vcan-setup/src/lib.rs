@@ -14,7 +14,7 @@ mod cpio;
 mod native;
 mod vm;
 
-pub use native::{CanSupport, can_support, ensure_vcan, set_link};
+pub use native::{CanSupport, can_support, ensure_vcan, ensure_vcan_fd, set_link};
 pub use vm::{VmOptions, VmPrereqs, install_prereqs, prereqs, run_in_vm};
 
 use std::path::PathBuf;

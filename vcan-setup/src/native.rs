@@ -117,6 +117,35 @@ pub fn ensure_vcan(name: &str) -> Result<()> {
     })
 }
 
+/// [`ensure_vcan`], able to carry CAN FD frames (MTU 72): a vcan interface of the classic MTU
+/// is taken down, given FD's and brought up again (vcan changes its MTU only while down).
+pub fn ensure_vcan_fd(name: &str) -> Result<()> {
+    ensure_vcan(name)?;
+    let mtu = std::fs::read_to_string(Path::new("/sys/class/net").join(name).join("mtu"))
+        .ok()
+        .and_then(|m| m.trim().parse::<u32>().ok());
+    if mtu == Some(socketcan::nl::Mtu::Fd as u32) {
+        return Ok(());
+    }
+    let iface = CanInterface::open(name).map_err(|e| Error::Netlink {
+        name: name.into(),
+        action: "open",
+        detail: e.to_string(),
+    })?;
+    let fail = |action: &'static str| {
+        move |e: socketcan::Error| Error::Netlink {
+            name: name.into(),
+            action,
+            detail: e.to_string(),
+        }
+    };
+    iface.bring_down().map_err(fail("take down"))?;
+    iface
+        .set_mtu(socketcan::nl::Mtu::Fd)
+        .map_err(fail("set the CAN FD MTU (72) of"))?;
+    iface.bring_up().map_err(fail("bring up"))
+}
+
 /// Take interface `name` down (`up = false`) or bring it back up, as `ip link set NAME down|up`
 /// does (a CAN controller switched off and on, a cable pulled and put back).
 pub fn set_link(name: &str, up: bool) -> Result<()> {

@@ -6,6 +6,7 @@
 //! it: the models, the bus model and the step order are pure (tests/tests/layout.rs).
 
 pub mod clock;
+pub mod fd;
 pub mod freerun;
 pub mod player;
 pub mod pty;

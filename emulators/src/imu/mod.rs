@@ -23,6 +23,7 @@
 //! the pulse count after N samples differs from the true accumulated angle by less than one
 //! pulse, whatever N.
 
+pub mod mapped;
 pub mod mems;
 pub mod oscillator;
 pub mod pulse;
@@ -392,6 +393,21 @@ pub struct SampleFrames {
     /// The true input went beyond the gyros' or accelerometers' range in this sample (clamped
     /// and flagged; a `saturated_s` window alone does not count).
     pub over_range: bool,
+    /// What the unit measured over the sample before its pulse counters (every error of the
+    /// model, the dither included): for a contract that carries rates or increments instead
+    /// of pulses (`mapped`).
+    pub measured: Measured,
+}
+
+/// A sample's measured increments, in SI units.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Measured {
+    /// Angle increments x, y, z, rad.
+    pub dtheta: [f64; 3],
+    /// Velocity increments x, y, z, m/s.
+    pub dv: [f64; 3],
+    /// The sample's length, s.
+    pub dt: f64,
 }
 
 impl ImuEmulator {
@@ -635,14 +651,20 @@ impl ImuEmulator {
         };
         let d1: [f64; 3] = std::array::from_fn(|i| self.dither(i, t1));
         self.dither_last = Some((t1, d1));
+        let mut measured = Measured {
+            dt,
+            ..Measured::default()
+        };
         for i in 0..3 {
             let d = g[i] + self.drift[i] * dt + self.arw_sigma * n.sample(&mut self.rng) + d1[i]
                 - d0[i];
+            measured.dtheta[i] = d;
             self.gyro[i].add(d / (self.p.gyro_pulse_arcsec[i] * ARCSEC));
             self.drift_sum[i] += self.drift[i];
             self.drift[i] =
                 self.drift_phi * self.drift[i] + self.drift_drive * n.sample(&mut self.rng);
             let dv = a[i] + self.vrw_sigma * n.sample(&mut self.rng);
+            measured.dv[i] = dv;
             self.accel[i].add(dv / self.p.accel_pulse_mps[i]);
         }
         let bit_fail = self.p.bit_fail_from_s.is_some_and(|t| t1 >= t);
@@ -691,6 +713,7 @@ impl ImuEmulator {
             k,
             frames,
             over_range,
+            measured,
         }
     }
 }

@@ -50,20 +50,7 @@ pub(crate) fn busload(bitrates: &[f64], scenario: Option<PathBuf>, measure: bool
 /// bus: each mapped message's rate, load and worst-case response time. Exit status 1 when a
 /// message has no bound.
 pub(crate) fn mapped(path: &std::path::Path) -> Result<i32> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read the mapping {}", path.display()))?;
-    let file: wire::mapping::MappingFile =
-        toml::from_str(&text).with_context(|| format!("the mapping {}", path.display()))?;
-    let dbc_path = path
-        .parent()
-        .unwrap_or(std::path::Path::new("."))
-        .join(&file.dbc);
-    let dbc = std::fs::read_to_string(&dbc_path)
-        .with_context(|| format!("cannot read the DBC {}", dbc_path.display()))?;
-    let contract = wire::dbc::Contract::parse(&dbc)
-        .with_context(|| format!("the DBC {}", dbc_path.display()))?;
-    let m = wire::mapping::Mapping::check(file, &contract)
-        .with_context(|| format!("the mapping {} against its DBC", path.display()))?;
+    let (contract, m) = hil::scenario::lab_contract::load(path)?;
     let nominal = m.file.bus.bitrate;
     let data = m.file.bus.data_bitrate.unwrap_or(nominal);
     let periodic = m.periodic(&contract);

@@ -78,6 +78,12 @@ pub(crate) struct EmulateArgs {
     /// Write what the device did as JSON here when it stops.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// imu: speak a lab's own contract instead of ours: its mapping file, with the DBC it names
+    /// beside it (docs/your-device.md): the mapped frames (29-bit identifiers, CAN FD where the
+    /// DBC says so, counters, alive counters and checksums) at the mapping's rate; the
+    /// interface is given CAN FD's MTU.
+    #[arg(long)]
+    mapping: Option<PathBuf>,
     /// Also write the nav.toml our nav takes with this scenario's devices on --iface (and the
     /// receiver at --link), with the parameter files it loads beside it.
     #[arg(long)]
@@ -120,6 +126,12 @@ pub(crate) fn emulate(a: EmulateArgs) -> Result<i32> {
         Device::Gps => format!("gps on {}", a.link.display()),
         d => format!("{d:?} on {}", a.iface).to_lowercase(),
     };
+    let t0_given = a.t0.is_some();
+    let lab = match (&a.mapping, device) {
+        (Some(m), Device::Imu) => Some(hil::scenario::lab_contract::load(m)?),
+        (Some(_), d) => bail!("--mapping: only the imu speaks a lab's contract yet, not {d:?}"),
+        (None, _) => None,
+    };
     let runner = {
         let (stop, progress) = (stop.clone(), progress.clone());
         let s = s.clone();
@@ -129,6 +141,10 @@ pub(crate) fn emulate(a: EmulateArgs) -> Result<i32> {
             .name("device".into())
             .spawn(move || -> Result<FreeStats> {
                 match device {
+                    Device::Imu if lab.is_some() => {
+                        let (c, m) = lab.as_ref().context("the lab's contract")?;
+                        mapped_imu(&s, &iface, (c, m), (&pacing, t0_given), &stop, &progress)
+                    }
                     Device::Imu => imu(&s, &iface, follow, &pacing, &stop, &progress),
                     Device::Turntable => turntable(&s, &iface, &pacing, &stop, &progress),
                     Device::Gps => gps(&s, &link, &pacing, &stop, &progress),
@@ -248,6 +264,50 @@ fn imu(
     let stream = BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults);
     Ok(emulators::adapters::freerun::run_imu(
         iface, stream, &tracks, None, p, stop, progress,
+    )?)
+}
+
+/// The IMU of `s` speaking the lab's contract `c` through its mapping `m` on `iface` (at the
+/// mapping's rate; the table, if any, stays at its zero).
+/// Without `--t0` (`t0_given` false), time 0 is when the interface and the unit are ready.
+fn mapped_imu(
+    s: &Scenario,
+    iface: &str,
+    (c, m): (&wire::dbc::Contract, &wire::mapping::Mapping),
+    (p, t0_given): (&Pacing, bool),
+    stop: &AtomicBool,
+    progress: &Progress,
+) -> Result<FreeStats> {
+    let imu_map = m
+        .file
+        .imu
+        .as_ref()
+        .context("the mapping has no [imu]: nothing for the IMU to send")?;
+    vcan_setup::ensure_vcan_fd(iface)?;
+    let mut params = s.imu.clone();
+    params.rate_hz = imu_map.rate_hz;
+    let arcsec = std::f64::consts::PI / 180.0 / 3600.0;
+    let mapped = emulators::imu::mapped::MappedImu::new(
+        imu_map,
+        c,
+        params.gyro_pulse_arcsec.map(|x| x * arcsec),
+        params.accel_pulse_mps,
+    );
+    let imu = ImuEmulator::new(s.motion(), params);
+    let mut framer = wire::mapping::Framer::new(c, m);
+    let p = &Pacing {
+        origin: if t0_given { p.origin } else { Instant::now() },
+        ..*p
+    };
+    Ok(emulators::adapters::fd::run_mapped_imu(
+        iface,
+        imu,
+        mapped,
+        &mut framer,
+        imu_map.rate_hz,
+        p,
+        stop,
+        progress,
     )?)
 }
 

@@ -2,6 +2,7 @@
 
 pub mod busload;
 pub mod fogunit;
+pub mod lab_contract;
 pub mod navconfig;
 pub mod route;
 pub mod trackview;

@@ -1,0 +1,131 @@
+//! The IMU on a lab's own contract (`wire::mapping`): what the unit measured over each sample
+//! as the quantity the lab's DBC carries: rates (deg/s, m/s^2), increments (deg, m/s) or whole
+//! pulses counted up and wrapping at their signal's width. Pure: a function of the samples.
+
+use super::Measured;
+use wire::dbc::{Contract, Kind};
+use wire::mapping::{Channel, ImuMapping, MappedSample, Quantity};
+
+/// One channel's conversion (the three gyros, or the three accelerometers).
+#[derive(Debug, Clone)]
+struct Conversion {
+    quantity: Quantity,
+    /// One pulse, in the measured unit (rad, m/s).
+    pulse: [f64; 3],
+    /// Pulses counted so far, with their fractions.
+    total: [f64; 3],
+    /// A pulse count's range: its signal's raw values (the low end, the count of values).
+    range: (f64, f64),
+}
+
+impl Conversion {
+    fn new(c: &Channel, contract: &Contract, pulse: [f64; 3]) -> Self {
+        let range = contract
+            .message(&c.message)
+            .and_then(|m| m.signal(&c.signals[0].replace("{k}", "0")))
+            .map_or((0.0, 2f64.powi(32)), |s| {
+                let n = 2f64.powi(i32::from(s.len));
+                match s.kind {
+                    Kind::Signed => (-n / 2.0, n),
+                    _ => (0.0, n),
+                }
+            });
+        Self {
+            quantity: c.quantity,
+            pulse,
+            total: [0.0; 3],
+            range,
+        }
+    }
+
+    /// The sample's values of increments `d` (rad or m/s) over `dt`; `to_unit`: the mapping's
+    /// unit per SI unit (deg per rad for the gyros, 1 for the accelerometers).
+    fn values(&mut self, d: &[f64; 3], dt: f64, to_unit: f64) -> [f64; 3] {
+        std::array::from_fn(|i| match self.quantity {
+            Quantity::Rate => d[i] * to_unit / dt,
+            Quantity::Increment => d[i] * to_unit,
+            Quantity::Pulses => {
+                self.total[i] += d[i] / self.pulse[i];
+                let (low, n) = self.range;
+                (self.total[i].floor() - low).rem_euclid(n) + low
+            }
+        })
+    }
+}
+
+/// The unit's samples as the mapping's quantities.
+#[derive(Debug, Clone)]
+pub struct MappedImu {
+    gyro: Conversion,
+    accel: Conversion,
+}
+
+impl MappedImu {
+    /// The IMU of `mapping` (checked against `contract`); its pulses, where it counts them:
+    /// `gyro_pulse_rad` and `accel_pulse_mps` per axis.
+    pub fn new(
+        mapping: &ImuMapping,
+        contract: &Contract,
+        gyro_pulse_rad: [f64; 3],
+        accel_pulse_mps: [f64; 3],
+    ) -> Self {
+        Self {
+            gyro: Conversion::new(&mapping.gyro, contract, gyro_pulse_rad),
+            accel: Conversion::new(&mapping.accel, contract, accel_pulse_mps),
+        }
+    }
+
+    /// Sample `counter` with what the unit measured over it.
+    pub fn sample(&mut self, counter: u64, m: &Measured) -> MappedSample {
+        MappedSample {
+            counter,
+            gyro: self
+                .gyro
+                .values(&m.dtheta, m.dt, 180.0 / std::f64::consts::PI),
+            accel: self.accel.values(&m.dv, m.dt, 1.0),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lab() -> (Contract, wire::mapping::Mapping) {
+        let here = concat!(env!("CARGO_MANIFEST_DIR"), "/../wire/contracts/");
+        let dbc = std::fs::read_to_string(format!("{here}lab-imu.dbc")).expect("the lab's DBC");
+        let c = Contract::parse(&dbc).expect("reads");
+        let toml = std::fs::read_to_string(format!("{here}lab-imu.toml")).expect("its mapping");
+        let m = wire::mapping::Mapping::parse(&toml, &c).expect("fits");
+        (c, m)
+    }
+
+    /// Rates from increments over the sample, pulses counted up with their fractions kept and
+    /// wrapping at their signal's width.
+    #[test]
+    fn the_unit_measures_as_the_mapping_says() {
+        let (c, m) = lab();
+        let imu = m.file.imu.as_ref().expect("the lab maps an IMU");
+        let mut x = MappedImu::new(imu, &c, [1e-5; 3], [1e-3; 3]);
+        let dt = 1e-3;
+        let meas = Measured {
+            dtheta: [1e-4, -2e-4, 0.0],
+            dv: [9.8e-3, 0.0, -1e-3],
+            dt,
+        };
+        let s = x.sample(7, &meas);
+        // the lab's gyros and accelerometers are rates
+        assert_eq!(s.counter, 7);
+        assert!((s.gyro[0] - 1e-4 / dt * 180.0 / std::f64::consts::PI).abs() < 1e-12);
+        assert!((s.accel[0] - 9.8).abs() < 1e-12 && (s.accel[2] + 1.0).abs() < 1e-12);
+        // as pulses on a 16-bit unsigned signal: 10.5 then 21 pulses, wrapping past 65535
+        let mut p = Conversion {
+            quantity: Quantity::Pulses,
+            pulse: [1e-5; 3],
+            total: [65530.0, 0.0, 0.0],
+            range: (0.0, 65536.0),
+        };
+        let v = p.values(&[1.05e-4, 0.0, -1e-5], dt, 1.0);
+        assert_eq!(v, [4.0, 0.0, 65535.0]);
+    }
+}
