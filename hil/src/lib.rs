@@ -24,6 +24,7 @@ pub mod junit;
 pub mod live;
 pub mod par;
 pub mod procedures;
+pub mod replay;
 pub mod report;
 pub mod run;
 pub mod scenario;

@@ -19,13 +19,14 @@ use std::path::{Path, PathBuf};
 const CRATES: [&str; 5] = ["wire", "nav", "emulators", "hil", "vcan-setup"];
 
 /// hil's folders in the order they may import (each from those before it).
-const HIL_LAYERS: [&str; 10] = [
+const HIL_LAYERS: [&str; 11] = [
     "scenario",
     "engine",
     "live",
     "procedures",
     "report",
     "run",
+    "replay",
     "free",
     "experiments",
     "suites",

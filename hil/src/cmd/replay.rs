@@ -71,7 +71,7 @@ pub(crate) fn replay_live(
         None
     };
     let (r, stats) =
-        hil::live::replay::replay_live(&mcap, &cfg, scenario.as_ref(), addr, wait, speed)?;
+        hil::replay::live_view::replay_live(&mcap, &cfg, scenario.as_ref(), addr, wait, speed)?;
     for c in &stats.clients {
         eprintln!(
             "hil: live view: client {}: {} messages sent, {} dropped (fell behind)",
@@ -110,14 +110,14 @@ pub(crate) fn replay_bus(
         None => sibling_binary("nav")?,
     };
     if bus.here() {
-        let opts = hil::run::busreplay::BusReplayOptions {
+        let opts = hil::replay::on_bus::BusReplayOptions {
             iface: bus.iface.clone(),
             out: out.clone(),
             nav_bin,
             speed,
             progress: !bus.json,
         };
-        let r = hil::run::busreplay::replay_on_bus(&mcap, &cfg, &opts)?;
+        let r = hil::replay::on_bus::replay_on_bus(&mcap, &cfg, &opts)?;
         let json = serde_json::to_string_pretty(&r)?;
         std::fs::write(out.join("replay.json"), &json)
             .with_context(|| format!("writing {}", out.join("replay.json").display()))?;

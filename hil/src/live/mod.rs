@@ -26,7 +26,6 @@
 //! pauses a drill and checks it against the in-process reference).
 
 pub mod bench_run;
-pub mod replay;
 pub mod server;
 
 use anyhow::Result;

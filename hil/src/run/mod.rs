@@ -2,7 +2,6 @@
 //! file differs from a vehicle's), run the emulators for the scenario's simulated duration,
 //! stop `nav` with SIGTERM, check and report.
 
-pub mod busreplay;
 mod judge;
 pub mod offload;
 

@@ -7,10 +7,10 @@
 //! and the truth (from the run's scenario, when the folder has it) go through the same watcher
 //! and publisher as a bench run's ([`super::bench_run`]).
 
-use super::View;
-use super::bench_run::BenchRun;
-use super::server::{Control, Playback as Status};
 use crate::engine::recording::{Input, Playback, Replayer, each_message, input_of, text};
+use crate::live::View;
+use crate::live::bench_run::BenchRun;
+use crate::live::server::{Control, Playback as Status};
 use crate::scenario::Scenario;
 use anyhow::Result;
 use nav::config::NavConfig;
@@ -40,7 +40,7 @@ pub fn replay_live(
     addr: std::net::SocketAddr,
     wait: usize,
     speed: f64,
-) -> Result<(Playback, super::server::ServerStats)> {
+) -> Result<(Playback, crate::live::server::ServerStats)> {
     let mut inputs = Vec::new();
     each_message(mcap, "replaying", |m| {
         if let Some(i) = input_of(m) {
