@@ -270,6 +270,19 @@ pub fn gpsd_testdata() -> Option<PathBuf> {
     .find(|p| p.is_dir())
 }
 
+/// CRC-8/SAE-J1850 in Python (polynomial 0x1D, start and final XOR 0xFF), for the scripts
+/// that check a lab contract's frames with the field's tools: written from the catalogue, not
+/// from our code.
+pub const PY_CRC8_SAE_J1850: &str = r#"
+def crc8_sae_j1850(data):
+    crc = 0xFF
+    for b in data:
+        crc ^= b
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+    return crc ^ 0xFF
+"#;
+
 #[cfg(test)]
 mod tests {
     /// The watchdog reports counted starved are found wherever the run's JSON holds them.

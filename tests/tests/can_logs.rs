@@ -197,7 +197,7 @@ fn cantools_decodes_the_lab_contract_the_emulated_imu_sent_on_vcan() {
     let dbc =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../wire/contracts/lab-imu.dbc");
     let out = e2e::python(
-        LAB_READ_BACK,
+        &format!("{}{LAB_READ_BACK}", e2e::PY_CRC8_SAE_J1850),
         &[log.as_os_str(), dbc.as_os_str()],
         "python-can and cantools on the lab's capture",
     );
@@ -214,13 +214,6 @@ const LAB_READ_BACK: &str = r#"
 import json, sys
 import can, cantools
 db = cantools.database.load_file(sys.argv[2], database_format="dbc")
-def crc8_sae_j1850(data):
-    crc = 0xFF
-    for b in data:
-        crc ^= b
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
 out = {"frames": 0, "fd_brs_extended": 0, "decoded": 0, "bad_crc": 0, "bad_alive": 0, "bad_counter": 0}
 alive, counter = {}, {}
 for m in can.LogReader(sys.argv[1]):

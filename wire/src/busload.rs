@@ -342,15 +342,11 @@ pub fn report(bitrate: f64) -> String {
     report_of(&table(bitrate), bitrate)
 }
 
-/// A printable bus-load report of a [`load`] at `bitrate`.
-pub fn report_of(load: &(Vec<MessageLoad>, f64, f64), bitrate: f64) -> String {
-    use std::fmt::Write;
-    let (rows, nominal, worst) = load;
-    // every message's worst-case response time, its rate taken as its period (those not sent
-    // take no part)
-    let sent: Vec<&MessageLoad> = rows.iter().filter(|r| r.frames_per_second > 0.0).collect();
-    let periodic: Vec<Periodic> = sent
-        .iter()
+/// The messages of our contract that `rows` sends (those at no rate take no part), each at its
+/// rate taken as its period, for [`response_times`].
+pub fn periodic_of(rows: &[MessageLoad]) -> Vec<Periodic> {
+    rows.iter()
+        .filter(|r| r.frames_per_second > 0.0)
         .map(|r| Periodic {
             name: r.spec.name.to_string(),
             id: u32::from(r.spec.id),
@@ -360,7 +356,15 @@ pub fn report_of(load: &(Vec<MessageLoad>, f64, f64), bitrate: f64) -> String {
             period_s: 1.0 / r.frames_per_second,
             jitter_s: 0.0,
         })
-        .collect();
+        .collect()
+}
+
+/// A printable bus-load report of a [`load`] at `bitrate`.
+pub fn report_of(load: &(Vec<MessageLoad>, f64, f64), bitrate: f64) -> String {
+    use std::fmt::Write;
+    let (rows, nominal, worst) = load;
+    // every message's worst-case response time, its rate taken as its period
+    let periodic = periodic_of(rows);
     let response = response_times(&periodic, bitrate, bitrate);
     let mut s = String::new();
     let _ = writeln!(
@@ -369,9 +373,9 @@ pub fn report_of(load: &(Vec<MessageLoad>, f64, f64), bitrate: f64) -> String {
         "message", "id", "dlc", "frames/s", "nominal %", "worst %", "response ms"
     );
     for r in rows {
-        let resp = sent
+        let resp = periodic
             .iter()
-            .position(|x| x.spec.id == r.spec.id)
+            .position(|x| x.id == u32::from(r.spec.id))
             .map(|k| response[k].map_or("no bound".to_string(), |t| format!("{:.3}", t * 1e3)))
             .unwrap_or_else(|| "-".to_string());
         let _ = writeln!(

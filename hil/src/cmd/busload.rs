@@ -148,19 +148,7 @@ fn against_bounds(b: &emulators::bus::model::BusStats, s: &Scenario) -> String {
     use std::fmt::Write;
     let bitrate = s.bus.bitrate_bps;
     let (rows, _, _) = hil::scenario::busload::of(s);
-    let periodic: Vec<wire::busload::Periodic> = rows
-        .iter()
-        .filter(|r| r.frames_per_second > 0.0)
-        .map(|r| wire::busload::Periodic {
-            name: r.spec.name.to_string(),
-            id: u32::from(r.spec.id),
-            extended: false,
-            payload: usize::from(r.spec.dlc),
-            fd: false,
-            period_s: 1.0 / r.frames_per_second,
-            jitter_s: 0.0,
-        })
-        .collect();
+    let periodic = wire::busload::periodic_of(&rows);
     let bounds = wire::busload::response_times(&periodic, bitrate, bitrate);
     let mut s = String::from(
         "\n| identifier | measured worst, queued to sent (us) | bound (us) | within |\n|---|---:|---:|---|\n",
