@@ -202,9 +202,13 @@ fn cantools_decodes_the_lab_contract_the_emulated_imu_sent_on_vcan() {
         "python-can and cantools on the lab's capture",
     );
     let r: Value = serde_json::from_slice(&out).expect("the read-back's JSON");
-    assert_eq!(r["frames"], 400, "{r}");
+    assert_eq!(r["frames"], 420, "{r}");
     assert_eq!(r["fd_brs_extended"], 400, "{r}");
-    assert_eq!(r["decoded"], 400, "{r}");
+    assert_eq!(r["decoded"], 420, "{r}");
+    // the unit's status: its temperature, healthy, and the PPS latched every second
+    assert_eq!(r["status"], 20, "{r}");
+    assert_eq!(r["status_ok"], 20, "{r}");
+    assert!(r["pps_valid"].as_u64().unwrap() >= 1, "{r}");
     assert_eq!(r["bad_crc"], 0, "{r}");
     assert_eq!(r["bad_alive"], 0, "{r}");
     assert_eq!(r["bad_counter"], 0, "{r}");
@@ -214,7 +218,8 @@ const LAB_READ_BACK: &str = r#"
 import json, sys
 import can, cantools
 db = cantools.database.load_file(sys.argv[2], database_format="dbc")
-out = {"frames": 0, "fd_brs_extended": 0, "decoded": 0, "bad_crc": 0, "bad_alive": 0, "bad_counter": 0}
+out = {"frames": 0, "fd_brs_extended": 0, "decoded": 0, "bad_crc": 0, "bad_alive": 0, "bad_counter": 0,
+       "status": 0, "status_ok": 0, "pps_valid": 0}
 alive, counter = {}, {}
 for m in can.LogReader(sys.argv[1]):
     out["frames"] += 1
@@ -224,9 +229,17 @@ for m in can.LogReader(sys.argv[1]):
     s = msg.decode(data, decode_choices=False, scaling=False)
     out["decoded"] += 1
     out["bad_crc"] += int(s["Crc8"] != crc8_sae_j1850(data[1:64]))
+    if msg.name == "IMU_STATUS":
+        t = msg.decode(data, decode_choices=False)
+        out["status"] += 1
+        out["status_ok"] += int(abs(t["Temperature"] - 45.0) < 30 and t["BitWord"] == 0)
+        out["pps_valid"] += int(t["PpsValid"] == 1)
+    elif msg.name in counter:
+        out["bad_counter"] += int(s["SampleCtr"] != (counter[msg.name] + 10) % 4096)
     if msg.name in alive:
         out["bad_alive"] += int(s["AliveCtr"] != (alive[msg.name] + 1) % 16)
-        out["bad_counter"] += int(s["SampleCtr"] != (counter[msg.name] + 10) % 4096)
-    alive[msg.name], counter[msg.name] = s["AliveCtr"], s["SampleCtr"]
+    alive[msg.name] = s["AliveCtr"]
+    if "SampleCtr" in s:
+        counter[msg.name] = s["SampleCtr"]
 print(json.dumps(out))
 "#;

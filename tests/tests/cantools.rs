@@ -125,7 +125,7 @@ fn cantools_reads_the_lab_contracts_frames_with_their_checksums_right() {
     let mapping = wire::mapping::Mapping::parse(&toml, &contract).unwrap();
     let mut framer = wire::mapping::Framer::new(&contract, &mapping);
     let mut lines = String::new();
-    let mut n = 0;
+    let (mut n, mut status) = (0, 0);
     for k in 0..200u64 {
         let x = (k as f64 * 0.37).sin();
         for f in framer
@@ -133,18 +133,27 @@ fn cantools_reads_the_lab_contracts_frames_with_their_checksums_right() {
                 counter: 4000 + k,
                 gyro: [120.0 * x, -0.01 * k as f64, 299.99],
                 accel: [9.0 * x, 0.0, -9.80665],
+                temperature_c: 41.5,
+                ..Default::default()
             })
             .unwrap()
         {
             let wire::dbc::FrameId::Extended(id) = f.id else {
                 panic!("{:?}: not extended", f.id)
             };
+            // the unit's status frame, one per 100 samples (read back from the bus by the
+            // end-to-end capture's test, tests/tests/can_logs.rs)
+            if f.data.len() == 8 {
+                status += 1;
+                continue;
+            }
             let hex: String = f.data.iter().map(|b| format!("{b:02X}")).collect();
             lines += &format!("{id:08X} {hex}\n");
             n += 1;
         }
     }
     assert_eq!(n, 40, "ten samples to a frame, two blocks");
+    assert_eq!(status, 2, "a status frame per 100 samples");
     std::fs::write(dir.path().join("lab-imu.dbc"), &dbc).unwrap();
     std::fs::write(dir.path().join("frames.txt"), &lines).unwrap();
     let o = Command::new("python3")

@@ -1754,19 +1754,28 @@ fn the_imu_speaks_a_labs_own_contract_on_vcan_in_can_fd_frames() {
     let captured = dump.stop();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let st: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    // 1 kHz, ten samples a frame, two blocks: 400 frames in 2 s
-    assert_eq!(st["written"], 400, "{st}");
+    // 1 kHz, ten samples a frame, two blocks, and the status every 100 samples: 420 frames in
+    // 2 s
+    assert_eq!(st["written"], 420, "{st}");
     let lines: Vec<&str> = captured.lines().collect();
-    assert_eq!(lines.len(), 400, "{captured}");
+    assert_eq!(lines.len(), 420, "{captured}");
+    let mut status = 0;
     for l in &lines {
-        // "(time) iface 18FF1021##5<128 hex digits>": extended, FD with the bit-rate switch
+        // "(time) iface 18FF1021##5<128 hex digits>": extended, FD with the bit-rate switch;
+        // the status "18FF1030#<16 hex digits>", classic
         let frame = l.split_whitespace().nth(2).unwrap_or_default();
+        if let Some(data) = frame.strip_prefix("18FF1030#") {
+            assert_eq!(data.len(), 16, "{l}");
+            status += 1;
+            continue;
+        }
         let (id, data) = frame
             .split_once("##")
             .unwrap_or_else(|| panic!("not FD: {l}"));
         assert!(["18FF1021", "18FF1022"].contains(&id), "{l}");
         assert!(data.starts_with('5') && data.len() == 1 + 128, "{l}");
     }
+    assert_eq!(status, 20);
     std::fs::write(dir.path().join("candump.log"), &captured).unwrap();
     keep_file(dir.path(), "lab-contract", "candump.log");
 }

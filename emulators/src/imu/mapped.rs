@@ -83,6 +83,9 @@ impl MappedImu {
                 .gyro
                 .values(&m.dtheta, m.dt, 180.0 / std::f64::consts::PI),
             accel: self.accel.values(&m.dv, m.dt, 1.0),
+            temperature_c: m.temp_c,
+            bit: u32::from(m.bit_fail),
+            pps_ms: m.pps_s.map(|s| s * 1e3),
         }
     }
 }
@@ -112,12 +115,16 @@ mod tests {
             dtheta: [1e-4, -2e-4, 0.0],
             dv: [9.8e-3, 0.0, -1e-3],
             dt,
+            pps_s: Some(2e-4),
+            bit_fail: false,
+            temp_c: 41.5,
         };
         let s = x.sample(7, &meas);
         // the lab's gyros and accelerometers are rates
         assert_eq!(s.counter, 7);
         assert!((s.gyro[0] - 1e-4 / dt * 180.0 / std::f64::consts::PI).abs() < 1e-12);
         assert!((s.accel[0] - 9.8).abs() < 1e-12 && (s.accel[2] + 1.0).abs() < 1e-12);
+        assert_eq!((s.temperature_c, s.bit, s.pps_ms), (41.5, 0, Some(0.2)));
         // as pulses on a 16-bit unsigned signal: 10.5 then 21 pulses, wrapping past 65535
         let mut p = Conversion {
             quantity: Quantity::Pulses,

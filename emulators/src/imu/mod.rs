@@ -408,6 +408,12 @@ pub struct Measured {
     pub dv: [f64; 3],
     /// The sample's length, s.
     pub dt: f64,
+    /// A PPS edge latched in the sample: its time after the sample's start, s.
+    pub pps_s: Option<f64>,
+    /// The built-in test reports a failure.
+    pub bit_fail: bool,
+    /// The gyro block's temperature, degC.
+    pub temp_c: f64,
 }
 
 impl ImuEmulator {
@@ -574,10 +580,16 @@ impl ImuEmulator {
 
     /// Where a PPS edge falls inside the sample (t0, t1], in 1/256 of the sample before its end:
     /// the edge of whole seconds plus phase and jitter unless it is missing, or a spurious one.
-    fn pps_offset(&self, t0: f64, t1: f64) -> Option<u8> {
+    fn pps_offset(&self, t0: f64, t1: f64, edge: Option<f64>) -> Option<u8> {
+        let dt = self.sample_length(t0, t1);
+        edge.map(|edge| (((t1 - edge) / dt) * 256.0).floor().clamp(0.0, 255.0) as u8)
+    }
+
+    /// The PPS edge the unit latches in the sample (t0, t1], if any: a true one outside the
+    /// missing windows, else a spurious one.
+    fn pps_latched(&self, t0: f64, t1: f64) -> Option<f64> {
         let within = |w: &[[f64; 2]], t: f64| w.iter().any(|p| t >= p[0] && t < p[1]);
-        let edge = self
-            .pps_edge_in(t0, t1)
+        self.pps_edge_in(t0, t1)
             .filter(|e| !within(&self.p.pps_missing_s, *e))
             .or_else(|| {
                 self.p
@@ -585,9 +597,7 @@ impl ImuEmulator {
                     .iter()
                     .copied()
                     .find(|e| *e > t0 && *e <= t1)
-            });
-        let dt = self.sample_length(t0, t1);
-        edge.map(|edge| (((t1 - edge) / dt) * 256.0).floor().clamp(0.0, 255.0) as u8)
+            })
     }
 
     /// The housekeeping frame, at 10 Hz of samples (none between).
@@ -673,7 +683,11 @@ impl ImuEmulator {
         let within = |w: &[[f64; 2]], t: f64| w.iter().any(|p| t >= p[0] && t < p[1]);
         let over_range = saturated;
         saturated |= within(&self.p.saturated_s, t1);
-        let pps_offset = self.pps_offset(t0, t1);
+        let edge = self.pps_latched(t0, t1);
+        let pps_offset = self.pps_offset(t0, t1, edge);
+        measured.pps_s = edge.map(|e| e - t0);
+        measured.bit_fail = bit_fail;
+        measured.temp_c = self.p.temp_c;
         let gf = ImuGyro {
             counts: [
                 self.gyro[0].wire(),
