@@ -31,6 +31,14 @@ pub enum FdError {
         /// Its length.
         len: usize,
     },
+    /// A sample the mapping could not encode (a value its signal cannot carry).
+    #[error("the IMU's sample {sample} in the lab's frames")]
+    Encode {
+        /// The sample.
+        sample: u64,
+        /// What the encoder said.
+        source: wire::dbc::EncodeError,
+    },
     /// A write failed.
     #[error("CAN interface {iface}: write of frame {id} failed")]
     Write {
@@ -123,10 +131,9 @@ pub fn run_mapped_imu(
         }
         let frames = framer
             .push(mapped.sample(s.k, &s.measured))
-            .map_err(|e| FdError::Frame {
-                iface: iface.into(),
-                id: format!("of sample {}: {e}", s.k),
-                len: 0,
+            .map_err(|source| FdError::Encode {
+                sample: s.k,
+                source,
             })?;
         reached = t;
         if frames.is_empty() {
