@@ -82,7 +82,7 @@ pub(crate) enum Experiment {
     /// fixes (none in a filter's first minute, no good fix ever) and integrity alarms per route
     /// and filter kind; plots of the errors against the filters' 3-sigma bounds. Writes
     /// report.md/json and SVGs; exit status 1 when a target is missed. Use a release build (the
-    /// 14 level routes, three of them an hour long, `--runs 16` as docs/navigation.md takes its
+    /// 14 level routes, three of them an hour long, `--runs 16` as docs/navigation-results.md takes its
     /// verdict on: 29 minutes on 2 cores; the roads of docs/routes.md besides, one of them a
     /// highway of 2.3 hours).
     Routes {

@@ -103,7 +103,7 @@ pub struct FilterConfig {
     /// keeps its drift states a random walk with the same short-term spectrum
     /// (`2 sigma^2 / tau`), the drift's turn-on value being unknown. Without it the drift
     /// states were sure of a drift that had moved on: on an hour's drive with a sub-metre
-    /// receiver the velocity NEES per dof rose to 4-5 after half an hour (docs/navigation.md).
+    /// receiver the velocity NEES per dof rose to 4-5 after half an hour (docs/navigation-results.md).
     pub gyro_bias_instability_dph: f64,
     /// The instability's correlation time, s.
     pub gyro_bias_tau_s: f64,
