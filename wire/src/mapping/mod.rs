@@ -7,6 +7,14 @@
 //! over its own bytes, a rate the bus cannot hold) is refused, naming the message and the
 //! signal. Every key: docs/your-device.md.
 
+mod solution;
+mod table;
+
+pub use solution::{
+    PositionMapping, SolutionMapping, SolutionPart, SolutionReader, VelocityMapping,
+};
+pub use table::{FAULT_NAMES, TableMapping, TableSide};
+
 use crate::crc::Crc;
 use crate::dbc::{Contract, EncodeError, FrameId, Kind, MessageLayout, SignalLayout};
 use serde::Deserialize;
@@ -23,6 +31,12 @@ pub struct MappingFile {
     /// The IMU's frames, when the lab's contract has them.
     #[serde(default)]
     pub imu: Option<ImuMapping>,
+    /// The turntable's commands and reports, when the lab's contract has them.
+    #[serde(default)]
+    pub turntable: Option<TableMapping>,
+    /// Where the device under test puts its solution, when the bench is to judge it.
+    #[serde(default)]
+    pub solution: Option<SolutionMapping>,
     /// The messages protected by an alive counter and a checksum.
     #[serde(default)]
     pub protect: Vec<Protection>,
@@ -235,6 +249,12 @@ impl Mapping {
         let mut frames: Vec<(String, f64)> = Vec::new();
         if let Some(imu) = &file.imu {
             check_imu(imu, contract, &mut frames)?;
+        }
+        if let Some(t) = &file.turntable {
+            table::check(t, contract)?;
+        }
+        if let Some(s) = &file.solution {
+            solution::check(s, contract)?;
         }
         for (i, p) in file.protect.iter().enumerate() {
             check_protection(&format!("protect {}", i + 1), p, contract)?;
@@ -593,7 +613,7 @@ pub struct Framer<'a> {
     contract: &'a Contract,
     mapping: &'a Mapping,
     pending: Vec<MappedSample>,
-    alive: std::collections::BTreeMap<String, u64>,
+    protector: Protector<'a>,
     /// Samples taken, for the status frame's period.
     seen: u64,
     /// The PPS latched since the last status frame (ms into its sample).
@@ -607,7 +627,7 @@ impl<'a> Framer<'a> {
             contract,
             mapping,
             pending: Vec::new(),
-            alive: Default::default(),
+            protector: Protector::new(mapping),
             seen: 0,
             pps: None,
         }
@@ -704,6 +724,29 @@ impl<'a> Framer<'a> {
             out.push(MappedFrame { id: m.id, data });
         }
         Ok(out)
+    }
+
+    /// Fill in message `m`'s alive counter and checksum ([`Protector::protect`]).
+    pub fn protect(&mut self, m: &MessageLayout, data: &mut [u8]) -> Result<(), EncodeError> {
+        self.protector.protect(m, data)
+    }
+}
+
+/// A sender's alive counters: each protected message's frames numbered one up from 0 and
+/// their checksums filled in (the senders' side of [`Guard`]).
+#[derive(Debug, Clone)]
+pub struct Protector<'a> {
+    mapping: &'a Mapping,
+    alive: std::collections::BTreeMap<String, u64>,
+}
+
+impl<'a> Protector<'a> {
+    /// The protector of `mapping`'s messages.
+    pub fn new(mapping: &'a Mapping) -> Self {
+        Self {
+            mapping,
+            alive: Default::default(),
+        }
     }
 
     /// Fill in message `m`'s alive counter (one more than its last frame's) and checksum,
@@ -838,10 +881,10 @@ mod tests {
     use super::*;
 
     fn lab() -> Contract {
-        Contract::parse(include_str!("../contracts/lab-imu.dbc")).expect("the lab's DBC reads")
+        Contract::parse(include_str!("../../contracts/lab-imu.dbc")).expect("the lab's DBC reads")
     }
 
-    const MAPPING: &str = include_str!("../contracts/lab-imu.toml");
+    const MAPPING: &str = include_str!("../../contracts/lab-imu.toml");
 
     /// The second contract's mapping fits its DBC: ten samples a CAN FD frame at 1 kHz, two
     /// blocks and a status frame, the table's reports, the box's commands and solution: a small
