@@ -57,7 +57,7 @@ pub struct Pacing {
 pub const IMU_WRITE_PERIOD: Duration = Duration::from_millis(1);
 
 impl Pacing {
-    fn clock(&self) -> SimClock {
+    pub(crate) fn clock(&self) -> SimClock {
         SimClock::starting_at(self.origin, self.speed)
     }
 }
@@ -67,7 +67,7 @@ impl Pacing {
 /// round to reading it (under load a thread woken 30 ms late reads three 100 Hz reports at once;
 /// taken at one instant they made the table turn 20 times its rate, beyond the gyros' range).
 #[derive(Debug, Clone, Copy)]
-struct Stamps {
+pub(crate) struct Stamps {
     /// The UNIX clock at simulated time 0, ns.
     unix_at_origin_ns: i128,
     speed: f64,
@@ -75,7 +75,7 @@ struct Stamps {
 
 impl Stamps {
     /// Tie the UNIX clock to `p`'s origin, now.
-    fn new(p: &Pacing) -> Self {
+    pub(crate) fn new(p: &Pacing) -> Self {
         let unix = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos() as i128);
@@ -94,7 +94,7 @@ impl Stamps {
     /// The simulated time of a frame stamped `stamp_ns` and read at `now` (s): the stamp's,
     /// unless there is none or it is not within a second before the read (the UNIX clock was
     /// stepped): then the read's.
-    fn at(&self, stamp_ns: Option<u64>, now: f64) -> f64 {
+    pub(crate) fn at(&self, stamp_ns: Option<u64>, now: f64) -> f64 {
         let Some(ns) = stamp_ns else { return now };
         let t = (i128::from(ns) - self.unix_at_origin_ns) as f64 * 1e-9 * self.speed;
         if t <= now && now - t < self.speed {
@@ -134,7 +134,7 @@ impl SentSamples {
         }
     }
 
-    fn push(&self, k: u64, counter: u16, at: Instant) {
+    pub(crate) fn push(&self, k: u64, counter: u16, at: Instant) {
         let mut r = self.ring.lock().unwrap_or_else(|e| e.into_inner());
         if r.len() == self.capacity {
             r.pop_front();
@@ -300,7 +300,7 @@ pub struct FreeGpsStats {
 }
 
 /// Sleep until `t` is due on `clock`, in slices short enough to see `stop` (false: stopped).
-fn sleep_until(clock: &SimClock, t: f64, stop: &AtomicBool) -> bool {
+pub(crate) fn sleep_until(clock: &SimClock, t: f64, stop: &AtomicBool) -> bool {
     let due = clock.wall_at(t);
     loop {
         if stop.load(Ordering::Relaxed) {
@@ -316,7 +316,7 @@ fn sleep_until(clock: &SimClock, t: f64, stop: &AtomicBool) -> bool {
 
 /// Measure a write due at `t` that has just returned; the reason to stop when it is beyond the
 /// limit.
-fn measure(
+pub(crate) fn measure(
     late: &mut Lateness,
     clock: &SimClock,
     t: f64,

@@ -78,10 +78,11 @@ pub(crate) struct EmulateArgs {
     /// Write what the device did as JSON here when it stops.
     #[arg(long)]
     report: Option<PathBuf>,
-    /// imu: speak a lab's own contract instead of ours: its mapping file, with the DBC it names
-    /// beside it (docs/your-device.md): the mapped frames (29-bit identifiers, CAN FD where the
-    /// DBC says so, counters, alive counters and checksums) at the mapping's rate; the
-    /// interface is given CAN FD's MTU.
+    /// imu, turntable: speak a lab's own contract instead of ours: its mapping file, with the
+    /// DBC it names beside it (docs/your-device.md): the mapped frames (29-bit identifiers, CAN
+    /// FD where the DBC says so, counters, alive counters and checksums; the IMU at the
+    /// mapping's rate, the table by the lab's opcodes and states); the interface is given CAN
+    /// FD's MTU.
     #[arg(long)]
     mapping: Option<PathBuf>,
     /// Also write the nav.toml our nav takes with this scenario's devices on --iface (and the
@@ -128,8 +129,10 @@ pub(crate) fn emulate(a: EmulateArgs) -> Result<i32> {
     };
     let t0_given = a.t0.is_some();
     let lab = match (&a.mapping, device) {
-        (Some(m), Device::Imu) => Some(hil::scenario::lab_contract::load(m)?),
-        (Some(_), d) => bail!("--mapping: only the imu speaks a lab's contract yet, not {d:?}"),
+        (Some(m), Device::Imu | Device::Turntable) => {
+            Some(hil::scenario::lab_contract::load(m)?)
+        }
+        (Some(_), d) => bail!("--mapping: the imu and the turntable speak a lab's contract, not {d:?}"),
         (None, _) => None,
     };
     let runner = {
@@ -146,6 +149,10 @@ pub(crate) fn emulate(a: EmulateArgs) -> Result<i32> {
                         mapped_imu(&s, &iface, (c, m), (&pacing, t0_given), &stop, &progress)
                     }
                     Device::Imu => imu(&s, &iface, follow, &pacing, &stop, &progress),
+                    Device::Turntable if lab.is_some() => {
+                        let (c, m) = lab.as_ref().context("the lab's contract")?;
+                        mapped_turntable(&s, &iface, (c, m), &pacing, &stop, &progress)
+                    }
                     Device::Turntable => turntable(&s, &iface, &pacing, &stop, &progress),
                     Device::Gps => gps(&s, &link, &pacing, &stop, &progress),
                 }
@@ -278,33 +285,40 @@ fn mapped_imu(
     stop: &AtomicBool,
     progress: &Progress,
 ) -> Result<FreeStats> {
-    let imu_map = m
-        .file
-        .imu
-        .as_ref()
-        .context("the mapping has no [imu]: nothing for the IMU to send")?;
     vcan_setup::ensure_vcan_fd(iface)?;
-    let mut params = s.imu.clone();
-    params.rate_hz = imu_map.rate_hz;
-    let arcsec = std::f64::consts::PI / 180.0 / 3600.0;
-    let mapped = emulators::imu::mapped::MappedImu::new(
-        imu_map,
-        c,
-        params.gyro_pulse_arcsec.map(|x| x * arcsec),
-        params.accel_pulse_mps,
-    );
-    let imu = ImuEmulator::new(s.motion(), params);
-    let mut framer = wire::mapping::Framer::new(c, m);
+    let run = hil::scenario::lab_contract::imu_run(s, (c, m), Vec::new(), None)?;
     let p = &Pacing {
         origin: if t0_given { p.origin } else { Instant::now() },
         ..*p
     };
     Ok(emulators::adapters::fd::run_mapped_imu(
+        iface, run, p, stop, progress,
+    )?)
+}
+
+/// The turntable of `s` on the lab's contract `c` through its mapping `m` on `iface`, its
+/// controller's loop at 1 kHz.
+fn mapped_turntable(
+    s: &Scenario,
+    iface: &str,
+    (c, m): (&wire::dbc::Contract, &wire::mapping::Mapping),
+    p: &Pacing,
+    stop: &AtomicBool,
+    progress: &Progress,
+) -> Result<FreeStats> {
+    vcan_setup::ensure_vcan_fd(iface)?;
+    let Some(tp) = &s.turntable else {
+        bail!("scenario {} has no [turntable]", s.name);
+    };
+    let (side, mut protector) = hil::scenario::lab_contract::table_side(c, m)?;
+    let tick_hz = 1000.0;
+    let mut tt = TtBus::new(emulators::turntable::Turntable::new(tp.clone()), tick_hz);
+    Ok(emulators::adapters::fd::run_mapped_turntable(
         iface,
-        imu,
-        mapped,
-        &mut framer,
-        imu_map.rate_hz,
+        &mut tt,
+        &side,
+        &mut protector,
+        tick_hz,
         p,
         stop,
         progress,

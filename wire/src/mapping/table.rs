@@ -212,6 +212,22 @@ impl<'a> TableSide<'a> {
         })
     }
 
+    /// The report message's identifier.
+    pub fn report_id(&self) -> FrameId {
+        self.rep.id
+    }
+
+    /// A report frame as the IMU's side reads it: the axis' angle, deg, and whether the
+    /// encoder's fault bit is set.
+    pub fn read_report(&self, data: &[u8]) -> Result<(f64, bool), DecodeError> {
+        let t = self.table;
+        let v = self.rep.decode(data)?;
+        let get = |n: &str| v.iter().find(|(x, _)| *x == n).map(|(_, x)| *x);
+        let bit = t.fault_bits.get("encoder").copied().unwrap_or(2);
+        let faults = t.faults.as_deref().and_then(get).unwrap_or(0.0) as u64;
+        Ok((get(&t.angle).unwrap_or(f64::NAN), faults >> bit & 1 == 1))
+    }
+
     /// Our status report in the lab's form: state by its table, the acknowledged sequence,
     /// the angle, the fault bits; alive counter and checksum by `protector`.
     pub fn report(
@@ -308,6 +324,8 @@ mod tests {
             assert_eq!(get("AliveCtr"), Some(f64::from(alive)));
             assert!((get("Angle").unwrap_or(0.0) - 90.0).abs() < 1e-3);
             guard.check(&m, side.rep, &f.data);
+            let (angle, encoder) = side.read_report(&f.data).expect("reads");
+            assert!((angle - 90.0).abs() < 1e-3 && encoder);
         }
         assert_eq!((guard.checked, guard.faults.len()), (3, 0));
     }
