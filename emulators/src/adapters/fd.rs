@@ -3,12 +3,12 @@
 //! where a message is longer than 8 bytes; the interface must carry CAN FD (MTU 72:
 //! `vcan_setup::ensure_vcan_fd`).
 
+use crate::reported::SharedTrack;
 use socketcan::{
     CanDataFrame, CanFdFrame, CanFdSocket, EmbeddedFrame, ExtendedId, Socket, StandardId,
 };
 use thiserror::Error;
 use wire::dbc::FrameId;
-use crate::reported::SharedTrack;
 use wire::mapping::MappedFrame;
 
 /// What went wrong putting a lab's frames on the bus.
@@ -247,8 +247,7 @@ pub fn run_mapped_imu(
         if let Some((side, tracks)) = &run.table {
             let now = clock.now();
             out.drain(|_, data, stamp| {
-                if let (Ok((angle, encoder)), Some(tr)) = (side.read_report(data), tracks.first())
-                {
+                if let (Ok((angle, encoder)), Some(tr)) = (side.read_report(data), tracks.first()) {
                     tr.lock().unwrap_or_else(|e| e.into_inner()).report(
                         stamps.at(stamp, now),
                         angle.rem_euclid(360.0),

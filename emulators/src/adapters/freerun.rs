@@ -159,16 +159,25 @@ impl SentSamples {
     /// two: behind the newest by less than half the period (32,768 samples), else ahead of it.
     /// None before any sample, or for one behind by more than is kept.
     pub fn place(&self, counter: u16) -> Option<(u64, Option<Instant>)> {
+        self.place_bits(u64::from(counter), 16)
+    }
+
+    /// [`SentSamples::place`] for a counter of `bits` bits (a lab's time tag: its low 16 bits
+    /// where it is wider, the half period 2^(bits - 1) where it is narrower).
+    pub fn place_bits(&self, counter: u64, bits: u16) -> Option<(u64, Option<Instant>)> {
+        let bits = bits.clamp(1, 16);
+        let mask = (1u64 << bits) - 1;
+        let counter = counter & mask;
         let r = self.ring.lock().unwrap_or_else(|e| e.into_inner());
         let &(newest_k, newest, _) = r.back()?;
-        let back = newest.wrapping_sub(counter);
-        if back >= 0x8000 {
-            let ahead = counter.wrapping_sub(newest);
-            return Some((newest_k + u64::from(ahead), None));
+        let back = u64::from(newest).wrapping_sub(counter) & mask;
+        if back > mask / 2 {
+            let ahead = counter.wrapping_sub(u64::from(newest)) & mask;
+            return Some((newest_k + ahead, None));
         }
-        let i = r.len().checked_sub(1 + usize::from(back))?;
+        let i = r.len().checked_sub(1 + usize::try_from(back).ok()?)?;
         let (k, c, at) = r[i];
-        (c == counter).then_some((k, Some(at)))
+        (u64::from(c) & mask == counter).then_some((k, Some(at)))
     }
 
     /// The newest sample sent: its index and counter.
@@ -652,5 +661,30 @@ mod tests {
             why.contains("IMU sample 200") && why.contains("cannot keep real time"),
             "{why}"
         );
+    }
+
+    /// A 12-bit counter (a lab's time tag) places its sample the nearer way round, its low 16
+    /// bits where it is wider.
+    #[test]
+    fn counters_of_other_widths_place_their_samples() {
+        let s = SentSamples::new(100);
+        let t0 = Instant::now();
+        for k in 4050..4150u64 {
+            s.push(k, k as u16, t0);
+        }
+        // 4149 is 53 mod 4096: 4100 is 4 mod 4096, 49 back
+        assert_eq!(
+            s.place_bits(4, 12).map(|(k, at)| (k, at.is_some())),
+            Some((4100, true))
+        );
+        assert_eq!(
+            s.place_bits(60, 12).map(|(k, at)| (k, at.is_some())),
+            Some((4156, false))
+        );
+        assert_eq!(
+            s.place_bits((1 << 20) + 4149, 24).map(|(k, _)| k),
+            Some(4149)
+        );
+        assert_eq!(s.place_bits(4000 % 4096, 12), None);
     }
 }

@@ -134,6 +134,13 @@ pub(crate) struct FreeArgs {
     /// that states predictions), ms (default: one of the device's output periods).
     #[arg(long, value_parser = hil::values::latency_budget_ms, requires = "free")]
     pub(crate) lead_allowance_ms: Option<f64>,
+    /// With --free: the bus speaks a lab's own contract, not ours: its mapping file, with the
+    /// DBC it names beside it (docs/your-device.md). The emulated IMU and turntable send and
+    /// take the lab's frames (29-bit identifiers, CAN FD, alive counters, checksums); the
+    /// device's solution is read where the mapping's [solution] says, and its protected frames'
+    /// checksums and alive counters are checked. {mapping} and {dbc} in --dut are replaced.
+    #[arg(long, requires = "free")]
+    pub(crate) mapping: Option<PathBuf>,
 }
 
 impl FreeArgs {
@@ -163,6 +170,10 @@ impl FreeArgs {
             max_late_ms: self.max_late_ms,
             lead_allowance_ms: self.lead_allowance_ms,
             progress: true,
+            lab: match &self.mapping {
+                Some(p) => Some(std::sync::Arc::new(hil::free::lab_ear(p)?)),
+                None => None,
+            },
         };
         for r in &self.real {
             match r.split_once('=') {
@@ -176,6 +187,11 @@ impl FreeArgs {
         }
         if !(0.0..=10_000.0).contains(&self.max_late_ms) {
             bail!("--max-late-ms {}: between 0 and 10000", self.max_late_ms);
+        }
+        if o.lab.is_some() && self.dut.is_none() {
+            bail!(
+                "--mapping needs --dut: our nav speaks wire/bench.dbc only; name the device that speaks the lab's contract (or `none` for one already on the bus)"
+            );
         }
         Ok(o)
     }

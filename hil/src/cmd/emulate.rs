@@ -129,10 +129,10 @@ pub(crate) fn emulate(a: EmulateArgs) -> Result<i32> {
     };
     let t0_given = a.t0.is_some();
     let lab = match (&a.mapping, device) {
-        (Some(m), Device::Imu | Device::Turntable) => {
-            Some(hil::scenario::lab_contract::load(m)?)
+        (Some(m), Device::Imu | Device::Turntable) => Some(hil::scenario::lab_contract::load(m)?),
+        (Some(_), d) => {
+            bail!("--mapping: the imu and the turntable speak a lab's contract, not {d:?}")
         }
-        (Some(_), d) => bail!("--mapping: the imu and the turntable speak a lab's contract, not {d:?}"),
         (None, _) => None,
     };
     let runner = {

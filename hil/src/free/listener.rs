@@ -14,7 +14,7 @@ use crate::free::score::Epoch;
 use anyhow::{Context, Result};
 use emulators::adapters::freerun::SentSamples;
 use emulators::imu::Oscillator;
-use socketcan::{CanFrame, CanSocket, Socket, SocketOptions};
+use socketcan::{CanAnyFrame, CanFdSocket, CanFrame, Socket, SocketOptions};
 use std::collections::{BTreeMap, BinaryHeap};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -42,6 +42,14 @@ pub struct Observed {
     pub stamps: Stamps,
     /// Frames heard in another order than their stamps' (put back in order).
     pub reordered: u64,
+    /// On a lab's contract: the device's protected frames checked (alive counter, checksum).
+    pub protected_checked: u64,
+    /// Their faults, by message and kind, with the first of each in words.
+    pub protection_faults: BTreeMap<String, (u64, String)>,
+    /// On a lab's contract: the last time tag, unwrapped to a sample count.
+    last_tag: Option<u64>,
+    /// On a lab's contract: the device's alive counters as last heard.
+    guard: wire::mapping::Guard,
 }
 
 /// Where the times of the frames the bench hears come from.
@@ -99,13 +107,16 @@ fn health_names(h: &NavHealth) -> Vec<String> {
     .collect()
 }
 
-/// A socket on `iface` that hears everything but the IMU's stream (0x080-0x09F), with the
-/// kernel's receive stamps (and the adapter's, where it has them).
-pub fn open(iface: &str) -> Result<CanSocket> {
+/// A socket on `iface` that hears classic and CAN FD frames, with the kernel's receive stamps
+/// (and the adapter's, where it has them): on our contract everything but the IMU's stream
+/// (0x080-0x09F); on a lab's, everything (its IMU's frames are dropped as they are read).
+pub fn open(iface: &str, lab: bool) -> Result<CanFdSocket> {
     use socketcan::timestamp as ts;
-    let sock = CanSocket::open(iface).with_context(|| format!("listening on {iface}"))?;
-    sock.set_filters(&[socketcan::CanFilter::new_inverted(0x080, 0x7E0)])
-        .with_context(|| format!("filters on {iface}"))?;
+    let sock = CanFdSocket::open(iface).with_context(|| format!("listening on {iface}"))?;
+    if !lab {
+        sock.set_filters(&[socketcan::CanFilter::new_inverted(0x080, 0x7E0)])
+            .with_context(|| format!("filters on {iface}"))?;
+    }
     // a socket without stamps is still heard (by the reads' times, said on the card)
     let _ = sock.set_recv_timestamp(true);
     let _ = sock.set_timestamping(
@@ -169,6 +180,8 @@ pub struct Held {
 pub enum HeldFrame {
     /// A data frame in the DBC's form.
     Raw(wire::RawFrame),
+    /// A data frame of a lab's contract: its identifier and its data.
+    Mapped(wire::dbc::FrameId, Vec<u8>),
     /// A frame outside the DBC, in words.
     Outside(String),
 }
@@ -208,13 +221,219 @@ impl Reorder {
     }
 }
 
-/// A frame in the DBC's form, or what it was: none for a controller's error frame.
-fn held_frame(f: &CanFrame) -> Option<HeldFrame> {
-    match wire::from_can_frame(f) {
+/// A frame in the DBC's form, or what it was: none for a controller's error frame or a frame
+/// `lab` ignores (its IMU's stream).
+fn held_frame(f: &CanAnyFrame, lab: Option<&LabEar>) -> Option<HeldFrame> {
+    use socketcan::EmbeddedFrame;
+    let classic = match f {
+        CanAnyFrame::Normal(d) => CanFrame::Data(*d),
+        CanAnyFrame::Remote(r) => CanFrame::Remote(*r),
+        CanAnyFrame::Error(e) => CanFrame::Error(*e),
+        CanAnyFrame::Fd(d) => {
+            return match lab {
+                Some(lab) => lab.held(d.id(), d.data()),
+                None => Some(HeldFrame::Outside(format!(
+                    "a CAN FD frame ({} bytes)",
+                    d.data().len()
+                ))),
+            };
+        }
+    };
+    if let (Some(lab), CanFrame::Data(d)) = (lab, &classic) {
+        return lab.held(d.id(), d.data());
+    }
+    match wire::from_can_frame(&classic) {
         Ok(r) => Some(HeldFrame::Raw(r)),
         // a controller's error frame is no device's message
         Err(wire::FrameConvError::Error(_)) => None,
         Err(e) => Some(HeldFrame::Outside(format!("{e}"))),
+    }
+}
+
+/// The bench's ear on a lab's contract: its DBC, the mapping's solution and protection, the
+/// IMU's messages it does not listen to, the table's command message it counts.
+pub struct LabEar {
+    /// The lab's DBC.
+    pub contract: wire::dbc::Contract,
+    /// Its mapping.
+    pub mapping: wire::mapping::Mapping,
+    /// The DBC's file name, for the card.
+    pub dbc_name: String,
+    /// The mapping file.
+    pub path: std::path::PathBuf,
+    ignored: Vec<wire::dbc::FrameId>,
+    device_sends: Vec<String>,
+}
+
+impl std::fmt::Debug for LabEar {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "LabEar({})", self.dbc_name)
+    }
+}
+
+impl LabEar {
+    /// The ear of `contract` through `mapping`, read from the file at `path`.
+    pub fn new(
+        contract: wire::dbc::Contract,
+        mapping: wire::mapping::Mapping,
+        path: std::path::PathBuf,
+    ) -> Self {
+        let dbc_name = mapping.file.dbc.clone();
+        let f = &mapping.file;
+        let mut ignored = Vec::new();
+        if let Some(imu) = &f.imu {
+            for n in [Some(&imu.gyro.message), Some(&imu.accel.message)]
+                .into_iter()
+                .chain([imu.status.as_ref().map(|s| &s.message)])
+                .flatten()
+            {
+                ignored.extend(contract.message(n).map(|m| m.id));
+            }
+        }
+        let mut device_sends: Vec<String> = Vec::new();
+        if let Some(t) = &f.turntable {
+            device_sends.push(t.command.clone());
+        }
+        if let Some(s) = &f.solution {
+            device_sends.push(s.message.clone());
+            device_sends.extend(s.position.as_ref().map(|p| p.message.clone()));
+            device_sends.extend(s.velocity.as_ref().map(|v| v.message.clone()));
+        }
+        Self {
+            contract,
+            mapping,
+            dbc_name,
+            path,
+            ignored,
+            device_sends,
+        }
+    }
+
+    /// A data frame heard: none for the IMU's stream.
+    fn held(&self, id: socketcan::Id, data: &[u8]) -> Option<HeldFrame> {
+        let id = match id {
+            socketcan::Id::Standard(x) => wire::dbc::FrameId::Standard(x.as_raw()),
+            socketcan::Id::Extended(x) => wire::dbc::FrameId::Extended(x.as_raw()),
+        };
+        (!self.ignored.contains(&id)).then(|| HeldFrame::Mapped(id, data.to_vec()))
+    }
+
+    /// A frame of the lab's contract into what was heard: outside its DBC counted; the
+    /// device's protected frames checked; its table commands counted; its solution's parts
+    /// into epochs.
+    fn take(
+        &self,
+        o: &mut Observed,
+        id: wire::dbc::FrameId,
+        data: &[u8],
+        rx_s: f64,
+        place: &Place,
+    ) {
+        use wire::mapping::SolutionPart;
+        let Some(m) = self.contract.by_id(id) else {
+            *o.outside_dbc
+                .entry(format!("{id}: not in {}", self.dbc_name))
+                .or_default() += 1;
+            return;
+        };
+        if self.device_sends.contains(&m.name) {
+            o.guard.check(&self.mapping, m, data);
+            o.protected_checked = o.guard.checked;
+            let faults: Vec<_> = o.guard.faults.drain(..).collect();
+            for f in faults {
+                let kind = match &f {
+                    wire::mapping::ProtectionFault::Checksum { .. } => "checksum wrong",
+                    wire::mapping::ProtectionFault::Skipped { .. } => "alive counter skipped",
+                };
+                let e = o
+                    .protection_faults
+                    .entry(format!("{} ({id}): {kind}", m.name))
+                    .or_insert_with(|| (0, f.to_string()));
+                e.0 += 1;
+            }
+        }
+        if self
+            .mapping
+            .file
+            .turntable
+            .as_ref()
+            .is_some_and(|t| t.command == m.name)
+        {
+            o.commands += 1;
+        }
+        let Some(sol) = &self.mapping.file.solution else {
+            return;
+        };
+        let part = match wire::mapping::SolutionReader::new(sol).read(m, data) {
+            Ok(Some(p)) => p,
+            Ok(None) => return,
+            Err(e) => {
+                *o.outside_dbc
+                    .entry(format!("{} ({id}): {e}", m.name))
+                    .or_default() += 1;
+                return;
+            }
+        };
+        let last = o.epochs.len().checked_sub(1);
+        match part {
+            SolutionPart::Epoch {
+                tag,
+                tag_bits,
+                mode,
+                att,
+                heading_sigma,
+            } => {
+                let count = unwrap_tag(o.last_tag, tag, tag_bits);
+                o.last_tag = Some(count);
+                let named = place.named_bits(tag, tag_bits);
+                o.epochs.push(Epoch {
+                    sample_count: count as u32,
+                    seq: o.epochs.len() as u8,
+                    mode,
+                    health: Vec::new(),
+                    rx_s,
+                    sample: named.map(|(k, at, _)| (k, at)),
+                    scheduled: named.is_some_and(|n| n.2),
+                    att,
+                    vel: None,
+                    pos: None,
+                    hgt: heading_sigma.map(|s| [0.0, 0.0, s]),
+                });
+            }
+            SolutionPart::Position {
+                lat_lon,
+                height,
+                sigma,
+            } => {
+                if let Some(e) = last.map(|i| &mut o.epochs[i]) {
+                    e.pos = Some(lat_lon);
+                    let h = e.hgt.get_or_insert([0.0, 0.0, f64::NAN]);
+                    h[0] = height.unwrap_or(0.0);
+                    h[1] = sigma.unwrap_or(0.0);
+                }
+            }
+            SolutionPart::Velocity(v) => {
+                if let Some(e) = last.map(|i| &mut o.epochs[i]) {
+                    e.vel = Some(v);
+                }
+            }
+        }
+    }
+}
+
+/// A time tag of `bits` bits as a sample count, unwrapped against the last (the nearer way
+/// round).
+fn unwrap_tag(last: Option<u64>, tag: u64, bits: u16) -> u64 {
+    let Some(last) = last else { return tag };
+    if bits >= 63 {
+        return tag;
+    }
+    let span = 1u64 << bits;
+    let d = tag.wrapping_sub(last) & (span - 1);
+    if d < span / 2 {
+        last + d
+    } else {
+        last.saturating_sub(span - d)
     }
 }
 
@@ -252,12 +471,13 @@ impl Clocks {
 /// Listen on `sock` until `stop`, into `seen`; times in s since `origin`. `clock`: the IMU's
 /// oscillator (when a sample not sent yet is due).
 pub fn listen(
-    sock: CanSocket,
+    sock: CanFdSocket,
     origin: Instant,
     clock: Oscillator,
     sent: &SentSamples,
     seen: &Mutex<Observed>,
     stop: &AtomicBool,
+    lab: Option<&LabEar>,
 ) -> Result<()> {
     let clocks = Clocks::new(origin);
     let mut order = Reorder::default();
@@ -283,7 +503,7 @@ pub fn listen(
                         (None, Some(_)) => Stamps::Kernel,
                         (None, None) => Stamps::Read,
                     };
-                    if let Some(frame) = held_frame(&f) {
+                    if let Some(frame) = held_frame(&f, lab) {
                         order.push(at_ns, Held { at_ns, frame });
                     }
                 }
@@ -304,7 +524,7 @@ pub fn listen(
         o.stamps = stamps;
         o.reordered = order.reordered;
         while let Some(h) = order.pop(now_ns - window_ns, stopping) {
-            take_held(&mut o, h, &place);
+            take_held(&mut o, h, &place, lab);
         }
         if stopping {
             return Ok(());
@@ -323,7 +543,12 @@ impl Place<'_> {
     /// The sample whose counter is `counter`: its index, the instant it went on the bus (or is
     /// due, s since the origin) and whether it had not gone out when placed.
     fn named(&self, counter: u16) -> Option<(u64, f64, bool)> {
-        let (k, at) = self.sent.place(counter)?;
+        self.named_bits(u64::from(counter), 16)
+    }
+
+    /// [`Place::named`] for a counter of `bits` bits.
+    fn named_bits(&self, counter: u64, bits: u16) -> Option<(u64, f64, bool)> {
+        let (k, at) = self.sent.place_bits(counter, bits)?;
         Some(match at {
             Some(at) => (
                 k,
@@ -337,11 +562,17 @@ impl Place<'_> {
 }
 
 /// A held frame into what was heard.
-fn take_held(o: &mut Observed, h: Held, place: &Place) {
+fn take_held(o: &mut Observed, h: Held, place: &Place, lab: Option<&LabEar>) {
     let rx_s = h.at_ns as f64 * 1e-9;
     let raw = match h.frame {
         HeldFrame::Outside(what) => {
             *o.outside_dbc.entry(what).or_default() += 1;
+            return;
+        }
+        HeldFrame::Mapped(id, data) => {
+            if let Some(lab) = lab {
+                lab.take(o, id, &data, rx_s, place);
+            }
             return;
         }
         HeldFrame::Raw(r) => r,
@@ -415,16 +646,17 @@ fn take(o: &mut Observed, m: Message, rx_s: f64, place: &Place) {
 
 /// Listen in a thread of its own.
 pub fn spawn(
-    sock: CanSocket,
+    sock: CanFdSocket,
     origin: Instant,
     clock: Oscillator,
     sent: Arc<SentSamples>,
     seen: Arc<Mutex<Observed>>,
     stop: Arc<AtomicBool>,
+    lab: Option<Arc<LabEar>>,
 ) -> Result<std::thread::JoinHandle<Result<()>>> {
     std::thread::Builder::new()
         .name("observer".into())
-        .spawn(move || listen(sock, origin, clock, &sent, &seen, &stop))
+        .spawn(move || listen(sock, origin, clock, &sent, &seen, &stop, lab.as_deref()))
         .context("starting the bus observer")
 }
 
@@ -443,7 +675,18 @@ mod tests {
         match h.frame {
             HeldFrame::Outside(w) => w,
             HeldFrame::Raw(r) => format!("{:03X}", r.id),
+            HeldFrame::Mapped(id, _) => id.to_string(),
         }
+    }
+
+    /// A lab's time tag of any width unwraps to a sample count the nearer way round.
+    #[test]
+    fn a_labs_time_tag_unwraps_to_a_sample_count() {
+        assert_eq!(unwrap_tag(None, 4000, 12), 4000);
+        assert_eq!(unwrap_tag(Some(4090), 5, 12), 4101);
+        assert_eq!(unwrap_tag(Some(4101), 4090, 12), 4090);
+        assert_eq!(unwrap_tag(Some(65_530), 20, 16), 65_556);
+        assert_eq!(unwrap_tag(Some(7), 1u64 << 40, 63), 1u64 << 40);
     }
 
     /// Frames read out of their stamps' order come out in it, once no earlier one can come.

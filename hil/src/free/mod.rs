@@ -43,8 +43,9 @@ pub enum Dut {
     /// Our nav binary, on the config the bench writes for the scenario.
     Nav(PathBuf),
     /// A command the bench starts (through `sh -c`), with `{iface}`, `{gps}` (the receiver's
-    /// port), `{config}` (the nav.toml the bench wrote for the scenario), `{out}` (its folder)
-    /// and `{nav}` (our nav binary) replaced.
+    /// port), `{config}` (the nav.toml the bench wrote for the scenario), `{out}` (its folder),
+    /// `{nav}` (our nav binary), and on a lab's contract `{mapping}` and `{dbc}` (its files)
+    /// replaced.
     Command(String, PathBuf),
     /// Nothing to start: the device is already on the interface.
     Nothing,
@@ -75,6 +76,20 @@ pub struct FreeOptions {
     pub lead_allowance_ms: Option<f64>,
     /// Progress on the terminal.
     pub progress: bool,
+    /// The bus speaks a lab's own contract (its DBC and mapping), not ours.
+    pub lab: Option<Arc<listener::LabEar>>,
+}
+
+/// The bench's ear on the lab's contract of the mapping file at `path` (and the DBC it names).
+pub fn lab_ear(path: &Path) -> Result<listener::LabEar> {
+    let (c, m) = crate::scenario::lab_contract::load(path)?;
+    if m.file.solution.is_none() {
+        bail!(
+            "the mapping {}: no [solution]: the bench cannot read the device's solution",
+            path.display()
+        );
+    }
+    Ok(listener::LabEar::new(c, m, path.to_path_buf()))
 }
 
 /// What a free-running run found.
@@ -190,7 +205,21 @@ struct Bench {
 /// Run `s` free-running with the device under test of `o`.
 pub fn run_free(s: &Scenario, o: &FreeOptions) -> Result<FreeReport> {
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
-    vcan_setup::ensure_vcan(&o.iface)?;
+    let lab_rate = o.lab.as_ref().and_then(|l| l.mapping.file.imu.as_ref());
+    let s = &match lab_rate {
+        // the lab's unit samples at its mapping's rate
+        Some(imu) => {
+            let mut s = s.clone();
+            s.imu.rate_hz = imu.rate_hz;
+            s
+        }
+        None => s.clone(),
+    };
+    if o.lab.is_some() {
+        vcan_setup::ensure_vcan_fd(&o.iface)?;
+    } else {
+        vcan_setup::ensure_vcan(&o.iface)?;
+    }
     std::fs::write(o.out.join("scenario.toml"), toml::to_string_pretty(s)?)?;
     // the receiver's port: the real one, or the emulator's pty behind a link
     let pty = match (&s.gps, &o.real_gps) {
@@ -216,7 +245,7 @@ pub fn run_free(s: &Scenario, o: &FreeOptions) -> Result<FreeReport> {
     // a moment for the device to open its devices, as a vehicle's computer boots first
     std::thread::sleep(Duration::from_secs(1));
     let seen = Arc::new(Mutex::new(Observed::default()));
-    let sock = listener::open(&o.iface)?;
+    let sock = listener::open(&o.iface, o.lab.is_some())?;
     let bench = start_bench(s, o, prepared)?;
     let observer = listener::spawn(
         sock,
@@ -225,6 +254,7 @@ pub fn run_free(s: &Scenario, o: &FreeOptions) -> Result<FreeReport> {
         bench.sent.clone(),
         seen.clone(),
         stop.clone(),
+        o.lab.clone(),
     )?;
     let probe = probe::Probe::start(bench.origin, stop.clone())?;
     let ended = supervise(s, o, &bench, &seen, child.as_mut());
@@ -293,6 +323,23 @@ fn start_dut(
                 .replace("{iface}", &o.iface)
                 .replace("{config}", &cfg.to_string_lossy())
                 .replace("{out}", &dir.to_string_lossy())
+                .replace(
+                    "{mapping}",
+                    &o.lab
+                        .as_ref()
+                        .map(|l| l.path.to_string_lossy().into_owned())
+                        .unwrap_or_default(),
+                )
+                .replace(
+                    "{dbc}",
+                    &o.lab
+                        .as_ref()
+                        .map(|l| {
+                            let p = l.path.parent().unwrap_or(Path::new("."));
+                            p.join(&l.dbc_name).to_string_lossy().into_owned()
+                        })
+                        .unwrap_or_default(),
+                )
                 .replace(
                     "{gps}",
                     &gps.map(|g| g.to_string_lossy().into_owned())
@@ -371,43 +418,10 @@ fn prepare_bench(
     let axes = s.turntable.as_ref().map_or(0, |t| usize::from(t.axes));
     let tracks: Vec<SharedTrack> = (0..axes).map(|_| s.reported_track(0.02)).collect();
     let mut devices: Vec<(&'static str, DeviceRun)> = Vec::new();
-    if let (Some(tp), false) = (&s.turntable, o.real_turntable) {
-        let mut tt = TtBus::new(emulators::turntable::Turntable::new(tp.clone()), 1000.0);
-        let (iface, stop, progress) =
-            (o.iface.clone(), stop.clone(), Arc::new(Progress::default()));
-        devices.push((
-            "turntable",
-            Box::new(move |pacing: Pacing| {
-                Ok(emulators::adapters::freerun::run_turntable(
-                    &iface, &mut tt, 1000.0, &pacing, &stop, &progress,
-                )?)
-            }),
-        ));
-    }
-    {
-        let motion = s.following(&tracks);
-        let stream = BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults);
-        let (iface, stop, progress, sent, tracks) = (
-            o.iface.clone(),
-            stop.clone(),
-            progress.clone(),
-            sent.clone(),
-            tracks.clone(),
-        );
-        devices.push((
-            "imu",
-            Box::new(move |pacing: Pacing| {
-                Ok(emulators::adapters::freerun::run_imu(
-                    &iface,
-                    stream,
-                    &tracks,
-                    Some(&sent),
-                    &pacing,
-                    &stop,
-                    &progress,
-                )?)
-            }),
-        ));
+    if let Some(lab) = &o.lab {
+        lab_devices(s, o, lab, (&tracks, &sent, &progress), &stop, &mut devices)?;
+    } else {
+        our_devices(s, o, (&tracks, &sent, &progress), &stop, &mut devices);
     }
     if let (Some(mut pty), Some(rx)) = (pty, &s.gps) {
         let Some(run) = crate::engine::inproc::gps_run(s, rx)? else {
@@ -430,6 +444,110 @@ fn prepare_bench(
         tracks,
         sent,
     })
+}
+
+/// The emulated table and IMU on our contract.
+fn our_devices(
+    s: &Scenario,
+    o: &FreeOptions,
+    (tracks, sent, progress): (&[SharedTrack], &Arc<SentSamples>, &Arc<Progress>),
+    stop: &Arc<AtomicBool>,
+    devices: &mut Vec<(&'static str, DeviceRun)>,
+) {
+    if let (Some(tp), false) = (&s.turntable, o.real_turntable) {
+        let mut tt = TtBus::new(emulators::turntable::Turntable::new(tp.clone()), 1000.0);
+        let (iface, stop, progress) =
+            (o.iface.clone(), stop.clone(), Arc::new(Progress::default()));
+        devices.push((
+            "turntable",
+            Box::new(move |pacing: Pacing| {
+                Ok(emulators::adapters::freerun::run_turntable(
+                    &iface, &mut tt, 1000.0, &pacing, &stop, &progress,
+                )?)
+            }),
+        ));
+    }
+    let motion = s.following(tracks);
+    let stream = BusStream::new(ImuEmulator::new(motion, s.imu.clone()), &s.faults);
+    let (iface, stop, progress, sent, tracks) = (
+        o.iface.clone(),
+        stop.clone(),
+        progress.clone(),
+        sent.clone(),
+        tracks.to_vec(),
+    );
+    devices.push((
+        "imu",
+        Box::new(move |pacing: Pacing| {
+            Ok(emulators::adapters::freerun::run_imu(
+                &iface,
+                stream,
+                &tracks,
+                Some(&sent),
+                &pacing,
+                &stop,
+                &progress,
+            )?)
+        }),
+    ));
+}
+
+/// The emulated table and IMU on the lab's contract (`lab`): the table by its opcodes and
+/// states, the IMU in its frames riding the table as the lab's reports say.
+fn lab_devices(
+    s: &Scenario,
+    o: &FreeOptions,
+    lab: &Arc<listener::LabEar>,
+    (tracks, sent, progress): (&[SharedTrack], &Arc<SentSamples>, &Arc<Progress>),
+    stop: &Arc<AtomicBool>,
+    devices: &mut Vec<(&'static str, DeviceRun)>,
+) -> Result<()> {
+    if let (Some(tp), false) = (&s.turntable, o.real_turntable) {
+        // checked here, before anything runs
+        crate::scenario::lab_contract::table_side(&lab.contract, &lab.mapping)?;
+        let mut tt = TtBus::new(emulators::turntable::Turntable::new(tp.clone()), 1000.0);
+        let (iface, stop, lab) = (o.iface.clone(), stop.clone(), lab.clone());
+        devices.push((
+            "turntable",
+            Box::new(move |pacing: Pacing| {
+                let (side, mut protector) =
+                    crate::scenario::lab_contract::table_side(&lab.contract, &lab.mapping)?;
+                Ok(emulators::adapters::fd::run_mapped_turntable(
+                    &iface,
+                    &mut tt,
+                    &side,
+                    &mut protector,
+                    1000.0,
+                    &pacing,
+                    &stop,
+                    &Progress::default(),
+                )?)
+            }),
+        ));
+    }
+    if lab.mapping.file.imu.is_none() {
+        bail!(
+            "the mapping {}: no [imu]: the bench's IMU cannot speak the lab's contract",
+            lab.path.display()
+        );
+    }
+    let (s, iface, stop, lab) = (s.clone(), o.iface.clone(), stop.clone(), lab.clone());
+    let (tracks, sent, progress) = (tracks.to_vec(), sent.clone(), progress.clone());
+    devices.push((
+        "imu",
+        Box::new(move |pacing: Pacing| {
+            let run = crate::scenario::lab_contract::imu_run(
+                &s,
+                (&lab.contract, &lab.mapping),
+                tracks,
+                Some(sent),
+            )?;
+            Ok(emulators::adapters::fd::run_mapped_imu(
+                &iface, run, &pacing, &stop, &progress,
+            )?)
+        }),
+    ));
+    Ok(())
 }
 
 /// Start the prepared devices, sharing one origin a little ahead.

@@ -243,7 +243,7 @@ pub fn drill_heading(epochs: &[Epoch], truth_deg: impl Fn(u64) -> f64) -> Option
         heading_deg: heading,
         truth_deg: truth.rem_euclid(360.0),
         error_deg: wrap180(heading - truth),
-        sigma_deg: found.hgt.map(|h| h[2]),
+        sigma_deg: found.hgt.map(|h| h[2]).filter(|s| s.is_finite()),
         epoch: i as u64,
         seq: found.seq,
         mode: format!("{:?}", found.mode),

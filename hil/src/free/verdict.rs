@@ -246,11 +246,15 @@ fn device_checks(
     ];
     checks.extend(latency_check(o, j, t, not_judged));
     checks.extend(lead_check(o, t, e.is_empty()));
+    let dbc = o
+        .lab
+        .as_ref()
+        .map_or("wire/bench.dbc", |l| l.dbc_name.as_str());
     checks.push(Check {
         name: "frames within the DBC".into(),
         pass: seen.outside_count() == 0,
         detail: if seen.outside_dbc.is_empty() {
-            "every frame heard is defined by wire/bench.dbc".into()
+            format!("every frame heard is defined by {dbc}")
         } else {
             seen.outside_dbc
                 .iter()
@@ -259,6 +263,9 @@ fn device_checks(
                 .join("; ")
         },
     });
+    if o.lab.is_some() {
+        checks.push(protection_check(seen));
+    }
     checks.push(Check {
         name: "time tags never go backwards".into(),
         pass: backwards == 0,
@@ -554,5 +561,32 @@ fn site_check(s: &Scenario, (d, sg): (f64, Option<f64>)) -> Check {
                 |x| format!(", PosSigma {x:.2} m ({:.2} sigma)", d / x)
             )
         ),
+    }
+}
+
+/// On a lab's contract: every protected frame the device sent had its checksum right and its
+/// alive counter one up from the last; the faults by message and kind, the first of each.
+fn protection_check(seen: &Observed) -> Check {
+    let faults: u64 = seen.protection_faults.values().map(|(n, _)| n).sum();
+    Check {
+        name: "the device's checksums and alive counters hold".into(),
+        pass: faults == 0,
+        detail: if faults == 0 {
+            format!(
+                "{} protected frames from the device, every checksum right, every alive counter one up",
+                seen.protected_checked
+            )
+        } else {
+            let each: Vec<String> = seen
+                .protection_faults
+                .iter()
+                .map(|(what, (n, first))| format!("{n} x {what} (the first: {first})"))
+                .collect();
+            format!(
+                "{faults} of {} protected frames: {}",
+                seen.protected_checked,
+                each.join("; ")
+            )
+        },
     }
 }
