@@ -65,7 +65,7 @@ fi
 rc=0
 "$suite" run --binaries "e2e::free=$free@$here" --name "end-to-end on vcan (free-running)" \
   --ignored --jobs "$free_jobs" --results "$dir/free.json" --history "$dir/previous/free.json" \
-  --alone an_independent_python_device_is_judged_by_the_same_checks,an_independent_python_device_that_lies_about_time_is_caught,an_independent_python_device_whose_clock_drifts_is_caught \
+  --alone an_independent_python_device_is_judged_by_the_same_checks,an_independent_python_device_that_lies_about_time_is_caught,an_independent_python_device_on_a_labs_contract_whose_clock_drifts_is_caught \
   --slow-first "$here/e2e-slow-first" || rc=1
 wait "$lockstep_pid" || rc=1
 kill "$mem_pid" 2>/dev/null

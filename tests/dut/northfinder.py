@@ -22,6 +22,15 @@ Faults on purpose, for the bench to catch:
   --stale S        its data are S seconds older than its tags: the solution of sample k is
                    named k + S * rate and sent when that sample has come (a device that stamps
                    with the newest sample, not the one its solution is of).
+
+On a lab's own contract (--mapping FILE, the bench's mapping of that DBC: docs/your-device.md)
+it reads the IMU's blocks of rates (CAN FD, 29-bit identifiers) and the table's reports by the
+mapping's names, checks every frame's alive counter and checksum, commands the table by the
+lab's opcodes and sends its solution where the mapping's [solution] says, protected as the
+mapping says. On SIGTERM it prints what it received and how many of those frames failed their
+checks. Two more faults on purpose there:
+  --bad-crc N      every Nth solution frame goes out with its checksum wrong;
+  --skip-alive N   every Nth solution frame's alive counter skips one.
 """
 
 import argparse
@@ -29,6 +38,7 @@ import collections
 import math
 import operator
 import select
+import signal
 import socket
 import struct
 import sys
@@ -54,7 +64,13 @@ def main():
     ap.add_argument("--backwards", action="store_true")
     ap.add_argument("--drift-ppm", type=float, default=0.0)
     ap.add_argument("--stale", type=float, default=0.0)
+    ap.add_argument("--mapping", help="a lab's mapping of --dbc (its own contract)")
+    ap.add_argument("--bad-crc", type=int, default=0)
+    ap.add_argument("--skip-alive", type=int, default=0)
     a = ap.parse_args()
+    if a.mapping:
+        LabNorthFinder(a, tomllib.load(open(a.mapping, "rb"))).run()
+        return
     cfg = tomllib.load(open(a.config, "rb"))
     imu = cfg.get("imu", {})
     pulse = imu.get("gyro_pulse_arcsec", [1.0, 1.0, 1.0])
@@ -112,11 +128,14 @@ class NorthFinder:
         self.fit = None  # least-squares sums of the dwell, in chunks
         self.heading = None
         self.sigma = 6.5
-        self.mode = 2  # NorthFinding
+        self.mode = self.mode_of("NorthFinding")
         self.out = collections.deque()
         self.stale = collections.deque()  # (the sample it waits for, frames)
         self.last_stray = time.monotonic()
         self.first_sample = None
+
+    def mode_of(self, name):
+        return {"NorthFinding": 2, "Navigation": 3}[name]
 
     # ---- the bus ----
     def send(self, msg, **signals):
@@ -204,9 +223,17 @@ class NorthFinder:
             h = -math.degrees(self.count[2] * self.pulse_rad[2])
         else:
             h = self.heading
+        frames = self.frames(named, h)
+        if stale > 0:
+            self.stale.append((self.sample + stale, frames))
+        else:
+            self.out.append((time.monotonic() + self.a.delay, frames))
+
+    def frames(self, named, h):
+        """The solution's frames: (message, signals) pairs."""
         s = self.nav_seq
         self.nav_seq = (s + 1) % 256
-        frames = [
+        return [
             (self.nav_time, dict(SampleCount=named % 2**32, Seq=s, Mode=self.mode,
                                  HealthImuTimeout=0, HealthImuGaps=0, HealthImuBit=0,
                                  HealthGpsStale=0, HealthTurntable=0, HealthFilter=0,
@@ -214,10 +241,6 @@ class NorthFinder:
             (self.nav_att, dict(Seq=s, Heading=h % 360.0, Pitch=0.0, Roll=0.0)),
             (self.nav_hgt, dict(Seq=s, Height=0.0, PosSigma=655.35, HeadingSigma=min(self.sigma, 6.5))),
         ]
-        if stale > 0:
-            self.stale.append((self.sample + stale, frames))
-        else:
-            self.out.append((time.monotonic() + self.a.delay, frames))
 
     # ---- the procedure ----
     def wait(self, what, cond, limit=60.0):
@@ -239,11 +262,13 @@ class NorthFinder:
         self.run_for(0.1)
         near = lambda: abs((self.table[1] - angle + 180.0) % 360.0 - 180.0) < 0.01
         self.wait(f"table at {angle} deg", lambda: self.table[0] == 1 and near())
+
         self.command("Lock")
         self.wait("locked table", lambda: self.table[0] == 4)
 
     def run(self):
         self.wait("IMU stream", lambda: self.sample is not None and self.table is not None)
+
         self.command("Enable")
         self.run_for(0.2)
         rates = []
@@ -272,11 +297,228 @@ class NorthFinder:
         # the vertical earth rate (7 deg/h here) into the horizontal ones by up to 0.04 deg/h,
         # 0.15 deg of heading
         self.sigma = math.hypot(math.degrees(math.sqrt(var) / w), 0.15)
-        self.mode = 3  # Navigation: the heading is known
+        self.mode = self.mode_of("Navigation")  # the heading is known
         print(f"northfinder: heading {self.heading:.4f} deg, sigma {self.sigma:.4f} deg, "
               f"earth rate {math.degrees(w) * 3600:.3f} deg/h", flush=True)
         while True:
             self.poll()
+
+
+# Checksums by the names the bench's mapping uses: width, polynomial, initial value, reflected
+# in and out, final xor.
+CRCS = {
+    "CRC-8/SAE-J1850": (8, 0x1D, 0xFF, False, 0xFF),
+    "CRC-8/AUTOSAR": (8, 0x2F, 0xFF, False, 0xFF),
+    "CRC-8/SMBUS": (8, 0x07, 0x00, False, 0x00),
+    "CRC-16/IBM-3740": (16, 0x1021, 0xFFFF, False, 0x0000),
+    "CRC-16/ARC": (16, 0x8005, 0x0000, True, 0x0000),
+}
+
+
+def crc(name, data):
+    width, poly, value, reflected, xorout = CRCS[name]
+    top, mask = 1 << (width - 1), (1 << width) - 1
+    if reflected:
+        rpoly = int(f"{poly:0{width}b}"[::-1], 2)
+        for b in data:
+            value ^= b
+            for _ in range(8):
+                value = (value >> 1) ^ rpoly if value & 1 else value >> 1
+    else:
+        for b in data:
+            value ^= b << (width - 8)
+            for _ in range(8):
+                value = ((value << 1) ^ poly) & mask if value & top else (value << 1) & mask
+    return value ^ xorout
+
+
+class Protection:
+    """A message's alive counter and checksum as the mapping's [[protect]] says: filled in on
+    the frames sent, checked on the frames received."""
+
+    def __init__(self, msg, p):
+        self.msg, self.p = msg, p
+        self.alive_sig = msg.get_signal_by_name(p["alive"]) if p.get("alive") else None
+        self.crc_sig = msg.get_signal_by_name(p["crc"]) if p.get("crc") else None
+        first, last = p.get("bytes", [1, msg.length - 1])
+        self.span = slice(first, last + 1)
+        self.sent = 0
+        self.last = None
+        self.bad_crc = self.skips = self.checked = 0
+
+    def wrap(self, sig):
+        return 1 << sig.length
+
+    def fill(self, signals, corrupt=False, skip=False):
+        """The frame's bytes from `signals`, alive counter and checksum filled in."""
+        if self.alive_sig is not None:
+            self.sent += 1 + (1 if skip else 0)
+            signals[self.alive_sig.name] = (self.sent - 1) % self.wrap(self.alive_sig)
+        if self.crc_sig is not None:
+            signals[self.crc_sig.name] = 0
+        data = bytearray(self.msg.encode(signals, strict=False))
+        if self.crc_sig is not None:
+            c = crc(self.p["algorithm"], data[self.span]) ^ (0x5A if corrupt else 0)
+            signals[self.crc_sig.name] = c
+            data = bytearray(self.msg.encode(signals, strict=False))
+        return bytes(data)
+
+    def check(self, data, decoded):
+        self.checked += 1
+        if self.crc_sig is not None:
+            if decoded[self.crc_sig.name] != crc(self.p["algorithm"], data[self.span]):
+                self.bad_crc += 1
+        if self.alive_sig is not None:
+            a = decoded[self.alive_sig.name]
+            if self.last is not None and a != (self.last + 1) % self.wrap(self.alive_sig):
+                self.skips += 1
+            self.last = a
+
+
+class LabNorthFinder(NorthFinder):
+    """The same drill on a lab's own contract, by its DBC and the bench's mapping of it."""
+
+    def __init__(self, a, mapping):
+        self.a = a
+        self.db = cantools.database.load_file(a.dbc, strict=False)
+        m = self.db.get_message_by_name
+        imu, tt, sol = mapping["imu"], mapping["turntable"], mapping["solution"]
+        self.gyro_map, self.tt_map, self.sol_map = imu["gyro"], tt, sol
+        self.gyro, self.report, self.cmd = m(imu["gyro"]["message"]), m(tt["report"]), m(tt["command"])
+        self.heading_msg = m(sol["message"])
+        self.protect = {p["message"]: Protection(m(p["message"]), p) for p in mapping.get("protect", [])}
+        self.per_frame = imu.get("samples_per_frame", 1)
+        self.state_of = {v: k for k, v in tt["states"].items()}
+        self.ours = {"Disabled": 0, "Idle": 1, "Moving": 2, "Settling": 3, "Locked": 4, "Fault": 5}
+        self.modes = sol["modes"]
+        self.bus = can.Bus(interface="socketcan", channel=a.iface, fd=True,
+                           can_filters=[{"can_id": 0, "can_mask": 0xFFFFFFFF, "extended": True}])
+        self.rx = socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
+        self.rx.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FD_FRAMES, 1)
+        eff = socket.CAN_EFF_FLAG
+        ids = [self.gyro.frame_id, self.report.frame_id]
+        self.rx.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FILTER,
+                           b"".join(struct.pack("=II", i | eff, socket.CAN_EFF_MASK | eff) for i in ids))
+        try:
+            self.rx.setsockopt(socket.SOL_SOCKET, 33, 4 << 20)
+        except OSError:
+            self.rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+        self.rx.bind((a.iface,))
+        self.rx.setblocking(False)
+        self.gyro_id, self.report_id = ids
+        self.signals = [[n.replace("{k}", str(k)) for n in self.gyro_map["signals"]]
+                        for k in range(self.per_frame)]
+        self.rate_hz = imu["rate_hz"]
+        self.pulse_rad = [1.0, 1.0, 1.0]  # the counts are angles, rad
+        self.seq = 0
+        self.last_hb = 0.0
+        self.table = None
+        self.count = None
+        self.ctr = None
+        self.sample = None
+        self.fit = None
+        self.heading = None
+        self.sigma = 6.5
+        self.mode = self.mode_of("NorthFinding")
+        self.out = collections.deque()
+        self.stale = collections.deque()
+        self.last_stray = time.monotonic()
+        self.first_sample = None
+        self.solutions = 0
+        signal.signal(signal.SIGTERM, self.summary)
+
+    def mode_of(self, name):
+        return self.modes[name]
+
+    def summary(self, *_):
+        for name, p in sorted(self.protect.items()):
+            if p.checked:
+                print(f"northfinder: received {p.checked} {name}: {p.bad_crc} bad checksums, "
+                      f"{p.skips} alive counter skips", flush=True)
+        sys.exit(0)
+
+    def send(self, msg, **signals):
+        p = self.protect.get(msg.name)
+        if msg is self.heading_msg:
+            self.solutions += 1
+        n = self.solutions if msg is self.heading_msg else 0
+        if p is not None:
+            data = p.fill(signals, corrupt=n > 0 and self.a.bad_crc > 0 and n % self.a.bad_crc == 0,
+                          skip=n > 0 and self.a.skip_alive > 0 and n % self.a.skip_alive == 0)
+        else:
+            data = msg.encode(signals, strict=False)
+        self.bus.send(can.Message(arbitration_id=msg.frame_id, data=data, is_extended_id=True,
+                                  is_fd=len(data) > 8, bitrate_switch=len(data) > 8))
+
+    def command(self, name, arg=0.0):
+        t = self.tt_map
+        self.seq = (self.seq + 1) % 256
+        signals = {t["opcode"]: t["opcodes"][name]}
+        if t.get("sequence"):
+            signals[t["sequence"]] = self.seq
+        if t.get("argument"):
+            signals[t["argument"]] = arg
+        self.send(self.cmd, **signals)
+
+    def poll(self, timeout=0.01):
+        select.select([self.rx], [], [], timeout)
+        n = 0
+        while True:
+            try:
+                f = self.rx.recv(72)
+            except BlockingIOError:
+                break
+            can_id, dlc = HEADER.unpack_from(f)
+            self.take(can_id & socket.CAN_EFF_MASK, f, dlc)
+            n += 1
+            if n % 5 == 0:
+                self.housekeeping()
+        self.housekeeping()
+
+    def take(self, can_id, f, dlc):
+        data = f[8 : 8 + dlc]
+        if can_id == self.report_id:
+            d = self.report.decode(data, decode_choices=False)
+            if self.report.name in self.protect:
+                self.protect[self.report.name].check(data, d)
+            state = self.ours.get(self.state_of.get(int(d[self.tt_map["state"]])), 5)
+            self.table = (state, float(d[self.tt_map["angle"]]) % 360.0)
+            return
+        if can_id != self.gyro_id:
+            return
+        d = self.gyro.decode(data, decode_choices=False)
+        if self.gyro.name in self.protect:
+            self.protect[self.gyro.name].check(data, d)
+        ctr_sig = self.gyro.get_signal_by_name(self.gyro_map["counter"])
+        ctr, wrap = int(d[ctr_sig.name]), 1 << ctr_sig.length
+        if self.ctr is None:
+            self.count = [0.0, 0.0, 0.0, ctr]
+        else:
+            self.count[3] += (ctr - self.ctr) % wrap
+        self.ctr = ctr
+        dt = math.radians(1.0) / self.rate_hz  # deg/s over a sample, in rad
+        for k, names in enumerate(self.signals):
+            c = self.count
+            c[0] += d[names[0]] * dt
+            c[1] += d[names[1]] * dt
+            c[2] += d[names[2]] * dt
+            self.sample = sample = c[3] + k
+            if self.fit is not None:
+                self.fit.add(sample, c[0], c[1])
+            if sample % 20 == 19:
+                self.solution()
+            while self.stale and self.stale[0][0] <= sample:
+                self.out.append((time.monotonic() + self.a.delay, self.stale.popleft()[1]))
+
+    def frames(self, named, h):
+        s = self.sol_map
+        signals = {s["time_tag"]: named % (1 << self.heading_msg.get_signal_by_name(s["time_tag"]).length),
+                   s["mode"]: self.mode}
+        if s.get("heading"):
+            signals[s["heading"]] = h % 360.0
+        if s.get("heading_sigma"):
+            signals[s["heading_sigma"]] = min(self.sigma, 6.5)
+        return [(self.heading_msg, signals)]
 
 
 def counters(msg, names):

@@ -429,6 +429,17 @@ fn guest_python() -> Option<std::path::PathBuf> {
 /// `iface` under a latency budget of `budget_ms`: the bench's report and exit status, or none
 /// (said on stderr) where the guest has no Python.
 fn python_drill(iface: &str, extra: &str, budget_ms: f64) -> Option<(Value, i32)> {
+    python_drill_on(iface, extra, budget_ms, None).map(|(r, code, _)| (r, code))
+}
+
+/// [`python_drill`] on a lab's contract where `mapping` is given (the bench and the device
+/// both speak it): also what the device printed.
+fn python_drill_on(
+    iface: &str,
+    extra: &str,
+    budget_ms: f64,
+    mapping: Option<&std::path::Path>,
+) -> Option<(Value, i32, String)> {
     let dwell_s = 5;
     let Some(py) = guest_python() else {
         eprintln!(
@@ -437,15 +448,23 @@ fn python_drill(iface: &str, extra: &str, budget_ms: f64) -> Option<(Value, i32)
         return None;
     };
     let here = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let contract = match mapping {
+        Some(_) => "{dbc} --mapping {mapping}".to_string(),
+        None => here.join("../wire/bench.dbc").display().to_string(),
+    };
     let dut = format!(
-        "{} {} --iface {{iface}} --dbc {} --config {{config}} --dwell {dwell_s} {extra}",
+        "{} {} --iface {{iface}} --dbc {contract} --config {{config}} --dwell {dwell_s} {extra}",
         py.display(),
         here.join("dut/northfinder.py").display(),
-        here.join("../wire/bench.dbc").display()
     );
     let dir = tempfile::tempdir().unwrap();
     let budget = format!("{budget_ms:.0}");
-    Some(hil_json(
+    let mut lab: Vec<&str> = Vec::new();
+    let mapping_arg = mapping.map(|m| m.display().to_string());
+    if let Some(m) = &mapping_arg {
+        lab.extend(["--mapping", m.as_str()]);
+    }
+    let (r, code) = hil_json(
         &[
             "drill",
             "north-finding",
@@ -466,10 +485,16 @@ fn python_drill(iface: &str, extra: &str, budget_ms: f64) -> Option<(Value, i32)
             "--json",
             "--dut",
             &dut,
-            "--out",
-        ],
+        ]
+        .into_iter()
+        .chain(lab)
+        .chain(["--out"])
+        .collect::<Vec<_>>(),
         &[&dir.path().join("run")],
-    ))
+    );
+    let printed =
+        std::fs::read_to_string(dir.path().join("run/device/device.out")).unwrap_or_default();
+    Some((r, code, printed))
 }
 
 /// An independent device under test: `tests/dut/northfinder.py`, a minimal four-position
@@ -582,22 +607,55 @@ fn an_independent_python_device_that_lies_about_time_is_caught() {
     }
 }
 
-/// The independent Python device with a clock 1000 ppm fast against the IMU's (its own
-/// crystal, or a mis-set sample rate; 5 s dwells): the bench estimates its drift from its
-/// NAV_TIMEs within the uncertainty it states, counts the samples it names before they went
-/// on the bus and fails it for leading the stream by more than one output period, with the
-/// figures; its heading is still judged where north-finding is over, against the truth at the
-/// sample it names (right: the table stands still then).
+/// The independent Python device on a lab's own contract (`wire/contracts/lab-imu.dbc` and its
+/// mapping: 29-bit identifiers, the IMU's rates ten samples to a CAN FD frame, the table by the
+/// lab's opcodes and states, a CRC-8 and an alive counter on every frame, its solution in
+/// INS_HEADING), with a clock 1000 ppm fast against the IMU's (its own crystal, or a mis-set
+/// sample rate; 5 s dwells), a wrong checksum on every 50th frame it sends and an alive counter
+/// that skips on every 70th. Every frame it took from the bench's IMU and table (decoded by
+/// cantools from the lab's DBC) had its checksum and alive counter right. The bench, reading
+/// its solution through the mapping, estimates its drift from its time tags within the
+/// uncertainty it states, counts the samples it names before they went on the bus and fails it
+/// for leading the stream by more than one output period, with the figures; names its bad
+/// checksums and skipped counters by message; still judges its heading where north-finding is
+/// over, against the truth at the sample it names (right: the table stands still then).
 #[test]
 #[ignore = "needs vcan and the guest's Python: run ./run-tests"]
-fn an_independent_python_device_whose_clock_drifts_is_caught() {
-    let Some((r, code)) = python_drill("vcan-py3", "--drift-ppm 1000", 1000.0) else {
+fn an_independent_python_device_on_a_labs_contract_whose_clock_drifts_is_caught() {
+    let here = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mapping = here.join("../wire/contracts/lab-imu.toml");
+    let Some((r, code, printed)) = python_drill_on(
+        "vcan-py3",
+        "--drift-ppm 1000 --bad-crc 50 --skip-alive 70",
+        1000.0,
+        Some(&mapping),
+    ) else {
         return;
     };
     if !judged(&r, code) {
         return;
     }
     assert_eq!(code, 1, "{r}");
+    // what the device took from the bench, checked by its own decoder
+    for m in ["IMU_GYRO_BLOCK", "TABLE_REPORT"] {
+        let line = printed
+            .lines()
+            .find(|l| l.contains(&format!(" {m}: ")))
+            .unwrap_or_else(|| panic!("the device printed nothing of {m}:\n{printed}"));
+        assert!(
+            line.ends_with(": 0 bad checksums, 0 alive counter skips"),
+            "{line}"
+        );
+    }
+    let (pass, detail) = check_named(&r, "the device's checksums and alive counters hold");
+    assert!(
+        !pass
+            && detail.contains("INS_HEADING 0x18FE3001 (extended): checksum wrong")
+            && detail.contains("INS_HEADING 0x18FE3001 (extended): alive counter skipped"),
+        "{detail}"
+    );
+    let (pass, detail) = check_named(&r, "frames within the DBC");
+    assert!(pass && detail.contains("lab-imu.dbc"), "{detail}");
     let (drift, sigma) = estimate(&r["clock"]["drift_ppm"]);
     assert!(
         (drift - 1000.0).abs() <= 3.0 * sigma + 30.0 && sigma < 200.0,

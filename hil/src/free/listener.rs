@@ -263,6 +263,9 @@ pub struct LabEar {
     pub path: std::path::PathBuf,
     ignored: Vec<wire::dbc::FrameId>,
     device_sends: Vec<String>,
+    /// The IMU's sample counter's width, bits: a time tag is placed at no more (a device that
+    /// joined the stream late knows the sample no better than the counter tells it).
+    counter_bits: Option<u16>,
 }
 
 impl std::fmt::Debug for LabEar {
@@ -290,6 +293,10 @@ impl LabEar {
                 ignored.extend(contract.message(n).map(|m| m.id));
             }
         }
+        let counter_bits = f.imu.as_ref().and_then(|imu| {
+            let n = imu.gyro.counter.as_deref()?;
+            Some(contract.message(&imu.gyro.message)?.signal(n)?.len)
+        });
         let mut device_sends: Vec<String> = Vec::new();
         if let Some(t) = &f.turntable {
             device_sends.push(t.command.clone());
@@ -306,6 +313,7 @@ impl LabEar {
             path,
             ignored,
             device_sends,
+            counter_bits,
         }
     }
 
@@ -347,7 +355,7 @@ impl LabEar {
                 };
                 let e = o
                     .protection_faults
-                    .entry(format!("{} ({id}): {kind}", m.name))
+                    .entry(format!("{} {id}: {kind}", m.name))
                     .or_insert_with(|| (0, f.to_string()));
                 e.0 += 1;
             }
@@ -369,7 +377,7 @@ impl LabEar {
             Ok(None) => return,
             Err(e) => {
                 *o.outside_dbc
-                    .entry(format!("{} ({id}): {e}", m.name))
+                    .entry(format!("{} {id}: {e}", m.name))
                     .or_default() += 1;
                 return;
             }
@@ -385,7 +393,8 @@ impl LabEar {
             } => {
                 let count = unwrap_tag(o.last_tag, tag, tag_bits);
                 o.last_tag = Some(count);
-                let named = place.named_bits(tag, tag_bits);
+                let bits = self.counter_bits.map_or(tag_bits, |c| c.min(tag_bits));
+                let named = place.named_bits(tag, bits);
                 o.epochs.push(Epoch {
                     sample_count: count as u32,
                     seq: o.epochs.len() as u8,

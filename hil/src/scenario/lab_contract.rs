@@ -52,11 +52,7 @@ pub fn imu_run<'a>(
         s.following(&tracks)
     };
     let table = match (&m.file.turntable, tracks.is_empty()) {
-        (Some(t), false) => Some((
-            wire::mapping::TableSide::new(c, t)
-                .context("the mapping's [turntable] names a message the DBC lacks")?,
-            tracks,
-        )),
+        (Some(_), false) => Some((table_side(c, m)?.0, tracks)),
         _ => None,
     };
     Ok(emulators::adapters::fd::MappedImuRun {
@@ -74,12 +70,10 @@ pub fn table_side<'a>(
     c: &'a Contract,
     m: &'a Mapping,
 ) -> Result<(wire::mapping::TableSide<'a>, wire::mapping::Protector<'a>)> {
-    let t = m
-        .file
-        .turntable
-        .as_ref()
-        .context("the mapping has no [turntable]: the table cannot speak the lab's contract")?;
-    let side = wire::mapping::TableSide::new(c, t)
+    if m.file.turntable.is_none() {
+        anyhow::bail!("the mapping has no [turntable]: the table cannot speak the lab's contract");
+    }
+    let side = wire::mapping::TableSide::new(c, m)
         .context("the mapping's [turntable] names a message the DBC lacks")?;
     Ok((side, wire::mapping::Protector::new(m)))
 }

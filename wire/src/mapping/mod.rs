@@ -13,7 +13,7 @@ mod table;
 pub use solution::{
     PositionMapping, SolutionMapping, SolutionPart, SolutionReader, VelocityMapping,
 };
-pub use table::{FAULT_NAMES, TableMapping, TableSide};
+pub use table::{CommandRefused, FAULT_NAMES, TableMapping, TableSide};
 
 use crate::crc::Crc;
 use crate::dbc::{Contract, EncodeError, FrameId, Kind, MessageLayout, SignalLayout};
@@ -826,6 +826,24 @@ pub enum ProtectionFault {
     },
 }
 
+/// The fault of a frame of message `m` whose checksum (where `mapping` protects it) does not
+/// match its bytes.
+pub fn checksum_fault(
+    mapping: &Mapping,
+    m: &MessageLayout,
+    data: &[u8],
+) -> Option<ProtectionFault> {
+    let p = mapping.file.protect.iter().find(|p| p.message == m.name)?;
+    let (s, crc, [first, last]) = checksum(m, p)?;
+    let want = u64::from(crc.compute(data.get(first..=last)?));
+    let got = s.bits(data);
+    (got != want).then(|| ProtectionFault::Checksum {
+        message: m.name.clone(),
+        got,
+        want,
+    })
+}
+
 /// The judge's side of [`Framer::protect`]: every protected frame a device sends checked for
 /// its checksum and its alive counter, each fault counted by message.
 #[derive(Debug, Clone, Default)]
@@ -845,18 +863,8 @@ impl Guard {
             return;
         };
         self.checked += 1;
-        if let Some((s, crc, [first, last])) = checksum(m, p)
-            && last < data.len()
-        {
-            let want = u64::from(crc.compute(&data[first..=last]));
-            let got = s.bits(data);
-            if got != want {
-                self.faults.push(ProtectionFault::Checksum {
-                    message: m.name.clone(),
-                    got,
-                    want,
-                });
-            }
+        if let Some(f) = checksum_fault(mapping, m, data) {
+            self.faults.push(f);
         }
         if let Some(s) = p.alive.as_deref().and_then(|a| m.signal(a)) {
             let got = s.bits(data);

@@ -5,7 +5,10 @@
 //! [`TableSide`] is the emulated table's translator: a command frame in the lab's form into
 //! our [`TtCmd`], our [`TtStatus`] into the lab's report frame.
 
-use super::{MappedFrame, MappingError, Protector, bad_signal, check_counter, message, signal};
+use super::{
+    MappedFrame, Mapping, MappingError, ProtectionFault, Protector, bad_signal, check_counter,
+    message, signal,
+};
 use crate::dbc::{Contract, DecodeError, EncodeError, FrameId, MessageLayout};
 use crate::{TtCmd, TtCommand, TtState, TtStatus};
 use serde::Deserialize;
@@ -157,9 +160,21 @@ fn codes(
     Ok(())
 }
 
+/// Why the table did not take a command frame.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CommandRefused {
+    /// The frame does not decode by the lab's DBC.
+    #[error(transparent)]
+    Decode(#[from] DecodeError),
+    /// Its checksum is wrong: the table drops it, as a real one does.
+    #[error(transparent)]
+    Checksum(ProtectionFault),
+}
+
 /// The emulated table's side of a lab's contract: its commands read, its reports written.
 #[derive(Debug)]
 pub struct TableSide<'a> {
+    mapping: &'a Mapping,
     table: &'a TableMapping,
     cmd: &'a MessageLayout,
     rep: &'a MessageLayout,
@@ -169,9 +184,12 @@ pub struct TableSide<'a> {
 const UNKNOWN_COMMAND: u8 = 0xFF;
 
 impl<'a> TableSide<'a> {
-    /// The side of `table` (checked against `contract`); none when a message is missing.
-    pub fn new(contract: &'a Contract, table: &'a TableMapping) -> Option<Self> {
+    /// The table's side of `mapping` (checked against `contract`); none when it has no
+    /// `[turntable]` or a message is missing.
+    pub fn new(contract: &'a Contract, mapping: &'a Mapping) -> Option<Self> {
+        let table = mapping.file.turntable.as_ref()?;
         Some(Self {
+            mapping,
             table,
             cmd: contract.message(&table.command)?,
             rep: contract.message(&table.report)?,
@@ -189,8 +207,12 @@ impl<'a> TableSide<'a> {
     }
 
     /// A command frame in the lab's form as ours: its opcode by the lab's table (an opcode it
-    /// lacks becomes a code the table refuses), sequence, axis and argument.
-    pub fn command(&self, data: &[u8]) -> Result<TtCmd, DecodeError> {
+    /// lacks becomes a code the table refuses), sequence, axis and argument. A frame whose
+    /// checksum is wrong is refused (its alive counter is the judge's to check).
+    pub fn command(&self, data: &[u8]) -> Result<TtCmd, CommandRefused> {
+        if let Some(f) = super::checksum_fault(self.mapping, self.cmd, data) {
+            return Err(CommandRefused::Checksum(f));
+        }
         let v = self.cmd.decode(data)?;
         let get = |n: &Option<String>| {
             n.as_deref()
@@ -282,23 +304,33 @@ mod tests {
     #[test]
     fn the_table_speaks_the_labs_commands_and_reports() {
         let (c, m) = lab();
-        let t = m.file.turntable.as_ref().expect("a turntable section");
-        let side = TableSide::new(&c, t).expect("its messages");
+        let side = TableSide::new(&c, &m).expect("its messages");
         let cmd = side.cmd;
-        let data = cmd
+        let mut data = cmd
             .encode(&[("Opcode", 5.0), ("Sequence", 42.0), ("TargetAngle", 180.0)])
             .expect("encodes");
+        Protector::new(&m)
+            .protect(cmd, &mut data)
+            .expect("protects");
         let got = side.command(&data).expect("decodes");
         assert_eq!(
             (got.seq, got.command, got.axis),
             (42, TtCommand::IndexAbs as u8, 0)
         );
         assert!((got.arg - 180.0).abs() < 1e-3);
-        let data = cmd.encode(&[("Opcode", 9.0)]).expect("encodes");
+        let mut data = cmd.encode(&[("Opcode", 9.0)]).expect("encodes");
+        Protector::new(&m)
+            .protect(cmd, &mut data)
+            .expect("protects");
         assert_eq!(
             side.command(&data).expect("decodes").command,
             UNKNOWN_COMMAND
         );
+        data[3] ^= 1;
+        assert!(matches!(
+            side.command(&data),
+            Err(CommandRefused::Checksum(ProtectionFault::Checksum { .. }))
+        ));
         let st = TtStatus {
             angle_deg: 90.0,
             rate_dps: 0.0,
