@@ -642,6 +642,7 @@ fn an_independent_python_device_on_a_labs_contract_whose_clock_drifts_is_caught(
             .lines()
             .find(|l| l.contains(&format!(" {m}: ")))
             .unwrap_or_else(|| panic!("the device printed nothing of {m}:\n{printed}"));
+        eprintln!("{line}");
         assert!(
             line.ends_with(": 0 bad checksums, 0 alive counter skips"),
             "{line}"
