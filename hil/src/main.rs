@@ -144,8 +144,9 @@ enum Cmd {
         #[arg(long)]
         measure: bool,
         /// A lab's mapping file (its DBC beside it, docs/your-device.md): the load and every
-        /// message's worst-case response time at the mapping's bit rates.
-        #[arg(long, conflicts_with_all = ["scenario", "measure", "bitrate"])]
+        /// message's worst-case response time at the mapping's bit rates; with --measure, its
+        /// traffic on the bus model beside them (and the table's round trip).
+        #[arg(long, conflicts_with_all = ["scenario", "bitrate"])]
         mapping: Option<PathBuf>,
     },
     /// Print the DBC file of the wire contract.
@@ -249,8 +250,10 @@ fn real_main(cli: Cli) -> Result<i32> {
         Cmd::Calibrate(Calibrate::Tetrahedral(a)) => calibrate_tetrahedral(a),
         Cmd::Validate(Validate::Turntable(a)) => validate_turntable(a),
         Cmd::Busload {
-            mapping: Some(m), ..
-        } => cmd::busload::mapped(&m),
+            mapping: Some(m),
+            measure,
+            ..
+        } => cmd::busload::mapped(&m, measure),
         Cmd::Busload {
             bitrate,
             scenario,

@@ -35,10 +35,22 @@ pub fn frame_time_worst_s(
     nominal_bps: f64,
     data_bps: f64,
 ) -> f64 {
+    let (arb, data) = frame_bits_worst_phases(extended, payload, fd);
+    let t = f64::from(arb) / nominal_bps;
+    if data == 0 {
+        t
+    } else {
+        t + f64::from(data) / data_bps
+    }
+}
+
+/// [`frame_time_worst_s`]'s bits: those at the nominal rate and those in CAN FD's data phase
+/// (0 for a classic frame).
+pub fn frame_bits_worst_phases(extended: bool, payload: usize, fd: bool) -> (u32, u32) {
     let n = payload as u32 * 8;
     if !fd {
         let g = if extended { 54 } else { 34 };
-        return f64::from(g + n + 13 + (g + n - 1) / 4) / nominal_bps;
+        return (g + n + 13 + (g + n - 1) / 4, 0);
     }
     // arbitration phase: SOF, identifier (SRR, IDE and the 18 more bits when extended), RRS,
     // IDE/FDF, res, BRS
@@ -55,8 +67,17 @@ pub fn frame_time_worst_s(
     let data = stuffed + stuffed / 4 + fixed + fixed.div_ceil(4) + 1;
     // after the switch back: ACK slot and delimiter, end of frame, intermission
     let tail = 1 + 1 + 7 + 3;
-    let arb = arb + (arb - 1) / 4;
-    f64::from(arb + tail) / nominal_bps + f64::from(data) / data_bps
+    (arb + (arb - 1) / 4 + tail, data)
+}
+
+/// A frame's place in arbitration: lower wins. The 11 base bits first; a standard frame wins
+/// over an extended one with the same base bits (its IDE bit is dominant); then the 18 more.
+pub fn arbitration_key(id: u32, extended: bool) -> u64 {
+    if extended {
+        (u64::from(id >> 18) << 19) | (1 << 18) | u64::from(id & 0x3_FFFF)
+    } else {
+        u64::from(id & 0x7FF) << 19
+    }
 }
 
 /// A message sent periodically on a bus, for [`response_times`].
@@ -82,11 +103,7 @@ impl Periodic {
     /// Its place in arbitration: lower wins. The 11 base bits first; a standard frame wins over
     /// an extended one with the same base bits (its IDE bit is dominant); then the 18 more.
     pub fn arbitration_key(&self) -> u64 {
-        if self.extended {
-            (u64::from(self.id >> 18) << 19) | (1 << 18) | u64::from(self.id & 0x3_FFFF)
-        } else {
-            u64::from(self.id & 0x7FF) << 19
-        }
+        arbitration_key(self.id, self.extended)
     }
 }
 

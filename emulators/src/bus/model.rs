@@ -23,6 +23,9 @@ use wire::RawFrame;
 pub struct BusTiming {
     /// Bit rate, bit/s.
     pub bitrate_bps: f64,
+    /// CAN FD's data phase after the bit-rate switch, bit/s (none: `bitrate_bps`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_bitrate_bps: Option<f64>,
     /// An ideal bus (vcan's): every frame completes the moment it is queued, in the order queued.
     pub ideal: bool,
     /// Depth of each node's transmit queue, frames.
@@ -35,6 +38,7 @@ impl Default for BusTiming {
     fn default() -> Self {
         Self {
             bitrate_bps: wire::busload::NOMINAL_BITRATE,
+            data_bitrate_bps: None,
             ideal: false,
             tx_queue: DEFAULT_TX_QUEUE,
             faults: PhysicalFaults::default(),
@@ -105,11 +109,59 @@ pub fn ns(t_s: f64) -> u64 {
     (t_s * 1e9).round().max(0.0) as u64
 }
 
+/// A frame the bus model carries: our contract's classic frames ([`RawFrame`]), or a lab's
+/// ([`crate::bus::lab::LabFrame`]: 29-bit identifiers, CAN FD's data phase at its own rate).
+pub trait BusFrame: Copy + std::fmt::Debug {
+    /// Its identifier.
+    fn id(&self) -> u32;
+    /// A 29-bit identifier.
+    fn extended(&self) -> bool;
+    /// Its place in arbitration: the lower wins.
+    fn arbitration(&self) -> u64;
+    /// Its bits on the wire: at the nominal rate, and in CAN FD's data phase (0: classic).
+    fn bits(&self) -> (u32, u32);
+    /// The node that sends it.
+    fn sender(&self) -> &'static str;
+    /// Its message's name (else its identifier).
+    fn name(&self) -> String;
+    /// A babbling node's frame ([`PhysicalFaults::babbling_s`]'s identifier).
+    fn babble(id: f64) -> Self;
+}
+
+impl BusFrame for RawFrame {
+    fn id(&self) -> u32 {
+        u32::from(self.id)
+    }
+    fn extended(&self) -> bool {
+        false
+    }
+    fn arbitration(&self) -> u64 {
+        u64::from(self.id)
+    }
+    fn bits(&self) -> (u32, u32) {
+        (wire::busload::frame_bits_exact(self), 0)
+    }
+    fn sender(&self) -> &'static str {
+        wire::spec_for_id(self.id).map_or(FOREIGN, |s| s.sender)
+    }
+    fn name(&self) -> String {
+        wire::spec_for_id(self.id)
+            .map_or_else(|| format!("0x{:03X}", self.id), |s| s.name.to_string())
+    }
+    fn babble(id: f64) -> Self {
+        RawFrame {
+            id: (id.max(0.0) as u16) & 0x7FF,
+            len: 8,
+            data: [0xBA; 8],
+        }
+    }
+}
+
 /// What the bus hands on: a frame over, or an error frame nav's controller raises.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Delivered {
+pub enum Delivered<F = RawFrame> {
     /// A frame is over on the bus.
-    Frame(OnBus),
+    Frame(OnBus<F>),
     /// nav's controller reports an error (a bus error, a change of its error state, bus-off, a
     /// restart), at `t_ns`.
     Error {
@@ -122,9 +174,9 @@ pub enum Delivered {
 
 /// A frame on the bus.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct OnBus {
+pub struct OnBus<F = RawFrame> {
     /// The frame.
-    pub frame: RawFrame,
+    pub frame: F,
     /// The node that sent it ([`CanBus::node_name`]).
     pub node: usize,
     /// When it was queued, ns.
@@ -138,19 +190,20 @@ pub struct OnBus {
 }
 
 #[derive(Debug, Clone, Copy)]
-struct Pending {
-    frame: RawFrame,
+struct Pending<F> {
+    frame: F,
     queued_ns: u64,
     seq: u64,
-    /// Its length on the wire with its stuff bits (counted once, as it is queued: a frame
-    /// waits through many calls of [`CanBus::run`]).
-    bits: u32,
+    /// Its length on the wire with its stuff bits, at the nominal rate and in CAN FD's data
+    /// phase (counted once, as it is queued: a frame waits through many calls of
+    /// [`CanBus::run`]).
+    bits: (u32, u32),
 }
 
-#[derive(Debug, Default)]
-struct Node {
+#[derive(Debug)]
+struct Node<F> {
     name: &'static str,
-    queue: VecDeque<Pending>,
+    queue: VecDeque<Pending<F>>,
     overflow: u64,
     sent: u64,
     deepest: usize,
@@ -165,7 +218,24 @@ struct Node {
     max_tec: u16,
 }
 
-impl Node {
+impl<F> Node<F> {
+    fn named(name: &'static str) -> Self {
+        Self {
+            name,
+            queue: VecDeque::new(),
+            overflow: 0,
+            sent: 0,
+            deepest: 0,
+            tec: 0,
+            rec: 0,
+            off_until: None,
+            failed: 0,
+            bus_offs: 0,
+            lost_off: 0,
+            max_tec: 0,
+        }
+    }
+
     fn state(&self) -> wire::errframe::ErrorState {
         if self.off_until.is_some() {
             wire::errframe::ErrorState::BusOff
@@ -178,20 +248,26 @@ impl Node {
 /// What the bus did, per identifier.
 #[derive(Debug, Clone, Default)]
 struct IdStats {
+    id: u32,
+    extended: bool,
+    name: String,
+    sender: &'static str,
     frames: u64,
     bits: u64,
+    /// Bits in CAN FD's data phase.
+    data_bits: u64,
     /// Queueing delay (queued to start of frame), ns -> frames.
     delay: BTreeMap<u64, u64>,
 }
 
 /// The bus.
 #[derive(Debug)]
-pub struct CanBus {
+pub struct CanBus<F = RawFrame> {
     timing: BusTiming,
-    nodes: Vec<Node>,
+    nodes: Vec<Node<F>>,
     /// The node of each identifier met so far (an index into `nodes`, which only grows): the
     /// contract's lookup and the name's search once per identifier, not per frame.
-    node_of_id: BTreeMap<u16, usize>,
+    node_of_id: BTreeMap<u64, usize>,
     /// A bit's time, ns, where it is a whole number (500 kbit/s: 2,000; any rate that divides
     /// 1 GHz): a frame's time is then the product, exactly what the rounded quotient gives.
     ns_per_bit: Option<u64>,
@@ -209,7 +285,8 @@ pub struct CanBus {
     /// The bus is idle from then on, ns.
     free_ns: u64,
     seq: u64,
-    ids: BTreeMap<u16, IdStats>,
+    /// By arbitration order.
+    ids: BTreeMap<u64, IdStats>,
     busy_ns: u64,
     first_ns: Option<u64>,
     last_ns: u64,
@@ -225,17 +302,14 @@ fn whole_ns_per_bit(bitrate_bps: f64) -> Option<u64> {
 /// the harness, the fault injector).
 pub const FOREIGN: &str = "OTHER";
 
-impl CanBus {
+impl<F: BusFrame> CanBus<F> {
     /// An idle bus.
     pub fn new(timing: BusTiming) -> Self {
         let next_corruption = timing.faults.disturbed_s.iter().map(|w| ns(w[0])).collect();
         let ns_per_bit = whole_ns_per_bit(timing.bitrate_bps);
         Self {
             timing,
-            nodes: vec![Node {
-                name: "NAV",
-                ..Default::default()
-            }],
+            nodes: vec![Node::named("NAV")],
             node_of_id: BTreeMap::new(),
             ns_per_bit,
             next_corruption,
@@ -266,13 +340,13 @@ impl CanBus {
 
     /// The node that sends `frame`: the contract's transmitter of its identifier, else
     /// [`FOREIGN`].
-    fn node_of(&mut self, frame: &RawFrame) -> usize {
-        if let Some(&i) = self.node_of_id.get(&frame.id) {
+    fn node_of(&mut self, frame: &F) -> usize {
+        let key = frame.arbitration();
+        if let Some(&i) = self.node_of_id.get(&key) {
             return i;
         }
-        let name = wire::spec_for_id(frame.id).map_or(FOREIGN, |s| s.sender);
-        let i = self.node_named(name);
-        self.node_of_id.insert(frame.id, i);
+        let i = self.node_named(frame.sender());
+        self.node_of_id.insert(key, i);
         i
     }
 
@@ -281,18 +355,32 @@ impl CanBus {
         match self.nodes.iter().position(|n| n.name == name) {
             Some(i) => i,
             None => {
-                self.nodes.push(Node {
-                    name,
-                    ..Default::default()
-                });
+                self.nodes.push(Node::named(name));
                 self.nodes.len() - 1
             }
         }
     }
 
     /// Duration of `frame` on the bus, ns (zero on the ideal bus).
-    pub fn duration_ns(&self, frame: &RawFrame) -> u64 {
-        self.bits_ns(wire::busload::frame_bits_exact(frame))
+    pub fn duration_ns(&self, frame: &F) -> u64 {
+        self.phases_ns(frame.bits())
+    }
+
+    /// Duration of bits at the nominal rate and in the data phase, ns (zero on the ideal bus).
+    fn phases_ns(&self, (bits, data): (u32, u32)) -> u64 {
+        self.bits_ns(bits) + self.data_ns(data)
+    }
+
+    /// Duration of `bits` in CAN FD's data phase, ns (zero on the ideal bus).
+    fn data_ns(&self, bits: u32) -> u64 {
+        if bits == 0 || self.timing.ideal {
+            return 0;
+        }
+        let rate = self
+            .timing
+            .data_bitrate_bps
+            .unwrap_or(self.timing.bitrate_bps);
+        (f64::from(bits) * 1e9 / rate).round() as u64
     }
 
     /// Duration of `bits` on the bus, ns (zero on the ideal bus).
@@ -308,12 +396,12 @@ impl CanBus {
 
     /// `frame` is handed to its node's controller at `t_ns`. False when the node's queue was
     /// full: the frame is lost (counted).
-    pub fn queue(&mut self, t_ns: u64, frame: RawFrame) -> bool {
+    pub fn queue(&mut self, t_ns: u64, frame: F) -> bool {
         let i = self.node_of(&frame);
         self.queue_on(i, t_ns, frame)
     }
 
-    fn queue_on(&mut self, i: usize, t_ns: u64, frame: RawFrame) -> bool {
+    fn queue_on(&mut self, i: usize, t_ns: u64, frame: F) -> bool {
         let mut events = std::mem::take(&mut self.events);
         self.recover(t_ns, &mut events);
         self.events = events;
@@ -332,7 +420,7 @@ impl CanBus {
             frame,
             queued_ns: t_ns,
             seq: self.seq,
-            bits: wire::busload::frame_bits_exact(&frame),
+            bits: frame.bits(),
         });
         self.seq += 1;
         node.deepest = node.deepest.max(node.queue.len());
@@ -362,7 +450,7 @@ impl CanBus {
         let at = self.free_ns.max(earliest);
         heads
             .filter(|(_, p)| p.queued_ns <= at)
-            .min_by_key(|(i, p)| (p.frame.id, *i))
+            .min_by_key(|(i, p)| (p.frame.arbitration(), *i))
             .map(|(i, _)| (i, at))
     }
 
@@ -376,7 +464,7 @@ impl CanBus {
         &mut self,
         limit_ns: u64,
         complete_by: bool,
-        mut out: impl FnMut(&mut Self, Delivered),
+        mut out: impl FnMut(&mut Self, Delivered<F>),
     ) {
         let mut events = std::mem::take(&mut self.events);
         loop {
@@ -391,7 +479,7 @@ impl CanBus {
                 break;
             };
             let bits = p.bits;
-            let end = start + self.bits_ns(bits);
+            let end = start + self.phases_ns(bits);
             if (complete_by && end > limit_ns) || (!complete_by && start >= limit_ns) {
                 self.recover(limit_ns.min(start), &mut events);
                 flush_events(self, &mut events, limit_ns, &mut out);
@@ -411,9 +499,19 @@ impl CanBus {
             self.first_ns.get_or_insert(start);
             self.last_ns = self.last_ns.max(end);
             self.busy_ns += end - start;
-            let s = self.ids.entry(p.frame.id).or_default();
+            let s = self
+                .ids
+                .entry(p.frame.arbitration())
+                .or_insert_with(|| IdStats {
+                    id: p.frame.id(),
+                    extended: p.frame.extended(),
+                    name: p.frame.name(),
+                    sender: p.frame.sender(),
+                    ..IdStats::default()
+                });
             s.frames += 1;
-            s.bits += u64::from(bits);
+            s.bits += u64::from(bits.0);
+            s.data_bits += u64::from(bits.1);
             *s.delay.entry(start - p.queued_ns).or_default() += 1;
             self.succeeded(i, end, &mut events);
             let nav_receives = self.nodes[self.nav].off_until.is_none();
@@ -462,12 +560,7 @@ impl CanBus {
             let (from, to) = (ns(w[0]), ns(w[1]));
             let at = from.max(self.free_ns);
             if at < to && at <= limit_ns {
-                let frame = RawFrame {
-                    id: (w[2].max(0.0) as u16) & 0x7FF,
-                    len: 8,
-                    data: [0xBA; 8],
-                };
-                self.queue_on(i, at, frame);
+                self.queue_on(i, at, F::babble(w[2]));
                 return;
             }
         }
@@ -604,17 +697,17 @@ impl CanBus {
         &mut self,
         i: usize,
         start: u64,
-        bits: u32,
+        (bits, data): (u32, u32),
         events: &mut Vec<(u64, wire::errframe::ErrorFrame)>,
     ) {
         use wire::errframe::prot;
         self.corrupted += 1;
-        let end = start + self.bits_ns(bits / 2 + ERROR_FRAME_BITS);
+        let end = start + self.bits_ns(bits / 2 + ERROR_FRAME_BITS) + self.data_ns(data / 2);
         self.free_ns = end;
         self.first_ns.get_or_insert(start);
         self.last_ns = self.last_ns.max(end);
         self.busy_ns += end - start;
-        let at = start + self.bits_ns(bits / 2);
+        let at = start + self.bits_ns(bits / 2) + self.data_ns(data / 2);
         // nav's controller reports the error it sent (a bit error) or saw (a stuff error)
         let kind = if i == self.nav {
             prot::BIT | prot::TX
@@ -643,7 +736,7 @@ impl CanBus {
         off_at: u64,
         bus_error: Option<u8>,
         events: &mut Vec<(u64, wire::errframe::ErrorFrame)>,
-        update: impl Fn(&mut Node, bool),
+        update: impl Fn(&mut Node<F>, bool),
     ) {
         use wire::errframe::{ErrorFrame, prot};
         for j in 0..self.nodes.len() {
@@ -705,16 +798,26 @@ impl CanBus {
         let span = self.last_ns.saturating_sub(self.first_ns.unwrap_or(0));
         let ids = self
             .ids
-            .iter()
-            .map(|(&id, s)| {
-                let spec = wire::spec_for_id(id);
+            .values()
+            .map(|s| {
+                let data_rate = self
+                    .timing
+                    .data_bitrate_bps
+                    .unwrap_or(self.timing.bitrate_bps);
                 IdTiming {
-                    id,
-                    name: spec.map_or_else(|| format!("0x{id:03X}"), |s| s.name.to_string()),
-                    sender: spec.map_or(FOREIGN, |s| s.sender).to_string(),
+                    id: s.id,
+                    extended: s.extended,
+                    name: s.name.clone(),
+                    sender: s.sender.to_string(),
                     frames: s.frames,
                     load: if span > 0 {
-                        s.bits as f64 / self.timing.bitrate_bps / (span as f64 * 1e-9)
+                        let nominal =
+                            s.bits as f64 / self.timing.bitrate_bps / (span as f64 * 1e-9);
+                        if s.data_bits == 0 {
+                            nominal
+                        } else {
+                            nominal + s.data_bits as f64 / data_rate / (span as f64 * 1e-9)
+                        }
                     } else {
                         0.0
                     },
@@ -760,11 +863,11 @@ impl CanBus {
 }
 
 /// Hand on the error frames raised by `until_ns`, in time order.
-fn flush_events(
-    bus: &mut CanBus,
+fn flush_events<F: BusFrame>(
+    bus: &mut CanBus<F>,
     events: &mut Vec<(u64, wire::errframe::ErrorFrame)>,
     until_ns: u64,
-    out: &mut impl FnMut(&mut CanBus, Delivered),
+    out: &mut impl FnMut(&mut CanBus<F>, Delivered<F>),
 ) {
     if events.is_empty() {
         return;
@@ -797,7 +900,10 @@ pub fn percentile(h: &BTreeMap<u64, u64>, q: f64) -> u64 {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct IdTiming {
     /// Identifier.
-    pub id: u16,
+    pub id: u32,
+    /// A 29-bit identifier.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub extended: bool,
     /// Message name in the contract (else the identifier).
     pub name: String,
     /// The node that sends it.

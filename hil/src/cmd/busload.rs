@@ -47,9 +47,10 @@ pub(crate) fn busload(bitrates: &[f64], scenario: Option<PathBuf>, measure: bool
 }
 
 /// `hil busload --mapping FILE`: the lab's contract (the mapping and the DBC it names) on its
-/// bus: each mapped message's rate, load and worst-case response time. Exit status 1 when a
-/// message has no bound.
-pub(crate) fn mapped(path: &std::path::Path) -> Result<i32> {
+/// bus: each mapped message's rate, load and worst-case response time; with `measure`, what the
+/// bus model measured of that traffic beside the bounds. Exit status 1 when a message has no
+/// bound.
+pub(crate) fn mapped(path: &std::path::Path, measure: bool) -> Result<i32> {
     let (contract, m) = hil::scenario::lab_contract::load(path)?;
     let nominal = m.file.bus.bitrate;
     let data = m.file.bus.data_bitrate.unwrap_or(nominal);
@@ -96,6 +97,12 @@ pub(crate) fn mapped(path: &std::path::Path) -> Result<i32> {
         "total: {:.1} % of the bus with every frame at its longest\nresponse: the worst-case time from queued to sent (Davis et al. 2007; jitter in ms)",
         100.0 * m.worst_load
     );
+    if measure {
+        println!(
+            "\n{}",
+            hil::scenario::lab_contract::measured(&contract, &m)?
+        );
+    }
     Ok(status)
 }
 
@@ -154,7 +161,7 @@ fn against_bounds(b: &emulators::bus::model::BusStats, s: &Scenario) -> String {
         "\n| identifier | measured worst, queued to sent (us) | bound (us) | within |\n|---|---:|---:|---|\n",
     );
     for id in &b.ids {
-        let Some(k) = periodic.iter().position(|p| p.id == u32::from(id.id)) else {
+        let Some(k) = periodic.iter().position(|p| p.id == id.id) else {
             continue;
         };
         let own =

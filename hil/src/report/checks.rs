@@ -241,7 +241,9 @@ fn frame_kind_checks(
     let foreign: u64 = bus
         .ids
         .iter()
-        .filter(|i| wire::spec_for_id(i.id).is_none())
+        .filter(|i| {
+            i.extended || u16::try_from(i.id).map_or(true, |id| wire::spec_for_id(id).is_none())
+        })
         .map(|i| i.frames)
         .sum();
     for (name, got, want) in [

@@ -163,6 +163,7 @@ impl BusSettings {
     pub fn timing(&self) -> emulators::bus::model::BusTiming {
         emulators::bus::model::BusTiming {
             bitrate_bps: self.bitrate_bps,
+            data_bitrate_bps: None,
             ideal: self.timing == TimingModel::Ideal,
             tx_queue: self.tx_queue_frames,
             faults: self.faults.clone(),
