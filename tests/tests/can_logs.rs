@@ -179,14 +179,18 @@ fn the_bus_models_log_reads_back_with_its_error_frames_on_the_simulated_clock() 
     }
 }
 
-/// The lab's contract as the emulated IMU put it on vcan (`the_imu_speaks_a_labs_own_contract_on_vcan_in_can_fd_frames`,
-/// its candump capture in `target/e2e-reports/lab-contract/`): python-can reads every line of
-/// it as an extended CAN FD frame with the bit-rate switch, cantools decodes each with the lab's
-/// DBC, every CRC-8/SAE-J1850 right and every alive counter one up on its message's last, and
-/// the sample counter ten up a frame (wrapping at 12 bits).
+/// The lab's contract as the emulated IMU and table put it on vcan
+/// (`the_imu_and_table_speak_a_labs_own_contract_on_vcan`, its candump capture in
+/// `target/e2e-reports/lab-contract/`): python-can reads every line of it, the IMU's blocks as
+/// extended CAN FD frames with the bit-rate switch, cantools decodes each with the lab's DBC,
+/// every CRC-8/SAE-J1850 of the bench's frames right and every alive counter one up on its
+/// message's last, the sample counter ten up a frame (wrapping at 12 bits); the table disabled
+/// (the lab's 0) until it took the Enable of sequence 7, then idle (the lab's 1) with 7 in
+/// AckSequence until a second without a heartbeat faults it (the lab's 14, its heartbeat bit);
+/// the Enable of sequence 9, its CRC wrong, never acknowledged.
 #[test]
 #[ignore = "reads the end-to-end tests' capture: run ./run-tests"]
-fn cantools_decodes_the_lab_contract_the_emulated_imu_sent_on_vcan() {
+fn cantools_decodes_the_lab_contract_the_emulated_imu_and_table_sent_on_vcan() {
     let log = reports_dir().join("lab-contract/candump.log");
     if !log.is_file() {
         panic!(
@@ -202,9 +206,17 @@ fn cantools_decodes_the_lab_contract_the_emulated_imu_sent_on_vcan() {
         "python-can and cantools on the lab's capture",
     );
     let r: Value = serde_json::from_slice(&out).expect("the read-back's JSON");
-    assert_eq!(r["frames"], 420, "{r}");
+    let frames = r["frames"].as_u64().unwrap();
     assert_eq!(r["fd_brs_extended"], 400, "{r}");
-    assert_eq!(r["decoded"], 420, "{r}");
+    assert_eq!(r["decoded"], frames, "{r}");
+    // the table's reports: disabled, then idle acknowledging 7 once it took it; 9 never
+    assert!(r["reports"].as_u64().unwrap() >= 200, "{r}");
+    assert_eq!(r["commands"], 2, "{r}");
+    assert_eq!(r["commands_bad_crc"], 1, "{r}");
+    assert!(r["disabled_before"].as_u64().unwrap() > 0, "{r}");
+    assert!(r["idle_acking_7"].as_u64().unwrap() > 0, "{r}");
+    assert_eq!(r["acking_9"], 0, "{r}");
+    assert_eq!(r["after_enable_not_idle"], 0, "{r}");
     // the unit's status: its temperature, healthy, and the PPS latched every second
     assert_eq!(r["status"], 20, "{r}");
     assert_eq!(r["status_ok"], 20, "{r}");
@@ -219,8 +231,11 @@ import json, sys
 import can, cantools
 db = cantools.database.load_file(sys.argv[2], database_format="dbc")
 out = {"frames": 0, "fd_brs_extended": 0, "decoded": 0, "bad_crc": 0, "bad_alive": 0, "bad_counter": 0,
-       "status": 0, "status_ok": 0, "pps_valid": 0}
+       "status": 0, "status_ok": 0, "pps_valid": 0, "reports": 0, "commands": 0,
+       "commands_bad_crc": 0, "disabled_before": 0, "idle_acking_7": 0, "acking_9": 0,
+       "after_enable_not_idle": 0}
 alive, counter = {}, {}
+enabled = False
 for m in can.LogReader(sys.argv[1]):
     out["frames"] += 1
     out["fd_brs_extended"] += int(m.is_fd and m.bitrate_switch and m.is_extended_id)
@@ -228,8 +243,25 @@ for m in can.LogReader(sys.argv[1]):
     data = bytes(m.data)
     s = msg.decode(data, decode_choices=False, scaling=False)
     out["decoded"] += 1
-    out["bad_crc"] += int(s["Crc8"] != crc8_sae_j1850(data[1:64]))
-    if msg.name == "IMU_STATUS":
+    crc_ok = s["Crc8"] == crc8_sae_j1850(data[1:])
+    if msg.name == "TABLE_CMD":
+        # the test's own commands, one spoiled on purpose
+        out["commands"] += 1
+        out["commands_bad_crc"] += int(not crc_ok)
+        continue
+    out["bad_crc"] += int(not crc_ok)
+    if msg.name == "TABLE_REPORT":
+        out["reports"] += 1
+        out["acking_9"] += int(s["AckSequence"] == 9)
+        if s["AckSequence"] == 7:
+            enabled = True
+            out["idle_acking_7"] += int(s["State"] == 1)
+        elif not enabled:
+            out["disabled_before"] += int(s["State"] == 0)
+        # idle, until a second without a heartbeat faults it (the lab's 14, Faults bit 3)
+        idle_or_timed_out = s["State"] == 1 or (s["State"] == 14 and s["Faults"] & 8)
+        out["after_enable_not_idle"] += int(enabled and not idle_or_timed_out)
+    elif msg.name == "IMU_STATUS":
         t = msg.decode(data, decode_choices=False)
         out["status"] += 1
         out["status_ok"] += int(abs(t["Temperature"] - 45.0) < 30 and t["BitWord"] == 0)

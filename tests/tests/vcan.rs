@@ -1056,6 +1056,8 @@ fn nav_sends(id: u16) -> bool {
 struct Candump {
     child: std::process::Child,
     reader: std::thread::JoinHandle<String>,
+    /// Every line captured, as it comes.
+    seen: std::sync::mpsc::Receiver<String>,
 }
 
 impl Candump {
@@ -1069,12 +1071,14 @@ impl Candump {
         let out = child.stdout.take().unwrap();
         const MARKER: &str = "7EE#A5";
         let (listening_tx, listening) = std::sync::mpsc::channel();
+        let (seen_tx, seen) = std::sync::mpsc::channel();
         let reader = std::thread::spawn(move || {
             let mut captured = String::new();
             for l in std::io::BufReader::new(out).lines().map_while(Result::ok) {
                 if l.ends_with(MARKER) {
                     let _ = listening_tx.send(());
                 } else {
+                    let _ = seen_tx.send(l.clone());
                     captured.push_str(&l);
                     captured.push('\n');
                 }
@@ -1096,7 +1100,24 @@ impl Candump {
                 "candump shows nothing"
             );
         }
-        Self { child, reader }
+        Self {
+            child,
+            reader,
+            seen,
+        }
+    }
+
+    /// Wait until a line containing `needle` is captured (false: none within 30 s).
+    fn wait_for(&self, needle: &str) -> bool {
+        let until = std::time::Instant::now() + std::time::Duration::from_secs(30);
+        while let Some(left) = until.checked_duration_since(std::time::Instant::now()) {
+            match self.seen.recv_timeout(left) {
+                Ok(l) if l.contains(needle) => return true,
+                Ok(_) => {}
+                Err(_) => return false,
+            }
+        }
+        false
     }
 
     /// Stop it (SIGINT) and take what it printed.
@@ -1727,55 +1748,109 @@ fn a_campaign_of_two_builds_finds_the_worse_one_worse_and_the_rest_the_same() {
     }
 }
 
-/// The emulated IMU speaking a lab's own contract on vcan (`hil emulate imu --mapping
-/// wire/contracts/lab-imu.toml`): the interface given CAN FD's MTU, the unit's samples ten to a
-/// 64-byte CAN FD frame with the bit-rate switch, 29-bit identifiers, as candump sees them. Its
+/// The emulated IMU and turntable speaking a lab's own contract on vcan (`hil emulate imu
+/// --mapping wire/contracts/lab-imu.toml`, `hil emulate turntable --mapping ...`, each in its
+/// own process): the interface given CAN FD's MTU, the unit's samples ten to a 64-byte CAN FD
+/// frame with the bit-rate switch, 29-bit identifiers, the table's reports in the lab's
+/// classic frames, as candump sees them. Two commands go to the table by cansend in the lab's
+/// form: Enable (sequence 7, its CRC right) and Enable again (sequence 9, its CRC wrong). The
 /// capture is decoded by cantools with the lab's DBC on the host after these tests, checksums
-/// and alive counters checked (tests/tests/can_logs.rs).
+/// and alive counters checked, the first command acknowledged and the second dropped
+/// (tests/tests/can_logs.rs).
 #[test]
 #[ignore = "needs vcan: run ./run-tests"]
-fn the_imu_speaks_a_labs_own_contract_on_vcan_in_can_fd_frames() {
+fn the_imu_and_table_speak_a_labs_own_contract_on_vcan() {
     let iface = "vcan-e2e19";
     vcan_setup::ensure_vcan_fd(iface).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let mapping =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../wire/contracts/lab-imu.toml");
     let dump = Candump::listening(iface);
-    let report = dir.path().join("emulate.json");
-    let o = Command::new(bin("hil"))
-        .args(["emulate", "imu", "--iface", iface, "--duration", "2"])
-        // what is checked is the frames, not the host's pace (the lockstep tests run beside)
-        .args(["--max-late-ms", "10000", "--mapping"])
-        .arg(&mapping)
-        .arg("--report")
-        .arg(&report)
-        .output()
-        .expect("hil runs");
+    let emulate = |device: &str, seconds: &str, report: &str| {
+        Command::new(bin("hil"))
+            .args(["emulate", device, "--iface", iface, "--duration", seconds])
+            // what is checked is the frames, not the host's pace (the lockstep tests run beside)
+            .args(["--max-late-ms", "10000", "--mapping"])
+            .arg(&mapping)
+            .arg("--report")
+            .arg(dir.path().join(report))
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("hil runs")
+    };
+    let table = emulate("turntable", "2.5", "table.json");
+    let imu = emulate("imu", "2", "imu.json");
+    // the table listens once it reports
+    assert!(dump.wait_for(" 18EF1020#"), "no report from the table");
+    for (seq, corrupt) in [(7.0, false), (9.0, true)] {
+        let frame = lab_command(&mapping, "Enable", seq, corrupt);
+        let sent = Command::new("cansend").args([iface, &frame]).status();
+        assert!(sent.is_ok_and(|s| s.success()), "cansend {frame}");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let (imu, table) = (imu.wait_with_output(), table.wait_with_output());
     let captured = dump.stop();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let st: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    for o in [imu, table] {
+        let o = o.expect("hil ran");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let st: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("imu.json")).unwrap())
+            .unwrap();
     // 1 kHz, ten samples a frame, two blocks, and the status every 100 samples: 420 frames in
     // 2 s
     assert_eq!(st["written"], 420, "{st}");
-    let lines: Vec<&str> = captured.lines().collect();
-    assert_eq!(lines.len(), 420, "{captured}");
-    let mut status = 0;
-    for l in &lines {
+    let (mut status, mut blocks, mut reports, mut commands) = (0, 0, 0, 0);
+    for l in captured.lines() {
         // "(time) iface 18FF1021##5<128 hex digits>": extended, FD with the bit-rate switch;
-        // the status "18FF1030#<16 hex digits>", classic
+        // the status "18FF1030#<16 hex digits>", the table's report 18EF1020, the commands
+        // 18EF2010, classic
         let frame = l.split_whitespace().nth(2).unwrap_or_default();
-        if let Some(data) = frame.strip_prefix("18FF1030#") {
-            assert_eq!(data.len(), 16, "{l}");
-            status += 1;
+        if let Some((id, data)) = frame.split_once("##") {
+            assert!(["18FF1021", "18FF1022"].contains(&id), "{l}");
+            assert!(data.starts_with('5') && data.len() == 1 + 128, "{l}");
+            blocks += 1;
             continue;
         }
-        let (id, data) = frame
-            .split_once("##")
-            .unwrap_or_else(|| panic!("not FD: {l}"));
-        assert!(["18FF1021", "18FF1022"].contains(&id), "{l}");
-        assert!(data.starts_with('5') && data.len() == 1 + 128, "{l}");
+        let (id, data) = frame.split_once('#').unwrap_or_else(|| panic!("{l}"));
+        assert_eq!(data.len(), 16, "{l}");
+        match id {
+            "18FF1030" => status += 1,
+            "18EF1020" => reports += 1,
+            "18EF2010" => commands += 1,
+            _ => panic!("not the lab's: {l}"),
+        }
     }
-    assert_eq!(status, 20);
+    assert_eq!((blocks, status, commands), (400, 20, 2), "{captured}");
+    // the table reports at 100 Hz for 2.5 s
+    assert!((200..=260).contains(&reports), "{reports} reports");
     std::fs::write(dir.path().join("candump.log"), &captured).unwrap();
     keep_file(dir.path(), "lab-contract", "candump.log");
+}
+
+/// A command to the table in the lab's form, as cansend writes it (`ID#DATA`): `op` by the
+/// mapping's opcodes, sequence `seq`, the alive counter and CRC filled in by the mapping (the
+/// CRC then spoiled where `corrupt`).
+fn lab_command(mapping: &std::path::Path, op: &str, seq: f64, corrupt: bool) -> String {
+    let text = std::fs::read_to_string(mapping).unwrap();
+    let dbc = std::fs::read_to_string(mapping.with_extension("dbc")).unwrap();
+    let c = wire::dbc::Contract::parse(&dbc).unwrap();
+    let m = wire::mapping::Mapping::parse(&text, &c).unwrap();
+    let t = m.file.turntable.as_ref().unwrap();
+    let msg = c.message(&t.command).unwrap();
+    let code = t.opcodes[op] as f64;
+    let mut data = msg
+        .encode(&[(t.opcode.as_str(), code), ("Sequence", seq)])
+        .unwrap();
+    wire::mapping::Protector::new(&m)
+        .protect(msg, &mut data)
+        .unwrap();
+    if corrupt {
+        data[0] ^= 0x5A;
+    }
+    let wire::dbc::FrameId::Extended(id) = msg.id else {
+        panic!("the lab's command is extended")
+    };
+    let hex: String = data.iter().map(|b| format!("{b:02X}")).collect();
+    format!("{id:08X}#{hex}")
 }
