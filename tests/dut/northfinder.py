@@ -94,21 +94,8 @@ class NorthFinder:
             channel=a.iface,
             can_filters=[{"can_id": 0x7FF, "can_mask": 0x7FF}],
         )
-        self.rx = socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
         ids = [self.gyro.frame_id, self.status.frame_id, self.ack.frame_id]
-        self.rx.setsockopt(
-            socket.SOL_CAN_RAW,
-            socket.CAN_RAW_FILTER,
-            b"".join(struct.pack("=II", i, 0x7FF) for i in ids),
-        )
-        # room for seconds of the stream when the interpreter stalls (SO_RCVBUFFORCE, 33,
-        # passes the system's limit where we may)
-        try:
-            self.rx.setsockopt(socket.SOL_SOCKET, 33, 4 << 20)
-        except OSError:
-            self.rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
-        self.rx.bind((a.iface,))
-        self.rx.setblocking(False)
+        self.rx = open_rx(a.iface, [(i, 0x7FF) for i in ids], fd=False)
         # the 2 kHz gyro frame's counters in one step from the received bytes (x, y, z, the
         # sample counter), and the identifiers as plain numbers: at 2 kHz in an emulated
         # guest every attribute lookup and object per frame shows
@@ -118,12 +105,17 @@ class NorthFinder:
         self.gyro_id, self.status_id, self.ack_id = ids
         self.pulse_rad = [p * math.pi / (180 * 3600) for p in pulse]
         self.rate_hz = rate_hz
-        self.seq = 0
+        # a classic frame's 16 bytes, 11-bit identifiers, housekeeping every 20 frames (2 kHz)
+        self.frame_size, self.id_mask, self.housekeep_every = 16, 0x7FF, 20
         self.nav_seq = 0
+        self.raw = None
+        self.start_state()
+
+    def start_state(self):
+        self.seq = 0
         self.last_hb = 0.0
         self.table = None  # (state, angle)
-        self.count = None  # unwrapped [x, y, z] pulses, 32-bit sample count
-        self.raw = None
+        self.count = None  # unwrapped [x, y, z] pulses (or angles), sample count
         self.sample = None
         self.fit = None  # least-squares sums of the dwell, in chunks
         self.heading = None
@@ -154,13 +146,13 @@ class NorthFinder:
         n = 0
         while True:
             try:
-                f = self.rx.recv(16)
+                f = self.rx.recv(self.frame_size)
             except BlockingIOError:
                 break
             can_id, dlc = HEADER.unpack_from(f)
-            self.take(can_id & 0x7FF, f, dlc)
+            self.take(can_id & self.id_mask, f, dlc)
             n += 1
-            if n % 20 == 0:
+            if n % self.housekeep_every == 0:
                 self.housekeeping()
         self.housekeeping()
 
@@ -304,6 +296,25 @@ class NorthFinder:
             self.poll()
 
 
+def open_rx(iface, filters, fd):
+    """A raw SocketCAN socket on `iface` hearing the (identifier, mask) `filters`, CAN FD frames
+    too where `fd`, non-blocking."""
+    rx = socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
+    if fd:
+        rx.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FD_FRAMES, 1)
+    rx.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FILTER,
+                  b"".join(struct.pack("=II", i, m) for i, m in filters))
+    # room for seconds of the stream when the interpreter stalls (SO_RCVBUFFORCE, 33, passes
+    # the system's limit where we may)
+    try:
+        rx.setsockopt(socket.SOL_SOCKET, 33, 4 << 20)
+    except OSError:
+        rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+    rx.bind((iface,))
+    rx.setblocking(False)
+    return rx
+
+
 # Checksums by the names the bench's mapping uses: width, polynomial, initial value, reflected
 # in and out, final xor.
 CRCS = {
@@ -393,38 +404,19 @@ class LabNorthFinder(NorthFinder):
         self.modes = sol["modes"]
         self.bus = can.Bus(interface="socketcan", channel=a.iface, fd=True,
                            can_filters=[{"can_id": 0, "can_mask": 0xFFFFFFFF, "extended": True}])
-        self.rx = socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
-        self.rx.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FD_FRAMES, 1)
         eff = socket.CAN_EFF_FLAG
         ids = [self.gyro.frame_id, self.report.frame_id]
-        self.rx.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FILTER,
-                           b"".join(struct.pack("=II", i | eff, socket.CAN_EFF_MASK | eff) for i in ids))
-        try:
-            self.rx.setsockopt(socket.SOL_SOCKET, 33, 4 << 20)
-        except OSError:
-            self.rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
-        self.rx.bind((a.iface,))
-        self.rx.setblocking(False)
+        self.rx = open_rx(a.iface, [(i | eff, socket.CAN_EFF_MASK | eff) for i in ids], fd=True)
         self.gyro_id, self.report_id = ids
         self.signals = [[n.replace("{k}", str(k)) for n in self.gyro_map["signals"]]
                         for k in range(self.per_frame)]
         self.rate_hz = imu["rate_hz"]
         self.pulse_rad = [1.0, 1.0, 1.0]  # the counts are angles, rad
-        self.seq = 0
-        self.last_hb = 0.0
-        self.table = None
-        self.count = None
+        # CAN FD frames of 72 bytes, 29-bit identifiers, blocks of ten samples
+        self.frame_size, self.id_mask, self.housekeep_every = 72, socket.CAN_EFF_MASK, 5
         self.ctr = None
-        self.sample = None
-        self.fit = None
-        self.heading = None
-        self.sigma = 6.5
-        self.mode = self.mode_of("NorthFinding")
-        self.out = collections.deque()
-        self.stale = collections.deque()
-        self.last_stray = time.monotonic()
-        self.first_sample = None
         self.solutions = 0
+        self.start_state()
         signal.signal(signal.SIGTERM, self.summary)
 
     def mode_of(self, name):
@@ -459,21 +451,6 @@ class LabNorthFinder(NorthFinder):
         if t.get("argument"):
             signals[t["argument"]] = arg
         self.send(self.cmd, **signals)
-
-    def poll(self, timeout=0.01):
-        select.select([self.rx], [], [], timeout)
-        n = 0
-        while True:
-            try:
-                f = self.rx.recv(72)
-            except BlockingIOError:
-                break
-            can_id, dlc = HEADER.unpack_from(f)
-            self.take(can_id & socket.CAN_EFF_MASK, f, dlc)
-            n += 1
-            if n % 5 == 0:
-                self.housekeeping()
-        self.housekeeping()
 
     def take(self, can_id, f, dlc):
         data = f[8 : 8 + dlc]

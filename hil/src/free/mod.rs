@@ -99,6 +99,9 @@ pub struct FreeReport {
     pub scenario: String,
     /// The interface.
     pub interface: String,
+    /// The contract the bus spoke: our DBC, or a lab's through its mapping.
+    #[serde(default)]
+    pub contract: String,
     /// The device under test, as started.
     pub device: String,
     /// How it ended (exit status, or still running when stopped).
@@ -674,8 +677,8 @@ pub(crate) struct Judged {
 /// The result card.
 pub fn card(r: &FreeReport) -> String {
     let mut out = format!(
-        " FREE-RUNNING {} on {}  {:.1} s at x1 (the host's clock); device: {}\n",
-        r.scenario, r.interface, r.wall_s, r.device
+        " FREE-RUNNING {} on {}  {:.1} s at x1 (the host's clock); device: {}\n contract: {}\n",
+        r.scenario, r.interface, r.wall_s, r.device, r.contract
     );
     for b in &r.bench {
         let l = &b.lateness;

@@ -181,6 +181,10 @@ pub(crate) fn judge(s: &Scenario, o: &FreeOptions, j: Judged, seen: Observed) ->
     FreeReport {
         scenario: s.name.clone(),
         interface: o.iface.clone(),
+        contract: o.lab.as_ref().map_or_else(
+            || "wire/bench.dbc".to_string(),
+            |l| format!("{} (through {})", l.dbc_name, l.path.display()),
+        ),
         device: j.device,
         device_exit: j.device_exit,
         ended: j.ended,
