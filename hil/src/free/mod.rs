@@ -641,7 +641,8 @@ fn supervise(
         };
         if !answered && t > o.answer_within_s {
             return format!(
-                "the device under test sent no NAV_TIME within {} s of the stream's start",
+                "the device under test sent no {} within {} s of the stream's start",
+                verdict::Words::of(o).epoch,
                 o.answer_within_s
             );
         }

@@ -227,6 +227,7 @@ fn device_checks(
     not_judged: &mut Vec<String>,
 ) -> Vec<Check> {
     let e = &seen.epochs;
+    let w = Words::of(o);
     let (backwards, first_back, swapped) = score::backwards(e);
     let mut checks = vec![
         Check {
@@ -234,11 +235,12 @@ fn device_checks(
             pass: !e.is_empty(),
             detail: match e.first() {
                 Some(f) => format!(
-                    "first NAV_TIME {:.2} s after the stream started; {} epochs",
+                    "first {} {:.2} s after the stream started; {} epochs",
+                    w.epoch,
                     f.rx_s,
                     e.len()
                 ),
-                None => format!("no NAV_TIME at all ({})", j.ended),
+                None => format!("no {} at all ({})", w.epoch, j.ended),
             },
         },
         Check {
@@ -275,14 +277,16 @@ fn device_checks(
         pass: backwards == 0,
         detail: match first_back {
             Some((a, b)) => format!(
-                "{backwards} of {} NAV_TIMEs named a sample before the one before them; the first from sample {a} to {b}",
-                e.len()
+                "{backwards} of {} {}s named a sample before the one before them; the first from sample {a} to {b}",
+                e.len(),
+                w.epoch
             ),
             None if swapped > 0 => format!(
-                "{} NAV_TIMEs in order; {swapped} pair(s) of neighbours heard swapped (not counted)",
-                e.len()
+                "{} {}s in order; {swapped} pair(s) of neighbours heard swapped (not counted)",
+                e.len(),
+                w.epoch
             ),
-            None => format!("{} NAV_TIMEs in order", e.len()),
+            None => format!("{} {}s in order", e.len(), w.epoch),
         },
     });
     checks
@@ -297,16 +301,24 @@ fn latency_check(
     not_judged: &mut Vec<String>,
 ) -> Option<Check> {
     let (l, own) = (&t.latency, &t.own);
+    let w = Words::of(o);
     let name = "latency within the budget";
     let over = format!(
-        "IMU sample on the bus to the NAV_TIME naming it: median {:.1} ms, p99 {:.1} ms, worst {:.1} ms over {} epochs ({} named samples ahead of the stream, {} named none the bench could place); budget p99 {} ms",
-        l.p50_ms, l.p99_ms, l.max_ms, l.count, t.lead.epochs, t.unnamed, o.latency_budget_ms
+        "IMU sample on the bus to the {} naming it: median {:.1} ms, p99 {:.1} ms, worst {:.1} ms over {} epochs ({} named samples ahead of the stream, {} named none the bench could place); budget p99 {} ms",
+        w.epoch,
+        l.p50_ms,
+        l.p99_ms,
+        l.max_ms,
+        l.count,
+        t.lead.epochs,
+        t.unnamed,
+        o.latency_budget_ms
     );
     if l.count == 0 {
-        if !j.ended.contains("no NAV_TIME") && t.unnamed > 0 {
+        if !j.ended.contains(&format!("no {}", w.epoch)) && t.unnamed > 0 {
             not_judged.push(format!(
-                "{name}: none of the {} NAV_TIMEs named a sample the bench could place (older than the half counter period it keeps)",
-                t.unnamed
+                "{name}: none of the {} {}s named a sample the bench could place (older than the half counter period it keeps)",
+                t.unnamed, w.epoch
             ));
             return None;
         }
@@ -420,20 +432,24 @@ fn truth_checks(
     let (navigation, site_error) = (*navigation, *site_error);
     let drive = s.drive.is_some() && !is_drill(s);
     if s.north_finding.is_some() {
-        checks.push(heading_check(heading.as_ref(), |k| truth.t_of(k)));
+        checks.push(heading_check(
+            heading.as_ref(),
+            |k| truth.t_of(k),
+            &Words::of(o),
+        ));
     }
     if drive && o.real_gps.is_some() {
         not_judged.push("position along the drive: the real receiver's fixes steer it, and the bench has no truth for where that receiver was".into());
     } else if drive {
-        checks.push(navigation_check(s, navigation));
+        checks.push(navigation_check(s, navigation, &Words::of(o)));
     }
     // a device that only finds north owes no position
     match (is_drill(s) && s.drive.is_some(), site_error) {
         (true, Some(err)) => checks.push(site_check(s, err)),
-        (true, None) => not_judged.push(
-            "the position at the drill's end: the device sent none (NAV_POS) with its heading"
-                .into(),
-        ),
+        (true, None) => not_judged.push(format!(
+            "the position at the drill's end: the device sent none ({}) with its heading",
+            Words::of(o).position
+        )),
         _ => {}
     }
     match data_check(offset.as_ref(), *period_s) {
@@ -499,7 +515,7 @@ fn data_check(offset: Option<&DataOffset>, period_s: f64) -> Result<Check, Strin
     })
 }
 
-fn heading_check(heading: Option<&HeadingScore>, t_of: impl Fn(u64) -> f64) -> Check {
+fn heading_check(heading: Option<&HeadingScore>, t_of: impl Fn(u64) -> f64, w: &Words) -> Check {
     Check {
         name: "heading at the drill's end within 3 of the device's sigmas".into(),
         pass: heading.is_some_and(|h| h.in_sigmas().is_some_and(|x| x.abs() <= 3.0)),
@@ -522,15 +538,18 @@ fn heading_check(heading: Option<&HeadingScore>, t_of: impl Fn(u64) -> f64) -> C
                 h.error_deg,
                 match (h.sigma_deg, h.in_sigmas()) {
                     (Some(sg), Some(x)) => format!(" = {x:+.2} sigma ({sg:.4} deg)"),
-                    _ => ", no sigma sent (NAV_HGT's HeadingSigma)".into(),
+                    _ => format!(", no sigma sent ({})", w.sigma),
                 }
             ),
-            None => "the device sent no heading (NAV_ATT) with a sample the bench could place after its mode left north-finding".into(),
+            None => format!(
+                "the device sent no heading ({}) with a sample the bench could place after its mode left north-finding",
+                w.attitude
+            ),
         },
     }
 }
 
-fn navigation_check(s: &Scenario, navigation: Option<DriveScore>) -> Check {
+fn navigation_check(s: &Scenario, navigation: Option<DriveScore>, w: &Words) -> Check {
     Check {
         name: "navigation error within tolerance".into(),
         pass: navigation.is_some_and(|n| n.last_m <= s.position_tolerance_m),
@@ -547,7 +566,10 @@ fn navigation_check(s: &Scenario, navigation: Option<DriveScore>) -> Check {
                 n.nees
                     .map_or("-- (no PosSigma sent)".into(), |x| format!("{x:.2}"))
             ),
-            None => "the device sent no position (NAV_POS) while navigating".into(),
+            None => format!(
+                "the device sent no position ({}) while navigating",
+                w.position
+            ),
         },
     }
 }
@@ -592,5 +614,47 @@ fn protection_check(seen: &Observed) -> Check {
                 each.join("; ")
             )
         },
+    }
+}
+
+/// What the card calls the device's frames: ours, or the lab's messages by its mapping.
+pub(crate) struct Words {
+    /// The frame that opens an epoch and names its sample.
+    pub(crate) epoch: String,
+    /// The frame of the heading.
+    pub(crate) attitude: String,
+    /// The heading's sigma.
+    pub(crate) sigma: String,
+    /// The frame of the position.
+    pub(crate) position: String,
+}
+
+impl Words {
+    /// The words of the contract `o` runs on.
+    pub(crate) fn of(o: &FreeOptions) -> Self {
+        let Some(s) = o
+            .lab
+            .as_ref()
+            .and_then(|l| l.mapping.file.solution.as_ref())
+        else {
+            return Self {
+                epoch: "NAV_TIME".into(),
+                attitude: "NAV_ATT".into(),
+                sigma: "NAV_HGT's HeadingSigma".into(),
+                position: "NAV_POS".into(),
+            };
+        };
+        Self {
+            epoch: s.message.clone(),
+            attitude: s.message.clone(),
+            sigma: s.heading_sigma.as_ref().map_or_else(
+                || "the mapping has no heading_sigma".into(),
+                |h| format!("{}'s {h}", s.message),
+            ),
+            position: s.position.as_ref().map_or_else(
+                || "the mapping has no [solution.position]".into(),
+                |p| p.message.clone(),
+            ),
+        }
     }
 }
