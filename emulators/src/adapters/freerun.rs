@@ -134,7 +134,9 @@ impl SentSamples {
         }
     }
 
-    pub(crate) fn push(&self, k: u64, counter: u16, at: Instant) {
+    /// Sample `k`, its counter `counter`, went on the bus at `at` (the oldest kept is dropped
+    /// when the ring is full).
+    pub fn push(&self, k: u64, counter: u16, at: Instant) {
         let mut r = self.ring.lock().unwrap_or_else(|e| e.into_inner());
         if r.len() == self.capacity {
             r.pop_front();

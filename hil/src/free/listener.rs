@@ -688,6 +688,108 @@ mod tests {
         }
     }
 
+    /// The judge's ear on the example lab contract, without a bus: the device's heading frame
+    /// opens an epoch placed at the sample its tag names (at the IMU counter's 12 bits), its
+    /// position frame fills it; a frame with its CRC spoiled and one whose alive counter skips
+    /// are named by message and kind; an identifier outside the lab's DBC is counted; the
+    /// bench's own IMU frames are not heard at all.
+    #[test]
+    fn the_ear_on_a_labs_contract_reads_the_solution_and_names_protection_faults() {
+        let here = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let path = here.join("../wire/contracts/lab-imu.toml");
+        let (c, m) = crate::scenario::lab_contract::load(&path).expect("the example");
+        let ear = LabEar::new(c.clone(), m.clone(), path);
+        let sent = SentSamples::new(10_000);
+        let place = Place {
+            origin: Instant::now(),
+            clock: Oscillator::nominal(1000.0),
+            sent: &sent,
+        };
+        let mut protector = wire::mapping::Protector::new(&m);
+        let heading = c.message("INS_HEADING").expect("heading");
+        let position = c.message("INS_POSITION").expect("position");
+        let enc = |p: &mut wire::mapping::Protector,
+                   msg: &wire::dbc::MessageLayout,
+                   v: &[(&str, f64)]| {
+            let mut d = msg.encode(v).expect("encodes");
+            p.protect(msg, &mut d).expect("protects");
+            d
+        };
+        let hd = |tag: f64| {
+            [
+                ("Mode", 5.0),
+                ("Heading", 90.5),
+                ("HeadingSigma", 0.2),
+                ("TimeTag", tag),
+            ]
+        };
+        let mut o = Observed::default();
+        let take = |o: &mut Observed, id, data: Vec<u8>| {
+            if let Some(h) = ear.held(id, &data) {
+                take_held(o, Held { at_ns: 0, frame: h }, &place, Some(&ear));
+            }
+        };
+        let ext = |id: wire::dbc::FrameId| match id {
+            wire::dbc::FrameId::Extended(x) => {
+                socketcan::Id::Extended(socketcan::ExtendedId::new(x).expect("29 bits"))
+            }
+            wire::dbc::FrameId::Standard(x) => {
+                socketcan::Id::Standard(socketcan::StandardId::new(x).expect("11 bits"))
+            }
+        };
+        // samples 0 to 5000 on the bus; the device names 4100 (its 16-bit tag)
+        for k in 0..=5000u64 {
+            sent.push(k, k as u16, Instant::now());
+        }
+        let p = &mut protector;
+        take(&mut o, ext(heading.id), enc(p, heading, &hd(4100.0)));
+        let at = [
+            ("Latitude", 28.2),
+            ("Longitude", 112.9),
+            ("PositionSigma", 3.5),
+        ];
+        take(&mut o, ext(position.id), enc(p, position, &at));
+        assert_eq!(o.epochs.len(), 1);
+        let e = &o.epochs[0];
+        assert_eq!(
+            (e.sample.map(|s| s.0), e.mode),
+            (Some(4100), wire::NavMode::Navigation)
+        );
+        assert!(e.att.is_some_and(|a| (a[0] - 90.5).abs() < 0.01));
+        assert!(
+            e.hgt
+                .is_some_and(|h| (h[1] - 3.5).abs() < 1e-9 && (h[2] - 0.2).abs() < 1e-4)
+        );
+        assert!(e.pos.is_some_and(|p| (p[0] - 28.2).abs() < 1e-6));
+        // a spoiled CRC, then a frame whose alive counter skips one
+        let mut bad = enc(p, heading, &hd(4120.0));
+        bad[3] ^= 1;
+        take(&mut o, ext(heading.id), bad);
+        let _ = enc(p, heading, &hd(4140.0));
+        take(&mut o, ext(heading.id), enc(p, heading, &hd(4160.0)));
+        let kinds: Vec<&String> = o.protection_faults.keys().collect();
+        assert_eq!(
+            kinds,
+            [
+                "INS_HEADING 0x18FE3001 (extended): alive counter skipped",
+                "INS_HEADING 0x18FE3001 (extended): checksum wrong"
+            ],
+            "{:?}",
+            o.protection_faults
+        );
+        assert_eq!(o.protected_checked, 4);
+        // outside the DBC, and the bench's own IMU block (not heard)
+        take(
+            &mut o,
+            ext(wire::dbc::FrameId::Extended(0x1234_5678)),
+            vec![0; 8],
+        );
+        let gyro = c.message("IMU_GYRO_BLOCK").expect("gyro");
+        assert!(ear.held(ext(gyro.id), &[0; 64]).is_none());
+        assert_eq!(o.outside_count(), 1, "{:?}", o.outside_dbc);
+        assert_eq!(o.epochs.len(), 3);
+    }
+
     /// A lab's time tag of any width unwraps to a sample count the nearer way round.
     #[test]
     fn a_labs_time_tag_unwraps_to_a_sample_count() {
