@@ -143,7 +143,7 @@ enum Cmd {
         /// Run the scenario in process on the bus model and print the measured figures.
         #[arg(long)]
         measure: bool,
-        /// A lab's mapping file (its DBC beside it, docs/your-device.md): the load and every
+        /// A lab's mapping file (its DBC beside it, docs/your-dbc.md): the load and every
         /// message's worst-case response time at the mapping's bit rates; with --measure, its
         /// traffic on the bus model beside them (and the table's round trip).
         #[arg(long, conflicts_with_all = ["scenario", "bitrate"])]

@@ -23,7 +23,7 @@ Faults on purpose, for the bench to catch:
                    named k + S * rate and sent when that sample has come (a device that stamps
                    with the newest sample, not the one its solution is of).
 
-On a lab's own contract (--mapping FILE, the bench's mapping of that DBC: docs/your-device.md)
+On a lab's own contract (--mapping FILE, the bench's mapping of that DBC: docs/your-dbc.md)
 it reads the IMU's blocks of rates (CAN FD, 29-bit identifiers) and the table's reports by the
 mapping's names, checks every frame's alive counter and checksum, commands the table by the
 lab's opcodes and sends its solution where the mapping's [solution] says, protected as the

@@ -135,7 +135,7 @@ pub(crate) struct FreeArgs {
     #[arg(long, value_parser = hil::values::latency_budget_ms, requires = "free")]
     pub(crate) lead_allowance_ms: Option<f64>,
     /// With --free: the bus speaks a lab's own contract, not ours: its mapping file, with the
-    /// DBC it names beside it (docs/your-device.md). The emulated IMU and turntable send and
+    /// DBC it names beside it (docs/your-dbc.md). The emulated IMU and turntable send and
     /// take the lab's frames (29-bit identifiers, CAN FD, alive counters, checksums); the
     /// device's solution is read where the mapping's [solution] says, and its protected frames'
     /// checksums and alive counters are checked. {mapping} and {dbc} in --dut are replaced.

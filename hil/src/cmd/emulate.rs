@@ -79,7 +79,7 @@ pub(crate) struct EmulateArgs {
     #[arg(long)]
     report: Option<PathBuf>,
     /// imu, turntable: speak a lab's own contract instead of ours: its mapping file, with the
-    /// DBC it names beside it (docs/your-device.md): the mapped frames (29-bit identifiers, CAN
+    /// DBC it names beside it (docs/your-dbc.md): the mapped frames (29-bit identifiers, CAN
     /// FD where the DBC says so, counters, alive counters and checksums; the IMU at the
     /// mapping's rate, the table by the lab's opcodes and states); the interface is given CAN
     /// FD's MTU.

@@ -1,4 +1,4 @@
-//! A lab's own contract: its mapping file (`wire::mapping`, docs/your-device.md) and the DBC it
+//! A lab's own contract: its mapping file (`wire::mapping`, docs/your-dbc.md) and the DBC it
 //! names beside it, read and checked together.
 
 use anyhow::{Context, Result};

@@ -5,7 +5,7 @@
 //! mapping that does not fit (a message or a signal the DBC lacks, a signal too narrow for the
 //! range it must carry, a counter that is not a whole number, a checksum of the wrong width or
 //! over its own bytes, a rate the bus cannot hold) is refused, naming the message and the
-//! signal. Every key: docs/your-device.md.
+//! signal. Every key: docs/your-dbc.md.
 
 mod solution;
 mod table;
