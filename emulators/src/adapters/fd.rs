@@ -247,7 +247,9 @@ pub fn run_mapped_imu(
         if let Some((side, tracks)) = &run.table {
             let now = clock.now();
             out.drain(|_, data, stamp| {
-                if let (Ok((angle, encoder)), Some(tr)) = (side.read_report(data), tracks.first()) {
+                if let Ok((axis, angle, encoder)) = side.read_report(data)
+                    && let Some(tr) = tracks.get(axis)
+                {
                     tr.lock().unwrap_or_else(|e| e.into_inner()).report(
                         stamps.at(stamp, now),
                         angle.rem_euclid(360.0),

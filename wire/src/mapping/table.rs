@@ -35,6 +35,9 @@ pub struct TableMapping {
     pub report: String,
     /// Its state signal (values in `states`).
     pub state: String,
+    /// Its axis signal: which axis the report is of (none: one axis, 0).
+    #[serde(default)]
+    pub report_axis: Option<String>,
     /// Its signal echoing the sequence of the last command acknowledged.
     #[serde(default)]
     pub ack: Option<String>,
@@ -97,7 +100,7 @@ pub(super) fn check(t: &TableMapping, contract: &Contract) -> Result<(), Mapping
     if let Some(s) = &t.sequence {
         check_counter(sec, cmd, signal(cmd, sec, s)?)?;
     }
-    for n in [&t.ack, &t.faults].into_iter().flatten() {
+    for n in [&t.ack, &t.faults, &t.report_axis].into_iter().flatten() {
         check_counter(sec, rep, signal(rep, sec, n)?)?;
     }
     signal(rep, sec, &t.angle)?;
@@ -239,15 +242,20 @@ impl<'a> TableSide<'a> {
         self.rep.id
     }
 
-    /// A report frame as the IMU's side reads it: the axis' angle, deg, and whether the
-    /// encoder's fault bit is set.
-    pub fn read_report(&self, data: &[u8]) -> Result<(f64, bool), DecodeError> {
+    /// A report frame as the IMU's side reads it: its axis, the axis' angle, deg, and whether
+    /// the encoder's fault bit is set.
+    pub fn read_report(&self, data: &[u8]) -> Result<(usize, f64, bool), DecodeError> {
         let t = self.table;
         let v = self.rep.decode(data)?;
         let get = |n: &str| v.iter().find(|(x, _)| *x == n).map(|(_, x)| *x);
         let bit = t.fault_bits.get("encoder").copied().unwrap_or(2);
         let faults = t.faults.as_deref().and_then(get).unwrap_or(0.0) as u64;
-        Ok((get(&t.angle).unwrap_or(f64::NAN), faults >> bit & 1 == 1))
+        let axis = t.report_axis.as_deref().and_then(get).unwrap_or(0.0) as usize;
+        Ok((
+            axis,
+            get(&t.angle).unwrap_or(f64::NAN),
+            faults >> bit & 1 == 1,
+        ))
     }
 
     /// Our status report in the lab's form: state by its table, the acknowledged sequence,
@@ -273,6 +281,9 @@ impl<'a> TableSide<'a> {
         let mut v: Vec<(&str, f64)> = vec![(&t.state, state as f64), (&t.angle, st.angle_deg)];
         if let Some(a) = &t.ack {
             v.push((a, f64::from(st.ack_seq)));
+        }
+        if let Some(a) = &t.report_axis {
+            v.push((a, f64::from(st.axis)));
         }
         if let Some(f) = &t.faults {
             v.push((f, bits as f64));
@@ -356,8 +367,8 @@ mod tests {
             assert_eq!(get("AliveCtr"), Some(f64::from(alive)));
             assert!((get("Angle").unwrap_or(0.0) - 90.0).abs() < 1e-3);
             guard.check(&m, side.rep, &f.data);
-            let (angle, encoder) = side.read_report(&f.data).expect("reads");
-            assert!((angle - 90.0).abs() < 1e-3 && encoder);
+            let (axis, angle, encoder) = side.read_report(&f.data).expect("reads");
+            assert!(axis == 0 && (angle - 90.0).abs() < 1e-3 && encoder);
         }
         assert_eq!((guard.checked, guard.faults.len()), (3, 0));
     }
