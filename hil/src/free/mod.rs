@@ -89,7 +89,10 @@ pub fn lab_ear(path: &Path) -> Result<listener::LabEar> {
             path.display()
         );
     }
-    Ok(listener::LabEar::new(c, m, path.to_path_buf()))
+    // absolute: the device under test runs in its own folder, given {mapping} and {dbc}
+    let path = std::fs::canonicalize(path)
+        .with_context(|| format!("the mapping {}", path.display()))?;
+    Ok(listener::LabEar::new(c, m, path))
 }
 
 /// What a free-running run found.
