@@ -90,8 +90,8 @@ pub fn lab_ear(path: &Path) -> Result<listener::LabEar> {
         );
     }
     // absolute: the device under test runs in its own folder, given {mapping} and {dbc}
-    let path = std::fs::canonicalize(path)
-        .with_context(|| format!("the mapping {}", path.display()))?;
+    let path =
+        std::fs::canonicalize(path).with_context(|| format!("the mapping {}", path.display()))?;
     Ok(listener::LabEar::new(c, m, path))
 }
 
