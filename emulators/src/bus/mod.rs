@@ -3,5 +3,6 @@
 //! device's frames on vcan in lockstep with nav and the socket transport are adapters
 //! ([`crate::adapters::scheduler`], [`crate::adapters::transport`]).
 
+pub mod bounds;
 pub mod lab;
 pub mod model;

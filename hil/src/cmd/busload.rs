@@ -145,40 +145,12 @@ fn measured(s: &Scenario) -> Result<String> {
     ))
 }
 
-/// Each identifier's worst measured time from queued to sent (its worst queueing delay plus
-/// its frame at its longest) against the analysis' bound with the scenario's rates as periods
-/// (`wire::busload::response_times`). The analysis assumes each node sends its lowest
-/// identifier first; the model's nodes keep a FIFO queue (SocketCAN's default), so a frame
-/// queued behind its own node's earlier frames (nav's NAV_TIME after the rest of its 50 Hz
-/// burst) can pass it, and is marked so, as can sporadic traffic faster than its nominal rate.
+/// Each identifier's worst measured time from queued to sent against the analysis' bound with
+/// the scenario's rates as periods (`emulators::bus::bounds`).
 fn against_bounds(b: &emulators::bus::model::BusStats, s: &Scenario) -> String {
-    use std::fmt::Write;
     let bitrate = s.bus.bitrate_bps;
     let (rows, _, _) = hil::scenario::busload::of(s);
     let periodic = wire::busload::periodic_of(&rows);
-    let bounds = wire::busload::response_times(&periodic, bitrate, bitrate);
-    let mut s = String::from(
-        "\n| identifier | measured worst, queued to sent (us) | bound (us) | within |\n|---|---:|---:|---|\n",
-    );
-    for id in &b.ids {
-        let Some(k) = periodic.iter().position(|p| p.id == id.id) else {
-            continue;
-        };
-        let own =
-            wire::busload::frame_time_worst_s(false, periodic[k].payload, false, bitrate, bitrate);
-        let measured = id.delay_max_us + own * 1e6;
-        let (bound, within) = match bounds[k] {
-            Some(r) => (
-                format!("{:.0}", r * 1e6),
-                if measured <= r * 1e6 + 1e-6 {
-                    "yes"
-                } else {
-                    "no: behind its node's FIFO queue or a burst"
-                },
-            ),
-            None => ("none".to_string(), "-"),
-        };
-        let _ = writeln!(s, "| {} | {measured:.0} | {bound} | {within} |", id.name);
-    }
-    s
+    let (table, _) = emulators::bus::bounds::against_bounds(b, &periodic, bitrate, bitrate);
+    format!("\n{table}")
 }

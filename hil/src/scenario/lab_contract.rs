@@ -118,7 +118,7 @@ pub fn measured(c: &Contract, m: &Mapping) -> Result<String> {
     };
     let b = emulators::bus::lab::simulate(&msgs, table, timing, MEASURE_S, 1);
     let mut s = format!(
-        "Measured on the bus model ({:.1} s, every message's first frame at 0, each later one within its jitter; every frame at its longest): load {:.2} % (the analysis' worst {:.2} % for the periodic traffic{}).\n\n| message | frames | measured worst, queued to sent (us) | bound (us) | within |\n|---|---:|---:|---:|---|\n",
+        "Measured on the bus model ({:.1} s, every message's first frame at 0, each later one within its jitter; every frame at its longest): load {:.2} % (the analysis' worst {:.2} % for the periodic traffic{}).\n\n{}",
         b.span_s,
         100.0 * b.load,
         100.0 * m.worst_load,
@@ -126,41 +126,9 @@ pub fn measured(c: &Contract, m: &Mapping) -> Result<String> {
             "; the table's answer to each command is one report more"
         } else {
             ""
-        }
+        },
+        emulators::bus::bounds::against_bounds(&b, &periodic, nominal, data).0
     );
-    let response_of = |name: &str| -> Option<(f64, Option<f64>)> {
-        let k = periodic.iter().position(|p| p.name == name)?;
-        let id = b.ids.iter().find(|i| i.name == name)?;
-        let p = &periodic[k];
-        let own = wire::busload::frame_time_worst_s(p.extended, p.payload, p.fd, nominal, data);
-        Some((id.delay_max_us + own * 1e6, bounds[k].map(|r| r * 1e6)))
-    };
-    for p in &periodic {
-        let frames = b
-            .ids
-            .iter()
-            .find(|i| i.name == p.name)
-            .map_or(0, |i| i.frames);
-        let Some((worst, bound)) = response_of(&p.name) else {
-            continue;
-        };
-        let (bound, within) = match bound {
-            Some(r) => (
-                format!("{r:.0}"),
-                if worst <= r + 1e-6 {
-                    "yes"
-                } else {
-                    "no: behind its own node's earlier frames (a FIFO queue, as SocketCAN's; the analysis assumes a node sends its lowest identifier first)"
-                },
-            ),
-            None => ("none".into(), "-"),
-        };
-        let _ = writeln!(
-            s,
-            "| {} | {frames} | {worst:.0} | {bound} | {within} |",
-            p.name
-        );
-    }
     if let (Some(t), Some(tl)) = (&m.file.turntable, table) {
         let bound = match (bounds[tl.command], bounds[tl.report]) {
             (Some(a), Some(b)) => format!("{:.0} us", (a + tick_s + b) * 1e6),

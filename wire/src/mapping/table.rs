@@ -221,7 +221,10 @@ impl<'a> TableSide<'a> {
             n.as_deref()
                 .and_then(|n| v.iter().find(|(s, _)| *s == n).map(|(_, x)| *x))
         };
-        let op = get(&Some(self.table.opcode.clone())).unwrap_or(-1.0) as i64;
+        let op = v
+            .iter()
+            .find(|(s, _)| *s == self.table.opcode)
+            .map_or(-1, |(_, x)| *x as i64);
         let command = self
             .table
             .opcodes
