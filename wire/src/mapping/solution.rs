@@ -82,26 +82,13 @@ pub(super) fn check(s: &SolutionMapping, contract: &Contract) -> Result<(), Mapp
     let sec = "solution";
     let m = message(contract, sec, &s.message)?;
     check_counter(sec, m, signal(m, sec, &s.time_tag)?)?;
-    let mode = signal(m, sec, &s.mode)?;
-    let range = mode.raw_range();
-    for (name, v) in &s.modes {
-        if !NavMode::ALL.iter().any(|x| x.name() == name) {
-            return Err(super::bad_signal(
-                "solution.modes",
-                m,
-                mode,
-                format!("{name}: not a mode of ours (bench.dbc's NAV_TIME Mode)"),
-            ));
-        }
-        if range.is_some_and(|(lo, hi)| *v < lo || *v > hi) {
-            return Err(super::bad_signal(
-                "solution.modes",
-                m,
-                mode,
-                format!("{name} = {v}: beyond what the signal carries"),
-            ));
-        }
-    }
+    super::table::codes(
+        "solution.modes",
+        m,
+        signal(m, sec, &s.mode)?,
+        &s.modes,
+        |n| NavMode::ALL.iter().any(|x| x.name() == n),
+    )?;
     for n in [&s.heading, &s.heading_sigma, &s.pitch, &s.roll]
         .into_iter()
         .flatten()
@@ -291,6 +278,17 @@ mod tests {
         )
         .expect_err("refused")
         .to_string();
-        assert!(e.contains("Aided: not a mode of ours"), "{e}");
+        assert!(e.contains("Aided: not a name of ours"), "{e}");
+        let e = Mapping::parse(
+            &include_str!("../../contracts/lab-imu.toml").replacen(
+                "GpsAided = 6",
+                "GpsAided = 5",
+                1,
+            ),
+            &c,
+        )
+        .expect_err("refused")
+        .to_string();
+        assert!(e.contains("both 5"), "{e}");
     }
 }

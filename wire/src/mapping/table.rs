@@ -125,7 +125,7 @@ pub(super) fn check(t: &TableMapping, contract: &Contract) -> Result<(), Mapping
 }
 
 /// Every name one `known` accepts, every value one the signal carries, no value twice.
-fn codes(
+pub(super) fn codes(
     section: &str,
     m: &MessageLayout,
     s: &crate::dbc::SignalLayout,
