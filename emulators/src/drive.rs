@@ -577,6 +577,11 @@ impl Drive {
         }))
     }
 
+    /// A drive on a road already planned (a recorded track fitted, say).
+    pub fn from_road(road: Road) -> Self {
+        Self(Kind::Road(Box::new(road)))
+    }
+
     /// The road, when the route is one.
     pub fn road(&self) -> Option<&Road> {
         match &self.0 {
@@ -695,7 +700,7 @@ fn plan_track(spec: &DriveSpec, file: &str) -> Result<Drive, crate::ParamError> 
     let road = crate::road::track::read(std::path::Path::new(file))
         .and_then(|t| Road::from_track(spec, &t))
         .map_err(|e| crate::ParamError::new("drive", e.to_string()))?;
-    let d = Drive(Kind::Road(Box::new(road)));
+    let d = Drive::from_road(road);
     if let Ok(mut c) = cache.lock() {
         // a few tracks per process at most; a bench that plans many keeps the latest
         if c.len() >= 8 {

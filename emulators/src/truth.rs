@@ -130,6 +130,45 @@ pub fn gauss_legendre3_split(
     }
 }
 
+/// [`gauss_legendre3`] over `(t0, t1]` split at every one of `cuts` (in increasing order) that
+/// falls inside it: a plan's corners (steps in a rate's derivative), however many one sample
+/// interval holds (a change of speed can be shorter than a sample). Each piece is then smooth,
+/// so exact; with one cut it is [`gauss_legendre3_split`]'s sum, bit for bit.
+pub fn gauss_legendre3_pieces(
+    t0: f64,
+    t1: f64,
+    cuts: impl IntoIterator<Item = f64>,
+    f: impl Fn(f64) -> (Vector3<f64>, Vector3<f64>),
+) -> Increments {
+    let mut a = t0;
+    let mut sum: Option<Increments> = None;
+    for c in cuts {
+        if c <= a {
+            continue;
+        }
+        if c >= t1 {
+            break;
+        }
+        let piece = gauss_legendre3(a, c, &f);
+        sum = Some(match sum {
+            None => piece,
+            Some(s) => Increments {
+                dtheta: s.dtheta + piece.dtheta,
+                dv: s.dv + piece.dv,
+            },
+        });
+        a = c;
+    }
+    let last = gauss_legendre3(a, t1, &f);
+    match sum {
+        None => last,
+        Some(s) => Increments {
+            dtheta: s.dtheta + last.dtheta,
+            dv: s.dv + last.dv,
+        },
+    }
+}
+
 /// The body's attitude relative to inertial space at `t` from its attitude `q_bn` relative to
 /// ENU at latitude `lat` and longitude `lon` (rad): inertial <- earth (the earth's rotation
 /// since 0) <- ENU <- body.

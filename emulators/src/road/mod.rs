@@ -250,13 +250,15 @@ impl Motion for Road {
 
     fn increments(&self, t0: f64, t1: f64) -> Increments {
         // smooth within a phase of the speed profile: 3 nodes are exact to rounding on a sample
-        // interval; a phase's start (a step in jerk, so in the pitch rate) splits the interval
+        // interval; every phase's start inside it (a step in jerk, so in the pitch rate: a
+        // change of speed may be shorter than a sample, two starts in one interval) and the
+        // plan's end split the interval
         let i = self.phases.partition_point(|p| p.t0 <= t0);
-        crate::truth::gauss_legendre3_split(
+        let starts = self.phases[i..].iter().map(|p| p.t0);
+        crate::truth::gauss_legendre3_pieces(
             t0,
             t1,
-            self.phases.get(i).map(|p| p.t0),
-            self.duration(),
+            starts.chain(std::iter::once(self.duration())),
             |t| self.rate_force(t),
         )
     }

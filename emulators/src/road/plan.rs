@@ -309,8 +309,21 @@ fn lay(spec: &DriveSpec, legs: &[Leg], tn: &[Corner]) -> Result<Laid, ParamError
     })
 }
 
+/// The shortest vertical curve where its neighbours leave room, m: at 30 m/s, 100 ms (200
+/// IMU samples at 2 kHz).
+const MIN_CURVE_M: f64 = 3.0;
+
+/// A change of grade whose point is nearer than this to the end of the vertical curve before
+/// it (or inside it) is made by that curve, m.
+const MIN_CURVE_GAP_M: f64 = 0.5;
+
 /// Vertical curves where the grade changes, centred on the points; kept within their
-/// neighbours (and said where that makes them sharper than the limit).
+/// neighbours (and said where that makes them sharper than the limit). The curves never
+/// overlap, so the road's pitch is continuous, and none is squeezed into millimetres (a
+/// feature the IMU's samples cannot resolve): a change of grade whose point falls inside the
+/// curve before it, or within [`MIN_CURVE_GAP_M`] after it (a change too small, under 0.02 %,
+/// to limit its neighbours' curves can), is made by that curve, which then ends on the grade
+/// after it; a curve is [`MIN_CURVE_M`] long at least where there is room.
 fn crests(spec: &DriveSpec, legs: &[Leg], laid: &mut Laid, notes: &mut RoadNotes) {
     let n = spec.waypoints.len();
     let a_v = spec.vertical_accel_mps2.unwrap_or(0.5);
@@ -322,6 +335,13 @@ fn crests(spec: &DriveSpec, legs: &[Leg], laid: &mut Laid, notes: &mut RoadNotes
         }
         let v = legs[i].speed.max(legs[i + 1].speed);
         let mid = laid.at[i + 1];
+        if mid - last_end < MIN_CURVE_GAP_M
+            && let Some(c) = laid.path.crests.last_mut()
+        {
+            // within the curve before, or just after it: that curve makes this change too
+            c.dgamma += dg;
+            continue;
+        }
         // the next point where the grade changes (a point on one grade, to 0.02 %, is no limit)
         let next = (i + 1..legs.len().saturating_sub(1))
             .find(|&j| (legs[j + 1].gamma - legs[j].gamma).abs() >= 2e-4)
@@ -330,7 +350,9 @@ fn crests(spec: &DriveSpec, legs: &[Leg], laid: &mut Laid, notes: &mut RoadNotes
         let want = PI * dg.abs() * v * v / (2.0 * a_v);
         // room: up to the last curve's end before, half-way to the next point after
         let room = 2.0 * (mid - last_end).min(0.5 * (next_mid - mid));
-        let len = want.min(room).max(1e-3);
+        // at least a few metres where there is room: a small change's curve at the limit
+        // would last a fraction of an IMU sample
+        let len = want.max(MIN_CURVE_M).min(room).max(1e-3);
         if len < want * (1.0 - 1e-9) {
             notes
                 .sharp_crests

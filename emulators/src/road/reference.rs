@@ -145,3 +145,153 @@ impl Truth for crate::drive::Drive {
         self.attitude(t)
     }
 }
+
+/// How far a drive's truth may depart from the reference integration of its own increments
+/// and still be one motion: the bench's promise about its truth, checked on every drive it
+/// scores in process.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Bound {
+    /// Horizontal position, m.
+    pub horizontal_m: f64,
+    /// Horizontal velocity, m/s.
+    pub velocity_mps: f64,
+    /// Attitude, rad.
+    pub attitude_rad: f64,
+}
+
+/// A road's bound (exact on the ellipsoid): the shipped roads and tracks depart by at most
+/// 3 mm, 1e-6 m/s and 1e-9 rad (the 2.3-hour highway, the pass), ten to a hundred times within.
+pub const ROAD_BOUND: Bound = Bound {
+    horizontal_m: 0.1,
+    velocity_mps: 1e-4,
+    attitude_rad: 2e-8,
+};
+
+/// A level route's bound: its latitude and longitude come from metres on the plane of its
+/// start (the radii and the parallel's scale of the start held), an approximation that grows
+/// with the distance north or south driven; the shipped level routes depart by at most 4.3 m,
+/// 8.4 mm/s and 1.4e-6 rad (an hour at 61 N). A level route beyond it is better driven as a
+/// road (any field of a road, `heights_m` for one, plans it on the ellipsoid).
+pub const LEVEL_BOUND: Bound = Bound {
+    horizontal_m: 10.0,
+    velocity_mps: 0.02,
+    attitude_rad: 1e-5,
+};
+
+/// Where the truth's departure was largest or first passed its bound.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Place {
+    /// Time on the drive's clock, s.
+    pub t: f64,
+    /// Latitude and longitude, deg.
+    pub lat_lon_deg: [f64; 2],
+    /// The departure there.
+    pub horizontal_m: f64,
+    /// See [`Place::horizontal_m`].
+    pub velocity_mps: f64,
+    /// See [`Place::horizontal_m`].
+    pub attitude_rad: f64,
+}
+
+/// The truth's self-check over one drive: the reference integration of the truth's ideal
+/// increments at the IMU's rate against the truth's position, velocity and attitude (the
+/// vertical channel held, as for any run longer than minutes).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct SelfCheck {
+    /// Seconds of the drive checked.
+    pub checked_s: f64,
+    /// The integration's rate, Hz.
+    pub rate_hz: f64,
+    /// Largest horizontal position departure, m.
+    pub horizontal_m: f64,
+    /// Largest horizontal velocity departure, m/s.
+    pub velocity_mps: f64,
+    /// Largest attitude departure, rad.
+    pub attitude_rad: f64,
+    /// The bound it is held to (a road's or a level route's).
+    pub bound: Bound,
+    /// The first place where a departure passed the bound (none: the truth is one motion).
+    pub first_past: Option<Place>,
+}
+
+impl SelfCheck {
+    /// Within its bound all along.
+    pub fn holds(&self) -> bool {
+        self.first_past.is_none()
+    }
+
+    /// One line for people: the departures against the bound, and where it first broke.
+    pub fn summary(&self) -> String {
+        let mut s = format!(
+            "the truth's self-check over {:.0} s at {:.0} Hz: horizontal {:.2e} m, velocity {:.2e} m/s, attitude {:.2e} rad (bound {:e} m, {:e} m/s, {:e} rad)",
+            self.checked_s,
+            self.rate_hz,
+            self.horizontal_m,
+            self.velocity_mps,
+            self.attitude_rad,
+            self.bound.horizontal_m,
+            self.bound.velocity_mps,
+            self.bound.attitude_rad
+        );
+        if let Some(p) = &self.first_past {
+            s += &format!(
+                "; past its bound from {:.3} s at {:.6} {:.6} deg ({:.2e} m, {:.2e} m/s, {:.2e} rad): the bench's truth disagrees with itself there, not the navigator",
+                p.t,
+                p.lat_lon_deg[0],
+                p.lat_lon_deg[1],
+                p.horizontal_m,
+                p.velocity_mps,
+                p.attitude_rad
+            );
+        }
+        s
+    }
+}
+
+/// Check `drive`'s truth against the reference integration of its own increments at `rate_hz`
+/// over its first `t_end` s, every 10 ms, with the bound of its kind.
+pub fn self_check(drive: &crate::drive::Drive, rate_hz: f64, t_end: f64) -> SelfCheck {
+    let bound = if drive.road().is_some() {
+        ROAD_BOUND
+    } else {
+        LEVEL_BOUND
+    };
+    check_motion(drive, drive, bound, rate_hz, t_end)
+}
+
+/// [`self_check`] of the increments of any motion `m` against any `truth`, held to `bound`.
+pub fn check_motion(
+    m: &dyn Motion,
+    truth: &dyn Truth,
+    bound: Bound,
+    rate_hz: f64,
+    t_end: f64,
+) -> SelfCheck {
+    let t_end = t_end.max(0.0);
+    let e = integrate(m, truth, rate_hz, t_end, 0.01, true);
+    let past = |x: &RefError| {
+        !(x.horizontal_m <= bound.horizontal_m
+            && x.velocity_mps <= bound.velocity_mps
+            && x.attitude_rad <= bound.attitude_rad)
+    };
+    let first_past = e.iter().find(|x| past(x)).map(|x| {
+        let [lat, lon, _] = truth.llh(x.t);
+        Place {
+            t: x.t,
+            lat_lon_deg: [lat.to_degrees(), lon.to_degrees()],
+            horizontal_m: x.horizontal_m,
+            velocity_mps: x.velocity_mps,
+            attitude_rad: x.attitude_rad,
+        }
+    });
+    let worst = |f: fn(&RefError) -> f64| e.iter().map(f).fold(0.0, f64::max);
+    SelfCheck {
+        checked_s: t_end,
+        rate_hz,
+        horizontal_m: worst(|x| x.horizontal_m),
+        velocity_mps: worst(|x| x.velocity_mps),
+        attitude_rad: worst(|x| x.attitude_rad),
+        bound,
+        first_past,
+    }
+}

@@ -28,6 +28,40 @@ pub(crate) fn hilly() -> DriveSpec {
     }
 }
 
+/// A brisk drive through hills (about 7.6 km, 8 minutes): legs at up to 29 m/s, grades to
+/// 10 %, corners taken at 3.5 m/s^2 lateral, braking at 3 m/s^2, three stops, a paved surface.
+pub(crate) fn brisk() -> DriveSpec {
+    DriveSpec {
+        lat_deg: 41.15,
+        lon_deg: -8.61,
+        height_m: 80.0,
+        waypoints: vec![
+            [0.0, 900.0],
+            [700.0, 1400.0],
+            [1500.0, 1300.0],
+            [1800.0, 600.0],
+            [2600.0, 300.0],
+            [2400.0, -500.0],
+            [1300.0, -700.0],
+            [600.0, -200.0],
+            [0.0, 0.0],
+        ],
+        heights_m: vec![150.0, 120.0, 200.0, 120.0, 90.0, 40.0, 110.0, 70.0, 80.0],
+        leg_speeds_mps: vec![25.0, 20.0, 29.0, 22.0, 28.0, 18.0, 29.0, 20.0, 14.0],
+        stops: vec![[2.0, 12.0], [5.0, 20.0], [7.0, 8.0]],
+        speed_mps: 25.0,
+        accel_mps2: 2.5,
+        brake_mps2: Some(3.0),
+        jerk_mps3: Some(2.0),
+        turn_rate_dps: 40.0,
+        lateral_accel_mps2: 3.5,
+        corner_radius_m: Some(45.0),
+        roughness: Some(1.0),
+        start_wait_s: 6.0,
+        ..Default::default()
+    }
+}
+
 /// `spec` without a road's fields: the level route of old.
 fn level_of(mut spec: DriveSpec) -> DriveSpec {
     spec.heights_m.clear();
@@ -448,4 +482,78 @@ fn truth_pace() {
             120.0 / s
         );
     }
+}
+
+/// A change of grade too small to limit its neighbours (under 0.02 %) a few metres after a
+/// large one, inside the large one's vertical curve (as a fitted track's corners give): the
+/// road's pitch stays continuous and the truth one motion. (The curves overlapped once: the
+/// small one's start stepped the pitch by the large one's unfinished part, 3 mrad on a track of
+/// a brisk drive, and the reference integration walked 1.5 km from the truth.)
+#[test]
+fn a_small_change_of_grade_inside_a_curve_keeps_the_pitch_continuous() {
+    let spec = DriveSpec {
+        lat_deg: 41.15,
+        lon_deg: -8.61,
+        height_m: 0.0,
+        waypoints: vec![[0.0, 200.0], [0.0, 230.0], [0.0, 800.0]],
+        heights_m: vec![0.0, 1.5, 1.5 + 570.0 * 0.0501],
+        speed_mps: 20.0,
+        start_wait_s: 2.0,
+        ..Default::default()
+    };
+    let r = road(&spec);
+    let mut prev = r.hpr(0.0)[1];
+    let mut t = 0.0;
+    while t < r.duration() {
+        t += 1e-3;
+        let p = r.hpr(t)[1];
+        // at 20 m/s along a curve of 5 % over 60 m the pitch moves by 2e-5 rad a millisecond
+        assert!(
+            (p - prev).abs() < 1e-4,
+            "the pitch steps at {t:.3} s: {prev} to {p}"
+        );
+        prev = p;
+    }
+    reference_follows(&spec);
+}
+/// The truth's self-check holds on a road, and fails where the increments and the truth are
+/// not one motion: a pitch step of 1 mrad the increments never saw is found when it happens,
+/// and where.
+#[test]
+fn the_truths_self_check_finds_where_the_truth_disagrees_with_itself() {
+    let d = Drive::plan(&hilly()).unwrap();
+    let ok = reference::self_check(&d, 2000.0, 120.0);
+    assert!(ok.holds(), "{}", ok.summary());
+    assert_eq!(ok.bound, reference::ROAD_BOUND);
+    /// The drive's truth with a pitch step at 60 s that its increments lack.
+    struct Stepped<'a>(&'a Drive);
+    impl reference::Truth for Stepped<'_> {
+        fn llh(&self, t: f64) -> [f64; 3] {
+            reference::Truth::llh(self.0, t)
+        }
+        fn vel(&self, t: f64) -> nalgebra::Vector3<f64> {
+            reference::Truth::vel(self.0, t)
+        }
+        fn q_bn(&self, t: f64) -> UnitQuaternion<f64> {
+            let q = reference::Truth::q_bn(self.0, t);
+            if t >= 60.0 {
+                q * UnitQuaternion::from_euler_angles(1e-3, 0.0, 0.0)
+            } else {
+                q
+            }
+        }
+    }
+    let bad = reference::check_motion(&d, &Stepped(&d), reference::ROAD_BOUND, 2000.0, 120.0);
+    assert!(!bad.holds());
+    let p = bad.first_past.unwrap();
+    assert!((p.t - 60.0).abs() < 0.011, "{p:?}");
+    assert!((p.attitude_rad - 1e-3).abs() < 1e-5, "{p:?}");
+    let (lat, lon, _) = d.position(p.t);
+    assert!((p.lat_lon_deg[0] - lat.to_degrees()).abs() < 1e-12);
+    assert!((p.lat_lon_deg[1] - lon.to_degrees()).abs() < 1e-12);
+    assert!(
+        bad.summary().contains("not the navigator"),
+        "{}",
+        bad.summary()
+    );
 }

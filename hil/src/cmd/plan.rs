@@ -18,15 +18,17 @@ pub(crate) enum Plan {
     /// What the bench will drive on a scenario's route: its length and duration, heights,
     /// speeds, accelerations (along and across the road), the body's pitch and roll, where it
     /// stands, and what the plan had to do (legs driven slower than asked, short vertical
-    /// curves); with --csv, its profile for a plot. Exit status 1 when the scenario ends before
-    /// the drive does.
+    /// curves); with --csv, its profile for a plot; with --check, the truth's self-check. Exit
+    /// status 1 when the scenario ends before the drive does, 3 when the truth disagrees with
+    /// itself.
     Route(RouteArgs),
     /// Check a recorded track (GPX 1.0/1.1, an NMEA log of GGA/RMC, or a CSV reference
     /// trajectory) and show what the bench will drive from it: the points it dropped and why,
     /// what it assumed, the stops it found, how far the road it drives is from the track's
     /// points and times, and the route's summary; with --svg, a picture of the track against
-    /// the road. A track the bench cannot drive is refused with the file, the line or point,
-    /// and what is wrong (exit status 2).
+    /// the road; with --check, the truth's self-check. A track the bench cannot drive is
+    /// refused with the file, the line or point, and what is wrong (exit status 2); exit status
+    /// 3 when the drive's truth disagrees with itself.
     Track(TrackArgs),
 }
 
@@ -51,21 +53,40 @@ pub(crate) struct TrackArgs {
     /// Print the summary as JSON.
     #[arg(long)]
     json: bool,
+    /// Also check the truth: integrate the drive's own ideal increments (at the scenario's IMU
+    /// rate, else 2 kHz) and compare with its position, velocity and attitude, against the
+    /// bound every in-process run is held to; exit status 3 when it departs beyond it.
+    #[arg(long)]
+    check: bool,
+}
+
+/// The truth's self-check of `d` at `rate_hz` over `run_s`, into `r`; exit status 3 when it
+/// fails.
+fn check_truth(
+    r: &mut hil::scenario::route::RouteSummary,
+    d: &emulators::drive::Drive,
+    rate_hz: f64,
+    run_s: f64,
+) -> i32 {
+    let c = emulators::road::reference::self_check(d, rate_hz, run_s);
+    let code = if c.holds() { 0 } else { 3 };
+    r.truth_check = Some(c);
+    code
 }
 
 fn track_cmd(a: TrackArgs) -> Result<i32> {
     use emulators::drive::{Drive, DriveSpec};
-    let (mut spec, run_s) = match &a.scenario {
+    let (mut spec, run_s, rate_hz) = match &a.scenario {
         Some(p) => {
             let s = Scenario::load(p)?;
             let d = s
                 .drive
                 .clone()
                 .with_context(|| format!("scenario {} has no [drive]", p.display()))?;
-            (d, Some(s.duration_s))
+            (d, Some(s.duration_s), s.imu.rate_hz)
         }
         // a driver's limits, not the level route's gentle ones: a track is driven as it was
-        None => (DriveSpec::driver(), None),
+        None => (DriveSpec::driver(), None, 2000.0),
     };
     spec.track = Some(a.file.display().to_string());
     let track = match emulators::road::track::read(&a.file) {
@@ -83,7 +104,13 @@ fn track_cmd(a: TrackArgs) -> Result<i32> {
         }
     };
     let name = a.file.display().to_string();
-    let r = hil::scenario::route::summary_of(&name, run_s.unwrap_or(d.duration()), &d);
+    let run_s = run_s.unwrap_or(d.duration());
+    let mut r = hil::scenario::route::summary_of(&name, run_s, &d);
+    let code = if a.check {
+        check_truth(&mut r, &d, rate_hz, run_s)
+    } else {
+        0
+    };
     if let Some(f) = &a.csv {
         hil::scenario::route::csv_of(&d, 1.0, f)?;
     }
@@ -101,7 +128,7 @@ fn track_cmd(a: TrackArgs) -> Result<i32> {
             }
         }
     }
-    Ok(0)
+    Ok(code)
 }
 
 /// `hil plan route`'s arguments.
@@ -148,6 +175,11 @@ pub(crate) struct RouteArgs {
     /// The logger's seed.
     #[arg(long, default_value_t = 1)]
     track_seed: u64,
+    /// Also check the truth: integrate the drive's own ideal increments at the scenario's IMU
+    /// rate and compare with its position, velocity and attitude over the scenario, against
+    /// the bound every in-process run is held to; exit status 3 when it departs beyond it.
+    #[arg(long)]
+    check: bool,
 }
 
 fn jitter_m(s: &str) -> Result<f64, String> {
@@ -205,7 +237,15 @@ fn record_track(s: &Scenario, a: &RouteArgs, out: &std::path::Path) -> Result<()
 
 fn route_cmd(a: RouteArgs) -> Result<i32> {
     let s = Scenario::load(&a.scenario)?;
-    let r = hil::scenario::route::summary(&s)?;
+    let mut r = hil::scenario::route::summary(&s)?;
+    let checked = if a.check {
+        let spec = s.drive.as_ref().context("the scenario has no [drive]")?;
+        let d = emulators::drive::Drive::plan(spec)
+            .map_err(|e| anyhow::anyhow!("[{}] {}", e.table, e.problem))?;
+        check_truth(&mut r, &d, s.imu.rate_hz, s.duration_s)
+    } else {
+        0
+    };
     if let Some(f) = &a.csv {
         hil::scenario::route::csv(&s, a.csv_hz, f)?;
     }
@@ -222,6 +262,9 @@ fn route_cmd(a: RouteArgs) -> Result<i32> {
         if let Some(f) = &a.track {
             println!("  track: {}", f.display());
         }
+    }
+    if checked != 0 {
+        return Ok(checked);
     }
     Ok(i32::from(r.duration_s > r.scenario_s))
 }

@@ -10,6 +10,7 @@ pub mod north_finding_mc;
 pub mod redundant_imu;
 pub mod routes;
 pub mod shard;
+pub mod truth;
 pub mod windows;
 
 use anyhow::Result;

@@ -116,6 +116,9 @@ pub struct NavExperiment {
     /// The same where the filter understates it (both follow the receiver; fading weights it
     /// more): reported, not a target.
     pub fading_no_worse_understated: bool,
+    /// The drive's truth against the reference integration of its own increments (a drive
+    /// whose truth disagrees with itself is refused before it is driven).
+    pub truth: crate::experiments::truth::TruthRow,
 }
 
 /// Which table a case belongs to.
@@ -379,6 +382,8 @@ pub fn run_part(o: &NavExpOptions, shard: usize, shards: usize, progress: bool) 
     } = plan(o)?;
     let total = jobs.len();
     let mine = crate::experiments::shard::select(jobs, shard, shards)?;
+    // the truth each run is scored against, checked before any is driven
+    crate::experiments::truth::check_all(std::slice::from_ref(s), 1)?;
     if progress {
         eprintln!(
             "hil: {} of {} runs of {} ({} cases x {} seeds, {} s each) on {} threads",
@@ -481,7 +486,9 @@ pub fn merge(parts: &[NavPart], out: Option<&Path>) -> Result<NavExperiment> {
     let first = &table4[1].runs[0];
     // the receiver's horizontal error per axis (Gauss-Markov and white parts)
     let rx_sigma = rx0.errors.gm_sigma_m.hypot(rx0.errors.white_sigma_m);
+    let truth = crate::experiments::truth::check_all(std::slice::from_ref(s), 1)?;
     let r = NavExperiment {
+        truth: truth.into_iter().next().context("no truth checked")?,
         scenario: s.name.clone(),
         navigated_s: first.duration_s - first.started_at_s.unwrap_or(0.0),
         north_finding_error_deg: first
@@ -713,6 +720,8 @@ pub fn markdown(r: &NavExperiment) -> String {
     );
     s += &outages_markdown(r);
     s += &mis_modelled_markdown(r);
+    s += "\n";
+    s += &crate::experiments::truth::markdown(std::slice::from_ref(&r.truth));
     s
 }
 

@@ -87,6 +87,9 @@ pub struct RouteRow {
 pub struct RoutesReport {
     /// One row per route and filter.
     pub rows: Vec<RouteRow>,
+    /// Each route's truth against the reference integration of its own increments (a route
+    /// whose truth disagrees with itself is refused before it is driven).
+    pub truth: Vec<crate::experiments::truth::TruthRow>,
     /// Every row consistent.
     pub all_consistent: bool,
     /// No run ended with an unflagged velocity error.
@@ -143,6 +146,8 @@ pub fn run_part(
     let all = jobs(o);
     let total = all.len();
     let mine = crate::experiments::shard::select(all, shard, shards)?;
+    // the truth each run is scored against, checked before any is driven
+    crate::experiments::truth::check_all(&o.scenarios, o.threads)?;
     if progress {
         eprintln!(
             "hil: {} of {total} runs ({} routes x {} filters x {} seeds) on {} threads",
@@ -221,6 +226,7 @@ pub fn merge(parts: &[RoutesPart], out: Option<&Path>) -> Result<RoutesReport> {
         }
     }
     let r = RoutesReport {
+        truth: crate::experiments::truth::check_all(&o.scenarios, crate::par::threads())?,
         all_consistent: rows.iter().all(|r| r.consistent),
         no_unflagged_velocity_errors: rows.iter().all(|r| r.unflagged_velocity_errors == 0),
         rows,
@@ -453,6 +459,7 @@ pub fn markdown(r: &RoutesReport) -> String {
             "NOT MET"
         }
     );
+    let _ = write!(m, "\n{}", crate::experiments::truth::markdown(&r.truth));
     m
 }
 

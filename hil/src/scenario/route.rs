@@ -43,6 +43,9 @@ pub struct RouteSummary {
     pub notes: Option<emulators::road::RoadNotes>,
     /// What was done with the recorded track the road was fitted to, when it was.
     pub track: Option<emulators::road::track::TrackNotes>,
+    /// The truth's self-check (`--check`): the reference integration of the drive's own
+    /// increments against its position, velocity and attitude.
+    pub truth_check: Option<emulators::road::reference::SelfCheck>,
 }
 
 /// The route of scenario `s`, sampled at 10 Hz.
@@ -74,6 +77,7 @@ pub fn summary_of(name: &str, run_s: f64, d: &Drive) -> RouteSummary {
         standing: Vec::new(),
         notes: d.road().map(|r| r.notes().clone()),
         track: d.road().and_then(|r| r.track_notes().cloned()),
+        truth_check: None,
     };
     let mut still_from: Option<f64> = None;
     let mut vertical = (0.0f64, 0.0f64, 0.0f64);
@@ -187,6 +191,18 @@ pub fn text(r: &RouteSummary) -> String {
     }
     if let Some(t) = &r.track {
         track_text(&mut o, t);
+    }
+    if let Some(c) = &r.truth_check {
+        let _ = writeln!(
+            o,
+            "  {}: {}",
+            if c.holds() {
+                "one motion"
+            } else {
+                "NOT ONE MOTION"
+            },
+            c.summary()
+        );
     }
     o
 }

@@ -407,3 +407,39 @@ fn a_track_is_planned_once_until_its_file_changes() {
         a.duration()
     );
 }
+
+/// The truth of a brisk drive logged as a handheld 1 Hz logger logs it (1 s +- 0.4 s, 3 m of
+/// wandering jitter, glitches, missing heights), fitted and driven with a brisk driver's
+/// limits, is one motion: the reference integration of its increments stays within the road's
+/// bound. (Fitted tracks once gave vertical curves that overlapped, a pitch step of 3 mrad and
+/// 1.5 km of departure, and curves and changes of speed shorter than an IMU sample.)
+#[test]
+fn the_truth_of_a_brisk_logged_track_is_one_motion() {
+    let truth =
+        Drive::plan(&crate::road::tests::brisk()).unwrap_or_else(|e| panic!("{}", e.problem));
+    let log = Logger {
+        step_s: 1.0,
+        step_spread_s: 0.4,
+        standing_step_s: 5.0,
+        jitter_m: 3.0,
+        jitter_h_m: 6.0,
+        no_elevation: 0.03,
+        glitch: 0.005,
+        seed: 5,
+    };
+    let text = write(&record(&truth, &log, T0), Format::Gpx, false);
+    let track = parse(&text, "brisk.gpx").unwrap_or_else(|e| panic!("{e}"));
+    let spec = DriveSpec {
+        start_wait_s: 6.0,
+        accel_mps2: 2.5,
+        brake_mps2: Some(3.0),
+        jerk_mps3: Some(2.0),
+        lateral_accel_mps2: 3.5,
+        ..DriveSpec::driver()
+    };
+    let road = Road::from_track(&spec, &track).unwrap_or_else(|e| panic!("{e}"));
+    let d = Drive::from_road(road);
+    let c = crate::road::reference::self_check(&d, 2000.0, d.duration() + 5.0);
+    eprintln!("{}", c.summary());
+    assert!(c.holds(), "{}", c.summary());
+}
