@@ -71,6 +71,10 @@ pub struct NavRun {
     pub north_finding: Option<nav::procedures::north_finding::NorthResult>,
     /// IMU time navigation started, s.
     pub started_at_s: Option<f64>,
+    /// How it started (still, or aligned in motion), and the levelling windows it refused
+    /// because the vehicle moved.
+    #[serde(default)]
+    pub start: (Option<nav::navigation::navigator::StartKind>, u64),
     /// nav's integrity monitor over the run.
     pub integrity: nav::navigation::integrity::IntegrityStats,
     /// Fixes nav could not tie to a PPS edge (applied at their arrival instead): none while
@@ -199,6 +203,7 @@ pub fn navigate(
         filter: navigator.filter().map(nav::navigation::filter::Kf::stats),
         north_finding: nf_result,
         started_at_s: navigator.summary().started_at_s,
+        start: (navigator.summary().start, navigator.summary().level_waits),
         integrity: navigator.integrity().stats(),
         untied_fixes: navigator.summary().untied_fixes,
         good_fixes_refused: bench.good_fixes_refused(),

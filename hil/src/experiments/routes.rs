@@ -69,6 +69,13 @@ pub struct RouteRow {
     pub rejected_first_minute: u64,
     /// Integrity alarms raised, over the runs.
     pub integrity_alarms: u64,
+    /// Runs whose navigation was aligned in motion (the vehicle moving when nav could first
+    /// start), and the latest start over the runs, s.
+    pub started_in_motion: usize,
+    /// See [`RouteRow::started_in_motion`].
+    pub latest_start_s: f64,
+    /// Zero-velocity updates applied at stops, over the runs.
+    pub zero_velocity_updates: u64,
     /// NEES per dof in each ten-minute window, inside each outage and in the minute after
     /// it, pooled over the runs.
     pub windowed: Windowed,
@@ -290,6 +297,18 @@ fn row(s: &Scenario, kind: FilterKind, parts: &[&PartRun]) -> RouteRow {
             .map(|r| r.filter.map_or(0, |f| f.rejected_first_minute))
             .sum(),
         integrity_alarms: runs.iter().map(|r| r.integrity.alarms).sum(),
+        started_in_motion: runs
+            .iter()
+            .filter(|r| r.start.0 == Some(nav::navigation::navigator::StartKind::InMotion))
+            .count(),
+        latest_start_s: runs
+            .iter()
+            .filter_map(|r| r.started_at_s)
+            .fold(0.0, f64::max),
+        zero_velocity_updates: runs
+            .iter()
+            .map(|r| r.filter.map_or(0, |f| f.zero_velocity_updates))
+            .sum(),
         good_fixes_refused: runs.iter().map(|r| r.good_fixes_refused).sum(),
         consistent: within(nees[0]) && within(nees[1]) && windowed.within(NEES_BOUNDS),
         windowed,
@@ -402,6 +421,8 @@ pub fn markdown(r: &RoutesReport) -> String {
         ("rejected (first minute)", Right),
         ("good fixes refused", Right),
         ("alarms", Right),
+        ("start (in motion)", Right),
+        ("stops' ZUPTs", Right),
         ("consistent", Left),
     ]);
     for x in &r.rows {
@@ -422,6 +443,8 @@ pub fn markdown(r: &RoutesReport) -> String {
             format!("{} ({})", x.rejected, x.rejected_first_minute),
             x.good_fixes_refused.to_string(),
             x.integrity_alarms.to_string(),
+            format!("{:.0} s ({})", x.latest_start_s, x.started_in_motion),
+            x.zero_velocity_updates.to_string(),
             (if x.consistent { "yes" } else { "NO" }).to_string(),
         ]);
     }

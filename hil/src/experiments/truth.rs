@@ -88,7 +88,7 @@ pub fn markdown(rows: &[TruthRow]) -> String {
             format!("{:.1e}", c.velocity_mps),
             format!("{:.1e}", c.attitude_rad),
             format!(
-                "{}, {}, {}",
+                "{:e}, {:e}, {:e}",
                 c.bound.horizontal_m, c.bound.velocity_mps, c.bound.attitude_rad
             ),
             (if c.holds() { "yes" } else { "NO" }).to_string(),

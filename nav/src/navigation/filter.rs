@@ -323,6 +323,13 @@ pub struct FilterStats {
     /// states no accuracy (`learn_receiver_scale`).
     #[serde(default)]
     pub learned_scale: [f64; 2],
+    /// Zero-velocity updates applied (the vehicle standing, by the IMU's own evidence).
+    #[serde(default)]
+    pub zero_velocity_updates: u64,
+    /// Zero-velocity updates refused by the gate (the INS's velocity too far from zero for
+    /// its sigma: not standing after all, or the filter lost).
+    #[serde(default)]
+    pub zero_velocity_refused: u64,
 }
 
 /// What the receiver says of a fix's accuracy.
@@ -861,6 +868,36 @@ impl Kf {
         self.stats.updates += 1;
         self.nis_sum += nis;
         self.stats.mean_nis = self.nis_sum / self.stats.updates as f64;
+        self.correct(s);
+        true
+    }
+
+    /// A zero-velocity update: the vehicle stands (the navigator's judgement, from the IMU's
+    /// own evidence), so the INS's velocity is its velocity error, measured with `sigma_mps`
+    /// per axis (what standing leaves: the body rocking on its suspension). `H = [0 I 0 0 0
+    /// 0]`; refused (and counted) when its NIS passes the gate. Returns whether it was used.
+    pub fn zero_velocity(&mut self, s: &mut NavState, sigma_mps: f64) -> bool {
+        let z = s.v;
+        let mut h_mat = SMatrix::<f64, 3, N>::zeros();
+        for i in 0..3 {
+            h_mat[(i, 3 + i)] = 1.0;
+        }
+        let innov = z - h_mat * self.x;
+        let r = SMatrix::<f64, 3, 3>::identity() * (sigma_mps * sigma_mps);
+        let s_mat = h_mat * self.p * h_mat.transpose() + r;
+        let Some(s_inv) = s_mat.try_inverse() else {
+            return false;
+        };
+        let nis = (innov.transpose() * s_inv * innov)[(0, 0)];
+        if !(nis.is_finite() && nis <= self.cfg.gate_nis) {
+            self.stats.zero_velocity_refused += 1;
+            return false;
+        }
+        let k = self.p * h_mat.transpose() * s_inv;
+        self.x += k * innov;
+        let ikh = MatN::identity() - k * h_mat;
+        self.p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
+        self.stats.zero_velocity_updates += 1;
         self.correct(s);
         true
     }

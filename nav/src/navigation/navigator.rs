@@ -38,6 +38,14 @@ pub struct NavigationConfig {
     /// [`PPS_CLOCK_ALLOWANCE_UNKNOWN`] before it is read); any other edge (a glitch on the PPS
     /// line) is rejected and counted.
     pub pps_tolerance_s: f64,
+    /// The sigma of the receiver's velocity (RMC's speed and track) assumed when navigation
+    /// starts in motion, m/s per axis.
+    pub motion_velocity_sigma_mps: f64,
+    /// Zero-velocity updates while the vehicle stands (judged each second from the IMU's own
+    /// evidence as levelling judges it, with the receiver's speed where it tells one and the
+    /// INS's own speed): the velocity measured as zero with this sigma, m/s per axis (the
+    /// body rocking on its suspension); 0: none.
+    pub zero_velocity_sigma_mps: f64,
 }
 
 /// The IMU clock's allowance in the PPS check, per second of interval, about the rate read
@@ -60,8 +68,136 @@ impl Default for NavigationConfig {
             fix_delay_s: 0.5,
             integrity: crate::navigation::integrity::IntegrityConfig::default(),
             pps_tolerance_s: 0.002,
+            motion_velocity_sigma_mps: 0.3,
+            zero_velocity_sigma_mps: 0.05,
         }
     }
+}
+
+/// Levelling takes a window as still when the specific force's spread about its mean is
+/// under this (m/s^2 RMS: a parked vehicle's idling engine is far less, a vehicle driving
+/// over any road more), ...
+pub const STILL_FORCE_SPREAD: f64 = 0.3;
+
+/// ... the mean specific force is gravity within this (m/s^2, 15 mg: three of a tactical
+/// accelerometer's bias of 5 mg; a vehicle accelerating at 1.7 m/s^2 or more is not still,
+/// whatever else it shows), the mean forces of the window's two halves differ by less than
+/// [`STILL_FORCE_CHANGE`] ...
+pub const STILL_FORCE_OFF_G: f64 = 0.15;
+
+/// See [`STILL_FORCE_OFF_G`] (m/s^2): a vehicle setting off or coming to a halt changes its
+/// specific force within a second, however gently (within a jerk of 1 m/s^3, by 0.25 m/s^2
+/// in half a second); a standing one's changes by its noise.
+pub const STILL_FORCE_CHANGE: f64 = 0.03;
+
+/// ... the body turns slower than this (rad/s, 0.3 deg/s) ...
+pub const STILL_RATE: f64 = 0.3 * std::f64::consts::PI / 180.0;
+
+/// ... and the receiver, where it tells its speed, says the vehicle moves slower than this
+/// (m/s), or than four of its velocity's sigmas (a standing receiver's speed is its noise).
+pub const STILL_SPEED: f64 = 0.5;
+
+/// A vehicle found moving is aligned in motion when the receiver's speed is at least this
+/// (m/s: its track then tells the way the vehicle goes) ...
+pub const MOTION_MIN_SPEED: f64 = 3.0;
+
+/// ... and the vehicle's acceleration between its last two velocities is under this (m/s^2)
+/// and its turn rate under [`MOTION_MAX_RATE`]: the window's mean specific force, less that
+/// acceleration, is then gravity to within what the velocities can tell.
+pub const MOTION_MAX_ACCEL: f64 = 1.0;
+
+/// See [`MOTION_MAX_ACCEL`] (rad/s, 3 deg/s).
+pub const MOTION_MAX_RATE: f64 = 3.0 * std::f64::consts::PI / 180.0;
+
+/// The window over which a navigating vehicle is judged standing, s.
+pub const ZUPT_WINDOW_S: f64 = 1.0;
+
+/// A vehicle is taken as standing only where the INS's own horizontal speed is under this
+/// (m/s), or three of its sigmas: a vehicle cruising on a smooth road feels what a standing
+/// one feels, and its INS knows it moves.
+pub const ZUPT_MAX_INS_SPEED: f64 = 0.5;
+
+/// A land vehicle's slip, the angle between where it points and where it goes, allowed for
+/// when its heading is taken from the receiver's track (rad, 0.5 deg).
+pub const SLIP_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
+
+/// How navigation started.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StartKind {
+    /// Levelled standing still, from rest.
+    Still,
+    /// Aligned in motion: the velocity and (without a heading given) the heading from the
+    /// receiver's speed and track, the level from the specific force less the acceleration
+    /// between the receiver's velocities, with the sigmas that leaves.
+    InMotion,
+}
+
+/// What the levelling window saw of the vehicle's motion.
+#[derive(Debug, Clone, Copy, Default)]
+struct LevelWindow {
+    /// Sums over the window's updates: velocity increments, their specific forces' squared
+    /// norms (times dt), rotation increments.
+    dv: Vector3<f64>,
+    ff_dt: f64,
+    phi: Vector3<f64>,
+    t: f64,
+    /// The velocity increments' sum and the time at the window's half, once passed.
+    half: Option<(Vector3<f64>, f64)>,
+}
+
+impl LevelWindow {
+    /// Add an update to a window of `len` s.
+    fn add_of(&mut self, phi: [f64; 3], dv: [f64; 3], dt: f64, len: f64) {
+        if self.half.is_none() && self.t >= 0.5 * len {
+            self.half = Some((self.dv, self.t));
+        }
+        self.add(phi, dv, dt);
+    }
+    /// The change of the mean specific force from the window's first half to its second,
+    /// m/s^2 (0 before the half).
+    fn force_change(&self) -> f64 {
+        match self.half {
+            Some((dv1, t1)) if t1 > 0.0 && self.t > t1 => {
+                (dv1 / t1 - (self.dv - dv1) / (self.t - t1)).norm()
+            }
+            _ => 0.0,
+        }
+    }
+    fn add(&mut self, phi: [f64; 3], dv: [f64; 3], dt: f64) {
+        let dv = Vector3::from(dv);
+        self.dv += dv;
+        if dt > 0.0 {
+            self.ff_dt += dv.norm_squared() / dt;
+        }
+        self.phi += Vector3::from(phi);
+        self.t += dt;
+    }
+    /// Mean specific force, m/s^2.
+    fn force(&self) -> Vector3<f64> {
+        self.dv / self.t.max(1e-9)
+    }
+    /// The specific force's RMS spread about its mean, m/s^2.
+    fn spread(&self) -> f64 {
+        (self.ff_dt / self.t.max(1e-9) - self.force().norm_squared())
+            .max(0.0)
+            .sqrt()
+    }
+    /// Mean turn rate, rad/s.
+    fn rate(&self) -> f64 {
+        self.phi.norm() / self.t.max(1e-9)
+    }
+}
+
+/// A velocity the receiver stated (RMC's speed and track) while navigation had not started.
+#[derive(Debug, Clone, Copy)]
+struct Course {
+    /// IMU time it was taken at, s.
+    t: f64,
+    /// East, north, m/s.
+    v: [f64; 2],
+    /// Speed, m/s.
+    speed: f64,
 }
 
 /// Where navigation is.
@@ -124,6 +260,13 @@ pub struct NavigatorSummary {
     /// [`crate::frontend::imu_clock::MIN_EDGES`] edges).
     #[serde(default)]
     pub imu_clock: Option<ClockEstimate>,
+    /// How navigation started: still, or aligned in motion (none: not yet).
+    #[serde(default)]
+    pub start: Option<StartKind>,
+    /// Levelling windows refused because the vehicle moved and could not be aligned in
+    /// motion (navigation waited).
+    #[serde(default)]
+    pub level_waits: u64,
 }
 
 /// The navigator.
@@ -137,8 +280,16 @@ pub struct Navigator {
     first_fix: Option<(f64, f64, f64)>,
     /// What the receiver said of the accuracy of the fix navigation starts at.
     first_fix_accuracy: crate::navigation::filter::StatedAccuracy,
-    level_sum: Vector3<f64>,
-    level_t: f64,
+    level: LevelWindow,
+    /// The receiver's last velocities before the start, newest last.
+    courses: std::collections::VecDeque<Course>,
+    /// Levelling windows refused because the vehicle moved (and could not be aligned in
+    /// motion).
+    level_waits: u64,
+    start_kind: Option<StartKind>,
+    /// The current window of the standing judgement while navigating, and its first half.
+    still: LevelWindow,
+    still_first: Option<LevelWindow>,
     state: Option<NavState>,
     kf: Option<Kf>,
     f_acc: Vector3<f64>,
@@ -272,8 +423,12 @@ impl Navigator {
             phase: NavPhase::Waiting,
             first_fix: None,
             first_fix_accuracy: crate::navigation::filter::StatedAccuracy::default(),
-            level_sum: Vector3::zeros(),
-            level_t: 0.0,
+            level: LevelWindow::default(),
+            courses: std::collections::VecDeque::new(),
+            level_waits: 0,
+            start_kind: None,
+            still: LevelWindow::default(),
+            still_first: None,
             state: None,
             kf: None,
             f_acc: Vector3::zeros(),
@@ -458,17 +613,29 @@ impl Navigator {
         match self.phase {
             NavPhase::Waiting => {
                 // a heading (north-finding or the config) and a position (the first good fix)
-                if self.heading.is_some() && self.first_fix.is_some() {
+                // (or, in motion, the receiver's track where no heading is given)
+                if (self.heading.is_some() || !self.courses.is_empty()) && self.first_fix.is_some()
+                {
                     self.phase = NavPhase::Levelling;
-                    self.level_sum = Vector3::zeros();
-                    self.level_t = 0.0;
+                    self.level = LevelWindow::default();
                 }
             }
             NavPhase::Levelling => {
-                self.level_sum += Vector3::from(dv);
-                self.level_t += dt;
-                if self.level_t >= self.cfg.level_s {
-                    self.start(t);
+                self.level.add_of(phi, dv, dt, self.cfg.level_s);
+                if self.level.t >= self.cfg.level_s {
+                    match self.judge_window(t) {
+                        Some(kind) => self.start(t, kind),
+                        None => {
+                            // moving, and not steadily enough to align: a new window
+                            if self.level_waits == 0 {
+                                tracing::warn!(
+                                    "the vehicle moves: levelling waits for it to stand still or drive steadily"
+                                );
+                            }
+                            self.level_waits += 1;
+                            self.level = LevelWindow::default();
+                        }
+                    }
                 }
             }
             NavPhase::Navigating => {
@@ -484,6 +651,9 @@ impl Navigator {
                 self.f_acc += st.q_nb * Vector3::from(dv);
                 self.t_acc += dt;
                 st.update(phi, dv, dt);
+                if self.cfg.zero_velocity_sigma_mps > 0.0 {
+                    self.still.add(phi, dv, dt);
+                }
                 if let Some(k) = kf
                     && self.t_acc >= 0.1
                 {
@@ -494,28 +664,160 @@ impl Navigator {
                         self.integrity.on_position_sigma(sigma);
                     }
                 }
+                if self.still.t >= 0.5 * ZUPT_WINDOW_S {
+                    match self.still_first.take() {
+                        None => self.still_first = Some(self.still),
+                        Some(first) => self.zero_velocity(t, &first),
+                    }
+                    self.still = LevelWindow::default();
+                }
             }
         }
     }
 
-    fn start(&mut self, t: f64) {
-        let f = self.level_sum / self.level_t.max(1e-9);
-        let roll = (-f.x).atan2(f.z);
-        let pitch = f.y.atan2((f.x * f.x + f.z * f.z).sqrt());
+    /// Whether the levelling window just ended lets navigation start, and how: still (the
+    /// IMU's own evidence, and the receiver's speed where it tells one), or in motion (the
+    /// receiver's velocity steady and fast enough to tell the way); none: wait.
+    fn judge_window(&self, t: f64) -> Option<StartKind> {
+        let w = &self.level;
+        let f = w.force();
+        let (lat, h) = self.first_fix.map_or((0.0, 0.0), |(lat, _, h)| (lat, h));
+        let g = crate::navigation::earth::gravity(lat, h);
+        // the receiver's latest velocity, if it is recent (fixes are applied `fix_delay_s`
+        // after they are taken, 1 Hz receivers the slowest)
+        let recent = self
+            .courses
+            .back()
+            .filter(|c| t - c.t <= 1.5 + self.cfg.fix_delay_s);
+        let still_imu = w.spread() < STILL_FORCE_SPREAD
+            && (f.norm() - g).abs() < STILL_FORCE_OFF_G
+            && w.force_change() < STILL_FORCE_CHANGE
+            && w.rate() < STILL_RATE;
+        let still_speed = STILL_SPEED.max(4.0 * self.cfg.motion_velocity_sigma_mps);
+        if still_imu && recent.is_none_or(|c| c.speed < still_speed) && self.heading.is_some() {
+            return Some(StartKind::Still);
+        }
+        let [a, b] = self.last_two_courses()?;
+        let dt = b.t - a.t;
+        let accel = ((b.v[0] - a.v[0]).hypot(b.v[1] - a.v[1])) / dt;
+        (recent.is_some()
+            && b.speed >= MOTION_MIN_SPEED
+            && accel < MOTION_MAX_ACCEL
+            && w.rate() < MOTION_MAX_RATE)
+            .then_some(StartKind::InMotion)
+    }
+
+    /// The vehicle stood through the window just ended (the IMU's evidence, the receiver's
+    /// speed where recent, and the INS's own speed): its velocity is measured as zero.
+    fn zero_velocity(&mut self, t: f64, first: &LevelWindow) {
+        let second = self.still;
+        let mut w = *first;
+        w.dv += second.dv;
+        w.ff_dt += second.ff_dt;
+        w.phi += second.phi;
+        w.t += second.t;
+        let (Some(st), Some(k)) = (self.state.as_mut(), self.kf.as_mut()) else {
+            return;
+        };
+        let g = crate::navigation::earth::gravity(st.lat, st.h);
+        // standing: its specific force is gravity and does not change (a vehicle setting off
+        // or coming to a halt changes its force within a second, however gently)
+        let still_imu = w.spread() < STILL_FORCE_SPREAD
+            && (w.force().norm() - g).abs() < STILL_FORCE_OFF_G
+            && (first.force() - second.force()).norm() < STILL_FORCE_CHANGE
+            && w.rate() < STILL_RATE;
+        let still_speed = STILL_SPEED.max(4.0 * self.cfg.motion_velocity_sigma_mps);
+        let gps_still = self
+            .courses
+            .back()
+            .filter(|c| t - c.t <= 1.5 + self.cfg.fix_delay_s)
+            .is_none_or(|c| c.speed < still_speed);
+        let p = k.covariance();
+        let ins_sigma = (p[(3, 3)] + p[(4, 4)]).sqrt();
+        let c = k.corrected(st);
+        let ins_still = c.v.x.hypot(c.v.y) < ZUPT_MAX_INS_SPEED.max(3.0 * ins_sigma);
+        if still_imu && gps_still && ins_still {
+            k.zero_velocity(st, self.cfg.zero_velocity_sigma_mps);
+        }
+    }
+
+    /// The receiver's last two velocities, 0.05 to 2.5 s apart.
+    fn last_two_courses(&self) -> Option<[Course; 2]> {
+        let n = self.courses.len();
+        if n < 2 {
+            return None;
+        }
+        let (a, b) = (self.courses[n - 2], self.courses[n - 1]);
+        (b.t - a.t > 0.05 && b.t - a.t <= 2.5).then_some([a, b])
+    }
+
+    fn start(&mut self, t: f64, kind: StartKind) {
+        let mut f = self.level.force();
         let (lat, lon, h) = self.first_fix.unwrap_or((0.0, 0.0, 0.0));
-        let st = NavState::from_euler(
-            self.heading.unwrap_or(0.0),
-            pitch,
-            roll,
-            Vector3::zeros(),
-            lat,
-            lon,
-            h,
-        );
+        let mut fc = self.cfg.filter.clone();
+        let mut v0 = Vector3::zeros();
+        let mut heading = self.heading.unwrap_or(0.0);
+        if kind == StartKind::InMotion
+            && let Some([a, b]) = self.last_two_courses()
+        {
+            // the vehicle's acceleration (ENU) between the receiver's last two velocities
+            let dt = b.t - a.t;
+            let acc = Vector3::new((b.v[0] - a.v[0]) / dt, (b.v[1] - a.v[1]) / dt, 0.0);
+            let sv = self.cfg.motion_velocity_sigma_mps;
+            // the heading is the way the vehicle goes (a heading given for power-on is stale
+            // once it has driven), to within the track's noise and a land vehicle's slip
+            heading = b.v[0].atan2(b.v[1]);
+            let track_sigma = (sv / b.speed).atan().hypot(SLIP_RAD);
+            fc.init_att_deg[2] = fc.init_att_deg[2].max(track_sigma.to_degrees());
+            // the level from the specific force less that acceleration, taken into the body
+            // by the attitude the raw force gives (twice: the second with the first's tilt)
+            for _ in 0..2 {
+                let (pitch, roll) = level_of(&f);
+                let q = NavState::from_euler(heading, pitch, roll, v0, lat, lon, h).q_nb;
+                f = self.level.force() - q.inverse() * acc;
+            }
+            // what is left unknown of the acceleration: the velocities' noise over their
+            // interval, and its change since (as large as the acceleration itself)
+            let sa = (2.0f64.sqrt() * sv / dt).hypot(acc.norm()).hypot(0.1);
+            let tilt = (sa / f.norm()).atan().to_degrees();
+            fc.init_att_deg[0] = fc.init_att_deg[0].max(tilt);
+            fc.init_att_deg[1] = fc.init_att_deg[1].max(tilt);
+            // the velocity carried from the fix to now; the vertical along the body's pitch
+            // (a land vehicle goes where it points)
+            let age = (t - b.t).max(0.0);
+            let (pitch, _) = level_of(&f);
+            v0 = Vector3::new(
+                b.v[0] + acc.x * age,
+                b.v[1] + acc.y * age,
+                b.speed * pitch.tan(),
+            );
+            let vz_sigma = b.speed * (fc.init_att_deg[1].to_radians() + 0.5f64.to_radians());
+            fc.init_vel_mps = fc.init_vel_mps.max(sv.hypot(sa * age)).max(vz_sigma);
+            tracing::info!(
+                speed_mps = b.speed,
+                accel_mps2 = acc.norm(),
+                tilt_sigma_deg = tilt,
+                "navigation starts in motion"
+            );
+        }
+        let (pitch, roll) = level_of(&f);
+        // in motion the fix is behind the vehicle by its age: carried to now
+        let (lat, lon, h) = match (kind, self.courses.back()) {
+            (StartKind::InMotion, Some(b)) => {
+                let age = (t - b.t).max(0.0);
+                let (rm, rn) = crate::navigation::earth::radii(lat);
+                (
+                    lat + v0.y * age / (rm + h),
+                    lon + v0.x * age / ((rn + h) * lat.cos()),
+                    h + v0.z * age,
+                )
+            }
+            _ => (lat, lon, h),
+        };
+        let st = NavState::from_euler(heading, pitch, roll, v0, lat, lon, h);
         self.kf = self.cfg.gps_aiding.then(|| {
             // the filter starts no surer of the heading than what found it (a degraded
             // north-finding's sigma is larger than the configured one)
-            let mut fc = self.cfg.filter.clone();
             if let Some(s) = self.heading_sigma_deg {
                 fc.init_att_deg[2] = fc.init_att_deg[2].max(s);
             }
@@ -529,10 +831,12 @@ impl Navigator {
         self.state = Some(st);
         self.phase = NavPhase::Navigating;
         self.started_at = Some(t);
+        self.start_kind = Some(kind);
         tracing::info!(
             lat_deg = lat.to_degrees(),
             lon_deg = lon.to_degrees(),
-            heading_deg = self.heading.unwrap_or(0.0).to_degrees(),
+            heading_deg = heading.to_degrees(),
+            ?kind,
             "navigation started"
         );
     }
@@ -840,6 +1144,20 @@ impl Navigator {
             .or(self.first_fix.map(|f| f.2))
             .unwrap_or(0.0);
         let p = (fix.lat_deg.to_radians(), fix.lon_deg.to_radians(), alt);
+        if let (Some(speed), Some(track)) = (fix.speed_mps, fix.track_deg)
+            && speed.is_finite()
+            && track.is_finite()
+        {
+            let (s, c) = track.to_radians().sin_cos();
+            if self.courses.len() >= 4 {
+                self.courses.pop_front();
+            }
+            self.courses.push_back(Course {
+                t: taken_at,
+                v: [speed * s, speed * c],
+                speed,
+            });
+        }
         if self.phase != NavPhase::Navigating {
             self.first_fix = Some(p);
             if fix.sentence == "GGA" {
@@ -925,8 +1243,17 @@ impl Navigator {
             clock_jumps: self.clock_jumps,
             integrity: self.integrity.stats(),
             imu_clock: self.clock,
+            start: self.start_kind,
+            level_waits: self.level_waits,
         }
     }
+}
+
+/// Pitch and roll (rad) of a body whose mean specific force is `f` (gravity's reaction).
+fn level_of(f: &Vector3<f64>) -> (f64, f64) {
+    let roll = (-f.x).atan2(f.z);
+    let pitch = f.y.atan2((f.x * f.x + f.z * f.z).sqrt());
+    (pitch, roll)
 }
 
 #[cfg(test)]
@@ -1248,5 +1575,143 @@ mod tests {
             let h = s.output.expect("a solution").h_m;
             assert!((h - height).abs() < 5.0, "{height} m: at {h} m");
         }
+    }
+
+    /// A vehicle driving north on a level road: from rest it accelerates at `accel` m/s^2 from
+    /// `t_go` s for `accel_s` s, then cruises; updates at 100 Hz, a fix (GGA and RMC with the
+    /// speed and track) at each PPS edge. Returns the navigator after `end` s.
+    fn drive_north(
+        t_go: f64,
+        accel: f64,
+        accel_s: f64,
+        end: f64,
+        heading: Option<f64>,
+    ) -> Navigator {
+        let mut n = Navigator::new(NavigationConfig {
+            enabled: true,
+            initial_heading_deg: heading,
+            ..NavigationConfig::default()
+        });
+        let dt = 0.01;
+        let g = crate::navigation::earth::gravity(60f64.to_radians(), 5.0);
+        let accel_at = |t: f64| {
+            if t > t_go && t <= t_go + accel_s {
+                accel
+            } else {
+                0.0
+            }
+        };
+        let speed_at = |t: f64| accel * (t - t_go).clamp(0.0, accel_s);
+        let distance_at = |t: f64| {
+            let a = (t - t_go).clamp(0.0, accel_s);
+            0.5 * accel * a * a + speed_at(t) * (t - t_go - accel_s).max(0.0)
+        };
+        // metres north to degrees at 60 N (the meridian's degree there)
+        let lat_at = |t: f64| 60.0 + distance_at(t) / 111_412.0;
+        let steps = (end / dt).round() as u32;
+        for i in 0..steps {
+            let t = f64::from(i + 1) * dt;
+            // the body level, pointing north: its forward (y) axis feels the acceleration
+            n.on_update(t, [0.0; 3], [0.0, accel_at(t) * dt, g * dt], dt);
+            if (i + 1) % 100 == 0 {
+                assert!(n.on_pps(t));
+                let k = u64::from((i + 1) / 100);
+                let utc = 40_000.0 + k as f64;
+                n.on_fix(&GpsFix {
+                    lat_deg: lat_at(t),
+                    ..timed_fix(utc, 2 * k)
+                });
+                n.on_fix(&GpsFix {
+                    sentence: "RMC".into(),
+                    alt_m: None,
+                    lat_deg: lat_at(t),
+                    speed_mps: Some(speed_at(t)),
+                    track_deg: Some(0.0),
+                    ..timed_fix(utc, 2 * k + 1)
+                });
+            }
+        }
+        n
+    }
+
+    /// Levelling refuses a vehicle that moves: one accelerating at 2 m/s^2 from power-on is
+    /// neither levelled as if it stood (its tilt would be 12 deg) nor aligned while its speed
+    /// changes; once it cruises steadily it is aligned in motion, with the receiver's velocity
+    /// and track, and the solution's pitch is level. A vehicle standing is levelled still.
+    #[test]
+    fn levelling_refuses_motion_and_aligns_once_the_vehicle_drives_steadily() {
+        // standing: still, at once
+        let n = drive_north(1e9, 0.0, 0.0, 10.0, Some(0.0));
+        let s = n.summary();
+        assert_eq!(s.start, Some(StartKind::Still));
+        assert_eq!(s.level_waits, 0);
+        // accelerating from power-on for 15 s, then cruising at 30 m/s
+        let n = drive_north(0.0, 2.0, 15.0, 12.0, Some(0.0));
+        assert_ne!(
+            n.summary().phase,
+            NavPhase::Navigating,
+            "levelled while accelerating"
+        );
+        assert!(n.summary().level_waits >= 2, "{:?}", n.summary());
+        let n = drive_north(0.0, 2.0, 15.0, 18.0, Some(0.0));
+        let s = n.summary();
+        assert_eq!(s.start, Some(StartKind::InMotion), "{s:?}");
+        let started = s.started_at_s.expect("started");
+        assert!(
+            started > 15.0,
+            "aligned at {started} s, before the speed settled"
+        );
+        let st = n.state().expect("a state");
+        let (_, pitch, roll) = st.euler();
+        assert!(pitch.abs() < 1e-3 && roll.abs() < 1e-3, "{pitch} {roll}");
+        assert!(
+            (st.v.y - 30.0).abs() < 0.5 && st.v.x.abs() < 0.5,
+            "{:?}",
+            st.v
+        );
+        // the filter says it is less sure of its level and its velocity than a still start
+        let k = n.filter().expect("the filter");
+        let still = drive_north(1e9, 0.0, 0.0, 10.0, Some(0.0));
+        let ks = still.filter().expect("the filter");
+        assert!(k.covariance()[(0, 0)] > 10.0 * ks.covariance()[(0, 0)]);
+    }
+
+    /// At a stop the vehicle's velocity is known to be zero: a standing vehicle gets a
+    /// zero-velocity update each second and its velocity sigma shrinks to what standing
+    /// leaves; one cruising at a constant speed on a smooth road feels what a standing one
+    /// feels, but its INS and its receiver know it moves, and it gets none.
+    #[test]
+    fn zero_velocity_updates_at_stops_and_never_while_cruising() {
+        let n = drive_north(1e9, 0.0, 0.0, 60.0, Some(0.0));
+        let f = n.filter().expect("the filter").stats();
+        assert!(f.zero_velocity_updates >= 50, "{f:?}");
+        assert_eq!(f.zero_velocity_refused, 0, "{f:?}");
+        let p = n.filter().expect("the filter").covariance();
+        let sigma = (p[(3, 3)] + p[(4, 4)]).sqrt();
+        assert!(sigma < 0.06, "velocity sigma {sigma} m/s at a stop");
+        let n = drive_north(0.0, 2.0, 15.0, 60.0, Some(0.0));
+        let f = n.filter().expect("the filter").stats();
+        assert_eq!(f.zero_velocity_updates, 0, "{f:?}");
+        // and none where they are switched off
+        let mut cfg = NavigationConfig {
+            enabled: true,
+            initial_heading_deg: Some(0.0),
+            zero_velocity_sigma_mps: 0.0,
+            ..NavigationConfig::default()
+        };
+        cfg.filter.kind = crate::navigation::filter::FilterKind::Standard;
+        let mut n = Navigator::new(cfg);
+        let g = crate::navigation::earth::gravity(60f64.to_radians(), 5.0);
+        for i in 0..3000u32 {
+            let t = f64::from(i + 1) * 0.01;
+            n.on_update(t, [0.0; 3], [0.0, 0.0, g * 0.01], 0.01);
+            if (i + 1) % 100 == 0 {
+                assert!(n.on_pps(t));
+                let k = u64::from((i + 1) / 100);
+                n.on_fix(&timed_fix(40_000.0 + k as f64, k));
+            }
+        }
+        let f = n.filter().expect("the filter").stats();
+        assert!(f.updates > 20 && f.zero_velocity_updates == 0, "{f:?}");
     }
 }
