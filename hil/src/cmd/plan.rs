@@ -175,6 +175,10 @@ pub(crate) struct RouteArgs {
     /// The logger's seed.
     #[arg(long, default_value_t = 1)]
     track_seed: u64,
+    /// When the logger is switched on, s into the drive (its track then starts in motion, as
+    /// a logger's switched on while driving does).
+    #[arg(long, default_value_t = 0.0, value_parser = hil::values::pause_s)]
+    track_start: f64,
     /// Also check the truth: integrate the drive's own ideal increments at the scenario's IMU
     /// rate and compare with its position, velocity and attitude over the scenario, against
     /// the bound every in-process run is held to; exit status 3 when it departs beyond it.
@@ -228,6 +232,7 @@ fn record_track(s: &Scenario, a: &RouteArgs, out: &std::path::Path) -> Result<()
             no_elevation: a.track_no_elevation,
             glitch: a.track_glitch,
             seed: a.track_seed,
+            start_s: a.track_start,
         };
         logger::record(&d, &log, t0)
     };

@@ -603,6 +603,54 @@ mod tests {
         }
     }
 
+    /// A logger's track that starts while the vehicle drives off (a scenario of one line
+    /// under `[drive]`): nav does not level while the vehicle accelerates, aligns in motion
+    /// once the receiver's velocity is steady, and navigates within the position tolerance with
+    /// honest sigmas; the brisk drive logged from standing levels still and uses its stops.
+    #[test]
+    fn a_track_that_starts_moving_is_aligned_in_motion_with_honest_sigmas() {
+        use nav::navigation::navigator::StartKind;
+        for (file, kind) in [
+            ("track-porto-moving.toml", StartKind::InMotion),
+            ("track-porto-handheld.toml", StartKind::Still),
+        ] {
+            let s = Scenario::load(
+                &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                    .join("../scenarios")
+                    .join(file),
+            )
+            .unwrap();
+            let rx = s.gps.clone().unwrap();
+            let f = s.navigation.as_ref().map(|n| n.filter.clone());
+            let r = navigate(&s, f.as_ref(), &rx, 0.0).unwrap();
+            eprintln!(
+                "{file}: started {:?} at {:?} s, rms {:.2} m, end {:.2} m, NEES per dof {:?}, ZUPTs {:?}",
+                r.start,
+                r.started_at_s,
+                r.rms_position_error_m,
+                r.end_position_error_m,
+                r.mean_nees_per_dof,
+                r.filter.map(|f| f.zero_velocity_updates)
+            );
+            assert_eq!(r.start.0, Some(kind), "{file}");
+            assert!(
+                r.rms_position_error_m < 10.0 && r.end_position_error_m < 10.0,
+                "{file}: {r:?}"
+            );
+            let [p, v] = r.mean_nees_per_dof.unwrap();
+            assert!(
+                (0.3..3.0).contains(&p) && (0.3..3.0).contains(&v),
+                "{file}: {p} {v}"
+            );
+            if kind == StartKind::Still {
+                // three stops of 8-20 s
+                assert!(r.filter.unwrap().zero_velocity_updates >= 20, "{file}");
+            } else {
+                assert!(r.start.1 >= 1, "{file}: no window refused");
+            }
+        }
+    }
+
     #[test]
     #[ignore = "figures: cargo test -p hil --release -- --ignored --nocapture pure_inertial"]
     fn pure_inertial_with_the_paper_grade_imu() {

@@ -27,9 +27,11 @@ use std::path::Path;
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Scenario {
-    /// Name (used for run folders).
+    /// Name (used for run folders; default: the file's name).
+    #[serde(default)]
     pub name: String,
-    /// Simulated duration, s.
+    /// Simulated duration, s (a drive from a track: default, the track's drive and 5 s).
+    #[serde(default = "unset")]
     pub duration_s: f64,
     /// Speed factor (1.0 real time).
     #[serde(default = "one")]
@@ -37,7 +39,8 @@ pub struct Scenario {
     /// Largest fraction of IMU frames the bus may lose before the run fails.
     #[serde(default)]
     pub max_bus_loss: f64,
-    /// Where the vehicle is parked.
+    /// Where the vehicle is parked (a drive from a track: default, the track's start).
+    #[serde(default = "unset_site")]
     pub site: Static,
     /// Classical coning on a lab fixture instead of the parked vehicle (inertial; the site then
     /// only names the place).
@@ -214,6 +217,21 @@ fn default_tolerance() -> f64 {
     0.1
 }
 
+/// A field the file left out, filled in from the track where it can be.
+fn unset() -> f64 {
+    f64::NAN
+}
+
+fn unset_site() -> Static {
+    Static {
+        lat_deg: f64::NAN,
+        ..Static::level(0.0)
+    }
+}
+
+/// A track's start farther than this from the scenario's site is refused, m.
+const TRACK_SITE_M: f64 = 100.0;
+
 impl Scenario {
     /// The scenario files shipped under `scenarios/`, sorted.
     pub fn shipped_files() -> anyhow::Result<Vec<std::path::PathBuf>> {
@@ -232,7 +250,8 @@ impl Scenario {
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read scenario {}", path.display()))?;
-        Self::from_text_at(&text, path.parent())
+        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+        Self::from_text_named(&text, path.parent(), stem.as_deref())
             .with_context(|| format!("scenario {}", path.display()))
     }
 
@@ -240,7 +259,42 @@ impl Scenario {
     /// (the scenario's folder), and kept as an absolute path so that the scenario written into
     /// a run's folder finds it too.
     pub fn from_text_at(text: &str, dir: Option<&Path>) -> Result<Self> {
+        Self::from_text_named(text, dir, None)
+    }
+
+    /// [`Scenario::from_text_at`], named `stem` where the text names no scenario; a drive from
+    /// a track takes its site (the track's start) and its duration (the drive's, and 5 s)
+    /// from the track where the text leaves them out, and a site the text gives that is more
+    /// than 100 m from the track's start is refused.
+    fn from_text_named(text: &str, dir: Option<&Path>, stem: Option<&str>) -> Result<Self> {
         let mut s: Scenario = toml::from_str(text)?;
+        // a track is driven with a driver's limits where the file sets none (the level
+        // route's gentle defaults drove a brisk track's corners seconds late)
+        let table: toml::Table = toml::from_str(text)?;
+        if let (Some(d), Some(toml::Value::Table(given))) = (s.drive.as_mut(), table.get("drive"))
+            && d.track.is_some()
+        {
+            let driver = emulators::drive::DriveSpec::driver();
+            let unset = |k: &str| !given.contains_key(k);
+            if unset("accel_mps2") {
+                d.accel_mps2 = driver.accel_mps2;
+            }
+            if unset("brake_mps2") {
+                d.brake_mps2 = driver.brake_mps2;
+            }
+            if unset("jerk_mps3") {
+                d.jerk_mps3 = driver.jerk_mps3;
+            }
+            if unset("turn_rate_dps") {
+                d.turn_rate_dps = driver.turn_rate_dps;
+            }
+            if unset("lateral_accel_mps2") {
+                d.lateral_accel_mps2 = driver.lateral_accel_mps2;
+            }
+        }
+        if s.name.is_empty() {
+            s.name = stem.unwrap_or("scenario").to_string();
+        }
         if let Some(d) = s.drive.as_mut()
             && let Some(t) = d.track.as_mut()
         {
@@ -252,8 +306,60 @@ impl Scenario {
             let full = std::path::absolute(&full).unwrap_or(full);
             *t = full.display().to_string();
         }
+        s.fill_from_track()?;
+        if s.duration_s.is_nan() {
+            bail!("duration_s is missing (only a drive from a track has one of its own)");
+        }
+        if s.site.lat_deg.is_nan() {
+            bail!("[site] is missing (only a drive from a track has one of its own)");
+        }
         s.check()?;
         Ok(s)
+    }
+
+    /// A track's drive gives what the scenario leaves out: the site (its start) and the
+    /// duration (its drive and 5 s); a site it gives must be where the track starts.
+    fn fill_from_track(&mut self) -> Result<()> {
+        let Some(d) = &self.drive else {
+            return Ok(());
+        };
+        let Some(track) = &d.track else {
+            return Ok(());
+        };
+        let plan = emulators::drive::Drive::plan(d)
+            .map_err(|e| anyhow::anyhow!("[{}] {}", e.table, e.problem))?;
+        let (lat, lon, h) = plan.position(0.0);
+        let (lat_deg, lon_deg) = (lat.to_degrees(), lon.to_degrees());
+        if self.site.lat_deg.is_nan() {
+            self.site = Static {
+                lat_deg,
+                lon_deg,
+                height_m: h,
+                heading_deg: plan.heading(0.0).to_degrees().rem_euclid(360.0),
+                ..Static::level(0.0)
+            };
+        } else {
+            let e = emulators::geodesy::enu_offset(
+                (lat, lon, 0.0),
+                (
+                    self.site.lat_deg.to_radians(),
+                    self.site.lon_deg.to_radians(),
+                    0.0,
+                ),
+            );
+            let off = e[0].hypot(e[1]);
+            if off.is_nan() || off > TRACK_SITE_M {
+                bail!(
+                    "the track {track} starts at {lat_deg:.6} N {lon_deg:.6} E, {off:.0} m from the site ({} N {} E): leave [site] out to start where the track does",
+                    self.site.lat_deg,
+                    self.site.lon_deg
+                );
+            }
+        }
+        if self.duration_s.is_nan() {
+            self.duration_s = (plan.duration() + 5.0).ceil();
+        }
+        Ok(())
     }
 
     /// Parse and check a scenario's text.
@@ -869,5 +975,41 @@ mod campus_tests {
         eprintln!("drive {drive_s:.1} s, total {:.1} s", d.duration());
         assert!((1300.0..1400.0).contains(&drive_s), "{drive_s}");
         assert!((s.truth_heading_deg() + 0.364616).abs() < 1e-3);
+    }
+
+    /// A track scenario of one line: the name is the file's, the site the track's start, the
+    /// duration its drive and 5 s, the limits a driver's; a site far from the track's start is
+    /// refused, naming both.
+    #[test]
+    fn a_track_is_a_scenario_of_one_line() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+        let text = "[drive]\ntrack = \"tracks/porto-moving.gpx\"\n";
+        let s = Scenario::from_text_named(text, Some(&dir), Some("mine")).unwrap();
+        assert_eq!(s.name, "mine");
+        let d = s.drive.as_ref().unwrap();
+        let plan = Drive::plan(d).unwrap();
+        assert!(s.duration_s >= plan.duration() + 5.0 && s.duration_s < plan.duration() + 6.0);
+        let (lat, lon, _) = plan.position(0.0);
+        assert!((s.site.lat_deg - lat.to_degrees()).abs() < 1e-9);
+        assert!((s.site.lon_deg - lon.to_degrees()).abs() < 1e-9);
+        assert_eq!(d.accel_mps2, DriveSpec::driver().accel_mps2);
+        assert_eq!(d.brake_mps2, DriveSpec::driver().brake_mps2);
+        // a limit the file sets is kept
+        let s = Scenario::from_text_named(
+            "[drive]\ntrack = \"tracks/porto-moving.gpx\"\naccel_mps2 = 1.2\n",
+            Some(&dir),
+            None,
+        )
+        .unwrap();
+        assert_eq!(s.drive.unwrap().accel_mps2, 1.2);
+        let far = format!("{text}[site]\nlat_deg = 41.16\nlon_deg = -8.61\n");
+        let e = format!(
+            "{:#}",
+            Scenario::from_text_named(&far, Some(&dir), None).unwrap_err()
+        );
+        assert!(e.contains("from the site") && e.contains("41.16"), "{e}");
+        // without a track, the duration and the site are still needed
+        let e = format!("{:#}", Scenario::from_text("[drive]\nwaypoints = [[0.0, 100.0]]\nlat_deg = 1.0\nlon_deg = 1.0\nspeed_mps = 5.0\n").unwrap_err());
+        assert!(e.contains("duration_s is missing"), "{e}");
     }
 }

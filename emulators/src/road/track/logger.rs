@@ -33,6 +33,9 @@ pub struct Logger {
     pub glitch: f64,
     /// Seed of its random numbers.
     pub seed: u64,
+    /// When it is switched on, s into the drive (a logger switched on while driving, as most
+    /// are: its track starts in motion).
+    pub start_s: f64,
 }
 
 impl Default for Logger {
@@ -46,6 +49,7 @@ impl Default for Logger {
             no_elevation: 0.0,
             glitch: 0.0,
             seed: 1,
+            start_s: 0.0,
         }
     }
 }
@@ -58,7 +62,7 @@ pub fn record(drive: &Drive, log: &Logger, t0_utc: f64) -> Vec<TrackPoint> {
     // the wandering jitter: first-order Markov with a 30 s time constant
     let tau = 30.0;
     let mut wander = [0.0f64; 3];
-    let (mut t, mut last) = (0.0, 0.0);
+    let (mut t, mut last) = (log.start_s.max(0.0), log.start_s.max(0.0));
     let mut out = Vec::new();
     while t <= end {
         let dt = t - last;

@@ -25,6 +25,7 @@ fn logged(seed: u64) -> Vec<TrackPoint> {
         no_elevation: 0.02,
         glitch: 0.004,
         seed,
+        start_s: 0.0,
     };
     record(&hilly_drive(), &log, T0)
 }
@@ -426,6 +427,7 @@ fn the_truth_of_a_brisk_logged_track_is_one_motion() {
         no_elevation: 0.03,
         glitch: 0.005,
         seed: 5,
+        start_s: 0.0,
     };
     let text = write(&record(&truth, &log, T0), Format::Gpx, false);
     let track = parse(&text, "brisk.gpx").unwrap_or_else(|e| panic!("{e}"));
