@@ -315,34 +315,7 @@ impl NavConfig {
                     "tetra_calibration commands the table at start: north_finding and self_calibration must be off".into());
             }
         }
-        if let Err(e) = self.navigation.filter.check() {
-            return Err(format!("navigation.{e}"));
-        }
-        let tol = self.navigation.pps_tolerance_s;
-        if !(tol > 0.0 && tol < 0.5) {
-            return Err(format!(
-                "navigation.pps_tolerance_s ({tol}) must lie in (0, 0.5) s"
-            ));
-        }
-        for (name, v) in [
-            (
-                "zero_velocity_sigma_mps",
-                self.navigation.zero_velocity_sigma_mps,
-            ),
-            (
-                "motion_velocity_sigma_mps",
-                self.navigation.motion_velocity_sigma_mps,
-            ),
-        ] {
-            if !(v.is_finite() && (0.0..=10.0).contains(&v)) {
-                return Err(format!(
-                    "navigation.{name} ({v}) must lie in [0, 10] m/s (0: no zero-velocity updates)"
-                ));
-            }
-        }
-        if self.navigation.motion_velocity_sigma_mps <= 0.0 {
-            return Err("navigation.motion_velocity_sigma_mps must be above 0 m/s".into());
-        }
+        self.navigation.check()?;
         if let Err(e) = ImuProcessor::new(&self.processing) {
             return Err(format!("processing: {e}"));
         }

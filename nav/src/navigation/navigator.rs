@@ -48,6 +48,46 @@ pub struct NavigationConfig {
     pub zero_velocity_sigma_mps: f64,
 }
 
+impl NavigationConfig {
+    /// The settings are usable: the filter's, the PPS tolerance, the velocity sigmas; the
+    /// error names the key (under `navigation.`).
+    pub fn check(&self) -> Result<(), String> {
+        self.filter.check().map_err(|e| format!("navigation.{e}"))?;
+        let tol = self.pps_tolerance_s;
+        if !(tol > 0.0 && tol < 0.5) {
+            return Err(format!(
+                "navigation.pps_tolerance_s ({tol}) must lie in (0, 0.5) s"
+            ));
+        }
+        for (name, v, zero) in [
+            (
+                "zero_velocity_sigma_mps",
+                self.zero_velocity_sigma_mps,
+                true,
+            ),
+            (
+                "motion_velocity_sigma_mps",
+                self.motion_velocity_sigma_mps,
+                false,
+            ),
+        ] {
+            let ok = v.is_finite() && v <= 10.0 && (v > 0.0 || (zero && v == 0.0));
+            if !ok {
+                return Err(format!(
+                    "navigation.{name} ({v}) must lie in {} m/s{}",
+                    if zero { "[0, 10]" } else { "(0, 10]" },
+                    if zero {
+                        " (0: no zero-velocity updates)"
+                    } else {
+                        ""
+                    }
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The IMU clock's allowance in the PPS check, per second of interval, about the rate read
 /// from the edges (100 ppm: its wander between edges is far less).
 pub const PPS_CLOCK_ALLOWANCE: f64 = 1e-4;
