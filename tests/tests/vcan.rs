@@ -781,13 +781,20 @@ fn a_hilly_stop_and_go_road_navigates_through_vcan() {
     let track = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../scenarios/tracks/lisbon-handheld.gpx");
     let track_line = format!("track = {:?}", track.display().to_string());
-    for (scenario, replace, iface, report, seconds) in [
+    // and the first 40 s of a brisk drive's track that starts while the vehicle drives off
+    // (a scenario of one line under [drive]): nav refuses to level it, aligns in motion once
+    // the receiver's velocity is steady (about 7 s in), and navigates within its sigmas
+    let moving = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenarios/tracks/porto-moving.gpx");
+    let moving_line = format!("track = {:?}", moving.display().to_string());
+    for (scenario, replace, iface, report, seconds, rate) in [
         (
             "route-lisbon-hills.toml",
             vec![("duration_s = 275.0", "duration_s = 60.0")],
             "vcan-e2e17",
             "lisbon-hills",
             60,
+            10,
         ),
         (
             "track-lisbon-handheld.toml",
@@ -801,6 +808,18 @@ fn a_hilly_stop_and_go_road_navigates_through_vcan() {
             "vcan-e2e18",
             "lisbon-track",
             40,
+            10,
+        ),
+        (
+            "track-porto-moving.toml",
+            vec![
+                ("\n[drive]\n", "\nduration_s = 40.0\n\n[drive]\n"),
+                ("track = \"tracks/porto-moving.gpx\"", moving_line.as_str()),
+            ],
+            "vcan-e2e20",
+            "porto-moving-track",
+            40,
+            1,
         ),
     ] {
         let (r, dir) = run_variant(scenario, &replace, iface);
@@ -818,9 +837,9 @@ fn a_hilly_stop_and_go_road_navigates_through_vcan() {
                 "{scenario}: missing check {n}: {names:?}"
             );
         }
-        // 10 Hz fixes over the drive
+        // the receiver's fixes over the drive
         assert!(
-            r["gps"]["fixes"].as_u64().unwrap() > 9 * seconds,
+            r["gps"]["fixes"].as_u64().unwrap() >= (rate * seconds) * 9 / 10,
             "{}",
             r["gps"]
         );
@@ -830,7 +849,7 @@ fn a_hilly_stop_and_go_road_navigates_through_vcan() {
             r["navigation"]
         );
         assert!(
-            series["samples"].as_u64().unwrap() > seconds - 10,
+            series["samples"].as_u64().unwrap() > seconds - 12,
             "{series}"
         );
         assert_eq!(series["bad_records"], 0);

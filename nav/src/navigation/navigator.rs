@@ -44,7 +44,7 @@ pub struct NavigationConfig {
     /// Zero-velocity updates while the vehicle stands (judged each second from the IMU's own
     /// evidence as levelling judges it, with the receiver's speed where it tells one and the
     /// INS's own speed): the velocity measured as zero with this sigma, m/s per axis (the
-    /// body rocking on its suspension); 0: none.
+    /// body rocking on its suspension at idle, millimetres a second); 0: none.
     pub zero_velocity_sigma_mps: f64,
 }
 
@@ -109,7 +109,7 @@ impl Default for NavigationConfig {
             integrity: crate::navigation::integrity::IntegrityConfig::default(),
             pps_tolerance_s: 0.002,
             motion_velocity_sigma_mps: 0.3,
-            zero_velocity_sigma_mps: 0.05,
+            zero_velocity_sigma_mps: 0.005,
         }
     }
 }
@@ -1728,7 +1728,7 @@ mod tests {
         assert_eq!(f.zero_velocity_refused, 0, "{f:?}");
         let p = n.filter().expect("the filter").covariance();
         let sigma = (p[(3, 3)] + p[(4, 4)]).sqrt();
-        assert!(sigma < 0.06, "velocity sigma {sigma} m/s at a stop");
+        assert!(sigma < 0.01, "velocity sigma {sigma} m/s at a stop");
         let n = drive_north(0.0, 2.0, 15.0, 60.0, Some(0.0));
         let f = n.filter().expect("the filter").stats();
         assert_eq!(f.zero_velocity_updates, 0, "{f:?}");
