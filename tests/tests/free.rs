@@ -518,25 +518,6 @@ fn an_independent_python_device_is_judged_by_the_same_checks() {
     if !judged(&r, code) {
         return;
     }
-    // the honest run's own latency is the guest's pace as much as the device's (a Python
-    // device's p99 234 ms against its 200 in a guest slowed beside other work, 14-24 ms
-    // idle): the honest device missing it is the machine's, no verdict on the latency; every
-    // other check must pass
-    if code == 1
-        && let Some((false, detail)) = latency_verdict(&r)
-    {
-        let failed: Vec<String> = checks(&r)
-            .into_iter()
-            .filter(|(name, pass, _)| !pass && !name.starts_with("latency"))
-            .map(|(name, _, detail)| format!("{name}: {detail}"))
-            .collect();
-        assert!(failed.is_empty(), "{failed:?}");
-        eprintln!(
-            "the honest run missed its latency budget with a wide tail ({detail}): the guest's pace; no verdict on the latency budget"
-        );
-        return;
-    }
-    assert_eq!(code, 0, "{r}");
     let h = &r["heading"];
     let (err, sigma) = (
         h["error_deg"].as_f64().unwrap(),
@@ -547,6 +528,26 @@ fn an_independent_python_device_is_judged_by_the_same_checks() {
     assert!(pass, "{detail}");
     let p99 = r["latency"]["p99_ms"].as_f64().unwrap();
     let p50 = r["latency"]["p50_ms"].as_f64().unwrap();
+    // the honest run's own latency tail is the guest's pace as much as the device's (a Python
+    // device's p99 234 ms against its 200 in a guest slowed beside other work; 14-24 ms
+    // idle): the honest device missing its budget with a tail wider than 50 ms over its median
+    // is the machine's, no verdict on the latency; every other check must still pass
+    if code == 1
+        && p99 - p50 > 50.0
+        && let Some((false, detail)) = latency_verdict(&r)
+    {
+        let failed: Vec<String> = checks(&r)
+            .into_iter()
+            .filter(|(name, pass, _)| !pass && name != "latency within the budget")
+            .map(|(name, _, detail)| format!("{name}: {detail}"))
+            .collect();
+        assert!(failed.is_empty(), "{failed:?}");
+        eprintln!(
+            "the honest run missed its latency budget with a tail wider than 50 ms ({detail}): the guest's pace; no verdict on the latency budget"
+        );
+        return;
+    }
+    assert_eq!(code, 0, "{r}");
     // the budget half judges 50 ms more on every solution: where the honest run's own tail is
     // wider than that (a slow or loaded host: p50 3.5 ms, p99 170 ms seen in the guest at x1.6),
     // its p99 measures the machine, not the device, and a second run's can land 50 ms lower
@@ -680,22 +681,20 @@ fn an_independent_python_device_on_a_labs_contract_whose_clock_drifts_is_caught(
     let (pass, detail) = check_named(&r, "frames within the DBC");
     assert!(pass && detail.contains("lab-imu.dbc"), "{detail}");
     let (drift, sigma) = estimate(&r["clock"]["drift_ppm"]);
-    assert!(
-        (drift - 1000.0).abs() <= 3.0 * sigma + 30.0,
-        "{drift} ± {sigma} ppm: {}",
-        r["clock"]
-    );
-    // how closely the drift can be told rests on the device's latency scatter about its line,
-    // which is the guest's pace as much as the device's: a Python device in a guest slowed
-    // beside other work scattered by 58 ms RMS (1210 ± 466 ppm, consistent, not informative)
-    let scatter = r["clock"]["residual_rms_ms"]
-        .as_f64()
-        .unwrap_or(f64::INFINITY);
+    // the drift is told through the device's latency, whose scatter about its line is the
+    // guest's pace as much as the device's: a Python device in a guest slowed beside other
+    // work scattered by 58 and 329 ms RMS (1210 ± 466, 3094 ± 8516 ppm): no verdict on the
+    // drift there; everything else below still judged
+    let scatter = r["clock"]["residual_rms_ms"].as_f64().unwrap_or(0.0);
     if scatter <= DRIFT_SCATTER_MS {
-        assert!(sigma < 200.0, "{drift} ± {sigma} ppm: {}", r["clock"]);
+        assert!(
+            (drift - 1000.0).abs() <= 3.0 * sigma + 30.0 && sigma < 200.0,
+            "{drift} ± {sigma} ppm: {}",
+            r["clock"]
+        );
     } else {
         eprintln!(
-            "the device's latency scattered by {scatter:.0} ms RMS about its clock line (the guest's pace beside it): no verdict on how closely the drift is told ({drift:.0} ± {sigma:.0} ppm)"
+            "the device's latency scattered by {scatter:.0} ms RMS about its clock line (the guest's pace beside it): no verdict on its drift ({drift:.0} ± {sigma:.0} ppm)"
         );
     }
     let (pass, detail) = check_named(

@@ -787,7 +787,8 @@ fn a_hilly_stop_and_go_road_navigates_through_vcan() {
     let moving = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../scenarios/tracks/porto-moving.gpx");
     let moving_line = format!("track = {:?}", moving.display().to_string());
-    for (scenario, replace, iface, report, seconds, rate) in [
+    // (scenario, its changes, interface, report, seconds, fixes a second, nav's start)
+    for (scenario, replace, iface, report, seconds, rate, start) in [
         (
             "route-lisbon-hills.toml",
             vec![("duration_s = 275.0", "duration_s = 60.0")],
@@ -795,6 +796,7 @@ fn a_hilly_stop_and_go_road_navigates_through_vcan() {
             "lisbon-hills",
             60,
             10,
+            "still",
         ),
         (
             "track-lisbon-handheld.toml",
@@ -809,6 +811,7 @@ fn a_hilly_stop_and_go_road_navigates_through_vcan() {
             "lisbon-track",
             40,
             10,
+            "still",
         ),
         (
             "track-porto-moving.toml",
@@ -820,6 +823,7 @@ fn a_hilly_stop_and_go_road_navigates_through_vcan() {
             "porto-moving-track",
             40,
             1,
+            "in_motion",
         ),
     ] {
         let (r, dir) = run_variant(scenario, &replace, iface);
@@ -848,8 +852,19 @@ fn a_hilly_stop_and_go_road_navigates_through_vcan() {
             "{scenario}: over the run: {series}; against truth: {}",
             r["navigation"]
         );
+        // how nav started: levelled standing, or (the track that starts moving) aligned in
+        // motion after refusing the windows in which the vehicle drove off
+        let navigation = &r["nav"]["navigation"];
+        assert_eq!(navigation["start"], start, "{scenario}: {navigation}");
+        let waits = navigation["level_waits"].as_u64().unwrap();
+        let started = navigation["started_at_s"].as_f64().unwrap();
+        if start == "in_motion" {
+            assert!(waits >= 1 && started > 5.0, "{scenario}: {navigation}");
+        } else {
+            assert!(waits == 0 && started < 5.0, "{scenario}: {navigation}");
+        }
         assert!(
-            series["samples"].as_u64().unwrap() > seconds - 12,
+            series["samples"].as_u64().unwrap() + started.ceil() as u64 > seconds - 4,
             "{series}"
         );
         assert_eq!(series["bad_records"], 0);

@@ -575,18 +575,24 @@ mod tests {
     /// process with the scenario's filter: within the position tolerance, and the sigmas
     /// honest (mean NEES per degree of freedom of position and velocity in [0.3, 3] over the
     /// drive).
+    /// A shipped scenario navigated in process with its own receiver and filter, the start
+    /// heading `heading_err_deg` off.
+    fn navigate_shipped(file: &str, heading_err_deg: f64) -> NavRun {
+        let s = Scenario::load(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../scenarios")
+                .join(file),
+        )
+        .unwrap();
+        let rx = s.gps.clone().unwrap();
+        let f = s.navigation.as_ref().map(|n| n.filter.clone());
+        navigate(&s, f.as_ref(), &rx, heading_err_deg).unwrap()
+    }
+
     #[test]
     fn a_hilly_stop_and_go_road_is_navigated_with_honest_sigmas() {
         for file in ["route-lisbon-hills.toml", "track-lisbon-handheld.toml"] {
-            let s = Scenario::load(
-                &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                    .join("../scenarios")
-                    .join(file),
-            )
-            .unwrap();
-            let rx = s.gps.clone().unwrap();
-            let f = s.navigation.as_ref().map(|n| n.filter.clone());
-            let r = navigate(&s, f.as_ref(), &rx, 0.05).unwrap();
+            let r = navigate_shipped(file, 0.05);
             eprintln!(
                 "{file}: rms {:.2} m, end {:.2} m, NEES per dof {:?}",
                 r.rms_position_error_m, r.end_position_error_m, r.mean_nees_per_dof
@@ -614,15 +620,7 @@ mod tests {
             ("track-porto-moving.toml", StartKind::InMotion),
             ("track-porto-handheld.toml", StartKind::Still),
         ] {
-            let s = Scenario::load(
-                &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                    .join("../scenarios")
-                    .join(file),
-            )
-            .unwrap();
-            let rx = s.gps.clone().unwrap();
-            let f = s.navigation.as_ref().map(|n| n.filter.clone());
-            let r = navigate(&s, f.as_ref(), &rx, 0.0).unwrap();
+            let r = navigate_shipped(file, 0.0);
             eprintln!(
                 "{file}: started {:?} at {:?} s, rms {:.2} m, end {:.2} m, NEES per dof {:?}, ZUPTs {:?}",
                 r.start,

@@ -481,6 +481,9 @@ impl Scenario {
         if self.navigation.is_some() && self.gps.is_none() {
             bail!("[navigation] needs a [gps]: nav takes its start position from the first fix");
         }
+        if let Some(n) = &self.navigation {
+            n.check().map_err(|e| anyhow::anyhow!("{e}"))?;
+        }
         if let Some(d) = &self.drive
             && (self.turntable.is_some() || self.north_finding.is_some())
             && ((d.lat_deg - self.site.lat_deg).abs() > 1e-6

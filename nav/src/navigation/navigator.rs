@@ -109,7 +109,7 @@ impl Default for NavigationConfig {
             integrity: crate::navigation::integrity::IntegrityConfig::default(),
             pps_tolerance_s: 0.002,
             motion_velocity_sigma_mps: 0.3,
-            zero_velocity_sigma_mps: 0.005,
+            zero_velocity_sigma_mps: 0.01,
         }
     }
 }
@@ -171,6 +171,19 @@ pub enum StartKind {
     /// receiver's speed and track, the level from the specific force less the acceleration
     /// between the receiver's velocities, with the sigmas that leaves.
     InMotion,
+}
+
+/// What a levelling window that ended decides.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Judged {
+    /// Navigation starts, so.
+    Start(StartKind),
+    /// Another window: the vehicle moves (not steadily enough to align), or it stands with
+    /// no heading to start from.
+    Wait {
+        /// It moved.
+        moving: bool,
+    },
 }
 
 /// What the levelling window saw of the vehicle's motion.
@@ -326,6 +339,8 @@ pub struct Navigator {
     /// Levelling windows refused because the vehicle moved (and could not be aligned in
     /// motion).
     level_waits: u64,
+    /// A levelling window saw the vehicle move: a heading given for power-on is stale.
+    moved: bool,
     start_kind: Option<StartKind>,
     /// The current window of the standing judgement while navigating, and its first half.
     still: LevelWindow,
@@ -466,6 +481,7 @@ impl Navigator {
             level: LevelWindow::default(),
             courses: std::collections::VecDeque::new(),
             level_waits: 0,
+            moved: false,
             start_kind: None,
             still: LevelWindow::default(),
             still_first: None,
@@ -664,15 +680,19 @@ impl Navigator {
                 self.level.add_of(phi, dv, dt, self.cfg.level_s);
                 if self.level.t >= self.cfg.level_s {
                     match self.judge_window(t) {
-                        Some(kind) => self.start(t, kind),
-                        None => {
-                            // moving, and not steadily enough to align: a new window
-                            if self.level_waits == 0 {
-                                tracing::warn!(
-                                    "the vehicle moves: levelling waits for it to stand still or drive steadily"
-                                );
+                        Judged::Start(kind) => self.start(t, kind),
+                        Judged::Wait { moving } => {
+                            // moving, and not steadily enough to align (or standing with no
+                            // heading yet): a new window
+                            if moving {
+                                if self.level_waits == 0 {
+                                    tracing::warn!(
+                                        "the vehicle moves: levelling waits for it to drive steadily"
+                                    );
+                                }
+                                self.level_waits += 1;
+                                self.moved = true;
                             }
-                            self.level_waits += 1;
                             self.level = LevelWindow::default();
                         }
                     }
@@ -718,7 +738,7 @@ impl Navigator {
     /// Whether the levelling window just ended lets navigation start, and how: still (the
     /// IMU's own evidence, and the receiver's speed where it tells one), or in motion (the
     /// receiver's velocity steady and fast enough to tell the way); none: wait.
-    fn judge_window(&self, t: f64) -> Option<StartKind> {
+    fn judge_window(&self, t: f64) -> Judged {
         let w = &self.level;
         let f = w.force();
         let (lat, h) = self.first_fix.map_or((0.0, 0.0), |(lat, _, h)| (lat, h));
@@ -734,17 +754,27 @@ impl Navigator {
             && w.force_change() < STILL_FORCE_CHANGE
             && w.rate() < STILL_RATE;
         let still_speed = STILL_SPEED.max(4.0 * self.cfg.motion_velocity_sigma_mps);
-        if still_imu && recent.is_none_or(|c| c.speed < still_speed) && self.heading.is_some() {
-            return Some(StartKind::Still);
+        let still = still_imu && recent.is_none_or(|c| c.speed < still_speed);
+        // a heading given for power-on (or found standing) is stale once the vehicle has
+        // moved: after that only the receiver's track gives one, in motion
+        if still && self.heading.is_some() && !self.moved {
+            return Judged::Start(StartKind::Still);
         }
-        let [a, b] = self.last_two_courses()?;
+        let wait = Judged::Wait { moving: !still };
+        let Some([a, b]) = self.last_two_courses() else {
+            return wait;
+        };
         let dt = b.t - a.t;
         let accel = ((b.v[0] - a.v[0]).hypot(b.v[1] - a.v[1])) / dt;
-        (recent.is_some()
+        if recent.is_some()
             && b.speed >= MOTION_MIN_SPEED
             && accel < MOTION_MAX_ACCEL
-            && w.rate() < MOTION_MAX_RATE)
-            .then_some(StartKind::InMotion)
+            && w.rate() < MOTION_MAX_RATE
+        {
+            Judged::Start(StartKind::InMotion)
+        } else {
+            wait
+        }
     }
 
     /// The vehicle stood through the window just ended (the IMU's evidence, the receiver's
@@ -1709,6 +1739,16 @@ mod tests {
             "{:?}",
             st.v
         );
+        // accelerating gently and steadily (0.5 m/s^2, the IMU's force constant, gravity's size
+        // within a few mg): the receiver's speed says it moves; once fast enough it is aligned
+        // in motion, its level the force less the acceleration between the receiver's
+        // velocities (taken as still, its pitch would be 0.05 rad)
+        let n = drive_north(0.0, 0.5, 100.0, 12.0, Some(0.0));
+        let s = n.summary();
+        assert_eq!(s.start, Some(StartKind::InMotion), "{s:?}");
+        assert!(s.level_waits >= 1, "{s:?}");
+        let (_, pitch, roll) = n.state().expect("a state").euler();
+        assert!(pitch.abs() < 2e-3 && roll.abs() < 1e-3, "{pitch} {roll}");
         // the filter says it is less sure of its level and its velocity than a still start
         let k = n.filter().expect("the filter");
         let still = drive_north(1e9, 0.0, 0.0, 10.0, Some(0.0));
@@ -1752,6 +1792,10 @@ mod tests {
             }
         }
         let f = n.filter().expect("the filter").stats();
-        assert!(f.updates > 20 && f.zero_velocity_updates == 0, "{f:?}");
+        assert!(
+            f.updates > 20 && f.zero_velocity_updates == 0,
+            "{f:?} {:?}",
+            n.summary()
+        );
     }
 }
