@@ -525,6 +525,12 @@ fn the_truths_self_check_finds_where_the_truth_disagrees_with_itself() {
     let ok = reference::self_check(&d, 2000.0, 120.0);
     assert!(ok.holds(), "{}", ok.summary());
     assert_eq!(ok.bound, reference::ROAD_BOUND);
+    // a level route (its latitude and longitude from metres on the plane of its start) is held
+    // to its own, looser bound, and holds it
+    let level = Drive::plan(&level_of(hilly())).unwrap();
+    let c = reference::self_check(&level, 2000.0, 120.0);
+    assert_eq!(c.bound, reference::LEVEL_BOUND);
+    assert!(c.holds(), "{}", c.summary());
     /// The drive's truth with a pitch step at 60 s that its increments lack.
     struct Stepped<'a>(&'a Drive);
     impl reference::Truth for Stepped<'_> {
