@@ -1,7 +1,7 @@
 //! `hil experiment`: the papers' tables in process.
 
 use crate::cmd::guest::default_out;
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use clap::Subcommand;
 use hil::experiments::Experiment as Exp;
 use hil::experiments::coning::ConingTables;
@@ -80,11 +80,12 @@ pub(crate) enum Experiment {
     /// position and velocity error, NEES per degree of freedom over the drive and in each ten
     /// minutes (target [0.5, 2]) and inside and after each outage (at most 2), NIS, rejected
     /// fixes (none in a filter's first minute, no good fix ever) and integrity alarms per route
-    /// and filter kind; plots of the errors against the filters' 3-sigma bounds. Writes
-    /// report.md/json and SVGs; exit status 1 when a target is missed. Use a release build (the
-    /// 14 level routes, three of them an hour long, `--runs 16` as docs/navigation-results.md takes its
-    /// verdict on: 29 minutes on 2 cores; the roads of docs/routes.md besides, one of them a
-    /// highway of 2.3 hours).
+    /// and filter mode (feedback and output correction); plots of the errors against the
+    /// filters' 3-sigma bounds. Writes report.md/json and SVGs; exit status 1 when a target is
+    /// missed. Use a release build (the 14 level routes, three of them an hour long, `--runs 16`
+    /// as docs/navigation-results.md takes its verdict on: 29 minutes on 2 cores for the three
+    /// feedback filters, twice that with the output-corrected three; the roads of
+    /// docs/routes.md besides, one of them a highway of 2.3 hours).
     Routes {
         /// Route scenarios (drives with a [gps]); default: every shipped one under scenarios/.
         #[arg(long)]
@@ -92,11 +93,13 @@ pub(crate) enum Experiment {
         /// Runs per route and filter with other IMU and receiver seeds (results are averaged).
         #[arg(long, value_parser = hil::values::count, default_value_t = 1)]
         runs: usize,
-        /// Filter kinds (comma-separated).
+        /// Filters (comma-separated): a kind (standard, fading, adaptive) with feedback, nav's
+        /// default, or KIND/output for paper 003's output correction; default: every mode nav
+        /// offers.
         #[arg(
             long,
             value_delimiter = ',',
-            default_value = "standard,fading,adaptive"
+            default_value = "standard,fading,adaptive,standard/output,fading/output,adaptive/output"
         )]
         filters: Vec<String>,
         /// Run only part K of N (0-based, `K/N`); `hil experiment merge` makes the report.
@@ -336,23 +339,14 @@ fn routes_options(
         .iter()
         .map(|f| Scenario::load(f))
         .collect::<Result<Vec<_>>>()?;
-    let kinds = filters
+    let modes = filters
         .iter()
-        .map(|f| {
-            serde_json::from_value::<nav::navigation::filter::FilterKind>(
-                serde_json::Value::String(f.trim().to_string()),
-            )
-            .map_err(|_| {
-                anyhow::anyhow!(
-                    "--filters: `{f}` is not a filter kind (standard, fading, adaptive)"
-                )
-            })
-        })
-        .collect::<Result<Vec<_>>>()?;
+        .map(|f| f.parse().context("--filters"))
+        .collect::<Result<Vec<hil::experiments::routes::Mode>>>()?;
     Ok(hil::experiments::routes::RoutesOptions {
         scenarios,
         runs,
-        kinds,
+        modes,
         threads: hil::par::threads(),
     })
 }

@@ -15,10 +15,70 @@ use crate::experiments::windows::{Stretch, Windowed};
 use crate::report::plot::{BandChart, Panel};
 use crate::scenario::Scenario;
 use anyhow::{Context, Result, bail};
-use nav::navigation::filter::FilterKind;
+use nav::navigation::filter::{Correction, FilterKind};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::Path;
+
+/// A filter as nav offers it: its kind and how its estimate is applied (closed-loop feedback,
+/// nav's default, or paper 003's output correction). Written `standard` (feedback) or
+/// `standard/output`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Mode {
+    /// The filter kind.
+    pub kind: FilterKind,
+    /// How its estimate is applied.
+    pub correction: Correction,
+}
+
+impl Mode {
+    /// Every mode nav offers: each filter kind with feedback, then each with output correction.
+    pub fn all() -> Vec<Mode> {
+        let kinds = [
+            FilterKind::Standard,
+            FilterKind::Fading,
+            FilterKind::Adaptive,
+        ];
+        [Correction::Feedback, Correction::Output]
+            .iter()
+            .flat_map(|&correction| kinds.iter().map(move |&kind| Mode { kind, correction }))
+            .collect()
+    }
+}
+
+impl From<FilterKind> for Mode {
+    fn from(kind: FilterKind) -> Mode {
+        Mode {
+            kind,
+            correction: Correction::Feedback,
+        }
+    }
+}
+
+impl std::fmt::Display for Mode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.correction {
+            Correction::Feedback => write!(f, "{}", self.kind),
+            Correction::Output => write!(f, "{}/output", self.kind),
+        }
+    }
+}
+
+impl std::str::FromStr for Mode {
+    type Err = anyhow::Error;
+    /// `standard`, `fading/output`, `adaptive/feedback`.
+    fn from_str(s: &str) -> Result<Mode> {
+        let (kind, correction) = s.trim().split_once('/').unwrap_or((s.trim(), "feedback"));
+        let word = |v: &str| serde_json::Value::String(v.trim().to_string());
+        let kind = serde_json::from_value::<FilterKind>(word(kind)).map_err(|_| {
+            anyhow::anyhow!("`{s}`: `{kind}` is not a filter kind (standard, fading, adaptive)")
+        })?;
+        let correction = serde_json::from_value::<Correction>(word(correction)).map_err(|_| {
+            anyhow::anyhow!("`{s}`: `{correction}` is not a correction (feedback, output)")
+        })?;
+        Ok(Mode { kind, correction })
+    }
+}
 
 /// NEES per degree of freedom a consistent filter stays within.
 pub const NEES_BOUNDS: [f64; 2] = [0.5, 2.0];
@@ -33,8 +93,8 @@ pub struct RoutesOptions {
     pub scenarios: Vec<Scenario>,
     /// Runs per route and filter with other IMU and receiver seeds.
     pub runs: usize,
-    /// The filter kinds compared.
-    pub kinds: Vec<FilterKind>,
+    /// The filters compared (kind and correction).
+    pub modes: Vec<Mode>,
     /// Threads (not part of the plan).
     #[serde(skip)]
     pub threads: usize,
@@ -45,8 +105,8 @@ pub struct RoutesOptions {
 pub struct RouteRow {
     /// Route (scenario name).
     pub route: String,
-    /// Filter kind.
-    pub filter: FilterKind,
+    /// Filter kind and correction.
+    pub filter: Mode,
     /// Runs.
     pub runs: usize,
     /// Seconds navigated (first run).
@@ -114,14 +174,14 @@ pub const EXPERIMENT: &str = "routes";
 
 struct Job {
     route: usize,
-    kind: FilterKind,
+    kind: Mode,
     seed: u64,
 }
 
 fn jobs(o: &RoutesOptions) -> Vec<Job> {
     let mut v = Vec::new();
     for route in 0..o.scenarios.len() {
-        for &kind in &o.kinds {
+        for &kind in &o.modes {
             for seed in 0..o.runs as u64 {
                 v.push(Job { route, kind, seed });
             }
@@ -131,7 +191,7 @@ fn jobs(o: &RoutesOptions) -> Vec<Job> {
 }
 
 fn check(o: &RoutesOptions) -> Result<()> {
-    if o.runs == 0 || o.kinds.is_empty() || o.scenarios.is_empty() {
+    if o.runs == 0 || o.modes.is_empty() || o.scenarios.is_empty() {
         bail!("at least one route, one filter kind and one run");
     }
     for s in &o.scenarios {
@@ -160,7 +220,7 @@ pub fn run_part(
             "hil: {} of {total} runs ({} routes x {} filters x {} seeds) on {} threads",
             mine.len(),
             o.scenarios.len(),
-            o.kinds.len(),
+            o.modes.len(),
             o.runs,
             o.threads
         );
@@ -175,13 +235,12 @@ pub fn run_part(
                 bail!("{}: no [gps]", s.name);
             };
             let label = format!("{} {}", s.name, j.kind);
-            let r = crate::experiments::navigation::seeded_run(
-                s,
-                Some(&filter(j.kind, None)),
-                rx,
-                j.seed,
-            )
-            .with_context(|| format!("{label}, seed {}", j.seed));
+            let f = nav::navigation::filter::FilterConfig {
+                correction: j.kind.correction,
+                ..filter(j.kind.kind, None)
+            };
+            let r = crate::experiments::navigation::seeded_run(s, Some(&f), rx, j.seed)
+                .with_context(|| format!("{label}, seed {}", j.seed));
             tally.done(&label, &r);
             r.map(|r| (*g, r))
         },
@@ -217,9 +276,9 @@ pub fn merge(parts: &[RoutesPart], out: Option<&Path>) -> Result<RoutesReport> {
         );
     }
     let mut rows = Vec::new();
-    let mut firsts: Vec<(usize, FilterKind, Vec<NavSample>)> = Vec::new();
+    let mut firsts: Vec<(usize, Mode, Vec<NavSample>)> = Vec::new();
     for (route, s) in o.scenarios.iter().enumerate() {
-        for &kind in &o.kinds {
+        for &kind in &o.modes {
             let runs: Vec<&PartRun> = jobs
                 .iter()
                 .zip(&all)
@@ -246,7 +305,7 @@ pub fn merge(parts: &[RoutesPart], out: Option<&Path>) -> Result<RoutesReport> {
         w("report.json", serde_json::to_string_pretty(&r)?)?;
         w("report.md", markdown(&r))?;
         for (route, s) in o.scenarios.iter().enumerate() {
-            let mine: Vec<&(usize, FilterKind, Vec<NavSample>)> =
+            let mine: Vec<&(usize, Mode, Vec<NavSample>)> =
                 firsts.iter().filter(|f| f.0 == route).collect();
             w(&format!("{}-series.csv", s.name), series_csv(&mine))?;
             w(
@@ -263,7 +322,7 @@ pub fn merge(parts: &[RoutesPart], out: Option<&Path>) -> Result<RoutesReport> {
     Ok(r)
 }
 
-fn row(s: &Scenario, kind: FilterKind, parts: &[&PartRun]) -> RouteRow {
+fn row(s: &Scenario, kind: Mode, parts: &[&PartRun]) -> RouteRow {
     let runs: Vec<&NavRun> = parts.iter().map(|r| &r.run).collect();
     let series: Vec<&[NavSample]> = parts.iter().map(|r| r.series.as_slice()).collect();
     let outages = s.gps.as_ref().map_or(&[][..], |g| g.outages.as_slice());
@@ -320,7 +379,7 @@ fn row(s: &Scenario, kind: FilterKind, parts: &[&PartRun]) -> RouteRow {
 }
 
 /// Each filter's first run on one route, second by second: errors, sigmas and NEES.
-fn series_csv(runs: &[&(usize, FilterKind, Vec<NavSample>)]) -> String {
+fn series_csv(runs: &[&(usize, Mode, Vec<NavSample>)]) -> String {
     let mut c = String::from(
         "filter,t_s,position_error_m,position_sigma_m,velocity_error_mps,velocity_sigma_mps,nees_position,nees_velocity\n",
     );
@@ -346,11 +405,7 @@ fn series_csv(runs: &[&(usize, FilterKind, Vec<NavSample>)]) -> String {
 
 /// Each filter's error on one route against its own 3-sigma bound (first run), a panel per
 /// filter, the receiver's outages shaded.
-fn sigma_chart(
-    s: &Scenario,
-    runs: &[&(usize, FilterKind, Vec<NavSample>)],
-    position: bool,
-) -> String {
+fn sigma_chart(s: &Scenario, runs: &[&(usize, Mode, Vec<NavSample>)], position: bool) -> String {
     const COLORS: [&str; 4] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"];
     let panels = runs
         .iter()
@@ -543,6 +598,29 @@ impl crate::experiments::Experiment for Routes {
 mod tests {
     use super::*;
 
+    /// Every mode is written as it is read, a kind alone means feedback, and a word that is
+    /// neither a kind nor a correction is refused naming it.
+    #[test]
+    fn modes_are_read_as_written() {
+        let all = Mode::all();
+        assert_eq!(all.len(), 6);
+        for m in &all {
+            assert_eq!(m.to_string().parse::<Mode>().unwrap(), *m);
+        }
+        assert_eq!(
+            " adaptive ".parse::<Mode>().unwrap(),
+            Mode::from(FilterKind::Adaptive)
+        );
+        assert_eq!(
+            "standard/output".parse::<Mode>().unwrap().correction,
+            Correction::Output
+        );
+        let e = "kalman/output".parse::<Mode>().unwrap_err().to_string();
+        assert!(e.contains("`kalman` is not a filter kind"), "{e}");
+        let e = "fading/both".parse::<Mode>().unwrap_err().to_string();
+        assert!(e.contains("`both` is not a correction"), "{e}");
+    }
+
     /// A short route run whole and in two parts (through their JSON) gives the same table, and
     /// the table carries what the promise is judged on.
     #[test]
@@ -553,7 +631,10 @@ mod tests {
         let o = RoutesOptions {
             scenarios: vec![s],
             runs: 1,
-            kinds: vec![FilterKind::Standard, FilterKind::Fading],
+            modes: vec![
+                FilterKind::Standard.into(),
+                "fading/output".parse().unwrap(),
+            ],
             threads: 2,
         };
         let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
