@@ -22,8 +22,9 @@ use std::path::Path;
 
 /// A filter as nav offers it: its kind and how its estimate is applied (closed-loop feedback,
 /// nav's default, or paper 003's output correction). Written `standard` (feedback) or
-/// `standard/output`.
+/// `standard/output`, in the report's JSON as on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
 pub struct Mode {
     /// The filter kind.
     pub kind: FilterKind,
@@ -77,6 +78,19 @@ impl std::str::FromStr for Mode {
             anyhow::anyhow!("`{s}`: `{correction}` is not a correction (feedback, output)")
         })?;
         Ok(Mode { kind, correction })
+    }
+}
+
+impl TryFrom<String> for Mode {
+    type Error = anyhow::Error;
+    fn try_from(s: String) -> Result<Mode> {
+        s.parse()
+    }
+}
+
+impl From<Mode> for String {
+    fn from(m: Mode) -> String {
+        m.to_string()
     }
 }
 
@@ -615,6 +629,9 @@ mod tests {
             "standard/output".parse::<Mode>().unwrap().correction,
             Correction::Output
         );
+        let json = serde_json::to_string(&all).unwrap();
+        assert!(json.contains("\"fading/output\""), "{json}");
+        assert_eq!(serde_json::from_str::<Vec<Mode>>(&json).unwrap(), all);
         let e = "kalman/output".parse::<Mode>().unwrap_err().to_string();
         assert!(e.contains("`kalman` is not a filter kind"), "{e}");
         let e = "fading/both".parse::<Mode>().unwrap_err().to_string();
