@@ -37,6 +37,10 @@ use crate::navigation::strapdown::NavState;
 use nalgebra::{SMatrix, SVector, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
+/// The fading filter does not fade while a zero-velocity update was taken this recently, s
+/// (they come each second while the vehicle stands).
+pub const STANDING_HOLD_S: f64 = 1.5;
+
 /// States: paper 003's 15 and the receiver's error.
 pub const N: usize = 18;
 /// The first of the receiver-error states.
@@ -390,6 +394,8 @@ pub struct Kf {
     since_update: f64,
     /// Time propagated since the filter started, s.
     age_s: f64,
+    /// When (on `age_s`) a zero-velocity update was last taken: the vehicle stands.
+    stood_at_s: Option<f64>,
     /// The receiver's correlated error over the configured one (north, east, up), once a fix
     /// has said.
     rx_scale: Option<[f64; 3]>,
@@ -454,6 +460,7 @@ impl Kf {
             r_m2,
             since_update: 0.0,
             age_s: 0.0,
+            stood_at_s: None,
             rx_scale: None,
             learned: [1.0; 2],
             learn_rho: [1.0; 2],
@@ -898,6 +905,7 @@ impl Kf {
         let ikh = MatN::identity() - k * h_mat;
         self.p = ikh * self.p * ikh.transpose() + k * r * k.transpose();
         self.stats.zero_velocity_updates += 1;
+        self.stood_at_s = Some(self.age_s);
         self.correct(s);
         true
     }
@@ -906,6 +914,16 @@ impl Kf {
     /// the last fix (nothing for the other kinds).
     fn fade(&mut self, per_s: f64) {
         if self.cfg.kind != FilterKind::Fading {
+            return;
+        }
+        // a standing vehicle teaches the filter nothing new of its heading and drifts: fading
+        // them then only drives them to their caps, and the stop's zero-velocity updates meet
+        // sigmas that no longer say what the filter knows (over the E6 highway's ten-minute
+        // stop, position NEES per dof 4.9, and velocity 0.33 once it drove on)
+        if self
+            .stood_at_s
+            .is_some_and(|t| self.age_s - t <= STANDING_HOLD_S)
+        {
             return;
         }
         // fading discounts what the filter learnt of its own horizontal navigation and IMU
@@ -1333,6 +1351,41 @@ mod tests {
         let (a, b) = (sigma_after(1.0), sigma_after(5.0));
         // five times the fixes shrink the tilt's sigma a little, never inflate it
         assert!(b <= a * 1.05 && b > 0.3 * a, "1 Hz {a}, 5 Hz {b}");
+    }
+
+    /// A standing vehicle (a zero-velocity update each second beside its fixes): the fading
+    /// filter does not fade what the stop cannot teach it, so its heading's sigma after ten
+    /// minutes is what the standard filter's is, not driven to its cap.
+    #[test]
+    fn the_fading_filter_holds_its_memory_while_the_vehicle_stands() {
+        let heading_sigma = |kind: FilterKind, zupt: bool| {
+            let mut st = parked();
+            let mut k = Kf::new(
+                FilterConfig {
+                    kind,
+                    ..FilterConfig::default()
+                },
+                st.lat,
+            );
+            let (lat, lon, h) = (st.lat, st.lon, st.h);
+            for _ in 0..600 {
+                k.propagate(&st, &Vector3::new(0.0, 0.0, 9.79), 1.0);
+                if zupt {
+                    assert!(k.zero_velocity(&mut st, 0.01));
+                }
+                k.update(&mut st, lat, lon, h, &StatedAccuracy::default());
+            }
+            k.covariance()[(2, 2)].sqrt()
+        };
+        let standard = heading_sigma(FilterKind::Standard, true);
+        let fading = heading_sigma(FilterKind::Fading, true);
+        let fading_unheld = heading_sigma(FilterKind::Fading, false);
+        assert!(
+            (fading / standard - 1.0).abs() < 0.05,
+            "standing: standard {standard}, fading {fading}"
+        );
+        // without the stop's updates the fading does inflate it (the hold is what differs)
+        assert!(fading_unheld > 2.0 * fading, "{fading_unheld} / {fading}");
     }
 
     /// A receiver that states nothing (no GST, no UERE) but is eight times better than the

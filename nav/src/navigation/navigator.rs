@@ -1708,8 +1708,13 @@ mod tests {
             speed += a * dt;
             // metres north to degrees at 60 N (the meridian's degree there)
             let lat = 60.0 + distance / 111_412.0;
-            // the body level, pointing north: its forward (y) axis feels the acceleration
-            n.on_update(t, [0.0; 3], [0.0, a * dt, g * dt], dt);
+            // the body level, pointing north (x east, y north, z up): its forward (y) axis
+            // feels the acceleration, its gyros the earth's rate and the turn over the earth's
+            // curve as the vehicle drives north
+            let l = lat.to_radians();
+            let omega = crate::navigation::earth::OMEGA_IE;
+            let w = [-speed / 6_381_000.0, omega * l.cos(), omega * l.sin()];
+            n.on_update(t, w.map(|x| x * dt), [0.0, a * dt, g * dt], dt);
             if (i + 1) % 100 == 0 {
                 assert!(n.on_pps(t));
                 let k = u64::from((i + 1) / 100);
