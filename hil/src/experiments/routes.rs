@@ -107,7 +107,9 @@ pub struct RoutesOptions {
     pub scenarios: Vec<Scenario>,
     /// Runs per route and filter with other IMU and receiver seeds.
     pub runs: usize,
-    /// The filters compared (kind and correction).
+    /// The filters compared (kind and correction); an earlier part's plan named them `kinds`
+    /// (feedback alone).
+    #[serde(alias = "kinds")]
     pub modes: Vec<Mode>,
     /// Threads (not part of the plan).
     #[serde(skip)]
@@ -632,6 +634,23 @@ mod tests {
         let json = serde_json::to_string(&all).unwrap();
         assert!(json.contains("\"fading/output\""), "{json}");
         assert_eq!(serde_json::from_str::<Vec<Mode>>(&json).unwrap(), all);
+        // an earlier part's plan: `kinds`, each a kind alone
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/drive-gps.toml");
+        let o = RoutesOptions {
+            scenarios: vec![Scenario::load(&path).unwrap()],
+            runs: 2,
+            modes: vec![FilterKind::Standard.into(), FilterKind::Adaptive.into()],
+            threads: 1,
+        };
+        let old = serde_json::to_string(&o)
+            .unwrap()
+            .replace("\"modes\"", "\"kinds\"");
+        assert!(
+            old.contains("\"kinds\":[\"standard\",\"adaptive\"]"),
+            "{old}"
+        );
+        let read: RoutesOptions = serde_json::from_str(&old).unwrap();
+        assert_eq!(read.modes, o.modes);
         let e = "kalman/output".parse::<Mode>().unwrap_err().to_string();
         assert!(e.contains("`kalman` is not a filter kind"), "{e}");
         let e = "fading/both".parse::<Mode>().unwrap_err().to_string();
