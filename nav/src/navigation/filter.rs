@@ -1085,6 +1085,16 @@ mod tests {
         NavState::from_euler(0.0, 0.0, 0.0, Vector3::zeros(), 0.49, 1.97, 0.0)
     }
 
+    /// A parked vehicle and a filter of `kind` with nav's default config otherwise.
+    fn parked_filter(kind: FilterKind) -> (NavState, Kf) {
+        let st = parked();
+        let cfg = FilterConfig {
+            kind,
+            ..FilterConfig::default()
+        };
+        (st, Kf::new(cfg, st.lat))
+    }
+
     /// The horizontal velocity-error rate `f^n x phi + C_b^n nabla` (rows E, N) for specific
     /// force `f_n`: its variance under the filter's covariance.
     fn accel_error_var(k: &Kf, cbn: &SMatrix<f64, 3, 3>, f_n: &Vector3<f64>) -> [f64; 2] {
@@ -1145,14 +1155,7 @@ mod tests {
             FilterKind::Fading,
             FilterKind::Adaptive,
         ] {
-            let mut st = parked();
-            let mut k = Kf::new(
-                FilterConfig {
-                    kind,
-                    ..FilterConfig::default()
-                },
-                st.lat,
-            );
+            let (mut st, mut k) = parked_filter(kind);
             let f = Vector3::new(0.0, 0.0, 9.79);
             for _ in 0..2000 {
                 k.propagate(&st, &f, 0.1);
@@ -1368,14 +1371,7 @@ mod tests {
     fn the_fading_filter_holds_its_memory_while_the_vehicle_stands() {
         // the heading's sigma after ten minutes standing, and after two more without updates
         let heading_sigma = |kind: FilterKind| {
-            let mut st = parked();
-            let mut k = Kf::new(
-                FilterConfig {
-                    kind,
-                    ..FilterConfig::default()
-                },
-                st.lat,
-            );
+            let (mut st, mut k) = parked_filter(kind);
             let (lat, lon, h) = (st.lat, st.lon, st.h);
             let mut at = [0.0; 2];
             for i in 0..720 {
